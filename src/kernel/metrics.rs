@@ -1,0 +1,241 @@
+//! Metrics of MODEL.md §5, accumulated online at the controller ticks (no stored history).
+//!
+//! Over the analysis window of n ticks, harmonic k of a channel s is the running projection
+//! H_k = (2/n) Σ s[n]·exp(−j 2π k f t_n). From it:
+//!
+//! - amplitude ratio |H_1(a)|/|H_1(a_r)| and phase error ∠H_1(a) − ∠H_1(a_r) (degrees);
+//! - h_k = |H_k(a)|/|H_1(a)|, k = 2…9; THD_odd = √(Σ_{k=3,5,7,9} h_k²), THD_even = √(Σ_{k=2,4,6,8} h_k²);
+//! - tracking errors rms(a − a_r)/rms(a_r), rms(x − x_r)/rms(x_r) and peak |a − a_r| over the window;
+//! - max |u| over the whole run; the displacement amplitude ratio and phase (same projection on x).
+//!
+//! For a record (no fundamental) the harmonic metrics are NaN and the window is the whole record.
+
+/// Highest harmonic computed.
+pub const N_HARM: usize = 9;
+
+/// The metrics of one lane.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Metrics {
+    pub amp_ratio: f64,
+    pub phase_err_deg: f64,
+    /// h_2 … h_9 (index 0 is h_2).
+    pub h: [f64; N_HARM - 1],
+    pub thd_odd: f64,
+    pub thd_even: f64,
+    pub rms_err_accel_ratio: f64,
+    pub rms_err_disp_ratio: f64,
+    pub peak_err_accel_mps2: f64,
+    pub max_abs_u_v: f64,
+    pub disp_amp_ratio: f64,
+    pub disp_phase_err_deg: f64,
+}
+
+impl Metrics {
+    pub const NAN: Metrics = Metrics {
+        amp_ratio: f64::NAN,
+        phase_err_deg: f64::NAN,
+        h: [f64::NAN; N_HARM - 1],
+        thd_odd: f64::NAN,
+        thd_even: f64::NAN,
+        rms_err_accel_ratio: f64::NAN,
+        rms_err_disp_ratio: f64::NAN,
+        peak_err_accel_mps2: f64::NAN,
+        max_abs_u_v: f64::NAN,
+        disp_amp_ratio: f64::NAN,
+        disp_phase_err_deg: f64::NAN,
+    };
+
+    /// h_k for k = 2…9.
+    pub fn h(&self, k: usize) -> f64 {
+        self.h[k - 2]
+    }
+
+    /// (column name, value) pairs in a fixed order, as written to result tables.
+    pub fn columns(&self) -> Vec<(&'static str, f64)> {
+        let mut v = vec![("amp_ratio", self.amp_ratio), ("phase_err_deg", self.phase_err_deg)];
+        const H: [&str; 8] = ["h2_ratio", "h3_ratio", "h4_ratio", "h5_ratio", "h6_ratio", "h7_ratio", "h8_ratio", "h9_ratio"];
+        v.extend(H.iter().zip(self.h.iter()).map(|(n, x)| (*n, *x)));
+        v.extend([
+            ("thd_odd_ratio", self.thd_odd),
+            ("thd_even_ratio", self.thd_even),
+            ("rms_err_accel_ratio", self.rms_err_accel_ratio),
+            ("rms_err_disp_ratio", self.rms_err_disp_ratio),
+            ("peak_err_accel_mps2", self.peak_err_accel_mps2),
+            ("max_abs_valve_cmd_v", self.max_abs_u_v),
+            ("disp_amp_ratio", self.disp_amp_ratio),
+            ("disp_phase_err_deg", self.disp_phase_err_deg),
+        ]);
+        v
+    }
+}
+
+/// cos and sin of k·2πf·t for k = 1…9 at one tick (shared by every lane).
+#[derive(Debug, Clone, Copy)]
+pub struct Basis {
+    pub cos: [f64; N_HARM],
+    pub sin: [f64; N_HARM],
+}
+
+impl Basis {
+    /// Basis at tick `k` of rate `f_s` for fundamental `f` (phase reduced to one cycle first).
+    pub fn at(k: usize, f_s: f64, f: f64) -> Basis {
+        let mut b = Basis { cos: [0.0; N_HARM], sin: [0.0; N_HARM] };
+        let cycles = f * (k as f64) / f_s;
+        for h in 0..N_HARM {
+            let c = cycles * (h + 1) as f64;
+            let (s, co) = (2.0 * std::f64::consts::PI * (c - c.floor())).sin_cos();
+            b.cos[h] = co;
+            b.sin[h] = s;
+        }
+        b
+    }
+}
+
+/// Running sums of one batch.
+#[derive(Debug, Clone, Copy)]
+pub struct MetricsAcc<const N: usize> {
+    n: usize,
+    /// Σ a cos, Σ a sin for k = 1…9.
+    a_re: [[f64; N]; N_HARM],
+    a_im: [[f64; N]; N_HARM],
+    x_re: [f64; N],
+    x_im: [f64; N],
+    err_a2: [f64; N],
+    err_x2: [f64; N],
+    peak_err_a: [f64; N],
+    max_u: [f64; N],
+    // Reference channels are shared by every lane.
+    ar_re: f64,
+    ar_im: f64,
+    xr_re: f64,
+    xr_im: f64,
+    ar2: f64,
+    xr2: f64,
+}
+
+impl<const N: usize> Default for MetricsAcc<N> {
+    fn default() -> Self {
+        MetricsAcc {
+            n: 0,
+            a_re: [[0.0; N]; N_HARM],
+            a_im: [[0.0; N]; N_HARM],
+            x_re: [0.0; N],
+            x_im: [0.0; N],
+            err_a2: [0.0; N],
+            err_x2: [0.0; N],
+            peak_err_a: [0.0; N],
+            max_u: [0.0; N],
+            ar_re: 0.0,
+            ar_im: 0.0,
+            xr_re: 0.0,
+            xr_im: 0.0,
+            ar2: 0.0,
+            xr2: 0.0,
+        }
+    }
+}
+
+impl<const N: usize> MetricsAcc<N> {
+    /// Every tick: max |u|.
+    #[inline(always)]
+    pub fn every_tick(&mut self, u: &[f64; N]) {
+        for l in 0..N {
+            self.max_u[l] = self.max_u[l].max(u[l].abs());
+        }
+    }
+
+    /// A tick inside the analysis window.
+    #[inline(always)]
+    pub fn window_tick(&mut self, basis: Option<&Basis>, a_r: f64, x_r: f64, a: &[f64; N], x: &[f64; N]) {
+        self.n += 1;
+        self.ar2 += a_r * a_r;
+        self.xr2 += x_r * x_r;
+        for l in 0..N {
+            let ea = a[l] - a_r;
+            let ex = x[l] - x_r;
+            self.err_a2[l] += ea * ea;
+            self.err_x2[l] += ex * ex;
+            self.peak_err_a[l] = self.peak_err_a[l].max(ea.abs());
+        }
+        if let Some(b) = basis {
+            self.ar_re += a_r * b.cos[0];
+            self.ar_im += a_r * b.sin[0];
+            self.xr_re += x_r * b.cos[0];
+            self.xr_im += x_r * b.sin[0];
+            for h in 0..N_HARM {
+                let (c, s) = (b.cos[h], b.sin[h]);
+                for l in 0..N {
+                    self.a_re[h][l] += a[l] * c;
+                    self.a_im[h][l] += a[l] * s;
+                }
+            }
+            for l in 0..N {
+                self.x_re[l] += x[l] * b.cos[0];
+                self.x_im[l] += x[l] * b.sin[0];
+            }
+        }
+    }
+
+    /// Final metrics of lane `l`.
+    pub fn finish(&self, l: usize, harmonics: bool) -> Metrics {
+        // H_k = (2/n)(Σ s cos − j Σ s sin): magnitude and angle; the 2/n cancels in every ratio.
+        let mag = |re: f64, im: f64| re.hypot(im);
+        let ang = |re: f64, im: f64| (-im).atan2(re);
+        let wrap = |d: f64| {
+            let mut d = d.to_degrees() % 360.0;
+            if d > 180.0 {
+                d -= 360.0;
+            } else if d <= -180.0 {
+                d += 360.0;
+            }
+            d
+        };
+        let mut m = Metrics::NAN;
+        m.max_abs_u_v = self.max_u[l];
+        if self.n > 0 {
+            m.rms_err_accel_ratio = (self.err_a2[l] / self.ar2).sqrt();
+            m.rms_err_disp_ratio = (self.err_x2[l] / self.xr2).sqrt();
+            m.peak_err_accel_mps2 = self.peak_err_a[l];
+        }
+        if harmonics && self.n > 0 {
+            let h1 = mag(self.a_re[0][l], self.a_im[0][l]);
+            m.amp_ratio = h1 / mag(self.ar_re, self.ar_im);
+            m.phase_err_deg = wrap(ang(self.a_re[0][l], self.a_im[0][l]) - ang(self.ar_re, self.ar_im));
+            for k in 2..=N_HARM {
+                m.h[k - 2] = mag(self.a_re[k - 1][l], self.a_im[k - 1][l]) / h1;
+            }
+            m.thd_odd = [3, 5, 7, 9].iter().map(|&k| m.h(k).powi(2)).sum::<f64>().sqrt();
+            m.thd_even = [2, 4, 6, 8].iter().map(|&k| m.h(k).powi(2)).sum::<f64>().sqrt();
+            m.disp_amp_ratio = mag(self.x_re[l], self.x_im[l]) / mag(self.xr_re, self.xr_im);
+            m.disp_phase_err_deg = wrap(ang(self.x_re[l], self.x_im[l]) - ang(self.xr_re, self.xr_im));
+        }
+        m
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn projection_recovers_a_known_signal() {
+        // a = 2 sin(ωt + 0.1) + 0.1 sin(3ωt) + 0.04 cos(2ωt) over exactly 4 cycles of 1024 ticks.
+        let (f_s, f) = (1024.0, 4.0);
+        let w = 2.0 * std::f64::consts::PI * f;
+        let mut acc = MetricsAcc::<1>::default();
+        for k in 0..1024 {
+            let t = k as f64 / f_s;
+            let ar = (w * t).sin();
+            let a = 2.0 * (w * t + 0.1).sin() + 0.1 * (3.0 * w * t).sin() + 0.04 * (2.0 * w * t).cos();
+            acc.window_tick(Some(&Basis::at(k, f_s, f)), ar, ar, &[a], &[ar]);
+        }
+        let m = acc.finish(0, true);
+        assert!((m.amp_ratio - 2.0).abs() < 1e-12);
+        assert!((m.phase_err_deg - 0.1f64.to_degrees()).abs() < 1e-9);
+        assert!((m.h(3) - 0.05).abs() < 1e-12);
+        assert!((m.h(2) - 0.02).abs() < 1e-12);
+        assert!(m.h(5).abs() < 1e-12);
+        assert!((m.thd_odd - 0.05).abs() < 1e-12);
+        assert!((m.rms_err_disp_ratio).abs() < 1e-15);
+    }
+}

@@ -1,0 +1,26 @@
+//! The physics kernel: pure computation, no I/O, no serde, no threads.
+//!
+//! Modules are named after the physical parts of the LHPOST model (MODEL.md):
+//! [`controller`] (TVC, §2), [`servovalve`], [`actuator`], [`platen`], [`friction`] (§3),
+//! [`excitation`] (§4), [`metrics`] (§5), with [`params`] holding every default and
+//! [`simulate`] the lane integrator that ties them together. Optional physical effects plug in
+//! through [`effects::Effect`].
+
+pub mod actuator;
+pub mod controller;
+pub mod effects;
+pub mod excitation;
+pub mod friction;
+pub mod metrics;
+pub mod params;
+pub mod platen;
+pub mod servovalve;
+pub mod simulate;
+
+/// Actuators driving the platen [paper: two horizontal actuators]. Kept separate in the state so
+/// effects may break their symmetry.
+pub const N_ACT: usize = 2;
+
+/// Lanes of the batch kernel (samples integrated together). Eight f64 lanes are two AVX2
+/// vectors, which gives the square-root and division units independent work to overlap.
+pub const LANES: usize = 8;

@@ -1,0 +1,66 @@
+//! Rigid platen (MODEL.md §3):
+//!
+//! ```text
+//! M dv/dt = F − K y − (C |v|^α + μ) z,   dy/dt = v
+//! ```
+//!
+//! F is the total actuator force, K the hold-down stiffness, C|v|^α the viscous term and μ the
+//! Coulomb force, both shaped by the friction variable z of [`crate::kernel::friction`].
+//! |v|^α is a type parameter ([`Damping`]): α = 0.5 (the paper's value) uses a square root,
+//! other exponents `powf`; the choice is made once per batch.
+
+/// Per-lane platen coefficients.
+#[derive(Debug, Clone, Copy)]
+pub struct PlatenLane {
+    pub inv_m: f64,
+    pub k: f64,
+    pub c: f64,
+    pub alpha: f64,
+    pub mu: f64,
+}
+
+/// How |v|^α is evaluated.
+pub trait Damping: Copy + Send + Sync + 'static {
+    fn pow(v_abs: f64, alpha: f64) -> f64;
+}
+
+/// α = 0.5 for every lane: |v|^α = √|v|.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct SqrtDamping;
+impl Damping for SqrtDamping {
+    #[inline(always)]
+    fn pow(v_abs: f64, _alpha: f64) -> f64 {
+        v_abs.sqrt()
+    }
+}
+
+/// Any α: |v|^α = powf (not vectorised; used only when some lane has α ≠ 0.5).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct PowDamping;
+impl Damping for PowDamping {
+    #[inline(always)]
+    fn pow(v_abs: f64, alpha: f64) -> f64 {
+        v_abs.powf(alpha)
+    }
+}
+
+/// Platen acceleration dv/dt for actuator force `f` plus any external force `f_ext`.
+#[inline(always)]
+pub fn accel<D: Damping>(c: &PlatenLane, f: f64, f_ext: f64, y: f64, v: f64, z: f64) -> f64 {
+    (f + f_ext - c.k * y - (c.c * D::pow(v.abs(), c.alpha) + c.mu) * z) * c.inv_m
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn accel_balances_forces() {
+        let c = PlatenLane { inv_m: 1.0 / 144e3, k: 1.266e6, c: 0.041e6, alpha: 0.5, mu: 7597.0 };
+        let a = accel::<SqrtDamping>(&c, 1e6, 0.0, 0.01, 0.25, 1.0);
+        let expected = (1e6 - 1.266e4 - (0.041e6 * 0.5 + 7597.0)) / 144e3;
+        assert!((a - expected).abs() < 1e-12);
+        let b = accel::<PowDamping>(&c, 1e6, 0.0, 0.01, 0.25, 1.0);
+        assert!((a - b).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,450 @@
+//! The lane kernel: N samples integrated together, structure-of-arrays, allocation-free.
+//!
+//! Each controller tick t_k = k/f_s:
+//! 1. actuator force F and the controller ([`super::controller::tick`]) → spool command x_c, held
+//!    over [t_k, t_{k+1}) (zero-order hold);
+//! 2. one right-hand-side evaluation at t_k gives the platen acceleration a = dv/dt at t_k (a does
+//!    not depend on x_c) and the first RK4 stage;
+//! 3. the channels are offered to the [`Observer`] and the online metrics;
+//! 4. the plant is advanced to t_{k+1} by `substeps` classical RK4 steps of h = 1/(f_s·substeps)
+//!    (the plant is smooth inside a tick, so the hold costs no accuracy; the integrator was chosen
+//!    for vectorisation: fixed step, no data-dependent control flow; its convergence is checked
+//!    by `tests/reference.rs`);
+//! 5. the guard of MODEL.md §3: a lane whose state is non-finite, whose |y| reaches L, or whose
+//!    pressure leaves [−1 MPa, 2·P_S] is marked failed with time and reason, reset to rest and
+//!    carried along (its metrics become NaN); it never aborts the batch.
+//!
+//! The valve law (`V`), the damping law (`D`) and the effect (`E`) are type parameters, so the
+//! step has no branch on configuration. N = 1 is the scalar path: the same code, one lane.
+
+use super::actuator::{self, ActuatorLane};
+use super::controller::{self, ControllerLane, ControllerMemory, RefState};
+use super::effects::{Effect, PlantView};
+use super::excitation::Reference;
+use super::friction::{self, FrictionLane};
+use super::metrics::{Basis, Metrics, MetricsAcc};
+use super::params::{ModelParams, ValveLaw};
+use super::platen::{self, Damping, PlatenLane, PowDamping, SqrtDamping};
+use super::servovalve::{FlowLaw, Linear, Orifice, ValveLane};
+use super::N_ACT;
+use std::fmt;
+
+/// Number of plant states per lane.
+pub const NP: usize = 7;
+
+/// Indices of the plant states.
+pub mod idx {
+    /// Cap-side pressure of actuator i, Pa.
+    pub const P1: [usize; 2] = [0, 2];
+    /// Rod-side pressure of actuator i, Pa.
+    pub const P2: [usize; 2] = [1, 3];
+    /// Platen displacement, m.
+    pub const Y: usize = 4;
+    /// Platen velocity, m/s.
+    pub const V: usize = 5;
+    /// Friction law variable z, −.
+    pub const Z: usize = 6;
+}
+use idx::*;
+
+/// Generates a structure-of-arrays twin of a per-lane coefficient struct.
+macro_rules! soa {
+    ($Scalar:ident => $Soa:ident { $($f:ident),* $(,)? }) => {
+        #[derive(Debug, Clone, Copy)]
+        pub struct $Soa<const N: usize> { $(pub $f: [f64; N],)* }
+        impl<const N: usize> $Soa<N> {
+            #[inline(always)]
+            pub fn lane(&self, l: usize) -> $Scalar { $Scalar { $($f: self.$f[l],)* } }
+            pub fn from_lanes(c: &[$Scalar; N]) -> Self { $Soa { $($f: std::array::from_fn(|l| c[l].$f),)* } }
+        }
+    };
+}
+soa!(ValveLane => ValveSoa { kw1, kw2, kw3, kw4, p_r, p_tr2, kq1, kq2 });
+soa!(ActuatorLane => ActuatorSoa { beta, a1, a2, l, vd1, vd2 });
+soa!(PlatenLane => PlatenSoa { inv_m, k, c, alpha, mu });
+soa!(FrictionLane => FrictionSoa { inv_y, kappa, kappa_neg });
+
+/// Integrator settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Solver {
+    /// RK4 steps per controller tick. Default 8 (h = 122 µs at 1024 Hz) [chosen: converged to
+    /// < 0.1 % against 32, see `tests/reference.rs`].
+    pub substeps: usize,
+}
+
+impl Default for Solver {
+    fn default() -> Self {
+        Solver { substeps: 8 }
+    }
+}
+
+/// Per-lane coefficients of a batch, derived once from [`ModelParams`].
+#[derive(Debug, Clone)]
+pub struct LaneParams<const N: usize> {
+    pub valve: ValveSoa<N>,
+    pub p_s: [f64; N],
+    pub act: ActuatorSoa<N>,
+    pub platen: PlatenSoa<N>,
+    pub friction: FrictionSoa<N>,
+    pub ctrl: [ControllerLane; N],
+    /// Initial (no-load) pressures.
+    pub p0: [(f64, f64); N],
+    pub f_s: f64,
+    pub valve_law: ValveLaw,
+    pub alpha_half: bool,
+}
+
+/// Why a batch could not be set up.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SetupError {
+    #[error("a batch takes 1 to {max} parameter sets, got {got}")]
+    LaneCount { got: usize, max: usize },
+    #[error("every lane of a batch must share the controller rate and the valve law (lane {lane} differs)")]
+    NotUniform { lane: usize },
+    #[error("the reference was made at {reference} Hz but the controller runs at {controller} Hz")]
+    RateMismatch { reference: f64, controller: f64 },
+    #[error("substeps must be at least 1")]
+    Substeps,
+}
+
+impl<const N: usize> LaneParams<N> {
+    /// Coefficients for up to N parameter sets; missing lanes repeat the last set.
+    pub fn new(sets: &[&ModelParams]) -> Result<Self, SetupError> {
+        if sets.is_empty() || sets.len() > N {
+            return Err(SetupError::LaneCount { got: sets.len(), max: N });
+        }
+        let p = |l: usize| sets[l.min(sets.len() - 1)];
+        for (l, s) in sets.iter().enumerate() {
+            if s.controller.f_s != sets[0].controller.f_s || s.valve_law != sets[0].valve_law {
+                return Err(SetupError::NotUniform { lane: l });
+            }
+        }
+        let valve: [ValveLane; N] = std::array::from_fn(|l| {
+            let m = p(l);
+            let sv = &m.servovalve;
+            let k = sv.n_val * sv.kv * sv.w3;
+            let (p1_0, _) = m.no_load_pressures();
+            let kq = sv.n_val * sv.kv * sv.r1 * sv.w3 * (sv.p_s - p1_0).sqrt();
+            ValveLane {
+                kw1: k * sv.r1,
+                kw2: k * sv.r2,
+                kw3: k,
+                kw4: k * sv.r4,
+                p_r: sv.p_r,
+                p_tr2: sv.p_tr * sv.p_tr,
+                kq1: kq,
+                kq2: kq * m.actuator.a2 / m.actuator.a1,
+            }
+        });
+        let act: [ActuatorLane; N] = std::array::from_fn(|l| {
+            let a = &p(l).actuator;
+            ActuatorLane { beta: a.beta, a1: a.a1, a2: a.a2, l: a.l, vd1: a.vd1, vd2: a.vd2 }
+        });
+        let platen: [PlatenLane; N] = std::array::from_fn(|l| {
+            let m = p(l);
+            PlatenLane { inv_m: 1.0 / m.platen.m, k: m.platen.k, c: m.platen.c, alpha: m.platen.alpha, mu: m.mu() }
+        });
+        let friction: [FrictionLane; N] = std::array::from_fn(|l| {
+            let f = &p(l).friction;
+            FrictionLane { inv_y: 1.0 / f.y_yield, kappa: f.kappa, kappa_neg: 2.0 * f.kappa - 1.0 }
+        });
+        Ok(LaneParams {
+            valve: ValveSoa::from_lanes(&valve),
+            p_s: std::array::from_fn(|l| p(l).servovalve.p_s),
+            act: ActuatorSoa::from_lanes(&act),
+            platen: PlatenSoa::from_lanes(&platen),
+            friction: FrictionSoa::from_lanes(&friction),
+            ctrl: std::array::from_fn(|l| {
+                let m = p(l);
+                ControllerLane::new(&m.controller, m.servovalve.u_lim, m.servovalve.k_sp)
+            }),
+            p0: std::array::from_fn(|l| p(l).no_load_pressures()),
+            f_s: sets[0].controller.f_s,
+            valve_law: sets[0].valve_law,
+            alpha_half: (0..N).all(|l| p(l).platen.alpha == 0.5),
+        })
+    }
+}
+
+/// Why a lane failed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Failure {
+    /// A state became NaN or infinite.
+    NonFinite,
+    /// |y| reached the half stroke L.
+    StrokeLimit { disp_m: f64 },
+    /// A chamber pressure left [−1 MPa, 2·P_S].
+    Pressure { actuator: usize, chamber: usize, pa: f64 },
+}
+
+impl fmt::Display for Failure {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Failure::NonFinite => write!(f, "state became non-finite (diverged)"),
+            Failure::StrokeLimit { disp_m } => write!(f, "stroke limit reached (y = {disp_m:.4} m)"),
+            Failure::Pressure { actuator, chamber, pa } => write!(
+                f,
+                "pressure P{chamber} of actuator {} left [-1 MPa, 2 P_S] ({:.3} MPa)",
+                actuator + 1,
+                pa / 1e6
+            ),
+        }
+    }
+}
+
+/// Outcome of one lane.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum LaneStatus {
+    Ok,
+    Failed { time_s: f64, reason: Failure },
+}
+
+/// Result of one lane: status and metrics (NaN for a failed lane).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LaneResult {
+    pub status: LaneStatus,
+    pub metrics: Metrics,
+}
+
+/// The channels of MODEL.md §5 at one tick, for every lane.
+pub struct TickView<'a, const N: usize> {
+    pub k: usize,
+    pub t: f64,
+    pub r: &'a RefState,
+    /// Platen displacement (ideal LVDT), m.
+    pub x: &'a [f64; N],
+    /// Platen acceleration dv/dt at t_k, m/s².
+    pub a: &'a [f64; N],
+    /// Valve command after the clamp, V.
+    pub u: &'a [f64; N],
+    /// Spool command, m.
+    pub x_c: &'a [f64; N],
+    /// Total actuator force, N.
+    pub f: &'a [f64; N],
+    pub state: &'a [[f64; N]; NP],
+}
+
+/// Receives every tick (time histories, live plots). The batch engine passes [`NoObserver`].
+pub trait Observer<const N: usize> {
+    fn tick(&mut self, view: &TickView<'_, N>);
+}
+
+/// Observes nothing.
+pub struct NoObserver;
+impl<const N: usize> Observer<N> for NoObserver {
+    #[inline(always)]
+    fn tick(&mut self, _view: &TickView<'_, N>) {}
+}
+
+/// Runs a batch: dispatches once on the valve law and the damping law, then integrates.
+pub fn run<const N: usize, E: Effect<N>, O: Observer<N>>(
+    lp: &LaneParams<N>,
+    effect: &E,
+    reference: &Reference,
+    solver: &Solver,
+    obs: &mut O,
+) -> Result<[LaneResult; N], SetupError> {
+    if reference.f_s != lp.f_s {
+        return Err(SetupError::RateMismatch { reference: reference.f_s, controller: lp.f_s });
+    }
+    if solver.substeps == 0 {
+        return Err(SetupError::Substeps);
+    }
+    Ok(match (lp.valve_law, lp.alpha_half) {
+        (ValveLaw::Orifice, true) => integrate::<N, Orifice, SqrtDamping, E, O>(lp, effect, reference, solver, obs),
+        (ValveLaw::Orifice, false) => integrate::<N, Orifice, PowDamping, E, O>(lp, effect, reference, solver, obs),
+        (ValveLaw::Linear, true) => integrate::<N, Linear, SqrtDamping, E, O>(lp, effect, reference, solver, obs),
+        (ValveLaw::Linear, false) => integrate::<N, Linear, PowDamping, E, O>(lp, effect, reference, solver, obs),
+    })
+}
+
+/// Plant right-hand side for every lane.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn rhs<const N: usize, V: FlowLaw, D: Damping, E: Effect<N>>(
+    lp: &LaneParams<N>,
+    effect: &E,
+    x_c: &[f64; N],
+    s: &[[f64; N]; NP],
+    es: &E::State,
+    ds: &mut [[f64; N]; NP],
+    des: &mut E::State,
+) {
+    let mut q_in1 = [[0.0; N]; N_ACT];
+    let mut q_out2 = [[0.0; N]; N_ACT];
+    let mut p_s = [0.0; N];
+    for l in 0..N {
+        let valve = lp.valve.lane(l);
+        let act = lp.act.lane(l);
+        let (y, v, z) = (s[Y][l], s[V][l], s[Z][l]);
+        let ps = effect.supply(l, lp.p_s[l], es);
+        p_s[l] = ps;
+        let (b1, b2) = actuator::stiffness_factors(&act, y);
+        let mut f = 0.0;
+        for i in 0..N_ACT {
+            let (p1, p2) = (s[P1[i]][l], s[P2[i]][l]);
+            let x = effect.spool(l, i, x_c[l], es);
+            let (q1, q2) = V::flows(&valve, x, p1, p2, ps);
+            let (e1, e2) = effect.extra_flows(l, i, p1, p2, ps, es);
+            q_in1[i][l] = q1 + e1;
+            q_out2[i][l] = q2 + e2;
+            let (d1, d2) = actuator::pressure_rates(&act, b1, b2, q1 + e1, q2 + e2, v);
+            ds[P1[i]][l] = d1;
+            ds[P2[i]][l] = d2;
+            f += actuator::force(&act, p1, p2);
+        }
+        let fe = effect.extra_force(l, y, v, es);
+        ds[V][l] = platen::accel::<D>(&lp.platen.lane(l), f, fe, y, v, z);
+        ds[Y][l] = v;
+        ds[Z][l] = friction::dz_dt(&lp.friction.lane(l), v, z);
+    }
+    let view = PlantView { x_c, state: s, q_in1: &q_in1, q_out2: &q_out2, p_s: &p_s };
+    effect.derivs(&view, es, des);
+}
+
+#[inline(always)]
+fn axpy<const N: usize>(out: &mut [[f64; N]], base: &[[f64; N]], h: f64, k: &[[f64; N]]) {
+    for ((o, b), k) in out.iter_mut().zip(base).zip(k) {
+        for l in 0..N {
+            o[l] = b[l] + h * k[l];
+        }
+    }
+}
+
+#[inline(always)]
+fn rk4_combine<const N: usize>(s: &mut [[f64; N]], h6: f64, k1: &[[f64; N]], k2: &[[f64; N]], k3: &[[f64; N]], k4: &[[f64; N]]) {
+    for j in 0..s.len() {
+        for l in 0..N {
+            s[j][l] += h6 * (k1[j][l] + 2.0 * (k2[j][l] + k3[j][l]) + k4[j][l]);
+        }
+    }
+}
+
+fn initial_state<const N: usize>(lp: &LaneParams<N>) -> [[f64; N]; NP] {
+    let mut s = [[0.0; N]; NP];
+    for l in 0..N {
+        for i in 0..N_ACT {
+            s[P1[i]][l] = lp.p0[l].0;
+            s[P2[i]][l] = lp.p0[l].1;
+        }
+    }
+    s
+}
+
+fn total_force<const N: usize>(lp: &LaneParams<N>, s: &[[f64; N]; NP], f: &mut [f64; N]) {
+    for l in 0..N {
+        let act = lp.act.lane(l);
+        f[l] = (0..N_ACT).map(|i| actuator::force(&act, s[P1[i]][l], s[P2[i]][l])).sum();
+    }
+}
+
+fn check_lane<const N: usize>(lp: &LaneParams<N>, s: &[[f64; N]; NP], l: usize) -> Option<Failure> {
+    if (0..NP).any(|j| !s[j][l].is_finite()) {
+        return Some(Failure::NonFinite);
+    }
+    if s[Y][l].abs() >= lp.act.l[l] {
+        return Some(Failure::StrokeLimit { disp_m: s[Y][l] });
+    }
+    let p_hi = 2.0 * lp.p_s[l];
+    for i in 0..N_ACT {
+        for (chamber, j) in [(1, P1[i]), (2, P2[i])] {
+            let p = s[j][l];
+            if !(-1.0e6..=p_hi).contains(&p) {
+                return Some(Failure::Pressure { actuator: i, chamber, pa: p });
+            }
+        }
+    }
+    None
+}
+
+fn integrate<const N: usize, V: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N>>(
+    lp: &LaneParams<N>,
+    effect: &E,
+    reference: &Reference,
+    solver: &Solver,
+    obs: &mut O,
+) -> [LaneResult; N] {
+    let mut s = initial_state(lp);
+    let s_rest = s;
+    let mut es = effect.initial_state();
+    let es_rest = es;
+    let mut f = [0.0; N];
+    total_force(lp, &s, &mut f);
+    let mut mem: [ControllerMemory; N] = std::array::from_fn(|l| ControllerMemory::new(f[l]));
+    let mut status = [LaneStatus::Ok; N];
+    let mut acc = MetricsAcc::<N>::default();
+
+    let (mut k1, mut k2, mut k3, mut k4, mut tmp) = ([[0.0; N]; NP], [[0.0; N]; NP], [[0.0; N]; NP], [[0.0; N]; NP], [[0.0; N]; NP]);
+    let (mut ek1, mut ek2, mut ek3, mut ek4, mut etmp) = (es, es, es, es, es);
+    let mut u = [0.0; N];
+    let mut x_c = [0.0; N];
+    let mut a = [0.0; N];
+    let mut x = [0.0; N];
+    let h = 1.0 / (lp.f_s * solver.substeps as f64);
+    let (w0, w1) = reference.window;
+    let fundamental = reference.fundamental_hz;
+
+    for k in 0..reference.len() {
+        let t = reference.time(k);
+        let r = RefState { x: reference.x[k], v: reference.v[k], a: reference.a[k], j: reference.j[k] };
+        total_force(lp, &s, &mut f);
+        for l in 0..N {
+            x[l] = s[Y][l];
+            u[l] = controller::tick(&lp.ctrl[l], &mut mem[l], &r, x[l], f[l]);
+            x_c[l] = lp.ctrl[l].k_sp * u[l];
+        }
+        rhs::<N, V, D, E>(lp, effect, &x_c, &s, &es, &mut k1, &mut ek1);
+        a.copy_from_slice(&k1[V]);
+        obs.tick(&TickView { k, t, r: &r, x: &x, a: &a, u: &u, x_c: &x_c, f: &f, state: &s });
+        acc.every_tick(&u);
+        if (w0..w1).contains(&k) {
+            let basis = fundamental.map(|f0| Basis::at(k, lp.f_s, f0));
+            acc.window_tick(basis.as_ref(), r.a, r.x, &a, &x);
+        }
+
+        for sub in 0..solver.substeps {
+            if sub > 0 {
+                rhs::<N, V, D, E>(lp, effect, &x_c, &s, &es, &mut k1, &mut ek1);
+            }
+            axpy(&mut tmp, &s, 0.5 * h, &k1);
+            axpy(etmp.as_mut(), es.as_ref(), 0.5 * h, ek1.as_ref());
+            rhs::<N, V, D, E>(lp, effect, &x_c, &tmp, &etmp, &mut k2, &mut ek2);
+            axpy(&mut tmp, &s, 0.5 * h, &k2);
+            axpy(etmp.as_mut(), es.as_ref(), 0.5 * h, ek2.as_ref());
+            rhs::<N, V, D, E>(lp, effect, &x_c, &tmp, &etmp, &mut k3, &mut ek3);
+            axpy(&mut tmp, &s, h, &k3);
+            axpy(etmp.as_mut(), es.as_ref(), h, ek3.as_ref());
+            rhs::<N, V, D, E>(lp, effect, &x_c, &tmp, &etmp, &mut k4, &mut ek4);
+            rk4_combine(&mut s, h / 6.0, &k1, &k2, &k3, &k4);
+            rk4_combine(es.as_mut(), h / 6.0, ek1.as_ref(), ek2.as_ref(), ek3.as_ref(), ek4.as_ref());
+        }
+
+        // Guard (MODEL.md §3), once per tick.
+        let mut alive = 0;
+        for l in 0..N {
+            if status[l] != LaneStatus::Ok {
+                continue;
+            }
+            if let Some(reason) = check_lane(lp, &s, l) {
+                status[l] = LaneStatus::Failed { time_s: reference.time(k + 1), reason };
+                for j in 0..NP {
+                    s[j][l] = s_rest[j][l];
+                }
+                for (d, r) in es.as_mut().iter_mut().zip(es_rest.as_ref()) {
+                    d[l] = r[l];
+                }
+                mem[l] = ControllerMemory::new(0.0);
+            } else {
+                alive += 1;
+            }
+        }
+        if alive == 0 {
+            break;
+        }
+    }
+
+    std::array::from_fn(|l| match status[l] {
+        LaneStatus::Ok => LaneResult { status: status[l], metrics: acc.finish(l, fundamental.is_some()) },
+        failed => LaneResult { status: failed, metrics: Metrics::NAN },
+    })
+}
