@@ -257,7 +257,7 @@ mod tests {
         assert_eq!(r.len(), 3072);
         assert_eq!(r.window, (3072 - 1365, 3072));
         assert_eq!(s.default_cycles(), 3);
-        assert!((Sine::amp_from_g(1.73, 3.0) - 0.047737).abs() < 1e-5);
+        assert!((Sine::amp_from_g(1.73, 3.0) - 0.047749).abs() < 1e-6);
     }
 
     #[test]
@@ -270,8 +270,12 @@ mod tests {
         let r = rec.reference(f_s);
         assert_eq!(r.len(), 2049);
         let k = 2000;
-        assert!((r.v[k] - 0.1).abs() < 1e-6, "{}", r.v[k]);
-        assert!(r.a[k].abs() < 1e-4 && r.j[k].abs() < 1e-2);
+        // The held (staircase) input leaves a ripple at the tick rate: its sawtooth harmonics
+        // 0.1·T/(πn) at n·1024 Hz, differentiated and attenuated by |H|, bound the velocity
+        // ripple by 1.22e-6 m/s.
+        assert!((r.v[k] - 0.1).abs() < 2e-6, "{}", r.v[k]);
+        // Same argument with one and two more factors of 2πn·1024: bounds 8.8e-3 m/s², 77 m/s³.
+        assert!(r.a[k].abs() < 8.8e-3 && r.j[k].abs() < 77.0, "a {} j {}", r.a[k], r.j[k]);
         let lag = 4.0 / (2.0 * PI * 50.0);
         // Held input: half a tick of extra lag.
         let expected = 0.1 * (k as f64 / f_s - lag - 0.5 / f_s);

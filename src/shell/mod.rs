@@ -1,1 +1,36 @@
-//! Shell layer.
+//! The shell: command line, files, printing. Errors are `anyhow` chains here; [`exit_code`]
+//! maps them to the documented exit codes.
+
+pub mod cli;
+pub mod params_cmd;
+pub mod sim_cmd;
+pub mod tables;
+
+use crate::orchestration::toml_fields::InputError;
+
+/// Bad input that is not a TOML file (a missing file, a bad record row): exit code 2.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct BadInput(pub String);
+
+/// A run that failed (diverged, stroke or pressure limit): exit code 1.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct RunFailed(pub String);
+
+/// 2 for bad input, 1 for everything else.
+pub fn exit_code(e: &anyhow::Error) -> i32 {
+    if e.downcast_ref::<InputError>().is_some() || e.downcast_ref::<BadInput>().is_some() {
+        2
+    } else {
+        1
+    }
+}
+
+/// Runs a parsed command line.
+pub fn dispatch(cli: cli::Cli) -> anyhow::Result<()> {
+    match cli.command {
+        cli::Command::Sim(a) => sim_cmd::run(&a),
+        cli::Command::Params(a) => params_cmd::run(&a),
+    }
+}

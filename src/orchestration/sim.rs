@@ -1,0 +1,86 @@
+//! One configuration through the kernel (`study sim`): lane 0 of the same lane kernel the batch
+//! engine uses, with an [`Observer`] that keeps the time history of every channel of MODEL.md §5.
+
+use super::spec::SimSpec;
+use crate::kernel::effects::Baseline;
+use crate::kernel::excitation::Reference;
+use crate::kernel::simulate::{self, LaneParams, LaneResult, Observer, SetupError, TickView, idx};
+
+/// Channel names (FORMATS.md measured-test names where one exists, so a history can be read back
+/// as a measured test) and what each holds.
+pub const CHANNELS: [(&str, &str); 13] = [
+    ("time_s", "time t_k"),
+    ("ref_disp_m", "reference displacement x_r"),
+    ("ref_accel_mps2", "reference acceleration a_r"),
+    ("disp_m", "platen displacement feedback x"),
+    ("accel_mps2", "platen acceleration dv/dt at t_k"),
+    ("valve_cmd_v", "valve command u after the clamp"),
+    ("force_n", "total actuator force F"),
+    ("p1_pa", "cap-side pressure P1, actuator 1"),
+    ("p2_pa", "rod-side pressure P2, actuator 1"),
+    ("p1_act2_pa", "cap-side pressure P1, actuator 2"),
+    ("p2_act2_pa", "rod-side pressure P2, actuator 2"),
+    ("spool_m", "spool command x_c"),
+    ("ref_vel_mps", "reference velocity v_r"),
+];
+
+/// Time history of lane 0, one vector per channel of [`CHANNELS`].
+#[derive(Debug, Clone, Default)]
+pub struct History {
+    pub columns: Vec<Vec<f64>>,
+}
+
+impl History {
+    pub fn with_capacity(n: usize) -> Self {
+        History { columns: (0..CHANNELS.len()).map(|_| Vec::with_capacity(n)).collect() }
+    }
+    pub fn len(&self) -> usize {
+        self.columns.first().map_or(0, Vec::len)
+    }
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// The channel called `name`.
+    pub fn channel(&self, name: &str) -> Option<&[f64]> {
+        CHANNELS.iter().position(|(n, _)| *n == name).map(|i| self.columns[i].as_slice())
+    }
+}
+
+impl Observer<1> for History {
+    fn tick(&mut self, v: &TickView<'_, 1>) {
+        let s = v.state;
+        let row = [
+            v.t,
+            v.r.x,
+            v.r.a,
+            v.x[0],
+            v.a[0],
+            v.u[0],
+            v.f[0],
+            s[idx::P1[0]][0],
+            s[idx::P2[0]][0],
+            s[idx::P1[1]][0],
+            s[idx::P2[1]][0],
+            v.x_c[0],
+            v.r.v,
+        ];
+        for (c, x) in self.columns.iter_mut().zip(row) {
+            c.push(x);
+        }
+    }
+}
+
+/// The outcome of one run.
+#[derive(Debug, Clone)]
+pub struct SimOutcome {
+    pub result: LaneResult,
+    pub history: History,
+}
+
+/// Runs `spec` against a prepared reference (sine or record).
+pub fn run_sim(spec: &SimSpec, reference: &Reference) -> Result<SimOutcome, SetupError> {
+    let lp = LaneParams::<1>::new(&[&spec.model])?;
+    let mut history = History::with_capacity(reference.len());
+    let [result] = simulate::run(&lp, &Baseline, reference, &spec.solver, &mut history)?;
+    Ok(SimOutcome { result, history })
+}

@@ -1,0 +1,385 @@
+//! Run specifications read from TOML: model overrides, one excitation, solver settings.
+//!
+//! ```toml
+//! [model.servovalve]          # any parameter of `study params`, as [model.<component>] <name> = value
+//! kv = 0.018551
+//! law = "orifice"             # or "linear" (the published counter-example)
+//!
+//! [excitation]                # kind = "sine" | "record"
+//! kind = "sine"
+//! freq_hz = 3.0
+//! amp_g = 1.73                # or amp_m (displacement amplitude)
+//! taper_s = 1.0               # half-cosine taper-in, default 1 s
+//! duration_s = 3.0            # default taper_s + 2 s
+//! window_cycles = 4           # default: every whole cycle after taper_s + 1 s
+//!
+//! [solver]
+//! substeps = 8                # RK4 steps per controller tick
+//! ```
+//!
+//! A record excitation names a file and its columns instead:
+//! `{ kind = "record", file = "quake.csv", column = "ref_disp_m", time_column = "time_s", f_ref_hz = 50.0, scale = 1.0 }`
+//! (the path is relative to the spec file). Every problem is reported at once with its key path.
+
+use super::toml_fields::{Fields, InputError, Issues};
+use crate::kernel::excitation::Sine;
+use crate::kernel::params::{ModelParams, ValveLaw};
+use crate::kernel::simulate::Solver;
+use std::path::PathBuf;
+
+/// The excitation of a run, as written in a spec (a record's file is not read yet).
+#[derive(Debug, Clone, PartialEq)]
+pub enum ExcitationSpec {
+    Sine {
+        sine: Sine,
+        /// The amplitude as the user gave it, in g, if it was given in g.
+        amp_g: Option<f64>,
+    },
+    Record {
+        file: PathBuf,
+        column: String,
+        time_column: String,
+        f_ref_hz: f64,
+        scale: f64,
+    },
+}
+
+impl ExcitationSpec {
+    /// One-line description for printouts.
+    pub fn describe(&self) -> String {
+        match self {
+            ExcitationSpec::Sine { sine, amp_g } => {
+                let amp = match amp_g {
+                    Some(g) => format!("{g} g ({:.4} m)", sine.amp_m),
+                    None => format!("{} m", sine.amp_m),
+                };
+                format!(
+                    "sine {} Hz, {amp}, taper {} s, {} s run, window {} cycles",
+                    sine.freq_hz,
+                    sine.taper_s,
+                    sine.duration_s,
+                    sine.window_cycles.unwrap_or_else(|| sine.default_cycles())
+                )
+            }
+            ExcitationSpec::Record { file, column, f_ref_hz, .. } => {
+                format!("record {}:{column}, state-variable filter {f_ref_hz} Hz", file.display())
+            }
+        }
+    }
+}
+
+/// A single-run specification (`study sim`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimSpec {
+    pub model: ModelParams,
+    pub excitation: ExcitationSpec,
+    pub solver: Solver,
+}
+
+/// Reads `[model.<component>]` overrides into `model` (defaults for everything not named).
+pub fn read_model(mut f: Fields<'_>, model: &mut ModelParams, issues: &mut Issues) {
+    for comp in ModelParams::components() {
+        let Some(mut t) = f.table(comp, issues) else { continue };
+        let names: Vec<&str> = ModelParams::registry().filter(|p| p.component == comp).map(|p| p.name).collect();
+        let mut expected = names.clone();
+        if comp == "servovalve" {
+            expected.push("law");
+            if let Some(law) = t.str("law", issues) {
+                match law {
+                    "orifice" => model.valve_law = ValveLaw::Orifice,
+                    "linear" => model.valve_law = ValveLaw::Linear,
+                    other => issues.push(t.path_of("law"), format!("unknown valve law {other:?}; expected \"orifice\" or \"linear\"")),
+                }
+            }
+        }
+        for name in &names {
+            if let Some(v) = t.f64(name, issues) {
+                let info = ModelParams::lookup(&format!("{comp}.{name}")).expect("registry name");
+                (info.set)(model, v);
+            }
+        }
+        t.finish(&expected, issues);
+    }
+    f.finish(&ModelParams::components(), issues);
+}
+
+/// Validates a model, prefixing every path with `prefix` (e.g. `model`).
+pub fn validate_model(model: &ModelParams, prefix: &str, issues: &mut Issues) {
+    if let Err(list) = model.validate() {
+        for i in list {
+            let path = i.path.split(", ").map(|p| format!("{prefix}.{p}")).collect::<Vec<_>>().join(", ");
+            issues.push(path, i.message);
+        }
+    }
+}
+
+/// Reads an excitation table (`[excitation]` or an inline table of a campaign test).
+pub fn read_excitation(mut f: Fields<'_>, model: &ModelParams, issues: &mut Issues) -> Option<ExcitationSpec> {
+    let kind = f.str("kind", issues);
+    let out = match kind {
+        Some("sine") => {
+            let freq = f.f64("freq_hz", issues);
+            let amp_g = f.f64("amp_g", issues);
+            let amp_m = f.f64("amp_m", issues);
+            let taper = f.f64("taper_s", issues).unwrap_or(1.0);
+            let duration = f.f64("duration_s", issues).unwrap_or(taper + 2.0);
+            let cycles = f.int("window_cycles", issues);
+            let nyq = 0.5 * model.controller.f_s;
+            let freq = match freq {
+                Some(x) if x > 0.0 && x < nyq => Some(x),
+                Some(x) => {
+                    issues.push(f.path_of("freq_hz"), format!("{x} Hz must be in (0, {nyq}) Hz (below the controller's Nyquist frequency)"));
+                    None
+                }
+                None => {
+                    issues.push(f.path_of("freq_hz"), "missing (sine frequency in Hz)");
+                    None
+                }
+            };
+            if taper < 0.0 {
+                issues.push(f.path_of("taper_s"), format!("{taper} s must not be negative"));
+            }
+            if duration <= 0.0 || duration > 3600.0 {
+                issues.push(f.path_of("duration_s"), format!("{duration} s must be in (0, 3600] s"));
+            }
+            let amp = match (amp_g, amp_m, freq) {
+                (Some(_), Some(_), _) => {
+                    issues.push(f.path_of("amp_m"), "give the amplitude once: amp_g or amp_m, not both");
+                    None
+                }
+                (None, None, _) => {
+                    issues.push(f.path_of("amp_g"), "missing (acceleration amplitude in g, or amp_m in metres)");
+                    None
+                }
+                (Some(g), None, Some(fr)) => Some((Sine::amp_from_g(g, fr), "amp_g", g)),
+                (None, Some(m), Some(_)) => Some((m, "amp_m", m)),
+                _ => None,
+            };
+            let mut ok_amp = None;
+            if let Some((x, key, given)) = amp {
+                let l = model.actuator.l;
+                if x <= 0.0 {
+                    issues.push(f.path_of(key), format!("{given} must be positive"));
+                } else if x >= l {
+                    issues.push(
+                        f.path_of(key),
+                        format!("displacement amplitude {x:.4} m exceeds the stroke: |x| must stay below the half stroke actuator.l = {l} m"),
+                    );
+                } else {
+                    ok_amp = Some(x);
+                }
+            }
+            let cycles = match cycles {
+                Some(c) if c >= 1 => Some(c as u32),
+                Some(c) => {
+                    issues.push(f.path_of("window_cycles"), format!("{c} must be at least 1"));
+                    None
+                }
+                None => None,
+            };
+            let (Some(freq), Some(x_amp)) = (freq, ok_amp) else {
+                f.finish(&SINE_KEYS, issues);
+                return None;
+            };
+            let sine = Sine { freq_hz: freq, amp_m: x_amp, taper_s: taper, duration_s: duration, window_cycles: cycles };
+            let n = cycles.unwrap_or_else(|| sine.default_cycles());
+            if n == 0 {
+                issues.push(f.path_of("duration_s"), format!("{duration} s leaves no whole cycle after taper_s + 1 s for the analysis window; lengthen the run or set window_cycles"));
+            } else if n as f64 / freq > duration + 1e-9 {
+                issues.push(f.path_of("window_cycles"), format!("{n} cycles ({:.3} s) do not fit in the {duration} s run", n as f64 / freq));
+            }
+            Some(ExcitationSpec::Sine { sine, amp_g: amp_g.filter(|_| amp_m.is_none()) })
+        }
+        Some("record") => {
+            let file = f.str("file", issues);
+            let column = f.str("column", issues).unwrap_or("ref_disp_m");
+            let time_column = f.str("time_column", issues).unwrap_or("time_s");
+            let f_ref = f.f64("f_ref_hz", issues).unwrap_or(50.0);
+            let scale = f.f64("scale", issues).unwrap_or(1.0);
+            if !(f_ref > 0.0 && f_ref < 0.5 * model.controller.f_s) {
+                issues.push(f.path_of("f_ref_hz"), format!("{f_ref} Hz must be in (0, f_s/2)"));
+            }
+            match file {
+                Some(file) => Some(ExcitationSpec::Record {
+                    file: PathBuf::from(file),
+                    column: column.to_string(),
+                    time_column: time_column.to_string(),
+                    f_ref_hz: f_ref,
+                    scale,
+                }),
+                None => {
+                    issues.push(f.path_of("file"), "missing (the CSV or Parquet file holding the record)");
+                    None
+                }
+            }
+        }
+        Some(other) => {
+            issues.push(f.path_of("kind"), format!("unknown excitation kind {other:?}; expected \"sine\" or \"record\""));
+            None
+        }
+        None => {
+            issues.push(f.path_of("kind"), "missing (\"sine\" or \"record\")");
+            None
+        }
+    };
+    let expected: &[&str] = match kind {
+        Some("record") => &RECORD_KEYS,
+        _ => &SINE_KEYS,
+    };
+    f.finish(expected, issues);
+    out
+}
+
+const SINE_KEYS: [&str; 7] = ["kind", "freq_hz", "amp_g", "amp_m", "taper_s", "duration_s", "window_cycles"];
+const RECORD_KEYS: [&str; 6] = ["kind", "file", "column", "time_column", "f_ref_hz", "scale"];
+
+/// Reads `[solver]`.
+pub fn read_solver(mut f: Fields<'_>, issues: &mut Issues) -> Solver {
+    let mut s = Solver::default();
+    if let Some(n) = f.int("substeps", issues) {
+        if (1..=4096).contains(&n) {
+            s.substeps = n as usize;
+        } else {
+            issues.push(f.path_of("substeps"), format!("{n} must be in 1..=4096"));
+        }
+    }
+    f.finish(&["substeps"], issues);
+    s
+}
+
+impl SimSpec {
+    /// Parses a sim file's text; `file` names it in errors.
+    pub fn from_toml(text: &str, file: &str) -> Result<SimSpec, InputError> {
+        let table = super::toml_fields::parse(text, file)?;
+        let mut issues = Issues::default();
+        let mut root = Fields::new("", &table);
+        let mut model = ModelParams::default();
+        if let Some(m) = root.table("model", &mut issues) {
+            read_model(m, &mut model, &mut issues);
+        }
+        validate_model(&model, "model", &mut issues);
+        let excitation = match root.table("excitation", &mut issues) {
+            Some(e) => read_excitation(e, &model, &mut issues),
+            None => {
+                issues.push("excitation", "missing table (kind = \"sine\" or \"record\")");
+                None
+            }
+        };
+        let solver = match root.table("solver", &mut issues) {
+            Some(s) => read_solver(s, &mut issues),
+            None => Solver::default(),
+        };
+        root.finish(&["model", "excitation", "solver"], &mut issues);
+        issues.into_result(file)?;
+        Ok(SimSpec { model, excitation: excitation.expect("no issues means an excitation"), solver })
+    }
+
+    /// The spec after defaults, as TOML (every parameter written out), for result metadata.
+    pub fn resolved_toml(&self) -> String {
+        let mut root = toml::Table::new();
+        root.insert("model".into(), toml::Value::Table(model_table(&self.model)));
+        let mut e = toml::Table::new();
+        match &self.excitation {
+            ExcitationSpec::Sine { sine, amp_g } => {
+                e.insert("kind".into(), "sine".into());
+                e.insert("freq_hz".into(), sine.freq_hz.into());
+                if let Some(g) = amp_g {
+                    e.insert("amp_g".into(), (*g).into());
+                } else {
+                    e.insert("amp_m".into(), sine.amp_m.into());
+                }
+                e.insert("taper_s".into(), sine.taper_s.into());
+                e.insert("duration_s".into(), sine.duration_s.into());
+                e.insert("window_cycles".into(), (sine.window_cycles.unwrap_or_else(|| sine.default_cycles()) as i64).into());
+            }
+            ExcitationSpec::Record { file, column, time_column, f_ref_hz, scale } => {
+                e.insert("kind".into(), "record".into());
+                e.insert("file".into(), file.display().to_string().into());
+                e.insert("column".into(), column.clone().into());
+                e.insert("time_column".into(), time_column.clone().into());
+                e.insert("f_ref_hz".into(), (*f_ref_hz).into());
+                e.insert("scale".into(), (*scale).into());
+            }
+        }
+        root.insert("excitation".into(), toml::Value::Table(e));
+        let mut s = toml::Table::new();
+        s.insert("substeps".into(), (self.solver.substeps as i64).into());
+        root.insert("solver".into(), toml::Value::Table(s));
+        toml::to_string(&root).expect("TOML of plain values")
+    }
+}
+
+/// Every model parameter as `[component] name = value` tables.
+pub fn model_table(model: &ModelParams) -> toml::Table {
+    let mut m = toml::Table::new();
+    for comp in ModelParams::components() {
+        let mut t = toml::Table::new();
+        if comp == "servovalve" {
+            let law = match model.valve_law {
+                ValveLaw::Orifice => "orifice",
+                ValveLaw::Linear => "linear",
+            };
+            t.insert("law".into(), law.into());
+        }
+        for p in ModelParams::registry().filter(|p| p.component == comp) {
+            t.insert(p.name.into(), (p.get)(model).into());
+        }
+        m.insert(comp.into(), toml::Value::Table(t));
+    }
+    m
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = r#"
+[model.platen]
+m = 150000.0
+[model.servovalve]
+law = "linear"
+[excitation]
+kind = "sine"
+freq_hz = 3.0
+amp_g = 1.73
+window_cycles = 4
+"#;
+
+    #[test]
+    fn reads_overrides_and_defaults() {
+        let s = SimSpec::from_toml(GOOD, "good.toml").unwrap();
+        assert_eq!(s.model.platen.m, 150000.0);
+        assert_eq!(s.model.valve_law, ValveLaw::Linear);
+        assert_eq!(s.model.platen.k, 1.266e6);
+        assert_eq!(s.solver.substeps, 8);
+        let ExcitationSpec::Sine { sine, .. } = s.excitation else { panic!() };
+        assert_eq!(sine.duration_s, 3.0);
+        assert_eq!(sine.window_cycles, Some(4));
+        // The resolved TOML reads back to the same spec.
+        let again = SimSpec::from_toml(&s.resolved_toml(), "resolved").unwrap();
+        assert_eq!(again.model, s.model);
+    }
+
+    #[test]
+    fn reports_all_problems_with_key_paths() {
+        let bad = r#"
+[model.platen]
+m = -5.0
+mm = 3
+[model.actuator]
+beta = 0.0
+[excitation]
+kind = "sine"
+freq_hz = 0.5
+amp_g = 10.0
+"#;
+        let e = SimSpec::from_toml(bad, "bad.toml").unwrap_err();
+        let paths: Vec<&str> = e.issues.iter().map(|i| i.path.as_str()).collect();
+        assert!(paths.contains(&"model.platen.m"), "{e}");
+        assert!(paths.contains(&"model.platen.mm"), "{e}");
+        assert!(paths.contains(&"model.actuator.beta"), "{e}");
+        assert!(paths.contains(&"excitation.amp_g"), "{e}");
+        assert!(e.to_string().contains("exceeds the stroke"), "{e}");
+        assert!(e.to_string().contains("did you mean `m`"), "{e}");
+    }
+}

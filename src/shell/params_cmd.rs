@@ -1,0 +1,21 @@
+//! `study params`: the parameter registry as a table.
+
+use super::cli::ParamsArgs;
+use super::BadInput;
+use crate::kernel::params::ModelParams;
+use std::io::Write;
+
+pub fn run(args: &ParamsArgs) -> anyhow::Result<()> {
+    if let Some(c) = &args.component {
+        if !ModelParams::components().contains(&c.as_str()) {
+            return Err(BadInput(format!("unknown component `{c}`; expected one of: {}", ModelParams::components().join(", "))).into());
+        }
+    }
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "{:<30} {:<12} {:>14} {:<16} {:<7} meaning", "parameter", "unit", "default", "range", "source")?;
+    for p in ModelParams::registry().filter(|p| args.component.as_deref().is_none_or(|c| c == p.component)) {
+        writeln!(out, "{:<30} {:<12} {:>14} {:<16} {:<7} {}", p.path(), p.unit, format!("{}", p.default), p.range.to_string(), p.source.to_string(), p.doc)?;
+    }
+    writeln!(out, "{:<30} {:<12} {:>14} {:<16} {:<7} {}", "servovalve.law", "-", "orifice", "orifice|linear", "paper", "Valve flow law: square-root orifice, or the linear counter-example.")?;
+    Ok(())
+}

@@ -1,0 +1,154 @@
+//! The reference values of MODEL.md §5, the linear-valve counter-example, convergence of the
+//! integrator (§6) and the rest state, all through the public kernel API.
+
+use vshake::kernel::effects::Baseline;
+use vshake::kernel::excitation::{Reference, Sine};
+use vshake::kernel::metrics::Metrics;
+use vshake::kernel::params::{ModelParams, ValveLaw};
+use vshake::kernel::simulate::{self, idx, LaneParams, LaneStatus, NoObserver, Observer, Solver, TickView};
+
+fn reference_sine(amp_g: f64) -> Reference {
+    Sine { freq_hz: 3.0, amp_m: Sine::amp_from_g(amp_g, 3.0), taper_s: 1.0, duration_s: 3.0, window_cycles: Some(4) }.reference(1024.0)
+}
+
+fn metrics(p: &ModelParams, amp_g: f64, substeps: usize) -> Metrics {
+    let lp = LaneParams::<1>::new(&[p]).unwrap();
+    let [r] = simulate::run(&lp, &Baseline, &reference_sine(amp_g), &Solver { substeps }, &mut NoObserver).unwrap();
+    assert_eq!(r.status, LaneStatus::Ok);
+    r.metrics
+}
+
+fn assert_rel(name: &str, got: f64, want: f64, tol: f64) {
+    let rel = ((got - want) / want).abs();
+    assert!(rel <= tol, "{name}: got {got}, reference {want}, relative error {rel:.2e} > {tol}");
+}
+
+/// MODEL.md §5: ±0.5 % relative on ratios, ±0.2° on phase, ±2 % relative on h_k. The table gives
+/// max |u| to two decimals; it is held to ±0.5 % like the ratios.
+#[test]
+fn reference_table_of_model_md_section_5() {
+    let p = ModelParams::default();
+    // amplitude, ratio, phase, h2, h3, h5, max|u|
+    let table = [(1.73, 0.9987, 0.07, 0.0143, 0.0309, 0.0090, 3.40), (3.20, 0.9428, -0.37, 0.0302, 0.0561, 0.0191, 6.27)];
+    for (g, ratio, phase, h2, h3, h5, umax) in table {
+        let m = metrics(&p, g, Solver::default().substeps);
+        assert_rel(&format!("{g} g ratio"), m.amp_ratio, ratio, 0.005);
+        assert!((m.phase_err_deg - phase).abs() <= 0.2, "{g} g phase: got {} reference {phase}", m.phase_err_deg);
+        assert_rel(&format!("{g} g h2"), m.h(2), h2, 0.02);
+        assert_rel(&format!("{g} g h3"), m.h(3), h3, 0.02);
+        assert_rel(&format!("{g} g h5"), m.h(5), h5, 0.02);
+        assert_rel(&format!("{g} g max|u|"), m.max_abs_u_v, umax, 0.005);
+    }
+}
+
+/// MODEL.md §5: the linear valve lowers THD_odd by 5× or more at both amplitudes; the quoted
+/// defaults (0.0045, 0.0032 against 0.0326, 0.0603) are held to the h_k tolerance (2 %).
+#[test]
+fn linear_valve_removes_the_odd_harmonic_distortion() {
+    let orifice = ModelParams::default();
+    let linear = ModelParams { valve_law: ValveLaw::Linear, ..ModelParams::default() };
+    for (g, thd_lin, thd_orf) in [(1.73, 0.0045, 0.0326), (3.20, 0.0032, 0.0603)] {
+        let mo = metrics(&orifice, g, 8);
+        let ml = metrics(&linear, g, 8);
+        let factor = mo.thd_odd / ml.thd_odd;
+        assert!(factor >= 5.0, "{g} g: THD_odd orifice {} / linear {} = {factor:.2} < 5", mo.thd_odd, ml.thd_odd);
+        assert_rel(&format!("{g} g THD_odd orifice"), mo.thd_odd, thd_orf, 0.02);
+        assert_rel(&format!("{g} g THD_odd linear"), ml.thd_odd, thd_lin, 0.02);
+    }
+}
+
+/// MODEL.md §6: a quarter of the step changes the metrics by < 0.1 %.
+#[test]
+fn default_step_is_converged() {
+    let p = ModelParams::default();
+    let n = Solver::default().substeps;
+    for g in [1.73, 3.20] {
+        let a = metrics(&p, g, n);
+        let b = metrics(&p, g, 4 * n);
+        for ((name, x), (_, y)) in a.columns().into_iter().zip(b.columns()) {
+            assert_rel(&format!("{g} g {name} (h vs h/4)"), x, y, 1e-3);
+        }
+    }
+}
+
+struct RestProbe {
+    max_y: f64,
+    max_dp: f64,
+    p0: (f64, f64),
+    ticks: usize,
+}
+
+impl Observer<1> for RestProbe {
+    fn tick(&mut self, v: &TickView<'_, 1>) {
+        self.ticks += 1;
+        self.max_y = self.max_y.max(v.x[0].abs());
+        for i in 0..2 {
+            self.max_dp = self.max_dp.max((v.state[idx::P1[i]][0] - self.p0.0).abs()).max((v.state[idx::P2[i]][0] - self.p0.1).abs());
+        }
+    }
+}
+
+/// Zero command: the table stays at rest for 10 s, pressures at the no-load values.
+#[test]
+fn zero_command_stays_at_rest() {
+    let p = ModelParams::default();
+    let n = 10 * 1024;
+    let zero = vec![0.0; n];
+    let reference = Reference { f_s: 1024.0, x: zero.clone(), v: zero.clone(), a: zero.clone(), j: zero, window: (0, n), fundamental_hz: None };
+    let (p1, p2) = p.no_load_pressures();
+    assert!((p1 - 8.2136e6).abs() < 100.0 && (p2 - 12.8364e6).abs() < 100.0);
+    let mut probe = RestProbe { max_y: 0.0, max_dp: 0.0, p0: (p1, p2), ticks: 0 };
+    let lp = LaneParams::<1>::new(&[&p]).unwrap();
+    let [r] = simulate::run(&lp, &Baseline, &reference, &Solver::default(), &mut probe).unwrap();
+    assert_eq!(r.status, LaneStatus::Ok);
+    assert_eq!(probe.ticks, n);
+    assert!(probe.max_y < 1e-6, "|y| reached {} m", probe.max_y);
+    assert!(probe.max_dp < 1.0, "pressures drifted by {} Pa", probe.max_dp);
+    assert_eq!(r.metrics.max_abs_u_v, 0.0);
+}
+
+/// A single run is one lane of the batch kernel: the 8-lane kernel, fed 8 different parameter
+/// sets, gives each lane bit for bit what the 1-lane kernel gives it.
+#[test]
+fn lanes_are_independent_and_equal_the_scalar_path() {
+    let sets: Vec<ModelParams> = (0..8)
+        .map(|i| {
+            let mut p = ModelParams::default();
+            p.controller.g_d = 1.0 + 0.15 * i as f64;
+            p.servovalve.r1 = 0.75 + 0.01 * i as f64;
+            p
+        })
+        .collect();
+    let refs: Vec<&ModelParams> = sets.iter().collect();
+    let reference = reference_sine(1.73);
+    let lp8 = LaneParams::<8>::new(&refs).unwrap();
+    let batch = simulate::run(&lp8, &Baseline, &reference, &Solver::default(), &mut NoObserver).unwrap();
+    for (i, p) in sets.iter().enumerate() {
+        let lp1 = LaneParams::<1>::new(&[p]).unwrap();
+        let [single] = simulate::run(&lp1, &Baseline, &reference, &Solver::default(), &mut NoObserver).unwrap();
+        assert_eq!(batch[i].status, single.status);
+        for ((name, a), (_, b)) in batch[i].metrics.columns().into_iter().zip(single.metrics.columns()) {
+            assert_eq!(a.to_bits(), b.to_bits(), "lane {i} {name}: {a} vs {b}");
+        }
+    }
+    // The lanes really differ.
+    assert_ne!(batch[0].metrics.amp_ratio, batch[7].metrics.amp_ratio);
+}
+
+/// A diverging lane is data: marked failed with time and reason, the other lanes unaffected.
+#[test]
+fn a_diverging_lane_fails_alone() {
+    let good = ModelParams::default();
+    let mut bad = ModelParams::default();
+    bad.controller.g_d = 400.0;
+    let reference = reference_sine(1.73);
+    let lp = LaneParams::<2>::new(&[&good, &bad]).unwrap();
+    let r = simulate::run(&lp, &Baseline, &reference, &Solver::default(), &mut NoObserver).unwrap();
+    assert_eq!(r[0].status, LaneStatus::Ok);
+    assert!((r[0].metrics.amp_ratio - 0.9987).abs() < 0.005);
+    match r[1].status {
+        LaneStatus::Failed { time_s, .. } => assert!(time_s > 0.0 && time_s < 3.0),
+        LaneStatus::Ok => panic!("g_d = 400 should diverge"),
+    }
+    assert!(r[1].metrics.amp_ratio.is_nan());
+}
