@@ -177,7 +177,7 @@ pub const G: f64 = 9.80665;
 /// Default orifice coefficient K_v = Q_r / (w3 · x_max · √(ΔP_r/2)) in m/(s·√Pa), with the rated
 /// flow Q_r = 10 000 L/min per valve at ΔP_r = 6.895 MPa valve drop (two lands) and full spool
 /// x_max = 19.05 mm [chosen; MODEL.md §1]. Evaluates to 0.018551.
-pub const KV_DEFAULT: f64 = (10_000.0e-3 / 60.0) / (0.254 * 19.05e-3 * 1856.744_462_762_714_2);
+pub const KV_DEFAULT: f64 = (10_000.0e-3 / 60.0) / (0.254 * 19.05e-3 * 1_856.744_462_762_714_2);
 // 1856.744… = √(6.895e6 / 2); `sqrt` is not const, the test below checks the constant.
 
 params! {
