@@ -133,6 +133,13 @@ fn lanes_are_independent_and_equal_the_scalar_path() {
     }
     // The lanes really differ.
     assert_ne!(batch[0].metrics.amp_ratio, batch[7].metrics.amp_ratio);
+    // The portable build gives the same bits as the runtime-detected (AVX2) one.
+    let portable = simulate::run_on(simulate::Isa::Portable, &lp8, &Baseline, &reference, &Solver::default(), &mut NoObserver).unwrap();
+    for i in 0..8 {
+        for ((name, a), (_, b)) in batch[i].metrics.columns().into_iter().zip(portable[i].metrics.columns()) {
+            assert_eq!(a.to_bits(), b.to_bits(), "lane {i} {name}: {a} (auto) vs {b} (portable)");
+        }
+    }
 }
 
 /// A diverging lane is data: marked failed with time and reason, the other lanes unaffected.

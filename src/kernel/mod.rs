@@ -11,6 +11,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod actuator;
+pub mod calibrate;
 pub mod controller;
 pub mod effects;
 pub mod excitation;

@@ -34,13 +34,14 @@ impl Damping for SqrtDamping {
     }
 }
 
-/// Any α: |v|^α = powf (not vectorised; used only when some lane has α ≠ 0.5).
+/// Any α: |v|^α = powf (not vectorised; used only when some lane has α ≠ 0.5). A lane with
+/// α = 0.5 still takes the square root, so its result does not depend on its batch neighbours.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct PowDamping;
 impl Damping for PowDamping {
     #[inline(always)]
     fn pow(v_abs: f64, alpha: f64) -> f64 {
-        v_abs.powf(alpha)
+        if alpha == 0.5 { v_abs.sqrt() } else { v_abs.powf(alpha) }
     }
 }
 

@@ -236,8 +236,45 @@ impl<const N: usize> Observer<N> for NoObserver {
     fn tick(&mut self, _view: &TickView<'_, N>) {}
 }
 
-/// Runs a batch: dispatches once on the valve law and the damping law, then integrates.
+/// Instruction set used for a batch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Isa {
+    /// AVX2 when the CPU has it (runtime detection), else the portable build.
+    Auto,
+    /// The portable build (x86-64 baseline: SSE2).
+    Portable,
+}
+
+impl Isa {
+    /// What `Auto` resolves to on this machine.
+    pub fn detected() -> &'static str {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+            return "avx2";
+        }
+        "portable"
+    }
+}
+
+/// Runs a batch: dispatches once on the valve law, the damping law and the instruction set, then
+/// integrates.
+///
+/// The AVX2 build is the same generic code compiled with wider vectors. Rust never contracts a
+/// multiply and an add into an FMA, and square root and division are correctly rounded, so both
+/// builds give bit-identical results (`tests/reference.rs` checks it).
 pub fn run<const N: usize, E: Effect<N>, O: Observer<N>>(
+    lp: &LaneParams<N>,
+    effect: &E,
+    reference: &Reference,
+    solver: &Solver,
+    obs: &mut O,
+) -> Result<[LaneResult; N], SetupError> {
+    run_on(Isa::Auto, lp, effect, reference, solver, obs)
+}
+
+/// [`run`] on a chosen instruction set.
+pub fn run_on<const N: usize, E: Effect<N>, O: Observer<N>>(
+    isa: Isa,
     lp: &LaneParams<N>,
     effect: &E,
     reference: &Reference,
@@ -250,12 +287,42 @@ pub fn run<const N: usize, E: Effect<N>, O: Observer<N>>(
     if solver.substeps == 0 {
         return Err(SetupError::Substeps);
     }
+    let wide = isa == Isa::Auto && Isa::detected() == "avx2";
     Ok(match (lp.valve_law, lp.alpha_half) {
-        (ValveLaw::Orifice, true) => integrate::<N, Orifice, SqrtDamping, E, O>(lp, effect, reference, solver, obs),
-        (ValveLaw::Orifice, false) => integrate::<N, Orifice, PowDamping, E, O>(lp, effect, reference, solver, obs),
-        (ValveLaw::Linear, true) => integrate::<N, Linear, SqrtDamping, E, O>(lp, effect, reference, solver, obs),
-        (ValveLaw::Linear, false) => integrate::<N, Linear, PowDamping, E, O>(lp, effect, reference, solver, obs),
+        (ValveLaw::Orifice, true) => dispatch::<N, Orifice, SqrtDamping, E, O>(wide, lp, effect, reference, solver, obs),
+        (ValveLaw::Orifice, false) => dispatch::<N, Orifice, PowDamping, E, O>(wide, lp, effect, reference, solver, obs),
+        (ValveLaw::Linear, true) => dispatch::<N, Linear, SqrtDamping, E, O>(wide, lp, effect, reference, solver, obs),
+        (ValveLaw::Linear, false) => dispatch::<N, Linear, PowDamping, E, O>(wide, lp, effect, reference, solver, obs),
     })
+}
+
+fn dispatch<const N: usize, V: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N>>(
+    wide: bool,
+    lp: &LaneParams<N>,
+    effect: &E,
+    reference: &Reference,
+    solver: &Solver,
+    obs: &mut O,
+) -> [LaneResult; N] {
+    #[cfg(target_arch = "x86_64")]
+    if wide {
+        // SAFETY: `wide` is only true when the CPU reports AVX2 and FMA (`Isa::detected`).
+        return unsafe { integrate_avx2::<N, V, D, E, O>(lp, effect, reference, solver, obs) };
+    }
+    let _ = wide;
+    integrate::<N, V, D, E, O>(lp, effect, reference, solver, obs)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn integrate_avx2<const N: usize, V: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N>>(
+    lp: &LaneParams<N>,
+    effect: &E,
+    reference: &Reference,
+    solver: &Solver,
+    obs: &mut O,
+) -> [LaneResult; N] {
+    integrate::<N, V, D, E, O>(lp, effect, reference, solver, obs)
 }
 
 /// Plant right-hand side for every lane.
@@ -357,6 +424,7 @@ fn check_lane<const N: usize>(lp: &LaneParams<N>, s: &[[f64; N]; NP], l: usize) 
     None
 }
 
+#[inline(always)]
 fn integrate<const N: usize, V: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N>>(
     lp: &LaneParams<N>,
     effect: &E,

@@ -1,6 +1,10 @@
 //! Orchestration: run specifications, validation, and running configurations through the kernel.
 //! No terminal or file I/O here (the shell reads files and hands over their contents).
 
+pub mod batch;
+pub mod sampling;
+pub mod sensitivity;
 pub mod sim;
+pub mod study;
 pub mod spec;
 pub mod toml_fields;

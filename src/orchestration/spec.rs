@@ -114,7 +114,12 @@ pub fn validate_model(model: &ModelParams, prefix: &str, issues: &mut Issues) {
 }
 
 /// Reads an excitation table (`[excitation]` or an inline table of a campaign test).
-pub fn read_excitation(mut f: Fields<'_>, model: &ModelParams, issues: &mut Issues) -> Option<ExcitationSpec> {
+pub fn read_excitation(f: Fields<'_>, model: &ModelParams, issues: &mut Issues) -> Option<ExcitationSpec> {
+    read_excitation_with_extra(f, model, issues, &[])
+}
+
+/// [`read_excitation`] for a table that also holds `extra` keys read by the caller.
+pub fn read_excitation_with_extra(mut f: Fields<'_>, model: &ModelParams, issues: &mut Issues, extra: &[&str]) -> Option<ExcitationSpec> {
     let kind = f.str("kind", issues);
     let out = match kind {
         Some("sine") => {
@@ -178,11 +183,12 @@ pub fn read_excitation(mut f: Fields<'_>, model: &ModelParams, issues: &mut Issu
                 None => None,
             };
             let (Some(freq), Some(x_amp)) = (freq, ok_amp) else {
-                f.finish(&SINE_KEYS, issues);
+                f.finish(&[&SINE_KEYS[..], extra].concat(), issues);
                 return None;
             };
-            let sine = Sine { freq_hz: freq, amp_m: x_amp, taper_s: taper, duration_s: duration, window_cycles: cycles };
+            let mut sine = Sine { freq_hz: freq, amp_m: x_amp, taper_s: taper, duration_s: duration, window_cycles: cycles };
             let n = cycles.unwrap_or_else(|| sine.default_cycles());
+            sine.window_cycles = Some(n);
             if n == 0 {
                 issues.push(f.path_of("duration_s"), format!("{duration} s leaves no whole cycle after taper_s + 1 s for the analysis window; lengthen the run or set window_cycles"));
             } else if n as f64 / freq > duration + 1e-9 {
@@ -226,15 +232,15 @@ pub fn read_excitation(mut f: Fields<'_>, model: &ModelParams, issues: &mut Issu
         Some("record") => &RECORD_KEYS,
         _ => &SINE_KEYS,
     };
-    f.finish(expected, issues);
+    f.finish(&[expected, extra].concat(), issues);
     out
 }
 
 const SINE_KEYS: [&str; 7] = ["kind", "freq_hz", "amp_g", "amp_m", "taper_s", "duration_s", "window_cycles"];
 const RECORD_KEYS: [&str; 6] = ["kind", "file", "column", "time_column", "f_ref_hz", "scale"];
 
-/// Reads `[solver]`.
-pub fn read_solver(mut f: Fields<'_>, issues: &mut Issues) -> Solver {
+/// Reads `[solver]`; `extra` names keys of the same table read by the caller.
+pub fn read_solver(mut f: Fields<'_>, issues: &mut Issues, extra: &[&str]) -> Solver {
     let mut s = Solver::default();
     if let Some(n) = f.int("substeps", issues) {
         if (1..=4096).contains(&n) {
@@ -243,7 +249,7 @@ pub fn read_solver(mut f: Fields<'_>, issues: &mut Issues) -> Solver {
             issues.push(f.path_of("substeps"), format!("{n} must be in 1..=4096"));
         }
     }
-    f.finish(&["substeps"], issues);
+    f.finish(&[&["substeps"][..], extra].concat(), issues);
     s
 }
 
@@ -266,7 +272,7 @@ impl SimSpec {
             }
         };
         let solver = match root.table("solver", &mut issues) {
-            Some(s) => read_solver(s, &mut issues),
+            Some(s) => read_solver(s, &mut issues, &[]),
             None => Solver::default(),
         };
         root.finish(&["model", "excitation", "solver"], &mut issues);

@@ -171,6 +171,70 @@ impl<'a> Fields<'a> {
         }
     }
 
+    /// An array of tables (`[[key]]`), each with its path `key[i]`.
+    pub fn tables(&mut self, key: &str, issues: &mut Issues) -> Option<Vec<Fields<'a>>> {
+        let path = self.path_of(key);
+        match self.take(key)? {
+            toml::Value::Array(items) => {
+                let mut out = Vec::new();
+                for (i, v) in items.iter().enumerate() {
+                    match v {
+                        toml::Value::Table(t) => out.push(Fields::new(format!("{path}[{i}]"), t)),
+                        other => issues.push(format!("{path}[{i}]"), format!("expected a table, found {}", other.type_str())),
+                    }
+                }
+                Some(out)
+            }
+            other => {
+                issues.push(path, format!("expected an array of tables ([[{key}]]), found {}", other.type_str()));
+                None
+            }
+        }
+    }
+
+    /// An array of numbers.
+    pub fn f64_array(&mut self, key: &str, issues: &mut Issues) -> Option<Vec<f64>> {
+        let path = self.path_of(key);
+        match self.take(key)? {
+            toml::Value::Array(items) => {
+                let mut out = Vec::new();
+                for (i, v) in items.iter().enumerate() {
+                    match v {
+                        toml::Value::Float(x) if x.is_finite() => out.push(*x),
+                        toml::Value::Integer(n) => out.push(*n as f64),
+                        other => issues.push(format!("{path}[{i}]"), format!("expected a finite number, found {other}")),
+                    }
+                }
+                Some(out)
+            }
+            other => {
+                issues.push(path, format!("expected an array of numbers, found {}", other.type_str()));
+                None
+            }
+        }
+    }
+
+    /// An array of strings.
+    pub fn str_array(&mut self, key: &str, issues: &mut Issues) -> Option<Vec<&'a str>> {
+        let path = self.path_of(key);
+        match self.take(key)? {
+            toml::Value::Array(items) => {
+                let mut out = Vec::new();
+                for (i, v) in items.iter().enumerate() {
+                    match v {
+                        toml::Value::String(x) => out.push(x.as_str()),
+                        other => issues.push(format!("{path}[{i}]"), format!("expected a string, found {}", other.type_str())),
+                    }
+                }
+                Some(out)
+            }
+            other => {
+                issues.push(path, format!("expected an array of strings, found {}", other.type_str()));
+                None
+            }
+        }
+    }
+
     /// The keys of this table not read yet, each reported as unknown (with the expected names).
     pub fn finish(self, expected: &[&str], issues: &mut Issues) {
         for key in self.table.keys() {

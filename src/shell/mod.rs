@@ -1,8 +1,12 @@
 //! The shell: command line, files, printing. Errors are `anyhow` chains here; [`exit_code`]
 //! maps them to the documented exit codes.
 
+pub mod bench_cmd;
 pub mod cli;
 pub mod params_cmd;
+pub mod progress;
+pub mod run_cmd;
+pub mod sensitivity_cmd;
 pub mod sim_cmd;
 pub mod tables;
 
@@ -32,5 +36,8 @@ pub fn dispatch(cli: cli::Cli) -> anyhow::Result<()> {
     match cli.command {
         cli::Command::Sim(a) => sim_cmd::run(&a),
         cli::Command::Params(a) => params_cmd::run(&a),
+        cli::Command::Run(a) => run_cmd::run(&a),
+        cli::Command::Sensitivity(a) => sensitivity_cmd::run(&a),
+        cli::Command::Bench(a) => bench_cmd::run(&a),
     }
 }

@@ -4,6 +4,7 @@ use super::cli::SimArgs;
 use super::tables::{self, TableError};
 use super::{BadInput, RunFailed};
 use crate::kernel::excitation::{Record, Reference};
+use crate::kernel::params::ModelParams;
 use crate::kernel::simulate::LaneStatus;
 use crate::orchestration::sim::{self, CHANNELS};
 use crate::orchestration::spec::{ExcitationSpec, SimSpec};
@@ -13,15 +14,20 @@ use std::path::Path;
 
 /// Builds the reference of a spec, reading a record file relative to `base`.
 pub fn build_reference(spec: &SimSpec, base: &Path) -> anyhow::Result<Reference> {
-    let f_s = spec.model.controller.f_s;
-    match &spec.excitation {
+    reference_for(&spec.excitation, &spec.model, base)
+}
+
+/// The reference of one excitation for `model`, reading a record file relative to `base`.
+pub fn reference_for(excitation: &ExcitationSpec, model: &ModelParams, base: &Path) -> anyhow::Result<Reference> {
+    let f_s = model.controller.f_s;
+    match excitation {
         ExcitationSpec::Sine { sine, .. } => Ok(sine.reference(f_s)),
         ExcitationSpec::Record { file, column, time_column, f_ref_hz, scale } => {
             let path = base.join(file);
             let t = tables::read_columns(&path, &[time_column, column], &[]).map_err(input_if_user)?;
             t.check_time(time_column).map_err(input_if_user)?;
             let disp: Vec<f64> = t.column(column).unwrap().iter().map(|d| d * scale).collect();
-            let l = spec.model.actuator.l;
+            let l = model.actuator.l;
             if let Some((row, d)) = disp.iter().enumerate().find(|(_, d)| d.abs() >= l) {
                 return Err(BadInput(format!(
                     "{}: column `{column}`, row {}: displacement {d} m (after scale {scale}) exceeds the stroke (half stroke actuator.l = {l} m)",

@@ -103,10 +103,35 @@ fn missing(file: &Path, column: &str, found: &[String]) -> TableError {
     TableError::MissingColumn { file: file.to_path_buf(), column: column.to_string(), hint }
 }
 
-/// Reads the `wanted` columns (all required) plus any of `optional` that are present.
+/// The column names of a CSV (header row) or Parquet file.
+pub fn column_names(path: &Path) -> Result<Vec<String>, TableError> {
+    let file = path.to_path_buf();
+    let f = File::open(path).map_err(|e| TableError::Io { file: file.clone(), source: e })?;
+    if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("parquet") || e.eq_ignore_ascii_case("pq")) {
+        let b = ParquetRecordBatchReaderBuilder::try_new(f).map_err(|e| TableError::Format { file, kind: "Parquet", message: e.to_string() })?;
+        Ok(b.schema().fields().iter().map(|f| f.name().clone()).collect())
+    } else {
+        let mut rdr = csv::ReaderBuilder::new().has_headers(true).trim(csv::Trim::All).from_reader(f);
+        let h = rdr.headers().map_err(|e| TableError::Format { file, kind: "CSV", message: e.to_string() })?;
+        Ok(h.iter().map(str::to_string).collect())
+    }
+}
+
+/// Reads the `wanted` columns (all required) plus any of `optional` that are present. Every
+/// cell must be a finite number (measured data: a NaN is an error naming column and row).
 pub fn read_columns(path: &Path, wanted: &[&str], optional: &[&str]) -> Result<NumTable, TableError> {
+    read_columns_impl(path, wanted, optional, false)
+}
+
+/// Reads the `wanted` columns of a Parquet results table, where NaN marks a metric of a failed
+/// run (nulls are still errors).
+pub fn read_columns_allow_nan(path: &Path, wanted: &[&str]) -> Result<NumTable, TableError> {
+    read_columns_impl(path, wanted, &[], true)
+}
+
+fn read_columns_impl(path: &Path, wanted: &[&str], optional: &[&str], allow_nan: bool) -> Result<NumTable, TableError> {
     let is_parquet = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("parquet") || e.eq_ignore_ascii_case("pq"));
-    let table = if is_parquet { read_parquet(path, wanted, optional)? } else { read_csv(path, wanted, optional)? };
+    let table = if is_parquet { read_parquet(path, wanted, optional, allow_nan)? } else { read_csv(path, wanted, optional)? };
     if table.rows() == 0 {
         return Err(TableError::Empty { file: path.to_path_buf() });
     }
@@ -155,7 +180,7 @@ fn read_csv(path: &Path, wanted: &[&str], optional: &[&str]) -> Result<NumTable,
     Ok(NumTable { file, names: idx.into_iter().map(|(n, _)| n).collect(), columns, csv: true })
 }
 
-fn read_parquet(path: &Path, wanted: &[&str], optional: &[&str]) -> Result<NumTable, TableError> {
+fn read_parquet(path: &Path, wanted: &[&str], optional: &[&str], allow_nan: bool) -> Result<NumTable, TableError> {
     let file = path.to_path_buf();
     let fmt = |e: &dyn std::fmt::Display| TableError::Format { file: file.clone(), kind: "Parquet", message: e.to_string() };
     let f = File::open(path).map_err(|e| TableError::Io { file: file.clone(), source: e })?;
@@ -182,6 +207,8 @@ fn read_parquet(path: &Path, wanted: &[&str], optional: &[&str]) -> Result<NumTa
                 DataType::Float32 => { let a = arr.as_any().downcast_ref::<Float32Array>().unwrap().clone(); Box::new(move |i| a.value(i) as f64) }
                 DataType::Int64 => { let a = arr.as_any().downcast_ref::<Int64Array>().unwrap().clone(); Box::new(move |i| a.value(i) as f64) }
                 DataType::Int32 => { let a = arr.as_any().downcast_ref::<Int32Array>().unwrap().clone(); Box::new(move |i| a.value(i) as f64) }
+                DataType::UInt64 => { let a = arr.as_any().downcast_ref::<arrow_array::UInt64Array>().unwrap().clone(); Box::new(move |i| a.value(i) as f64) }
+                DataType::UInt32 => { let a = arr.as_any().downcast_ref::<arrow_array::UInt32Array>().unwrap().clone(); Box::new(move |i| a.value(i) as f64) }
                 other => return Err(bad(base + 1, format!("column type {other} is not numeric"))),
             };
             for i in 0..arr.len() {
@@ -190,7 +217,7 @@ fn read_parquet(path: &Path, wanted: &[&str], optional: &[&str]) -> Result<NumTa
                     return Err(bad(row, "empty (null) cell".into()));
                 }
                 let v = get(i);
-                if !v.is_finite() {
+                if !v.is_finite() && !(allow_nan && v.is_nan()) {
                     return Err(bad(row, format!("{v} is not a finite number")));
                 }
                 col.push(v);
@@ -229,24 +256,109 @@ impl Drop for AtomicFile {
     }
 }
 
+/// A column to write.
+pub enum Column {
+    F64(Vec<f64>),
+    /// Nullable f64 (None → null).
+    OptF64(Vec<Option<f64>>),
+    U64(Vec<u64>),
+    U32(Vec<u32>),
+    Str(Vec<String>),
+    /// Nullable string.
+    OptStr(Vec<Option<String>>),
+}
+
+impl Column {
+    fn field(&self, name: &str) -> Field {
+        match self {
+            Column::F64(_) => Field::new(name, DataType::Float64, false),
+            Column::OptF64(_) => Field::new(name, DataType::Float64, true),
+            Column::U64(_) => Field::new(name, DataType::UInt64, false),
+            Column::U32(_) => Field::new(name, DataType::UInt32, false),
+            Column::Str(_) => Field::new(name, DataType::Utf8, false),
+            Column::OptStr(_) => Field::new(name, DataType::Utf8, true),
+        }
+    }
+    fn array(self) -> ArrayRef {
+        match self {
+            Column::F64(v) => Arc::new(Float64Array::from(v)),
+            Column::OptF64(v) => Arc::new(Float64Array::from(v)),
+            Column::U64(v) => Arc::new(arrow_array::UInt64Array::from(v)),
+            Column::U32(v) => Arc::new(arrow_array::UInt32Array::from(v)),
+            Column::Str(v) => Arc::new(arrow_array::StringArray::from(v)),
+            Column::OptStr(v) => Arc::new(arrow_array::StringArray::from(v)),
+        }
+    }
+}
+
+/// A Parquet file written batch by batch (zstd, bounded row groups), atomically: it appears
+/// under its name only when [`ParquetStream::finish`] succeeds.
+pub struct ParquetStream {
+    file: AtomicFile,
+    writer: ArrowWriter<File>,
+    schema: Arc<Schema>,
+}
+
+impl ParquetStream {
+    /// Opens `path.tmp` for a table with the columns of `template` (names and types).
+    pub fn create(path: &Path, template: &[(String, Column)], metadata: &[(String, String)]) -> anyhow::Result<Self> {
+        use anyhow::Context;
+        let schema = Arc::new(Schema::new(template.iter().map(|(n, c)| c.field(n)).collect::<Vec<_>>()));
+        let props = WriterProperties::builder()
+            .set_compression(Compression::ZSTD(ZstdLevel::default()))
+            .set_max_row_group_row_count(Some(16_384))
+            .set_key_value_metadata(Some(metadata.iter().map(|(k, v)| KeyValue::new(k.clone(), v.clone())).collect()))
+            .build();
+        let file = AtomicFile::new(path);
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        }
+        let f = File::create(&file.tmp).with_context(|| format!("cannot create {}", file.tmp.display()))?;
+        let writer = ArrowWriter::try_new(f, schema.clone(), Some(props))?;
+        Ok(ParquetStream { file, writer, schema })
+    }
+
+    /// Appends rows (columns in the template's order).
+    pub fn write(&mut self, columns: Vec<Column>) -> anyhow::Result<()> {
+        let batch = RecordBatch::try_new(self.schema.clone(), columns.into_iter().map(Column::array).collect())?;
+        self.writer.write(&batch)?;
+        Ok(())
+    }
+
+    /// Closes the file and moves it into place.
+    pub fn finish(self) -> anyhow::Result<()> {
+        use anyhow::Context;
+        self.writer.close()?;
+        let path = self.file.path.clone();
+        self.file.commit().with_context(|| format!("cannot move the finished file to {}", path.display()))?;
+        Ok(())
+    }
+}
+
 /// Writes f64 columns as one Parquet file (zstd) with key-value metadata, atomically.
 pub fn write_parquet(path: &Path, columns: &[(&str, &[f64])], metadata: &[(String, String)]) -> anyhow::Result<()> {
-    use anyhow::Context;
-    let fields: Vec<Field> = columns.iter().map(|(n, _)| Field::new(*n, DataType::Float64, false)).collect();
-    let schema = Arc::new(Schema::new(fields));
-    let arrays: Vec<ArrayRef> = columns.iter().map(|(_, v)| Arc::new(Float64Array::from(v.to_vec())) as ArrayRef).collect();
-    let batch = RecordBatch::try_new(schema.clone(), arrays)?;
-    let props = WriterProperties::builder()
-        .set_compression(Compression::ZSTD(ZstdLevel::default()))
-        .set_key_value_metadata(Some(metadata.iter().map(|(k, v)| KeyValue::new(k.clone(), v.clone())).collect()))
-        .build();
-    let out = AtomicFile::new(path);
-    let f = File::create(&out.tmp).with_context(|| format!("cannot create {}", out.tmp.display()))?;
-    let mut w = ArrowWriter::try_new(f, schema, Some(props))?;
-    w.write(&batch)?;
-    w.close()?;
-    out.commit().with_context(|| format!("cannot move the finished file to {}", path.display()))?;
-    Ok(())
+    let cols: Vec<(String, Column)> = columns.iter().map(|(n, v)| (n.to_string(), Column::F64(v.to_vec()))).collect();
+    write_table(path, cols, metadata)
+}
+
+/// Writes typed columns as one Parquet file, atomically.
+pub fn write_table(path: &Path, columns: Vec<(String, Column)>, metadata: &[(String, String)]) -> anyhow::Result<()> {
+    let mut s = ParquetStream::create(path, &columns, metadata)?;
+    s.write(columns.into_iter().map(|(_, c)| c).collect())?;
+    s.finish()
+}
+
+/// The key-value metadata of a Parquet file.
+pub fn parquet_metadata(path: &Path) -> Result<Vec<(String, String)>, TableError> {
+    let file = path.to_path_buf();
+    let f = File::open(path).map_err(|e| TableError::Io { file: file.clone(), source: e })?;
+    let builder = ParquetRecordBatchReaderBuilder::try_new(f).map_err(|e| TableError::Format { file, kind: "Parquet", message: e.to_string() })?;
+    Ok(builder
+        .metadata()
+        .file_metadata()
+        .key_value_metadata()
+        .map(|kv| kv.iter().map(|k| (k.key.clone(), k.value.clone().unwrap_or_default())).collect())
+        .unwrap_or_default())
 }
 
 #[cfg(test)]

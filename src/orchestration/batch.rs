@@ -1,0 +1,282 @@
+//! The batch engine: a study's samples through the lane kernel, in parallel, streamed in order.
+//!
+//! - A sample's parameters depend only on (seed, sample id) ([`Plan::sample`]).
+//! - A chunk of consecutive samples is one work item: its samples are run in groups of
+//!   [`LANES`] through the kernel for every excitation; lanes are independent (bit for bit), so a
+//!   sample's row does not depend on its neighbours, the chunk size or the thread count.
+//! - Chunks are processed in waves: a wave runs in parallel on the rayon pool, and its rows go to
+//!   the [`RowSink`] in sample order before the next wave starts, so memory stays flat however
+//!   many samples a study has.
+//! - A sample whose parameters are invalid (e.g. a normal draw giving a negative mass) or whose run
+//!   fails is a row with its status, time and reason; the study goes on.
+
+use super::sampling::{saltelli_block, Design, UnitDesign};
+use super::study::{Method, StudySpec};
+use crate::kernel::effects::Baseline;
+use crate::kernel::excitation::Reference;
+use crate::kernel::metrics::Metrics;
+use crate::kernel::params::{ModelParams, ParamInfo};
+use crate::kernel::simulate::{self, LaneParams, LaneStatus, NoObserver};
+use crate::kernel::LANES;
+use rayon::prelude::*;
+use std::ops::Range;
+
+/// Where the sample points come from.
+#[derive(Debug, Clone)]
+pub enum DesignSource {
+    Generated(UnitDesign),
+    /// Rows read from a design file, one value per column of `Plan::columns`.
+    Table(Vec<Vec<f64>>),
+}
+
+/// Everything needed to compute any sample's row: shared read-only by every thread.
+pub struct Plan {
+    pub base: ModelParams,
+    /// The parameters written as columns: the study's variables (fixed ones too), or a design
+    /// file's columns.
+    pub columns: Vec<&'static ParamInfo>,
+    /// For generated designs: which design dimension drives each column (None = fixed value).
+    dims: Vec<Option<usize>>,
+    fixed: Vec<f64>,
+    dists: Vec<super::sampling::Distribution>,
+    pub design: DesignSource,
+    pub references: Vec<Reference>,
+    pub solver: simulate::Solver,
+    pub saltelli_dims: Option<usize>,
+}
+
+/// Status of one row.
+#[derive(Debug, Clone, PartialEq)]
+pub enum RowStatus {
+    Ok,
+    /// The run failed (diverged, stroke or pressure limit) at a time.
+    Failed { time_s: f64, reason: String },
+    /// The sample's parameters are outside their valid ranges; it was not run.
+    Invalid { reason: String },
+}
+
+impl RowStatus {
+    pub fn label(&self) -> &'static str {
+        match self {
+            RowStatus::Ok => "ok",
+            RowStatus::Failed { .. } => "failed",
+            RowStatus::Invalid { .. } => "invalid",
+        }
+    }
+}
+
+/// One row of the results: one sample × one excitation.
+#[derive(Debug, Clone)]
+pub struct Row {
+    pub sample_id: u64,
+    pub excitation: u32,
+    /// Saltelli design: (base point, block 0 = A, 1 = B, 2 + i = AB_i).
+    pub saltelli: Option<(u32, u32)>,
+    pub values: Vec<f64>,
+    pub status: RowStatus,
+    pub metrics: Metrics,
+}
+
+/// A sample's parameter values and model (or why the model is invalid).
+pub struct Sample {
+    pub id: u64,
+    pub values: Vec<f64>,
+    pub model: Result<ModelParams, String>,
+}
+
+impl Plan {
+    /// A plan for a study whose design is generated (not `Method::File`).
+    pub fn generated(spec: &StudySpec, references: Vec<Reference>) -> Plan {
+        let varied = spec.varied();
+        let design = UnitDesign::new(spec.design(), varied.len(), spec.samples, spec.seed);
+        let mut dims = Vec::new();
+        let mut next = 0;
+        for v in &spec.variables {
+            if v.dist.varies() {
+                dims.push(Some(next));
+                next += 1;
+            } else {
+                dims.push(None);
+            }
+        }
+        Plan {
+            base: spec.model.clone(),
+            columns: spec.variables.iter().map(|v| v.info).collect(),
+            dims,
+            fixed: spec.variables.iter().map(|v| v.dist.quantile(0.5)).collect(),
+            dists: spec.variables.iter().map(|v| v.dist.clone()).collect(),
+            saltelli_dims: matches!(spec.method, Method::Saltelli).then_some(varied.len()),
+            design: DesignSource::Generated(design),
+            references,
+            solver: spec.solver,
+        }
+    }
+
+    /// A plan whose samples are the rows of a design table.
+    pub fn from_table(spec: &StudySpec, columns: Vec<&'static ParamInfo>, rows: Vec<Vec<f64>>, references: Vec<Reference>) -> Plan {
+        Plan {
+            base: spec.model.clone(),
+            dims: (0..columns.len()).map(Some).collect(),
+            fixed: vec![f64::NAN; columns.len()],
+            dists: Vec::new(),
+            columns,
+            design: DesignSource::Table(rows),
+            references,
+            solver: spec.solver,
+            saltelli_dims: None,
+        }
+    }
+
+    /// Number of samples.
+    pub fn samples(&self) -> usize {
+        match &self.design {
+            DesignSource::Generated(d) => d.samples,
+            DesignSource::Table(rows) => rows.len(),
+        }
+    }
+
+    /// Number of rows (samples × excitations).
+    pub fn rows(&self) -> usize {
+        self.samples() * self.references.len()
+    }
+
+    /// The parameters of sample `id`: a function of (seed, id) only.
+    pub fn sample(&self, id: usize) -> Sample {
+        let values: Vec<f64> = match &self.design {
+            DesignSource::Table(rows) => rows[id].clone(),
+            DesignSource::Generated(d) => {
+                let mut vals = self.fixed.clone();
+                if let Design::Grid { values } = &d.design {
+                    let mut idx = vec![0; d.dims];
+                    d.grid_index(id, &mut idx);
+                    for (c, dim) in self.dims.iter().enumerate() {
+                        if let Some(j) = dim {
+                            vals[c] = values[*j][idx[*j]];
+                        }
+                    }
+                } else {
+                    let mut u = vec![0.0; d.dims];
+                    d.point(id, &mut u);
+                    for (c, dim) in self.dims.iter().enumerate() {
+                        if let Some(j) = dim {
+                            vals[c] = self.dists[c].quantile(u[*j]);
+                        }
+                    }
+                }
+                vals
+            }
+        };
+        let mut model = self.base.clone();
+        for (info, v) in self.columns.iter().zip(&values) {
+            (info.set)(&mut model, *v);
+        }
+        let model = model.validate().map(|_| model).map_err(|list| list.iter().map(|i| i.to_string()).collect::<Vec<_>>().join("; "));
+        Sample { id: id as u64, values, model }
+    }
+
+    /// Runs samples `range` for every excitation: rows in (sample, excitation) order.
+    pub fn run_chunk(&self, range: Range<usize>) -> Vec<Row> {
+        let samples: Vec<Sample> = range.map(|i| self.sample(i)).collect();
+        let n_exc = self.references.len();
+        let mut rows: Vec<Option<Row>> = vec![None; samples.len() * n_exc];
+        let valid: Vec<usize> = (0..samples.len()).filter(|&i| samples[i].model.is_ok()).collect();
+        let saltelli = |id: u64| self.saltelli_dims.map(|d| {
+            let (b, k) = saltelli_block(id as usize, d);
+            (b as u32, k as u32)
+        });
+        for (e, reference) in self.references.iter().enumerate() {
+            for group in valid.chunks(LANES) {
+                let models: Vec<&ModelParams> = group.iter().map(|&i| samples[i].model.as_ref().expect("valid")).collect();
+                let results = match LaneParams::<LANES>::new(&models) {
+                    Ok(lp) => simulate::run(&lp, &Baseline, reference, &self.solver, &mut NoObserver),
+                    Err(e) => Err(e),
+                };
+                for (lane, &i) in group.iter().enumerate() {
+                    let (status, metrics) = match &results {
+                        Ok(r) => match r[lane].status {
+                            LaneStatus::Ok => (RowStatus::Ok, r[lane].metrics),
+                            LaneStatus::Failed { time_s, reason } => (RowStatus::Failed { time_s, reason: reason.to_string() }, Metrics::NAN),
+                        },
+                        Err(e) => (RowStatus::Invalid { reason: e.to_string() }, Metrics::NAN),
+                    };
+                    let s = &samples[i];
+                    rows[i * n_exc + e] = Some(Row { sample_id: s.id, excitation: e as u32, saltelli: saltelli(s.id), values: s.values.clone(), status, metrics });
+                }
+            }
+            for s in samples.iter().enumerate().filter(|(_, s)| s.model.is_err()) {
+                let (i, s) = s;
+                let reason = s.model.as_ref().err().cloned().unwrap_or_default();
+                rows[i * n_exc + e] = Some(Row {
+                    sample_id: s.id,
+                    excitation: e as u32,
+                    saltelli: saltelli(s.id),
+                    values: s.values.clone(),
+                    status: RowStatus::Invalid { reason },
+                    metrics: Metrics::NAN,
+                });
+            }
+        }
+        rows.into_iter().map(|r| r.expect("every row filled")).collect()
+    }
+}
+
+/// Receives rows in sample order.
+pub trait RowSink {
+    fn write(&mut self, rows: &[Row]) -> anyhow::Result<()>;
+}
+
+impl RowSink for Vec<Row> {
+    fn write(&mut self, rows: &[Row]) -> anyhow::Result<()> {
+        self.extend_from_slice(rows);
+        Ok(())
+    }
+}
+
+/// Counts of a finished run.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Summary {
+    pub rows: usize,
+    pub ok: usize,
+    pub failed: usize,
+    pub invalid: usize,
+}
+
+/// Runs samples `range` of a plan on `pool` in chunks of `chunk` samples, sending rows to `sink`
+/// in order. `progress(rows_done)` is called from worker threads as chunks finish.
+pub fn run_plan(
+    plan: &Plan,
+    range: Range<usize>,
+    pool: &rayon::ThreadPool,
+    chunk: usize,
+    sink: &mut dyn RowSink,
+    progress: &(dyn Fn(usize) + Sync),
+) -> anyhow::Result<Summary> {
+    let chunk = chunk.max(1);
+    let starts: Vec<usize> = range.clone().step_by(chunk).collect();
+    let wave = (pool.current_num_threads() * 4).max(1);
+    let mut summary = Summary::default();
+    for wave_starts in starts.chunks(wave) {
+        let results: Vec<Vec<Row>> = pool.install(|| {
+            wave_starts
+                .par_iter()
+                .map(|&s| {
+                    let rows = plan.run_chunk(s..(s + chunk).min(range.end));
+                    progress(rows.len());
+                    rows
+                })
+                .collect()
+        });
+        for rows in &results {
+            for r in rows {
+                summary.rows += 1;
+                match r.status {
+                    RowStatus::Ok => summary.ok += 1,
+                    RowStatus::Failed { .. } => summary.failed += 1,
+                    RowStatus::Invalid { .. } => summary.invalid += 1,
+                }
+            }
+            sink.write(rows)?;
+        }
+    }
+    Ok(summary)
+}

@@ -1,0 +1,137 @@
+//! `study bench`: throughput of the kernel in simulated seconds per wall second, the scalar path
+//! beside it, the machine's limit for this kernel, and a CI gate on ratios measured in the same
+//! run (never on absolute times: machines differ).
+
+use super::cli::BenchArgs;
+use crate::kernel::calibrate;
+use crate::kernel::effects::Baseline;
+use crate::kernel::excitation::{Reference, Sine};
+use crate::kernel::params::ModelParams;
+use crate::kernel::simulate::{self, Isa, LaneParams, NoObserver, Solver};
+use crate::kernel::LANES;
+use anyhow::{bail, Context};
+use rayon::prelude::*;
+use std::io::Write;
+use std::time::Instant;
+
+/// RK4 stages per step.
+const STAGES: f64 = 4.0;
+
+fn reference() -> Reference {
+    Sine { freq_hz: 3.0, amp_m: Sine::amp_from_g(1.73, 3.0), taper_s: 1.0, duration_s: 3.0, window_cycles: Some(4) }.reference(1024.0)
+}
+
+/// Simulated seconds per wall second of `threads` workers each running N-lane batches for
+/// about `secs` seconds.
+fn throughput<const N: usize>(threads: usize, secs: f64) -> anyhow::Result<f64> {
+    let p = ModelParams::default();
+    let sets: Vec<&ModelParams> = (0..N).map(|_| &p).collect();
+    let lp = LaneParams::<N>::new(&sets)?;
+    let r = reference();
+    let solver = Solver::default();
+    let run_once = || simulate::run(&lp, &Baseline, &r, &solver, &mut NoObserver).map(|x| x[0].metrics.amp_ratio);
+    // Calibrate the repetitions to the time budget with one run.
+    let t = Instant::now();
+    run_once()?;
+    let per_run = t.elapsed().as_secs_f64().max(1e-6);
+    let reps = ((secs / per_run) as usize).max(2);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
+    let t = Instant::now();
+    let done: Vec<f64> = pool.install(|| (0..reps * threads).into_par_iter().map(|_| run_once().unwrap_or(f64::NAN)).collect());
+    let wall = t.elapsed().as_secs_f64();
+    anyhow::ensure!(done.iter().all(|x| x.is_finite()), "benchmark run failed");
+    Ok((reps * threads * N) as f64 * r.len() as f64 / r.f_s / wall)
+}
+
+/// Figures of one benchmark run.
+#[derive(Debug, Clone, Copy)]
+pub struct Figures {
+    pub clock_hz: f64,
+    pub scalar: f64,
+    pub batch1: f64,
+    pub batch2: f64,
+    pub limit: f64,
+    pub rhs_per_sim_s: f64,
+}
+
+impl Figures {
+    pub fn batch_over_scalar(&self) -> f64 {
+        self.batch1 / self.scalar
+    }
+    pub fn batch_over_limit(&self) -> f64 {
+        self.batch1 / self.limit
+    }
+    pub fn cycles_per_rhs(&self, sim_s_per_s: f64) -> f64 {
+        self.clock_hz / (sim_s_per_s * self.rhs_per_sim_s)
+    }
+}
+
+pub fn measure(secs: f64) -> anyhow::Result<Figures> {
+    let budget = secs / 5.0;
+    // Clock: a dependent chain of 1-cycle operations, 2 per iteration.
+    let iters = 200_000_000;
+    let t = Instant::now();
+    std::hint::black_box(calibrate::add_chain(std::hint::black_box(iters), 1));
+    let clock_hz = 2.0 * iters as f64 / t.elapsed().as_secs_f64();
+    // The divide/square-root limit.
+    let probe = 200_000;
+    let t = Instant::now();
+    std::hint::black_box(calibrate::sqrt_div_mix(probe, 1.0));
+    let n = ((budget / t.elapsed().as_secs_f64().max(1e-6)) as usize * probe).max(probe);
+    let t = Instant::now();
+    std::hint::black_box(calibrate::sqrt_div_mix(std::hint::black_box(n), 1.0));
+    let lane_rhs_per_s = (n * LANES) as f64 / t.elapsed().as_secs_f64();
+    let rhs_per_sim_s = 1024.0 * Solver::default().substeps as f64 * STAGES;
+    Ok(Figures {
+        clock_hz,
+        scalar: throughput::<1>(1, budget)?,
+        batch1: throughput::<LANES>(1, budget)?,
+        batch2: throughput::<LANES>(2, budget)?,
+        limit: lane_rhs_per_s / rhs_per_sim_s,
+        rhs_per_sim_s,
+    })
+}
+
+fn read_baseline(path: &std::path::Path) -> anyhow::Result<(f64, f64)> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let t: toml::Table = text.parse().with_context(|| format!("{} is not TOML", path.display()))?;
+    let get = |k: &str| t.get(k).and_then(|v| v.as_float()).with_context(|| format!("{}: missing number `{k}`", path.display()));
+    Ok((get("batch_over_scalar")?, get("batch_over_limit")?))
+}
+
+pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
+    let f = measure(args.seconds)?;
+    let mut out = std::io::stdout().lock();
+    let h_us = 1e6 / (1024.0 * Solver::default().substeps as f64);
+    writeln!(out, "study bench: 3 s sine at 1.73 g, RK4 h = {h_us:.1} µs ({} substeps per 1024 Hz tick; converged: a quarter step changes no metric by 1e-5), {} kernel", Solver::default().substeps, Isa::detected())?;
+    writeln!(out, "  clock (dependent add chain)        {:>8.2} GHz", f.clock_hz / 1e9)?;
+    writeln!(out, "  {:<34} {:>8.0} sim-s/wall-s  {:>6.1} cycles per lane per RHS", "scalar path (1 lane, 1 thread)", f.scalar, f.cycles_per_rhs(f.scalar))?;
+    writeln!(out, "  {:<34} {:>8.0} sim-s/wall-s  {:>6.1} cycles per lane per RHS", format!("batch ({LANES} lanes, 1 thread)"), f.batch1, f.cycles_per_rhs(f.batch1))?;
+    writeln!(out, "  {:<34} {:>8.0} sim-s/wall-s  ({:.2}x one thread)", format!("batch ({LANES} lanes, 2 threads)"), f.batch2, f.batch2 / f.batch1)?;
+    writeln!(out, "  {:<34} {:>8.0} sim-s/wall-s  {:>6.1} cycles per lane per RHS", "limit: 9 sqrt + 6 div per RHS", f.limit, f.cycles_per_rhs(f.limit))?;
+    writeln!(out, "  ratios: batch/scalar {:.2}, batch/limit {:.2}, 2 threads/1 thread {:.2}", f.batch_over_scalar(), f.batch_over_limit(), f.batch2 / f.batch1)?;
+    if let Some(path) = &args.write_baseline {
+        let text = format!(
+            "# Ratios measured by `study bench` (same run, same machine); the CI gate fails when one falls\n# more than 25 % below these.\nbatch_over_scalar = {:.3}\nbatch_over_limit = {:.3}\n",
+            f.batch_over_scalar(),
+            f.batch_over_limit()
+        );
+        std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))?;
+        writeln!(out, "  wrote baseline {}", path.display())?;
+    }
+    if let Some(path) = &args.gate {
+        let (bs, bl) = read_baseline(path)?;
+        let mut bad = Vec::new();
+        for (name, got, base) in [("batch/scalar", f.batch_over_scalar(), bs), ("batch/limit", f.batch_over_limit(), bl)] {
+            let floor = 0.75 * base;
+            writeln!(out, "  gate {name}: {got:.3} against baseline {base:.3} (floor {floor:.3}) {}", if got >= floor { "ok" } else { "FAILED" })?;
+            if got < floor {
+                bad.push(name);
+            }
+        }
+        if !bad.is_empty() {
+            bail!("benchmark gate failed: {} fell more than 25 % below the baseline {}", bad.join(", "), path.display());
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,66 @@
+//! Progress of long runs: an indicatif bar (rate, ETA) on a terminal; a plain line every few
+//! seconds when stderr is not a terminal (Slurm logs, CI); nothing with --quiet.
+
+use indicatif::{ProgressBar, ProgressStyle};
+use std::io::IsTerminal;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+pub struct Progress {
+    bar: Option<ProgressBar>,
+    plain: Option<Mutex<Instant>>,
+    start: Instant,
+    total: usize,
+    done: AtomicUsize,
+    label: String,
+}
+
+impl Progress {
+    pub fn new(label: &str, total: usize, quiet: bool) -> Self {
+        let terminal = std::io::stderr().is_terminal();
+        let bar = (!quiet && terminal).then(|| {
+            let b = ProgressBar::new(total as u64);
+            b.set_style(
+                ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} runs  {per_sec}  ETA {eta}").expect("template").progress_chars("=> "),
+            );
+            b.set_message(label.to_string());
+            b
+        });
+        let plain = (!quiet && !terminal).then(|| Mutex::new(Instant::now()));
+        Progress { bar, plain, start: Instant::now(), total, done: AtomicUsize::new(0), label: label.to_string() }
+    }
+
+    /// `n` more runs finished (callable from any thread).
+    pub fn inc(&self, n: usize) {
+        let done = self.done.fetch_add(n, Ordering::Relaxed) + n;
+        if let Some(b) = &self.bar {
+            b.inc(n as u64);
+        }
+        if let Some(last) = &self.plain {
+            let mut last = last.lock().expect("progress lock");
+            if last.elapsed() >= Duration::from_secs(5) || done == self.total {
+                *last = Instant::now();
+                let t = self.start.elapsed().as_secs_f64();
+                let rate = done as f64 / t.max(1e-9);
+                let eta = (self.total - done) as f64 / rate.max(1e-9);
+                eprintln!(
+                    "{}: {done}/{} runs ({:.0}%), {rate:.0} runs/s, elapsed {t:.0} s, ETA {eta:.0} s",
+                    self.label,
+                    self.total,
+                    100.0 * done as f64 / self.total.max(1) as f64
+                );
+            }
+        }
+    }
+
+    pub fn finish(&self) {
+        if let Some(b) = &self.bar {
+            b.finish_and_clear();
+        }
+    }
+
+    pub fn elapsed(&self) -> Duration {
+        self.start.elapsed()
+    }
+}

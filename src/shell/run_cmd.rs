@@ -1,0 +1,260 @@
+//! `study run`: a study file through the batch engine into a Parquet table.
+
+use super::cli::RunArgs;
+use super::progress::Progress;
+use super::sim_cmd::{input_if_user, reference_for};
+use super::tables::{self, Column, ParquetStream};
+use super::BadInput;
+use crate::kernel::params::{ModelParams, ParamInfo};
+use crate::kernel::simulate::Isa;
+use crate::kernel::LANES;
+use crate::orchestration::batch::{self, Plan, Row, RowSink, RowStatus};
+use crate::orchestration::sim;
+use crate::orchestration::spec::SimSpec;
+use crate::orchestration::study::{Method, StudySpec};
+use anyhow::Context;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// Version of the results table layout (FORMATS.md "Results").
+pub const SCHEMA_VERSION: &str = "1";
+
+/// Reads and validates a study file.
+pub fn load_study(file: &Path) -> anyhow::Result<StudySpec> {
+    let text = std::fs::read_to_string(file).map_err(|e| BadInput(format!("{}: cannot read: {e}", file.display())))?;
+    Ok(StudySpec::from_toml(&text, &file.display().to_string())?)
+}
+
+/// Builds the plan of a study: references of its excitations and its design.
+pub fn plan_for(spec: &StudySpec, base: &Path) -> anyhow::Result<Plan> {
+    let references = spec.excitations.iter().map(|e| reference_for(&e.spec, &spec.model, base)).collect::<anyhow::Result<Vec<_>>>()?;
+    match &spec.method {
+        Method::File { path } => {
+            let path = base.join(path);
+            let names = tables::column_names(&path).map_err(input_if_user)?;
+            let mut infos: Vec<&'static ParamInfo> = Vec::new();
+            for n in &names {
+                let info = ModelParams::lookup(n).or_else(|| ModelParams::registry().find(|p| p.column_name() == *n || p.name == n));
+                match info {
+                    Some(i) if i.path() == "controller.f_s" => {
+                        return Err(BadInput(format!("{}: column `{n}`: controller.f_s cannot be varied (every lane of a batch shares it)", path.display())).into())
+                    }
+                    Some(i) => infos.push(i),
+                    None => {
+                        return Err(BadInput(format!(
+                            "{}: column `{n}` is not a model parameter (use a path such as controller.g_d, or a column name such as g_d; `study params` lists them)",
+                            path.display()
+                        ))
+                        .into())
+                    }
+                }
+            }
+            let wanted: Vec<&str> = names.iter().map(String::as_str).collect();
+            let t = tables::read_columns(&path, &wanted, &[]).map_err(input_if_user)?;
+            let rows: Vec<Vec<f64>> = (0..t.rows()).map(|r| t.columns.iter().map(|c| c[r]).collect()).collect();
+            Ok(Plan::from_table(spec, infos, rows, references))
+        }
+        _ => Ok(Plan::generated(spec, references)),
+    }
+}
+
+/// Writes rows to a results file.
+pub struct ResultsSink {
+    stream: ParquetStream,
+    exc_names: Vec<String>,
+    metrics: Vec<&'static str>,
+    saltelli: bool,
+    columns: Vec<String>,
+}
+
+impl ResultsSink {
+    /// Column layout: sample_id, excitation_id, excitation, [design_base, design_block],
+    /// one column per parameter, one per metric, status, fail_time_s, fail_reason.
+    pub fn create(path: &Path, plan: &Plan, spec: &StudySpec, metadata: &[(String, String)]) -> anyhow::Result<Self> {
+        let saltelli = plan.saltelli_dims.is_some();
+        let columns: Vec<String> = plan.columns.iter().map(|c| c.column_name()).collect();
+        let template = Self::template(saltelli, &columns, &spec.metrics);
+        Ok(ResultsSink {
+            stream: ParquetStream::create(path, &template, metadata)?,
+            exc_names: spec.excitations.iter().map(|e| e.name.clone()).collect(),
+            metrics: spec.metrics.clone(),
+            saltelli,
+            columns,
+        })
+    }
+
+    fn template(saltelli: bool, columns: &[String], metrics: &[&str]) -> Vec<(String, Column)> {
+        let mut t = vec![
+            ("sample_id".to_string(), Column::U64(vec![])),
+            ("excitation_id".to_string(), Column::U32(vec![])),
+            ("excitation".to_string(), Column::Str(vec![])),
+        ];
+        if saltelli {
+            t.push(("design_base".into(), Column::U32(vec![])));
+            t.push(("design_block".into(), Column::U32(vec![])));
+        }
+        t.extend(columns.iter().map(|c| (c.clone(), Column::F64(vec![]))));
+        t.extend(metrics.iter().map(|m| (m.to_string(), Column::F64(vec![]))));
+        t.push(("status".into(), Column::Str(vec![])));
+        t.push(("fail_time_s".into(), Column::OptF64(vec![])));
+        t.push(("fail_reason".into(), Column::OptStr(vec![])));
+        t
+    }
+
+    pub fn finish(self) -> anyhow::Result<()> {
+        self.stream.finish()
+    }
+}
+
+impl RowSink for ResultsSink {
+    fn write(&mut self, rows: &[Row]) -> anyhow::Result<()> {
+        let mut cols = vec![
+            Column::U64(rows.iter().map(|r| r.sample_id).collect()),
+            Column::U32(rows.iter().map(|r| r.excitation).collect()),
+            Column::Str(rows.iter().map(|r| self.exc_names[r.excitation as usize].clone()).collect()),
+        ];
+        if self.saltelli {
+            cols.push(Column::U32(rows.iter().map(|r| r.saltelli.map_or(0, |s| s.0)).collect()));
+            cols.push(Column::U32(rows.iter().map(|r| r.saltelli.map_or(0, |s| s.1)).collect()));
+        }
+        for c in 0..self.columns.len() {
+            cols.push(Column::F64(rows.iter().map(|r| r.values[c]).collect()));
+        }
+        for m in &self.metrics {
+            cols.push(Column::F64(rows.iter().map(|r| r.metrics.columns().into_iter().find(|(n, _)| n == m).map_or(f64::NAN, |(_, v)| v)).collect()));
+        }
+        cols.push(Column::Str(rows.iter().map(|r| r.status.label().to_string()).collect()));
+        cols.push(Column::OptF64(rows.iter().map(|r| if let RowStatus::Failed { time_s, .. } = r.status { Some(time_s) } else { None }).collect()));
+        cols.push(Column::OptStr(
+            rows.iter()
+                .map(|r| match &r.status {
+                    RowStatus::Ok => None,
+                    RowStatus::Failed { reason, .. } | RowStatus::Invalid { reason } => Some(reason.clone()),
+                })
+                .collect(),
+        ));
+        self.stream.write(cols)
+    }
+}
+
+/// The metadata every results file carries.
+pub fn results_metadata(spec: &StudySpec, plan: &Plan, extra: &[(String, String)]) -> Vec<(String, String)> {
+    let mut m = vec![
+        ("vshake.kind".to_string(), "study_results".to_string()),
+        ("vshake.study".to_string(), spec.resolved_toml()),
+        ("vshake.seed".to_string(), spec.seed.to_string()),
+        ("vshake.version".to_string(), env!("CARGO_PKG_VERSION").to_string()),
+        ("vshake.schema_version".to_string(), SCHEMA_VERSION.to_string()),
+        ("vshake.design".to_string(), spec.method.name().to_string()),
+        ("vshake.samples".to_string(), plan.samples().to_string()),
+        ("vshake.excitations".to_string(), spec.excitations.iter().map(|e| e.name.as_str()).collect::<Vec<_>>().join(",")),
+        ("vshake.parameters".to_string(), plan.columns.iter().map(|c| c.path()).collect::<Vec<_>>().join(",")),
+        ("vshake.parameter_columns".to_string(), plan.columns.iter().map(|c| c.column_name()).collect::<Vec<_>>().join(",")),
+        ("vshake.metrics".to_string(), spec.metrics.join(",")),
+    ];
+    m.extend_from_slice(extra);
+    m
+}
+
+/// Builds the rayon pool for `--threads` (0 = all cores).
+pub fn pool(threads: usize) -> anyhow::Result<rayon::ThreadPool> {
+    let mut b = rayon::ThreadPoolBuilder::new();
+    if threads > 0 {
+        b = b.num_threads(threads);
+    }
+    Ok(b.build()?)
+}
+
+pub fn run(args: &RunArgs) -> anyhow::Result<()> {
+    let mut spec = load_study(&args.file)?;
+    if let Some(n) = args.samples {
+        if n == 0 {
+            return Err(BadInput("--samples must be at least 1".into()).into());
+        }
+        spec.samples = n;
+    }
+    if let Some(c) = args.chunk {
+        spec.chunk = c.max(1);
+    }
+    let out: PathBuf = args.out.clone().unwrap_or_else(|| spec.output.clone());
+    let base = args.file.parent().unwrap_or(Path::new("."));
+    let plan = plan_for(&spec, base)?;
+    let pool = pool(args.threads)?;
+    let varied = if matches!(spec.method, Method::File { .. }) { plan.columns.len() } else { spec.varied().len() };
+    let mut stdout = std::io::stdout().lock();
+    writeln!(stdout, "study run {}", args.file.display())?;
+    writeln!(
+        stdout,
+        "  design      {}, {} samples x {} excitations = {} runs, {} varied parameters, seed {}",
+        spec.method.name(),
+        plan.samples(),
+        plan.references.len(),
+        plan.rows(),
+        varied,
+        spec.seed
+    )?;
+    writeln!(
+        stdout,
+        "  engine      {} threads, chunks of {} samples, {} kernel ({} lanes), RK4 {} substeps",
+        pool.current_num_threads(),
+        spec.chunk,
+        Isa::detected(),
+        LANES,
+        spec.solver.substeps
+    )?;
+    stdout.flush()?;
+
+    let meta = results_metadata(&spec, &plan, &[]);
+    let mut sink = ResultsSink::create(&out, &plan, &spec, &meta)?;
+    let progress = Progress::new(&spec.name, plan.rows(), args.quiet);
+    let summary = batch::run_plan(&plan, 0..plan.samples(), &pool, spec.chunk, &mut sink, &|n| progress.inc(n))?;
+    progress.finish();
+    sink.finish().with_context(|| format!("writing {}", out.display()))?;
+    let secs = progress.elapsed().as_secs_f64();
+    let sim_s: f64 = plan.references.iter().map(|r| r.len() as f64 / r.f_s).sum::<f64>() * plan.samples() as f64;
+    writeln!(
+        stdout,
+        "  done        {} rows in {secs:.1} s ({:.0} simulated s per wall s): {} ok, {} failed, {} invalid",
+        summary.rows,
+        sim_s / secs,
+        summary.ok,
+        summary.failed,
+        summary.invalid
+    )?;
+    writeln!(stdout, "  wrote       {}", out.display())?;
+
+    if !spec.histories.is_empty() {
+        let dir = history_dir(&out);
+        std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        for &id in &spec.histories {
+            if id as usize >= plan.samples() {
+                writeln!(stdout, "  history     sample {id} does not exist (the study has {} samples); skipped", plan.samples())?;
+                continue;
+            }
+            let sample = plan.sample(id as usize);
+            let Ok(model) = sample.model else { continue };
+            for (e, exc) in spec.excitations.iter().enumerate() {
+                let sim_spec = SimSpec { model: model.clone(), excitation: exc.spec.clone(), solver: spec.solver };
+                let outcome = sim::run_sim(&sim_spec, &plan.references[e])?;
+                let path = dir.join(format!("sample{id}_{}.parquet", exc.name));
+                let cols: Vec<(&str, &[f64])> = sim::CHANNELS.iter().map(|(n, _)| *n).zip(outcome.history.columns.iter().map(Vec::as_slice)).collect();
+                let meta = vec![
+                    ("vshake.kind".to_string(), "time_history".to_string()),
+                    ("vshake.spec".to_string(), sim_spec.resolved_toml()),
+                    ("vshake.sample_id".to_string(), id.to_string()),
+                    ("vshake.version".to_string(), env!("CARGO_PKG_VERSION").to_string()),
+                    ("vshake.schema_version".to_string(), SCHEMA_VERSION.to_string()),
+                ];
+                tables::write_parquet(&path, &cols, &meta)?;
+                writeln!(stdout, "  history     {}", path.display())?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Folder of the full histories requested by a study: `<out stem>_histories/`.
+pub fn history_dir(out: &Path) -> PathBuf {
+    let stem = out.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "results".into());
+    out.with_file_name(format!("{stem}_histories"))
+}
