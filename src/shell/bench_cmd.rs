@@ -103,7 +103,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     let f = measure(args.seconds)?;
     let mut out = std::io::stdout().lock();
     let h_us = 1e6 / (1024.0 * Solver::default().substeps as f64);
-    writeln!(out, "study bench: 3 s sine at 1.73 g, RK4 h = {h_us:.1} µs ({} substeps per 1024 Hz tick; converged: a quarter step changes no metric by 1e-5), {} kernel", Solver::default().substeps, Isa::detected())?;
+    writeln!(out, "study bench: 3 s sine at 1.73 g, RK4 h = {h_us:.1} µs ({} substeps per 1024 Hz tick; converged: a quarter of the step changes no metric by more than 1e-5), {} kernel", Solver::default().substeps, Isa::detected())?;
     writeln!(out, "  clock (dependent add chain)        {:>8.2} GHz", f.clock_hz / 1e9)?;
     writeln!(out, "  {:<34} {:>8.0} sim-s/wall-s  {:>6.1} cycles per lane per RHS", "scalar path (1 lane, 1 thread)", f.scalar, f.cycles_per_rhs(f.scalar))?;
     writeln!(out, "  {:<34} {:>8.0} sim-s/wall-s  {:>6.1} cycles per lane per RHS", format!("batch ({LANES} lanes, 1 thread)"), f.batch1, f.cycles_per_rhs(f.batch1))?;

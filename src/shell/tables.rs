@@ -217,7 +217,7 @@ fn read_parquet(path: &Path, wanted: &[&str], optional: &[&str], allow_nan: bool
                     return Err(bad(row, "empty (null) cell".into()));
                 }
                 let v = get(i);
-                if !v.is_finite() && !(allow_nan && v.is_nan()) {
+                if !(v.is_finite() || allow_nan && v.is_nan()) {
                     return Err(bad(row, format!("{v} is not a finite number")));
                 }
                 col.push(v);
@@ -291,6 +291,9 @@ impl Column {
     }
 }
 
+/// Encoded bytes of a row group in progress at which it is flushed (also at 16 384 rows).
+const ROW_GROUP_BYTES: usize = 4 << 20;
+
 /// A Parquet file written batch by batch (zstd, bounded row groups), atomically: it appears
 /// under its name only when [`ParquetStream::finish`] succeeds.
 pub struct ParquetStream {
@@ -303,8 +306,22 @@ impl ParquetStream {
     /// Opens `path.tmp` for a table with the columns of `template` (names and types).
     pub fn create(path: &Path, template: &[(String, Column)], metadata: &[(String, String)]) -> anyhow::Result<Self> {
         use anyhow::Context;
-        let schema = Arc::new(Schema::new(template.iter().map(|(n, c)| c.field(n)).collect::<Vec<_>>()));
-        let props = WriterProperties::builder()
+        // The metadata goes into the file's key-value block (DuckDB, polars, pandas) and into the
+        // Arrow schema too, so `pyarrow.parquet.read_table(path).schema.metadata` shows it.
+        let schema = Arc::new(
+            Schema::new(template.iter().map(|(n, c)| c.field(n)).collect::<Vec<_>>())
+                .with_metadata(metadata.iter().cloned().collect::<std::collections::HashMap<String, String>>()),
+        );
+        // Dictionary encoding only for string columns: float columns of simulation results are
+        // nearly all distinct values, and a dictionary per column would hold up to a page each in
+        // memory for nothing.
+        let mut props = WriterProperties::builder().set_dictionary_enabled(false);
+        for (name, c) in template {
+            if matches!(c, Column::Str(_) | Column::OptStr(_)) {
+                props = props.set_column_dictionary_enabled(name.as_str().into(), true);
+            }
+        }
+        let props = props
             .set_compression(Compression::ZSTD(ZstdLevel::default()))
             .set_max_row_group_row_count(Some(16_384))
             .set_key_value_metadata(Some(metadata.iter().map(|(k, v)| KeyValue::new(k.clone(), v.clone())).collect()))
@@ -322,6 +339,10 @@ impl ParquetStream {
     pub fn write(&mut self, columns: Vec<Column>) -> anyhow::Result<()> {
         let batch = RecordBatch::try_new(self.schema.clone(), columns.into_iter().map(Column::array).collect())?;
         self.writer.write(&batch)?;
+        // Bound the buffered row group by bytes, so memory stays flat however many rows follow.
+        if self.writer.in_progress_size() > ROW_GROUP_BYTES {
+            self.writer.flush()?;
+        }
         Ok(())
     }
 
