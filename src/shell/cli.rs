@@ -48,6 +48,9 @@ pub struct RunArgs {
     /// No progress output.
     #[arg(long, short)]
     pub quiet: bool,
+    /// Progress as a plain line every 5 s on stderr (for batch-job logs) instead of a bar.
+    #[arg(long)]
+    pub log_progress: bool,
 }
 
 #[derive(Debug, clap::Args)]

@@ -1,5 +1,6 @@
-//! Progress of long runs: an indicatif bar (rate, ETA) on a terminal; a plain line every few
-//! seconds when stderr is not a terminal (Slurm logs, CI); nothing with --quiet.
+//! Progress of long runs: an indicatif bar (rate, ETA) when stderr is a terminal; nothing when it
+//! is not, or with --quiet; with --log-progress a plain line every 5 s instead (for batch logs,
+//! where a bar cannot be drawn).
 
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::IsTerminal;
@@ -17,8 +18,8 @@ pub struct Progress {
 }
 
 impl Progress {
-    pub fn new(label: &str, total: usize, quiet: bool) -> Self {
-        let terminal = std::io::stderr().is_terminal();
+    pub fn new(label: &str, total: usize, quiet: bool, log_lines: bool) -> Self {
+        let terminal = std::io::stderr().is_terminal() && !log_lines;
         let bar = (!quiet && terminal).then(|| {
             let b = ProgressBar::new(total as u64);
             b.set_style(
@@ -27,7 +28,7 @@ impl Progress {
             b.set_message(label.to_string());
             b
         });
-        let plain = (!quiet && !terminal).then(|| Mutex::new(Instant::now()));
+        let plain = (!quiet && log_lines).then(|| Mutex::new(Instant::now()));
         Progress { bar, plain, start: Instant::now(), total, done: AtomicUsize::new(0), label: label.to_string() }
     }
 

@@ -120,8 +120,12 @@ impl RowSink for ResultsSink {
         for c in 0..self.columns.len() {
             cols.push(Column::F64(rows.iter().map(|r| r.values[c]).collect()));
         }
+        // Metric values in table order, once per row; then the chosen ones as columns.
+        let names: Vec<&str> = crate::kernel::metrics::Metrics::NAN.columns().into_iter().map(|(n, _)| n).collect();
+        let values: Vec<Vec<(&str, f64)>> = rows.iter().map(|r| r.metrics.columns()).collect();
         for m in &self.metrics {
-            cols.push(Column::F64(rows.iter().map(|r| r.metrics.columns().into_iter().find(|(n, _)| n == m).map_or(f64::NAN, |(_, v)| v)).collect()));
+            let k = names.iter().position(|n| n == m).expect("metric names are validated");
+            cols.push(Column::F64(values.iter().map(|v| v[k].1).collect()));
         }
         cols.push(Column::Str(rows.iter().map(|r| r.status.label().to_string()).collect()));
         cols.push(Column::OptF64(rows.iter().map(|r| if let RowStatus::Failed { time_s, .. } = r.status { Some(time_s) } else { None }).collect()));
@@ -206,7 +210,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
 
     let meta = results_metadata(&spec, &plan, &[]);
     let mut sink = ResultsSink::create(&out, &plan, &spec, &meta)?;
-    let progress = Progress::new(&spec.name, plan.rows(), args.quiet);
+    let progress = Progress::new(&spec.name, plan.rows(), args.quiet, args.log_progress);
     let summary = batch::run_plan(&plan, 0..plan.samples(), &pool, spec.chunk, &mut sink, &|n| progress.inc(n))?;
     progress.finish();
     sink.finish().with_context(|| format!("writing {}", out.display()))?;
