@@ -38,6 +38,18 @@ fn every_bundled_file_parses_and_validates() {
         n += 1;
     }
     assert!(n >= 4, "studies/ holds the sim example, smoke, gains_sweep and port_width ({n} found)");
+    // Campaign definitions (their data is made by `study synth`).
+    let mut c = 0;
+    for entry in std::fs::read_dir(studies_dir().join("campaigns")).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "toml") {
+            let text = std::fs::read_to_string(&path).unwrap();
+            let camp = vshake::orchestration::campaign::Campaign::from_toml(&text, &path.display().to_string(), &Default::default()).unwrap_or_else(|e| panic!("{e}"));
+            assert!(!camp.tests.is_empty());
+            c += 1;
+        }
+    }
+    assert!(c >= 1);
 }
 
 const MIXED: &str = r#"

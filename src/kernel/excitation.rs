@@ -22,6 +22,9 @@ pub struct Reference {
     pub v: Vec<f64>,
     pub a: Vec<f64>,
     pub j: Vec<f64>,
+    /// The reference displacement command before any filter (a sine: x_r itself; a record: the
+    /// record interpolated to the ticks), m — what a controller log calls the reference.
+    pub command: Vec<f64>,
     /// Ticks of the analysis window, [start, end).
     pub window: (usize, usize),
     /// Fundamental frequency for the harmonic metrics, Hz (`None` for records).
@@ -98,6 +101,7 @@ impl Sine {
             v: Vec::with_capacity(n),
             a: Vec::with_capacity(n),
             j: Vec::with_capacity(n),
+            command: Vec::new(),
             window: (0, n),
             fundamental_hz: Some(self.freq_hz),
         };
@@ -108,6 +112,7 @@ impl Sine {
             r.a.push(s[2]);
             r.j.push(s[3]);
         }
+        r.command = r.x.clone();
         let cycles = self.window_cycles.unwrap_or_else(|| self.default_cycles());
         let len = ((cycles as f64) * f_s / self.freq_hz).round() as usize;
         r.window = (n.saturating_sub(len), n);
@@ -143,6 +148,7 @@ impl Record {
             v: Vec::with_capacity(n),
             a: Vec::with_capacity(n),
             j: Vec::with_capacity(n),
+            command: Vec::with_capacity(n),
             window: (0, n),
             fundamental_hz: None,
         };
@@ -156,6 +162,7 @@ impl Record {
             let (ta, tb) = (self.time_s[i], self.time_s[i + 1]);
             let w = ((t - ta) / (tb - ta)).clamp(0.0, 1.0);
             let u = self.disp_m[i] + w * (self.disp_m[i + 1] - self.disp_m[i]);
+            r.command.push(u);
             r.x.push(s[0]);
             r.v.push(s[1]);
             r.a.push(s[2]);

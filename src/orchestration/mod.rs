@@ -2,6 +2,8 @@
 //! No terminal or file I/O here (the shell reads files and hands over their contents).
 
 pub mod batch;
+pub mod campaign;
+pub mod compare;
 pub mod sampling;
 pub mod sensitivity;
 pub mod sim;

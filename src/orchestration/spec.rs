@@ -115,11 +115,23 @@ pub fn validate_model(model: &ModelParams, prefix: &str, issues: &mut Issues) {
 
 /// Reads an excitation table (`[excitation]` or an inline table of a campaign test).
 pub fn read_excitation(f: Fields<'_>, model: &ModelParams, issues: &mut Issues) -> Option<ExcitationSpec> {
-    read_excitation_with_extra(f, model, issues, &[])
+    read_excitation_in(f, model, issues, &[], None)
 }
 
 /// [`read_excitation`] for a table that also holds `extra` keys read by the caller.
-pub fn read_excitation_with_extra(mut f: Fields<'_>, model: &ModelParams, issues: &mut Issues, extra: &[&str]) -> Option<ExcitationSpec> {
+pub fn read_excitation_with_extra(f: Fields<'_>, model: &ModelParams, issues: &mut Issues, extra: &[&str]) -> Option<ExcitationSpec> {
+    read_excitation_in(f, model, issues, extra, None)
+}
+
+/// [`read_excitation`] with extra keys and, for a record without `file`, a default file (a
+/// campaign test's own data file).
+pub fn read_excitation_in(
+    mut f: Fields<'_>,
+    model: &ModelParams,
+    issues: &mut Issues,
+    extra: &[&str],
+    default_file: Option<&std::path::Path>,
+) -> Option<ExcitationSpec> {
     let kind = f.str("kind", issues);
     let out = match kind {
         Some("sine") => {
@@ -205,9 +217,9 @@ pub fn read_excitation_with_extra(mut f: Fields<'_>, model: &ModelParams, issues
             if !(f_ref > 0.0 && f_ref < 0.5 * model.controller.f_s) {
                 issues.push(f.path_of("f_ref_hz"), format!("{f_ref} Hz must be in (0, f_s/2)"));
             }
-            match file {
+            match file.map(PathBuf::from).or_else(|| default_file.map(PathBuf::from)) {
                 Some(file) => Some(ExcitationSpec::Record {
-                    file: PathBuf::from(file),
+                    file,
                     column: column.to_string(),
                     time_column: time_column.to_string(),
                     f_ref_hz: f_ref,

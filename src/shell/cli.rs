@@ -23,6 +23,10 @@ pub enum Command {
     Run(RunArgs),
     /// Sensitivity of each metric to each parameter: Sobol' indices (Saltelli designs), SRC and PRCC.
     Sensitivity(SensitivityArgs),
+    /// Compare the model with a campaign of measured tests: harmonics, amplitude, part of the cycle, envelope.
+    Compare(CompareArgs),
+    /// Write measurement files (FORMATS.md) made by the model, with hidden parameter changes and sensor noise.
+    Synth(SynthArgs),
     /// Benchmark the kernel (simulated seconds per wall second) and optionally gate on a baseline.
     Bench(BenchArgs),
     /// List every model parameter: name, unit, default, valid range, source and meaning.
@@ -66,6 +70,39 @@ pub struct SensitivityArgs {
     /// Bootstrap resamples for the Sobol' confidence intervals.
     #[arg(long, default_value_t = 500)]
     pub bootstrap: usize,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct CompareArgs {
+    /// The campaign file (TOML, FORMATS.md): [campaign] and [[test]] entries.
+    pub campaign: PathBuf,
+    /// Model file ([model.<component>] tables) to compare instead of the defaults.
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Folder for the report tables (Parquet: tests, harmonics, bins, cycles, overlay).
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct SynthArgs {
+    /// The campaign whose tests to synthesise (its data files are written, not read).
+    pub campaign: PathBuf,
+    /// Output folder: one data file per test, named as in the campaign, and the campaign file.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Model file to start from ([model.<component>] tables).
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Hidden parameter change, component.name=value (repeatable).
+    #[arg(long = "set")]
+    pub set: Vec<String>,
+    /// Sensor noise, standard deviations in SI units: accel=0.05,disp=1e-5,force=2000,p1=1e4,p2=1e4.
+    #[arg(long)]
+    pub noise: Option<String>,
+    /// Seed of the noise (one stream per test and channel).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
 }
 
 #[derive(Debug, clap::Args)]

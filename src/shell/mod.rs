@@ -2,12 +2,15 @@
 //! maps them to the documented exit codes.
 
 pub mod bench_cmd;
+pub mod campaign_io;
 pub mod cli;
+pub mod compare_cmd;
 pub mod params_cmd;
 pub mod progress;
 pub mod run_cmd;
 pub mod sensitivity_cmd;
 pub mod sim_cmd;
+pub mod synth_cmd;
 pub mod tables;
 
 use crate::orchestration::toml_fields::InputError;
@@ -39,5 +42,7 @@ pub fn dispatch(cli: cli::Cli) -> anyhow::Result<()> {
         cli::Command::Run(a) => run_cmd::run(&a),
         cli::Command::Sensitivity(a) => sensitivity_cmd::run(&a),
         cli::Command::Bench(a) => bench_cmd::run(&a),
+        cli::Command::Compare(a) => compare_cmd::run(&a),
+        cli::Command::Synth(a) => synth_cmd::run(&a),
     }
 }

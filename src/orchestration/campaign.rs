@@ -1,0 +1,200 @@
+//! Campaigns (FORMATS.md): a TOML file listing measured tests and how each was driven.
+//!
+//! ```toml
+//! [campaign]
+//! name = "bare_table_2026_03"
+//! description = "bare-table sine tests"
+//!
+//! [[test]]
+//! name = "sine_3hz_1p73g"
+//! data = "sine_3hz_1p73g.csv"          # relative to the campaign file; CSV or Parquet
+//! excitation = { kind = "sine", freq_hz = 3.0, amp_g = 1.73, taper_s = 1.0 }
+//! model = { platen = { m = 150000.0 } } # optional per-test model overrides
+//! weights = { accel = 1.0, disp = 0.0 } # optional channel weights (accel, disp, force)
+//! ```
+//!
+//! A sine test's reference states are analytic (MODEL.md §4); a record test's come from the named
+//! column of its data file. The first row of a data file is t = 0 of its excitation. A sine test's
+//! duration is its file's; `duration_s` in the excitation, when given, must agree.
+
+use super::spec::{self, ExcitationSpec};
+use super::toml_fields::{Fields, InputError, Issues};
+use crate::kernel::params::ModelParams;
+use std::path::PathBuf;
+
+/// Channel weights of a test (used by fits; 1 by default).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Weights {
+    pub accel: f64,
+    pub disp: f64,
+    pub force: f64,
+}
+
+impl Default for Weights {
+    fn default() -> Self {
+        Weights { accel: 1.0, disp: 1.0, force: 1.0 }
+    }
+}
+
+/// One measured test of a campaign.
+#[derive(Debug, Clone)]
+pub struct TestSpec {
+    pub name: String,
+    /// Data file, relative to the campaign file.
+    pub data: PathBuf,
+    pub excitation: ExcitationSpec,
+    /// The campaign's model with this test's overrides.
+    pub model: ModelParams,
+    pub weights: Weights,
+    /// Whether the excitation table set `window_cycles` (else the window follows the file's
+    /// length) and `duration_s` (else the file's length is the duration).
+    pub window_given: bool,
+    pub duration_given: bool,
+}
+
+/// A parsed campaign.
+#[derive(Debug, Clone)]
+pub struct Campaign {
+    pub name: String,
+    pub description: String,
+    pub tests: Vec<TestSpec>,
+}
+
+impl Campaign {
+    /// Parses a campaign; `base_model` is the model the tests start from (defaults, or a model
+    /// file given with `--model`).
+    pub fn from_toml(text: &str, file: &str, base_model: &ModelParams) -> Result<Campaign, InputError> {
+        let table = super::toml_fields::parse(text, file)?;
+        let mut issues = Issues::default();
+        let mut root = Fields::new("", &table);
+        let (mut name, mut description) = (String::new(), String::new());
+        match root.table("campaign", &mut issues) {
+            Some(mut c) => {
+                name = c.str("name", &mut issues).unwrap_or("").to_string();
+                description = c.str("description", &mut issues).unwrap_or("").to_string();
+                if name.is_empty() {
+                    issues.push("campaign.name", "missing");
+                }
+                c.finish(&["name", "description"], &mut issues);
+            }
+            None => issues.push("campaign", "missing table ([campaign] name = ...)"),
+        }
+        let mut tests = Vec::new();
+        match root.tables("test", &mut issues) {
+            Some(list) if list.is_empty() => issues.push("test", "the campaign lists no test"),
+            Some(list) => {
+                for mut t in list {
+                    let tname = t.str("name", &mut issues).map(str::to_string);
+                    let data = t.str("data", &mut issues).map(PathBuf::from);
+                    if tname.is_none() {
+                        issues.push(t.path_of("name"), "missing");
+                    }
+                    if data.is_none() {
+                        issues.push(t.path_of("data"), "missing (the CSV or Parquet file of the test)");
+                    }
+                    let mut model = base_model.clone();
+                    if let Some(m) = t.table("model", &mut issues) {
+                        spec::read_model(m, &mut model, &mut issues);
+                        spec::validate_model(&model, &t.path_of("model"), &mut issues);
+                    }
+                    let mut weights = Weights::default();
+                    if let Some(mut w) = t.table("weights", &mut issues) {
+                        for (key, slot) in [("accel", &mut weights.accel), ("disp", &mut weights.disp), ("force", &mut weights.force)] {
+                            if let Some(v) = w.f64(key, &mut issues) {
+                                if v < 0.0 {
+                                    issues.push(w.path_of(key), format!("{v} must not be negative"));
+                                }
+                                *slot = v;
+                            }
+                        }
+                        w.finish(&["accel", "disp", "force"], &mut issues);
+                    }
+                    let (mut window_given, mut duration_given) = (false, false);
+                    let excitation = match t.table("excitation", &mut issues) {
+                        Some(e) => {
+                            window_given = e.has("window_cycles");
+                            duration_given = e.has("duration_s");
+                            spec::read_excitation_in(e, &model, &mut issues, &[], data.as_deref())
+                        }
+                        None => {
+                            issues.push(t.path_of("excitation"), "missing (an inline table: { kind = \"sine\", freq_hz = ..., amp_g = ... })");
+                            None
+                        }
+                    };
+                    t.finish(&["name", "data", "excitation", "model", "weights"], &mut issues);
+                    if let (Some(name), Some(data), Some(excitation)) = (tname, data, excitation) {
+                        if tests.iter().any(|x: &TestSpec| x.name == name) {
+                            issues.push("test", format!("test name {name:?} is used twice"));
+                        }
+                        tests.push(TestSpec { name, data, excitation, model, weights, window_given, duration_given });
+                    }
+                }
+            }
+            None => issues.push("test", "missing ([[test]] entries)"),
+        }
+        root.finish(&["campaign", "test"], &mut issues);
+        issues.into_result(file)?;
+        Ok(Campaign { name, description, tests })
+    }
+}
+
+/// Reads a model file: `[model.<component>]` tables as in run files (other tables are refused).
+pub fn model_from_toml(text: &str, file: &str) -> Result<ModelParams, InputError> {
+    let table = super::toml_fields::parse(text, file)?;
+    let mut issues = Issues::default();
+    let mut root = Fields::new("", &table);
+    let mut model = ModelParams::default();
+    match root.table("model", &mut issues) {
+        Some(m) => spec::read_model(m, &mut model, &mut issues),
+        None => issues.push("model", "missing ([model.<component>] tables)"),
+    }
+    root.finish(&["model"], &mut issues);
+    spec::validate_model(&model, "model", &mut issues);
+    issues.into_result(file)?;
+    Ok(model)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const FORMATS_EXAMPLE: &str = r#"
+[campaign]
+name = "bare_table_2026_03"
+description = "bare-table sine tests"
+
+[[test]]
+name = "sine_3hz_1p73g"
+data = "sine_3hz_1p73g.csv"
+excitation = { kind = "sine", freq_hz = 3.0, amp_g = 1.73, taper_s = 1.0 }
+
+[[test]]
+name = "el_centro_50pct"
+data = "elcentro50.parquet"
+excitation = { kind = "record", column = "ref_disp_m" }
+model = { platen = { m = 150000.0 } }
+weights = { force = 0.0 }
+"#;
+
+    #[test]
+    fn reads_the_formats_md_example() {
+        // FORMATS.md's record excitation names only the column: the file is the test's data.
+        let c = Campaign::from_toml(&FORMATS_EXAMPLE.replace("kind = \"record\", column", "kind = \"record\", file = \"elcentro50.parquet\", column"), "c.toml", &ModelParams::default()).unwrap();
+        assert_eq!(c.tests.len(), 2);
+        assert_eq!(c.tests[1].model.platen.m, 150000.0);
+        assert_eq!(c.tests[0].model.platen.m, 144000.0);
+        assert_eq!(c.tests[1].weights.force, 0.0);
+    }
+
+    #[test]
+    fn record_tests_default_to_their_own_data_file() {
+        let c = Campaign::from_toml(FORMATS_EXAMPLE, "c.toml", &ModelParams::default()).unwrap();
+        match &c.tests[1].excitation {
+            ExcitationSpec::Record { file, column, .. } => {
+                assert_eq!(file, &PathBuf::from("elcentro50.parquet"));
+                assert_eq!(column, "ref_disp_m");
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+}

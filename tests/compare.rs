@@ -1,0 +1,152 @@
+//! Model versus measurement: synthetic campaigns whose truth is known, and every malformed
+//! measured file of FORMATS.md.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn study(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_study")).args(args).output().expect("run study");
+    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stdout).into(), String::from_utf8_lossy(&out.stderr).into())
+}
+
+fn campaign() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("studies/campaigns/sines.toml")
+}
+
+fn synth(dir: &Path, extra: &[&str]) {
+    let c = campaign();
+    let mut args = vec!["synth", c.to_str().unwrap(), "--out", dir.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    let (code, stdout, stderr) = study(&args);
+    assert_eq!(code, 0, "{stdout}{stderr}");
+}
+
+fn tests_table(report: &Path, col: &str) -> Vec<f64> {
+    let t = vshake::shell::tables::read_columns_allow_nan(&report.join("tests.parquet"), &[col]).unwrap();
+    t.column(col).unwrap().to_vec()
+}
+
+/// Acceptance 1: files that are exactly the model's own output compare at floating-point level
+/// (CSV written with round-trip digits, and Parquet).
+#[test]
+fn the_models_own_output_compares_at_floating_point_level() {
+    let d = tempfile::tempdir().unwrap();
+    synth(d.path(), &[]);
+    let report = d.path().join("report");
+    let (code, stdout, stderr) = study(&["compare", d.path().join("sines.toml").to_str().unwrap(), "--report", report.to_str().unwrap()]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(stdout.contains("sine_3hz_3p20g"), "{stdout}");
+    for col in ["rms_residual_accel_ratio", "rms_residual_disp_ratio", "rms_residual_force_ratio"] {
+        for v in tests_table(&report, col) {
+            assert!(v.abs() < 1e-12, "{col} = {v}");
+        }
+    }
+    let h = vshake::shell::tables::read_columns_allow_nan(&report.join("harmonics.parquet"), &["residual_abs"]).unwrap();
+    assert_eq!(h.rows(), 4 * 9);
+    assert!(h.column("residual_abs").unwrap().iter().all(|v| *v < 1e-12));
+    // The reference case reproduces MODEL.md §5 through the whole file path.
+    let ratio = tests_table(&report, "amp_ratio_measured");
+    assert!((ratio[0] - 0.9987).abs() < 0.005, "{ratio:?}");
+}
+
+/// Acceptance 1: with sensor noise, the residual is at the noise level.
+#[test]
+fn with_noise_the_residual_is_at_the_noise_level() {
+    let d = tempfile::tempdir().unwrap();
+    let sigma = 0.05;
+    synth(d.path(), &["--noise", "accel=0.05,disp=2e-5", "--seed", "9"]);
+    let report = d.path().join("report");
+    let (code, _, stderr) = study(&["compare", d.path().join("sines.toml").to_str().unwrap(), "--report", report.to_str().unwrap()]);
+    assert_eq!(code, 0, "{stderr}");
+    // Expected: rms(noise)/rms(measured accel) over the window. The overlay table holds the
+    // window's measured acceleration and the residual (= −noise).
+    let ov = vshake::shell::tables::read_columns_allow_nan(&report.join("overlay.parquet"), &["accel_measured_mps2", "residual_mps2"]).unwrap();
+    let res = ov.column("residual_mps2").unwrap();
+    let rms_res = (res.iter().map(|r| r * r).sum::<f64>() / res.len() as f64).sqrt();
+    assert!((rms_res - sigma).abs() < 0.05 * sigma, "window residual rms {rms_res} vs noise {sigma}");
+    let got = tests_table(&report, "rms_residual_accel_ratio");
+    let amps = [1.73, 3.20, 1.0, 1.0];
+    for (g, r) in amps.iter().zip(&got) {
+        // rms of a sine of amplitude g·9.81 is g·9.81/√2.
+        let expect = sigma / (g * 9.80665 / 2f64.sqrt());
+        assert!((r / expect - 1.0).abs() < 0.15, "{g} g: residual ratio {r} vs noise level {expect}");
+    }
+    // The harmonic residuals sit at the noise floor: σ·√(2/n)/|H1(a_r)| is below 1e-3.
+    let h = vshake::shell::tables::read_columns_allow_nan(&report.join("harmonics.parquet"), &["residual_abs"]).unwrap();
+    assert!(h.column("residual_abs").unwrap().iter().all(|v| *v < 1e-3), "{:?}", h.column("residual_abs"));
+}
+
+/// A hidden change of the plant shows in the comparison: 10 % less valve flow gain lowers the
+/// measured amplitude ratio against the model's and leaves a fundamental residual of that order.
+#[test]
+fn a_hidden_flow_gain_change_shows_in_the_fundamental() {
+    let d = tempfile::tempdir().unwrap();
+    synth(d.path(), &["--set", "servovalve.kv=0.016696"]);
+    let report = d.path().join("report");
+    let (code, _, stderr) = study(&["compare", d.path().join("sines.toml").to_str().unwrap(), "--report", report.to_str().unwrap()]);
+    assert_eq!(code, 0, "{stderr}");
+    let (meas, model) = (tests_table(&report, "amp_ratio_measured"), tests_table(&report, "amp_ratio_model"));
+    for (a, b) in meas.iter().zip(&model) {
+        assert!(b - a > 0.005, "measured {a} should fall below the model's {b}");
+    }
+    let r = tests_table(&report, "rms_residual_accel_ratio");
+    assert!(r.iter().all(|v| *v > 0.01 && *v < 0.3), "{r:?}");
+}
+
+fn one_test_campaign(dir: &Path, data: &str, text: &str) -> PathBuf {
+    std::fs::write(dir.join(data), text).unwrap();
+    let c = dir.join("c.toml");
+    std::fs::write(
+        &c,
+        format!("[campaign]\nname = \"bad\"\n[[test]]\nname = \"t\"\ndata = \"{data}\"\nexcitation = {{ kind = \"sine\", freq_hz = 3.0, amp_g = 1.0, taper_s = 0.0 }}\n"),
+    )
+    .unwrap();
+    c
+}
+
+fn good_rows(n: usize) -> String {
+    let mut s = String::from("time_s,ref_disp_m,disp_m,accel_mps2\n");
+    for k in 0..n {
+        s.push_str(&format!("{:?},0,0,0\n", k as f64 / 1024.0));
+    }
+    s
+}
+
+/// Acceptance 3: every malformed case of FORMATS.md is a clear error naming file, column and row.
+#[test]
+fn malformed_measured_files_name_file_column_and_row() {
+    let d = tempfile::tempdir().unwrap();
+    let header_ok = good_rows(3000);
+    let cases: Vec<(String, Vec<&str>)> = vec![
+        (header_ok.replace("time_s,ref_disp_m,disp_m,accel_mps2", "time_s,ref_disp_m,disp_m,acc"), vec!["`accel_mps2` is missing"]),
+        (header_ok.replace("time_s,ref_disp_m,disp_m,accel_mps2", "time_s,ref_disp_m,disp_mm,accel_mps2"), vec!["`disp_m` is missing", "`disp_mm`: other units?"]),
+        (header_ok.replacen("\n0.0009765625,0,0,0\n", "\n0.0009765625,0,NaN,0\n", 1), vec!["column `disp_m`, row 2 (line 3)", "NaN"]),
+        (header_ok.replacen("\n0.0009765625,0,0,0\n", "\n0.0009765625,,0,0\n", 1), vec!["column `ref_disp_m`, row 2 (line 3)", "empty cell"]),
+        (header_ok.replacen("\n0.001953125,0,0,0\n", "\n0.0,0,0,0\n", 1), vec!["column `time_s`, row 3 (line 4)", "does not increase"]),
+        (header_ok.replacen("\n0.001953125,0,0,0\n", "\n0.0025,0,0,0\n", 1), vec!["column `time_s`, row 3 (line 4)", "non-uniform"]),
+        ("time_s,ref_disp_m,disp_m,accel_mps2\n".to_string(), vec!["no data rows"]),
+    ];
+    for (text, needles) in cases {
+        let c = one_test_campaign(d.path(), "t.csv", &text);
+        let (code, _, stderr) = study(&["compare", c.to_str().unwrap()]);
+        assert_eq!(code, 2, "{stderr}");
+        assert!(stderr.contains("t.csv"), "names the file: {stderr}");
+        for n in needles {
+            assert!(stderr.contains(n), "expected {n:?} in {stderr}");
+        }
+    }
+    // A file at another rate than the controller's.
+    let mut slow = String::from("time_s,ref_disp_m,disp_m,accel_mps2\n");
+    for k in 0..3000 {
+        slow.push_str(&format!("{:?},0,0,0\n", k as f64 / 500.0));
+    }
+    let c = one_test_campaign(d.path(), "t.csv", &slow);
+    let (code, _, stderr) = study(&["compare", c.to_str().unwrap()]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("column `time_s`: sampled at 500") && stderr.contains("f_s = 1024"), "{stderr}");
+    // A bad campaign file names the key.
+    std::fs::write(d.path().join("c2.toml"), "[campaign]\nname = \"x\"\n[[test]]\nname = \"t\"\ndata = \"t.csv\"\nexcitation = { kind = \"sine\", freq_hz = 3.0, amp_g = 1.0, colour = 1 }\n").unwrap();
+    let (code, _, stderr) = study(&["compare", d.path().join("c2.toml").to_str().unwrap()]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("test[0].excitation.colour: unknown key"), "{stderr}");
+}
