@@ -314,6 +314,96 @@ params! {
     }
 }
 
+params! {
+    /// Effect `spool_dynamics`: the servo-valve spool follows its command through a second-order
+    /// lag, ẍ = ω²(x_c − x) − 2ζω ẋ (the baseline has x = x_c).
+    pub struct SpoolDynamicsParams in spool_dynamics as "spool_dynamics" {
+        freq_hz: "Hz", "hz", 80.0, Range::closed(1.0, 1000.0), Chosen,
+            "Spool natural frequency [chosen: 80 Hz; with 40 Hz the published TVC loop oscillates at small amplitude].";
+        zeta: "-", "", 0.7, Range::closed(0.05, 5.0), Chosen,
+            "Spool damping ratio [chosen].";
+    }
+}
+
+params! {
+    /// Effect `leakage`: internal leakage across the piston, q = c_int (P1 − P2), and external
+    /// leakage from each chamber to drain, q = c_ext·P.
+    pub struct LeakageParams in leakage as "leakage" {
+        c_int: "m³/(s·Pa)", "m3_per_s_pa", 2.0e-11, Range::ge(0.0), Chosen,
+            "Internal (cross-piston) leakage coefficient [chosen: 12 L/min at 10 MPa across the piston].";
+        c_ext: "m³/(s·Pa)", "m3_per_s_pa", 0.0, Range::ge(0.0), Chosen,
+            "External leakage coefficient of each chamber to drain [chosen: none by default].";
+    }
+}
+
+params! {
+    /// Effect `supply`: supply pressure dynamics. A pressure-compensated pump delivers
+    /// Q_p = q_pump·clamp((P_S − P_s)/dp_band, 0, 1) into an accumulator of capacitance c_acc;
+    /// the valves draw Q from it: c_acc dP_s/dt = Q_p − Q. The valves see P_s instead of P_S.
+    pub struct SupplyParams in supply as "supply" {
+        q_pump: "m³/s", "m3_per_s", 0.2, Range::gt(0.0), Chosen,
+            "Pump flow at full stroke [chosen: below the peak draw of large tests, so accumulators carry the peaks].";
+        c_acc: "m³/Pa", "m3_per_pa", 3.5e-8, Range::gt(0.0), Chosen,
+            "Accumulator capacitance V_gas/(n·P) [chosen: 1 m³ of gas at 20.7 MPa, n = 1.4].";
+        dp_band: "Pa", "pa", 1.0e6, Range::gt(0.0), Chosen,
+            "Pressure band over which the pump goes from no flow to full flow [chosen].";
+    }
+}
+
+params! {
+    /// Effect `seal_friction`: actuator seal friction with a Stribeck term,
+    /// F = −tanh(v/v_eps)·(f_c + (f_s − f_c)·exp(−(v/v_s)²)) − sigma·v.
+    pub struct SealFrictionParams in seal_friction as "seal_friction" {
+        f_c: "N", "n", 5000.0, Range::ge(0.0), Chosen,
+            "Coulomb seal friction, all actuators together [chosen].";
+        f_s: "N", "n", 8000.0, Range::ge(0.0), Chosen,
+            "Static (breakaway) seal friction [chosen].";
+        v_s: "m/s", "m_per_s", 0.01, Range::gt(0.0), Chosen,
+            "Stribeck velocity [chosen].";
+        sigma: "N·s/m", "n_s_per_m", 0.0, Range::ge(0.0), Chosen,
+            "Viscous seal friction [chosen: none by default].";
+        v_eps: "m/s", "m_per_s", 1.0e-3, Range::gt(0.0), Chosen,
+            "Velocity that smooths the sign of v [chosen].";
+    }
+}
+
+/// Names of the optional effects (components that are off unless their table is given).
+pub const EFFECTS: [&str; 4] = ["spool_dynamics", "leakage", "supply", "seal_friction"];
+
+/// Which optional effects are on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct EffectSwitches {
+    pub spool_dynamics: bool,
+    pub leakage: bool,
+    pub supply: bool,
+    pub seal_friction: bool,
+}
+
+impl EffectSwitches {
+    pub fn any(&self) -> bool {
+        self.spool_dynamics || self.leakage || self.supply || self.seal_friction
+    }
+    /// The switch of effect `name`.
+    pub fn get_mut(&mut self, name: &str) -> Option<&mut bool> {
+        match name {
+            "spool_dynamics" => Some(&mut self.spool_dynamics),
+            "leakage" => Some(&mut self.leakage),
+            "supply" => Some(&mut self.supply),
+            "seal_friction" => Some(&mut self.seal_friction),
+            _ => None,
+        }
+    }
+    pub fn get(&self, name: &str) -> bool {
+        match name {
+            "spool_dynamics" => self.spool_dynamics,
+            "leakage" => self.leakage,
+            "supply" => self.supply,
+            "seal_friction" => self.seal_friction,
+            _ => false,
+        }
+    }
+}
+
 /// Which flow law the servo-valves follow (a structural choice, decided once per batch).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum ValveLaw {
@@ -334,6 +424,12 @@ pub struct ModelParams {
     pub controller: ControllerParams,
     /// Servo-valve flow law (`servovalve.law` in model files: "orifice" or "linear").
     pub valve_law: ValveLaw,
+    /// Optional effects (see [`EFFECTS`]); their parameters below apply when switched on.
+    pub effects: EffectSwitches,
+    pub spool_dynamics: SpoolDynamicsParams,
+    pub leakage: LeakageParams,
+    pub supply: SupplyParams,
+    pub seal_friction: SealFrictionParams,
 }
 
 /// One problem found by [`ModelParams::validate`].
@@ -359,6 +455,10 @@ impl ModelParams {
             .chain(PlatenParams::PARAMS)
             .chain(FrictionParams::PARAMS)
             .chain(ControllerParams::PARAMS)
+            .chain(SpoolDynamicsParams::PARAMS)
+            .chain(LeakageParams::PARAMS)
+            .chain(SupplyParams::PARAMS)
+            .chain(SealFrictionParams::PARAMS)
     }
 
     /// The registry row of `component.name`, if any.
@@ -367,9 +467,9 @@ impl ModelParams {
         Self::registry().find(|p| p.component == c && p.name == n)
     }
 
-    /// Names of the components (in registry order).
-    pub fn components() -> [&'static str; 5] {
-        ["servovalve", "actuator", "platen", "friction", "controller"]
+    /// Names of the components (in registry order): the baseline's, then the optional effects.
+    pub fn components() -> [&'static str; 9] {
+        ["servovalve", "actuator", "platen", "friction", "controller", "spool_dynamics", "leakage", "supply", "seal_friction"]
     }
 
     /// Checks every range and every relation between parameters; returns all problems at once.

@@ -339,6 +339,8 @@ fn rhs<const N: usize, V: FlowLaw, D: Damping, E: Effect<N>>(
 ) {
     let mut q_in1 = [[0.0; N]; N_ACT];
     let mut q_out2 = [[0.0; N]; N_ACT];
+    let mut xs = [[0.0; N]; N_ACT];
+    let mut q_supply = [0.0; N];
     let mut p_s = [0.0; N];
     for l in 0..N {
         let valve = lp.valve.lane(l);
@@ -348,24 +350,29 @@ fn rhs<const N: usize, V: FlowLaw, D: Damping, E: Effect<N>>(
         p_s[l] = ps;
         let (b1, b2) = actuator::stiffness_factors(&act, y);
         let mut f = 0.0;
+        let mut qs = 0.0;
         for i in 0..N_ACT {
             let (p1, p2) = (s[P1[i]][l], s[P2[i]][l]);
             let x = effect.spool(l, i, x_c[l], es);
+            xs[i][l] = x;
             let (q1, q2) = V::flows(&valve, x, p1, p2, ps);
-            let (e1, e2) = effect.extra_flows(l, i, p1, p2, ps, es);
-            q_in1[i][l] = q1 + e1;
-            q_out2[i][l] = q2 + e2;
-            let (d1, d2) = actuator::pressure_rates(&act, b1, b2, q1 + e1, q2 + e2, v);
+            // Supply → chamber 1 when x > 0, supply → chamber 2 (q2 < 0) otherwise.
+            qs += if x > 0.0 { q1 } else { -q2 };
+            let (q1, q2) = effect.flows(l, i, (q1, q2), p1, p2, ps, es);
+            q_in1[i][l] = q1;
+            q_out2[i][l] = q2;
+            let (d1, d2) = actuator::pressure_rates(&act, b1, b2, q1, q2, v);
             ds[P1[i]][l] = d1;
             ds[P2[i]][l] = d2;
             f += actuator::force(&act, p1, p2);
         }
+        q_supply[l] = qs;
         let fe = effect.extra_force(l, y, v, es);
         ds[V][l] = platen::accel::<D>(&lp.platen.lane(l), f, fe, y, v, z);
         ds[Y][l] = v;
         ds[Z][l] = friction::dz_dt(&lp.friction.lane(l), v, z);
     }
-    let view = PlantView { x_c, state: s, q_in1: &q_in1, q_out2: &q_out2, p_s: &p_s };
+    let view = PlantView { x_c, x: &xs, q_supply: &q_supply, state: s, q_in1: &q_in1, q_out2: &q_out2, p_s: &p_s };
     effect.derivs(&view, es, des);
 }
 

@@ -12,7 +12,7 @@
 
 use super::sampling::{saltelli_block, Design, UnitDesign};
 use super::study::{Method, StudySpec};
-use crate::kernel::effects::Baseline;
+use crate::kernel::effects::{Baseline, EffectSet};
 use crate::kernel::excitation::Reference;
 use crate::kernel::metrics::Metrics;
 use crate::kernel::params::{ModelParams, ParamInfo};
@@ -187,7 +187,12 @@ impl Plan {
         for (e, reference) in self.references.iter().enumerate() {
             for group in valid.chunks(LANES) {
                 let models: Vec<&ModelParams> = group.iter().map(|&i| samples[i].model.as_ref().expect("valid")).collect();
+                // Lanes without effects give the same bits in the effect set (it is neutral
+                // there), so the choice per group does not make a row depend on its neighbours.
                 let results = match LaneParams::<LANES>::new(&models) {
+                    Ok(lp) if models.iter().any(|m| m.effects.any()) => {
+                        simulate::run(&lp, &EffectSet::<LANES>::new(&models), reference, &self.solver, &mut NoObserver)
+                    }
                     Ok(lp) => simulate::run(&lp, &Baseline, reference, &self.solver, &mut NoObserver),
                     Err(e) => Err(e),
                 };

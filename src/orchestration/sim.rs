@@ -2,7 +2,7 @@
 //! engine uses, with an [`Observer`] that keeps the time history of every channel of MODEL.md §5.
 
 use super::spec::SimSpec;
-use crate::kernel::effects::Baseline;
+use crate::kernel::effects::{Baseline, EffectSet};
 use crate::kernel::excitation::Reference;
 use crate::kernel::simulate::{self, LaneParams, LaneResult, Observer, SetupError, TickView, idx};
 
@@ -81,6 +81,10 @@ pub struct SimOutcome {
 pub fn run_sim(spec: &SimSpec, reference: &Reference) -> Result<SimOutcome, SetupError> {
     let lp = LaneParams::<1>::new(&[&spec.model])?;
     let mut history = History::with_capacity(reference.len());
-    let [result] = simulate::run(&lp, &Baseline, reference, &spec.solver, &mut history)?;
+    let [result] = if spec.model.effects.any() {
+        simulate::run(&lp, &EffectSet::<1>::new(&[&spec.model]), reference, &spec.solver, &mut history)?
+    } else {
+        simulate::run(&lp, &Baseline, reference, &spec.solver, &mut history)?
+    };
     Ok(SimOutcome { result, history })
 }

@@ -82,6 +82,11 @@ pub fn read_model(mut f: Fields<'_>, model: &mut ModelParams, issues: &mut Issue
         let Some(mut t) = f.table(comp, issues) else { continue };
         let names: Vec<&str> = ModelParams::registry().filter(|p| p.component == comp).map(|p| p.name).collect();
         let mut expected = names.clone();
+        if let Some(switch) = model.effects.get_mut(comp) {
+            // An optional effect is on when its table is given (`enabled = false` switches it off).
+            expected.push("enabled");
+            *switch = t.bool("enabled", issues).unwrap_or(true);
+        }
         if comp == "servovalve" {
             expected.push("law");
             if let Some(law) = t.str("law", issues) {
@@ -338,6 +343,9 @@ pub fn model_table(model: &ModelParams) -> toml::Table {
                 ValveLaw::Linear => "linear",
             };
             t.insert("law".into(), law.into());
+        }
+        if crate::kernel::params::EFFECTS.contains(&comp) && !model.effects.get(comp) {
+            continue;
         }
         for p in ModelParams::registry().filter(|p| p.component == comp) {
             t.insert(p.name.into(), (p.get)(model).into());

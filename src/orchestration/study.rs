@@ -348,6 +348,10 @@ impl StudySpec {
             }
         }
         for (i, v) in variables.iter().enumerate() {
+            let comp = v.info.component;
+            if crate::kernel::params::EFFECTS.contains(&comp) && !model.effects.get(comp) {
+                issues.push(format!("variables[{i}].name"), format!("effect `{comp}` is not switched on: add a [model.{comp}] table"));
+            }
             if variables[..i].iter().any(|w| std::ptr::eq(w.info, v.info)) {
                 issues.push(format!("variables[{i}].name"), format!("{} is listed twice", v.path()));
             }

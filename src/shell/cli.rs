@@ -94,7 +94,10 @@ pub struct SynthArgs {
     /// Model file to start from ([model.<component>] tables).
     #[arg(long)]
     pub model: Option<PathBuf>,
-    /// Hidden parameter change, component.name=value (repeatable).
+    /// Hidden effect(s) to switch on (spool_dynamics, leakage, supply, seal_friction); repeatable.
+    #[arg(long = "effect", value_delimiter = ',')]
+    pub effect: Vec<String>,
+    /// Hidden parameter change, component.name=value (repeatable), e.g. seal_friction.f_c=8000.
     #[arg(long = "set")]
     pub set: Vec<String>,
     /// Sensor noise, standard deviations in SI units: accel=0.05,disp=1e-5,force=2000,p1=1e4,p2=1e4.

@@ -20,6 +20,17 @@ use std::path::Path;
 /// Channels that take sensor noise, and their column names.
 const NOISY: [(&str, &str); 5] = [("accel", "accel_mps2"), ("disp", "disp_m"), ("force", "force_n"), ("p1", "p1_pa"), ("p2", "p2_pa")];
 
+/// Switches on the named effects.
+pub fn apply_effects(model: &mut ModelParams, effects: &[String]) -> anyhow::Result<()> {
+    for e in effects {
+        let switch = model.effects.get_mut(e.trim()).ok_or_else(|| {
+            BadInput(format!("--effect {e:?}: unknown effect; the library has {}", crate::kernel::params::EFFECTS.join(", ")))
+        })?;
+        *switch = true;
+    }
+    Ok(())
+}
+
 /// Parses `path=value` model settings into `model`.
 pub fn apply_sets(model: &mut ModelParams, sets: &[String]) -> anyhow::Result<()> {
     for s in sets {
@@ -71,6 +82,7 @@ pub fn write_measured(path: &Path, cols: &[(&str, Vec<f64>)], meta: &[(String, S
 
 pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
     let mut model = load_model(args.model.as_deref())?;
+    apply_effects(&mut model, &args.effect)?;
     apply_sets(&mut model, &args.set)?;
     let noise = parse_noise(args.noise.as_deref())?;
     let lc = load_campaign(&args.campaign, &model)?;
@@ -79,6 +91,7 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
     writeln!(stdout, "study synth {} -> {}", args.campaign.display(), args.out.display())?;
     for (i, test) in lc.campaign.tests.iter().enumerate() {
         let mut test_model = test.model.clone();
+        apply_effects(&mut test_model, &args.effect)?;
         apply_sets(&mut test_model, &args.set)?;
         let reference = reference_for(&test.excitation, &test_model, &lc.base)?;
         let spec = SimSpec { model: test_model, excitation: test.excitation.clone(), solver: Default::default() };
