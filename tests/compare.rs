@@ -44,6 +44,11 @@ fn the_models_own_output_compares_at_floating_point_level() {
     let h = vshake::shell::tables::read_columns_allow_nan(&report.join("harmonics.parquet"), &["residual_abs"]).unwrap();
     assert_eq!(h.rows(), 4 * 9);
     assert!(h.column("residual_abs").unwrap().iter().all(|v| *v < 1e-12));
+    // The HTML report: one plot across the campaign, and an overlay and harmonic bars per test.
+    let html = std::fs::read_to_string(report.join("report.html")).unwrap();
+    assert_eq!(html.matches("<svg").count(), 1 + 2 * 4, "plots in the report");
+    assert_eq!(html.matches("class=\"plot overlay\"").count(), 4);
+    assert!(html.contains("id=\"test-sine_2hz_1p00g\"") && html.contains("<table id=\"summary\">"));
     // The reference case reproduces MODEL.md §5 through the whole file path.
     let ratio = tests_table(&report, "amp_ratio_measured");
     assert!((ratio[0] - 0.9987).abs() < 0.005, "{ratio:?}");

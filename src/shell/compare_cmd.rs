@@ -119,7 +119,12 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<()> {
     }
     if let Some(dir) = &args.report {
         write_tables(dir, &results)?;
-        writeln!(o, "\n  wrote the report tables to {} (tests, harmonics, bins, cycles, overlay .parquet)", dir.display())?;
+        let page = super::report::html(&format!("vshake: model versus measurement, {}", args.campaign.display()), &results)?;
+        let path = dir.join("report.html");
+        let out = super::tables::AtomicFile::new(&path);
+        std::fs::write(&out.tmp, page)?;
+        out.commit()?;
+        writeln!(o, "\n  wrote {} and its tables (tests, harmonics, bins, cycles, overlay .parquet)", path.display())?;
     }
     Ok(())
 }

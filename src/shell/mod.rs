@@ -7,6 +7,7 @@ pub mod cli;
 pub mod compare_cmd;
 pub mod params_cmd;
 pub mod progress;
+pub mod report;
 pub mod run_cmd;
 pub mod sensitivity_cmd;
 pub mod sim_cmd;

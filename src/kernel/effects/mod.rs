@@ -138,12 +138,12 @@ pub struct EffectSet<const N: usize> {
 impl<const N: usize> EffectSet<N> {
     /// The effects of up to N lanes (missing lanes repeat the last).
     pub fn new(sets: &[&ModelParams]) -> Self {
-        let p = |l: usize| sets[l.min(sets.len() - 1)];
+        let lanes: [&ModelParams; N] = std::array::from_fn(|l| sets[l.min(sets.len() - 1)]);
         EffectSet {
-            spool: spool_dynamics::SpoolDynamics::new(std::array::from_fn(|l| p(l))),
-            leakage: leakage::Leakage::new(std::array::from_fn(|l| p(l))),
-            supply: supply::Supply::new(std::array::from_fn(|l| p(l))),
-            seal: seal_friction::SealFriction::new(std::array::from_fn(|l| p(l))),
+            spool: spool_dynamics::SpoolDynamics::new(lanes),
+            leakage: leakage::Leakage::new(lanes),
+            supply: supply::Supply::new(lanes),
+            seal: seal_friction::SealFriction::new(lanes),
         }
     }
 }

@@ -1,0 +1,188 @@
+//! The HTML report of `study compare`: a summary table and, drawn by plotters as inline SVG, the
+//! time-history overlay with its residual, the harmonic bars (model against measured) per test,
+//! and the error against amplitude across the campaign. The numbers behind every plot are the
+//! Parquet tables written beside it.
+
+use super::compare_cmd::Compared;
+use crate::kernel::metrics::N_HARM;
+use plotters::prelude::*;
+use std::fmt::Write as _;
+
+const MEASURED: RGBColor = RGBColor(31, 119, 180);
+const MODEL: RGBColor = RGBColor(214, 39, 40);
+const RESIDUAL: RGBColor = RGBColor(90, 90, 90);
+
+fn range(v: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (lo, hi) = v.filter(|x| x.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(x), b.max(x)));
+    if !lo.is_finite() {
+        return (-1.0, 1.0);
+    }
+    let pad = ((hi - lo) * 0.05).max(1e-12);
+    (lo - pad, hi + pad)
+}
+
+/// Measured and model acceleration over the window, and their residual below.
+fn overlay_svg(r: &Compared) -> Result<String, Box<dyn std::error::Error>> {
+    let mut s = String::new();
+    {
+        let root = SVGBackend::with_string(&mut s, (760, 420)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let (top, bottom) = root.split_vertically(280);
+        let (w0, w1) = r.window;
+        let t = &r.time[w0..w1];
+        let (tx0, tx1) = (t[0], t[t.len() - 1]);
+        let (y0, y1) = range(r.accel_measured[w0..w1].iter().chain(&r.accel_model[w0..w1]).copied());
+        let mut c = ChartBuilder::on(&top)
+            .caption(format!("{}: platen acceleration", r.test.name), ("sans-serif", 16))
+            .margin(8)
+            .x_label_area_size(20)
+            .y_label_area_size(55)
+            .build_cartesian_2d(tx0..tx1, y0..y1)?;
+        c.configure_mesh().y_desc("m/s²").draw()?;
+        c.draw_series(LineSeries::new(t.iter().zip(&r.accel_measured[w0..w1]).map(|(a, b)| (*a, *b)), MEASURED.stroke_width(2)))?
+            .label("measured")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], MEASURED));
+        c.draw_series(LineSeries::new(t.iter().zip(&r.accel_model[w0..w1]).map(|(a, b)| (*a, *b)), MODEL.stroke_width(1)))?
+            .label("model")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], MODEL));
+        c.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+        let res: Vec<f64> = (w0..w1).map(|k| r.accel_model[k] - r.accel_measured[k]).collect();
+        let (r0, r1) = range(res.iter().copied());
+        let mut c = ChartBuilder::on(&bottom).margin(8).x_label_area_size(30).y_label_area_size(55).build_cartesian_2d(tx0..tx1, r0..r1)?;
+        c.configure_mesh().x_desc("t (s)").y_desc("model − meas.").draw()?;
+        c.draw_series(LineSeries::new(t.iter().zip(&res).map(|(a, b)| (*a, *b)), RESIDUAL))?;
+        root.present()?;
+    }
+    Ok(s)
+}
+
+/// h2 … h9, measured and model, as grouped bars.
+fn harmonics_svg(r: &Compared) -> Result<String, Box<dyn std::error::Error>> {
+    let mut s = String::new();
+    {
+        let root = SVGBackend::with_string(&mut s, (760, 300)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let c = &r.comparison;
+        let top = c.h_measured.iter().chain(&c.h_model).copied().filter(|x| x.is_finite()).fold(1e-6, f64::max) * 1.1;
+        let mut ch = ChartBuilder::on(&root)
+            .caption(format!("{}: harmonics of the acceleration, h_k = |H_k|/|H_1|", r.test.name), ("sans-serif", 16))
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(55)
+            .build_cartesian_2d(1.5f64..(N_HARM as f64 + 0.5), 0f64..top)?;
+        ch.configure_mesh().x_desc("harmonic k").disable_x_mesh().draw()?;
+        for k in 2..=N_HARM {
+            let x = k as f64;
+            let (m, d) = (c.h_measured[k - 2], c.h_model[k - 2]);
+            if m.is_finite() {
+                ch.draw_series(std::iter::once(Rectangle::new([(x - 0.35, 0.0), (x - 0.02, m)], MEASURED.filled())))?;
+            }
+            if d.is_finite() {
+                ch.draw_series(std::iter::once(Rectangle::new([(x + 0.02, 0.0), (x + 0.35, d)], MODEL.filled())))?;
+            }
+        }
+        root.present()?;
+    }
+    Ok(s)
+}
+
+/// RMS acceleration residual against amplitude, one line per frequency.
+fn amplitude_svg(results: &[Compared]) -> Result<Option<String>, Box<dyn std::error::Error>> {
+    let mut pts: Vec<(f64, f64, f64)> = results
+        .iter()
+        .filter_map(|r| match &r.test.excitation {
+            crate::orchestration::spec::ExcitationSpec::Sine { sine, .. } => {
+                let g = sine.amp_m * (2.0 * std::f64::consts::PI * sine.freq_hz).powi(2) / crate::kernel::params::G;
+                Some((sine.freq_hz, g, r.comparison.rms_residual_accel_ratio))
+            }
+            _ => None,
+        })
+        .collect();
+    if pts.is_empty() {
+        return Ok(None);
+    }
+    pts.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
+    let mut s = String::new();
+    {
+        let root = SVGBackend::with_string(&mut s, (760, 320)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let (x0, x1) = range(pts.iter().map(|p| p.1));
+        let (_, y1) = range(pts.iter().map(|p| p.2));
+        let mut c = ChartBuilder::on(&root)
+            .caption("campaign: acceleration residual against amplitude, per frequency", ("sans-serif", 16))
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(60)
+            .build_cartesian_2d(x0.min(0.0)..x1, 0f64..y1.max(1e-9))?;
+        c.configure_mesh().x_desc("amplitude (g)").y_desc("rms residual / rms measured").draw()?;
+        let freqs: Vec<f64> = pts.iter().map(|p| p.0).fold(Vec::new(), |mut v, f| {
+            if v.last() != Some(&f) {
+                v.push(f);
+            }
+            v
+        });
+        for (i, f) in freqs.iter().enumerate() {
+            let color = Palette99::pick(i).to_rgba();
+            let line: Vec<(f64, f64)> = pts.iter().filter(|p| p.0 == *f).map(|p| (p.1, p.2)).collect();
+            c.draw_series(LineSeries::new(line.clone(), color.stroke_width(2)))?
+                .label(format!("{f} Hz"))
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
+            c.draw_series(line.into_iter().map(|p| Circle::new(p, 4, color.filled())))?;
+        }
+        c.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+        root.present()?;
+    }
+    Ok(Some(s))
+}
+
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+}
+
+/// The whole report as one self-contained HTML page.
+pub fn html(title: &str, results: &[Compared]) -> anyhow::Result<String> {
+    let plot = |r: Result<String, Box<dyn std::error::Error>>| r.map_err(|e| anyhow::anyhow!("drawing a plot: {e}"));
+    let mut h = String::new();
+    write!(
+        h,
+        "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>{t}</title><style>\
+body{{font-family:sans-serif;margin:24px;color:#222}} table{{border-collapse:collapse;font-size:13px}}\
+td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}} th{{background:#f2f2f2}} td:first-child{{text-align:left}}\
+figure{{margin:12px 0}} .legend span{{display:inline-block;width:14px;height:4px;margin:0 4px 2px 12px}}\
+</style></head><body>\n<h1>{t}</h1>\n<p class=\"legend\">measured<span style=\"background:#1f77b4\"></span> model<span style=\"background:#d62728\"></span></p>\n",
+        t = esc(title)
+    )?;
+    h.push_str("<h2>Summary</h2>\n<table id=\"summary\"><tr><th>test</th><th>amp. ratio meas.</th><th>model</th><th>phase° meas.</th><th>model</th><th>h3 meas.</th><th>model</th><th>rms resid. a</th><th>x</th><th>F</th><th>drift meas./cycle</th><th>model</th></tr>\n");
+    for r in results {
+        let c = &r.comparison;
+        writeln!(
+            h,
+            "<tr><td>{}</td><td>{:.4}</td><td>{:.4}</td><td>{:+.2}</td><td>{:+.2}</td><td>{:.4}</td><td>{:.4}</td><td>{:.2e}</td><td>{:.2e}</td><td>{}</td><td>{:+.1e}</td><td>{:+.1e}</td></tr>",
+            esc(&r.test.name),
+            c.amp_ratio_measured,
+            c.amp_ratio_model,
+            c.phase_measured_deg,
+            c.phase_model_deg,
+            c.h_measured[1],
+            c.h_model[1],
+            c.rms_residual_accel_ratio,
+            c.rms_residual_disp_ratio,
+            c.rms_residual_force_ratio.map_or("-".into(), |v| format!("{v:.2e}")),
+            c.drift_measured,
+            c.drift_model
+        )?;
+    }
+    h.push_str("</table>\n");
+    if let Some(svg) = amplitude_svg(results).map_err(|e| anyhow::anyhow!("drawing a plot: {e}"))? {
+        write!(h, "<h2>Across the campaign</h2>\n<figure class=\"plot\" id=\"amplitude\">{svg}</figure>\n")?;
+    }
+    for r in results {
+        writeln!(h, "<h2 id=\"test-{n}\">{n}</h2>", n = esc(&r.test.name))?;
+        writeln!(h, "<figure class=\"plot overlay\">{}</figure>", plot(overlay_svg(r))?)?;
+        if r.comparison.amp_ratio_model.is_finite() {
+            writeln!(h, "<figure class=\"plot harmonics\">{}</figure>", plot(harmonics_svg(r))?)?;
+        }
+    }
+    h.push_str("<p>The numbers behind every plot are in the Parquet tables beside this page (tests, harmonics, bins, cycles, overlay).</p>\n</body></html>\n");
+    Ok(h)
+}
