@@ -32,6 +32,29 @@ pub struct Reference {
 }
 
 impl Reference {
+    /// An empty reference with room for `n` ticks; the window is every tick until set.
+    fn with_capacity(f_s: f64, n: usize, fundamental_hz: Option<f64>) -> Self {
+        Reference {
+            f_s,
+            x: Vec::with_capacity(n),
+            v: Vec::with_capacity(n),
+            a: Vec::with_capacity(n),
+            j: Vec::with_capacity(n),
+            command: Vec::with_capacity(n),
+            window: (0, n),
+            fundamental_hz,
+        }
+    }
+
+    /// Appends one tick: the states (x, v, a, j) and the command.
+    fn push(&mut self, s: [f64; 4], command: f64) {
+        self.x.push(s[0]);
+        self.v.push(s[1]);
+        self.a.push(s[2]);
+        self.j.push(s[3]);
+        self.command.push(command);
+    }
+
     pub fn len(&self) -> usize {
         self.x.len()
     }
@@ -95,24 +118,11 @@ impl Sine {
     /// The reference at controller rate f_s.
     pub fn reference(&self, f_s: f64) -> Reference {
         let n = (self.duration_s * f_s).round() as usize;
-        let mut r = Reference {
-            f_s,
-            x: Vec::with_capacity(n),
-            v: Vec::with_capacity(n),
-            a: Vec::with_capacity(n),
-            j: Vec::with_capacity(n),
-            command: Vec::new(),
-            window: (0, n),
-            fundamental_hz: Some(self.freq_hz),
-        };
+        let mut r = Reference::with_capacity(f_s, n, Some(self.freq_hz));
         for k in 0..n {
             let s = self.states(k as f64 / f_s);
-            r.x.push(s[0]);
-            r.v.push(s[1]);
-            r.a.push(s[2]);
-            r.j.push(s[3]);
+            r.push(s, s[0]);
         }
-        r.command = r.x.clone();
         let cycles = self.window_cycles.unwrap_or_else(|| self.default_cycles());
         let len = ((cycles as f64) * f_s / self.freq_hz).round() as usize;
         r.window = (n.saturating_sub(len), n);
@@ -142,16 +152,7 @@ impl Record {
         let span = self.time_s[self.time_s.len() - 1] - t0;
         let n = (span * f_s).floor() as usize + 1;
         let (phi, gam) = svf_discrete(2.0 * PI * self.f_ref_hz, 1.0 / f_s);
-        let mut r = Reference {
-            f_s,
-            x: Vec::with_capacity(n),
-            v: Vec::with_capacity(n),
-            a: Vec::with_capacity(n),
-            j: Vec::with_capacity(n),
-            command: Vec::with_capacity(n),
-            window: (0, n),
-            fundamental_hz: None,
-        };
+        let mut r = Reference::with_capacity(f_s, n, None);
         let mut s = [self.disp_m[0], 0.0, 0.0, 0.0];
         let mut i = 0;
         for k in 0..n {
@@ -162,11 +163,7 @@ impl Record {
             let (ta, tb) = (self.time_s[i], self.time_s[i + 1]);
             let w = ((t - ta) / (tb - ta)).clamp(0.0, 1.0);
             let u = self.disp_m[i] + w * (self.disp_m[i + 1] - self.disp_m[i]);
-            r.command.push(u);
-            r.x.push(s[0]);
-            r.v.push(s[1]);
-            r.a.push(s[2]);
-            r.j.push(s[3]);
+            r.push(s, u);
             let mut next = [0.0; 4];
             for (row, out) in next.iter_mut().enumerate() {
                 *out = (0..4).map(|c| phi[row][c] * s[c]).sum::<f64>() + gam[row] * u;

@@ -126,37 +126,29 @@ impl<'a> Fields<'a> {
         Some(x)
     }
 
+    /// A value of one TOML type, or an issue naming the key and what was found.
+    fn typed<T>(&mut self, key: &str, issues: &mut Issues, expected: &str, get: impl Fn(&'a toml::Value) -> Option<T>) -> Option<T> {
+        let v = self.take(key)?;
+        let out = get(v);
+        if out.is_none() {
+            issues.push(self.path_of(key), format!("expected {expected}, found {}", v.type_str()));
+        }
+        out
+    }
+
     /// A whole number.
     pub fn int(&mut self, key: &str, issues: &mut Issues) -> Option<i64> {
-        match self.take(key)? {
-            toml::Value::Integer(i) => Some(*i),
-            other => {
-                issues.push(self.path_of(key), format!("expected a whole number, found {}", other.type_str()));
-                None
-            }
-        }
+        self.typed(key, issues, "a whole number", toml::Value::as_integer)
     }
 
     /// A string.
     pub fn str(&mut self, key: &str, issues: &mut Issues) -> Option<&'a str> {
-        match self.take(key)? {
-            toml::Value::String(s) => Some(s.as_str()),
-            other => {
-                issues.push(self.path_of(key), format!("expected a string, found {}", other.type_str()));
-                None
-            }
-        }
+        self.typed(key, issues, "a string", toml::Value::as_str)
     }
 
     /// A boolean.
     pub fn bool(&mut self, key: &str, issues: &mut Issues) -> Option<bool> {
-        match self.take(key)? {
-            toml::Value::Boolean(b) => Some(*b),
-            other => {
-                issues.push(self.path_of(key), format!("expected true or false, found {}", other.type_str()));
-                None
-            }
-        }
+        self.typed(key, issues, "true or false", toml::Value::as_bool)
     }
 
     /// A sub-table (also accepts an inline table).
