@@ -41,6 +41,13 @@ fn hidden(effect: &str, sets: &[&str]) -> Report {
         let row: HashMap<String, f64> = cols.iter().map(|c| (c.to_string(), t.column(c).unwrap()[i])).collect();
         tests.insert(n.to_string(), row);
     }
+    // Residual magnitude of harmonics 2 and 3 per test (harmonics table: 9 rows per test).
+    let h = vshake::shell::tables::read_columns_allow_nan(&report.join("harmonics.parquet"), &["residual_abs"]).unwrap();
+    for (i, n) in names.iter().enumerate() {
+        let row = tests.get_mut(*n).unwrap();
+        row.insert("r2".into(), h.column("residual_abs").unwrap()[9 * i + 1]);
+        row.insert("r3".into(), h.column("residual_abs").unwrap()[9 * i + 2]);
+    }
     // Bins: velocity reversal and peak velocity residuals per test.
     let b = vshake::shell::tables::read_columns_allow_nan(&report.join("bins.parquet"), &["rms_residual_ratio"]).unwrap();
     for (i, n) in names.iter().enumerate() {
@@ -99,6 +106,41 @@ fn leakage_shows_in_displacement_more_than_acceleration() {
     for t in ["f2_a0p3", "f6_a0p3", "f6_a1p5"] {
         let (x, a) = (r.get(t, "rms_residual_disp_ratio"), r.get(t, "rms_residual_accel_ratio"));
         assert!(x > 5.0 * a && a < 0.02, "{t}: displacement {x} vs acceleration {a}");
+    }
+}
+
+/// Spool-to-flow saturation: flow is lost where the velocity demand is high (2 Hz at 1.5 g,
+/// 3.2 g), with more odd distortion; nothing at small demand.
+#[test]
+fn flow_saturation_bites_at_high_velocity_demand() {
+    let r = hidden("flow_saturation", &[]);
+    let res = |t: &str| r.get(t, "rms_residual_accel_ratio");
+    assert!(res("f2_a1p5") > 100.0 * res("f6_a0p3"), "{} vs {}", res("f2_a1p5"), res("f6_a0p3"));
+    assert!(res("f3_a3p2") > 0.05);
+    let dh3 = |t: &str| r.get(t, "h3_measured_ratio") - r.get(t, "h3_model_ratio");
+    assert!(dh3("f3_a3p2") > 0.01 && dh3("f6_a0p3").abs() < 1e-3, "{} {}", dh3("f3_a3p2"), dh3("f6_a0p3"));
+    assert!(r.get("f3_a3p2", "amp_ratio_measured") < r.get("f3_a3p2", "amp_ratio_model") - 0.05);
+}
+
+/// Hold-down stiffness nonlinearity: matters where the displacement is large (2 Hz, 1.5 g:
+/// X = 9 cm), with more odd distortion there, and not at 6 Hz (X = 1 cm).
+#[test]
+fn hold_down_nonlinearity_grows_with_displacement() {
+    let r = hidden("hold_down", &[]);
+    let res = |t: &str| r.get(t, "rms_residual_accel_ratio");
+    assert!(res("f2_a1p5") > 100.0 * res("f6_a1p5"), "{} vs {}", res("f2_a1p5"), res("f6_a1p5"));
+    let dh3 = r.get("f2_a1p5", "h3_measured_ratio") - r.get("f2_a1p5", "h3_model_ratio");
+    assert!(dh3 > 0.005, "{dh3}");
+}
+
+/// Port asymmetry (extension 5 % stronger than retraction): the residual is an even harmonic,
+/// larger in h2 than in h3 in every test, and the displacement shifts.
+#[test]
+fn port_asymmetry_shows_as_even_harmonics() {
+    let r = hidden("asymmetry", &[]);
+    for t in ["f2_a0p3", "f2_a1p5", "f6_a0p3", "f6_a1p5", "f3_a3p2"] {
+        assert!(r.get(t, "r2") > 2.0 * r.get(t, "r3"), "{t}: |R2| {} vs |R3| {}", r.get(t, "r2"), r.get(t, "r3"));
+        assert!(r.get(t, "rms_residual_disp_ratio") > r.get(t, "rms_residual_accel_ratio"), "{t}");
     }
 }
 

@@ -367,8 +367,36 @@ params! {
     }
 }
 
+params! {
+    /// Effect `flow_saturation`: spool-to-flow nonlinearity; the metering area saturates,
+    /// x_eff = x_sat·tanh(x/x_sat).
+    pub struct FlowSaturationParams in flow_saturation as "flow_saturation" {
+        x_sat: "m", "m", 0.012, Range::gt(0.0), Chosen,
+            "Spool opening scale of the saturation x_eff = x_sat·tanh(x/x_sat) [chosen: 12 mm of the 19.05 mm stroke].";
+    }
+}
+
+params! {
+    /// Effect `hold_down`: hold-down strut stiffness nonlinearity, F = −k3·y³ on top of −K·y.
+    pub struct HoldDownParams in hold_down as "hold_down" {
+        k3: "N/m³", "n_per_m3", 1.0e8, Range::any(), Chosen,
+            "Cubic stiffness of the hold-down struts, positive = hardening [chosen: k3·y³ equals K·y at y = 11 cm].";
+    }
+}
+
+params! {
+    /// Effect `asymmetry`: port/valve asymmetry. The flow gain for extension (x > 0) differs from
+    /// that for retraction, and actuator 2's valves differ from actuator 1's.
+    pub struct AsymmetryParams in asymmetry as "asymmetry" {
+        extend_gain: "-", "", 1.05, Range::gt(0.0), Chosen,
+            "Flow gain for x > 0 relative to x < 0 [chosen: a 5 % port mismatch].";
+        act2_gain: "-", "", 1.0, Range::gt(0.0), Chosen,
+            "Flow gain of actuator 2's valves relative to actuator 1's [chosen: equal].";
+    }
+}
+
 /// Names of the optional effects (components that are off unless their table is given).
-pub const EFFECTS: [&str; 4] = ["spool_dynamics", "leakage", "supply", "seal_friction"];
+pub const EFFECTS: [&str; 7] = ["spool_dynamics", "leakage", "supply", "seal_friction", "flow_saturation", "hold_down", "asymmetry"];
 
 /// Which optional effects are on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -377,11 +405,14 @@ pub struct EffectSwitches {
     pub leakage: bool,
     pub supply: bool,
     pub seal_friction: bool,
+    pub flow_saturation: bool,
+    pub hold_down: bool,
+    pub asymmetry: bool,
 }
 
 impl EffectSwitches {
     pub fn any(&self) -> bool {
-        self.spool_dynamics || self.leakage || self.supply || self.seal_friction
+        EFFECTS.iter().any(|e| self.get(e))
     }
     /// The switch of effect `name`.
     pub fn get_mut(&mut self, name: &str) -> Option<&mut bool> {
@@ -390,6 +421,9 @@ impl EffectSwitches {
             "leakage" => Some(&mut self.leakage),
             "supply" => Some(&mut self.supply),
             "seal_friction" => Some(&mut self.seal_friction),
+            "flow_saturation" => Some(&mut self.flow_saturation),
+            "hold_down" => Some(&mut self.hold_down),
+            "asymmetry" => Some(&mut self.asymmetry),
             _ => None,
         }
     }
@@ -399,6 +433,9 @@ impl EffectSwitches {
             "leakage" => self.leakage,
             "supply" => self.supply,
             "seal_friction" => self.seal_friction,
+            "flow_saturation" => self.flow_saturation,
+            "hold_down" => self.hold_down,
+            "asymmetry" => self.asymmetry,
             _ => false,
         }
     }
@@ -430,6 +467,9 @@ pub struct ModelParams {
     pub leakage: LeakageParams,
     pub supply: SupplyParams,
     pub seal_friction: SealFrictionParams,
+    pub flow_saturation: FlowSaturationParams,
+    pub hold_down: HoldDownParams,
+    pub asymmetry: AsymmetryParams,
 }
 
 /// One problem found by [`ModelParams::validate`].
@@ -459,6 +499,9 @@ impl ModelParams {
             .chain(LeakageParams::PARAMS)
             .chain(SupplyParams::PARAMS)
             .chain(SealFrictionParams::PARAMS)
+            .chain(FlowSaturationParams::PARAMS)
+            .chain(HoldDownParams::PARAMS)
+            .chain(AsymmetryParams::PARAMS)
     }
 
     /// The registry row of `component.name`, if any.
@@ -468,8 +511,21 @@ impl ModelParams {
     }
 
     /// Names of the components (in registry order): the baseline's, then the optional effects.
-    pub fn components() -> [&'static str; 9] {
-        ["servovalve", "actuator", "platen", "friction", "controller", "spool_dynamics", "leakage", "supply", "seal_friction"]
+    pub fn components() -> [&'static str; 12] {
+        [
+            "servovalve",
+            "actuator",
+            "platen",
+            "friction",
+            "controller",
+            "spool_dynamics",
+            "leakage",
+            "supply",
+            "seal_friction",
+            "flow_saturation",
+            "hold_down",
+            "asymmetry",
+        ]
     }
 
     /// Checks every range and every relation between parameters; returns all problems at once.

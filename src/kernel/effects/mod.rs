@@ -49,6 +49,9 @@
 //! (the `params!` table gives unit, default, range, source and the registry entry) and add it to
 //! [`EffectSet`].
 
+pub mod asymmetry;
+pub mod flow_saturation;
+pub mod hold_down;
 pub mod leakage;
 pub mod seal_friction;
 pub mod spool_dynamics;
@@ -133,6 +136,9 @@ pub struct EffectSet<const N: usize> {
     pub leakage: leakage::Leakage<N>,
     pub supply: supply::Supply<N>,
     pub seal: seal_friction::SealFriction<N>,
+    pub saturation: flow_saturation::FlowSaturation<N>,
+    pub hold_down: hold_down::HoldDown<N>,
+    pub asymmetry: asymmetry::Asymmetry<N>,
 }
 
 impl<const N: usize> EffectSet<N> {
@@ -144,6 +150,9 @@ impl<const N: usize> EffectSet<N> {
             leakage: leakage::Leakage::new(lanes),
             supply: supply::Supply::new(lanes),
             seal: seal_friction::SealFriction::new(lanes),
+            saturation: flow_saturation::FlowSaturation::new(lanes),
+            hold_down: hold_down::HoldDown::new(lanes),
+            asymmetry: asymmetry::Asymmetry::new(lanes),
         }
     }
 }
@@ -162,15 +171,17 @@ impl<const N: usize> Effect<N> for EffectSet<N> {
     }
     #[inline(always)]
     fn spool(&self, l: usize, act: usize, x_c: f64, s: &Self::State) -> f64 {
-        self.spool.spool(l, act, x_c, s)
+        // The spool follows its command (dynamics), then the metering area saturates.
+        self.saturation.opening(l, self.spool.spool(l, act, x_c, s))
     }
     #[inline(always)]
-    fn flows(&self, l: usize, _act: usize, q: (f64, f64), p1: f64, p2: f64, _p_s: f64, _s: &Self::State) -> (f64, f64) {
-        self.leakage.flows(l, q, p1, p2)
+    fn flows(&self, l: usize, act: usize, q: (f64, f64), p1: f64, p2: f64, _p_s: f64, _s: &Self::State) -> (f64, f64) {
+        // Valve flows scaled by the port asymmetry, then the leakage paths.
+        self.leakage.flows(l, self.asymmetry.flows(l, act, q), p1, p2)
     }
     #[inline(always)]
-    fn extra_force(&self, l: usize, _y: f64, v: f64, _s: &Self::State) -> f64 {
-        self.seal.force(l, v)
+    fn extra_force(&self, l: usize, y: f64, v: f64, _s: &Self::State) -> f64 {
+        self.seal.force(l, v) + self.hold_down.force(l, y)
     }
     #[inline(always)]
     fn derivs(&self, plant: &PlantView<'_, N>, s: &Self::State, ds: &mut Self::State) {
