@@ -155,9 +155,19 @@ pub fn results_metadata(spec: &StudySpec, plan: &Plan, extra: &[(String, String)
         ("vshake.parameters".to_string(), plan.columns.iter().map(|c| c.path()).collect::<Vec<_>>().join(",")),
         ("vshake.parameter_columns".to_string(), plan.columns.iter().map(|c| c.column_name()).collect::<Vec<_>>().join(",")),
         ("vshake.metrics".to_string(), spec.metrics.join(",")),
+        // The design's dimensions in order (the varied variables; a design file's columns): for a
+        // Saltelli design, block 2 + i of a base point swaps dimension i.
+        ("vshake.design_parameters".to_string(), design_parameters(spec, plan).join(",")),
     ];
     m.extend_from_slice(extra);
     m
+}
+
+fn design_parameters(spec: &StudySpec, plan: &Plan) -> Vec<String> {
+    match spec.method {
+        Method::File { .. } => plan.columns.iter().map(|c| c.path()).collect(),
+        _ => spec.varied().iter().map(|v| v.path()).collect(),
+    }
 }
 
 /// Builds the rayon pool for `--threads` (0 = all cores).

@@ -55,13 +55,17 @@ pub fn run(args: &SensitivityArgs) -> anyhow::Result<()> {
     wanted.extend(metrics.iter().map(String::as_str));
     let t = tables::read_columns_allow_nan(file, &wanted).map_err(input_if_user)?;
     let col = |n: &str| t.column(n).expect("column read");
-    // Varied parameters: those that are not constant.
-    let varied: Vec<usize> = (0..pcols.len())
-        .filter(|&i| {
-            let c = col(&pcols[i]);
-            c.iter().any(|v| *v != c[0])
-        })
-        .collect();
+    // The design's parameters, in design order (recorded by `study run`); older files: the
+    // parameter columns that vary.
+    let varied: Vec<usize> = match meta.get("vshake.design_parameters") {
+        Some(list) => list.split(',').filter(|s| !s.is_empty()).filter_map(|p| paths.iter().position(|x| x == p)).collect(),
+        None => (0..pcols.len())
+            .filter(|&i| {
+                let c = col(&pcols[i]);
+                c.iter().any(|v| *v != c[0])
+            })
+            .collect(),
+    };
     if varied.is_empty() {
         return Err(BadInput(format!("{}: no parameter varies; nothing to analyse", file.display())).into());
     }
