@@ -184,47 +184,36 @@ impl<'a> Fields<'a> {
         }
     }
 
-    /// An array of numbers.
-    pub fn f64_array(&mut self, key: &str, issues: &mut Issues) -> Option<Vec<f64>> {
+    /// An array whose every element `get` accepts; a bad element is an issue at `key[i]`.
+    fn array<T>(&mut self, key: &str, issues: &mut Issues, what: &str, element: &str, get: impl Fn(&'a toml::Value) -> Option<T>) -> Option<Vec<T>> {
         let path = self.path_of(key);
-        match self.take(key)? {
-            toml::Value::Array(items) => {
-                let mut out = Vec::new();
-                for (i, v) in items.iter().enumerate() {
-                    match v {
-                        toml::Value::Float(x) if x.is_finite() => out.push(*x),
-                        toml::Value::Integer(n) => out.push(*n as f64),
-                        other => issues.push(format!("{path}[{i}]"), format!("expected a finite number, found {other}")),
-                    }
-                }
-                Some(out)
-            }
-            other => {
-                issues.push(path, format!("expected an array of numbers, found {}", other.type_str()));
-                None
+        let v = self.take(key)?;
+        let Some(items) = v.as_array() else {
+            issues.push(path, format!("expected an array of {what}, found {}", v.type_str()));
+            return None;
+        };
+        let mut out = Vec::with_capacity(items.len());
+        for (i, item) in items.iter().enumerate() {
+            match get(item) {
+                Some(x) => out.push(x),
+                None => issues.push(format!("{path}[{i}]"), format!("expected {element}, found {item}")),
             }
         }
+        Some(out)
+    }
+
+    /// An array of numbers (integers or finite floats).
+    pub fn f64_array(&mut self, key: &str, issues: &mut Issues) -> Option<Vec<f64>> {
+        self.array(key, issues, "numbers", "a finite number", |v| match v {
+            toml::Value::Float(x) if x.is_finite() => Some(*x),
+            toml::Value::Integer(n) => Some(*n as f64),
+            _ => None,
+        })
     }
 
     /// An array of strings.
     pub fn str_array(&mut self, key: &str, issues: &mut Issues) -> Option<Vec<&'a str>> {
-        let path = self.path_of(key);
-        match self.take(key)? {
-            toml::Value::Array(items) => {
-                let mut out = Vec::new();
-                for (i, v) in items.iter().enumerate() {
-                    match v {
-                        toml::Value::String(x) => out.push(x.as_str()),
-                        other => issues.push(format!("{path}[{i}]"), format!("expected a string, found {}", other.type_str())),
-                    }
-                }
-                Some(out)
-            }
-            other => {
-                issues.push(path, format!("expected an array of strings, found {}", other.type_str()));
-                None
-            }
-        }
+        self.array(key, issues, "strings", "a string", toml::Value::as_str)
     }
 
     /// The keys of this table not read yet, each reported as unknown (with the expected names).

@@ -106,7 +106,13 @@ pub fn run(args: &SensitivityArgs) -> anyhow::Result<()> {
             }
             let n = regression_rows.len();
             let (src, r2, prcc) = if n > d + 2 && regression_rows.iter().any(|&r| y[r] != y[regression_rows[0]]) {
-                let x: Vec<Vec<f64>> = varied.iter().map(|&i| regression_rows.iter().map(|&r| col(&pcols[i])[r]).collect()).collect();
+                let x: Vec<Vec<f64>> = varied
+                    .iter()
+                    .map(|&i| {
+                        let c = col(&pcols[i]);
+                        regression_rows.iter().map(|&r| c[r]).collect()
+                    })
+                    .collect();
                 let yy: Vec<f64> = regression_rows.iter().map(|&r| y[r]).collect();
                 let (src, r2) = sensitivity::src(&x, &yy);
                 (src, r2, sensitivity::prcc(&x, &yy))
