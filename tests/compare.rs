@@ -54,6 +54,37 @@ fn the_models_own_output_compares_at_floating_point_level() {
     assert!((ratio[0] - 0.9987).abs() < 0.005, "{ratio:?}");
 }
 
+/// Open loop on the model's own valve command reproduces the closed-loop run exactly (the
+/// command is the one the controller produced), so the residual is again at floating-point level.
+/// A campaign without the drive's column is refused with the file and the column.
+#[test]
+fn open_loop_on_the_models_own_command_is_exact_and_needs_its_column() {
+    let d = tempfile::tempdir().unwrap();
+    synth(d.path(), &[]);
+    let report = d.path().join("report");
+    let c = d.path().join("sines.toml");
+    let (code, stdout, stderr) = study(&["compare", c.to_str().unwrap(), "--open-loop", "valve", "--report", report.to_str().unwrap()]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(stdout.contains("open loop on the measured valve_cmd_v"), "{stdout}");
+    for col in ["rms_residual_accel_ratio", "rms_residual_disp_ratio", "rms_residual_force_ratio"] {
+        for v in tests_table(&report, col) {
+            assert!(v.abs() < 1e-12, "{col} = {v}");
+        }
+    }
+    // Without the column: exit 2, naming the file and the column.
+    let dir = d.path().join("no_cmd");
+    std::fs::create_dir(&dir).unwrap();
+    let text = std::fs::read_to_string(d.path().join("sine_3hz_1p73g.csv")).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let drop = header.iter().position(|h| *h == "spool_m").unwrap();
+    let stripped: String = text.lines().map(|l| l.split(',').enumerate().filter(|(i, _)| *i != drop).map(|(_, v)| v).collect::<Vec<_>>().join(",") + "\n").collect();
+    std::fs::write(dir.join("t.csv"), stripped).unwrap();
+    std::fs::write(dir.join("c.toml"), "[campaign]\nname = \"x\"\n[[test]]\nname = \"t\"\ndata = \"t.csv\"\nexcitation = { kind = \"sine\", freq_hz = 3.0, amp_g = 1.73 }\n").unwrap();
+    let (code, _, stderr) = study(&["compare", dir.join("c.toml").to_str().unwrap(), "--open-loop", "spool"]);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("t.csv") && stderr.contains("`spool_m`"), "{stderr}");
+}
+
 /// Acceptance 1: with sensor noise, the residual is at the noise level.
 #[test]
 fn with_noise_the_residual_is_at_the_noise_level() {

@@ -22,6 +22,12 @@ impl Report {
 }
 
 fn hidden(effect: &str, sets: &[&str]) -> Report {
+    hidden_compared(effect, sets, None)
+}
+
+/// Synthesises the signatures campaign with `effect` hidden and compares it with the baseline,
+/// in closed loop or open loop (`Some("valve")`, `Some("spool")`).
+fn hidden_compared(effect: &str, sets: &[&str], open_loop: Option<&str>) -> Report {
     let d = tempfile::tempdir().unwrap();
     let campaign = Path::new(env!("CARGO_MANIFEST_DIR")).join("studies/campaigns/signatures.toml");
     let mut args = vec!["synth", campaign.to_str().unwrap(), "--out", d.path().to_str().unwrap(), "--effect", effect];
@@ -31,9 +37,27 @@ fn hidden(effect: &str, sets: &[&str]) -> Report {
     let (code, out, err) = study(&args);
     assert_eq!(code, 0, "{out}{err}");
     let report = d.path().join("report");
-    let (code, out, err) = study(&["compare", d.path().join("signatures.toml").to_str().unwrap(), "--report", report.to_str().unwrap()]);
+    let campaign = d.path().join("signatures.toml");
+    let mut args = vec!["compare", campaign.to_str().unwrap(), "--report", report.to_str().unwrap()];
+    if let Some(o) = open_loop {
+        args.extend(["--open-loop", o]);
+    }
+    let (code, out, err) = study(&args);
     assert_eq!(code, 0, "{out}{err}");
-    let cols = ["amp_ratio_measured", "amp_ratio_model", "phase_measured_deg", "phase_model_deg", "h3_measured_ratio", "h3_model_ratio", "rms_residual_accel_ratio", "rms_residual_disp_ratio", "drift_measured_per_cycle", "drift_model_per_cycle"];
+    let cols = [
+        "amp_ratio_measured",
+        "amp_ratio_model",
+        "phase_measured_deg",
+        "phase_model_deg",
+        "h3_measured_ratio",
+        "h3_model_ratio",
+        "rms_residual_accel_ratio",
+        "rms_residual_disp_ratio",
+        "drift_measured_per_cycle",
+        "drift_model_per_cycle",
+        "accel_over_disp_measured",
+        "accel_over_disp_model",
+    ];
     let t = vshake::shell::tables::read_columns_allow_nan(&report.join("tests.parquet"), &cols).unwrap();
     let names = ["f2_a0p3", "f2_a1p5", "f6_a0p3", "f6_a1p5", "f3_a3p2"];
     let mut tests = HashMap::new();
@@ -98,6 +122,96 @@ fn spool_dynamics_adds_phase_lag() {
     }
 }
 
+/// Phase difference measured − model, degrees.
+fn dphase(r: &Report, t: &str) -> f64 {
+    r.get(t, "phase_measured_deg") - r.get(t, "phase_model_deg")
+}
+
+/// Frequency of a test of the signatures campaign, Hz.
+fn freq(t: &str) -> f64 {
+    t[1..2].parse().unwrap()
+}
+
+const TESTS: [&str; 5] = ["f2_a0p3", "f2_a1p5", "f6_a0p3", "f6_a1p5", "f3_a3p2"];
+
+/// In open loop (driven by the measured valve command) the controller no longer compensates, and
+/// the spool's lag shows as it is: −2ζ·f/f_n, growing in proportion to frequency. Driven by the
+/// measured spool instead, the valve is bypassed and the residual all but vanishes: the error is
+/// the valve's, not the plant's.
+#[test]
+fn open_loop_separates_the_valve_from_the_plant() {
+    let valve = hidden_compared("spool_dynamics", &[], Some("valve"));
+    for t in TESTS {
+        let lag = 2.0 * 0.7 * freq(t) / 80.0 * 180.0 / std::f64::consts::PI;
+        let d = dphase(&valve, t);
+        assert!((d + lag).abs() < 0.1 * lag, "{t}: open-loop phase change {d}° against the spool's lag −{lag:.2}°");
+    }
+    assert!(dphase(&valve, "f6_a0p3") < 2.5 * dphase(&valve, "f2_a0p3"), "the lag grows with frequency");
+    let spool = hidden_compared("spool_dynamics", &[], Some("spool"));
+    for t in TESTS {
+        let (rs, rv) = (spool.get(t, "rms_residual_accel_ratio"), valve.get(t, "rms_residual_accel_ratio"));
+        assert!(rs < 0.03 * rv && rs < 1e-3, "{t}: spool-driven residual {rs} vs valve-driven {rv}");
+    }
+}
+
+/// Transport delay τ = 2 ms: in open loop a phase −360°·f·τ exactly proportional to frequency, no
+/// amplitude change; in closed loop the amplitude ratio falls and the 2 Hz phase lags by about ωτ.
+#[test]
+fn transport_delay_lags_in_proportion_to_frequency() {
+    let tau = 2.0e-3;
+    let open = hidden_compared("transport_delay", &[], Some("valve"));
+    for t in TESTS {
+        let lag = 360.0 * freq(t) * tau;
+        let d = dphase(&open, t);
+        assert!((d + lag).abs() < 0.05 * lag, "{t}: open-loop phase change {d}° against −{lag:.2}°");
+        let dr = open.get(t, "amp_ratio_measured") / open.get(t, "amp_ratio_model") - 1.0;
+        assert!(dr.abs() < 2e-3, "{t}: amplitude changed by {dr}");
+    }
+    let closed = hidden("transport_delay", &[]);
+    for t in TESTS {
+        assert!(closed.get(t, "amp_ratio_measured") < closed.get(t, "amp_ratio_model") - 0.01, "{t}");
+    }
+    let d2 = dphase(&closed, "f2_a0p3");
+    assert!((d2 + 360.0 * 2.0 * tau).abs() < 0.3 * 360.0 * 2.0 * tau, "closed loop at 2 Hz: {d2}°");
+}
+
+/// Effective bulk modulus and dead volume: a softer oil column (resonance ≈ 10 Hz) changes the
+/// response more at 6 Hz than at 2 Hz; entrained air alone (no dead volume) stiffens with pressure,
+/// so the asymmetric chamber pressures of large tests add an even harmonic that grows with amplitude.
+#[test]
+fn compressibility_grows_with_frequency_and_air_with_amplitude() {
+    let r = hidden("compressibility", &[]);
+    let res = |t: &str| r.get(t, "rms_residual_accel_ratio");
+    for a in ["a0p3", "a1p5"] {
+        assert!(res(&format!("f6_{a}")) > 2.0 * res(&format!("f2_{a}")), "{a}: {} vs {}", res(&format!("f6_{a}")), res(&format!("f2_{a}")));
+        assert!(dphase(&r, &format!("f6_{a}")) < -0.5, "{a}: extra lag at 6 Hz {}", dphase(&r, &format!("f6_{a}")));
+    }
+    let air = hidden("compressibility", &["compressibility.dead_volume=0", "compressibility.air_fraction=0.05"]);
+    assert!(air.get("f6_a1p5", "r2") > 3.0 * air.get("f6_a0p3", "r2"), "h2 residual {} vs {}", air.get("f6_a1p5", "r2"), air.get("f6_a0p3", "r2"));
+}
+
+/// Reaction-mass compliance: the LVDT reads the stroke, the accelerometer the platen, so the two
+/// stop being one body's: |a1|/(ω²|x1|) departs from 1 as (m/m_r)(f/f_r)²/(1 − (f/f_r)²) — 2.4 %
+/// at 6 Hz, 0.2 % at 2 Hz for the defaults — while the model's stays 1; the displacement residual
+/// exceeds the acceleration's at 6 Hz.
+#[test]
+fn reaction_mass_breaks_the_kinematic_consistency() {
+    let r = hidden("reaction_mass", &[]);
+    let predicted = |f: f64| {
+        let q = (f / 12.0f64).powi(2);
+        144_000.0 / 2.0e6 * q / (1.0 - q)
+    };
+    for t in TESTS {
+        let gap = r.get(t, "accel_over_disp_measured") - 1.0;
+        let p = predicted(freq(t));
+        assert!((gap - p).abs() < 0.25 * p + 5e-4, "{t}: a/x − 1 = {gap} against {p}");
+        assert!((r.get(t, "accel_over_disp_model") - 1.0).abs() < 1e-3, "{t}: the model is one body");
+    }
+    for t in ["f6_a0p3", "f6_a1p5"] {
+        assert!(r.get(t, "rms_residual_disp_ratio") > 2.0 * r.get(t, "rms_residual_accel_ratio"), "{t}");
+    }
+}
+
 /// Leakage across the piston: a flow loss proportional to the load pressure, which the weak
 /// displacement loop corrects slowly: the displacement residual far exceeds the acceleration's.
 #[test]
@@ -158,4 +272,44 @@ fn a_switched_off_effect_is_neutral() {
     std::fs::write(d.path().join("c.toml"), format!("[model.seal_friction]\n{base}")).unwrap();
     let (_, c, _) = study(&["sim", d.path().join("c.toml").to_str().unwrap(), "-q"]);
     assert_ne!(a, c, "switched on, it changes the run");
+}
+
+/// Every built-in effect switched off in the composite set reproduces the baseline kernel to the
+/// bit, lane by lane, next to lanes where effects are on (the set's "neutral when off").
+#[test]
+fn the_effect_set_is_the_baseline_where_everything_is_off() {
+    use vshake::kernel::effects::{Baseline, EffectSet};
+    use vshake::kernel::params::{ModelParams, EFFECTS};
+    use vshake::kernel::simulate::{self, LaneParams, NoObserver, Solver};
+    let base = ModelParams::default();
+    let reference = vshake::kernel::excitation::Sine { freq_hz: 3.0, amp_m: 0.0488, taper_s: 1.0, duration_s: 3.0, window_cycles: Some(4) }.reference(1024.0);
+    let [expected] = simulate::run(&LaneParams::<1>::new(&[&base]).unwrap(), &Baseline, &reference, &Solver::default(), &mut NoObserver).unwrap();
+    // Lane 0 off, lanes 1.. with one effect each.
+    let mut sets = vec![base.clone()];
+    for e in EFFECTS.iter().take(7) {
+        let mut m = base.clone();
+        *m.effects.get_mut(e).unwrap() = true;
+        sets.push(m);
+    }
+    let refs: Vec<&ModelParams> = sets.iter().collect();
+    let lp = LaneParams::<8>::new(&refs).unwrap();
+    let got = simulate::run(&lp, &EffectSet::<8>::new(&refs), &reference, &Solver::default(), &mut NoObserver).unwrap();
+    assert_eq!(got[0], expected, "all off = baseline, bit for bit");
+    for (l, e) in EFFECTS.iter().take(7).enumerate() {
+        assert_ne!(got[l + 1].metrics, expected.metrics, "{e} on changes the run");
+    }
+    // The remaining effects, each on in its own lane next to an all-off lane.
+    let mut sets = vec![base.clone()];
+    for e in EFFECTS.iter().skip(7) {
+        let mut m = base.clone();
+        *m.effects.get_mut(e).unwrap() = true;
+        sets.push(m);
+    }
+    let refs: Vec<&ModelParams> = sets.iter().collect();
+    let lp = LaneParams::<8>::new(&refs).unwrap();
+    let got = simulate::run(&lp, &EffectSet::<8>::new(&refs), &reference, &Solver::default(), &mut NoObserver).unwrap();
+    assert_eq!(got[0], expected);
+    for (l, e) in EFFECTS.iter().skip(7).enumerate() {
+        assert_ne!(got[l + 1].metrics, expected.metrics, "{e} on changes the run");
+    }
 }

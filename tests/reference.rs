@@ -94,7 +94,7 @@ fn zero_command_stays_at_rest() {
     let p = ModelParams::default();
     let n = 10 * 1024;
     let zero = vec![0.0; n];
-    let reference = Reference { f_s: 1024.0, x: zero.clone(), v: zero.clone(), a: zero.clone(), j: zero.clone(), command: zero, window: (0, n), fundamental_hz: None };
+    let reference = Reference { f_s: 1024.0, x: zero.clone(), v: zero.clone(), a: zero.clone(), j: zero.clone(), command: zero, window: (0, n), fundamental_hz: None, drive: Default::default() };
     let (p1, p2) = p.no_load_pressures();
     assert!((p1 - 8.2136e6).abs() < 100.0 && (p2 - 12.8364e6).abs() < 100.0);
     let mut probe = RestProbe { max_y: 0.0, max_dp: 0.0, p0: (p1, p2), ticks: 0 };

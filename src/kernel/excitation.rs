@@ -29,6 +29,28 @@ pub struct Reference {
     pub window: (usize, usize),
     /// Fundamental frequency for the harmonic metrics, Hz (`None` for records).
     pub fundamental_hz: Option<f64>,
+    /// What moves the spool: the controller (the default) or a measured column (open loop).
+    pub drive: Drive,
+}
+
+/// What moves the spool.
+///
+/// Open loop drives the plant with a measured column instead of the controller, to separate
+/// the plant's error from the controller's. The reference still gives the analysis window and
+/// the phase reference of the metrics.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub enum Drive {
+    /// The three-variable controller closes the loop (MODEL.md §3).
+    #[default]
+    ClosedLoop,
+    /// A valve command per tick, V: clamped to ±u_lim like the controller's output, then
+    /// x_c = k_sp·u goes through the valve effects (delay, spool dynamics) as usual.
+    ValveCommand(Vec<f64>),
+    /// A spool position per tick, m; the spool command held over [t_k, t_{k+1}) is the mean of
+    /// the samples at t_k and t_{k+1} (the measured spool moves continuously). A measured spool already
+    /// contains the valve's own dynamics, so the caller switches the delay and spool-dynamics
+    /// effects off for this drive.
+    Spool(Vec<f64>),
 }
 
 impl Reference {
@@ -43,6 +65,7 @@ impl Reference {
             command: Vec::with_capacity(n),
             window: (0, n),
             fundamental_hz,
+            drive: Drive::ClosedLoop,
         }
     }
 

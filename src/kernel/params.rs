@@ -395,49 +395,89 @@ params! {
     }
 }
 
-/// Names of the optional effects (components that are off unless their table is given).
-pub const EFFECTS: [&str; 7] = ["spool_dynamics", "leakage", "supply", "seal_friction", "flow_saturation", "hold_down", "asymmetry"];
-
-/// Which optional effects are on.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct EffectSwitches {
-    pub spool_dynamics: bool,
-    pub leakage: bool,
-    pub supply: bool,
-    pub seal_friction: bool,
-    pub flow_saturation: bool,
-    pub hold_down: bool,
-    pub asymmetry: bool,
+params! {
+    /// Effect `transport_delay`: a pure delay τ between the controller's command and the spool
+    /// (pilot stages, driver electronics, digital I/O), before the spool dynamics if those are on.
+    pub struct TransportDelayParams in transport_delay as "transport_delay" {
+        tau: "s", "s", 2.0e-3, Range::closed(0.5e-3, 20.0e-3), Chosen,
+            "Delay between the valve command and the spool [chosen: 2 ms; realised as 4 equal first-order lags, see the effect's doc].";
+    }
 }
+
+params! {
+    /// Effect `compressibility`: effective bulk modulus and dead volume. Each chamber gains a dead
+    /// volume (hoses, manifold) and its oil an entrained-air fraction and a wall compliance:
+    /// 1/β_e = 1/(beta_ratio·β) + air_fraction·p_atm/p², with p the absolute chamber pressure.
+    pub struct CompressibilityParams in compressibility as "compressibility" {
+        dead_volume: "m³", "m3", 0.02, Range::closed(0.0, 1.0), Chosen,
+            "Dead volume added to every chamber (hoses, manifold, valve block) [chosen: 20 L].";
+        beta_ratio: "-", "", 1.0, Range::closed(0.05, 1.0), Chosen,
+            "Effective over nominal bulk modulus at high pressure (hose and wall compliance) [chosen: 1 = none].";
+        air_fraction: "-", "", 0.01, Range::closed(0.0, 0.2), Chosen,
+            "Entrained-air volume fraction at atmospheric pressure, isothermal [chosen: 1 %].";
+    }
+}
+
+params! {
+    /// Effect `reaction_mass`: the actuators push against a reaction mass on a compliant
+    /// foundation, m_r ÿ_r = −F − k_r y_r − c_r ẏ_r. The actuator stroke (and the LVDT) is y − y_r;
+    /// the accelerometer sees the platen's absolute acceleration.
+    pub struct ReactionMassParams in reaction_mass as "reaction_mass" {
+        m_r: "kg", "kg", 2.0e6, Range::gt(0.0), Chosen,
+            "Reaction mass [chosen: order of a large table's foundation block].";
+        f_r: "Hz", "hz", 12.0, Range::closed(0.5, 200.0), Chosen,
+            "Natural frequency of the reaction mass on its foundation [chosen].";
+        zeta_r: "-", "", 0.1, Range::closed(0.0, 2.0), Chosen,
+            "Damping ratio of the reaction mass on its foundation [chosen: soil radiation damping].";
+    }
+}
+
+/// Declares the optional effects: the name list and the on/off switches.
+macro_rules! effect_switches {
+    ($($name:ident),* $(,)?) => {
+        /// Names of the optional effects (components that are off unless their table is given).
+        pub const EFFECTS: [&str; [$(stringify!($name)),*].len()] = [$(stringify!($name)),*];
+
+        /// Which optional effects are on.
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+        pub struct EffectSwitches {
+            $(pub $name: bool,)*
+        }
+
+        impl EffectSwitches {
+            /// The switch of effect `name`.
+            pub fn get_mut(&mut self, name: &str) -> Option<&mut bool> {
+                match name {
+                    $(stringify!($name) => Some(&mut self.$name),)*
+                    _ => None,
+                }
+            }
+            pub fn get(&self, name: &str) -> bool {
+                match name {
+                    $(stringify!($name) => self.$name,)*
+                    _ => false,
+                }
+            }
+        }
+    };
+}
+
+effect_switches!(
+    spool_dynamics,
+    transport_delay,
+    leakage,
+    supply,
+    seal_friction,
+    flow_saturation,
+    compressibility,
+    reaction_mass,
+    hold_down,
+    asymmetry,
+);
 
 impl EffectSwitches {
     pub fn any(&self) -> bool {
         EFFECTS.iter().any(|e| self.get(e))
-    }
-    /// The switch of effect `name`.
-    pub fn get_mut(&mut self, name: &str) -> Option<&mut bool> {
-        match name {
-            "spool_dynamics" => Some(&mut self.spool_dynamics),
-            "leakage" => Some(&mut self.leakage),
-            "supply" => Some(&mut self.supply),
-            "seal_friction" => Some(&mut self.seal_friction),
-            "flow_saturation" => Some(&mut self.flow_saturation),
-            "hold_down" => Some(&mut self.hold_down),
-            "asymmetry" => Some(&mut self.asymmetry),
-            _ => None,
-        }
-    }
-    pub fn get(&self, name: &str) -> bool {
-        match name {
-            "spool_dynamics" => self.spool_dynamics,
-            "leakage" => self.leakage,
-            "supply" => self.supply,
-            "seal_friction" => self.seal_friction,
-            "flow_saturation" => self.flow_saturation,
-            "hold_down" => self.hold_down,
-            "asymmetry" => self.asymmetry,
-            _ => false,
-        }
     }
 }
 
@@ -470,6 +510,9 @@ pub struct ModelParams {
     pub flow_saturation: FlowSaturationParams,
     pub hold_down: HoldDownParams,
     pub asymmetry: AsymmetryParams,
+    pub transport_delay: TransportDelayParams,
+    pub compressibility: CompressibilityParams,
+    pub reaction_mass: ReactionMassParams,
 }
 
 /// One problem found by [`ModelParams::validate`].
@@ -502,6 +545,9 @@ impl ModelParams {
             .chain(FlowSaturationParams::PARAMS)
             .chain(HoldDownParams::PARAMS)
             .chain(AsymmetryParams::PARAMS)
+            .chain(TransportDelayParams::PARAMS)
+            .chain(CompressibilityParams::PARAMS)
+            .chain(ReactionMassParams::PARAMS)
     }
 
     /// The registry row of `component.name`, if any.
@@ -511,7 +557,7 @@ impl ModelParams {
     }
 
     /// Names of the components (in registry order): the baseline's, then the optional effects.
-    pub fn components() -> [&'static str; 12] {
+    pub fn components() -> [&'static str; 15] {
         [
             "servovalve",
             "actuator",
@@ -525,6 +571,9 @@ impl ModelParams {
             "flow_saturation",
             "hold_down",
             "asymmetry",
+            "transport_delay",
+            "compressibility",
+            "reaction_mass",
         ]
     }
 

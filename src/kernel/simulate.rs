@@ -20,7 +20,7 @@
 use super::actuator::{self, ActuatorLane};
 use super::controller::{self, ControllerLane, ControllerMemory, RefState};
 use super::effects::{Effect, PlantView};
-use super::excitation::Reference;
+use super::excitation::{Drive, Reference};
 use super::friction::{self, FrictionLane};
 use super::metrics::{Basis, Metrics, MetricsAcc};
 use super::params::{ModelParams, ValveLaw};
@@ -105,6 +105,8 @@ pub enum SetupError {
     RateMismatch { reference: f64, controller: f64 },
     #[error("substeps must be at least 1")]
     Substeps,
+    #[error("the open-loop drive has {got} samples but the run has {expected} ticks")]
+    DriveLength { got: usize, expected: usize },
 }
 
 impl<const N: usize> LaneParams<N> {
@@ -211,7 +213,8 @@ pub struct TickView<'a, const N: usize> {
     pub k: usize,
     pub t: f64,
     pub r: &'a RefState,
-    /// Platen displacement (ideal LVDT), m.
+    /// Displacement feedback: the actuator stroke (ideal LVDT; the platen displacement unless an
+    /// effect moves the actuators' base), m.
     pub x: &'a [f64; N],
     /// Platen acceleration dv/dt at t_k, m/s².
     pub a: &'a [f64; N],
@@ -219,6 +222,8 @@ pub struct TickView<'a, const N: usize> {
     pub u: &'a [f64; N],
     /// Spool command, m.
     pub x_c: &'a [f64; N],
+    /// Spool position of actuator 1 (after the valve effects; x_c in the baseline), m.
+    pub spool: &'a [f64; N],
     /// Total actuator force, N.
     pub f: &'a [f64; N],
     pub state: &'a [[f64; N]; NP],
@@ -287,6 +292,11 @@ pub fn run_on<const N: usize, E: Effect<N>, O: Observer<N>>(
     if solver.substeps == 0 {
         return Err(SetupError::Substeps);
     }
+    if let Drive::ValveCommand(d) | Drive::Spool(d) = &reference.drive {
+        if d.len() != reference.len() {
+            return Err(SetupError::DriveLength { got: d.len(), expected: reference.len() });
+        }
+    }
     let wide = isa == Isa::Auto && Isa::detected() == "avx2";
     Ok(match (lp.valve_law, lp.alpha_half) {
         (ValveLaw::Orifice, true) => dispatch::<N, Orifice, SqrtDamping, E, O>(wide, lp, effect, reference, solver, obs),
@@ -342,13 +352,16 @@ fn rhs<const N: usize, V: FlowLaw, D: Damping, E: Effect<N>>(
     let mut xs = [[0.0; N]; N_ACT];
     let mut q_supply = [0.0; N];
     let mut p_s = [0.0; N];
+    let mut f_act = [0.0; N];
     for l in 0..N {
         let valve = lp.valve.lane(l);
         let act = lp.act.lane(l);
         let (y, v, z) = (s[Y][l], s[V][l], s[Z][l]);
         let ps = effect.supply(l, lp.p_s[l], es);
         p_s[l] = ps;
-        let (b1, b2) = actuator::stiffness_factors(&act, y);
+        // The chambers follow the actuator stroke (the platen's motion unless an effect says so).
+        let (y_s, v_s) = effect.stroke(l, y, v, es);
+        let b = actuator::stiffness_factors(&act, y_s);
         let mut f = 0.0;
         let mut qs = 0.0;
         for i in 0..N_ACT {
@@ -361,18 +374,20 @@ fn rhs<const N: usize, V: FlowLaw, D: Damping, E: Effect<N>>(
             let (q1, q2) = effect.flows(l, i, (q1, q2), p1, p2, ps, es);
             q_in1[i][l] = q1;
             q_out2[i][l] = q2;
-            let (d1, d2) = actuator::pressure_rates(&act, b1, b2, q1, q2, v);
+            let (b1, b2) = effect.chamber_stiffness(l, i, b, p1, p2, es);
+            let (d1, d2) = actuator::pressure_rates(&act, b1, b2, q1, q2, v_s);
             ds[P1[i]][l] = d1;
             ds[P2[i]][l] = d2;
             f += actuator::force(&act, p1, p2);
         }
         q_supply[l] = qs;
+        f_act[l] = f;
         let fe = effect.extra_force(l, y, v, es);
         ds[V][l] = platen::accel::<D>(&lp.platen.lane(l), f, fe, y, v, z);
         ds[Y][l] = v;
         ds[Z][l] = friction::dz_dt(&lp.friction.lane(l), v, z);
     }
-    let view = PlantView { x_c, x: &xs, q_supply: &q_supply, state: s, q_in1: &q_in1, q_out2: &q_out2, p_s: &p_s };
+    let view = PlantView { x_c, x: &xs, q_supply: &q_supply, state: s, q_in1: &q_in1, q_out2: &q_out2, p_s: &p_s, f_act: &f_act };
     effect.derivs(&view, es, des);
 }
 
@@ -453,6 +468,7 @@ fn integrate<const N: usize, V: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N
     let (mut ek1, mut ek2, mut ek3, mut ek4, mut etmp) = (es, es, es, es, es);
     let mut u = [0.0; N];
     let mut x_c = [0.0; N];
+    let mut spool = [0.0; N];
     let mut a = [0.0; N];
     let mut x = [0.0; N];
     let h = 1.0 / (lp.f_s * solver.substeps as f64);
@@ -464,13 +480,32 @@ fn integrate<const N: usize, V: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N
         let r = RefState { x: reference.x[k], v: reference.v[k], a: reference.a[k], j: reference.j[k] };
         total_force(lp, &s, &mut f);
         for l in 0..N {
-            x[l] = s[Y][l];
-            u[l] = controller::tick(&lp.ctrl[l], &mut mem[l], &r, x[l], f[l]);
-            x_c[l] = lp.ctrl[l].k_sp * u[l];
+            // The displacement feedback (LVDT) reads the actuator stroke.
+            x[l] = effect.stroke(l, s[Y][l], s[V][l], &es).0;
+            match &reference.drive {
+                Drive::ClosedLoop => {
+                    u[l] = controller::tick(&lp.ctrl[l], &mut mem[l], &r, x[l], f[l]);
+                    x_c[l] = lp.ctrl[l].k_sp * u[l];
+                }
+                Drive::ValveCommand(cmd) => {
+                    u[l] = cmd[k].clamp(-lp.ctrl[l].u_lim, lp.ctrl[l].u_lim);
+                    x_c[l] = lp.ctrl[l].k_sp * u[l];
+                }
+                Drive::Spool(spool) => {
+                    // A measured spool moves continuously; holding its sample at t_k over the tick
+                    // would delay it by half a tick (0.5/f_s). The held value is the mean of its
+                    // linear interpolant over [t_k, t_{k+1}] instead (a choice; error O((ωT)²)).
+                    x_c[l] = 0.5 * (spool[k] + spool[(k + 1).min(spool.len() - 1)]);
+                    u[l] = x_c[l] / lp.ctrl[l].k_sp;
+                }
+            }
         }
         rhs::<N, V, D, E>(lp, effect, &x_c, &s, &es, &mut k1, &mut ek1);
         a.copy_from_slice(&k1[V]);
-        obs.tick(&TickView { k, t, r: &r, x: &x, a: &a, u: &u, x_c: &x_c, f: &f, state: &s });
+        for l in 0..N {
+            spool[l] = effect.spool_position(l, 0, x_c[l], &es);
+        }
+        obs.tick(&TickView { k, t, r: &r, x: &x, a: &a, u: &u, x_c: &x_c, spool: &spool, f: &f, state: &s });
         acc.every_tick(&u);
         if (w0..w1).contains(&k) {
             let basis = fundamental.map(|f0| Basis::at(k, lp.f_s, f0));

@@ -66,6 +66,11 @@ pub struct Comparison {
     /// Least-squares slope of the per-cycle amplitude divided by its mean (per cycle).
     pub drift_model: f64,
     pub drift_measured: f64,
+    /// Kinematic consistency |A₁|/(ω²|X₁|) of the acceleration and displacement channels: 1 when
+    /// both sensors see one rigid body; not 1 when the LVDT reads a stroke the accelerometer does
+    /// not see (a moving reaction mass, a compliant sensor mount).
+    pub accel_over_disp_model: f64,
+    pub accel_over_disp_measured: f64,
 }
 
 /// H_k (k = 1…9) of `s` over ticks [w0, w1).
@@ -160,6 +165,8 @@ pub fn compare(reference: &Reference, measured: &Channels<'_>, model: &Channels<
         cycle_amp_measured: Vec::new(),
         drift_model: f64::NAN,
         drift_measured: f64::NAN,
+        accel_over_disp_model: f64::NAN,
+        accel_over_disp_measured: f64::NAN,
     };
     let Some(f) = reference.fundamental_hz else { return c };
     let hr = project(&reference.a, w0, w1, f_s, f);
@@ -190,6 +197,9 @@ pub fn compare(reference: &Reference, measured: &Channels<'_>, model: &Channels<
     }
     c.drift_model = drift(&c.cycle_amp_model);
     c.drift_measured = drift(&c.cycle_amp_measured);
+    let w2 = (2.0 * std::f64::consts::PI * f).powi(2);
+    c.accel_over_disp_model = mag(hm[0]) / (w2 * mag(project(model.disp, w0, w1, f_s, f)[0]));
+    c.accel_over_disp_measured = mag(hx[0]) / (w2 * mag(project(measured.disp, w0, w1, f_s, f)[0]));
     c
 }
 
@@ -232,5 +242,7 @@ mod tests {
         assert_eq!(c.rms_residual_accel_ratio, 0.0);
         assert!(c.residual.iter().all(|z| z.0 == 0.0 && z.1 == 0.0));
         assert!((c.amp_ratio_model - 1.0).abs() < 1e-12);
+        // The reference's a and x are one body's: a = −ω²x in the window.
+        assert!((c.accel_over_disp_measured - 1.0).abs() < 1e-9, "{}", c.accel_over_disp_measured);
     }
 }

@@ -20,7 +20,7 @@ pub const CHANNELS: [(&str, &str); 13] = [
     ("p2_pa", "rod-side pressure P2, actuator 1"),
     ("p1_act2_pa", "cap-side pressure P1, actuator 2"),
     ("p2_act2_pa", "rod-side pressure P2, actuator 2"),
-    ("spool_m", "spool command x_c"),
+    ("spool_m", "spool position of actuator 1 (the command x_c unless a valve effect is on)"),
     ("ref_vel_mps", "reference velocity v_r"),
 ];
 
@@ -61,7 +61,7 @@ impl Observer<1> for History {
             s[idx::P2[0]][0],
             s[idx::P1[1]][0],
             s[idx::P2[1]][0],
-            v.x_c[0],
+            v.spool[0],
             v.r.v,
         ];
         for (c, x) in self.columns.iter_mut().zip(row) {

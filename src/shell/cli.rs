@@ -82,6 +82,30 @@ pub struct CompareArgs {
     /// Folder for the report tables (Parquet: tests, harmonics, bins, cycles, overlay).
     #[arg(long)]
     pub report: Option<PathBuf>,
+    /// Open loop: drive the plant with a measured column instead of the controller, to separate
+    /// the plant's error from the controller's: `valve` (valve_cmd_v, through the model's valve
+    /// effects) or `spool` (spool_m; the model's transport delay and spool dynamics are bypassed).
+    #[arg(long, value_enum)]
+    pub open_loop: Option<OpenLoop>,
+}
+
+/// The measured column an open-loop comparison drives the plant with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum OpenLoop {
+    /// The valve command `valve_cmd_v`, V.
+    Valve,
+    /// The spool position `spool_m`, m.
+    Spool,
+}
+
+impl OpenLoop {
+    /// The measured column this drive reads.
+    pub fn column(self) -> &'static str {
+        match self {
+            OpenLoop::Valve => "valve_cmd_v",
+            OpenLoop::Spool => "spool_m",
+        }
+    }
 }
 
 #[derive(Debug, clap::Args)]

@@ -2,7 +2,9 @@
 //! differs: harmonics, amplitude, part of the cycle, envelope; per test and across the campaign.
 
 use super::campaign_io::{load_campaign, load_model, read_measured, test_reference};
-use super::cli::CompareArgs;
+use super::cli::{CompareArgs, OpenLoop};
+use super::BadInput;
+use crate::kernel::excitation::Drive;
 use super::tables::{self, Column};
 use super::RunFailed;
 use crate::kernel::metrics::N_HARM;
@@ -41,8 +43,24 @@ pub fn compare_campaign(args: &CompareArgs) -> anyhow::Result<Vec<Compared>> {
     for test in &lc.campaign.tests {
         let path = lc.base.join(&test.data);
         let m = read_measured(&path, test.model.controller.f_s)?;
-        let reference = test_reference(test, m.rows(), &lc.base, &path)?;
-        let spec = SimSpec { model: test.model.clone(), excitation: test.excitation.clone(), solver: Default::default() };
+        let mut reference = test_reference(test, m.rows(), &lc.base, &path)?;
+        let mut model = test.model.clone();
+        if let Some(mode) = args.open_loop {
+            let col = mode.column();
+            let data = m.column(col).ok_or_else(|| {
+                BadInput(format!("{}: column `{col}` is missing; `--open-loop {}` drives the model with it", path.display(), col.split('_').next().unwrap_or(col)))
+            })?;
+            reference.drive = match mode {
+                OpenLoop::Valve => Drive::ValveCommand(data.to_vec()),
+                OpenLoop::Spool => {
+                    // A measured spool already holds the valve's delay and dynamics.
+                    model.effects.transport_delay = false;
+                    model.effects.spool_dynamics = false;
+                    Drive::Spool(data.to_vec())
+                }
+            };
+        }
+        let spec = SimSpec { model, excitation: test.excitation.clone(), solver: Default::default() };
         let outcome = sim::run_sim(&spec, &reference)?;
         if let LaneStatus::Failed { time_s, reason } = outcome.result.status {
             return Err(RunFailed(format!("test {:?}: the model failed at t = {time_s:.4} s: {reason}", test.name)).into());
@@ -66,7 +84,14 @@ pub fn compare_campaign(args: &CompareArgs) -> anyhow::Result<Vec<Compared>> {
 pub fn run(args: &CompareArgs) -> anyhow::Result<()> {
     let results = compare_campaign(args)?;
     let mut o = std::io::stdout().lock();
-    writeln!(o, "study compare {} ({} tests, model: {})", args.campaign.display(), results.len(), args.model.as_ref().map_or("defaults".to_string(), |p| p.display().to_string()))?;
+    writeln!(
+        o,
+        "study compare {} ({} tests, model: {}, {})",
+        args.campaign.display(),
+        results.len(),
+        args.model.as_ref().map_or("defaults".to_string(), |p| p.display().to_string()),
+        drive_label(args.open_loop)
+    )?;
     writeln!(o)?;
     writeln!(
         o,
@@ -95,10 +120,20 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<()> {
     }
     writeln!(o)?;
     writeln!(o, "  residual of the acceleration by part of the cycle (rms in the part / rms of the measured acceleration):")?;
-    writeln!(o, "  {:<22} {:>18} {:>18} {:>18}", "test", "velocity reversal", "peak velocity", "peak displacement")?;
+    writeln!(o, "  (and the kinematic consistency |a1|/(w^2 |x1|) of the acceleration and displacement channels: 1 for one rigid body)")?;
+    writeln!(o, "  {:<22} {:>18} {:>18} {:>18} {:>17}", "test", "velocity reversal", "peak velocity", "peak displacement", "a/x meas/mod")?;
     for r in &results {
-        let b = &r.comparison.bins;
-        writeln!(o, "  {:<22} {:>18.2e} {:>18.2e} {:>18.2e}", r.test.name, b[0].rms_residual_ratio, b[1].rms_residual_ratio, b[2].rms_residual_ratio)?;
+        let c = &r.comparison;
+        let b = &c.bins;
+        writeln!(
+            o,
+            "  {:<22} {:>18.2e} {:>18.2e} {:>18.2e} {:>17}",
+            r.test.name,
+            b[0].rms_residual_ratio,
+            b[1].rms_residual_ratio,
+            b[2].rms_residual_ratio,
+            format!("{:.4}/{:.4}", c.accel_over_disp_measured, c.accel_over_disp_model)
+        )?;
     }
     // Across the campaign: error against amplitude, per frequency.
     let mut sines: Vec<(f64, f64, &Compared)> =
@@ -118,8 +153,8 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<()> {
         writeln!(o)?;
     }
     if let Some(dir) = &args.report {
-        write_tables(dir, &results)?;
-        let page = super::report::html(&format!("vshake: model versus measurement, {}", args.campaign.display()), &results)?;
+        write_tables(dir, &results, args.open_loop)?;
+        let page = super::report::html(&format!("vshake: model versus measurement, {} ({})", args.campaign.display(), drive_label(args.open_loop)), &results)?;
         let path = dir.join("report.html");
         let out = super::tables::AtomicFile::new(&path);
         std::fs::write(&out.tmp, page)?;
@@ -129,10 +164,22 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// How the model was driven, in words.
+pub fn drive_label(open_loop: Option<OpenLoop>) -> String {
+    match open_loop {
+        None => "closed loop".to_string(),
+        Some(m) => format!("open loop on the measured {}", m.column()),
+    }
+}
+
 /// The Parquet tables of a comparison: one per kind of thing a report plots.
-pub fn write_tables(dir: &std::path::Path, results: &[Compared]) -> anyhow::Result<()> {
+pub fn write_tables(dir: &std::path::Path, results: &[Compared], open_loop: Option<OpenLoop>) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir)?;
-    let meta = vec![("vshake.kind".to_string(), "compare".to_string()), ("vshake.version".to_string(), env!("CARGO_PKG_VERSION").to_string())];
+    let meta = vec![
+        ("vshake.kind".to_string(), "compare".to_string()),
+        ("vshake.drive".to_string(), drive_label(open_loop)),
+        ("vshake.version".to_string(), env!("CARGO_PKG_VERSION").to_string()),
+    ];
     let s = |f: &dyn Fn(&Compared) -> String| Column::Str(results.iter().map(f).collect());
     let x = |f: &dyn Fn(&Compared) -> f64| Column::F64(results.iter().map(f).collect());
     let mut cols = vec![
@@ -155,6 +202,8 @@ pub fn write_tables(dir: &std::path::Path, results: &[Compared]) -> anyhow::Resu
         ("rms_residual_force_ratio".to_string(), Column::OptF64(results.iter().map(|r| r.comparison.rms_residual_force_ratio).collect())),
         ("drift_measured_per_cycle".to_string(), x(&|r| r.comparison.drift_measured)),
         ("drift_model_per_cycle".to_string(), x(&|r| r.comparison.drift_model)),
+        ("accel_over_disp_measured".to_string(), x(&|r| r.comparison.accel_over_disp_measured)),
+        ("accel_over_disp_model".to_string(), x(&|r| r.comparison.accel_over_disp_model)),
     ]);
     tables::write_table(&dir.join("tests.parquet"), cols, &meta)?;
 

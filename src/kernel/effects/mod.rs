@@ -4,10 +4,14 @@
 //! contributes through hooks that the plant right-hand side calls at fixed places:
 //!
 //! 1. [`Effect::supply`]: the supply pressure the valves see (supply droop);
-//! 2. [`Effect::spool`]: the spool position from the held command x_c (spool dynamics, delay);
+//! 2. [`Effect::spool`]: the valve opening from the held command x_c (spool dynamics, delay,
+//!    saturation);
 //! 3. [`Effect::flows`]: the valve flows of an actuator, changed (leakage, asymmetry);
-//! 4. [`Effect::extra_force`]: a force on the platen (seal friction, reaction-mass compliance);
-//! 5. [`Effect::derivs`]: the derivatives of its own states, given a view of the plant.
+//! 4. [`Effect::stroke`]: the actuator stroke from the platen's motion (reaction-mass compliance);
+//!    the chamber volumes and the displacement feedback follow it;
+//! 5. [`Effect::chamber_stiffness`]: β/V of the chambers (effective bulk modulus, dead volume);
+//! 6. [`Effect::extra_force`]: a force on the platen (seal friction, hold-down nonlinearity);
+//! 7. [`Effect::derivs`]: the derivatives of its own states, given a view of the plant.
 //!
 //! Every hook has a no-op default and is `#[inline(always)]`, so the baseline ([`Baseline`]) costs
 //! nothing, and an effect is compiled into the same lane kernel (monomorphised, no dynamic dispatch
@@ -50,12 +54,15 @@
 //! [`EffectSet`].
 
 pub mod asymmetry;
+pub mod compressibility;
 pub mod flow_saturation;
 pub mod hold_down;
 pub mod leakage;
+pub mod reaction_mass;
 pub mod seal_friction;
 pub mod spool_dynamics;
 pub mod supply;
+pub mod transport_delay;
 
 use super::params::ModelParams;
 
@@ -75,6 +82,8 @@ pub struct PlantView<'a, const N: usize> {
     pub q_out2: &'a [[f64; N]; super::N_ACT],
     /// Supply pressure seen by the valves, Pa.
     pub p_s: &'a [f64; N],
+    /// Total actuator force on the platen, N.
+    pub f_act: &'a [f64; N],
 }
 
 /// An optional physical effect plugged into the lane kernel.
@@ -91,10 +100,33 @@ pub trait Effect<const N: usize>: Sync {
         p_s
     }
 
-    /// Spool position of actuator `act` in lane `l`, from the held command x_c.
+    /// Valve opening (effective spool position) of actuator `act` in lane `l`, from the held
+    /// command x_c.
     #[inline(always)]
     fn spool(&self, _l: usize, _act: usize, x_c: f64, _s: &Self::State) -> f64 {
         x_c
+    }
+
+    /// Spool position as a spool LVDT reads it (before any metering nonlinearity); recorded as
+    /// the `spool_m` channel. The same as [`Effect::spool`] unless an effect says otherwise.
+    #[inline(always)]
+    fn spool_position(&self, l: usize, act: usize, x_c: f64, s: &Self::State) -> f64 {
+        self.spool(l, act, x_c, s)
+    }
+
+    /// Actuator stroke and stroke rate of lane `l` from the platen's displacement `y` and
+    /// velocity `v` (the chamber volumes, the piston flows and the LVDT follow the stroke).
+    #[inline(always)]
+    fn stroke(&self, _l: usize, y: f64, v: f64, _s: &Self::State) -> (f64, f64) {
+        (y, v)
+    }
+
+    /// β/V of the cap- and rod-side chambers of actuator `act`, from the baseline's `b` = (β/V1,
+    /// β/V2) at chamber pressures `p1`, `p2`.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn chamber_stiffness(&self, _l: usize, _act: usize, b: (f64, f64), _p1: f64, _p2: f64, _s: &Self::State) -> (f64, f64) {
+        b
     }
 
     /// The net flows of actuator `act` (into chamber 1, out of chamber 2), m³/s, from the valve
@@ -127,8 +159,9 @@ impl<const N: usize> Effect<N> for Baseline {
     }
 }
 
-/// Number of states of [`EffectSet`]: spool position and velocity of each actuator, supply pressure.
-pub const SET_STATES: usize = 2 * super::N_ACT + 1;
+/// Number of states of [`EffectSet`]: spool position and velocity of each actuator (0..4), supply
+/// pressure (4), the transport-delay chain (5..9), reaction-mass displacement and velocity (9, 10).
+pub const SET_STATES: usize = 2 * super::N_ACT + 1 + transport_delay::STAGES + 2;
 
 /// Every built-in effect, per lane; what is off in a lane is neutral there.
 pub struct EffectSet<const N: usize> {
@@ -139,6 +172,9 @@ pub struct EffectSet<const N: usize> {
     pub saturation: flow_saturation::FlowSaturation<N>,
     pub hold_down: hold_down::HoldDown<N>,
     pub asymmetry: asymmetry::Asymmetry<N>,
+    pub delay: transport_delay::TransportDelay<N>,
+    pub compressibility: compressibility::Compressibility<N>,
+    pub reaction: reaction_mass::ReactionMass<N>,
 }
 
 impl<const N: usize> EffectSet<N> {
@@ -153,6 +189,9 @@ impl<const N: usize> EffectSet<N> {
             saturation: flow_saturation::FlowSaturation::new(lanes),
             hold_down: hold_down::HoldDown::new(lanes),
             asymmetry: asymmetry::Asymmetry::new(lanes),
+            delay: transport_delay::TransportDelay::new(lanes),
+            compressibility: compressibility::Compressibility::new(lanes),
+            reaction: reaction_mass::ReactionMass::new(lanes),
         }
     }
 }
@@ -171,8 +210,21 @@ impl<const N: usize> Effect<N> for EffectSet<N> {
     }
     #[inline(always)]
     fn spool(&self, l: usize, act: usize, x_c: f64, s: &Self::State) -> f64 {
-        // The spool follows its command (dynamics), then the metering area saturates.
-        self.saturation.opening(l, self.spool.spool(l, act, x_c, s))
+        // The metering area saturates with the spool position.
+        self.saturation.opening(l, self.spool_position(l, act, x_c, s))
+    }
+    #[inline(always)]
+    fn spool_position(&self, l: usize, act: usize, x_c: f64, s: &Self::State) -> f64 {
+        // The command is delayed, then the spool follows it (dynamics).
+        self.spool.spool(l, act, self.delay.delayed(l, x_c, s), s)
+    }
+    #[inline(always)]
+    fn stroke(&self, l: usize, y: f64, v: f64, s: &Self::State) -> (f64, f64) {
+        self.reaction.stroke(l, y, v, s)
+    }
+    #[inline(always)]
+    fn chamber_stiffness(&self, l: usize, _act: usize, b: (f64, f64), p1: f64, p2: f64, _s: &Self::State) -> (f64, f64) {
+        self.compressibility.stiffness(l, b, p1, p2)
     }
     #[inline(always)]
     fn flows(&self, l: usize, act: usize, q: (f64, f64), p1: f64, p2: f64, _p_s: f64, _s: &Self::State) -> (f64, f64) {
@@ -185,7 +237,11 @@ impl<const N: usize> Effect<N> for EffectSet<N> {
     }
     #[inline(always)]
     fn derivs(&self, plant: &PlantView<'_, N>, s: &Self::State, ds: &mut Self::State) {
-        self.spool.derivs(plant, s, ds);
+        self.delay.derivs(plant, s, ds);
+        // The spool dynamics are driven by the delayed command.
+        let delayed: [f64; N] = std::array::from_fn(|l| self.delay.delayed(l, plant.x_c[l], s));
+        self.spool.derivs(&PlantView { x_c: &delayed, ..*plant }, s, ds);
         self.supply.derivs(plant, s, ds);
+        self.reaction.derivs(plant, s, ds);
     }
 }

@@ -1,0 +1,58 @@
+//! Effect `compressibility`: effective bulk modulus and dead volume. Every chamber gains a dead
+//! volume V_x (hoses, manifold, valve block), and its oil a wall/hose compliance and an
+//! entrained-air fraction ε (isothermal, at atmospheric pressure p_atm):
+//!
+//! ```text
+//! dP/dt = β_e(p)/(V + V_x) · (flows),   1/β_e(p) = 1/(beta_ratio·β) + ε·p_atm/p²
+//! ```
+//!
+//! with p the absolute chamber pressure (gauge + p_atm, floored at p_atm/10 so the air term stays
+//! finite near cavitation). Its signature: a softer oil column, so the closed-loop amplitude ratio
+//! and phase change more at higher frequency (nearer the oil-column resonance, ≈ 10 Hz for the
+//! default table); with air, more at large amplitude, where one chamber's pressure falls.
+//! Isothermal air (polytropic exponent 1) is a choice: bubbles in oil exchange heat quickly, and
+//! it avoids a `powf` in the step.
+
+use crate::kernel::params::ModelParams;
+
+/// Atmospheric pressure, Pa (ISO 2533 standard atmosphere).
+pub const P_ATM: f64 = 101_325.0;
+
+pub struct Compressibility<const N: usize> {
+    on: [f64; N],
+    /// Nominal oil bulk modulus β, Pa.
+    beta: [f64; N],
+    /// 1/(beta_ratio·β), 1/Pa.
+    inv_beta_e: [f64; N],
+    /// ε·p_atm, Pa.
+    air: [f64; N],
+    /// Dead volume per chamber, m³.
+    v_x: [f64; N],
+}
+
+impl<const N: usize> Compressibility<N> {
+    pub fn new(p: [&ModelParams; N]) -> Self {
+        Compressibility {
+            on: p.map(|m| if m.effects.compressibility { 1.0 } else { 0.0 }),
+            beta: p.map(|m| m.actuator.beta),
+            inv_beta_e: p.map(|m| 1.0 / (m.compressibility.beta_ratio * m.actuator.beta)),
+            air: p.map(|m| m.compressibility.air_fraction * P_ATM),
+            v_x: p.map(|m| m.compressibility.dead_volume),
+        }
+    }
+
+    /// β_e/V of one chamber at gauge pressure `p`, from the baseline's β/V (`b`).
+    #[inline(always)]
+    fn one(&self, l: usize, b: f64, p: f64) -> f64 {
+        let pa = (p + P_ATM).max(0.1 * P_ATM);
+        let beta_e = 1.0 / (self.inv_beta_e[l] + self.air[l] / (pa * pa));
+        let volume = self.beta[l] / b + self.v_x[l];
+        b + self.on[l] * (beta_e / volume - b)
+    }
+
+    /// β_e/V of both chambers (cap, rod) of an actuator, from the baseline's β/V1, β/V2.
+    #[inline(always)]
+    pub fn stiffness(&self, l: usize, b: (f64, f64), p1: f64, p2: f64) -> (f64, f64) {
+        (self.one(l, b.0, p1), self.one(l, b.1, p2))
+    }
+}
