@@ -16,6 +16,8 @@ pub fn run(args: &ParamsArgs) -> anyhow::Result<()> {
     for p in ModelParams::registry().filter(|p| args.component.as_deref().is_none_or(|c| c == p.component)) {
         writeln!(out, "{:<30} {:<12} {:>14} {:<16} {:<7} {}", p.path(), p.unit, format!("{}", p.default), p.range.to_string(), p.source.to_string(), p.doc)?;
     }
-    writeln!(out, "{:<30} {:<12} {:>14} {:<16} {:<7} Valve flow law: square-root orifice, or the linear counter-example.", "servovalve.law", "-", "orifice", "orifice|linear", "paper")?;
+    if args.component.as_deref().is_none_or(|c| c == "servovalve") {
+        writeln!(out, "{:<30} {:<12} {:>14} {:<16} {:<7} Valve flow law: square-root orifice, or the linear counter-example.", "servovalve.law", "-", "orifice", "orifice|linear", "paper")?;
+    }
     Ok(())
 }
