@@ -4,6 +4,8 @@
 pub mod batch;
 pub mod campaign;
 pub mod compare;
+pub mod diagnose;
+pub mod fit;
 pub mod sampling;
 pub mod sensitivity;
 pub mod sim;

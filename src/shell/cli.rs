@@ -27,6 +27,10 @@ pub enum Command {
     Compare(CompareArgs),
     /// Write measurement files (FORMATS.md) made by the model, with hidden parameter changes and sensor noise.
     Synth(SynthArgs),
+    /// Calibrate effects' (and named baseline) parameters against a campaign (Levenberg-Marquardt).
+    Fit(FitArgs),
+    /// Fit every candidate effect of the library and say which one is most likely missing.
+    Diagnose(DiagnoseArgs),
     /// Benchmark the kernel (simulated seconds per wall second) and optionally gate on a baseline.
     Bench(BenchArgs),
     /// List every model parameter: name, unit, default, valid range, source and meaning.
@@ -89,6 +93,42 @@ pub struct CompareArgs {
     pub open_loop: Option<OpenLoop>,
 }
 
+#[derive(Debug, clap::Args)]
+pub struct FitArgs {
+    /// The campaign file (TOML, FORMATS.md).
+    pub campaign: PathBuf,
+    /// Effects to add and calibrate (comma-separated; each frees its default parameters).
+    #[arg(long, value_delimiter = ',')]
+    pub effect: Vec<String>,
+    /// More parameters to calibrate, as component.name (comma-separated), baseline ones included.
+    #[arg(long, value_delimiter = ',')]
+    pub free: Vec<String>,
+    /// Model file to start from ([model.<component>] tables; default: the defaults).
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Where to write the fitted model (a model file the other commands accept with --model).
+    #[arg(long, default_value = "fitted.toml")]
+    pub out: PathBuf,
+    /// Iterations of Levenberg-Marquardt at most.
+    #[arg(long, default_value_t = 40)]
+    pub max_iter: usize,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct DiagnoseArgs {
+    /// The campaign file (TOML, FORMATS.md).
+    pub campaign: PathBuf,
+    /// Model file to start from (default: the defaults).
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Candidate effects (comma-separated; default: every effect of the library not already on).
+    #[arg(long, value_delimiter = ',')]
+    pub candidates: Vec<String>,
+    /// Folder for the report (report.html and Parquet tables: candidates, tests, evidence).
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+}
+
 /// The measured column an open-loop comparison drives the plant with.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum OpenLoop {
@@ -130,6 +170,10 @@ pub struct SynthArgs {
     /// Seed of the noise (one stream per test and channel).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Blind data: leave the model (and so any hidden effect) out of the files' metadata, as for
+    /// a tutorial or a blind test; only the noise, seed and version are recorded.
+    #[arg(long)]
+    pub blind: bool,
 }
 
 #[derive(Debug, clap::Args)]

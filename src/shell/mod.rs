@@ -5,6 +5,8 @@ pub mod bench_cmd;
 pub mod campaign_io;
 pub mod cli;
 pub mod compare_cmd;
+pub mod diagnose_cmd;
+pub mod fit_cmd;
 pub mod params_cmd;
 pub mod progress;
 pub mod report;
@@ -45,5 +47,7 @@ pub fn dispatch(cli: cli::Cli) -> anyhow::Result<()> {
         cli::Command::Bench(a) => bench_cmd::run(&a),
         cli::Command::Compare(a) => compare_cmd::run(&a),
         cli::Command::Synth(a) => synth_cmd::run(&a),
+        cli::Command::Fit(a) => fit_cmd::run(&a),
+        cli::Command::Diagnose(a) => diagnose_cmd::run(&a),
     }
 }

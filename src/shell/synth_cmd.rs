@@ -127,13 +127,16 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
         if let Some(dir) = path.parent() {
             std::fs::create_dir_all(dir)?;
         }
-        let meta = vec![
+        let mut meta = vec![
             ("vshake.kind".to_string(), "synthetic_measurement".to_string()),
             ("vshake.spec".to_string(), spec.resolved_toml()),
             ("vshake.noise".to_string(), args.noise.clone().unwrap_or_default()),
             ("vshake.seed".to_string(), args.seed.to_string()),
             ("vshake.version".to_string(), env!("CARGO_PKG_VERSION").to_string()),
         ];
+        if args.blind {
+            meta.retain(|(k, _)| k != "vshake.spec");
+        }
         write_measured(&path, &cols, &meta)?;
         // A record that lives in its own file is copied along, so the folder is a whole campaign.
         if let ExcitationSpec::Record { file, .. } = &test.excitation {

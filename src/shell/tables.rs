@@ -430,3 +430,29 @@ mod tests {
         assert_eq!(t.check_time("time_s").unwrap(), 0.5);
     }
 }
+
+/// The string column `column` of a Parquet file (null cells as empty strings).
+pub fn read_strings(path: &Path, column: &str) -> Result<Vec<String>, TableError> {
+    let file = path.to_path_buf();
+    let fmt = |e: &dyn std::fmt::Display| TableError::Format { file: file.clone(), kind: "Parquet", message: e.to_string() };
+    let f = File::open(path).map_err(|e| TableError::Io { file: file.clone(), source: e })?;
+    let builder = ParquetRecordBatchReaderBuilder::try_new(f).map_err(|e| fmt(&e))?;
+    let found: Vec<String> = builder.schema().fields().iter().map(|f| f.name().clone()).collect();
+    if !found.iter().any(|f| f == column) {
+        return Err(missing(path, column, &found));
+    }
+    let mut out = Vec::new();
+    for batch in builder.build().map_err(|e| fmt(&e))? {
+        let batch = batch.map_err(|e| fmt(&e))?;
+        let arr = batch.column_by_name(column).expect("column in schema");
+        let s = arr.as_any().downcast_ref::<arrow_array::StringArray>().ok_or_else(|| TableError::BadCell {
+            file: file.clone(),
+            column: column.to_string(),
+            row: out.len() + 1,
+            line: String::new(),
+            message: format!("column type {} is not a string", arr.data_type()),
+        })?;
+        out.extend((0..s.len()).map(|i| if s.is_null(i) { String::new() } else { s.value(i).to_string() }));
+    }
+    Ok(out)
+}

@@ -1,0 +1,569 @@
+//! Calibration: nonlinear least squares of model parameters against a campaign of measured tests.
+//!
+//! **Features.** A fit does not match raw time histories (noise, and the window's start, would
+//! dominate); it matches features that average noise out:
+//! - a sine test: the complex harmonics k = 1…9 of acceleration, displacement and force (where
+//!   the file has it) over the analysis window, model minus measured;
+//! - a record test: the residual of each channel averaged over blocks of [`BLOCK`] ticks.
+//!
+//! Each feature is divided by its noise standard deviation, so the sum of squares χ² is a
+//! chi-square when the model is right. The noise of a channel is estimated from the measured data
+//! itself, σ = rms(Δ³x)/√20 (the third difference removes a smooth signal: at 6 Hz and 1024 Hz it
+//! keeps (2π·6/1024)³ = 5e-5 of it, while white noise keeps variance 20σ²), floored at 1e-6 of
+//! the channel's rms so noise-free synthetic data stays finite. A harmonic of white noise over W
+//! ticks has σ·√(2/W) per component, a block mean σ/√B. Campaign channel weights multiply.
+//!
+//! **Solver.** Levenberg–Marquardt on u, the free parameters in scaled coordinates (log of the
+//! ratio to the start for a positive parameter, else the change over the start's magnitude),
+//! clamped to each parameter's valid range. The Jacobian comes from forward differences (step
+//! 1e-3 in u); the base point, the perturbed points and the trial steps of one iteration are lanes
+//! of one batch on the lane kernel, and the tests run in parallel. Linear algebra by faer.
+//! Standard errors: Cov(u) = s²·(JᵀJ)⁻¹ with s² = max(1, χ²/(n − p)) (inflated when the model
+//! still misfits), mapped to the parameters' units.
+
+use super::campaign::Weights;
+use crate::kernel::effects::EffectSet;
+use crate::kernel::excitation::Reference;
+use crate::kernel::metrics::N_HARM;
+use crate::kernel::params::{ModelParams, ParamInfo};
+use crate::kernel::simulate::{self, LaneParams, LaneStatus, Observer, Solver, TickView};
+use crate::kernel::LANES;
+use faer::prelude::*;
+use faer::Mat;
+use rayon::prelude::*;
+
+/// Ticks per block of a record test's time-domain features.
+pub const BLOCK: usize = 16;
+/// Forward-difference step in the scaled coordinates.
+const H: f64 = 1e-3;
+
+/// The parameters each effect frees by default when it is fitted (the rest keep their defaults):
+/// the ones its signature determines; parameters that only shape it (a smoothing velocity, a
+/// damping ratio that trades off against a frequency) stay fixed unless `--free` names them.
+pub fn default_free(effect: &str) -> &'static [&'static str] {
+    match effect {
+        "spool_dynamics" => &["freq_hz"],
+        "transport_delay" => &["tau"],
+        "leakage" => &["c_int"],
+        "supply" => &["q_pump", "c_acc"],
+        "seal_friction" => &["f_c", "f_s"],
+        "flow_saturation" => &["x_sat"],
+        "compressibility" => &["dead_volume", "air_fraction"],
+        "reaction_mass" => &["m_r", "f_r"],
+        "hold_down" => &["k3"],
+        "asymmetry" => &["extend_gain"],
+        _ => &[],
+    }
+}
+
+/// Families of effects whose signatures a campaign of sine tests cannot tell apart (a spool lag
+/// and a delay both add a lag ∝ frequency below the spool's bandwidth).
+pub fn family(effect: &str) -> &'static str {
+    match effect {
+        "spool_dynamics" | "transport_delay" => "valve dynamics",
+        "leakage" => "leakage",
+        "supply" => "supply pressure",
+        "seal_friction" => "friction",
+        "flow_saturation" => "valve flow nonlinearity",
+        "compressibility" => "compressibility",
+        "reaction_mass" => "reaction mass",
+        "hold_down" => "hold-down stiffness",
+        "asymmetry" => "asymmetry",
+        _ => "other",
+    }
+}
+
+/// Which channel a feature comes from.
+pub const CHANNELS: [&str; 3] = ["accel", "disp", "force"];
+
+/// What one feature is: its test, channel (index into [`CHANNELS`]) and harmonic (0 for a block).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FeatureInfo {
+    pub test: usize,
+    pub channel: usize,
+    pub harmonic: usize,
+}
+
+/// One measured test, prepared for fitting.
+pub struct TestData {
+    pub name: String,
+    /// The test's model (campaign model with its overrides); free parameters are set on it.
+    pub model: ModelParams,
+    pub reference: Reference,
+    /// Measured channels: acceleration, displacement, force (if the file has it).
+    pub measured: [Option<Vec<f64>>; 3],
+    pub weights: Weights,
+    /// Noise standard deviation per channel, estimated from the data.
+    pub sigma: [f64; 3],
+    /// Measured features (unweighted) and each one's standard deviation × 1/weight.
+    meas: Vec<f64>,
+    scale: Vec<f64>,
+    info: Vec<FeatureInfo>,
+}
+
+/// σ of white noise in `x` from its third differences, floored at 1e-6 of its rms.
+pub fn noise_sigma(x: &[f64]) -> f64 {
+    let d3: Vec<f64> = x.windows(4).map(|w| w[3] - 3.0 * w[2] + 3.0 * w[1] - w[0]).collect();
+    let rms = |v: &[f64]| (v.iter().map(|a| a * a).sum::<f64>() / v.len().max(1) as f64).sqrt();
+    (rms(&d3) / 20f64.sqrt()).max(1e-6 * rms(x)).max(f64::MIN_POSITIVE)
+}
+
+/// The unweighted features of one channel of a test.
+fn channel_features(reference: &Reference, x: &[f64]) -> Vec<f64> {
+    match reference.fundamental_hz {
+        Some(f) => {
+            let (w0, w1) = reference.window;
+            let h = super::compare::project(x, w0, w1, reference.f_s, f);
+            h.iter().flat_map(|c| [c.0, c.1]).collect()
+        }
+        None => x.chunks(BLOCK).filter(|c| c.len() == BLOCK).map(|c| c.iter().sum::<f64>() / BLOCK as f64).collect(),
+    }
+}
+
+impl TestData {
+    /// Prepares a test: the measured features, the noise estimate and the feature scales.
+    pub fn new(name: String, model: ModelParams, reference: Reference, measured: [Option<Vec<f64>>; 3], weights: Weights) -> Self {
+        let w = [weights.accel, weights.disp, weights.force];
+        let mut t = TestData { name, model, reference, measured, weights, sigma: [f64::NAN; 3], meas: Vec::new(), scale: Vec::new(), info: Vec::new() };
+        let (w0, w1) = t.reference.window;
+        for c in 0..3 {
+            let Some(x) = &t.measured[c] else { continue };
+            if w[c] <= 0.0 {
+                continue;
+            }
+            let sine = t.reference.fundamental_hz.is_some();
+            let sigma = if sine { noise_sigma(&x[w0..w1]) } else { noise_sigma(x) };
+            t.sigma[c] = sigma;
+            let fs = channel_features(&t.reference, x);
+            let sd = if sine { sigma * (2.0 / (w1 - w0) as f64).sqrt() } else { sigma / (BLOCK as f64).sqrt() };
+            for (i, v) in fs.iter().enumerate() {
+                t.meas.push(*v);
+                t.scale.push(sd / w[c]);
+                t.info.push(FeatureInfo { test: 0, channel: c, harmonic: if sine { i / 2 + 1 } else { 0 } });
+            }
+        }
+        t
+    }
+
+    /// Number of features of this test.
+    pub fn len(&self) -> usize {
+        self.meas.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.meas.is_empty()
+    }
+}
+
+/// Acceleration, displacement and force of every lane, every tick.
+struct LaneHistory {
+    ch: [Vec<[f64; LANES]>; 3],
+}
+
+impl Observer<LANES> for LaneHistory {
+    fn tick(&mut self, v: &TickView<'_, LANES>) {
+        self.ch[0].push(*v.a);
+        self.ch[1].push(*v.x);
+        self.ch[2].push(*v.f);
+    }
+}
+
+/// The model evaluated at one parameter set, over the campaign.
+#[derive(Debug, Clone)]
+pub struct Eval {
+    /// Weighted residual features (model − measured)/σ, all tests in order; empty on failure.
+    pub r: Vec<f64>,
+    /// Per test and channel (acceleration, displacement, force): rms of the residual over rms
+    /// of the measurement, over the analysis window (NaN where the file lacks the channel).
+    pub rms: Vec<[f64; 3]>,
+    /// Why the model failed in some test, if it did.
+    pub failure: Option<String>,
+}
+
+impl Eval {
+    /// The residual rms of test `t`, over its channels.
+    pub fn test_rms(&self, t: usize) -> f64 {
+        rms_of(self.rms[t].iter().copied())
+    }
+    /// The campaign's residual rms: over every test and channel.
+    pub fn residual_rms(&self) -> f64 {
+        rms_of(self.rms.iter().flat_map(|r| r.iter().copied()))
+    }
+    pub fn chi2(&self) -> f64 {
+        if self.failure.is_some() {
+            f64::INFINITY
+        } else {
+            self.r.iter().map(|v| v * v).sum()
+        }
+    }
+}
+
+fn rms_of(v: impl Iterator<Item = f64>) -> f64 {
+    let (mut s, mut n) = (0.0, 0);
+    for x in v.filter(|x| !x.is_nan()) {
+        s += x * x;
+        n += 1;
+    }
+    (s / n.max(1) as f64).sqrt()
+}
+
+/// A campaign prepared for fitting.
+pub struct Problem {
+    pub tests: Vec<TestData>,
+}
+
+impl Problem {
+    pub fn new(mut tests: Vec<TestData>) -> Self {
+        for (i, t) in tests.iter_mut().enumerate() {
+            for f in &mut t.info {
+                f.test = i;
+            }
+        }
+        Problem { tests }
+    }
+
+    /// The residual rms a model right to the noise would leave: over every test and channel, the
+    /// estimated noise σ over the measurement's rms (the floor of [`Eval::residual_rms`]).
+    pub fn noise_rms(&self) -> f64 {
+        rms_of(self.tests.iter().flat_map(|t| {
+            let (w0, w1) = t.reference.window;
+            (0..3).map(move |c| match &t.measured[c] {
+                Some(x) if t.sigma[c] > 0.0 => t.sigma[c] / rms_of(x[w0..w1].iter().copied()),
+                _ => f64::NAN,
+            })
+        }))
+    }
+
+    /// What each feature is, all tests in order.
+    pub fn features(&self) -> Vec<FeatureInfo> {
+        self.tests.iter().flat_map(|t| t.info.iter().copied()).collect()
+    }
+
+    /// Evaluates `sets(test)` — one model per parameter set for each test — in batches of
+    /// [`LANES`] lanes, the tests in parallel.
+    pub fn evaluate(&self, n_sets: usize, set: &(dyn Fn(usize, &ModelParams) -> ModelParams + Sync)) -> Vec<Eval> {
+        let chunks: Vec<(usize, usize)> = (0..self.tests.len()).flat_map(|t| (0..n_sets.div_ceil(LANES)).map(move |c| (t, c))).collect();
+        // Per (test, chunk): per lane, the weighted features and rms, or a failure.
+        type Lane = Result<(Vec<f64>, [f64; 3]), String>;
+        let done: Vec<Vec<Lane>> = chunks
+            .par_iter()
+            .map(|&(ti, c)| {
+                let t = &self.tests[ti];
+                let lo = c * LANES;
+                let hi = (lo + LANES).min(n_sets);
+                let models: Vec<ModelParams> = (lo..hi).map(|k| set(k, &t.model)).collect();
+                let refs: Vec<&ModelParams> = models.iter().collect();
+                if let Some(bad) = models.iter().find_map(|m| m.validate().err()) {
+                    let msg = bad.iter().map(|i| i.to_string()).collect::<Vec<_>>().join("; ");
+                    return vec![Err(format!("test {:?}: {msg}", t.name)); hi - lo];
+                }
+                let lp = match LaneParams::<LANES>::new(&refs) {
+                    Ok(lp) => lp,
+                    Err(e) => return vec![Err(format!("test {:?}: {e}", t.name)); hi - lo],
+                };
+                let n = t.reference.len();
+                let mut h = LaneHistory { ch: std::array::from_fn(|_| Vec::with_capacity(n)) };
+                let res = match simulate::run(&lp, &EffectSet::<LANES>::new(&refs), &t.reference, &Solver::default(), &mut h) {
+                    Ok(r) => r,
+                    Err(e) => return vec![Err(format!("test {:?}: {e}", t.name)); hi - lo],
+                };
+                (0..hi - lo)
+                    .map(|l| {
+                        if let LaneStatus::Failed { time_s, reason } = res[l].status {
+                            return Err(format!("test {:?}: the model failed at t = {time_s:.4} s: {reason}", t.name));
+                        }
+                        let lane = |c: usize| -> Vec<f64> { h.ch[c].iter().map(|v| v[l]).collect() };
+                        let mut r = Vec::with_capacity(t.len());
+                        let model_ch: [Vec<f64>; 3] = std::array::from_fn(lane);
+                        let mut at = 0;
+                        for c in 0..3 {
+                            let Some(x) = &t.measured[c] else { continue };
+                            if !(t.sigma[c] > 0.0) {
+                                continue;
+                            }
+                            let _ = x;
+                            for v in channel_features(&t.reference, &model_ch[c]) {
+                                r.push((v - t.meas[at]) / t.scale[at]);
+                                at += 1;
+                            }
+                        }
+                        let (w0, w1) = t.reference.window;
+                        let rms: [f64; 3] = std::array::from_fn(|c| match &t.measured[c] {
+                            Some(x) => {
+                                let num: f64 = (w0..w1).map(|k| (model_ch[c][k] - x[k]).powi(2)).sum();
+                                let den: f64 = (w0..w1).map(|k| x[k].powi(2)).sum();
+                                (num / den).sqrt()
+                            }
+                            None => f64::NAN,
+                        });
+                        Ok((r, rms))
+                    })
+                    .collect()
+            })
+            .collect();
+        (0..n_sets)
+            .map(|k| {
+                let mut e = Eval { r: Vec::new(), rms: Vec::new(), failure: None };
+                for (i, &(_, c)) in chunks.iter().enumerate() {
+                    if k / LANES != c {
+                        continue;
+                    }
+                    match &done[i][k % LANES] {
+                        Ok((r, rms)) => {
+                            e.r.extend_from_slice(r);
+                            e.rms.push(*rms);
+                        }
+                        Err(m) => {
+                            e.failure.get_or_insert_with(|| m.clone());
+                            e.rms.push([f64::NAN; 3]);
+                        }
+                    }
+                }
+                if e.failure.is_some() {
+                    e.r.clear();
+                }
+                e
+            })
+            .collect()
+    }
+}
+
+/// A free parameter: its registry row and the start value.
+#[derive(Clone, Copy)]
+pub struct Free {
+    pub info: &'static ParamInfo,
+    pub start: f64,
+    /// Scaled by log (a positive parameter) or linearly.
+    pub log: bool,
+}
+
+impl Free {
+    pub fn new(info: &'static ParamInfo, start: f64) -> Self {
+        Free { info, start, log: start > 0.0 && info.range.lo >= 0.0 }
+    }
+    /// The parameter's value at scaled coordinate u, inside its valid range.
+    pub fn value(&self, u: f64) -> f64 {
+        let u = if u.is_finite() { u } else { 0.0 };
+        let v = if self.log { self.start * u.exp() } else { self.start + u * self.start.abs().max(1.0) };
+        // Inside the valid range (an open end is kept a relative 1e-12 away).
+        let r = self.info.range;
+        let lo = if !r.lo.is_finite() { f64::MIN } else if r.lo_inclusive { r.lo } else { r.lo + r.lo.abs() * 1e-12 + f64::MIN_POSITIVE };
+        let hi = if !r.hi.is_finite() { f64::MAX } else if r.hi_inclusive { r.hi } else { r.hi - r.hi.abs() * 1e-12 - f64::MIN_POSITIVE };
+        v.clamp(lo, hi)
+    }
+    /// d value / d u at u.
+    pub fn slope(&self, u: f64) -> f64 {
+        if self.log {
+            self.value(u)
+        } else {
+            self.start.abs().max(1.0)
+        }
+    }
+}
+
+/// Sets the free parameters at `u` on `model` (switching on the effects they belong to).
+pub fn apply(model: &ModelParams, free: &[Free], u: &[f64]) -> ModelParams {
+    let mut m = model.clone();
+    for (f, &x) in free.iter().zip(u) {
+        if let Some(on) = m.effects.get_mut(f.info.component) {
+            *on = true;
+        }
+        (f.info.set)(&mut m, f.value(x));
+    }
+    m
+}
+
+/// The outcome of a fit.
+#[derive(Debug, Clone)]
+pub struct FitResult {
+    pub estimate: Vec<f64>,
+    /// Standard errors in the parameters' units.
+    pub se: Vec<f64>,
+    /// Correlation matrix of the estimates.
+    pub corr: Vec<Vec<f64>>,
+    /// Scaled coordinates of the estimate.
+    pub u: Vec<f64>,
+    pub before: Eval,
+    pub after: Eval,
+    pub n: usize,
+    pub iterations: usize,
+    pub converged: bool,
+}
+
+impl FitResult {
+    pub fn chi2_before(&self) -> f64 {
+        self.before.chi2()
+    }
+    pub fn chi2_after(&self) -> f64 {
+        self.after.chi2()
+    }
+}
+
+/// Solves the small square system `a x = b` (least squares by QR, which also copes with a
+/// singular `a`).
+fn solve(a: &[Vec<f64>], b: &[f64]) -> Vec<f64> {
+    let p = b.len();
+    let m = Mat::<f64>::from_fn(p, p, |i, j| a[i][j]);
+    let rhs = Mat::<f64>::from_fn(p, 1, |i, _| b[i]);
+    let x = m.qr().solve_lstsq(&rhs);
+    (0..p).map(|i| x[(i, 0)]).collect()
+}
+
+/// JᵀJ and Jᵀr of the columns `j` (one per parameter) and residual `r`.
+fn normal(j: &[Vec<f64>], r: &[f64]) -> (Vec<Vec<f64>>, Vec<f64>) {
+    let p = j.len();
+    let a = (0..p).map(|i| (0..p).map(|k| j[i].iter().zip(&j[k]).map(|(x, y)| x * y).sum()).collect()).collect();
+    let g = (0..p).map(|i| j[i].iter().zip(r).map(|(x, y)| x * y).sum()).collect();
+    (a, g)
+}
+
+/// Evaluates each point of `points` with its forward-difference neighbours (one batch of lanes
+/// when it fits): per point, its evaluation and the Jacobian columns there, or `None` where the
+/// point or a neighbour fails.
+fn with_jacobian(problem: &Problem, free: &[Free], points: &[Vec<f64>]) -> Vec<(Eval, Option<Vec<Vec<f64>>>)> {
+    let p = free.len();
+    let mut sets = Vec::with_capacity(points.len() * (p + 1));
+    for u in points {
+        sets.push(u.clone());
+        for i in 0..p {
+            let mut v = u.clone();
+            v[i] += H;
+            sets.push(v);
+        }
+    }
+    let ev = problem.evaluate(sets.len(), &|k, m| apply(m, free, &sets[k]));
+    ev.chunks(p + 1)
+        .map(|c| {
+            let base = c[0].clone();
+            if base.failure.is_some() || c[1..].iter().any(|e| e.failure.is_some()) {
+                return (base, None);
+            }
+            let cols = c[1..].iter().map(|e| e.r.iter().zip(&base.r).map(|(a, b)| (a - b) / H).collect()).collect();
+            (base, Some(cols))
+        })
+        .collect()
+}
+
+/// The damping factors tried at once in an iteration, around λ, as many as fit in one batch.
+fn lambdas(lambda: f64, p: usize) -> Vec<f64> {
+    match (crate::kernel::LANES / (p + 1)).clamp(1, 4) {
+        1 => vec![lambda],
+        2 => vec![lambda / 10.0, lambda * 10.0],
+        3 => vec![lambda / 10.0, lambda, lambda * 10.0],
+        _ => vec![lambda / 10.0, lambda, lambda * 10.0, lambda * 100.0],
+    }
+}
+
+/// Levenberg–Marquardt over the free parameters, from their start values; setting a parameter
+/// switches its effect on. "Before" is each test's model as given.
+///
+/// Each iteration is one batch: the trial steps for a few damping factors, each with its
+/// forward-difference neighbours, so the Jacobian at the accepted step comes with it. It stops
+/// when χ² falls by less than 1e-3 + 1e-4·χ² (a thousandth of a standard deviation squared at the
+/// noise level; a ten-thousandth of a misfit's χ²), or no step lowers χ².
+pub fn fit(problem: &Problem, free: &[Free], max_iter: usize) -> Result<FitResult, String> {
+    let p = free.len();
+    let before = problem.evaluate(1, &|_, m| m.clone()).into_iter().next().expect("one set");
+    let mut u = vec![0.0; p];
+    let (mut at, j0) = with_jacobian(problem, free, std::slice::from_ref(&u)).remove(0);
+    if let Some(f) = &at.failure {
+        return Err(f.clone());
+    }
+    let mut j = j0.ok_or_else(|| "a parameter step of 1e-3 from the start makes the model fail".to_string())?;
+    let mut lambda = 1e-3;
+    let mut iterations = 0;
+    let mut converged = false;
+    for it in 0..max_iter {
+        iterations = it + 1;
+        let chi2 = at.chi2();
+        let (a, g) = normal(&j, &at.r);
+        let lams = lambdas(lambda, p);
+        let dmax = (0..p).map(|i| a[i][i]).fold(0.0, f64::max);
+        let trials: Vec<Vec<f64>> = lams
+            .iter()
+            .map(|&l| {
+                let mut al = a.clone();
+                for i in 0..p {
+                    al[i][i] += l * a[i][i].max(1e-12 * dmax) + f64::MIN_POSITIVE;
+                }
+                let d = solve(&al, &g.iter().map(|x| -x).collect::<Vec<_>>());
+                u.iter()
+                    .zip(&d)
+                    .zip(free)
+                    .enumerate()
+                    .map(|(i, ((x, dx), f))| {
+                        // A parameter the features do not see (zero column) does not move.
+                        let dx = if dx.is_finite() && a[i][i] > 0.0 { dx.clamp(-2.0, 2.0) } else { 0.0 };
+                        // Keep u where the clamp to the valid range puts the value.
+                        let v = f.value(x + dx);
+                        if f.log {
+                            (v / f.start).ln()
+                        } else {
+                            (v - f.start) / f.start.abs().max(1.0)
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+        let ev = with_jacobian(problem, free, &trials);
+        let best = (0..ev.len()).filter(|&k| ev[k].1.is_some()).min_by(|&x, &y| ev[x].0.chi2().total_cmp(&ev[y].0.chi2()));
+        match best {
+            Some(b) if ev[b].0.chi2() < chi2 => {
+                let new = ev[b].0.chi2();
+                let step: f64 = trials[b].iter().zip(&u).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+                u = trials[b].clone();
+                lambda = lams[b].max(1e-9);
+                (at, j) = (ev[b].0.clone(), ev[b].1.clone().expect("filtered"));
+                if chi2 - new < 1e-3 + 1e-4 * chi2 || step < 1e-8 {
+                    converged = true;
+                    break;
+                }
+            }
+            _ => {
+                lambda = lams[lams.len() - 1] * 10.0;
+                if lambda > 1e10 {
+                    // No step lowers χ²: u is a minimum (to the precision of the features).
+                    converged = true;
+                    break;
+                }
+            }
+        }
+    }
+    let after = at;
+    let n = after.r.len();
+    let chi2 = after.chi2();
+    let (a, _) = normal(&j, &after.r);
+    let s2 = if n > p { (chi2 / (n - p) as f64).max(1.0) } else { 1.0 };
+    // Columns of (JᵀJ)⁻¹ (symmetric).
+    let inv: Vec<Vec<f64>> = (0..p)
+        .map(|k| {
+            let e: Vec<f64> = (0..p).map(|i| if i == k { 1.0 } else { 0.0 }).collect();
+            solve(&a, &e)
+        })
+        .collect();
+    let cov = |i: usize, k: usize| s2 * inv[k][i];
+    let se_u: Vec<f64> = (0..p).map(|i| cov(i, i).max(0.0).sqrt()).collect();
+    let corr = (0..p).map(|i| (0..p).map(|k| cov(i, k) / (se_u[i] * se_u[k])).collect()).collect();
+    Ok(FitResult {
+        estimate: free.iter().zip(&u).map(|(f, &x)| f.value(x)).collect(),
+        se: free.iter().zip(&u).zip(&se_u).map(|((f, &x), s)| f.slope(x) * s).collect(),
+        corr,
+        u,
+        before,
+        after,
+        n,
+        iterations,
+        converged,
+    })
+}
+
+/// χ² contributions grouped by (test, harmonic) — what a candidate explains.
+pub fn grouped(features: &[FeatureInfo], r: &[f64]) -> std::collections::BTreeMap<(usize, usize), f64> {
+    let mut g = std::collections::BTreeMap::new();
+    for (f, v) in features.iter().zip(r) {
+        *g.entry((f.test, f.harmonic)).or_insert(0.0) += v * v;
+    }
+    g
+}
+
+/// Harmonics per sine test and channel in the features (k = 1…9).
+pub const HARMONICS: usize = N_HARM;

@@ -1,0 +1,255 @@
+//! `study diagnose`: fit every candidate effect and say which one is most likely missing.
+
+use super::cli::DiagnoseArgs;
+use super::fit_cmd::{check_effect, load_problem};
+use super::tables::{self, Column};
+use super::{campaign_io::load_model, RunFailed};
+use crate::kernel::params::EFFECTS;
+use crate::orchestration::diagnose::{self, Diagnosis};
+use crate::orchestration::fit::Problem;
+use plotters::prelude::*;
+use std::fmt::Write as _;
+use std::io::Write;
+
+fn harmonic_label(k: usize) -> String {
+    if k == 0 {
+        "time blocks".into()
+    } else {
+        format!("h{k}")
+    }
+}
+
+pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
+    let model = load_model(args.model.as_deref())?;
+    let candidates: Vec<&'static str> = if args.candidates.is_empty() {
+        EFFECTS.iter().copied().filter(|e| !model.effects.get(e)).collect()
+    } else {
+        args.candidates.iter().map(|c| check_effect(c, "--candidates")).collect::<anyhow::Result<_>>()?
+    };
+    let (_, problem) = load_problem(&args.campaign, &model)?;
+    let t0 = std::time::Instant::now();
+    let d = diagnose::diagnose(&problem, &candidates);
+    let secs = t0.elapsed().as_secs_f64();
+    if let Some(f) = &d.baseline.failure {
+        return Err(RunFailed(format!("the starting model fails: {f}")).into());
+    }
+    let mut o = std::io::stdout().lock();
+    let chi2_b = d.baseline.chi2();
+    writeln!(o, "study diagnose {} ({} tests, {} features, {} candidates, {:.1} s)", args.campaign.display(), problem.tests.len(), d.n, d.candidates.len(), secs)?;
+    writeln!(
+        o,
+        "\n  baseline: chi2 = {chi2_b:.4e} (about {} for a model right to the noise), residual rms {:.3e} (residual / measured, rms over tests and channels: acceleration, displacement, force; noise floor {:.3e})",
+        d.n,
+        d.baseline.residual_rms(),
+        d.noise_rms
+    )?;
+    writeln!(o, "\n  {:<4} {:<17} {:<24} {:>3} {:>4} {:>11} {:>11} {:>9} {:>11}  significant", "rank", "candidate", "family", "p", "iter", "chi2", "dBIC", "explains", "rms resid.")?;
+    for (i, c) in d.candidates.iter().enumerate() {
+        let rms = c.fit.as_ref().map_or(f64::NAN, |f| f.after.residual_rms());
+        writeln!(
+            o,
+            "  {:<4} {:<17} {:<24} {:>3} {:>4} {:>11.4e} {:>11.4e} {:>8.1}% {:>11.3e}  {}",
+            i + 1,
+            c.effect,
+            c.family,
+            c.free.len(),
+            c.fit.as_ref().map_or("-".to_string(), |f| format!("{}{}", f.iterations, if f.converged { "" } else { "!" })),
+            c.chi2(),
+            c.delta_bic,
+            100.0 * c.explained,
+            rms,
+            match &c.fit {
+                Err(e) => format!("fit failed: {e}"),
+                Ok(_) if c.significant() => "yes".into(),
+                Ok(_) => "no".into(),
+            }
+        )?;
+    }
+    writeln!(o, "\n  evidence for the top candidates (the residual features each explains; chi2 baseline -> candidate):")?;
+    for c in d.candidates.iter().take(3) {
+        let Ok(f) = &c.fit else { continue };
+        let params: Vec<String> = c.free.iter().zip(&f.estimate).zip(&f.se).map(|((p, e), s)| format!("{} = {e:.3e} ± {s:.1e} {}", p.info.name, p.info.unit)).collect();
+        writeln!(o, "  {} ({})", c.effect, params.join(", "))?;
+        for (t, k, b, a) in diagnose::evidence(&d, c, 3) {
+            writeln!(o, "      {} of {:<16} {:>11.4e} -> {:.4e}", harmonic_label(k), problem.tests[t].name, b, a)?;
+        }
+        let per: Vec<String> = (0..problem.tests.len()).map(|t| format!("{:.1e}->{:.1e}", d.baseline.test_rms(t), f.after.test_rms(t))).collect();
+        writeln!(o, "      residual rms per test: {}", per.join("  "))?;
+    }
+    writeln!(o, "\n  verdict: {}", d.summary())?;
+    if let Some(dir) = &args.report {
+        write_report(dir, &args.campaign.display().to_string(), &problem, &d)?;
+        writeln!(o, "\n  wrote {} and its tables (candidates, tests, evidence .parquet)", dir.join("report.html").display())?;
+    }
+    Ok(())
+}
+
+/// The Parquet tables and the HTML page of a diagnosis.
+pub fn write_report(dir: &std::path::Path, campaign: &str, problem: &Problem, d: &Diagnosis) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir)?;
+    let meta = vec![
+        ("vshake.kind".to_string(), "diagnose".to_string()),
+        ("vshake.campaign".to_string(), campaign.to_string()),
+        ("vshake.verdict".to_string(), d.summary()),
+        ("vshake.version".to_string(), env!("CARGO_PKG_VERSION").to_string()),
+    ];
+    let cs = &d.candidates;
+    tables::write_table(
+        &dir.join("candidates.parquet"),
+        vec![
+            ("rank".into(), Column::U32((1..=cs.len() as u32).collect())),
+            ("effect".into(), Column::Str(cs.iter().map(|c| c.effect.to_string()).collect())),
+            ("family".into(), Column::Str(cs.iter().map(|c| c.family.to_string()).collect())),
+            ("n_params".into(), Column::U32(cs.iter().map(|c| c.free.len() as u32).collect())),
+            ("params".into(), Column::Str(cs.iter().map(|c| c.free.iter().map(|f| f.info.path()).collect::<Vec<_>>().join(",")).collect())),
+            ("estimates".into(), Column::Str(cs.iter().map(|c| c.fit.as_ref().map_or(String::new(), |f| f.estimate.iter().map(|e| format!("{e:e}")).collect::<Vec<_>>().join(","))).collect())),
+            ("std_errors".into(), Column::Str(cs.iter().map(|c| c.fit.as_ref().map_or(String::new(), |f| f.se.iter().map(|e| format!("{e:e}")).collect::<Vec<_>>().join(","))).collect())),
+            ("chi2".into(), Column::F64(cs.iter().map(|c| c.chi2()).collect())),
+            ("chi2_baseline".into(), Column::F64(vec![d.baseline.chi2(); cs.len()])),
+            ("n_features".into(), Column::U32(vec![d.n as u32; cs.len()])),
+            ("delta_bic".into(), Column::F64(cs.iter().map(|c| c.delta_bic).collect())),
+            ("explained".into(), Column::F64(cs.iter().map(|c| c.explained).collect())),
+            ("significant".into(), Column::Str(cs.iter().map(|c| if c.significant() { "yes".into() } else { "no".into() }).collect())),
+            ("failure".into(), Column::Str(cs.iter().map(|c| c.fit.as_ref().err().cloned().unwrap_or_default()).collect())),
+        ],
+        &meta,
+    )?;
+    // Residual per test, baseline and each candidate: the "error falls" table.
+    let mut rows: Vec<(String, &str, f64)> = Vec::new();
+    for (t, test) in problem.tests.iter().enumerate() {
+        rows.push((test.name.clone(), "baseline", d.baseline.test_rms(t)));
+        for c in cs {
+            rows.push((test.name.clone(), c.effect, c.fit.as_ref().map_or(f64::NAN, |f| f.after.test_rms(t))));
+        }
+    }
+    tables::write_table(
+        &dir.join("tests.parquet"),
+        vec![
+            ("test".into(), Column::Str(rows.iter().map(|r| r.0.clone()).collect())),
+            ("model".into(), Column::Str(rows.iter().map(|r| r.1.to_string()).collect())),
+            ("rms_residual_ratio".into(), Column::F64(rows.iter().map(|r| r.2).collect())),
+        ],
+        &meta,
+    )?;
+    let mut ev: Vec<(&str, usize, usize, f64, f64)> = Vec::new();
+    for c in cs {
+        for (t, k, b, a) in diagnose::evidence(d, c, usize::MAX) {
+            ev.push((c.effect, t, k, b, a));
+        }
+    }
+    tables::write_table(
+        &dir.join("evidence.parquet"),
+        vec![
+            ("effect".into(), Column::Str(ev.iter().map(|e| e.0.to_string()).collect())),
+            ("test".into(), Column::Str(ev.iter().map(|e| problem.tests[e.1].name.clone()).collect())),
+            ("harmonic".into(), Column::U32(ev.iter().map(|e| e.2 as u32).collect())),
+            ("chi2_baseline".into(), Column::F64(ev.iter().map(|e| e.3).collect())),
+            ("chi2_candidate".into(), Column::F64(ev.iter().map(|e| e.4).collect())),
+        ],
+        &meta,
+    )?;
+    let page = html(campaign, problem, d)?;
+    let path = dir.join("report.html");
+    let out = tables::AtomicFile::new(&path);
+    std::fs::write(&out.tmp, page)?;
+    out.commit()?;
+    Ok(())
+}
+
+/// "The error falls": rms acceleration residual per test, baseline and the top candidates.
+fn error_falls_svg(problem: &Problem, d: &Diagnosis) -> Result<String, Box<dyn std::error::Error>> {
+    let n = problem.tests.len();
+    let per = |e: &crate::orchestration::fit::Eval| (0..n).map(|t| e.test_rms(t)).collect::<Vec<f64>>();
+    let mut series: Vec<(String, Vec<f64>)> = vec![("baseline".into(), per(&d.baseline))];
+    for c in d.candidates.iter().take(4) {
+        if let Ok(f) = &c.fit {
+            series.push((c.effect.to_string(), per(&f.after)));
+        }
+    }
+    let y1 = series.iter().flat_map(|s| s.1.iter().copied()).filter(|v| v.is_finite()).fold(0.0, f64::max).max(1e-12);
+    let mut s = String::new();
+    {
+        let root = SVGBackend::with_string(&mut s, (900, 380)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let names: Vec<String> = problem.tests.iter().map(|t| t.name.clone()).collect();
+        let mut c = ChartBuilder::on(&root)
+            .caption("the error falls: residual rms per test (acceleration, displacement, force), baseline and candidates", ("sans-serif", 16))
+            .margin(8)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d(-0.5f64..(n as f64 - 0.5), 0f64..1.08 * y1)?;
+        c.configure_mesh()
+            .x_labels(n)
+            .x_label_formatter(&|x| {
+                let i = x.round();
+                if (x - i).abs() < 1e-6 && i >= 0.0 && (i as usize) < names.len() {
+                    names[i as usize].clone()
+                } else {
+                    String::new()
+                }
+            })
+            .y_desc("rms residual / rms measured")
+            .draw()?;
+        for (i, (name, v)) in series.iter().enumerate() {
+            let color = if i == 0 { BLACK.to_rgba() } else { Palette99::pick(i - 1).to_rgba() };
+            let pts: Vec<(f64, f64)> = v.iter().enumerate().filter(|(_, y)| y.is_finite()).map(|(t, y)| (t as f64, *y)).collect();
+            c.draw_series(LineSeries::new(pts.clone(), color.stroke_width(if i == 0 { 3 } else { 2 })))?
+                .label(name.clone())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(3)));
+            c.draw_series(pts.into_iter().map(|p| Circle::new(p, 4, color.filled())))?;
+        }
+        c.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+        root.present()?;
+    }
+    Ok(s)
+}
+
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+}
+
+fn html(campaign: &str, problem: &Problem, d: &Diagnosis) -> anyhow::Result<String> {
+    let mut h = String::new();
+    let title = format!("vshake: diagnosis of {campaign}");
+    write!(
+        h,
+        "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>{t}</title><style>\
+body{{font-family:sans-serif;margin:24px;color:#222}} table{{border-collapse:collapse;font-size:13px}}\
+td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}} th{{background:#f2f2f2}} td:first-child,td:nth-child(2){{text-align:left}}\
+</style></head><body>\n<h1>{t}</h1>\n<p id=\"verdict\"><b>Verdict:</b> {v}</p>\n",
+        t = esc(&title),
+        v = esc(&d.summary())
+    )?;
+    let svg = error_falls_svg(problem, d).map_err(|e| anyhow::anyhow!("drawing a plot: {e}"))?;
+    writeln!(h, "<figure class=\"plot\" id=\"error-falls\">{svg}</figure>")?;
+    h.push_str("<h2>Candidates</h2>\n<table id=\"candidates\"><tr><th>rank</th><th>effect</th><th>family</th><th>fitted parameters</th><th>chi2</th><th>dBIC</th><th>explains</th><th>significant</th></tr>\n");
+    for (i, c) in d.candidates.iter().enumerate() {
+        let params = match &c.fit {
+            Ok(f) => c.free.iter().zip(&f.estimate).zip(&f.se).map(|((p, e), s)| format!("{} = {e:.3e} ± {s:.1e} {}", p.info.name, p.info.unit)).collect::<Vec<_>>().join("; "),
+            Err(e) => format!("fit failed: {e}"),
+        };
+        writeln!(
+            h,
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{:.4e}</td><td>{:.4e}</td><td>{:.1} %</td><td>{}</td></tr>",
+            i + 1,
+            c.effect,
+            c.family,
+            esc(&params),
+            c.chi2(),
+            c.delta_bic,
+            100.0 * c.explained,
+            if c.significant() { "yes" } else { "no" }
+        )?;
+    }
+    writeln!(h, "</table>\n<p>Baseline chi2 = {:.4e} over n = {} features (about n for a model right to the noise).</p>", d.baseline.chi2(), d.n)?;
+    h.push_str("<h2>Evidence</h2>\n");
+    for c in d.candidates.iter().take(3) {
+        writeln!(h, "<h3>{}</h3>\n<table><tr><th>feature</th><th>test</th><th>chi2 baseline</th><th>chi2 with it</th></tr>", c.effect)?;
+        for (t, k, b, a) in diagnose::evidence(d, c, 5) {
+            writeln!(h, "<tr><td>{}</td><td>{}</td><td>{b:.4e}</td><td>{a:.4e}</td></tr>", harmonic_label(k), esc(&problem.tests[t].name))?;
+        }
+        h.push_str("</table>\n");
+    }
+    h.push_str("<p>The numbers are in the Parquet tables beside this page (candidates, tests, evidence).</p>\n</body></html>\n");
+    Ok(h)
+}

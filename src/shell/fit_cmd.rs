@@ -1,0 +1,124 @@
+//! `study fit`: calibrate effects' parameters against a campaign and write the fitted model.
+
+use super::campaign_io::{load_campaign, load_model, read_measured, test_reference, LoadedCampaign};
+use super::cli::FitArgs;
+use super::{BadInput, RunFailed};
+use crate::kernel::params::{ModelParams, EFFECTS};
+use crate::orchestration::fit::{self, Free, Problem, TestData};
+use crate::orchestration::toml_fields::suggest;
+use std::io::Write;
+use std::path::Path;
+
+/// Reads a campaign and its measured tests into a fitting problem.
+pub fn load_problem(campaign: &Path, model: &ModelParams) -> anyhow::Result<(LoadedCampaign, Problem)> {
+    let lc = load_campaign(campaign, model)?;
+    let mut tests = Vec::new();
+    for test in &lc.campaign.tests {
+        let path = lc.base.join(&test.data);
+        let m = read_measured(&path, test.model.controller.f_s)?;
+        let reference = test_reference(test, m.rows(), &lc.base, &path)?;
+        let col = |n: &str| m.column(n).map(<[f64]>::to_vec);
+        tests.push(TestData::new(test.name.clone(), test.model.clone(), reference, [col("accel_mps2"), col("disp_m"), col("force_n")], test.weights));
+    }
+    if tests.is_empty() {
+        return Err(BadInput(format!("{}: the campaign has no tests", campaign.display())).into());
+    }
+    Ok((lc, Problem::new(tests)))
+}
+
+/// Checks an effect name against the library.
+pub fn check_effect(e: &str, flag: &str) -> anyhow::Result<&'static str> {
+    EFFECTS.iter().copied().find(|x| *x == e.trim()).ok_or_else(|| {
+        let hint = suggest(e.trim(), &EFFECTS).map_or(String::new(), |s| format!(" (did you mean `{s}`?)"));
+        BadInput(format!("{flag} {e:?}: unknown effect{hint}; the library has {}", EFFECTS.join(", "))).into()
+    })
+}
+
+/// The free parameters: each effect's defaults, then the named ones.
+pub fn free_parameters(effects: &[String], named: &[String], model: &ModelParams) -> anyhow::Result<Vec<Free>> {
+    let mut free: Vec<Free> = Vec::new();
+    for e in effects {
+        let e = check_effect(e, "--effect")?;
+        free.extend(crate::orchestration::diagnose::free_of(e, model));
+    }
+    let all: Vec<String> = ModelParams::registry().map(|p| p.path()).collect();
+    let all_refs: Vec<&str> = all.iter().map(String::as_str).collect();
+    for n in named {
+        let info = ModelParams::lookup(n.trim()).ok_or_else(|| {
+            let hint = suggest(n.trim(), &all_refs).map_or(String::new(), |s| format!(" (did you mean `{s}`?)"));
+            BadInput(format!("--free {n:?}: unknown parameter{hint} (`study params` lists them)"))
+        })?;
+        if !free.iter().any(|f| std::ptr::eq(f.info, info) || f.info.path() == info.path()) {
+            free.push(Free::new(info, (info.get)(model)));
+        }
+    }
+    if free.is_empty() {
+        return Err(BadInput("nothing to fit: name effects with --effect and/or parameters with --free".into()).into());
+    }
+    if free.len() >= 8 {
+        return Err(BadInput(format!("{} free parameters; at most 7 (one batch of lanes per Jacobian)", free.len())).into());
+    }
+    Ok(free)
+}
+
+pub fn run(args: &FitArgs) -> anyhow::Result<()> {
+    let model = load_model(args.model.as_deref())?;
+    let free = free_parameters(&args.effect, &args.free, &model)?;
+    let (_, problem) = load_problem(&args.campaign, &model)?;
+    let t0 = std::time::Instant::now();
+    let r = fit::fit(&problem, &free, args.max_iter).map_err(|e| RunFailed(format!("the fit failed: {e}")))?;
+    if let Some(f) = &r.before.failure {
+        return Err(RunFailed(format!("the starting model fails: {f}")).into());
+    }
+    let mut o = std::io::stdout().lock();
+    writeln!(
+        o,
+        "study fit {} ({} tests, {} features, {} free parameters; {} iterations, {}, {:.1} s)",
+        args.campaign.display(),
+        problem.tests.len(),
+        r.n,
+        free.len(),
+        r.iterations,
+        if r.converged { "converged" } else { "NOT converged: raise --max-iter" },
+        t0.elapsed().as_secs_f64()
+    )?;
+    writeln!(o)?;
+    writeln!(o, "  {:<30} {:>12} {:>12} {:>12}  unit", "parameter", "start", "estimate", "std. error")?;
+    for ((f, e), s) in free.iter().zip(&r.estimate).zip(&r.se) {
+        writeln!(o, "  {:<30} {:>12.4e} {:>12.4e} {:>12.2e}  {}", f.info.path(), f.start, e, s, f.info.unit)?;
+    }
+    if free.len() > 1 {
+        writeln!(o, "\n  correlations of the estimates:")?;
+        for (i, f) in free.iter().enumerate() {
+            let row: Vec<String> = r.corr[i].iter().map(|c| format!("{c:+.2}")).collect();
+            writeln!(o, "  {:<30} {}", f.info.path(), row.join("  "))?;
+        }
+    }
+    writeln!(o, "\n  chi2 (features scaled by their noise; about n for a model right to the noise): {:.4e} -> {:.4e} (n = {})", r.chi2_before(), r.chi2_after(), r.n)?;
+    writeln!(o, "\n  residual rms / measured rms, per test (before -> after):")?;
+    writeln!(o, "  {:<24} {:>24} {:>24} {:>24}", "test", "acceleration", "displacement", "force")?;
+    for (i, t) in problem.tests.iter().enumerate() {
+        let cell = |c: usize| {
+            let (b, a) = (r.before.rms[i][c], r.after.rms[i][c]);
+            if b.is_finite() { format!("{b:.3e} -> {a:.3e}") } else { "-".into() }
+        };
+        writeln!(o, "  {:<24} {:>24} {:>24} {:>24}", t.name, cell(0), cell(1), cell(2))?;
+    }
+    let (b, a) = (r.before.residual_rms(), r.after.residual_rms());
+    writeln!(o, "  {:<24} {:>10.3e} -> {:>10.3e} ({:+.0} %) over every test and channel", "campaign", b, a, 100.0 * (a / b - 1.0))?;
+    // The fitted model: the starting model with the fitted parameters (and their effects on).
+    let fitted = fit::apply(&model, &free, &r.u);
+    let mut root = toml::Table::new();
+    root.insert("model".into(), toml::Value::Table(crate::orchestration::spec::model_table(&fitted)));
+    let header = format!(
+        "# Fitted by `study fit {}` (vshake {}): {}\n",
+        args.campaign.display(),
+        env!("CARGO_PKG_VERSION"),
+        free.iter().zip(&r.estimate).zip(&r.se).map(|((f, e), s)| format!("{} = {e:.4e} ± {s:.1e}", f.info.path())).collect::<Vec<_>>().join(", ")
+    );
+    let out = super::tables::AtomicFile::new(&args.out);
+    std::fs::write(&out.tmp, header + &toml::to_string(&root)?)?;
+    out.commit()?;
+    writeln!(o, "\n  wrote {} (use it with --model)", args.out.display())?;
+    Ok(())
+}
