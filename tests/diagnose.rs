@@ -112,7 +112,11 @@ fn hidden(effect: &str, family: &str, truth: &[(&str, f64)]) {
     for (p, v) in truth {
         let i = c.params.iter().position(|n| n == &format!("{effect}.{p}")).unwrap_or_else(|| panic!("{p} not fitted: {:?}", c.params));
         let (e, s) = (c.estimates[i], c.std_errors[i]);
-        assert!((e - v).abs() <= 2.0 * s, "{effect}.{p}: {e} ± {s} does not cover the truth {v}\n{}", r.stdout);
+        // Three standard errors: this one run checks 14 parameters, so a 2-SE (95 %) band would
+        // be expected to miss one of them about every other noise draw. That the standard
+        // errors are honest is checked on its own, over noise seeds
+        // (`standard_errors_match_the_spread_over_noise_seeds`).
+        assert!((e - v).abs() <= 3.0 * s, "{effect}.{p}: {e} ± {s} does not cover the truth {v}\n{}", r.stdout);
     }
 }
 
@@ -138,7 +142,7 @@ fn supply_droop_is_found() {
 
 #[test]
 fn seal_friction_is_found() {
-    hidden("seal_friction", "friction", &[("f_c", 8000.0), ("f_s", 12000.0)]);
+    hidden("seal_friction", "friction", &[("f_c", 9000.0), ("f_s", 14000.0)]);
 }
 
 #[test]
@@ -255,4 +259,36 @@ fn an_effect_outside_the_library_gets_no_confident_answer() {
     assert!(best.explained < 0.5, "{first} explains {}", best.explained);
     assert!(r.stdout.contains("explains only") || r.stdout.contains("no significant missing effect"), "{}", r.stdout);
     assert!(r.residual["baseline"] > 0.02, "the specimen leaves a clear residual: {}", r.residual["baseline"]);
+}
+
+/// The reported standard errors are the real spread of the estimates: the same hidden effect
+/// under eight noise seeds, fitted each time; the standard deviation of the eight estimates must
+/// agree with the mean reported standard error (within the sampling spread of an 8-sample
+/// standard deviation, sqrt(χ²₇/7): a factor 0.38–1.70 holds with 99 % probability).
+#[test]
+fn standard_errors_match_the_spread_over_noise_seeds() {
+    let d = tempfile::tempdir().unwrap();
+    let c = campaign();
+    let (mut est, mut se) = (Vec::new(), Vec::new());
+    for seed in 1..=8 {
+        let dir = d.path().join(format!("s{seed}"));
+        let seed = seed.to_string();
+        let args = ["synth", c.to_str().unwrap(), "--out", dir.to_str().unwrap(), "--noise", NOISE, "--seed", &seed, "--effect", "flow_saturation", "--set", "flow_saturation.x_sat=0.010"];
+        let (code, out, err) = study(&args);
+        assert_eq!(code, 0, "{out}{err}");
+        let fitted = dir.join("fitted.toml");
+        let (code, out, err) = study(&["fit", dir.join("diagnosis.toml").to_str().unwrap(), "--effect", "flow_saturation", "--out", fitted.to_str().unwrap()]);
+        assert_eq!(code, 0, "{out}{err}");
+        // "# Fitted by ...: flow_saturation.x_sat = 0.00999983708617635 ± 7.968e-8"
+        let head = std::fs::read_to_string(&fitted).unwrap();
+        let tail = head.lines().next().unwrap().split("flow_saturation.x_sat = ").nth(1).unwrap().to_string();
+        let (e, s) = tail.split_once(" ± ").unwrap();
+        est.push(e.trim().parse::<f64>().unwrap());
+        se.push(s.trim().parse::<f64>().unwrap());
+    }
+    let mean = est.iter().sum::<f64>() / 8.0;
+    let sd = (est.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / 7.0).sqrt();
+    let reported = se.iter().sum::<f64>() / 8.0;
+    assert!(sd > 0.38 * reported && sd < 1.70 * reported, "spread {sd} vs reported {reported}: {est:?}");
+    assert!((mean - 0.010).abs() < 3.0 * reported / 8f64.sqrt(), "unbiased: mean {mean}");
 }

@@ -103,7 +103,40 @@ fn read_baseline(path: &std::path::Path) -> anyhow::Result<(f64, f64)> {
     Ok((get("batch_over_scalar")?, get("batch_over_limit")?))
 }
 
+/// Times a diagnosis of `campaign` with every candidate of the library.
+fn bench_diagnose(campaign: &std::path::Path, max_seconds: Option<f64>) -> anyhow::Result<()> {
+    let model = crate::kernel::params::ModelParams::default();
+    let (_, problem) = super::fit_cmd::load_problem(campaign, &model)?;
+    let candidates = crate::kernel::params::EFFECTS;
+    let simulated: f64 = problem.tests.iter().map(|t| t.reference.len() as f64 / t.reference.f_s).sum();
+    let t0 = std::time::Instant::now();
+    let d = crate::orchestration::diagnose::diagnose(&problem, &candidates);
+    let secs = t0.elapsed().as_secs_f64();
+    let runs: usize = d.candidates.iter().filter_map(|c| c.fit.as_ref().ok()).map(|f| f.iterations + 1).sum();
+    let mut out = std::io::stdout().lock();
+    writeln!(
+        out,
+        "study bench --diagnose {}: {} tests ({simulated:.1} s simulated per model), {} candidates, {} threads",
+        campaign.display(),
+        problem.tests.len(),
+        candidates.len(),
+        rayon::current_num_threads()
+    )?;
+    writeln!(out, "  wall time {secs:.1} s; {runs} batches of {LANES} lanes per test (one per Levenberg-Marquardt iteration, Jacobian included)")?;
+    writeln!(out, "  verdict: {}", d.summary())?;
+    if let Some(max) = max_seconds {
+        writeln!(out, "  gate: {secs:.1} s against {max} s {}", if secs <= max { "ok" } else { "FAILED" })?;
+        if secs > max {
+            return Err(super::RunFailed(format!("the diagnosis took {secs:.1} s, more than {max} s")).into());
+        }
+    }
+    Ok(())
+}
+
 pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
+    if let Some(c) = &args.diagnose {
+        return bench_diagnose(c, args.max_seconds);
+    }
     let f = measure(args.seconds)?;
     let mut out = std::io::stdout().lock();
     let h_us = 1e6 / (1024.0 * Solver::default().substeps as f64);

@@ -187,6 +187,13 @@ pub struct BenchArgs {
     /// Write the measured ratios as a new baseline.
     #[arg(long)]
     pub write_baseline: Option<PathBuf>,
+    /// Instead of the kernel, time a whole diagnosis (every candidate of the library) of this
+    /// campaign; with --max-seconds, fail when it takes longer.
+    #[arg(long)]
+    pub diagnose: Option<PathBuf>,
+    /// Wall-time limit of the diagnosis benchmark, s.
+    #[arg(long, requires = "diagnose")]
+    pub max_seconds: Option<f64>,
 }
 
 #[derive(Debug, clap::Args)]

@@ -114,7 +114,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         "# Fitted by `study fit {}` (vshake {}): {}\n",
         args.campaign.display(),
         env!("CARGO_PKG_VERSION"),
-        free.iter().zip(&r.estimate).zip(&r.se).map(|((f, e), s)| format!("{} = {e:.4e} ± {s:.1e}", f.info.path())).collect::<Vec<_>>().join(", ")
+        free.iter().zip(&r.estimate).zip(&r.se).map(|((f, e), s)| format!("{} = {e:?} ± {s:.3e}", f.info.path())).collect::<Vec<_>>().join(", ")
     );
     let out = super::tables::AtomicFile::new(&args.out);
     std::fs::write(&out.tmp, header + &toml::to_string(&root)?)?;
