@@ -254,6 +254,7 @@ fn an_effect_outside_the_library_gets_no_confident_answer() {
         vshake::shell::synth_cmd::write_measured(&path, &cols, &[]).unwrap();
     }
     let r = diagnose(d.path());
+    println!("{}", r.stdout);
     let (first, best) = r.first();
     assert!(!r.stdout.contains("most likely missing"), "a confident wrong answer ({first}):\n{}", r.stdout);
     assert!(best.explained < 0.5, "{first} explains {}", best.explained);

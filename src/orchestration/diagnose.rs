@@ -127,7 +127,8 @@ pub fn diagnose(problem: &Problem, candidates: &[&'static str]) -> Diagnosis {
                 Ok(f) => {
                     let rc = f.after.residual_rms();
                     let excess = rb * rb - n2;
-                    let e = if excess > 0.0 { (1.0 - (rc * rc - n2) / excess).clamp(0.0, 1.0) } else { 0.0 };
+                    // A candidate that fits the features worse than the baseline explains nothing.
+                    let e = if excess > 0.0 && f.chi2_after() < chi2_b { (1.0 - (rc * rc - n2) / excess).clamp(0.0, 1.0) } else { 0.0 };
                     (chi2_b - f.chi2_after() - p * (n as f64).ln(), e)
                 }
                 Err(_) => (f64::NEG_INFINITY, 0.0),

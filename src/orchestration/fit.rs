@@ -276,11 +276,10 @@ impl Problem {
                         let model_ch: [Vec<f64>; 3] = std::array::from_fn(lane);
                         let mut at = 0;
                         for c in 0..3 {
-                            let Some(x) = &t.measured[c] else { continue };
-                            if !(t.sigma[c] > 0.0) {
+                            // The channels with features: measured and weighted (σ set).
+                            if t.measured[c].is_none() || !(t.sigma[c] > 0.0) {
                                 continue;
                             }
-                            let _ = x;
                             for v in channel_features(&t.reference, &model_ch[c]) {
                                 r.push((v - t.meas[at]) / t.scale[at]);
                                 at += 1;

@@ -31,6 +31,10 @@ pub enum Command {
     Fit(FitArgs),
     /// Fit every candidate effect of the library and say which one is most likely missing.
     Diagnose(DiagnoseArgs),
+    /// Merge the shard files of a sharded study (`study run --shard I/N`) into one table.
+    Merge(MergeArgs),
+    /// Write a Slurm job array (one task per shard) and a dependent merge job for a study.
+    Slurm(SlurmArgs),
     /// Benchmark the kernel (simulated seconds per wall second) and optionally gate on a baseline.
     Bench(BenchArgs),
     /// List every model parameter: name, unit, default, valid range, source and meaning.
@@ -59,6 +63,46 @@ pub struct RunArgs {
     /// Progress as a plain line every 5 s on stderr (for batch-job logs) instead of a bar.
     #[arg(long)]
     pub log_progress: bool,
+    /// Run only shard I of N (I from 0 to N-1, as SLURM_ARRAY_TASK_ID): a deterministic,
+    /// contiguous slice of the design. `study merge` joins the shards.
+    #[arg(long, value_name = "I/N")]
+    pub shard: Option<String>,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct MergeArgs {
+    /// Folder holding the shard files (`study run --shard I/N`), one per shard.
+    pub dir: PathBuf,
+    /// The merged table (default: the folder's name with .parquet, beside it).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct SlurmArgs {
+    /// The study file (TOML).
+    pub file: PathBuf,
+    /// Number of shards (array tasks).
+    #[arg(long)]
+    pub shards: usize,
+    /// Slurm partition (default: the cluster's default partition).
+    #[arg(long)]
+    pub partition: Option<String>,
+    /// Time limit of each array task, as Slurm takes it (e.g. 01:00:00).
+    #[arg(long, default_value = "01:00:00")]
+    pub time: String,
+    /// CPUs per array task (the worker threads of each shard).
+    #[arg(long, default_value_t = 2)]
+    pub cpus: usize,
+    /// Slurm account to charge (default: the user's default).
+    #[arg(long)]
+    pub account: Option<String>,
+    /// Folder for the scripts, the logs, the shards and the merged table (default: slurm_<study name>).
+    #[arg(long)]
+    pub dir: Option<PathBuf>,
+    /// The `study` executable the jobs run (default: this one).
+    #[arg(long)]
+    pub bin: Option<PathBuf>,
 }
 
 #[derive(Debug, clap::Args)]

@@ -7,12 +7,14 @@ pub mod cli;
 pub mod compare_cmd;
 pub mod diagnose_cmd;
 pub mod fit_cmd;
+pub mod merge_cmd;
 pub mod params_cmd;
 pub mod progress;
 pub mod report;
 pub mod run_cmd;
 pub mod sensitivity_cmd;
 pub mod sim_cmd;
+pub mod slurm_cmd;
 pub mod synth_cmd;
 pub mod tables;
 
@@ -49,5 +51,7 @@ pub fn dispatch(cli: cli::Cli) -> anyhow::Result<()> {
         cli::Command::Synth(a) => synth_cmd::run(&a),
         cli::Command::Fit(a) => fit_cmd::run(&a),
         cli::Command::Diagnose(a) => diagnose_cmd::run(&a),
+        cli::Command::Merge(a) => merge_cmd::run(&a),
+        cli::Command::Slurm(a) => slurm_cmd::run(&a),
     }
 }

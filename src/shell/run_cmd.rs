@@ -187,12 +187,21 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
         }
         spec.samples = n;
     }
-    if let Some(c) = args.chunk {
-        spec.chunk = c.max(1);
-    }
-    let out: PathBuf = args.out.clone().unwrap_or_else(|| spec.output.clone());
+    // Chunk size and threads are how the run is scheduled, not what it computes: they stay out of
+    // the resolved study in the metadata, so shards run with different ones still merge.
+    let chunk = args.chunk.map_or(spec.chunk, |c| c.max(1));
     let base = args.file.parent().unwrap_or(Path::new("."));
     let plan = plan_for(&spec, base)?;
+    let shard = args.shard.as_deref().map(|s| Shard::parse(s, plan.samples())).transpose()?;
+    let range = shard.as_ref().map_or(0..plan.samples(), |s| s.range.clone());
+    let out: PathBuf = match (&args.out, &shard) {
+        (Some(o), _) => o.clone(),
+        (None, None) => spec.output.clone(),
+        (None, Some(s)) => {
+            let stem = spec.output.file_stem().map(|x| x.to_string_lossy().to_string()).unwrap_or_else(|| "results".into());
+            spec.output.with_file_name(format!("{stem}.shard-{}-of-{}.parquet", s.index, s.count))
+        }
+    };
     let pool = pool(args.threads)?;
     let varied = if matches!(spec.method, Method::File { .. }) { plan.columns.len() } else { spec.varied().len() };
     let mut stdout = std::io::stdout().lock();
@@ -211,21 +220,24 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
         stdout,
         "  engine      {} threads, chunks of {} samples, {} kernel ({} lanes), RK4 {} substeps",
         pool.current_num_threads(),
-        spec.chunk,
+        chunk,
         Isa::detected(),
         LANES,
         spec.solver.substeps
     )?;
+    if let Some(s) = &shard {
+        writeln!(stdout, "  shard       {}/{}: samples {}..{} ({} of {})", s.index, s.count, s.range.start, s.range.end, s.range.len(), plan.samples())?;
+    }
     stdout.flush()?;
 
-    let meta = results_metadata(&spec, &plan, &[]);
+    let meta = results_metadata(&spec, &plan, &shard.as_ref().map_or_else(Vec::new, |s| s.metadata()));
     let mut sink = ResultsSink::create(&out, &plan, &spec, &meta)?;
-    let progress = Progress::new(&spec.name, plan.rows(), args.quiet, args.log_progress);
-    let summary = batch::run_plan(&plan, 0..plan.samples(), &pool, spec.chunk, &mut sink, &|n| progress.inc(n))?;
+    let progress = Progress::new(&spec.name, range.len() * plan.references.len(), args.quiet, args.log_progress);
+    let summary = batch::run_plan(&plan, range.clone(), &pool, chunk, &mut sink, &|n| progress.inc(n))?;
     progress.finish();
     sink.finish().with_context(|| format!("writing {}", out.display()))?;
     let secs = progress.elapsed().as_secs_f64();
-    let sim_s: f64 = plan.references.iter().map(|r| r.len() as f64 / r.f_s).sum::<f64>() * plan.samples() as f64;
+    let sim_s: f64 = plan.references.iter().map(|r| r.len() as f64 / r.f_s).sum::<f64>() * range.len() as f64;
     writeln!(
         stdout,
         "  done        {} rows in {secs:.1} s ({:.0} simulated s per wall s): {} ok, {} failed, {} invalid",
@@ -244,6 +256,9 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
             if id as usize >= plan.samples() {
                 writeln!(stdout, "  history     sample {id} does not exist (the study has {} samples); skipped", plan.samples())?;
                 continue;
+            }
+            if !range.contains(&(id as usize)) {
+                continue; // another shard's
             }
             let sample = plan.sample(id as usize);
             let Ok(model) = sample.model else { continue };
@@ -265,6 +280,43 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// A deterministic slice of a study's design: shard `index` of `count` runs the contiguous
+/// samples [⌊index·S/count⌋, ⌊(index+1)·S/count⌋), so the shards in order are the whole run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Shard {
+    pub index: usize,
+    pub count: usize,
+    pub range: std::ops::Range<usize>,
+}
+
+/// Metadata keys a shard adds to its results (`study merge` checks and removes them).
+pub const SHARD_KEYS: [&str; 3] = ["vshake.shard_index", "vshake.shard_count", "vshake.shard_samples"];
+
+impl Shard {
+    /// Parses `I/N` for a design of `samples` samples.
+    pub fn parse(text: &str, samples: usize) -> anyhow::Result<Shard> {
+        let bad = |why: String| -> anyhow::Error { BadInput(format!("--shard {text:?}: {why}")).into() };
+        let (i, n) = text.split_once('/').ok_or_else(|| bad("expected I/N, e.g. 0/4 (I from 0 to N-1)".into()))?;
+        let index: usize = i.trim().parse().map_err(|_| bad(format!("{i:?} is not a shard index")))?;
+        let count: usize = n.trim().parse().map_err(|_| bad(format!("{n:?} is not a shard count")))?;
+        if count == 0 || index >= count {
+            return Err(bad(format!("the index must be in 0..{} (0 to N-1)", count.saturating_sub(1))));
+        }
+        if count > samples {
+            return Err(bad(format!("{count} shards for a design of {samples} samples; at most {samples}")));
+        }
+        Ok(Shard { index, count, range: (index * samples / count)..((index + 1) * samples / count) })
+    }
+
+    pub fn metadata(&self) -> Vec<(String, String)> {
+        vec![
+            (SHARD_KEYS[0].to_string(), self.index.to_string()),
+            (SHARD_KEYS[1].to_string(), self.count.to_string()),
+            (SHARD_KEYS[2].to_string(), format!("{}..{}", self.range.start, self.range.end)),
+        ]
+    }
 }
 
 /// Folder of the full histories requested by a study: `<out stem>_histories/`.

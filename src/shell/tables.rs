@@ -305,20 +305,22 @@ pub struct ParquetStream {
 impl ParquetStream {
     /// Opens `path.tmp` for a table with the columns of `template` (names and types).
     pub fn create(path: &Path, template: &[(String, Column)], metadata: &[(String, String)]) -> anyhow::Result<Self> {
+        Self::create_with_fields(path, template.iter().map(|(n, c)| c.field(n)).collect(), metadata)
+    }
+
+    /// Opens `path.tmp` for a table with these Arrow fields.
+    pub fn create_with_fields(path: &Path, fields: Vec<Field>, metadata: &[(String, String)]) -> anyhow::Result<Self> {
         use anyhow::Context;
         // The metadata goes into the file's key-value block (DuckDB, polars, pandas) and into the
         // Arrow schema too, so `pyarrow.parquet.read_table(path).schema.metadata` shows it.
-        let schema = Arc::new(
-            Schema::new(template.iter().map(|(n, c)| c.field(n)).collect::<Vec<_>>())
-                .with_metadata(metadata.iter().cloned().collect::<std::collections::HashMap<String, String>>()),
-        );
+        let schema = Arc::new(Schema::new(fields).with_metadata(metadata.iter().cloned().collect::<std::collections::HashMap<String, String>>()));
         // Dictionary encoding only for string columns: float columns of simulation results are
         // nearly all distinct values, and a dictionary per column would hold up to a page each in
         // memory for nothing.
         let mut props = WriterProperties::builder().set_dictionary_enabled(false);
-        for (name, c) in template {
-            if matches!(c, Column::Str(_) | Column::OptStr(_)) {
-                props = props.set_column_dictionary_enabled(name.as_str().into(), true);
+        for f in schema.fields() {
+            if f.data_type() == &DataType::Utf8 {
+                props = props.set_column_dictionary_enabled(f.name().as_str().into(), true);
             }
         }
         let props = props
@@ -333,6 +335,16 @@ impl ParquetStream {
         let f = File::create(&file.tmp).with_context(|| format!("cannot create {}", file.tmp.display()))?;
         let writer = ArrowWriter::try_new(f, schema.clone(), Some(props))?;
         Ok(ParquetStream { file, writer, schema })
+    }
+
+    /// Appends a record batch whose columns match this table's fields.
+    pub fn write_batch(&mut self, batch: &RecordBatch) -> anyhow::Result<()> {
+        let batch = RecordBatch::try_new(self.schema.clone(), batch.columns().to_vec())?;
+        self.writer.write(&batch)?;
+        if self.writer.in_progress_size() > ROW_GROUP_BYTES {
+            self.writer.flush()?;
+        }
+        Ok(())
     }
 
     /// Appends rows (columns in the template's order).
@@ -455,4 +467,14 @@ pub fn read_strings(path: &Path, column: &str) -> Result<Vec<String>, TableError
         out.extend((0..s.len()).map(|i| if s.is_null(i) { String::new() } else { s.value(i).to_string() }));
     }
     Ok(out)
+}
+
+/// The Arrow fields of a Parquet file, and a reader of its record batches.
+pub fn parquet_batches(path: &Path) -> Result<(Vec<Field>, parquet::arrow::arrow_reader::ParquetRecordBatchReader), TableError> {
+    let file = path.to_path_buf();
+    let fmt = |e: &dyn std::fmt::Display| TableError::Format { file: file.clone(), kind: "Parquet", message: e.to_string() };
+    let f = File::open(path).map_err(|e| TableError::Io { file: file.clone(), source: e })?;
+    let builder = ParquetRecordBatchReaderBuilder::try_new(f).map_err(|e| fmt(&e))?;
+    let fields = builder.schema().fields().iter().map(|f| f.as_ref().clone()).collect();
+    Ok((fields, builder.build().map_err(|e| fmt(&e))?))
 }

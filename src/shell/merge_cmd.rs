@@ -1,0 +1,142 @@
+//! `study merge`: join the shard files of a sharded study into one table equal to the unsharded
+//! run, refusing missing, duplicate or mismatched shards.
+
+use super::cli::MergeArgs;
+use super::run_cmd::SHARD_KEYS;
+use super::tables::{self, ParquetStream};
+use super::BadInput;
+use anyhow::Context;
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// What must agree between the shards of one run: metadata key and what to call it.
+const SAME: [(&str, &str); 5] = [
+    ("vshake.seed", "seed"),
+    ("vshake.version", "vshake version"),
+    ("vshake.schema_version", "results schema version"),
+    ("vshake.shard_count", "shard count"),
+    ("vshake.study", "study (the resolved study file)"),
+];
+
+struct ShardFile {
+    path: PathBuf,
+    meta: BTreeMap<String, String>,
+    index: usize,
+}
+
+fn get<'a>(f: &'a ShardFile, key: &str) -> anyhow::Result<&'a str> {
+    f.meta
+        .get(key)
+        .map(String::as_str)
+        .ok_or_else(|| BadInput(format!("{}: not a shard of `study run --shard I/N` (no {key} in its metadata)", f.path.display())).into())
+}
+
+/// Reads and checks the shards of `dir` (every .parquet file but `skip`), in shard order.
+fn shards(dir: &Path, skip: &Path) -> anyhow::Result<Vec<ShardFile>> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map_err(|e| BadInput(format!("{}: cannot read the folder: {e}", dir.display())))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "parquet") && std::fs::canonicalize(p).ok() != std::fs::canonicalize(skip).ok())
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        return Err(BadInput(format!("{}: no .parquet shard files", dir.display())).into());
+    }
+    let mut list = Vec::new();
+    for path in files {
+        let meta: BTreeMap<String, String> = tables::parquet_metadata(&path).map_err(super::sim_cmd::input_if_user)?.into_iter().collect();
+        let mut f = ShardFile { path, meta, index: 0 };
+        f.index = get(&f, SHARD_KEYS[0])?.parse().map_err(|_| BadInput(format!("{}: bad {}", f.path.display(), SHARD_KEYS[0])))?;
+        list.push(f);
+    }
+    let first = &list[0];
+    for f in &list[1..] {
+        for (key, what) in SAME {
+            let (a, b) = (get(first, key)?, get(f, key)?);
+            if a != b {
+                let show = |v: &str| if v.len() > 40 { format!("{}…", &v[..v.char_indices().nth(40).map_or(v.len(), |(i, _)| i)]) } else { v.to_string() };
+                return Err(BadInput(format!(
+                    "{}: a shard of another run: its {what} ({}) differs from {}'s ({})",
+                    f.path.display(),
+                    show(b),
+                    first.path.display(),
+                    show(a)
+                ))
+                .into());
+            }
+        }
+    }
+    let count: usize = get(first, SHARD_KEYS[1])?.parse().map_err(|_| BadInput(format!("{}: bad {}", first.path.display(), SHARD_KEYS[1])))?;
+    let mut by_index: BTreeMap<usize, &ShardFile> = BTreeMap::new();
+    for f in &list {
+        if f.index >= count {
+            return Err(BadInput(format!("{}: shard {}/{count} is out of range", f.path.display(), f.index)).into());
+        }
+        if let Some(other) = by_index.insert(f.index, f) {
+            return Err(BadInput(format!("shard {}/{count} appears twice: {} and {}", f.index, other.path.display(), f.path.display())).into());
+        }
+    }
+    let missing: Vec<String> = (0..count).filter(|i| !by_index.contains_key(i)).map(|i| format!("{i}/{count}")).collect();
+    if !missing.is_empty() {
+        return Err(BadInput(format!(
+            "{}: shard{} {} missing (found {} of {count}: {})",
+            dir.display(),
+            if missing.len() > 1 { "s" } else { "" },
+            missing.join(", "),
+            by_index.len(),
+            by_index.keys().map(|i| i.to_string()).collect::<Vec<_>>().join(", ")
+        ))
+        .into());
+    }
+    // The slices must tile the design in order.
+    let mut at = 0usize;
+    for f in by_index.values() {
+        let s = get(f, SHARD_KEYS[2])?;
+        let (a, b) = s.split_once("..").and_then(|(a, b)| Some((a.parse::<usize>().ok()?, b.parse::<usize>().ok()?))).ok_or_else(|| BadInput(format!("{}: bad {}", f.path.display(), SHARD_KEYS[2])))?;
+        if a != at {
+            return Err(BadInput(format!("{}: shard {}/{count} holds samples {a}..{b}, expected to start at {at}", f.path.display(), f.index)).into());
+        }
+        at = b;
+    }
+    list.sort_by_key(|f| f.index);
+    Ok(list)
+}
+
+pub fn run(args: &MergeArgs) -> anyhow::Result<()> {
+    let out = args.out.clone().unwrap_or_else(|| {
+        let name = args.dir.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_else(|| "merged".into());
+        args.dir.with_file_name(format!("{name}.parquet"))
+    });
+    let list = shards(&args.dir, &out)?;
+    let first = &list[0];
+    // The merged file says what the unsharded run says: the shard keys go.
+    let meta: Vec<(String, String)> = first.meta.iter().filter(|(k, _)| !SHARD_KEYS.contains(&k.as_str()) && *k != "ARROW:schema").map(|(k, v)| (k.clone(), v.clone())).collect();
+    let (fields, _) = tables::parquet_batches(&first.path).map_err(super::sim_cmd::input_if_user)?;
+    let mut stream = ParquetStream::create_with_fields(&out, fields.clone(), &meta)?;
+    let mut rows = 0usize;
+    for f in &list {
+        let (theirs, reader) = tables::parquet_batches(&f.path).map_err(super::sim_cmd::input_if_user)?;
+        let shape = |v: &[arrow_schema::Field]| v.iter().map(|x| (x.name().clone(), x.data_type().clone())).collect::<Vec<_>>();
+        if shape(&theirs) != shape(&fields) {
+            return Err(BadInput(format!("{}: its columns differ from {}'s", f.path.display(), first.path.display())).into());
+        }
+        for batch in reader {
+            let batch = batch.with_context(|| format!("reading {}", f.path.display()))?;
+            rows += batch.num_rows();
+            stream.write_batch(&batch)?;
+        }
+    }
+    let expected: Option<usize> = (|| {
+        let samples: usize = first.meta.get("vshake.samples")?.parse().ok()?;
+        let exc = first.meta.get("vshake.excitations")?.split(',').count();
+        Some(samples * exc)
+    })();
+    if let Some(e) = expected.filter(|e| *e != rows) {
+        return Err(BadInput(format!("{}: the shards hold {rows} rows, the study has {e}", args.dir.display())).into());
+    }
+    stream.finish().with_context(|| format!("writing {}", out.display()))?;
+    let mut o = std::io::stdout().lock();
+    writeln!(o, "study merge {}: {} shards, {rows} rows -> {}", args.dir.display(), list.len(), out.display())?;
+    Ok(())
+}

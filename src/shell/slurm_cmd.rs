@@ -1,0 +1,137 @@
+//! `study slurm`: a Slurm job array (one task per shard, SLURM_ARRAY_TASK_ID → `--shard I/N`) and
+//! a merge job that runs after every task succeeded (`--dependency=afterok`), ready to submit.
+
+use super::cli::SlurmArgs;
+use super::run_cmd::{load_study, plan_for, Shard};
+use super::BadInput;
+use anyhow::Context;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// Single-quotes `s` for a shell script.
+fn q(s: &Path) -> String {
+    format!("'{}'", s.display().to_string().replace('\'', "'\\''"))
+}
+
+fn absolute(p: &Path) -> anyhow::Result<PathBuf> {
+    std::fs::canonicalize(p).map_err(|e| BadInput(format!("{}: {e}", p.display())).into())
+}
+
+/// Checks a value that goes into an `#SBATCH` line (no spaces or shell characters).
+fn slurm_value(flag: &str, v: &str) -> anyhow::Result<()> {
+    if v.is_empty() || !v.chars().all(|c| c.is_ascii_alphanumeric() || "-_:.,+".contains(c)) {
+        return Err(BadInput(format!("--{flag} {v:?}: not a Slurm value (letters, digits and - _ : . , +)")).into());
+    }
+    Ok(())
+}
+
+pub fn run(args: &SlurmArgs) -> anyhow::Result<()> {
+    let spec = load_study(&args.file)?;
+    let base = args.file.parent().unwrap_or(Path::new("."));
+    let plan = plan_for(&spec, base)?;
+    if args.shards == 0 {
+        return Err(BadInput("--shards must be at least 1".into()).into());
+    }
+    // Every shard must be a valid slice (the same check `study run --shard` makes).
+    Shard::parse(&format!("{}/{}", args.shards - 1, args.shards), plan.samples()).map_err(|e| BadInput(e.to_string().replace("--shard", "--shards")))?;
+    if args.cpus == 0 {
+        return Err(BadInput("--cpus must be at least 1".into()).into());
+    }
+    slurm_value("time", &args.time)?;
+    for (flag, v) in [("partition", &args.partition), ("account", &args.account)] {
+        if let Some(v) = v {
+            slurm_value(flag, v)?;
+        }
+    }
+    let name: String = spec.name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '_' || c == '-' { c } else { '_' }).collect();
+    let dir = args.dir.clone().unwrap_or_else(|| PathBuf::from(format!("slurm_{name}")));
+    for d in ["logs", "shards"] {
+        std::fs::create_dir_all(dir.join(d)).with_context(|| format!("cannot create {}", dir.join(d).display()))?;
+    }
+    let dir = absolute(&dir)?;
+    let study = absolute(&args.file)?;
+    let bin = match &args.bin {
+        Some(b) => absolute(b)?,
+        None => std::env::current_exe().context("locating the study executable")?,
+    };
+    let n = args.shards;
+    let mut common = String::new();
+    if let Some(p) = &args.partition {
+        common += &format!("#SBATCH --partition={p}\n");
+    }
+    if let Some(a) = &args.account {
+        common += &format!("#SBATCH --account={a}\n");
+    }
+    let shard_out = dir.join("shards").join(format!("{name}.shard-${{SLURM_ARRAY_TASK_ID}}-of-{n}.parquet"));
+    let array = format!(
+        "#!/bin/bash\n\
+# Written by `study slurm` (vshake {ver}): {samples} samples x {exc} excitations of {study} in {n} shards.\n\
+# Task I runs `study run --shard I/{n}`, a contiguous slice of the design; the merge job joins them.\n\
+#SBATCH --job-name=vshake-{name}\n\
+#SBATCH --array=0-{last}\n\
+#SBATCH --ntasks=1\n\
+#SBATCH --cpus-per-task={cpus}\n\
+#SBATCH --time={time}\n\
+{common}#SBATCH --output={logs}/shard-%a.out\n\
+set -euo pipefail\n\
+exec {bin} run {study_q} --shard \"${{SLURM_ARRAY_TASK_ID}}/{n}\" --threads \"${{SLURM_CPUS_PER_TASK:-{cpus}}}\" --log-progress --out \"{shard_out}\"\n",
+        ver = env!("CARGO_PKG_VERSION"),
+        samples = plan.samples(),
+        exc = plan.references.len(),
+        study = study.display(),
+        last = n - 1,
+        cpus = args.cpus,
+        time = args.time,
+        logs = dir.join("logs").display(),
+        bin = q(&bin),
+        study_q = q(&study),
+        shard_out = shard_out.display(),
+    );
+    let merged = dir.join(format!("{name}.parquet"));
+    let merge = format!(
+        "#!/bin/bash\n\
+# Written by `study slurm`: joins the {n} shards once every array task has succeeded.\n\
+#SBATCH --job-name=vshake-{name}-merge\n\
+#SBATCH --ntasks=1\n\
+#SBATCH --cpus-per-task=1\n\
+#SBATCH --time=00:30:00\n\
+{common}#SBATCH --output={logs}/merge.out\n\
+set -euo pipefail\n\
+exec {bin} merge {shards} --out {merged}\n",
+        logs = dir.join("logs").display(),
+        bin = q(&bin),
+        shards = q(&dir.join("shards")),
+        merged = q(&merged),
+    );
+    let submit = format!(
+        "#!/bin/bash\n\
+# Submits the array, then the merge job to run after all of its tasks succeed (afterok).\n\
+set -euo pipefail\n\
+array=$(sbatch --parsable {array_q})\n\
+array=${{array%%;*}}\n\
+merge=$(sbatch --parsable --dependency=afterok:${{array}} {merge_q})\n\
+merge=${{merge%%;*}}\n\
+echo \"submitted array job ${{array}} ({n} tasks) and merge job ${{merge}} (afterok:${{array}})\"\n\
+echo \"merged table when done: {merged}\"\n",
+        array_q = q(&dir.join("array.sbatch")),
+        merge_q = q(&dir.join("merge.sbatch")),
+        merged = merged.display(),
+    );
+    for (file, text) in [("array.sbatch", &array), ("merge.sbatch", &merge), ("submit.sh", &submit)] {
+        let path = dir.join(file);
+        std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))?;
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755))?;
+        }
+    }
+    let mut o = std::io::stdout().lock();
+    writeln!(o, "study slurm {}: {} samples x {} excitations in {n} shards", args.file.display(), plan.samples(), plan.references.len())?;
+    writeln!(o, "  {}  the job array (task I = shard I/{n}, {} CPUs, {} each)", dir.join("array.sbatch").display(), args.cpus, args.time)?;
+    writeln!(o, "  {}  the merge job", dir.join("merge.sbatch").display())?;
+    writeln!(o, "  {}  submits both (merge afterok the array)", dir.join("submit.sh").display())?;
+    writeln!(o, "  submit: bash {}", dir.join("submit.sh").display())?;
+    writeln!(o, "  result: {}", merged.display())?;
+    Ok(())
+}
