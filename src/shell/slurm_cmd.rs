@@ -49,6 +49,9 @@ pub fn run(args: &SlurmArgs) -> anyhow::Result<()> {
         std::fs::create_dir_all(dir.join(d)).with_context(|| format!("cannot create {}", dir.join(d).display()))?;
     }
     let dir = absolute(&dir)?;
+    if dir.to_string_lossy().chars().any(|c| "\"$`\\".contains(c)) {
+        return Err(BadInput(format!("--dir {}: the path may not contain \" $ ` or \\ (it goes into the job scripts)", dir.display())).into());
+    }
     let study = absolute(&args.file)?;
     let bin = match &args.bin {
         Some(b) => absolute(b)?,
