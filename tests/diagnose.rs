@@ -290,6 +290,7 @@ fn standard_errors_match_the_spread_over_noise_seeds() {
     let mean = est.iter().sum::<f64>() / 8.0;
     let sd = (est.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / 7.0).sqrt();
     let reported = se.iter().sum::<f64>() / 8.0;
+    println!("x_sat over 8 seeds: mean {mean:e}, spread {sd:e}, mean reported standard error {reported:e} (ratio {:.2})", sd / reported);
     assert!(sd > 0.38 * reported && sd < 1.70 * reported, "spread {sd} vs reported {reported}: {est:?}");
     assert!((mean - 0.010).abs() < 3.0 * reported / 8f64.sqrt(), "unbiased: mean {mean}");
 }

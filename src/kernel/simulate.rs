@@ -2,7 +2,8 @@
 //!
 //! Each controller tick t_k = k/f_s:
 //! 1. actuator force F and the controller ([`super::controller::tick`]) → spool command x_c, held
-//!    over [t_k, t_{k+1}) (zero-order hold);
+//!    over [t_k, t_{k+1}) (zero-order hold); in open loop ([`super::excitation::Drive`]) a measured
+//!    valve command or spool position takes the controller's place;
 //! 2. one right-hand-side evaluation at t_k gives the platen acceleration a = dv/dt at t_k (a does
 //!    not depend on x_c) and the first RK4 stage;
 //! 3. the channels are offered to the [`Observer`] and the online metrics;
@@ -491,11 +492,11 @@ fn integrate<const N: usize, V: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N
                     u[l] = cmd[k].clamp(-lp.ctrl[l].u_lim, lp.ctrl[l].u_lim);
                     x_c[l] = lp.ctrl[l].k_sp * u[l];
                 }
-                Drive::Spool(spool) => {
+                Drive::Spool(measured) => {
                     // A measured spool moves continuously; holding its sample at t_k over the tick
                     // would delay it by half a tick (0.5/f_s). The held value is the mean of its
                     // linear interpolant over [t_k, t_{k+1}] instead (a choice; error O((ωT)²)).
-                    x_c[l] = 0.5 * (spool[k] + spool[(k + 1).min(spool.len() - 1)]);
+                    x_c[l] = 0.5 * (measured[k] + measured[(k + 1).min(measured.len() - 1)]);
                     u[l] = x_c[l] / lp.ctrl[l].k_sp;
                 }
             }
