@@ -39,6 +39,8 @@ struct Diagnosis {
     cands: HashMap<String, Cand>,
     /// Campaign residual rms per model ("baseline" or an effect).
     residual: HashMap<String, f64>,
+    /// Largest |phase error of the fundamental| over the tests, degrees, per model.
+    phase: HashMap<String, f64>,
 }
 
 impl Diagnosis {
@@ -81,7 +83,13 @@ fn diagnose(dir: &Path) -> Diagnosis {
         e.1 += 1;
     }
     let residual = sums.into_iter().map(|(m, (s, n))| (m, (s / n as f64).sqrt())).collect();
-    Diagnosis { stdout, cands, residual }
+    let ph = read_columns_allow_nan(&t, &["phase_err_fundamental_deg"]).unwrap();
+    let mut phase: HashMap<String, f64> = HashMap::new();
+    for (m, v) in models.iter().zip(ph.column("phase_err_fundamental_deg").unwrap()) {
+        let e = phase.entry(m.clone()).or_insert(0.0);
+        *e = e.max(v.abs());
+    }
+    Diagnosis { stdout, cands, residual, phase }
 }
 
 fn synth(dir: &Path, extra: &[&str]) {
@@ -109,6 +117,8 @@ fn hidden(effect: &str, family: &str, truth: &[(&str, f64)]) {
     let (before, after) = (r.residual["baseline"], r.residual[effect]);
     assert!(before > 0.02 && before < 0.3, "a realistic size: the hidden effect's residual is {before}");
     assert!(after <= 0.5 * before, "{effect}: the fit cuts the residual {before} -> {after}, not by half");
+    // The evidence: with the effect fitted, the fundamental's phase agrees to the noise.
+    assert!(r.phase[effect] < 0.1, "{effect}: phase error left {}° (baseline {}°)", r.phase[effect], r.phase["baseline"]);
     for (p, v) in truth {
         let i = c.params.iter().position(|n| n == &format!("{effect}.{p}")).unwrap_or_else(|| panic!("{p} not fitted: {:?}", c.params));
         let (e, s) = (c.estimates[i], c.std_errors[i]);

@@ -232,6 +232,34 @@ impl Problem {
         }))
     }
 
+    /// Per test: the phase of the acceleration's fundamental, model minus measured, in degrees,
+    /// under the evaluation `e` (NaN for a record test or a failed evaluation). Evidence of a
+    /// lag: a missing lag shows as a phase error that grows with frequency.
+    pub fn fundamental_phase_error(&self, e: &Eval) -> Vec<f64> {
+        let mut at = 0;
+        self.tests
+            .iter()
+            .map(|t| {
+                let start = at;
+                at += t.len();
+                // The acceleration's features come first in a test: H1 is features 0 (re) and 1 (im).
+                let first = t.info.first().copied();
+                if e.failure.is_some() || t.reference.fundamental_hz.is_none() || first.map(|f| f.channel) != Some(0) {
+                    return f64::NAN;
+                }
+                let (mr, mi) = (t.meas[0], t.meas[1]);
+                let (xr, xi) = (mr + e.r[start] * t.scale[0], mi + e.r[start + 1] * t.scale[1]);
+                let mut d = (xi.atan2(xr) - mi.atan2(mr)).to_degrees();
+                if d > 180.0 {
+                    d -= 360.0;
+                } else if d <= -180.0 {
+                    d += 360.0;
+                }
+                d
+            })
+            .collect()
+    }
+
     /// What each feature is, all tests in order.
     pub fn features(&self) -> Vec<FeatureInfo> {
         self.tests.iter().flat_map(|t| t.info.iter().copied()).collect()

@@ -75,6 +75,11 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
         }
         let per: Vec<String> = (0..problem.tests.len()).map(|t| format!("{:.1e}->{:.1e}", d.baseline.test_rms(t), f.after.test_rms(t))).collect();
         writeln!(o, "      residual rms per test: {}", per.join("  "))?;
+        let (pb, pa) = (problem.fundamental_phase_error(&d.baseline), problem.fundamental_phase_error(&f.after));
+        let ph: Vec<String> = (0..problem.tests.len()).filter(|&t| pb[t].is_finite()).map(|t| format!("{:+.2}->{:+.2}", pb[t], pa[t])).collect();
+        if !ph.is_empty() {
+            writeln!(o, "      phase error of the fundamental per test (model - measured, deg): {}", ph.join("  "))?;
+        }
     }
     writeln!(o, "\n  verdict: {}", d.summary())?;
     if let Some(dir) = &args.report {
@@ -115,11 +120,13 @@ pub fn write_report(dir: &std::path::Path, campaign: &str, problem: &Problem, d:
         &meta,
     )?;
     // Residual per test, baseline and each candidate: the "error falls" table.
-    let mut rows: Vec<(String, &str, f64)> = Vec::new();
+    let mut rows: Vec<(String, &str, f64, f64)> = Vec::new();
+    let phase_b = problem.fundamental_phase_error(&d.baseline);
+    let phase_c: Vec<Vec<f64>> = cs.iter().map(|c| c.fit.as_ref().map_or(vec![f64::NAN; problem.tests.len()], |f| problem.fundamental_phase_error(&f.after))).collect();
     for (t, test) in problem.tests.iter().enumerate() {
-        rows.push((test.name.clone(), "baseline", d.baseline.test_rms(t)));
-        for c in cs {
-            rows.push((test.name.clone(), c.effect, c.fit.as_ref().map_or(f64::NAN, |f| f.after.test_rms(t))));
+        rows.push((test.name.clone(), "baseline", d.baseline.test_rms(t), phase_b[t]));
+        for (i, c) in cs.iter().enumerate() {
+            rows.push((test.name.clone(), c.effect, c.fit.as_ref().map_or(f64::NAN, |f| f.after.test_rms(t)), phase_c[i][t]));
         }
     }
     tables::write_table(
@@ -128,6 +135,7 @@ pub fn write_report(dir: &std::path::Path, campaign: &str, problem: &Problem, d:
             ("test".into(), Column::Str(rows.iter().map(|r| r.0.clone()).collect())),
             ("model".into(), Column::Str(rows.iter().map(|r| r.1.to_string()).collect())),
             ("rms_residual_ratio".into(), Column::F64(rows.iter().map(|r| r.2).collect())),
+            ("phase_err_fundamental_deg".into(), Column::F64(rows.iter().map(|r| r.3).collect())),
         ],
         &meta,
     )?;
