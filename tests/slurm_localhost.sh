@@ -41,7 +41,7 @@ mkdir -p "$work/state" "$work/spool"
 cpus=$(nproc)
 cat > "$SLURM_CONF" <<CONF
 ClusterName=vshakeci
-SlurmctldHost=$host
+SlurmctldHost=$host(127.0.0.1)
 SlurmUser=root
 SlurmdUser=root
 AuthType=auth/munge
@@ -64,7 +64,7 @@ PartitionName=ci Nodes=$host Default=YES MaxTime=INFINITE State=UP
 CONF
 touch "$work/conf_ok"
 slurmctld -f "$SLURM_CONF"
-slurmd -f "$SLURM_CONF"
+slurmd -f "$SLURM_CONF" -N "$host"
 for i in $(seq 1 60); do
   if sinfo -h -o "%T" 2>/dev/null | grep -qE "^idle"; then break; fi
   sleep 1
