@@ -121,7 +121,7 @@ pub fn diagnose(problem: &Problem, candidates: &[&'static str]) -> Diagnosis {
         .par_iter()
         .map(|&effect| {
             let free = free_of(effect, model0);
-            let fit = fit::fit(problem, &free, MAX_ITER);
+            let fit = fit::fit_from(problem, &free, MAX_ITER, baseline.clone());
             let p = free.len() as f64;
             let (delta_bic, explained) = match &fit {
                 Ok(f) => {

@@ -487,8 +487,13 @@ fn lambdas(lambda: f64, p: usize) -> Vec<f64> {
 /// when χ² falls by less than 1e-3 + 1e-4·χ² (a thousandth of a standard deviation squared at the
 /// noise level; a ten-thousandth of a misfit's χ²), or no step lowers χ².
 pub fn fit(problem: &Problem, free: &[Free], max_iter: usize) -> Result<FitResult, String> {
+    fit_from(problem, free, max_iter, problem.evaluate(1, &|_, m| m.clone()).remove(0))
+}
+
+/// [`fit`], given the evaluation of the models as given (a diagnosis evaluates it once for every
+/// candidate).
+pub fn fit_from(problem: &Problem, free: &[Free], max_iter: usize, before: Eval) -> Result<FitResult, String> {
     let p = free.len();
-    let before = problem.evaluate(1, &|_, m| m.clone()).into_iter().next().expect("one set");
     let mut u = vec![0.0; p];
     let (mut at, j0) = with_jacobian(problem, free, std::slice::from_ref(&u)).remove(0);
     if let Some(f) = &at.failure {

@@ -12,7 +12,7 @@ pub struct Asymmetry<const N: usize> {
 
 impl<const N: usize> Asymmetry<N> {
     pub fn new(p: [&ModelParams; N]) -> Self {
-        let on = |m: &ModelParams| if m.effects.asymmetry { 1.0 } else { 0.0 };
+        let on = |m: &ModelParams| super::switch(m, "asymmetry");
         // Off: both gains exactly 1.
         Asymmetry {
             extend: p.map(|m| 1.0 + on(m) * (m.asymmetry.extend_gain - 1.0)),

@@ -33,7 +33,7 @@ pub struct Compressibility<const N: usize> {
 impl<const N: usize> Compressibility<N> {
     pub fn new(p: [&ModelParams; N]) -> Self {
         Compressibility {
-            on: p.map(|m| if m.effects.compressibility { 1.0 } else { 0.0 }),
+            on: super::lane_mask(&p, "compressibility"),
             beta: p.map(|m| m.actuator.beta),
             inv_beta_e: p.map(|m| 1.0 / (m.compressibility.beta_ratio * m.actuator.beta)),
             air: p.map(|m| m.compressibility.air_fraction * P_ATM),

@@ -14,7 +14,7 @@ pub struct FlowSaturation<const N: usize> {
 impl<const N: usize> FlowSaturation<N> {
     pub fn new(p: [&ModelParams; N]) -> Self {
         FlowSaturation {
-            on: p.map(|m| if m.effects.flow_saturation { 1.0 } else { 0.0 }),
+            on: super::lane_mask(&p, "flow_saturation"),
             x_sat: p.map(|m| m.flow_saturation.x_sat),
             inv_x_sat: p.map(|m| 1.0 / m.flow_saturation.x_sat),
         }

@@ -13,7 +13,7 @@ pub struct Leakage<const N: usize> {
 
 impl<const N: usize> Leakage<N> {
     pub fn new(p: [&ModelParams; N]) -> Self {
-        let on = |m: &ModelParams| if m.effects.leakage { 1.0 } else { 0.0 };
+        let on = |m: &ModelParams| super::switch(m, "leakage");
         Leakage { c_int: p.map(|m| on(m) * m.leakage.c_int), c_ext: p.map(|m| on(m) * m.leakage.c_ext) }
     }
 

@@ -66,6 +66,21 @@ pub mod transport_delay;
 
 use super::params::ModelParams;
 
+/// 1.0 where effect `name` is switched on in `m`, 0.0 where it is off: the factor an effect's
+/// coefficients are multiplied by, so an off lane is neutral without a branch in the step.
+pub fn switch(m: &ModelParams, name: &str) -> f64 {
+    if m.effects.get(name) {
+        1.0
+    } else {
+        0.0
+    }
+}
+
+/// [`switch`] for every lane.
+pub fn lane_mask<const N: usize>(p: &[&ModelParams; N], name: &str) -> [f64; N] {
+    std::array::from_fn(|l| switch(p[l], name))
+}
+
 /// A view of the plant quantities of one right-hand-side evaluation, for [`Effect::derivs`].
 pub struct PlantView<'a, const N: usize> {
     /// Held spool command per lane, m.

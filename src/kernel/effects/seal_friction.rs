@@ -15,7 +15,7 @@ pub struct SealFriction<const N: usize> {
 
 impl<const N: usize> SealFriction<N> {
     pub fn new(p: [&ModelParams; N]) -> Self {
-        let on = |m: &ModelParams| if m.effects.seal_friction { 1.0 } else { 0.0 };
+        let on = |m: &ModelParams| super::switch(m, "seal_friction");
         SealFriction {
             f_c: p.map(|m| on(m) * m.seal_friction.f_c),
             df: p.map(|m| on(m) * (m.seal_friction.f_s - m.seal_friction.f_c)),

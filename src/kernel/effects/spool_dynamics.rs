@@ -21,7 +21,7 @@ impl<const N: usize> SpoolDynamics<N> {
     pub fn new(p: [&ModelParams; N]) -> Self {
         let w = p.map(|m| 2.0 * std::f64::consts::PI * m.spool_dynamics.freq_hz);
         SpoolDynamics {
-            on: p.map(|m| if m.effects.spool_dynamics { 1.0 } else { 0.0 }),
+            on: super::lane_mask(&p, "spool_dynamics"),
             w2: w.map(|w| w * w),
             two_zw: std::array::from_fn(|l| 2.0 * p[l].spool_dynamics.zeta * w[l]),
         }

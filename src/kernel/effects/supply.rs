@@ -22,7 +22,7 @@ pub struct Supply<const N: usize> {
 impl<const N: usize> Supply<N> {
     pub fn new(p: [&ModelParams; N]) -> Self {
         Supply {
-            on: p.map(|m| if m.effects.supply { 1.0 } else { 0.0 }),
+            on: super::lane_mask(&p, "supply"),
             p_s0: p.map(|m| m.servovalve.p_s),
             q_pump: p.map(|m| m.supply.q_pump),
             inv_c: p.map(|m| 1.0 / m.supply.c_acc),

@@ -29,7 +29,7 @@ impl<const N: usize> TransportDelay<N> {
     pub fn new(p: [&ModelParams; N]) -> Self {
         let default_tau = crate::kernel::params::TransportDelayParams::default().tau;
         TransportDelay {
-            on: p.map(|m| if m.effects.transport_delay { 1.0 } else { 0.0 }),
+            on: super::lane_mask(&p, "transport_delay"),
             rate: p.map(|m| STAGES as f64 / if m.effects.transport_delay { m.transport_delay.tau } else { default_tau }),
         }
     }
