@@ -1,4 +1,4 @@
-//! The reference values of MODEL.md §5, the linear-valve counter-example, convergence of the
+//! The reference values of docs/model.md §5, the linear-valve counter-example, convergence of the
 //! integrator (§6) and the rest state, all through the public kernel API.
 
 use vshake::kernel::effects::Baseline;
@@ -23,7 +23,7 @@ fn assert_rel(name: &str, got: f64, want: f64, tol: f64) {
     assert!(rel <= tol, "{name}: got {got}, reference {want}, relative error {rel:.2e} > {tol}");
 }
 
-/// MODEL.md §5: ±0.5 % relative on ratios, ±0.2° on phase, ±2 % relative on h_k. The table gives
+/// docs/model.md §5: ±0.5 % relative on ratios, ±0.2° on phase, ±2 % relative on h_k. The table gives
 /// max |u| to two decimals; it is held to ±0.5 % like the ratios.
 #[test]
 fn reference_table_of_model_md_section_5() {
@@ -41,7 +41,7 @@ fn reference_table_of_model_md_section_5() {
     }
 }
 
-/// MODEL.md §5: the linear valve lowers THD_odd by 5× or more at both amplitudes; the quoted
+/// docs/model.md §5: the linear valve lowers THD_odd by 5× or more at both amplitudes; the quoted
 /// defaults (0.0045, 0.0032 against 0.0326, 0.0603) are held to the h_k tolerance (2 %).
 #[test]
 fn linear_valve_removes_the_odd_harmonic_distortion() {
@@ -57,7 +57,7 @@ fn linear_valve_removes_the_odd_harmonic_distortion() {
     }
 }
 
-/// MODEL.md §6: a quarter of the step changes the metrics by < 0.1 %.
+/// docs/model.md §6: a quarter of the step changes the metrics by < 0.1 %.
 #[test]
 fn default_step_is_converged() {
     let p = ModelParams::default();

@@ -1,4 +1,4 @@
-//! Single-ended actuator with stroke-dependent chamber volumes (MODEL.md §3):
+//! Single-ended actuator with stroke-dependent chamber volumes (docs/model.md §3):
 //!
 //! ```text
 //! V1 = A1 (L + y) + V_d1,   V2 = A2 (L − y) + V_d2

@@ -1,4 +1,4 @@
-//! Three-variable controller (TVC) replica, discrete at f_s with a zero-order hold (MODEL.md §2).
+//! Three-variable controller (TVC) replica, discrete at f_s with a zero-order hold (docs/model.md §2).
 //!
 //! At each tick t_k = k/f_s, from the plant state at t_k:
 //!

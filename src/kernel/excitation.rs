@@ -1,4 +1,4 @@
-//! Excitations: the reference states (x_r, v_r, a_r, j_r) at every controller tick (MODEL.md §4).
+//! Excitations: the reference states (x_r, v_r, a_r, j_r) at every controller tick (docs/model.md §4).
 //!
 //! They are computed once, before a run, into a [`Reference`] that every lane of a batch shares,
 //! so the tick loop reads arrays and never branches on the excitation kind.
@@ -40,7 +40,7 @@ pub struct Reference {
 /// the phase reference of the metrics.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub enum Drive {
-    /// The three-variable controller closes the loop (MODEL.md §3).
+    /// The three-variable controller closes the loop (docs/model.md §3).
     #[default]
     ClosedLoop,
     /// A valve command per tick, V: clamped to ±u_lim like the controller's output, then
@@ -88,9 +88,53 @@ impl Reference {
     pub fn time(&self, k: usize) -> f64 {
         k as f64 / self.f_s
     }
+
+    /// Keeps the first `n` ticks (the window is clipped to them).
+    pub fn truncate(&mut self, n: usize) {
+        for v in [&mut self.x, &mut self.v, &mut self.a, &mut self.j, &mut self.command] {
+            v.truncate(n);
+        }
+        self.window = (self.window.0.min(n), self.window.1.min(n));
+    }
+
+    /// Lengthens the reference to `n` ticks by holding its last tick (states and command). A
+    /// run needs a tick beyond the last time it is sampled at ([`super::resample::Resampler`]);
+    /// a held tick at the end changes nothing before it.
+    pub fn hold_to(&mut self, n: usize) {
+        while !self.is_empty() && self.len() < n {
+            let k = self.len() - 1;
+            let (s, c) = ([self.x[k], self.v[k], self.a[k], self.j[k]], self.command[k]);
+            self.push(s, c);
+        }
+    }
+
+    /// Channel `values` (one per tick) at time `t`, by the cubic through the four nearest ticks
+    /// (held beyond the ends).
+    pub fn at_time(&self, values: &[f64], t: f64) -> f64 {
+        let p = t * self.f_s;
+        let n = values.len();
+        if n == 0 {
+            return f64::NAN;
+        }
+        let k = p.floor();
+        if p == k && (k as usize) < n {
+            return values[k as usize];
+        }
+        if n < 4 || p <= 0.0 || p >= (n - 1) as f64 {
+            return values[(p.round().max(0.0) as usize).min(n - 1)];
+        }
+        let j0 = (k as usize).saturating_sub(1).min(n - 4);
+        (0..4)
+            .map(|i| {
+                let xi = (j0 + i) as f64;
+                let w: f64 = (0..4).filter(|&q| q != i).map(|q| (p - (j0 + q) as f64) / (xi - (j0 + q) as f64)).product();
+                w * values[j0 + i]
+            })
+            .sum()
+    }
 }
 
-/// Sine excitation (MODEL.md §4).
+/// Sine excitation (docs/model.md §4).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Sine {
     /// Frequency f, Hz.
@@ -138,6 +182,15 @@ impl Sine {
         ]
     }
 
+    /// Reference displacement x_r at time t (0 before the start, t < 0), m.
+    pub fn displacement(&self, t: f64) -> f64 {
+        if t < 0.0 {
+            return 0.0;
+        }
+        let e = if t < self.taper_s { 0.5 * (1.0 - (PI * t / self.taper_s).cos()) } else { 1.0 };
+        self.amp_m * e * (2.0 * PI * self.freq_hz * t).sin()
+    }
+
     /// The reference at controller rate f_s.
     pub fn reference(&self, f_s: f64) -> Reference {
         let n = (self.duration_s * f_s).round() as usize;
@@ -153,7 +206,7 @@ impl Sine {
     }
 }
 
-/// Sampled displacement record (MODEL.md §4).
+/// Sampled displacement record (docs/model.md §4).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Record {
     /// Sample times, s (strictly increasing).

@@ -1,4 +1,4 @@
-//! Viscoplastic friction law of the platen bearings (MODEL.md §3):
+//! Viscoplastic friction law of the platen bearings (docs/model.md §3):
 //!
 //! ```text
 //! dz/dt = (v/Y) · (1 − z² [κ + (1−κ) sign(z v)])

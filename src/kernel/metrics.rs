@@ -1,4 +1,4 @@
-//! Metrics of MODEL.md §5, accumulated online at the controller ticks (no stored history).
+//! Metrics of docs/model.md §5, accumulated online at the controller ticks (no stored history).
 //!
 //! Over the analysis window of n ticks, harmonic k of a channel s is the running projection
 //! H_k = (2/n) Σ s[n]·exp(−j 2π k f t_n). From it:

@@ -1,6 +1,6 @@
 //! The physics kernel: pure computation, no I/O, no serde, no threads.
 //!
-//! Modules are named after the physical parts of the LHPOST model (MODEL.md):
+//! Modules are named after the physical parts of the LHPOST model (docs/model.md):
 //! [`controller`] (TVC, §2), [`servovalve`], [`actuator`], [`platen`], [`friction`] (§3),
 //! [`excitation`] (§4), [`metrics`] (§5), with [`params`] holding every default and
 //! [`simulate`] the lane integrator that ties them together. Optional physical effects plug in
@@ -20,6 +20,7 @@ pub mod metrics;
 pub mod params;
 pub mod platen;
 pub mod servovalve;
+pub mod resample;
 pub mod simulate;
 
 /// Actuators driving the platen [paper: two horizontal actuators]. Kept separate in the state so

@@ -1,4 +1,4 @@
-//! Rigid platen (MODEL.md §3):
+//! Rigid platen (docs/model.md §3):
 //!
 //! ```text
 //! M dv/dt = F − K y − (C |v|^α + μ) z,   dy/dt = v

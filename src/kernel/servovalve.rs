@@ -1,4 +1,4 @@
-//! Four-port servo-valve: spool position to chamber flows (MODEL.md §3).
+//! Four-port servo-valve: spool position to chamber flows (docs/model.md §3).
 //!
 //! Per valve, with x⁺ = max(x, 0), x⁻ = max(−x, 0) and the regularised orifice law
 //! sq(Δp) = Δp / (Δp² + p_tr²)^¼ (≈ sign(Δp)·√|Δp|):
@@ -12,7 +12,7 @@
 //! selected first (a branch-free select) and `sq` is evaluated once. This is exact, not an
 //! approximation, and halves the square roots per evaluation.
 //!
-//! The linear valve of MODEL.md §5 (the published counter-example) is the other [`FlowLaw`]:
+//! The linear valve of docs/model.md §5 (the published counter-example) is the other [`FlowLaw`]:
 //! q_in1 = K_q x, q_out2 = K_q (A2/A1) x with K_q = K_v w1 √(P_S − P1₀).
 //! The law is a type parameter of the kernel, chosen once per batch.
 
@@ -62,7 +62,7 @@ impl FlowLaw for Orifice {
     }
 }
 
-/// Linear valve (MODEL.md §5 counter-example): flow proportional to spool, no pressure dependence.
+/// Linear valve (docs/model.md §5 counter-example): flow proportional to spool, no pressure dependence.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Linear;
 

@@ -11,7 +11,7 @@
 //!    (the plant is smooth inside a tick, so the hold costs no accuracy; the integrator was chosen
 //!    for vectorisation: fixed step, no data-dependent control flow; its convergence is checked
 //!    by `tests/reference.rs`);
-//! 5. the guard of MODEL.md §3: a lane whose state is non-finite, whose |y| reaches L, or whose
+//! 5. the guard of docs/model.md §3: a lane whose state is non-finite, whose |y| reaches L, or whose
 //!    pressure leaves [−1 MPa, 2·P_S] is marked failed with time and reason, reset to rest and
 //!    carried along (its metrics become NaN); it never aborts the batch.
 //!
@@ -209,9 +209,14 @@ pub struct LaneResult {
     pub metrics: Metrics,
 }
 
-/// The channels of MODEL.md §5 at one tick, for every lane.
+/// The channels of docs/model.md §5 at one tick (or, for an observer that asks for them, at one
+/// RK4 substep inside a tick), for every lane.
 pub struct TickView<'a, const N: usize> {
+    /// Controller tick.
     pub k: usize,
+    /// Substep inside the tick: 0 at the tick itself, 1 … substeps − 1 at t_k + sub·h.
+    pub sub: usize,
+    /// Time, s.
     pub t: f64,
     pub r: &'a RefState,
     /// Displacement feedback: the actuator stroke (ideal LVDT; the platen displacement unless an
@@ -231,8 +236,39 @@ pub struct TickView<'a, const N: usize> {
 }
 
 /// Receives every tick (time histories, live plots). The batch engine passes [`NoObserver`].
+///
+/// An observer that needs the plant at other times (dense output at a measured file's sample
+/// rate, [`super::resample::Resampler`]) lists them in [`Observer::sample_times`] (s, ascending);
+/// it then receives [`Observer::sample`] at each, in order: the plant integrated to that time by
+/// a partial RK4 step from the substep before it (the command held, as in the tick), with the
+/// acceleration, force, stroke and spool evaluated there, and the tick's held command and
+/// reference. A time on a substep node (to 1e-9 of a substep) takes that node exactly.
 pub trait Observer<const N: usize> {
     fn tick(&mut self, view: &TickView<'_, N>);
+    /// Times at which [`Observer::sample`] is wanted (asked as the run goes).
+    fn sample_times(&self) -> &[f64] {
+        &[]
+    }
+    /// The plant at the next of [`Observer::sample_times`].
+    fn sample(&mut self, _view: &TickView<'_, N>) {}
+}
+
+/// Where time `t` falls: its tick and its position in the tick in substeps, in [0, S); a
+/// position within 1e-9 of a node is that node.
+pub fn slot(t: f64, f_s: f64, substeps: usize) -> (usize, f64) {
+    let s = substeps as f64;
+    let p = t * f_s;
+    let mut tick = p.floor().max(0.0) as usize;
+    let mut pos = (p - tick as f64) * s;
+    let node = pos.round();
+    if (pos - node).abs() < 1e-9 {
+        pos = node;
+        if node >= s {
+            tick += 1;
+            pos = 0.0;
+        }
+    }
+    (tick, pos.max(0.0))
 }
 
 /// Observes nothing.
@@ -392,6 +428,81 @@ fn rhs<const N: usize, V: FlowLaw, D: Damping, E: Effect<N>>(
     effect.derivs(&view, es, des);
 }
 
+/// The held part of a sample's view: its tick, substep, time, reference and command.
+struct Held<'a, const N: usize> {
+    k: usize,
+    sub: usize,
+    t: f64,
+    r: &'a RefState,
+    u: &'a [f64; N],
+}
+
+/// Scratch for dense output: one RK4 step of a chosen length from a substep node, kept apart
+/// from the integrator's own buffers (allocated once, on the stack, before the run).
+struct Probe<const N: usize, E: Effect<N>> {
+    s: [[f64; N]; NP],
+    tmp: [[f64; N]; NP],
+    k: [[[f64; N]; NP]; 4],
+    es: E::State,
+    etmp: E::State,
+    ek: [E::State; 4],
+}
+
+impl<const N: usize, E: Effect<N>> Probe<N, E> {
+    fn new(es: E::State) -> Self {
+        Probe { s: [[0.0; N]; NP], tmp: [[0.0; N]; NP], k: [[[0.0; N]; NP]; 4], es, etmp: es, ek: [es; 4] }
+    }
+
+    /// The plant `delta` after the node (s, es) whose derivatives are (k1, ek1), by one RK4 step
+    /// with the command held; its channels go to `obs.sample`.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn sample<V: FlowLaw, D: Damping, O: Observer<N>>(
+        &mut self,
+        lp: &LaneParams<N>,
+        effect: &E,
+        x_c: &[f64; N],
+        s: &[[f64; N]; NP],
+        es: &E::State,
+        k1: &[[f64; N]; NP],
+        ek1: &E::State,
+        delta: f64,
+        held: &Held<'_, N>,
+        obs: &mut O,
+    ) {
+        if delta > 0.0 {
+            let [k2, k3, k4, ka] = &mut self.k;
+            let [ek2, ek3, ek4, eka] = &mut self.ek;
+            axpy(&mut self.tmp, s, 0.5 * delta, k1);
+            axpy(self.etmp.as_mut(), es.as_ref(), 0.5 * delta, ek1.as_ref());
+            rhs::<N, V, D, E>(lp, effect, x_c, &self.tmp, &self.etmp, k2, ek2);
+            axpy(&mut self.tmp, s, 0.5 * delta, k2);
+            axpy(self.etmp.as_mut(), es.as_ref(), 0.5 * delta, ek2.as_ref());
+            rhs::<N, V, D, E>(lp, effect, x_c, &self.tmp, &self.etmp, k3, ek3);
+            axpy(&mut self.tmp, s, delta, k3);
+            axpy(self.etmp.as_mut(), es.as_ref(), delta, ek3.as_ref());
+            rhs::<N, V, D, E>(lp, effect, x_c, &self.tmp, &self.etmp, k4, ek4);
+            self.s = *s;
+            self.es = *es;
+            rk4_combine(&mut self.s, delta / 6.0, k1, k2, k3, k4);
+            rk4_combine(self.es.as_mut(), delta / 6.0, ek1.as_ref(), ek2.as_ref(), ek3.as_ref(), ek4.as_ref());
+            rhs::<N, V, D, E>(lp, effect, x_c, &self.s, &self.es, ka, eka);
+        } else {
+            self.s = *s;
+            self.es = *es;
+            self.k[3] = *k1;
+        }
+        let (mut f, mut x, mut spool) = ([0.0; N], [0.0; N], [0.0; N]);
+        total_force(lp, &self.s, &mut f);
+        for l in 0..N {
+            x[l] = effect.stroke(l, self.s[Y][l], self.s[V][l], &self.es).0;
+            spool[l] = effect.spool_position(l, 0, x_c[l], &self.es);
+        }
+        let a = self.k[3][V];
+        obs.sample(&TickView { k: held.k, sub: held.sub, t: held.t, r: held.r, x: &x, a: &a, u: held.u, x_c, spool: &spool, f: &f, state: &self.s });
+    }
+}
+
 #[inline(always)]
 fn axpy<const N: usize>(out: &mut [[f64; N]], base: &[[f64; N]], h: f64, k: &[[f64; N]]) {
     for ((o, b), k) in out.iter_mut().zip(base).zip(k) {
@@ -473,6 +584,11 @@ fn integrate<const N: usize, V: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N
     let mut a = [0.0; N];
     let mut x = [0.0; N];
     let h = 1.0 / (lp.f_s * solver.substeps as f64);
+    // Dense output: the next requested sample time's slot.
+    let mut next_sample = 0usize;
+    let sample_slot = |obs: &O, i: usize| obs.sample_times().get(i).map(|&t| slot(t, lp.f_s, solver.substeps));
+    let mut pending = sample_slot(obs, 0);
+    let mut probe = Probe::<N, E>::new(es);
     let (w0, w1) = reference.window;
     let fundamental = reference.fundamental_hz;
 
@@ -506,7 +622,7 @@ fn integrate<const N: usize, V: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N
         for l in 0..N {
             spool[l] = effect.spool_position(l, 0, x_c[l], &es);
         }
-        obs.tick(&TickView { k, t, r: &r, x: &x, a: &a, u: &u, x_c: &x_c, spool: &spool, f: &f, state: &s });
+        obs.tick(&TickView { k, sub: 0, t, r: &r, x: &x, a: &a, u: &u, x_c: &x_c, spool: &spool, f: &f, state: &s });
         acc.every_tick(&u);
         if (w0..w1).contains(&k) {
             let basis = fundamental.map(|f0| Basis::at(k, lp.f_s, f0));
@@ -516,6 +632,16 @@ fn integrate<const N: usize, V: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N
         for sub in 0..solver.substeps {
             if sub > 0 {
                 rhs::<N, V, D, E>(lp, effect, &x_c, &s, &es, &mut k1, &mut ek1);
+            }
+            // Samples in [t_k + sub·h, t_k + (sub + 1)·h): a partial step from this node.
+            while let Some((tk, pos)) = pending {
+                if tk != k || pos >= (sub + 1) as f64 {
+                    break;
+                }
+                let delta = (pos - sub as f64) * h;
+                probe.sample::<V, D, O>(lp, effect, &x_c, &s, &es, &k1, &ek1, delta, &Held { k, sub, t: t + pos * h, r: &r, u: &u }, obs);
+                next_sample += 1;
+                pending = sample_slot(obs, next_sample);
             }
             axpy(&mut tmp, &s, 0.5 * h, &k1);
             axpy(etmp.as_mut(), es.as_ref(), 0.5 * h, ek1.as_ref());
@@ -530,7 +656,7 @@ fn integrate<const N: usize, V: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N
             rk4_combine(es.as_mut(), h / 6.0, ek1.as_ref(), ek2.as_ref(), ek3.as_ref(), ek4.as_ref());
         }
 
-        // Guard (MODEL.md §3), once per tick.
+        // Guard (docs/model.md §3), once per tick.
         let mut alive = 0;
         for l in 0..N {
             if status[l] != LaneStatus::Ok {

@@ -1,4 +1,4 @@
-//! Campaigns (FORMATS.md): a TOML file listing measured tests and how each was driven.
+//! Campaigns (docs/formats.md): a TOML file listing measured tests and how each was driven.
 //!
 //! ```toml
 //! [campaign]
@@ -11,16 +11,24 @@
 //! excitation = { kind = "sine", freq_hz = 3.0, amp_g = 1.73, taper_s = 1.0 }
 //! model = { platen = { m = 150000.0 } } # optional per-test model overrides
 //! weights = { accel = 1.0, disp = 0.0 } # optional channel weights (accel, disp, force)
+//! t0_s = 0.5                            # optional: where the excitation starts, in the file's time
 //! ```
 //!
-//! A sine test's reference states are analytic (MODEL.md §4); a record test's come from the named
-//! column of its data file. The first row of a data file is t = 0 of its excitation. A sine test's
-//! duration is its file's; `duration_s` in the excitation, when given, must agree.
+//! A sine test's reference states are analytic (docs/model.md §4); a record test's come from the named
+//! column of its data file. Where the excitation starts in the file is found from `ref_disp_m`
+//! (a sine) or is the first row (a record), unless `t0_s` says; a sine lasts until `ref_disp_m`
+//! leaves it, or `duration_s` when given ([`super::measured`]).
 
 use super::spec::{self, ExcitationSpec};
 use super::toml_fields::{Fields, InputError, Issues};
 use crate::kernel::params::ModelParams;
 use std::path::PathBuf;
+
+/// The keys of `[campaign]`, of each `[[test]]` and of a test's `weights`; docs/formats.md
+/// describes each (a test checks it).
+pub const CAMPAIGN_KEYS: [&str; 2] = ["name", "description"];
+pub const TEST_KEYS: [&str; 6] = ["name", "data", "excitation", "model", "weights", "t0_s"];
+pub const WEIGHT_KEYS: [&str; 3] = ["accel", "disp", "force"];
 
 /// Channel weights of a test (used by fits; 1 by default).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -50,6 +58,8 @@ pub struct TestSpec {
     /// length) and `duration_s` (else the file's length is the duration).
     pub window_given: bool,
     pub duration_given: bool,
+    /// Where the excitation starts, in the file's time (`t0_s`), s; found from the data if None.
+    pub t0_s: Option<f64>,
 }
 
 /// A parsed campaign.
@@ -75,7 +85,7 @@ impl Campaign {
                 if name.is_empty() {
                     issues.push("campaign.name", "missing");
                 }
-                c.finish(&["name", "description"], &mut issues);
+                c.finish(&CAMPAIGN_KEYS, &mut issues);
             }
             None => issues.push("campaign", "missing table ([campaign] name = ...)"),
         }
@@ -107,8 +117,9 @@ impl Campaign {
                                 *slot = v;
                             }
                         }
-                        w.finish(&["accel", "disp", "force"], &mut issues);
+                        w.finish(&WEIGHT_KEYS, &mut issues);
                     }
+                    let t0_s = t.f64("t0_s", &mut issues);
                     let (mut window_given, mut duration_given) = (false, false);
                     let excitation = match t.table("excitation", &mut issues) {
                         Some(e) => {
@@ -121,12 +132,12 @@ impl Campaign {
                             None
                         }
                     };
-                    t.finish(&["name", "data", "excitation", "model", "weights"], &mut issues);
+                    t.finish(&TEST_KEYS, &mut issues);
                     if let (Some(name), Some(data), Some(excitation)) = (tname, data, excitation) {
                         if tests.iter().any(|x: &TestSpec| x.name == name) {
                             issues.push("test", format!("test name {name:?} is used twice"));
                         }
-                        tests.push(TestSpec { name, data, excitation, model, weights, window_given, duration_given });
+                        tests.push(TestSpec { name, data, excitation, model, weights, window_given, duration_given, t0_s });
                     }
                 }
             }
@@ -178,7 +189,7 @@ weights = { force = 0.0 }
 
     #[test]
     fn reads_the_formats_md_example() {
-        // FORMATS.md's record excitation names only the column: the file is the test's data.
+        // docs/formats.md's record excitation names only the column: the file is the test's data.
         let c = Campaign::from_toml(&FORMATS_EXAMPLE.replace("kind = \"record\", column", "kind = \"record\", file = \"elcentro50.parquet\", column"), "c.toml", &ModelParams::default()).unwrap();
         assert_eq!(c.tests.len(), 2);
         assert_eq!(c.tests[1].model.platen.m, 150000.0);

@@ -1,7 +1,7 @@
 //! Model versus measurement: where, in which harmonic and in which part of the cycle the model
 //! fails.
 //!
-//! Over the analysis window (a sine's last whole cycles, MODEL.md §5; a record's whole length),
+//! Over the analysis window (a sine's last whole cycles, docs/model.md §5; a record's whole length),
 //! with the harmonic projection H_k(s) = (2/n) Σ s[n]·exp(−j 2π k f t_n):
 //!
 //! - fundamental amplitude ratio |H_1(a)|/|H_1(a_r)| and phase ∠H_1(a) − ∠H_1(a_r), model and
@@ -18,13 +18,17 @@
 //!
 //! For a record the harmonic and envelope quantities are NaN/empty.
 
-use super::super::kernel::excitation::Reference;
-use crate::kernel::metrics::{Basis, N_HARM};
+use super::measured::{wrap_deg, AlignedTest, Samples};
+use super::sim;
+use crate::kernel::metrics::N_HARM;
+use crate::kernel::resample::ch;
+use crate::kernel::simulate::{LaneStatus, Solver};
+use std::f64::consts::PI;
 
 /// A complex number (re, im).
 pub type C64 = (f64, f64);
 
-/// The channels compared, sampled at the reference ticks.
+/// The channels compared, at the compared samples.
 #[derive(Debug, Clone, Copy)]
 pub struct Channels<'a> {
     pub accel: &'a [f64],
@@ -49,7 +53,7 @@ pub struct Comparison {
     pub amp_ratio_measured: f64,
     pub phase_model_deg: f64,
     pub phase_measured_deg: f64,
-    /// h_2 … h_9.
+    /// h_2 … h_9 (NaN at or above the file's Nyquist frequency).
     pub h_model: [f64; N_HARM - 1],
     pub h_measured: [f64; N_HARM - 1],
     /// H_k/|H_1(a_r)| of model and measurement, and the residual, k = 1 … 9.
@@ -68,23 +72,103 @@ pub struct Comparison {
     pub drift_measured: f64,
     /// Kinematic consistency |A₁|/(ω²|X₁|) of the acceleration and displacement channels: 1 when
     /// both sensors see one rigid body; not 1 when the LVDT reads a stroke the accelerometer does
-    /// not see (a moving reaction mass, a compliant sensor mount).
+    /// not see (a moving reaction mass, a compliant sensor mount) — or a channel in other units.
     pub accel_over_disp_model: f64,
     pub accel_over_disp_measured: f64,
 }
 
-/// H_k (k = 1…9) of `s` over ticks [w0, w1).
-pub fn project(s: &[f64], w0: usize, w1: usize, f_s: f64, f: f64) -> [C64; N_HARM] {
-    let mut out = [(0.0, 0.0); N_HARM];
-    for (k, &x) in s.iter().enumerate().take(w1).skip(w0) {
-        let b = Basis::at(k, f_s, f);
-        for (o, (c, sn)) in out.iter_mut().zip(b.cos.iter().zip(&b.sin)) {
-            o.0 += x * c;
-            o.1 -= x * sn;
+/// H_k (k = 1…9) of `x` at model times `tau`, by least squares on the harmonics below the
+/// Nyquist frequency (see [`Projector`]).
+pub fn project(x: &[f64], tau: &[f64], f: f64, n_harm: usize) -> [C64; N_HARM] {
+    Projector::new(tau, f, n_harm).apply(x)
+}
+
+/// The harmonics H_k of a channel over a window of samples, by least squares: x ≈ c +
+/// Σₖ (Re Hₖ cos θₖ − Im Hₖ sin θₖ), θₖ = 2π k f τ, for k = 1 … n_harm (those below the file's
+/// Nyquist frequency).
+///
+/// [chosen] On a window of whole cycles sampled at a whole number of samples per cycle this is
+/// the discrete Fourier sum (2/n) Σ x·e^{−jθₖ} exactly (the basis is orthogonal there). At a
+/// sample rate that is not a whole multiple of f (500 Hz for a 3 Hz test: 166.7 samples per
+/// cycle) the window holds whole cycles only to within a sample, and the plain sum leaks the
+/// other harmonics and the mean into each Hₖ by O(1/n) — 3e-4 of the fundamental at 500 Hz.
+/// Least squares removes that leakage, so a file's rate does not move its harmonics. The
+/// pseudo-inverse depends only on the sample times, so it is built once per window and each
+/// projection is one pass over the samples.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Projector {
+    n_harm: usize,
+    /// Rows of the pseudo-inverse (XᵀX)⁻¹Xᵀ: the mean, then (cos, sin) of each harmonic.
+    rows: Vec<Vec<f64>>,
+}
+
+impl Projector {
+    /// The projector of the window `tau` (model times, s) for fundamental `f` (Hz) and
+    /// harmonics 1 … `n_harm` (fewer when the window has too few samples for them).
+    pub fn new(tau: &[f64], f: f64, n_harm: usize) -> Self {
+        let n = tau.len();
+        let n_harm = n_harm.min(N_HARM).min(n.saturating_sub(1) / 2);
+        let p = 1 + 2 * n_harm;
+        // Basis at each sample, then the normal matrix XᵀX.
+        let basis = |t: f64, out: &mut [f64]| {
+            out[0] = 1.0;
+            for k in 1..=n_harm {
+                let c = f * t * k as f64;
+                let (s, co) = (2.0 * PI * (c - c.floor())).sin_cos();
+                out[2 * k - 1] = co;
+                out[2 * k] = s;
+            }
+        };
+        let mut g = vec![0.0; p * p];
+        let mut b = vec![0.0; p];
+        for &t in tau {
+            basis(t, &mut b);
+            for i in 0..p {
+                for j in 0..=i {
+                    g[i * p + j] += b[i] * b[j];
+                }
+            }
         }
+        // Cholesky G = L Lᵀ (G is positive definite for at least p distinct phases).
+        let mut l = vec![0.0; p * p];
+        for i in 0..p {
+            for j in 0..=i {
+                let s = g[i * p + j] - (0..j).map(|k| l[i * p + k] * l[j * p + k]).sum::<f64>();
+                l[i * p + j] = if i == j { s.max(f64::MIN_POSITIVE).sqrt() } else { s / l[j * p + j] };
+            }
+        }
+        let mut rows = vec![vec![0.0; n]; p];
+        let mut y = vec![0.0; p];
+        for (m, &t) in tau.iter().enumerate() {
+            basis(t, &mut b);
+            // (XᵀX)⁻¹ bₘ: forward then back substitution.
+            for i in 0..p {
+                y[i] = (b[i] - (0..i).map(|k| l[i * p + k] * y[k]).sum::<f64>()) / l[i * p + i];
+            }
+            for i in (0..p).rev() {
+                y[i] = (y[i] - (i + 1..p).map(|k| l[k * p + i] * y[k]).sum::<f64>()) / l[i * p + i];
+            }
+            for i in 0..p {
+                rows[i][m] = y[i];
+            }
+        }
+        Projector { n_harm, rows }
     }
-    let scale = 2.0 / (w1 - w0).max(1) as f64;
-    out.map(|(re, im)| (re * scale, im * scale))
+
+    /// Harmonics the projector resolves.
+    pub fn n_harm(&self) -> usize {
+        self.n_harm
+    }
+
+    /// H_1 … H_9 of `x` (one value per sample of the window); those beyond `n_harm` are 0.
+    pub fn apply(&self, x: &[f64]) -> [C64; N_HARM] {
+        let dot = |r: &[f64]| r.iter().zip(x).map(|(a, b)| a * b).sum::<f64>();
+        let mut out = [(0.0, 0.0); N_HARM];
+        for (k, o) in out.iter_mut().enumerate().take(self.n_harm) {
+            *o = (dot(&self.rows[2 * k + 1]), -dot(&self.rows[2 * k + 2]));
+        }
+        out
+    }
 }
 
 fn mag(c: C64) -> f64 {
@@ -92,13 +176,7 @@ fn mag(c: C64) -> f64 {
 }
 
 fn phase_deg(a: C64, r: C64) -> f64 {
-    let mut d = (a.1.atan2(a.0) - r.1.atan2(r.0)).to_degrees() % 360.0;
-    if d > 180.0 {
-        d -= 360.0;
-    } else if d <= -180.0 {
-        d += 360.0;
-    }
-    d
+    wrap_deg((a.1.atan2(a.0) - r.1.atan2(r.0)).to_degrees())
 }
 
 fn rms(xs: impl Iterator<Item = f64>) -> f64 {
@@ -122,27 +200,25 @@ fn drift(amps: &[f64]) -> f64 {
     sxy / sxx / ym
 }
 
-/// Compares `model` with `measured` over the reference's window.
-pub fn compare(reference: &Reference, measured: &Channels<'_>, model: &Channels<'_>) -> Comparison {
-    let (w0, w1) = reference.window;
-    let f_s = reference.f_s;
-    let win = w0..w1;
-    let ra = |s: &[f64], t: &[f64]| rms(win.clone().map(|k| s[k] - t[k])) / rms(win.clone().map(|k| t[k]));
-    let rms_meas = rms(win.clone().map(|k| measured.accel[k]));
-    let vmax = win.clone().map(|k| reference.v[k].abs()).fold(0.0, f64::max);
-    let xmax = win.clone().map(|k| reference.x[k].abs()).fold(0.0, f64::max);
+/// Compares `model` with `measured` at the compared samples `s`.
+pub fn compare(s: &Samples, measured: &Channels<'_>, model: &Channels<'_>) -> Comparison {
+    let n = s.len();
+    let ra = |m: &[f64], t: &[f64]| rms((0..n).map(|k| m[k] - t[k])) / rms(t.iter().copied());
+    let rms_meas = rms(measured.accel.iter().copied());
+    let vmax = s.ref_v.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let xmax = s.ref_x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let bin = |name: &'static str, pick: &dyn Fn(usize) -> bool| {
-        let ks: Vec<usize> = win.clone().filter(|&k| pick(k)).collect();
+        let ks: Vec<usize> = (0..n).filter(|&k| pick(k)).collect();
         Bin {
             name,
-            fraction: ks.len() as f64 / (w1 - w0).max(1) as f64,
+            fraction: ks.len() as f64 / n.max(1) as f64,
             rms_residual_ratio: if ks.is_empty() { f64::NAN } else { rms(ks.iter().map(|&k| model.accel[k] - measured.accel[k])) / rms_meas },
         }
     };
     let bins = [
-        bin("velocity_reversal", &|k| reference.v[k].abs() <= 0.1 * vmax),
-        bin("peak_velocity", &|k| reference.v[k].abs() >= 0.95 * vmax),
-        bin("peak_displacement", &|k| reference.x[k].abs() >= 0.95 * xmax),
+        bin("velocity_reversal", &|k| s.ref_v[k].abs() <= 0.1 * vmax),
+        bin("peak_velocity", &|k| s.ref_v[k].abs() >= 0.95 * vmax),
+        bin("peak_displacement", &|k| s.ref_x[k].abs() >= 0.95 * xmax),
     ];
     let mut c = Comparison {
         amp_ratio_model: f64::NAN,
@@ -168,39 +244,86 @@ pub fn compare(reference: &Reference, measured: &Channels<'_>, model: &Channels<
         accel_over_disp_model: f64::NAN,
         accel_over_disp_measured: f64::NAN,
     };
-    let Some(f) = reference.fundamental_hz else { return c };
-    let hr = project(&reference.a, w0, w1, f_s, f);
-    let hm = project(model.accel, w0, w1, f_s, f);
-    let hx = project(measured.accel, w0, w1, f_s, f);
+    let Some(f) = s.fundamental_hz else { return c };
+    let proj = Projector::new(&s.tau, f, s.n_harm);
+    let hr = proj.apply(&s.ref_a);
+    let hm = proj.apply(model.accel);
+    let hx = proj.apply(measured.accel);
     let r1 = mag(hr[0]);
     c.amp_ratio_model = mag(hm[0]) / r1;
     c.amp_ratio_measured = mag(hx[0]) / r1;
     c.phase_model_deg = phase_deg(hm[0], hr[0]);
     c.phase_measured_deg = phase_deg(hx[0], hr[0]);
-    for k in 2..=N_HARM {
+    // Harmonics at or above the file's Nyquist frequency stay NaN.
+    for k in 2..=s.n_harm {
         c.h_model[k - 2] = mag(hm[k - 1]) / mag(hm[0]);
         c.h_measured[k - 2] = mag(hx[k - 1]) / mag(hx[0]);
     }
-    c.harm_model = hm.map(|(re, im)| (re / r1, im / r1));
-    c.harm_measured = hx.map(|(re, im)| (re / r1, im / r1));
-    for k in 0..N_HARM {
+    for k in 0..s.n_harm {
+        c.harm_model[k] = (hm[k].0 / r1, hm[k].1 / r1);
+        c.harm_measured[k] = (hx[k].0 / r1, hx[k].1 / r1);
         c.residual[k] = (c.harm_model[k].0 - c.harm_measured[k].0, c.harm_model[k].1 - c.harm_measured[k].1);
     }
-    // Whole cycles of the window: boundaries at round(i·f_s/f) from the window start.
-    let per = f_s / f;
-    let cycles = ((w1 - w0) as f64 / per + 1e-9).floor() as usize;
+    // Whole cycles of the window: boundaries at round(i·R/f) from the window's start.
+    let per = s.rate_hz / f;
+    let cycles = (n as f64 / per + 1e-9).floor() as usize;
     for i in 0..cycles {
-        let (a, b) = (w0 + (i as f64 * per).round() as usize, (w0 + ((i + 1) as f64 * per).round() as usize).min(w1));
-        let r = mag(project(&reference.a, a, b, f_s, f)[0]);
-        c.cycle_amp_model.push(mag(project(model.accel, a, b, f_s, f)[0]) / r);
-        c.cycle_amp_measured.push(mag(project(measured.accel, a, b, f_s, f)[0]) / r);
+        let (a, b) = ((i as f64 * per).round() as usize, (((i + 1) as f64 * per).round() as usize).min(n));
+        let cycle = Projector::new(&s.tau[a..b], f, s.n_harm);
+        let r = mag(cycle.apply(&s.ref_a[a..b])[0]);
+        c.cycle_amp_model.push(mag(cycle.apply(&model.accel[a..b])[0]) / r);
+        c.cycle_amp_measured.push(mag(cycle.apply(&measured.accel[a..b])[0]) / r);
     }
     c.drift_model = drift(&c.cycle_amp_model);
     c.drift_measured = drift(&c.cycle_amp_measured);
-    let w2 = (2.0 * std::f64::consts::PI * f).powi(2);
-    c.accel_over_disp_model = mag(hm[0]) / (w2 * mag(project(model.disp, w0, w1, f_s, f)[0]));
-    c.accel_over_disp_measured = mag(hx[0]) / (w2 * mag(project(measured.disp, w0, w1, f_s, f)[0]));
+    let w2 = (2.0 * PI * f).powi(2);
+    c.accel_over_disp_model = mag(hm[0]) / (w2 * mag(proj.apply(model.disp)[0]));
+    c.accel_over_disp_measured = mag(hx[0]) / (w2 * mag(proj.apply(measured.disp)[0]));
     c
+}
+
+/// Share of the measured signal above which a residual is reported as implausible.
+pub const IMPLAUSIBLE_RESIDUAL: f64 = 0.5;
+
+/// One compared test: the comparison and the model's channels at the compared samples.
+#[derive(Debug, Clone)]
+pub struct Compared {
+    pub test: AlignedTest,
+    pub comparison: Comparison,
+    pub accel_model: Vec<f64>,
+    pub disp_model: Vec<f64>,
+    pub force_model: Vec<f64>,
+}
+
+impl Compared {
+    /// The warning for a residual above [`IMPLAUSIBLE_RESIDUAL`] of the signal, if any.
+    pub fn residual_warning(&self) -> Option<String> {
+        let r = self.comparison.rms_residual_accel_ratio;
+        (r > IMPLAUSIBLE_RESIDUAL).then(|| {
+            format!(
+                "test {:?}: the model's residual is {:.0} % of the measured acceleration: the file of another test, a channel in other units, or a test that did not run as the campaign says?",
+                self.test.name,
+                100.0 * r
+            )
+        })
+    }
+}
+
+/// Drives the test's model as the test was driven, samples it at the test's samples and
+/// compares. Fails (with the reason) when the model fails.
+pub fn compare_test(test: &AlignedTest, solver: &Solver) -> Result<Compared, String> {
+    let (result, rs) = sim::run_sampled(&test.model, &test.drive, solver, &test.samples.tau).map_err(|e| format!("test {:?}: {e}", test.name))?;
+    if let LaneStatus::Failed { time_s, reason } = result.status {
+        return Err(format!("test {:?}: the model failed at t = {time_s:.4} s after the excitation's start: {reason}", test.name));
+    }
+    let (accel, disp, force) = (rs.channel(ch::ACCEL, 0), rs.channel(ch::DISP, 0), rs.channel(ch::FORCE, 0));
+    let m = &test.measured;
+    let comparison = compare(
+        &test.samples,
+        &Channels { accel: &m.accel, disp: &m.disp, force: m.force.as_deref() },
+        &Channels { accel: &accel, disp: &disp, force: Some(&force) },
+    );
+    Ok(Compared { test: test.clone(), comparison, accel_model: accel, disp_model: disp, force_model: force })
 }
 
 #[cfg(test)]
@@ -208,17 +331,33 @@ mod tests {
     use super::*;
     use crate::kernel::excitation::Sine;
 
+    /// The samples of a sine's analysis window at the controller's rate.
+    fn samples(s: &Sine) -> Samples {
+        let r = s.reference(1024.0);
+        let (w0, w1) = r.window;
+        Samples {
+            rate_hz: 1024.0,
+            tau: (w0..w1).map(|k| k as f64 / 1024.0).collect(),
+            time: (w0..w1).map(|k| k as f64 / 1024.0).collect(),
+            ref_x: r.x[w0..w1].to_vec(),
+            ref_v: r.v[w0..w1].to_vec(),
+            ref_a: r.a[w0..w1].to_vec(),
+            fundamental_hz: Some(s.freq_hz),
+            n_harm: N_HARM,
+        }
+    }
+
     #[test]
     fn a_known_difference_is_found_where_it_is() {
-        let r = Sine { freq_hz: 2.0, amp_m: 0.05, taper_s: 0.0, duration_s: 4.0, window_cycles: Some(6) }.reference(1024.0);
+        let sine = Sine { freq_hz: 2.0, amp_m: 0.05, taper_s: 0.0, duration_s: 4.0, window_cycles: Some(6) };
+        let s = samples(&sine);
         let w = 2.0 * std::f64::consts::PI * 2.0;
-        let n = r.len();
-        let t = |k: usize| k as f64 / 1024.0;
+        let amax = s.ref_a.iter().map(|v| v.abs()).fold(0.0, f64::max);
         // "Measured": the reference plus 3 % third harmonic; "model": the reference with a
         // growing envelope (1 % per cycle).
-        let meas: Vec<f64> = (0..n).map(|k| r.a[k] + 0.03 * r.a.iter().map(|v| v.abs()).fold(0.0, f64::max) * (3.0 * w * t(k)).sin()).collect();
-        let model: Vec<f64> = (0..n).map(|k| r.a[k] * (1.0 + 0.01 * t(k) * 2.0)).collect();
-        let c = compare(&r, &Channels { accel: &meas, disp: &r.x, force: None }, &Channels { accel: &model, disp: &r.x, force: None });
+        let meas: Vec<f64> = s.tau.iter().zip(&s.ref_a).map(|(t, a)| a + 0.03 * amax * (3.0 * w * t).sin()).collect();
+        let model: Vec<f64> = s.tau.iter().zip(&s.ref_a).map(|(t, a)| a * (1.0 + 0.01 * t * 2.0)).collect();
+        let c = compare(&s, &Channels { accel: &meas, disp: &s.ref_x, force: None }, &Channels { accel: &model, disp: &s.ref_x, force: None });
         assert!((c.h_measured[1] - 0.03).abs() < 1e-6, "h3 measured {}", c.h_measured[1]);
         // The model's linear envelope is not periodic over the window, so it leaks into every
         // harmonic: its component at 2f bounds h3 by 0.02·(3 s)/(π·12) ≈ 1.6e-3.
@@ -236,13 +375,30 @@ mod tests {
 
     #[test]
     fn identical_channels_have_zero_residual() {
-        let r = Sine { freq_hz: 3.0, amp_m: 0.02, taper_s: 1.0, duration_s: 3.0, window_cycles: Some(4) }.reference(1024.0);
-        let ch = Channels { accel: &r.a, disp: &r.x, force: None };
-        let c = compare(&r, &ch, &ch);
+        let s = samples(&Sine { freq_hz: 3.0, amp_m: 0.02, taper_s: 1.0, duration_s: 3.0, window_cycles: Some(4) });
+        let ch = Channels { accel: &s.ref_a, disp: &s.ref_x, force: None };
+        let c = compare(&s, &ch, &ch);
         assert_eq!(c.rms_residual_accel_ratio, 0.0);
         assert!(c.residual.iter().all(|z| z.0 == 0.0 && z.1 == 0.0));
         assert!((c.amp_ratio_model - 1.0).abs() < 1e-12);
         // The reference's a and x are one body's: a = −ω²x in the window.
         assert!((c.accel_over_disp_measured - 1.0).abs() < 1e-9, "{}", c.accel_over_disp_measured);
+    }
+
+    /// Harmonics at or above the Nyquist frequency of the file are left out (NaN), the rest
+    /// computed on the file's own samples.
+    #[test]
+    fn harmonics_above_nyquist_are_left_out() {
+        let sine = Sine { freq_hz: 30.0, amp_m: 0.001, taper_s: 0.0, duration_s: 1.0, window_cycles: Some(20) };
+        let mut s = samples(&sine);
+        // Every 5th sample: a 204.8 Hz file, Nyquist 102.4 Hz: h1…h3 remain.
+        let keep = |v: &Vec<f64>| v.iter().step_by(5).copied().collect::<Vec<f64>>();
+        s = Samples { rate_hz: 204.8, tau: keep(&s.tau), time: keep(&s.time), ref_x: keep(&s.ref_x), ref_v: keep(&s.ref_v), ref_a: keep(&s.ref_a), n_harm: 3, ..s };
+        let meas: Vec<f64> = s.ref_a.iter().map(|a| 0.9 * a).collect();
+        let c = compare(&s, &Channels { accel: &meas, disp: &s.ref_x, force: None }, &Channels { accel: &s.ref_a, disp: &s.ref_x, force: None });
+        assert!((c.amp_ratio_measured - 0.9).abs() < 1e-3, "{}", c.amp_ratio_measured);
+        assert!(c.h_measured[0].is_finite() && c.h_measured[1].is_finite());
+        assert!(c.h_measured[2..].iter().all(|h| h.is_nan()), "{:?}", c.h_measured);
+        assert!(c.residual[3..].iter().all(|z| z.0.is_nan()));
     }
 }

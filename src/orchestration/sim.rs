@@ -1,12 +1,14 @@
 //! One configuration through the kernel (`study sim`): lane 0 of the same lane kernel the batch
-//! engine uses, with an [`Observer`] that keeps the time history of every channel of MODEL.md §5.
+//! engine uses, with an [`Observer`] that keeps the time history of every channel of docs/model.md §5.
 
 use super::spec::SimSpec;
 use crate::kernel::effects::{Baseline, EffectSet};
 use crate::kernel::excitation::Reference;
-use crate::kernel::simulate::{self, LaneParams, LaneResult, Observer, SetupError, TickView, idx};
+use crate::kernel::params::ModelParams;
+use crate::kernel::resample::Resampler;
+use crate::kernel::simulate::{self, LaneParams, LaneResult, Observer, SetupError, Solver, TickView, idx};
 
-/// Channel names (FORMATS.md measured-test names where one exists, so a history can be read back
+/// Channel names (docs/formats.md measured-test names where one exists, so a history can be read back
 /// as a measured test) and what each holds.
 pub const CHANNELS: [(&str, &str); 13] = [
     ("time_s", "time t_k"),
@@ -77,14 +79,28 @@ pub struct SimOutcome {
     pub history: History,
 }
 
+/// Runs up to N models as the lanes of one batch against `reference`: through the effect set
+/// when any lane switches an effect on, else through the bare baseline kernel.
+pub fn run_lanes<const N: usize, O: Observer<N>>(models: &[&ModelParams], reference: &Reference, solver: &Solver, obs: &mut O) -> Result<[LaneResult; N], SetupError> {
+    let lp = LaneParams::<N>::new(models)?;
+    if models.iter().any(|m| m.effects.any()) {
+        simulate::run(&lp, &EffectSet::<N>::new(models), reference, solver, obs)
+    } else {
+        simulate::run(&lp, &Baseline, reference, solver, obs)
+    }
+}
+
 /// Runs `spec` against a prepared reference (sine or record).
 pub fn run_sim(spec: &SimSpec, reference: &Reference) -> Result<SimOutcome, SetupError> {
-    let lp = LaneParams::<1>::new(&[&spec.model])?;
     let mut history = History::with_capacity(reference.len());
-    let [result] = if spec.model.effects.any() {
-        simulate::run(&lp, &EffectSet::<1>::new(&[&spec.model]), reference, &spec.solver, &mut history)?
-    } else {
-        simulate::run(&lp, &Baseline, reference, &spec.solver, &mut history)?
-    };
+    let [result] = run_lanes::<1, _>(&[&spec.model], reference, &spec.solver, &mut history)?;
     Ok(SimOutcome { result, history })
+}
+
+/// Runs `model` against `reference` and samples its channels at the model times `tau`
+/// ([`crate::kernel::resample`]).
+pub fn run_sampled(model: &ModelParams, reference: &Reference, solver: &Solver, tau: &[f64]) -> Result<(LaneResult, Resampler<1>), SetupError> {
+    let mut rs = Resampler::<1>::new(tau);
+    let [result] = run_lanes::<1, _>(&[model], reference, solver, &mut rs)?;
+    Ok((result, rs))
 }

@@ -253,8 +253,10 @@ pub fn read_excitation_in(
     out
 }
 
-const SINE_KEYS: [&str; 7] = ["kind", "freq_hz", "amp_g", "amp_m", "taper_s", "duration_s", "window_cycles"];
-const RECORD_KEYS: [&str; 6] = ["kind", "file", "column", "time_column", "f_ref_hz", "scale"];
+/// The keys of a sine excitation (campaign tests, study excitations); docs/formats.md lists each.
+pub const SINE_KEYS: [&str; 7] = ["kind", "freq_hz", "amp_g", "amp_m", "taper_s", "duration_s", "window_cycles"];
+/// The keys of a record excitation; docs/formats.md lists each.
+pub const RECORD_KEYS: [&str; 6] = ["kind", "file", "column", "time_column", "f_ref_hz", "scale"];
 
 /// Reads `[solver]`; `extra` names keys of the same table read by the caller.
 pub fn read_solver(mut f: Fields<'_>, issues: &mut Issues, extra: &[&str]) -> Solver {

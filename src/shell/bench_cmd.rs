@@ -106,9 +106,9 @@ fn read_baseline(path: &std::path::Path) -> anyhow::Result<(f64, f64)> {
 /// Times a diagnosis of `campaign` with every candidate of the library.
 fn bench_diagnose(campaign: &std::path::Path, max_seconds: Option<f64>) -> anyhow::Result<()> {
     let model = crate::kernel::params::ModelParams::default();
-    let (_, problem) = super::fit_cmd::load_problem(campaign, &model)?;
+    let problem = super::fit_cmd::load_problem(campaign, &model, false)?.problem;
     let candidates = crate::kernel::params::EFFECTS;
-    let simulated: f64 = problem.tests.iter().map(|t| t.reference.len() as f64 / t.reference.f_s).sum();
+    let simulated: f64 = problem.tests.iter().map(|t| t.drive.len() as f64 / t.drive.f_s).sum();
     let t0 = std::time::Instant::now();
     let d = crate::orchestration::diagnose::diagnose(&problem, &candidates);
     let secs = t0.elapsed().as_secs_f64();

@@ -1,19 +1,13 @@
-//! Campaign and measured-test files (FORMATS.md): loading, the error behaviour of measured data,
-//! and the reference each test is driven with.
+//! Campaign and measured-test files: loading, and the error behaviour of measured data (every
+//! problem of every file of a campaign reported at once, exit code 2).
 
-use super::sim_cmd::{input_if_user, reference_for};
 use super::tables::{self, NumTable};
 use super::BadInput;
-use crate::kernel::excitation::Reference;
 use crate::kernel::params::ModelParams;
 use crate::orchestration::campaign::{self, Campaign, TestSpec};
+use crate::orchestration::measured::{self, AlignedTest, OpenLoop, OPTIONAL, REQUIRED};
 use crate::orchestration::spec::ExcitationSpec;
 use std::path::{Path, PathBuf};
-
-/// Required columns of a measured test.
-pub const REQUIRED: [&str; 4] = ["time_s", "ref_disp_m", "disp_m", "accel_mps2"];
-/// Optional columns of a measured test (read and checked when present).
-pub const OPTIONAL: [&str; 5] = ["valve_cmd_v", "force_n", "p1_pa", "p2_pa", "spool_m"];
 
 /// A campaign with the folder its paths are relative to.
 pub struct LoadedCampaign {
@@ -39,52 +33,80 @@ pub fn load_campaign(file: &Path, model: &ModelParams) -> anyhow::Result<LoadedC
     Ok(LoadedCampaign { file: file.to_path_buf(), base: file.parent().unwrap_or(Path::new(".")).to_path_buf(), campaign })
 }
 
-/// Reads a measured test: the required columns, the optional ones present, every cell a finite
-/// number, time uniform and increasing, sampled at the controller rate `f_s`.
-pub fn read_measured(path: &Path, f_s: f64) -> anyhow::Result<NumTable> {
-    let t = tables::read_columns(path, &REQUIRED, &OPTIONAL).map_err(input_if_user)?;
-    let dt = t.check_time("time_s").map_err(input_if_user)?;
-    if ((1.0 / dt) - f_s).abs() > 1e-6 * f_s {
-        return Err(BadInput(format!(
-            "{}: column `time_s`: sampled at {:.6} Hz, but the controller runs at f_s = {f_s} Hz (set [model.controller] f_s, or resample the file)",
-            path.display(),
-            1.0 / dt
-        ))
-        .into());
+/// Reads a measured test: the required columns and the optional ones present, every cell a
+/// finite number within physical range ([`NumTable::check_limits`]). Every bad cell and every
+/// value out of range comes back at once.
+pub fn read_measured(path: &Path) -> Result<NumTable, Vec<String>> {
+    match tables::read_columns_lenient(path, &REQUIRED, &OPTIONAL) {
+        Ok((table, bad)) if bad.is_empty() => Ok(table),
+        Ok((table, bad)) => Err(bad.iter().map(|e| e.to_string()).chain(table.check_limits().iter().map(|p| p.to_string())).collect()),
+        Err(e) => Err(e.each()),
     }
-    Ok(t)
 }
 
-/// The reference a test is driven with, for a file of `rows` rows at `f_s`: a sine lasts as long as
-/// the file (its window follows unless given); a record comes from its column.
-pub fn test_reference(test: &TestSpec, rows: usize, base: &Path, data: &Path) -> anyhow::Result<Reference> {
-    let f_s = test.model.controller.f_s;
-    let r = match &test.excitation {
-        ExcitationSpec::Sine { sine, .. } => {
-            let mut s = *sine;
-            let file_duration = rows as f64 / f_s;
-            if test.duration_given && (s.duration_s - file_duration).abs() > 0.5 / f_s {
-                return Err(BadInput(format!(
-                    "test {:?}: excitation.duration_s = {} s but {} holds {file_duration} s ({rows} rows at {f_s} Hz)",
-                    test.name,
-                    s.duration_s,
-                    data.display()
-                ))
-                .into());
-            }
-            s.duration_s = file_duration;
-            if !test.window_given {
-                s.window_cycles = Some(s.default_cycles());
-            }
-            if s.window_cycles == Some(0) {
-                return Err(BadInput(format!("test {:?}: {} is too short for a whole cycle after taper_s + 1 s", test.name, data.display())).into());
-            }
-            s.reference(f_s)
-        }
-        ExcitationSpec::Record { .. } => reference_for(&test.excitation, &test.model, base)?,
+/// Reads one test's files and aligns it; its problems as lines.
+fn load_test(lc: &LoadedCampaign, test: &TestSpec, open_loop: Option<OpenLoop>) -> anyhow::Result<Result<AlignedTest, Vec<String>>> {
+    let path = lc.base.join(&test.data);
+    let data = match read_measured(&path) {
+        Ok(t) => t,
+        Err(problems) => return Ok(Err(problems)),
     };
-    if r.len() != rows {
-        return Err(BadInput(format!("test {:?}: the reference has {} ticks but {} has {rows} rows", test.name, r.len(), data.display())).into());
+    // A record in another file than the test's data.
+    let record = match &test.excitation {
+        ExcitationSpec::Record { file, column, time_column, .. } if file != &test.data => match tables::read_columns(&lc.base.join(file), &[time_column, column], &[]) {
+            Ok(t) => Some(t),
+            Err(e) if e.is_input() => return Ok(Err(e.each())),
+            Err(e) => return Err(e.into()),
+        },
+        _ => None,
+    };
+    Ok(measured::align(test, &data, record.as_ref(), open_loop).map_err(|ps| ps.iter().map(|p| p.to_string()).collect()))
+}
+
+/// Reads and aligns every test of a campaign. Every problem of every file is reported at once
+/// (exit code 2), a missing file once.
+pub fn load_tests(lc: &LoadedCampaign, open_loop: Option<OpenLoop>) -> anyhow::Result<Vec<AlignedTest>> {
+    let mut tests = Vec::new();
+    let mut problems: Vec<String> = Vec::new();
+    for test in &lc.campaign.tests {
+        match load_test(lc, test, open_loop)? {
+            Ok(t) => tests.push(t),
+            Err(ps) => problems.extend(ps),
+        }
     }
-    Ok(r)
+    if !problems.is_empty() {
+        return Err(BadInput(problem_list(&lc.file, "measured data", &problems)).into());
+    }
+    Ok(tests)
+}
+
+/// One problem as is; several as a counted list under the campaign's name.
+fn problem_list(campaign: &Path, what: &str, problems: &[String]) -> String {
+    if problems.len() == 1 {
+        return problems[0].clone();
+    }
+    format!("{} problems in the {what} of {}:\n  - {}", problems.len(), campaign.display(), problems.join("\n  - "))
+}
+
+/// The notes and warnings of aligned tests, printed as two blocks; under `strict`, warnings are
+/// an error (exit code 2) instead.
+pub fn report_checks(out: &mut dyn std::io::Write, campaign: &Path, tests: &[AlignedTest], extra_warnings: &[String], strict: bool) -> anyhow::Result<()> {
+    let notes: Vec<String> = tests.iter().flat_map(|t| t.notes.iter().map(move |n| format!("{}: {n}", t.name))).collect();
+    let warnings: Vec<String> = tests.iter().flat_map(|t| t.warnings.iter().cloned()).chain(extra_warnings.iter().cloned()).collect();
+    if strict && !warnings.is_empty() {
+        return Err(BadInput(format!("{} (--strict)", problem_list(campaign, "measured data", &warnings))).into());
+    }
+    if !notes.is_empty() {
+        writeln!(out, "\n  notes on the data files:")?;
+        for n in &notes {
+            writeln!(out, "    {n}")?;
+        }
+    }
+    if !warnings.is_empty() {
+        writeln!(out, "\n  WARNINGS (results above may be wrong science; --strict makes these errors):")?;
+        for w in &warnings {
+            writeln!(out, "    {w}")?;
+        }
+    }
+    Ok(())
 }

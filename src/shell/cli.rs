@@ -7,7 +7,9 @@ use std::path::PathBuf;
 #[command(name = "study", version, about = "vshake: the virtual shake table (UCSD-NEES LHPOST servo-hydraulic model)",
     long_about = "vshake: the virtual shake table. A nonlinear servo-hydraulic model of the UCSD-NEES LHPOST \
 (three-variable controller, four-port orifice servo-valves, single-ended actuators, rigid platen with friction).\n\n\
-Exit codes: 0 success; 1 a run failed (diverged, stroke or pressure limit) or a system error; 2 bad input.")]
+Exit codes: 0 success; 1 a run failed (diverged, stroke or pressure limit) or a system error; 2 bad input.\n\n\
+Documentation: README.md (tour and tutorials), docs/model.md (the physics contract: every equation, default \
+and source), docs/formats.md (measured-test files, campaigns, study files and results tables).")]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
@@ -24,8 +26,9 @@ pub enum Command {
     /// Sensitivity of each metric to each parameter: Sobol' indices (Saltelli designs), SRC and PRCC.
     Sensitivity(SensitivityArgs),
     /// Compare the model with a campaign of measured tests: harmonics, amplitude, part of the cycle, envelope.
+    #[command(long_about = COMPARE_HELP)]
     Compare(CompareArgs),
-    /// Write measurement files (FORMATS.md) made by the model, with hidden parameter changes and sensor noise.
+    /// Write measurement files (docs/formats.md) made by the model, with hidden parameter changes and sensor noise.
     Synth(SynthArgs),
     /// Calibrate effects' (and named baseline) parameters against a campaign (Levenberg-Marquardt).
     Fit(FitArgs),
@@ -122,7 +125,7 @@ pub struct SensitivityArgs {
 
 #[derive(Debug, clap::Args)]
 pub struct CompareArgs {
-    /// The campaign file (TOML, FORMATS.md): [campaign] and [[test]] entries.
+    /// The campaign file (TOML, docs/formats.md): [campaign] and [[test]] entries.
     pub campaign: PathBuf,
     /// Model file ([model.<component>] tables) to compare instead of the defaults.
     #[arg(long)]
@@ -135,11 +138,15 @@ pub struct CompareArgs {
     /// effects) or `spool` (spool_m; the model's transport delay and spool dynamics are bypassed).
     #[arg(long, value_enum)]
     pub open_loop: Option<OpenLoop>,
+    /// Treat every warning about the data (a file that does not match its test, units, a flipped
+    /// sign, a residual above half the signal) as an error (exit code 2).
+    #[arg(long)]
+    pub strict: bool,
 }
 
 #[derive(Debug, clap::Args)]
 pub struct FitArgs {
-    /// The campaign file (TOML, FORMATS.md).
+    /// The campaign file (TOML, docs/formats.md).
     pub campaign: PathBuf,
     /// Effects to add and calibrate (comma-separated; each frees its default parameters).
     #[arg(long, value_delimiter = ',')]
@@ -156,11 +163,14 @@ pub struct FitArgs {
     /// Iterations of Levenberg-Marquardt at most.
     #[arg(long, default_value_t = 40)]
     pub max_iter: usize,
+    /// Treat every warning about the data as an error (exit code 2).
+    #[arg(long)]
+    pub strict: bool,
 }
 
 #[derive(Debug, clap::Args)]
 pub struct DiagnoseArgs {
-    /// The campaign file (TOML, FORMATS.md).
+    /// The campaign file (TOML, docs/formats.md).
     pub campaign: PathBuf,
     /// Model file to start from (default: the defaults).
     #[arg(long)]
@@ -171,6 +181,9 @@ pub struct DiagnoseArgs {
     /// Folder for the report (report.html and Parquet tables: candidates, tests, evidence).
     #[arg(long)]
     pub report: Option<PathBuf>,
+    /// Treat every warning about the data as an error (exit code 2).
+    #[arg(long)]
+    pub strict: bool,
 }
 
 /// The measured column an open-loop comparison drives the plant with.
@@ -180,16 +193,6 @@ pub enum OpenLoop {
     Valve,
     /// The spool position `spool_m`, m.
     Spool,
-}
-
-impl OpenLoop {
-    /// The measured column this drive reads.
-    pub fn column(self) -> &'static str {
-        match self {
-            OpenLoop::Valve => "valve_cmd_v",
-            OpenLoop::Spool => "spool_m",
-        }
-    }
 }
 
 #[derive(Debug, clap::Args)]
@@ -218,6 +221,13 @@ pub struct SynthArgs {
     /// a tutorial or a blind test; only the noise, seed and version are recorded.
     #[arg(long)]
     pub blind: bool,
+    /// Sample rate of the written files, Hz (default: the controller's, one row per tick). At
+    /// another rate the model is sampled between its ticks, from a run at 64 substeps.
+    #[arg(long)]
+    pub rate: Option<f64>,
+    /// Seconds of recording at rest before the excitation starts (a pre-trigger).
+    #[arg(long, default_value_t = 0.0)]
+    pub pre_trigger: f64,
 }
 
 #[derive(Debug, clap::Args)]
@@ -257,6 +267,28 @@ pub struct ParamsArgs {
     /// Only this component (servovalve, actuator, platen, friction, controller).
     pub component: Option<String>,
 }
+
+const COMPARE_HELP: &str = "Compare the model with a campaign of measured tests: harmonics, amplitude, part of the cycle, envelope.
+
+The campaign (TOML) lists the tests; each names its data file (CSV or Parquet; columns time_s, ref_disp_m, \
+disp_m, accel_mps2 and optionally valve_cmd_v, force_n, p1_pa, p2_pa, spool_m, in SI units) and how it was driven:
+
+  [campaign]
+  name = \"bare_table\"
+  [[test]]
+  name = \"sine_3hz_1p73g\"
+  data = \"sine_3hz_1p73g.csv\"
+  excitation = { kind = \"sine\", freq_hz = 3.0, amp_g = 1.73, taper_s = 1.0 }
+  t0_s = 0.5                  # optional: where the excitation starts (default: found from ref_disp_m)
+  weights = { force = 0.0 }   # optional: channel weights of fits
+  model = { platen = { m = 150000.0 } }   # optional: per-test model overrides
+
+Files may be at any sample rate, with rounded time, a pre-trigger and extra length: the time base is rebuilt, \
+the excitation is found in the file, and the model (at its own controller rate) is sampled at the file's samples. \
+Every problem of every file is reported at once (exit code 2); warnings (a file that does not match its test, \
+units, a flipped sign) are printed, and are errors with --strict. The formats: docs/formats.md.
+
+Example: study compare studies/tutorial/campaign.toml --report /tmp/report";
 
 const RUN_HELP: &str = "Run a study file through the batch engine and write one Parquet row per sample x excitation: \
 sample_id, excitation_id, excitation, every parameter, every metric, status, fail_time_s, fail_reason \
@@ -303,7 +335,7 @@ The study file (TOML), SALib-style variables in Dakota-style blocks:
 
 Example: study run studies/gains_sweep.toml";
 
-const SIM_HELP: &str = "Run one configuration of the virtual shake table and print the metrics of MODEL.md §5 \
+const SIM_HELP: &str = "Run one configuration of the virtual shake table and print the metrics of docs/model.md §5 \
 (amplitude ratio, phase error, harmonics h2..h9, THD, tracking errors, max |u|).
 
 The run file is TOML:

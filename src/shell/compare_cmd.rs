@@ -1,31 +1,20 @@
 //! `study compare`: drive the model with each measured test's excitation and show where it
 //! differs: harmonics, amplitude, part of the cycle, envelope; per test and across the campaign.
 
-use super::campaign_io::{load_campaign, load_model, read_measured, test_reference};
+use super::campaign_io::{load_campaign, load_model, load_tests, report_checks};
 use super::cli::{CompareArgs, OpenLoop};
-use super::BadInput;
-use crate::kernel::excitation::Drive;
 use super::tables::{self, Column};
 use super::RunFailed;
 use crate::kernel::metrics::N_HARM;
-use crate::kernel::simulate::LaneStatus;
-use crate::orchestration::campaign::TestSpec;
-use crate::orchestration::compare::{self, Channels, Comparison};
-use crate::orchestration::sim;
-use crate::orchestration::spec::{ExcitationSpec, SimSpec};
+use crate::orchestration::compare::{self, Compared, Comparison};
+use crate::orchestration::measured::{self, fmt_row, AlignedTest, Start};
+use crate::orchestration::spec::ExcitationSpec;
+use crate::orchestration::timebase::fmt_rate;
+use rayon::prelude::*;
 use std::io::Write;
 
-/// One compared test, with what the report tables need.
-pub struct Compared {
-    pub test: TestSpec,
-    pub comparison: Comparison,
-    pub time: Vec<f64>,
-    pub accel_measured: Vec<f64>,
-    pub accel_model: Vec<f64>,
-    pub window: (usize, usize),
-}
-
-fn excitation_label(e: &ExcitationSpec) -> (String, f64, f64) {
+/// A test's excitation in words, with its frequency and amplitude in g (NaN for a record).
+pub fn excitation_label(e: &ExcitationSpec) -> (String, f64, f64) {
     match e {
         ExcitationSpec::Sine { sine, amp_g } => {
             let g = amp_g.unwrap_or(sine.amp_m * (2.0 * std::f64::consts::PI * sine.freq_hz).powi(2) / crate::kernel::params::G);
@@ -35,54 +24,33 @@ fn excitation_label(e: &ExcitationSpec) -> (String, f64, f64) {
     }
 }
 
-/// Compares every test of a campaign (used by `compare`, and by later diagnosis).
-pub fn compare_campaign(args: &CompareArgs) -> anyhow::Result<Vec<Compared>> {
-    let model = load_model(args.model.as_deref())?;
-    let lc = load_campaign(&args.campaign, &model)?;
-    let mut out = Vec::new();
-    for test in &lc.campaign.tests {
-        let path = lc.base.join(&test.data);
-        let m = read_measured(&path, test.model.controller.f_s)?;
-        let mut reference = test_reference(test, m.rows(), &lc.base, &path)?;
-        let mut model = test.model.clone();
-        if let Some(mode) = args.open_loop {
-            let col = mode.column();
-            let data = m.column(col).ok_or_else(|| {
-                BadInput(format!("{}: column `{col}` is missing; `--open-loop {}` drives the model with it", path.display(), col.split('_').next().unwrap_or(col)))
-            })?;
-            reference.drive = match mode {
-                OpenLoop::Valve => Drive::ValveCommand(data.to_vec()),
-                OpenLoop::Spool => {
-                    // A measured spool already holds the valve's delay and dynamics.
-                    model.effects.transport_delay = false;
-                    model.effects.spool_dynamics = false;
-                    Drive::Spool(data.to_vec())
-                }
-            };
+impl From<OpenLoop> for measured::OpenLoop {
+    fn from(o: OpenLoop) -> Self {
+        match o {
+            OpenLoop::Valve => measured::OpenLoop::Valve,
+            OpenLoop::Spool => measured::OpenLoop::Spool,
         }
-        let spec = SimSpec { model, excitation: test.excitation.clone(), solver: Default::default() };
-        let outcome = sim::run_sim(&spec, &reference)?;
-        if let LaneStatus::Failed { time_s, reason } = outcome.result.status {
-            return Err(RunFailed(format!("test {:?}: the model failed at t = {time_s:.4} s: {reason}", test.name)).into());
-        }
-        let h = &outcome.history;
-        let model_ch = Channels { accel: h.channel("accel_mps2").unwrap(), disp: h.channel("disp_m").unwrap(), force: h.channel("force_n") };
-        let meas_ch = Channels { accel: m.column("accel_mps2").unwrap(), disp: m.column("disp_m").unwrap(), force: m.column("force_n") };
-        let comparison = compare::compare(&reference, &meas_ch, &model_ch);
-        out.push(Compared {
-            test: test.clone(),
-            comparison,
-            time: m.column("time_s").unwrap().to_vec(),
-            accel_measured: meas_ch.accel.to_vec(),
-            accel_model: model_ch.accel.to_vec(),
-            window: reference.window,
-        });
     }
-    Ok(out)
+}
+
+/// Compares every test (in parallel); a model failure stops with its test and reason.
+fn compare_all(tests: &[AlignedTest]) -> anyhow::Result<Vec<Compared>> {
+    let solver = Default::default();
+    let out: Vec<Result<Compared, String>> = tests.par_iter().map(|t| compare::compare_test(t, &solver)).collect();
+    out.into_iter().map(|r| r.map_err(|e| RunFailed(e).into())).collect()
+}
+
+/// A number for a table cell: "-" for NaN.
+fn cell(v: f64, f: impl Fn(f64) -> String) -> String {
+    if v.is_finite() { f(v) } else { "-".into() }
 }
 
 pub fn run(args: &CompareArgs) -> anyhow::Result<()> {
-    let results = compare_campaign(args)?;
+    let model = load_model(args.model.as_deref())?;
+    let lc = load_campaign(&args.campaign, &model)?;
+    let tests = load_tests(&lc, args.open_loop.map(Into::into))?;
+    let results = compare_all(&tests)?;
+    let residual_warnings: Vec<String> = results.iter().filter_map(Compared::residual_warning).collect();
     let mut o = std::io::stdout().lock();
     writeln!(
         o,
@@ -93,82 +61,134 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<()> {
         drive_label(args.open_loop)
     )?;
     writeln!(o)?;
+    print_tests(&mut o, &results)?;
+    print_files(&mut o, &results)?;
+    print_bins(&mut o, &results)?;
+    print_amplitudes(&mut o, &results)?;
+    report_checks(&mut o, &args.campaign, &tests, &residual_warnings, args.strict)?;
+    let n_warn = tests.iter().map(|t| t.warnings.len()).sum::<usize>() + residual_warnings.len();
+    if let Some(dir) = &args.report {
+        write_tables(dir, &results, args.open_loop)?;
+        let page = super::report::html(&format!("vshake: model versus measurement, {} ({})", args.campaign.display(), drive_label(args.open_loop)), &results, &residual_warnings)?;
+        let path = dir.join("report.html");
+        let out = tables::AtomicFile::new(&path);
+        std::fs::write(&out.tmp, page)?;
+        out.commit()?;
+        writeln!(o, "\n  wrote {} and its tables (tests, harmonics, bins, cycles, overlay .parquet)", path.display())?;
+    }
+    if n_warn > 0 {
+        eprintln!("warning: {n_warn} warning(s) about the measured data: see the WARNINGS block of the output");
+    }
+    Ok(())
+}
+
+fn print_tests(o: &mut dyn Write, results: &[Compared]) -> std::io::Result<()> {
     writeln!(
         o,
         "  {:<22} {:<20} {:>15} {:>17} {:>15} {:>10} {:>10} {:>10} {:>10} {:>15}",
         "test", "excitation", "ratio meas/mod", "phase° meas/mod", "h3 meas/mod", "resid a", "resid x", "resid F", "worst k", "drift meas/mod"
     )?;
-    for r in &results {
+    for r in results {
         let c = &r.comparison;
         let (label, _, _) = excitation_label(&r.test.excitation);
-        let worst = (1..N_HARM).max_by(|&a, &b| c.residual[a].0.hypot(c.residual[a].1).total_cmp(&c.residual[b].0.hypot(c.residual[b].1)));
+        let worst = (1..N_HARM).filter(|&k| c.residual[k].0.is_finite()).max_by(|&a, &b| c.residual[a].0.hypot(c.residual[a].1).total_cmp(&c.residual[b].0.hypot(c.residual[b].1)));
         let worst = worst.map_or("-".to_string(), |k| format!("h{} {:.1e}", k + 1, c.residual[k].0.hypot(c.residual[k].1)));
         writeln!(
             o,
-            "  {:<22} {:<20} {:>15} {:>17} {:>15} {:>10.2e} {:>10.2e} {:>10} {:>10} {:>15}",
+            "  {:<22} {:<20} {:>15} {:>17} {:>15} {:>10} {:>10} {:>10} {:>10} {:>15}",
             r.test.name,
             label,
-            format!("{:.4}/{:.4}", c.amp_ratio_measured, c.amp_ratio_model),
-            format!("{:+.2}/{:+.2}", c.phase_measured_deg, c.phase_model_deg),
-            format!("{:.4}/{:.4}", c.h_measured[1], c.h_model[1]),
-            c.rms_residual_accel_ratio,
-            c.rms_residual_disp_ratio,
-            c.rms_residual_force_ratio.map_or("-".to_string(), |v| format!("{v:.2e}")),
+            format!("{}/{}", cell(c.amp_ratio_measured, |v| format!("{v:.4}")), cell(c.amp_ratio_model, |v| format!("{v:.4}"))),
+            format!("{}/{}", cell(c.phase_measured_deg, |v| format!("{v:+.2}")), cell(c.phase_model_deg, |v| format!("{v:+.2}"))),
+            format!("{}/{}", cell(c.h_measured[1], |v| format!("{v:.4}")), cell(c.h_model[1], |v| format!("{v:.4}"))),
+            cell(c.rms_residual_accel_ratio, |v| format!("{v:.2e}")),
+            cell(c.rms_residual_disp_ratio, |v| format!("{v:.2e}")),
+            c.rms_residual_force_ratio.map_or("-".to_string(), |v| cell(v, |v| format!("{v:.2e}"))),
             worst,
-            format!("{:+.1e}/{:+.1e}", c.drift_measured, c.drift_model),
+            format!("{}/{}", cell(c.drift_measured, |v| format!("{v:+.1e}")), cell(c.drift_model, |v| format!("{v:+.1e}"))),
         )?;
     }
+    Ok(())
+}
+
+/// How each file was read: its rate, where the excitation starts and ends, the window.
+fn print_files(o: &mut dyn Write, results: &[Compared]) -> std::io::Result<()> {
+    writeln!(o)?;
+    writeln!(o, "  data files (sample rate; where the excitation starts and ends in the file; the analysis window):")?;
+    writeln!(o, "  {:<22} {:>10}  {:<28} {:<20} {}", "test", "rate", "start", "end", "window")?;
+    for r in results {
+        let a = &r.test.alignment;
+        let how = match a.start {
+            Start::Detected => "found",
+            Start::Given => "t0_s",
+            Start::FirstRow => "first row",
+        };
+        let window = match a.cycles {
+            Some(c) => format!("{c} cycles, {} samples", a.window.1 - a.window.0),
+            None => format!("{} samples", a.window.1 - a.window.0),
+        };
+        writeln!(
+            o,
+            "  {:<22} {:>10}  {:<28} {:<20} {}",
+            r.test.name,
+            format!("{} Hz", fmt_rate(a.time.rate_hz)),
+            format!("{:.4} s (row {}, {how})", a.start_s(), fmt_row(a.start_row)),
+            format!("{:.4} s (row {})", a.end_s(), a.end_row),
+            window
+        )?;
+    }
+    Ok(())
+}
+
+
+fn print_bins(o: &mut dyn Write, results: &[Compared]) -> std::io::Result<()> {
     writeln!(o)?;
     writeln!(o, "  residual of the acceleration by part of the cycle (rms in the part / rms of the measured acceleration):")?;
     writeln!(o, "  (and the kinematic consistency |a1|/(w^2 |x1|) of the acceleration and displacement channels: 1 for one rigid body)")?;
     writeln!(o, "  {:<22} {:>18} {:>18} {:>18} {:>17}", "test", "velocity reversal", "peak velocity", "peak displacement", "a/x meas/mod")?;
-    for r in &results {
+    for r in results {
         let c = &r.comparison;
         let b = &c.bins;
+        let e = |v: f64| cell(v, |v| format!("{v:.2e}"));
         writeln!(
             o,
-            "  {:<22} {:>18.2e} {:>18.2e} {:>18.2e} {:>17}",
+            "  {:<22} {:>18} {:>18} {:>18} {:>17}",
             r.test.name,
-            b[0].rms_residual_ratio,
-            b[1].rms_residual_ratio,
-            b[2].rms_residual_ratio,
-            format!("{:.4}/{:.4}", c.accel_over_disp_measured, c.accel_over_disp_model)
+            e(b[0].rms_residual_ratio),
+            e(b[1].rms_residual_ratio),
+            e(b[2].rms_residual_ratio),
+            format!("{}/{}", cell(c.accel_over_disp_measured, |v| format!("{v:.4}")), cell(c.accel_over_disp_model, |v| format!("{v:.4}")))
         )?;
     }
-    // Across the campaign: error against amplitude, per frequency.
+    Ok(())
+}
+
+/// Across the campaign: error against amplitude, per frequency.
+fn print_amplitudes(o: &mut dyn Write, results: &[Compared]) -> std::io::Result<()> {
     let mut sines: Vec<(f64, f64, &Compared)> =
         results.iter().filter_map(|r| match excitation_label(&r.test.excitation) { (_, f, g) if f.is_finite() => Some((f, g, r)), _ => None }).collect();
-    if !sines.is_empty() {
-        sines.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
-        writeln!(o)?;
-        writeln!(o, "  error against amplitude, per frequency (rms acceleration residual / rms measured):")?;
-        let mut last = f64::NAN;
-        for (f, g, r) in &sines {
-            if *f != last {
-                write!(o, "{}  {f:>6} Hz:", if last.is_nan() { "" } else { "\n" })?;
-                last = *f;
-            }
-            write!(o, "  {g:.2} g -> {:.2e}", r.comparison.rms_residual_accel_ratio)?;
+    if sines.is_empty() {
+        return Ok(());
+    }
+    sines.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
+    writeln!(o)?;
+    writeln!(o, "  error against amplitude, per frequency (rms acceleration residual / rms measured):")?;
+    let mut last = f64::NAN;
+    for (f, g, r) in &sines {
+        if *f != last {
+            write!(o, "{}  {f:>6} Hz:", if last.is_nan() { "" } else { "\n" })?;
+            last = *f;
         }
-        writeln!(o)?;
+        write!(o, "  {g:.2} g -> {}", cell(r.comparison.rms_residual_accel_ratio, |v| format!("{v:.2e}")))?;
     }
-    if let Some(dir) = &args.report {
-        write_tables(dir, &results, args.open_loop)?;
-        let page = super::report::html(&format!("vshake: model versus measurement, {} ({})", args.campaign.display(), drive_label(args.open_loop)), &results)?;
-        let path = dir.join("report.html");
-        let out = super::tables::AtomicFile::new(&path);
-        std::fs::write(&out.tmp, page)?;
-        out.commit()?;
-        writeln!(o, "\n  wrote {} and its tables (tests, harmonics, bins, cycles, overlay .parquet)", path.display())?;
-    }
-    Ok(())
+    writeln!(o)
 }
 
 /// How the model was driven, in words.
 pub fn drive_label(open_loop: Option<OpenLoop>) -> String {
     match open_loop {
         None => "closed loop".to_string(),
-        Some(m) => format!("open loop on the measured {}", m.column()),
+        Some(m) => format!("open loop on the measured {}", measured::OpenLoop::from(m).column()),
     }
 }
 
@@ -187,6 +207,11 @@ pub fn write_tables(dir: &std::path::Path, results: &[Compared], open_loop: Opti
         ("excitation".to_string(), s(&|r| excitation_label(&r.test.excitation).0)),
         ("freq_hz".to_string(), x(&|r| excitation_label(&r.test.excitation).1)),
         ("amp_g".to_string(), x(&|r| excitation_label(&r.test.excitation).2)),
+        ("rate_hz".to_string(), x(&|r| r.test.alignment.time.rate_hz)),
+        ("start_s".to_string(), x(&|r| r.test.alignment.start_s())),
+        ("start_row".to_string(), x(&|r| r.test.alignment.start_row + 1.0)),
+        ("end_s".to_string(), x(&|r| r.test.alignment.end_s())),
+        ("window_samples".to_string(), Column::U32(results.iter().map(|r| r.test.samples.len() as u32).collect())),
         ("amp_ratio_measured".to_string(), x(&|r| r.comparison.amp_ratio_measured)),
         ("amp_ratio_model".to_string(), x(&|r| r.comparison.amp_ratio_model)),
         ("phase_measured_deg".to_string(), x(&|r| r.comparison.phase_measured_deg)),
@@ -204,6 +229,8 @@ pub fn write_tables(dir: &std::path::Path, results: &[Compared], open_loop: Opti
         ("drift_model_per_cycle".to_string(), x(&|r| r.comparison.drift_model)),
         ("accel_over_disp_measured".to_string(), x(&|r| r.comparison.accel_over_disp_measured)),
         ("accel_over_disp_model".to_string(), x(&|r| r.comparison.accel_over_disp_model)),
+        ("warnings".to_string(), s(&|r| r.test.warnings.iter().cloned().chain(r.residual_warning()).collect::<Vec<_>>().join("\n"))),
+        ("notes".to_string(), s(&|r| r.test.notes.join("\n"))),
     ]);
     tables::write_table(&dir.join("tests.parquet"), cols, &meta)?;
 
@@ -249,15 +276,15 @@ pub fn write_tables(dir: &std::path::Path, results: &[Compared], open_loop: Opti
         &meta,
     )?;
 
-    let ov: Vec<(&Compared, usize)> = results.iter().flat_map(|r| (r.window.0..r.window.1).map(move |k| (r, k))).collect();
+    let ov: Vec<(&Compared, usize)> = results.iter().flat_map(|r| (0..r.test.samples.len()).map(move |k| (r, k))).collect();
     tables::write_table(
         &dir.join("overlay.parquet"),
         vec![
             ("test".into(), Column::Str(ov.iter().map(|(r, _)| r.test.name.clone()).collect())),
-            ("time_s".into(), Column::F64(ov.iter().map(|(r, k)| r.time[*k]).collect())),
-            ("accel_measured_mps2".into(), Column::F64(ov.iter().map(|(r, k)| r.accel_measured[*k]).collect())),
+            ("time_s".into(), Column::F64(ov.iter().map(|(r, k)| r.test.samples.time[*k]).collect())),
+            ("accel_measured_mps2".into(), Column::F64(ov.iter().map(|(r, k)| r.test.measured.accel[*k]).collect())),
             ("accel_model_mps2".into(), Column::F64(ov.iter().map(|(r, k)| r.accel_model[*k]).collect())),
-            ("residual_mps2".into(), Column::F64(ov.iter().map(|(r, k)| r.accel_model[*k] - r.accel_measured[*k]).collect())),
+            ("residual_mps2".into(), Column::F64(ov.iter().map(|(r, k)| r.accel_model[*k] - r.test.measured.accel[*k]).collect())),
         ],
         &meta,
     )?;

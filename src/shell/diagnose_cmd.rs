@@ -1,7 +1,8 @@
 //! `study diagnose`: fit every candidate effect and say which one is most likely missing.
 
 use super::cli::DiagnoseArgs;
-use super::fit_cmd::{check_effect, load_problem};
+use super::fit_cmd::{check_effect, load_problem, print_checks, residual_warnings};
+use super::BadInput;
 use super::tables::{self, Column};
 use super::{campaign_io::load_model, RunFailed};
 use crate::kernel::params::EFFECTS;
@@ -26,12 +27,17 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
     } else {
         args.candidates.iter().map(|c| check_effect(c, "--candidates")).collect::<anyhow::Result<_>>()?
     };
-    let (_, problem) = load_problem(&args.campaign, &model)?;
+    let loaded = load_problem(&args.campaign, &model, args.strict)?;
+    let problem = loaded.problem;
     let t0 = std::time::Instant::now();
     let d = diagnose::diagnose(&problem, &candidates);
     let secs = t0.elapsed().as_secs_f64();
     if let Some(f) = &d.baseline.failure {
         return Err(RunFailed(format!("the starting model fails: {f}")).into());
+    }
+    let implausible = residual_warnings(&problem, &d.baseline);
+    if args.strict && !implausible.is_empty() {
+        return Err(BadInput(format!("{} (--strict)", implausible.join("\n"))).into());
     }
     let mut o = std::io::stdout().lock();
     let chi2_b = d.baseline.chi2();
@@ -86,6 +92,7 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
         write_report(dir, &args.campaign.display().to_string(), &problem, &d)?;
         writeln!(o, "\n  wrote {} and its tables (candidates, tests, evidence .parquet)", dir.join("report.html").display())?;
     }
+    print_checks(&mut o, &loaded.checks, &implausible)?;
     Ok(())
 }
 

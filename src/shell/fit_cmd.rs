@@ -1,6 +1,6 @@
 //! `study fit`: calibrate effects' parameters against a campaign and write the fitted model.
 
-use super::campaign_io::{load_campaign, load_model, read_measured, test_reference, LoadedCampaign};
+use super::campaign_io::{load_campaign, load_model, load_tests, report_checks, LoadedCampaign};
 use super::cli::FitArgs;
 use super::{BadInput, RunFailed};
 use crate::kernel::params::{ModelParams, EFFECTS};
@@ -9,21 +9,37 @@ use crate::orchestration::toml_fields::suggest;
 use std::io::Write;
 use std::path::Path;
 
-/// Reads a campaign and its measured tests into a fitting problem.
-pub fn load_problem(campaign: &Path, model: &ModelParams) -> anyhow::Result<(LoadedCampaign, Problem)> {
+/// A campaign's measured tests as a fitting problem, with what was noticed reading them.
+pub struct Loaded {
+    pub campaign: LoadedCampaign,
+    pub problem: Problem,
+    /// The notes and warnings about the data files, as printed.
+    pub checks: String,
+}
+
+/// Reads a campaign and its measured tests into a fitting problem. The data's warnings are an
+/// error under `strict`.
+pub fn load_problem(campaign: &Path, model: &ModelParams, strict: bool) -> anyhow::Result<Loaded> {
     let lc = load_campaign(campaign, model)?;
-    let mut tests = Vec::new();
-    for test in &lc.campaign.tests {
-        let path = lc.base.join(&test.data);
-        let m = read_measured(&path, test.model.controller.f_s)?;
-        let reference = test_reference(test, m.rows(), &lc.base, &path)?;
-        let col = |n: &str| m.column(n).map(<[f64]>::to_vec);
-        tests.push(TestData::new(test.name.clone(), test.model.clone(), reference, [col("accel_mps2"), col("disp_m"), col("force_n")], test.weights));
-    }
-    if tests.is_empty() {
+    let aligned = load_tests(&lc, None)?;
+    if aligned.is_empty() {
         return Err(BadInput(format!("{}: the campaign has no tests", campaign.display())).into());
     }
-    Ok((lc, Problem::new(tests)))
+    let mut checks = Vec::new();
+    report_checks(&mut checks, campaign, &aligned, &[], strict)?;
+    let tests = aligned.iter().map(TestData::new).collect();
+    Ok(Loaded { campaign: lc, problem: Problem::new(tests), checks: String::from_utf8_lossy(&checks).into_owned() })
+}
+
+/// Warnings for tests whose baseline residual is above half the signal (the evaluation `e`).
+pub fn residual_warnings(problem: &Problem, e: &fit::Eval) -> Vec<String> {
+    problem
+        .tests
+        .iter()
+        .enumerate()
+        .filter(|(t, _)| e.rms.get(*t).is_some_and(|r| r[0] > crate::orchestration::compare::IMPLAUSIBLE_RESIDUAL))
+        .map(|(t, test)| format!("test {:?}: the starting model's residual is {:.0} % of the measured acceleration: the file of another test, a channel in other units, or a test that did not run as the campaign says?", test.name, 100.0 * e.rms[t][0]))
+        .collect()
 }
 
 /// Checks an effect name against the library.
@@ -61,14 +77,37 @@ pub fn free_parameters(effects: &[String], named: &[String], model: &ModelParams
     Ok(free)
 }
 
+/// The data notes and warnings after a fit's or a diagnosis's results (a one-line pointer on
+/// stderr when there are warnings).
+pub fn print_checks(o: &mut dyn Write, checks: &str, implausible: &[String]) -> std::io::Result<()> {
+    write!(o, "{checks}")?;
+    if !implausible.is_empty() {
+        if !checks.contains("WARNINGS") {
+            writeln!(o, "\n  WARNINGS (results above may be wrong science; --strict makes these errors):")?;
+        }
+        for w in implausible {
+            writeln!(o, "    {w}")?;
+        }
+    }
+    if checks.contains("WARNINGS") || !implausible.is_empty() {
+        eprintln!("warning: there are warnings about the measured data: see the WARNINGS block of the output");
+    }
+    Ok(())
+}
+
 pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     let model = load_model(args.model.as_deref())?;
     let free = free_parameters(&args.effect, &args.free, &model)?;
-    let (_, problem) = load_problem(&args.campaign, &model)?;
+    let loaded = load_problem(&args.campaign, &model, args.strict)?;
+    let problem = &loaded.problem;
     let t0 = std::time::Instant::now();
-    let r = fit::fit(&problem, &free, args.max_iter).map_err(|e| RunFailed(format!("the fit failed: {e}")))?;
+    let r = fit::fit(problem, &free, args.max_iter).map_err(|e| RunFailed(format!("the fit failed: {e}")))?;
     if let Some(f) = &r.before.failure {
         return Err(RunFailed(format!("the starting model fails: {f}")).into());
+    }
+    let implausible = residual_warnings(problem, &r.before);
+    if args.strict && !implausible.is_empty() {
+        return Err(BadInput(format!("{} (--strict)", implausible.join("\n"))).into());
     }
     let mut o = std::io::stdout().lock();
     writeln!(
@@ -120,5 +159,6 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     std::fs::write(&out.tmp, header + &toml::to_string(&root)?)?;
     out.commit()?;
     writeln!(o, "\n  wrote {} (use it with --model)", args.out.display())?;
+    print_checks(&mut o, &loaded.checks, &implausible)?;
     Ok(())
 }

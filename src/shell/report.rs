@@ -1,9 +1,11 @@
 //! The HTML report of `study compare`: a summary table and, drawn by plotters as inline SVG, the
 //! time-history overlay with its residual, the harmonic bars (model against measured) per test,
 //! and the error against amplitude across the campaign. The numbers behind every plot are the
-//! Parquet tables written beside it.
+//! Parquet tables written beside it. A non-finite value is never drawn: a line breaks around it
+//! and a bar is left out, and a table cell shows "-".
 
-use super::compare_cmd::Compared;
+use crate::orchestration::compare::Compared;
+use crate::orchestration::timebase::fmt_rate;
 use crate::kernel::metrics::N_HARM;
 use plotters::prelude::*;
 use std::fmt::Write as _;
@@ -21,6 +23,40 @@ fn range(v: impl Iterator<Item = f64>) -> (f64, f64) {
     (lo - pad, hi + pad)
 }
 
+/// The runs of consecutive finite points of a line (a NaN breaks the line; it is never drawn).
+pub fn finite_runs(pts: impl Iterator<Item = (f64, f64)>) -> Vec<Vec<(f64, f64)>> {
+    let mut runs: Vec<Vec<(f64, f64)>> = vec![Vec::new()];
+    for p in pts {
+        if p.0.is_finite() && p.1.is_finite() {
+            runs.last_mut().expect("one run").push(p);
+        } else if !runs.last().expect("one run").is_empty() {
+            runs.push(Vec::new());
+        }
+    }
+    runs.retain(|r| !r.is_empty());
+    runs
+}
+
+/// Draws a line of possibly non-finite points as its finite runs; returns the first run's series
+/// annotation target, if any.
+fn draw_line<DB: DrawingBackend>(
+    c: &mut ChartContext<'_, DB, Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>>,
+    pts: impl Iterator<Item = (f64, f64)>,
+    style: ShapeStyle,
+    label: Option<&str>,
+) -> Result<(), Box<dyn std::error::Error>>
+where
+    DB::ErrorType: 'static,
+{
+    for (i, run) in finite_runs(pts).into_iter().enumerate() {
+        let series = c.draw_series(LineSeries::new(run, style))?;
+        if let (0, Some(l)) = (i, label) {
+            series.label(l).legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], style));
+        }
+    }
+    Ok(())
+}
+
 /// Measured and model acceleration over the window, and their residual below.
 fn overlay_svg(r: &Compared) -> Result<String, Box<dyn std::error::Error>> {
     let mut s = String::new();
@@ -28,10 +64,10 @@ fn overlay_svg(r: &Compared) -> Result<String, Box<dyn std::error::Error>> {
         let root = SVGBackend::with_string(&mut s, (760, 420)).into_drawing_area();
         root.fill(&WHITE)?;
         let (top, bottom) = root.split_vertically(280);
-        let (w0, w1) = r.window;
-        let t = &r.time[w0..w1];
+        let t = &r.test.samples.time;
+        let meas = &r.test.measured.accel;
         let (tx0, tx1) = (t[0], t[t.len() - 1]);
-        let (y0, y1) = range(r.accel_measured[w0..w1].iter().chain(&r.accel_model[w0..w1]).copied());
+        let (y0, y1) = range(meas.iter().chain(&r.accel_model).copied());
         let mut c = ChartBuilder::on(&top)
             .caption(format!("{}: platen acceleration", r.test.name), ("sans-serif", 16))
             .margin(8)
@@ -39,18 +75,14 @@ fn overlay_svg(r: &Compared) -> Result<String, Box<dyn std::error::Error>> {
             .y_label_area_size(55)
             .build_cartesian_2d(tx0..tx1, y0..y1)?;
         c.configure_mesh().y_desc("m/s²").draw()?;
-        c.draw_series(LineSeries::new(t.iter().zip(&r.accel_measured[w0..w1]).map(|(a, b)| (*a, *b)), MEASURED.stroke_width(2)))?
-            .label("measured")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], MEASURED));
-        c.draw_series(LineSeries::new(t.iter().zip(&r.accel_model[w0..w1]).map(|(a, b)| (*a, *b)), MODEL.stroke_width(1)))?
-            .label("model")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], MODEL));
+        draw_line(&mut c, t.iter().copied().zip(meas.iter().copied()), MEASURED.stroke_width(2), Some("measured"))?;
+        draw_line(&mut c, t.iter().copied().zip(r.accel_model.iter().copied()), MODEL.stroke_width(1), Some("model"))?;
         c.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
-        let res: Vec<f64> = (w0..w1).map(|k| r.accel_model[k] - r.accel_measured[k]).collect();
+        let res: Vec<f64> = r.accel_model.iter().zip(meas).map(|(m, x)| m - x).collect();
         let (r0, r1) = range(res.iter().copied());
         let mut c = ChartBuilder::on(&bottom).margin(8).x_label_area_size(30).y_label_area_size(55).build_cartesian_2d(tx0..tx1, r0..r1)?;
         c.configure_mesh().x_desc("t (s)").y_desc("model − meas.").draw()?;
-        c.draw_series(LineSeries::new(t.iter().zip(&res).map(|(a, b)| (*a, *b)), RESIDUAL))?;
+        draw_line(&mut c, t.iter().copied().zip(res.iter().copied()), RESIDUAL.into(), None)?;
         root.present()?;
     }
     Ok(s)
@@ -124,10 +156,8 @@ fn amplitude_svg(results: &[Compared]) -> Result<Option<String>, Box<dyn std::er
         for (i, f) in freqs.iter().enumerate() {
             let color = Palette99::pick(i).to_rgba();
             let line: Vec<(f64, f64)> = pts.iter().filter(|p| p.0 == *f).map(|p| (p.1, p.2)).collect();
-            c.draw_series(LineSeries::new(line.clone(), color.stroke_width(2)))?
-                .label(format!("{f} Hz"))
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
-            c.draw_series(line.into_iter().map(|p| Circle::new(p, 4, color.filled())))?;
+            draw_line(&mut c, line.iter().copied(), color.stroke_width(2), Some(&format!("{f} Hz")))?;
+            c.draw_series(line.into_iter().filter(|p| p.1.is_finite()).map(|p| Circle::new(p, 4, color.filled())))?;
         }
         c.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
         root.present()?;
@@ -139,8 +169,13 @@ fn esc(s: &str) -> String {
     s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
 }
 
+/// A number for a table cell ("-" when not finite).
+fn num(v: f64, f: impl Fn(f64) -> String) -> String {
+    if v.is_finite() { f(v) } else { "-".into() }
+}
+
 /// The whole report as one self-contained HTML page.
-pub fn html(title: &str, results: &[Compared]) -> anyhow::Result<String> {
+pub fn html(title: &str, results: &[Compared], extra_warnings: &[String]) -> anyhow::Result<String> {
     let plot = |r: Result<String, Box<dyn std::error::Error>>| r.map_err(|e| anyhow::anyhow!("drawing a plot: {e}"));
     let mut h = String::new();
     write!(
@@ -157,19 +192,43 @@ figure{{margin:12px 0}} .legend span{{display:inline-block;width:14px;height:4px
         let c = &r.comparison;
         writeln!(
             h,
-            "<tr><td>{}</td><td>{:.4}</td><td>{:.4}</td><td>{:+.2}</td><td>{:+.2}</td><td>{:.4}</td><td>{:.4}</td><td>{:.2e}</td><td>{:.2e}</td><td>{}</td><td>{:+.1e}</td><td>{:+.1e}</td></tr>",
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
             esc(&r.test.name),
-            c.amp_ratio_measured,
-            c.amp_ratio_model,
-            c.phase_measured_deg,
-            c.phase_model_deg,
-            c.h_measured[1],
-            c.h_model[1],
-            c.rms_residual_accel_ratio,
-            c.rms_residual_disp_ratio,
-            c.rms_residual_force_ratio.map_or("-".into(), |v| format!("{v:.2e}")),
-            c.drift_measured,
-            c.drift_model
+            num(c.amp_ratio_measured, |v| format!("{v:.4}")),
+            num(c.amp_ratio_model, |v| format!("{v:.4}")),
+            num(c.phase_measured_deg, |v| format!("{v:+.2}")),
+            num(c.phase_model_deg, |v| format!("{v:+.2}")),
+            num(c.h_measured[1], |v| format!("{v:.4}")),
+            num(c.h_model[1], |v| format!("{v:.4}")),
+            num(c.rms_residual_accel_ratio, |v| format!("{v:.2e}")),
+            num(c.rms_residual_disp_ratio, |v| format!("{v:.2e}")),
+            c.rms_residual_force_ratio.map_or("-".into(), |v| num(v, |v| format!("{v:.2e}"))),
+            num(c.drift_measured, |v| format!("{v:+.1e}")),
+            num(c.drift_model, |v| format!("{v:+.1e}"))
+        )?;
+    }
+    h.push_str("</table>\n");
+    let warnings: Vec<&String> = results.iter().flat_map(|r| r.test.warnings.iter()).chain(extra_warnings).collect();
+    if !warnings.is_empty() {
+        h.push_str("<h2>Warnings</h2>\n<ul id=\"warnings\" style=\"color:#a00\">\n");
+        for w in warnings {
+            writeln!(h, "<li>{}</li>", esc(w))?;
+        }
+        h.push_str("</ul>\n");
+    }
+    h.push_str("<h2>Data files</h2>\n<table id=\"files\"><tr><th>test</th><th>file</th><th>rate</th><th>excitation starts</th><th>ends</th><th>window</th><th>notes</th></tr>\n");
+    for r in results {
+        let a = &r.test.alignment;
+        writeln!(
+            h,
+            "<tr><td>{}</td><td>{}</td><td>{} Hz</td><td>{:.4} s</td><td>{:.4} s</td><td>{} samples</td><td style=\"text-align:left\">{}</td></tr>",
+            esc(&r.test.name),
+            esc(&r.test.file.display().to_string()),
+            fmt_rate(a.time.rate_hz),
+            a.start_s(),
+            a.end_s(),
+            r.test.samples.len(),
+            esc(&r.test.notes.join("; "))
         )?;
     }
     h.push_str("</table>\n");

@@ -16,7 +16,7 @@ use anyhow::Context;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-/// Version of the results table layout (FORMATS.md "Results").
+/// Version of the results table layout (docs/formats.md "Results").
 pub const SCHEMA_VERSION: &str = "1";
 
 /// Reads and validates a study file.

@@ -25,7 +25,8 @@ pub fn reference_for(excitation: &ExcitationSpec, model: &ModelParams, base: &Pa
         ExcitationSpec::Record { file, column, time_column, f_ref_hz, scale } => {
             let path = base.join(file);
             let t = tables::read_columns(&path, &[time_column, column], &[]).map_err(input_if_user)?;
-            t.check_time(time_column).map_err(input_if_user)?;
+            // Rounded time is rebuilt into its uniform grid; a gap or a drift is refused.
+            let grid = t.time_base(time_column).map_err(|p| BadInput(p.to_string()))?;
             let disp: Vec<f64> = t.column(column).unwrap().iter().map(|d| d * scale).collect();
             let l = model.actuator.l;
             if let Some((row, d)) = disp.iter().enumerate().find(|(_, d)| d.abs() >= l) {
@@ -36,7 +37,7 @@ pub fn reference_for(excitation: &ExcitationSpec, model: &ModelParams, base: &Pa
                 ))
                 .into());
             }
-            let rec = Record { time_s: t.column(time_column).unwrap().to_vec(), disp_m: disp, f_ref_hz: *f_ref_hz };
+            let rec = Record { time_s: (0..t.rows()).map(|i| grid.time(i as f64)).collect(), disp_m: disp, f_ref_hz: *f_ref_hz };
             Ok(rec.reference(f_s))
         }
     }

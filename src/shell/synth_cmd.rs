@@ -1,4 +1,4 @@
-//! `study synth`: measurement files (FORMATS.md) made by the model, with hidden parameter changes
+//! `study synth`: measurement files (docs/formats.md) made by the model, with hidden parameter changes
 //! and seeded sensor noise, for testing comparisons and diagnoses on data whose truth is known.
 
 use super::campaign_io::{load_campaign, load_model};
@@ -6,8 +6,10 @@ use super::cli::SynthArgs;
 use super::sim_cmd::reference_for;
 use super::tables::{self, Column};
 use super::{BadInput, RunFailed};
+use crate::kernel::excitation::Reference;
 use crate::kernel::params::ModelParams;
-use crate::kernel::simulate::LaneStatus;
+use crate::kernel::resample::ch;
+use crate::kernel::simulate::{LaneStatus, Solver};
 use crate::orchestration::sim;
 use crate::orchestration::spec::{ExcitationSpec, SimSpec};
 use anyhow::Context;
@@ -80,11 +82,56 @@ pub fn write_measured(path: &Path, cols: &[(&str, Vec<f64>)], meta: &[(String, S
     Ok(())
 }
 
+/// Substeps of a run sampled off the controller's ticks [chosen: the written "truth" is a finer
+/// run than the default 8 the comparison uses, so a test of another rate also checks the
+/// comparison's own integration].
+const FINE_SUBSTEPS: usize = 64;
+
+/// The measured-file columns of one test at `rate` (Hz) after `pre_rows` rows at rest: the model
+/// sampled at the file's times (at the ticks themselves when the rate is the controller's).
+fn sample_test(spec: &SimSpec, reference: &mut Reference, rate: f64, pre_rows: usize) -> anyhow::Result<Result<Vec<(&'static str, Vec<f64>)>, String>> {
+    let f_s = spec.model.controller.f_s;
+    let duration = reference.len() as f64 / f_s;
+    let n = (duration * rate).round() as usize;
+    let tau: Vec<f64> = (0..n).map(|i| i as f64 / rate).collect();
+    reference.hold_to((tau[n - 1] * f_s).floor() as usize + 2);
+    let solver = if rate == f_s { spec.solver } else { Solver { substeps: FINE_SUBSTEPS } };
+    let (result, rs) = sim::run_sampled(&spec.model, reference, &solver, &tau)?;
+    if let LaneStatus::Failed { time_s, reason } = result.status {
+        return Ok(Err(format!("the model failed at t = {time_s:.4} s: {reason}")));
+    }
+    // Rows at rest before the excitation: the model's state at its start.
+    let with_rest = |c: usize| -> Vec<f64> {
+        let v = rs.channel(c, 0);
+        std::iter::repeat_n(v[0], pre_rows).chain(v).collect()
+    };
+    let ref_disp: Vec<f64> = std::iter::repeat_n(0.0, pre_rows).chain(tau.iter().map(|&t| reference.at_time(&reference.command, t))).collect();
+    Ok(Ok(vec![
+        ("time_s", (0..pre_rows + n).map(|i| i as f64 / rate).collect()),
+        ("ref_disp_m", ref_disp),
+        ("disp_m", with_rest(ch::DISP)),
+        ("accel_mps2", with_rest(ch::ACCEL)),
+        ("valve_cmd_v", with_rest(ch::VALVE_CMD)),
+        ("force_n", with_rest(ch::FORCE)),
+        ("p1_pa", with_rest(ch::P1)),
+        ("p2_pa", with_rest(ch::P2)),
+        ("spool_m", with_rest(ch::SPOOL)),
+    ]))
+}
+
 pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
     let mut model = load_model(args.model.as_deref())?;
     apply_effects(&mut model, &args.effect)?;
     apply_sets(&mut model, &args.set)?;
     let noise = parse_noise(args.noise.as_deref())?;
+    let rate = args.rate.unwrap_or(model.controller.f_s);
+    if !(rate.is_finite() && rate > 0.0 && rate <= 1e6) {
+        return Err(BadInput(format!("--rate {rate}: must be a sample rate in (0, 1e6] Hz")).into());
+    }
+    if !(args.pre_trigger.is_finite() && (0.0..=3600.0).contains(&args.pre_trigger)) {
+        return Err(BadInput(format!("--pre-trigger {}: must be in [0, 3600] s", args.pre_trigger)).into());
+    }
+    let pre_rows = (args.pre_trigger * rate).round() as usize;
     let lc = load_campaign(&args.campaign, &model)?;
     std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
     let mut stdout = std::io::stdout().lock();
@@ -93,25 +140,10 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
         let mut test_model = test.model.clone();
         apply_effects(&mut test_model, &args.effect)?;
         apply_sets(&mut test_model, &args.set)?;
-        let reference = reference_for(&test.excitation, &test_model, &lc.base)?;
+        let mut reference = reference_for(&test.excitation, &test_model, &lc.base)?;
         let spec = SimSpec { model: test_model, excitation: test.excitation.clone(), solver: Default::default() };
-        let outcome = sim::run_sim(&spec, &reference)?;
-        if let LaneStatus::Failed { time_s, reason } = outcome.result.status {
-            return Err(RunFailed(format!("test {:?}: the model failed at t = {time_s:.4} s: {reason}", test.name)).into());
-        }
-        let h = &outcome.history;
-        let ch = |n: &str| h.channel(n).expect("channel").to_vec();
-        let mut cols: Vec<(&str, Vec<f64>)> = vec![
-            ("time_s", ch("time_s")),
-            ("ref_disp_m", reference.command.clone()),
-            ("disp_m", ch("disp_m")),
-            ("accel_mps2", ch("accel_mps2")),
-            ("valve_cmd_v", ch("valve_cmd_v")),
-            ("force_n", ch("force_n")),
-            ("p1_pa", ch("p1_pa")),
-            ("p2_pa", ch("p2_pa")),
-            ("spool_m", ch("spool_m")),
-        ];
+        let cols = sample_test(&spec, &mut reference, rate, pre_rows)?.map_err(|e| RunFailed(format!("test {:?}: {e}", test.name)))?;
+        let mut cols: Vec<(&str, Vec<f64>)> = cols;
         for (c, (_, col)) in NOISY.iter().enumerate() {
             if noise[c] > 0.0 {
                 let mut rng = ChaCha8Rng::seed_from_u64(args.seed);
@@ -148,7 +180,7 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
                 std::fs::copy(lc.base.join(file), &dst).with_context(|| format!("copying the record {}", file.display()))?;
             }
         }
-        writeln!(stdout, "  {:<24} {} ({} rows)", test.name, path.display(), h.len())?;
+        writeln!(stdout, "  {:<24} {} ({} rows)", test.name, path.display(), cols[0].1.len())?;
     }
     let dst = args.out.join(lc.file.file_name().unwrap_or_default());
     if std::fs::canonicalize(&lc.file).ok() != std::fs::canonicalize(&dst).ok() {

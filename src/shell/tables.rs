@@ -1,7 +1,9 @@
-//! Numeric tables in and out: CSV (header row) and Parquet readers with the error behaviour of
-//! FORMATS.md (missing column, NaN or empty cell, non-monotonic or non-uniform time, zero rows,
-//! a header with other units: each names the file, the column and the row), and an atomic
-//! Parquet writer (temp file + rename; an interrupted write leaves no file that looks complete).
+//! Numeric tables in and out: CSV (header row; comma, semicolon or tab separated, found from the
+//! header) and Parquet readers with the error behaviour of the measured-file format (a missing
+//! column, a NaN or empty cell, an empty file, a header with other units: each names the file,
+//! the column and the row), and an atomic Parquet writer (temp file + rename; an interrupted
+//! write leaves no file that looks complete). The time base and the values are checked one floor
+//! down ([`crate::orchestration::measured`]).
 
 use arrow_array::{Array, ArrayRef, Float32Array, Float64Array, Int32Array, Int64Array, RecordBatch};
 use arrow_schema::{DataType, Field, Schema};
@@ -14,77 +16,94 @@ use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+pub use crate::orchestration::measured::NumTable;
+
 /// A problem with a data file.
 #[derive(Debug, thiserror::Error)]
 pub enum TableError {
-    #[error("{file}: cannot read: {source}")]
-    Io { file: PathBuf, source: std::io::Error },
+    #[error("{file}: {}", io_message(err))]
+    Io { file: PathBuf, err: std::io::Error },
     #[error("{file}: not a readable {kind} file: {message}")]
     Format { file: PathBuf, kind: &'static str, message: String },
     #[error("{file}: required column `{column}` is missing{hint}")]
     MissingColumn { file: PathBuf, column: String, hint: String },
     #[error("{file}: column `{column}`, row {row}{line}: {message}")]
     BadCell { file: PathBuf, column: String, row: usize, line: String, message: String },
-    #[error("{file}: the file has no data rows")]
+    #[error("{file}: the file has a header but no data rows")]
     Empty { file: PathBuf },
-    #[error("{file}: column `{column}`, row {row}{line}: {message}")]
-    BadTime { file: PathBuf, column: String, row: usize, line: String, message: String },
+    #[error("{file}: the file is empty (no header, no rows)")]
+    EmptyFile { file: PathBuf },
+    /// Several problems of one file, each on its own line.
+    #[error("{}", .0.iter().map(|e| e.to_string()).collect::<Vec<_>>().join("\n"))]
+    Many(Vec<TableError>),
 }
 
 impl TableError {
-    /// Whether the error is the user's input (exit code 2) rather than the system's.
+    /// One problem as itself, several as [`TableError::Many`].
+    fn all(mut v: Vec<TableError>) -> TableError {
+        if v.len() == 1 { v.remove(0) } else { TableError::Many(v) }
+    }
+    /// The single problems (a [`TableError::Many`] unpacked).
+    pub fn each(&self) -> Vec<String> {
+        match self {
+            TableError::Many(v) => v.iter().map(|e| e.to_string()).collect(),
+            e => vec![e.to_string()],
+        }
+    }
+}
+
+/// The first bad cell of each column, and how many more there are.
+#[derive(Default)]
+struct BadCells {
+    first: Vec<(usize, TableError)>,
+    more: Vec<usize>,
+}
+
+impl BadCells {
+    fn push(&mut self, col: usize, e: impl FnOnce() -> TableError) {
+        if self.more.len() <= col {
+            self.more.resize(col + 1, 0);
+        }
+        match self.first.iter().position(|(c, _)| *c == col) {
+            Some(_) => self.more[col] += 1,
+            None => self.first.push((col, e())),
+        }
+    }
+    fn errors(self) -> Vec<TableError> {
+        let more = self.more;
+        self.first
+            .into_iter()
+            .map(|(c, e)| match (e, more.get(c).copied().unwrap_or(0)) {
+                (TableError::BadCell { file, column, row, line, message }, m) if m > 0 => {
+                    TableError::BadCell { file, column, row, line, message: format!("{message} (and {m} more bad cell(s) in this column)") }
+                }
+                (e, _) => e,
+            })
+            .collect()
+    }
+    fn finish(self) -> Result<(), TableError> {
+        let errors = self.errors();
+        if errors.is_empty() { Ok(()) } else { Err(TableError::all(errors)) }
+    }
+}
+
+fn io_message(e: &std::io::Error) -> String {
+    match e.kind() {
+        std::io::ErrorKind::NotFound => "not found".into(),
+        std::io::ErrorKind::PermissionDenied => "cannot read: permission denied".into(),
+        _ => format!("cannot read: {e}"),
+    }
+}
+
+impl TableError {
+    /// Whether the error is the user's input (exit code 2) rather than the system's: everything
+    /// but a failing disk (a file that is not there or not readable is the user's to fix).
     pub fn is_input(&self) -> bool {
-        !matches!(self, TableError::Io { .. })
-    }
-}
-
-/// Named f64 columns read from one file.
-#[derive(Debug, Clone)]
-pub struct NumTable {
-    pub file: PathBuf,
-    pub names: Vec<String>,
-    pub columns: Vec<Vec<f64>>,
-    csv: bool,
-}
-
-impl NumTable {
-    pub fn column(&self, name: &str) -> Option<&[f64]> {
-        self.names.iter().position(|n| n == name).map(|i| self.columns[i].as_slice())
-    }
-    pub fn rows(&self) -> usize {
-        self.columns.first().map_or(0, Vec::len)
-    }
-    fn line(&self, row: usize) -> String {
-        if self.csv { format!(" (line {})", row + 1) } else { String::new() }
-    }
-
-    /// Checks that `column` is a time column: strictly increasing and uniform (to 1e-6 relative
-    /// of the step, or 1e-9 s). Returns the step.
-    pub fn check_time(&self, column: &str) -> Result<f64, TableError> {
-        let t = self.column(column).expect("time column was read");
-        let bad = |row: usize, message: String| TableError::BadTime {
-            file: self.file.clone(),
-            column: column.to_string(),
-            row,
-            line: self.line(row),
-            message,
-        };
-        if t.len() < 2 {
-            return Err(bad(1, "need at least two samples".into()));
+        match self {
+            TableError::Io { err, .. } => matches!(err.kind(), std::io::ErrorKind::NotFound | std::io::ErrorKind::PermissionDenied | std::io::ErrorKind::IsADirectory),
+            TableError::Many(v) => v.iter().all(TableError::is_input),
+            _ => true,
         }
-        for i in 1..t.len() {
-            if t[i] <= t[i - 1] {
-                return Err(bad(i + 1, format!("time {} s does not increase (previous row {} s)", t[i], t[i - 1])));
-            }
-        }
-        let dt = (t[t.len() - 1] - t[0]) / (t.len() - 1) as f64;
-        for i in 1..t.len() {
-            let d = t[i] - t[i - 1];
-            if (d - dt).abs() > (1e-6 * dt).max(1e-9) {
-                return Err(bad(i + 1, format!("non-uniform time step {d:.6e} s (the file's mean step is {dt:.6e} s)")));
-            }
-        }
-        Ok(dt)
     }
 }
 
@@ -96,7 +115,7 @@ fn stem(name: &str) -> &str {
 fn missing(file: &Path, column: &str, found: &[String]) -> TableError {
     let other_units: Vec<&String> = found.iter().filter(|f| stem(f) == stem(column) && *f != column).collect();
     let hint = if !other_units.is_empty() {
-        format!(" (found {}: other units? vshake reads SI columns named as in FORMATS.md)", other_units.iter().map(|s| format!("`{s}`")).collect::<Vec<_>>().join(", "))
+        format!(" (found {}: other units? vshake reads SI columns named as in docs/formats.md)", other_units.iter().map(|s| format!("`{s}`")).collect::<Vec<_>>().join(", "))
     } else {
         format!(" (columns present: {})", found.join(", "))
     };
@@ -106,12 +125,15 @@ fn missing(file: &Path, column: &str, found: &[String]) -> TableError {
 /// The column names of a CSV (header row) or Parquet file.
 pub fn column_names(path: &Path) -> Result<Vec<String>, TableError> {
     let file = path.to_path_buf();
-    let f = File::open(path).map_err(|e| TableError::Io { file: file.clone(), source: e })?;
+    let f = File::open(path).map_err(|e| TableError::Io { file: file.clone(), err: e })?;
     if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("parquet") || e.eq_ignore_ascii_case("pq")) {
         let b = ParquetRecordBatchReaderBuilder::try_new(f).map_err(|e| TableError::Format { file, kind: "Parquet", message: e.to_string() })?;
         Ok(b.schema().fields().iter().map(|f| f.name().clone()).collect())
     } else {
-        let mut rdr = csv::ReaderBuilder::new().has_headers(true).trim(csv::Trim::All).from_reader(f);
+        let mut first = String::new();
+        std::io::BufRead::read_line(&mut std::io::BufReader::new(f), &mut first).map_err(|e| TableError::Io { file: file.clone(), err: e })?;
+        let first = first.strip_prefix('\u{feff}').unwrap_or(&first);
+        let mut rdr = csv::ReaderBuilder::new().has_headers(true).delimiter(sniff_separator(first)).trim(csv::Trim::All).from_reader(first.as_bytes());
         let h = rdr.headers().map_err(|e| TableError::Format { file, kind: "CSV", message: e.to_string() })?;
         Ok(h.iter().map(str::to_string).collect())
     }
@@ -130,18 +152,48 @@ pub fn read_columns_allow_nan(path: &Path, wanted: &[&str]) -> Result<NumTable, 
 }
 
 fn read_columns_impl(path: &Path, wanted: &[&str], optional: &[&str], allow_nan: bool) -> Result<NumTable, TableError> {
-    let is_parquet = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("parquet") || e.eq_ignore_ascii_case("pq"));
-    let table = if is_parquet { read_parquet(path, wanted, optional, allow_nan)? } else { read_csv(path, wanted, optional)? };
-    if table.rows() == 0 {
-        return Err(TableError::Empty { file: path.to_path_buf() });
-    }
+    let (table, bad) = read_columns_lenient_impl(path, wanted, optional, allow_nan)?;
+    bad.finish()?;
     Ok(table)
 }
 
-fn read_csv(path: &Path, wanted: &[&str], optional: &[&str]) -> Result<NumTable, TableError> {
+/// Reads like [`read_columns`], but bad cells (empty, not a number, not finite) do not stop the
+/// read: they come back as NaN in the table and as errors beside it (the first of each column,
+/// with a count), so that a caller can add its own checks of the same file to one report.
+pub fn read_columns_lenient(path: &Path, wanted: &[&str], optional: &[&str]) -> Result<(NumTable, Vec<TableError>), TableError> {
+    let (table, bad) = read_columns_lenient_impl(path, wanted, optional, false)?;
+    Ok((table, bad.errors()))
+}
+
+fn read_columns_lenient_impl(path: &Path, wanted: &[&str], optional: &[&str], allow_nan: bool) -> Result<(NumTable, BadCells), TableError> {
+    let is_parquet = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("parquet") || e.eq_ignore_ascii_case("pq"));
+    let (table, bad) = if is_parquet { read_parquet(path, wanted, optional, allow_nan)? } else { read_csv(path, wanted, optional)? };
+    if table.rows() == 0 {
+        return Err(TableError::Empty { file: path.to_path_buf() });
+    }
+    Ok((table, bad))
+}
+
+/// The field separator of a CSV file, from its header line: the one of `,`, `;` and tab that
+/// splits it most (a comma when none does).
+fn sniff_separator(header: &str) -> u8 {
+    [b',', b';', b'\t'].into_iter().max_by_key(|&c| (header.bytes().filter(|&b| b == c).count(), c == b',')).unwrap_or(b',')
+}
+
+fn read_csv(path: &Path, wanted: &[&str], optional: &[&str]) -> Result<(NumTable, BadCells), TableError> {
     let file = path.to_path_buf();
-    let f = File::open(path).map_err(|e| TableError::Io { file: file.clone(), source: e })?;
-    let mut rdr = csv::ReaderBuilder::new().has_headers(true).trim(csv::Trim::All).from_reader(f);
+    let bytes = std::fs::read(path).map_err(|e| TableError::Io { file: file.clone(), err: e })?;
+    let text = String::from_utf8_lossy(&bytes);
+    let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
+    if text.trim().is_empty() {
+        return Err(TableError::EmptyFile { file });
+    }
+    let sep = sniff_separator(text.lines().next().unwrap_or(""));
+    let mut notes = Vec::new();
+    if sep != b',' {
+        notes.push(format!("read as {}-separated values (found from the header)", if sep == b';' { "semicolon" } else { "tab" }));
+    }
+    let mut rdr = csv::ReaderBuilder::new().has_headers(true).delimiter(sep).trim(csv::Trim::All).from_reader(text.as_bytes());
     let headers: Vec<String> = rdr
         .headers()
         .map_err(|e| TableError::Format { file: file.clone(), kind: "CSV", message: e.to_string() })?
@@ -149,11 +201,15 @@ fn read_csv(path: &Path, wanted: &[&str], optional: &[&str]) -> Result<NumTable,
         .map(str::to_string)
         .collect();
     let mut idx = Vec::new();
+    let mut absent = Vec::new();
     for w in wanted {
         match headers.iter().position(|h| h == w) {
             Some(i) => idx.push((w.to_string(), i)),
-            None => return Err(missing(path, w, &headers)),
+            None => absent.push(missing(path, w, &headers)),
         }
+    }
+    if !absent.is_empty() {
+        return Err(TableError::all(absent));
     }
     for o in optional {
         if let Some(i) = headers.iter().position(|h| h == o) {
@@ -161,44 +217,69 @@ fn read_csv(path: &Path, wanted: &[&str], optional: &[&str]) -> Result<NumTable,
         }
     }
     let mut columns: Vec<Vec<f64>> = vec![Vec::new(); idx.len()];
+    let mut decimal_commas = false;
+    let mut bad_cells = BadCells::default();
     for (r, rec) in rdr.records().enumerate() {
         let row = r + 1;
         let rec = rec.map_err(|e| TableError::Format { file: file.clone(), kind: "CSV", message: format!("row {row} (line {}): {e}", row + 1) })?;
-        for ((name, i), col) in idx.iter().zip(columns.iter_mut()) {
+        for (c, ((name, i), col)) in idx.iter().zip(columns.iter_mut()).enumerate() {
             let cell = rec.get(*i).unwrap_or("");
-            let bad = |message: String| TableError::BadCell { file: file.clone(), column: name.clone(), row, line: format!(" (line {})", row + 1), message };
-            if cell.is_empty() {
-                return Err(bad("empty cell".into()));
+            let file = &file;
+            let bad = |message: String| move || TableError::BadCell { file: file.clone(), column: name.clone(), row, line: format!(" (line {})", row + 1), message };
+            // With another separator than the comma, a decimal comma is unambiguous.
+            let v: Result<f64, String> = if cell.is_empty() {
+                Err("empty cell".into())
+            } else {
+                match cell.parse::<f64>() {
+                    Ok(v) => Ok(v),
+                    Err(_) if sep != b',' && cell.matches(',').count() == 1 && !cell.contains('.') => {
+                        decimal_commas = true;
+                        cell.replace(',', ".").parse().map_err(|_| format!("{cell:?} is not a number"))
+                    }
+                    Err(_) => {
+                        let hint = if sep == b',' && cell.contains(';') { " (the file looks semicolon-separated, but its header is not)" } else { "" };
+                        Err(format!("{cell:?} is not a number{hint}"))
+                    }
+                }
+            };
+            match v {
+                Ok(v) if v.is_finite() => col.push(v),
+                Ok(_) => {
+                    bad_cells.push(c, bad(format!("{cell} is not a finite number")));
+                    col.push(f64::NAN);
+                }
+                Err(m) => {
+                    bad_cells.push(c, bad(m));
+                    col.push(f64::NAN);
+                }
             }
-            let v: f64 = cell.parse().map_err(|_| bad(format!("{cell:?} is not a number")))?;
-            if !v.is_finite() {
-                return Err(bad(format!("{cell} is not a finite number")));
-            }
-            col.push(v);
         }
     }
-    Ok(NumTable { file, names: idx.into_iter().map(|(n, _)| n).collect(), columns, csv: true })
+    if decimal_commas {
+        notes.push("decimal commas read as decimal points".into());
+    }
+    Ok((NumTable { file, names: idx.into_iter().map(|(n, _)| n).collect(), columns, csv: true, notes }, bad_cells))
 }
 
-fn read_parquet(path: &Path, wanted: &[&str], optional: &[&str], allow_nan: bool) -> Result<NumTable, TableError> {
+fn read_parquet(path: &Path, wanted: &[&str], optional: &[&str], allow_nan: bool) -> Result<(NumTable, BadCells), TableError> {
     let file = path.to_path_buf();
     let fmt = |e: &dyn std::fmt::Display| TableError::Format { file: file.clone(), kind: "Parquet", message: e.to_string() };
-    let f = File::open(path).map_err(|e| TableError::Io { file: file.clone(), source: e })?;
+    let f = File::open(path).map_err(|e| TableError::Io { file: file.clone(), err: e })?;
     let builder = ParquetRecordBatchReaderBuilder::try_new(f).map_err(|e| fmt(&e))?;
     let found: Vec<String> = builder.schema().fields().iter().map(|f| f.name().clone()).collect();
     let mut names: Vec<String> = Vec::new();
-    for w in wanted {
-        if !found.iter().any(|f| f == w) {
-            return Err(missing(path, w, &found));
-        }
-        names.push(w.to_string());
+    let absent: Vec<TableError> = wanted.iter().filter(|w| !found.iter().any(|f| f == *w)).map(|w| missing(path, w, &found)).collect();
+    if !absent.is_empty() {
+        return Err(TableError::all(absent));
     }
+    names.extend(wanted.iter().map(|w| w.to_string()));
     names.extend(optional.iter().filter(|o| found.iter().any(|f| f == *o)).map(|s| s.to_string()));
     let reader = builder.build().map_err(|e| fmt(&e))?;
     let mut columns: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
+    let mut bad_cells = BadCells::default();
     for batch in reader {
         let batch = batch.map_err(|e| fmt(&e))?;
-        for (name, col) in names.iter().zip(columns.iter_mut()) {
+        for (c, (name, col)) in names.iter().zip(columns.iter_mut()).enumerate() {
             let arr = batch.column_by_name(name).expect("column in schema");
             let base = col.len();
             let bad = |row: usize, message: String| TableError::BadCell { file: file.clone(), column: name.clone(), row, line: String::new(), message };
@@ -214,17 +295,19 @@ fn read_parquet(path: &Path, wanted: &[&str], optional: &[&str], allow_nan: bool
             for i in 0..arr.len() {
                 let row = base + i + 1;
                 if arr.is_null(i) {
-                    return Err(bad(row, "empty (null) cell".into()));
+                    bad_cells.push(c, || bad(row, "empty (null) cell".into()));
+                    col.push(f64::NAN);
+                    continue;
                 }
                 let v = get(i);
                 if !(v.is_finite() || allow_nan && v.is_nan()) {
-                    return Err(bad(row, format!("{v} is not a finite number")));
+                    bad_cells.push(c, || bad(row, format!("{v} is not a finite number")));
                 }
                 col.push(v);
             }
         }
     }
-    Ok(NumTable { file, names, columns, csv: false })
+    Ok((NumTable { file, names, columns, csv: false, notes: Vec::new() }, bad_cells))
 }
 
 /// A file being written: `path.tmp` until [`AtomicFile::commit`] renames it into place. Dropped
@@ -384,7 +467,7 @@ pub fn write_table(path: &Path, columns: Vec<(String, Column)>, metadata: &[(Str
 /// The key-value metadata of a Parquet file.
 pub fn parquet_metadata(path: &Path) -> Result<Vec<(String, String)>, TableError> {
     let file = path.to_path_buf();
-    let f = File::open(path).map_err(|e| TableError::Io { file: file.clone(), source: e })?;
+    let f = File::open(path).map_err(|e| TableError::Io { file: file.clone(), err: e })?;
     let builder = ParquetRecordBatchReaderBuilder::try_new(f).map_err(|e| TableError::Format { file, kind: "Parquet", message: e.to_string() })?;
     Ok(builder
         .metadata()
@@ -420,15 +503,35 @@ mod tests {
         let (_d, p) = csv("time_s,ref_disp_mm\n0,0\n");
         let e = read_columns(&p, &["time_s", "ref_disp_m"], &[]).unwrap_err().to_string();
         assert!(e.contains("`ref_disp_m` is missing") && e.contains("`ref_disp_mm`: other units?"), "{e}");
-        let (_d, p) = csv("time_s,x\n0,0\n0.001,0\n0.0005,0\n");
+        let (_d, p) = csv("time_s,x\n0,0\n0.0009765625,0\n0.001953125,0\n0.0009765625,0\n0.0029296875,0\n0.00390625,0\n0.0048828125,0\n");
         let t = read_columns(&p, &["time_s"], &[]).unwrap();
-        let e = t.check_time("time_s").unwrap_err().to_string();
-        assert!(e.contains("row 3") && e.contains("does not increase"), "{e}");
-        let (_d, p) = csv("time_s,x\n0,0\n0.001,0\n0.003,0\n0.004,0\n");
-        let e = read_columns(&p, &["time_s"], &[]).unwrap().check_time("time_s").unwrap_err().to_string();
-        assert!(e.contains("non-uniform"), "{e}");
+        let e = t.time_base("time_s").unwrap_err().to_string();
+        assert!(e.contains("row 4 (line 5)") && e.contains("does not increase"), "{e}");
+        let (_d, p) = csv("time_s,x\n0,0\n0.001,0\n0.003,0\n0.004,0\n0.005,0\n");
+        let e = read_columns(&p, &["time_s"], &[]).unwrap().time_base("time_s").unwrap_err().to_string();
+        assert!(e.contains("row 3") && e.contains("1 row(s) missing"), "{e}");
         let (_d, p) = csv("time_s,x\n");
-        assert!(matches!(read_columns(&p, &["time_s"], &[]), Err(TableError::Empty { .. })));
+        let e = read_columns(&p, &["time_s"], &[]).unwrap_err();
+        assert!(matches!(e, TableError::Empty { .. }) && e.to_string().contains("no data rows"), "{e}");
+        let (_d, p) = csv("");
+        let e = read_columns(&p, &["time_s"], &[]).unwrap_err();
+        assert!(e.to_string().ends_with("the file is empty (no header, no rows)"), "{e}");
+        let e = read_columns(Path::new("/nonexistent/t.csv"), &["time_s"], &[]).unwrap_err();
+        assert!(e.is_input() && e.to_string() == "/nonexistent/t.csv: not found", "{e}");
+    }
+
+    #[test]
+    fn semicolons_tabs_and_decimal_commas_are_read() {
+        for (sep, comma) in [(";", true), ("\t", true), (";", false)] {
+            let num = |x: &str| if comma { x.replace('.', ",") } else { x.to_string() };
+            let text = format!("time_s{sep}disp_m\n0{sep}{}\n{}{sep}{}\n", num("1.5"), num("0.001"), num("-2.25"));
+            let (_d, p) = csv(&text);
+            let t = read_columns(&p, &["time_s", "disp_m"], &[]).unwrap();
+            assert_eq!(t.column("disp_m").unwrap(), &[1.5, -2.25]);
+            assert_eq!(t.column("time_s").unwrap(), &[0.0, 0.001]);
+            assert!(t.notes[0].contains(if sep == ";" { "semicolon" } else { "tab" }), "{:?}", t.notes);
+            assert_eq!(t.notes.len() == 2, comma, "{:?}", t.notes);
+        }
     }
 
     #[test]
@@ -439,7 +542,7 @@ mod tests {
         assert!(!d.path().join("x.parquet.tmp").exists());
         let t = read_columns(&p, &["time_s", "disp_m"], &["absent"]).unwrap();
         assert_eq!(t.column("disp_m").unwrap(), &[1.0, 2.0]);
-        assert_eq!(t.check_time("time_s").unwrap(), 0.5);
+        assert_eq!(t.time_base("time_s").unwrap().rate_hz, 2.0);
     }
 }
 
@@ -447,7 +550,7 @@ mod tests {
 pub fn read_strings(path: &Path, column: &str) -> Result<Vec<String>, TableError> {
     let file = path.to_path_buf();
     let fmt = |e: &dyn std::fmt::Display| TableError::Format { file: file.clone(), kind: "Parquet", message: e.to_string() };
-    let f = File::open(path).map_err(|e| TableError::Io { file: file.clone(), source: e })?;
+    let f = File::open(path).map_err(|e| TableError::Io { file: file.clone(), err: e })?;
     let builder = ParquetRecordBatchReaderBuilder::try_new(f).map_err(|e| fmt(&e))?;
     let found: Vec<String> = builder.schema().fields().iter().map(|f| f.name().clone()).collect();
     if !found.iter().any(|f| f == column) {
@@ -473,7 +576,7 @@ pub fn read_strings(path: &Path, column: &str) -> Result<Vec<String>, TableError
 pub fn parquet_batches(path: &Path) -> Result<(Vec<Field>, parquet::arrow::arrow_reader::ParquetRecordBatchReader), TableError> {
     let file = path.to_path_buf();
     let fmt = |e: &dyn std::fmt::Display| TableError::Format { file: file.clone(), kind: "Parquet", message: e.to_string() };
-    let f = File::open(path).map_err(|e| TableError::Io { file: file.clone(), source: e })?;
+    let f = File::open(path).map_err(|e| TableError::Io { file: file.clone(), err: e })?;
     let builder = ParquetRecordBatchReaderBuilder::try_new(f).map_err(|e| fmt(&e))?;
     let fields = builder.schema().fields().iter().map(|f| f.as_ref().clone()).collect();
     Ok((fields, builder.build().map_err(|e| fmt(&e))?))

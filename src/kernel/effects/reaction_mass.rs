@@ -8,7 +8,7 @@
 //! The actuator stroke, the chamber volumes and the LVDT (the displacement feedback) follow
 //! y − y_r; the accelerometer sees the platen's absolute acceleration. The platen's own stiffness,
 //! damping and friction still act to fixed ground (a choice: they are small, and the bearings'
-//! reaction path is not in MODEL.md). Its signature: the measured acceleration and displacement
+//! reaction path is not in docs/model.md). Its signature: the measured acceleration and displacement
 //! stop being one body's (a₁ ≠ −ω²·x₁), increasingly with frequency, as (m/m_r)·(f/f_r)²/(1 − (f/f_r)²).
 
 use super::PlantView;

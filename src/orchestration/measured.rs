@@ -1,0 +1,842 @@
+//! Measured tests brought to the model: the file's own time base, where the excitation starts
+//! and ends in the file, the analysis window in the file's own samples, the model's drive at the
+//! controller's rate, and the checks that catch a wrong file before it becomes wrong science.
+//!
+//! **Time base.** [`super::timebase`]: a uniform grid t_n = t_0 + n/R rebuilt from the row index
+//! and a fitted rate R (any rate; rounded time is not an error, a gap is).
+//!
+//! **Alignment.** The model's t = 0 is the start of the excitation. For a sine test it is found
+//! from `ref_disp_m` (unless the campaign gives `t0_s`): the phase of the reference's fundamental
+//! after the taper gives the start modulo a period; of the few candidates a period apart before
+//! the first motion (the first sample above 1 % of the peak), the one whose sine (taper
+//! included) fits the column best by least squares is refined by golden-section search to 1e-9
+//! of a row, and taken on the row when within 0.01 row of one. The excitation ends where
+//! `ref_disp_m` leaves the campaign's sine (more than max(1e-3·X, 6× its rms mismatch) for a
+//! quarter cycle; not in the file's last quarter cycle, too short to tell from an edge effect of
+//! the export), or at `duration_s` after the start when given. Rows before the start
+//! (pre-trigger) and after the end are not compared. A record test starts at the first row (or
+//! at `t0_s`) and drives the model with its `ref_disp_m` column.
+//!
+//! **Window.** A sine's analysis window is the last N whole cycles of the excitation,
+//! round(N·R/f) of the file's samples (N from `window_cycles`, else every whole cycle after
+//! taper_s + 1 s); a record's is all of it. Residuals, harmonics and the fit features are
+//! computed on the file's own samples, where the model's channels are interpolated inside the
+//! controller's ticks ([`crate::kernel::resample`]). Harmonics at or above the file's Nyquist
+//! frequency R/2 are left out, with a note.
+//!
+//! **Checks** (each a warning naming the test and the likely cause; an error under `--strict`):
+//! `ref_disp_m` against the campaign's excitation (frequency within 2 %, amplitude within 5 %,
+//! shape within 5 % rms); the kinematic consistency |A₁|/(ω²|X₁|) of the acceleration and
+//! displacement channels (1 for one rigid body; 1/9.81 when the acceleration is in g, 1/1000
+//! when the displacement is in mm); the sign of each channel's fundamental against the
+//! reference (near ±180°: a flipped sign). Values beyond any physical range ([`LIMITS`]) are
+//! errors, like NaN.
+
+use super::campaign::{TestSpec, Weights};
+use super::spec::ExcitationSpec;
+use super::timebase::{self, TimeBase};
+use crate::kernel::excitation::{Drive, Record, Reference, Sine};
+use crate::kernel::metrics::N_HARM;
+use crate::kernel::params::{ModelParams, G};
+use std::f64::consts::PI;
+use std::fmt;
+use std::path::PathBuf;
+
+/// Required columns of a measured test.
+pub const REQUIRED: [&str; 4] = ["time_s", "ref_disp_m", "disp_m", "accel_mps2"];
+/// Optional columns of a measured test (read and checked when present).
+pub const OPTIONAL: [&str; 5] = ["valve_cmd_v", "force_n", "p1_pa", "p2_pa", "spool_m"];
+
+/// Largest magnitude each column may hold, with its unit [chosen: an order of magnitude or more
+/// beyond any shake table (the LHPOST: ±0.75 m, 4.7 g bare, 6.8 MN, 20.7 MPa, ±10 V), so only
+/// a corrupt cell or a wrong unit reaches it].
+pub const LIMITS: [(&str, f64, &str); 9] = [
+    ("time_s", 1.0e7, "s"),
+    ("ref_disp_m", 10.0, "m"),
+    ("disp_m", 10.0, "m"),
+    ("accel_mps2", 100.0 * G, "m/s² (100 g)"),
+    ("valve_cmd_v", 100.0, "V"),
+    ("force_n", 1.0e9, "N"),
+    ("p1_pa", 1.0e9, "Pa (1 GPa)"),
+    ("p2_pa", 1.0e9, "Pa (1 GPa)"),
+    ("spool_m", 1.0, "m"),
+];
+
+/// Named f64 columns read from one file (the shell reads; this layer checks).
+#[derive(Debug, Clone)]
+pub struct NumTable {
+    pub file: PathBuf,
+    pub names: Vec<String>,
+    pub columns: Vec<Vec<f64>>,
+    /// Rows are lines of a text file after one header line (messages then give the line too).
+    pub csv: bool,
+    /// What the reader noticed (another separator, decimal commas).
+    pub notes: Vec<String>,
+}
+
+impl NumTable {
+    pub fn column(&self, name: &str) -> Option<&[f64]> {
+        self.names.iter().position(|n| n == name).map(|i| self.columns[i].as_slice())
+    }
+    pub fn rows(&self) -> usize {
+        self.columns.first().map_or(0, Vec::len)
+    }
+    /// A problem at a column and a 1-based data row.
+    pub fn problem(&self, column: Option<&str>, row: Option<usize>, message: impl Into<String>) -> DataProblem {
+        let mut place = String::new();
+        if let Some(c) = column {
+            place.push_str(&format!("column `{c}`"));
+        }
+        if let Some(r) = row {
+            place.push_str(&format!("{}row {r}", if place.is_empty() { "" } else { ", " }));
+            if self.csv {
+                place.push_str(&format!(" (line {})", r + 1));
+            }
+        }
+        DataProblem { file: self.file.display().to_string(), place, message: message.into() }
+    }
+
+    /// The rebuilt time base of column `name`.
+    pub fn time_base(&self, name: &str) -> Result<TimeBase, DataProblem> {
+        let t = self.column(name).expect("time column was read");
+        timebase::rebuild(t).map_err(|e| self.problem(Some(name), Some(e.row()), e.to_string()))
+    }
+
+    /// Magnitudes beyond [`LIMITS`]: the first offending row of each column, and how many.
+    pub fn check_limits(&self) -> Vec<DataProblem> {
+        let mut out = Vec::new();
+        for (name, limit, unit) in LIMITS {
+            let Some(col) = self.column(name) else { continue };
+            let beyond = col.iter().filter(|v| v.abs() > limit).count();
+            if let Some((i, v)) = col.iter().enumerate().find(|(_, v)| v.abs() > limit) {
+                let why = if beyond == 1 {
+                    "a corrupt cell?".to_string()
+                } else {
+                    let hint = match name {
+                        "disp_m" | "ref_disp_m" | "spool_m" => " (mm? vshake reads metres)",
+                        "accel_mps2" => " (mm/s²? vshake reads m/s²)",
+                        "p1_pa" | "p2_pa" => " (vshake reads Pa)",
+                        _ => "",
+                    };
+                    format!("{beyond} rows are beyond it: the column is in another unit{hint}")
+                };
+                out.push(self.problem(Some(name), Some(i + 1), format!("{v:e} is beyond any physical range (|value| ≤ {limit:e} {unit}): {why}")));
+            }
+        }
+        out
+    }
+}
+
+/// A problem with a data file: the file, the place (column, row, line) and what is wrong.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub struct DataProblem {
+    pub file: String,
+    pub place: String,
+    pub message: String,
+}
+
+impl fmt::Display for DataProblem {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.place.is_empty() {
+            write!(f, "{}: {}", self.file, self.message)
+        } else {
+            write!(f, "{}: {}: {}", self.file, self.place, self.message)
+        }
+    }
+}
+
+/// What drives the model in a comparison.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OpenLoop {
+    /// The measured valve command `valve_cmd_v` replaces the controller.
+    Valve,
+    /// The measured spool position `spool_m` replaces the controller and the valve's dynamics.
+    Spool,
+}
+
+impl OpenLoop {
+    pub fn column(self) -> &'static str {
+        match self {
+            OpenLoop::Valve => "valve_cmd_v",
+            OpenLoop::Spool => "spool_m",
+        }
+    }
+}
+
+/// How the excitation's start was found.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Start {
+    /// From `ref_disp_m` (sine).
+    Detected,
+    /// The campaign's `t0_s`.
+    Given,
+    /// The file's first row (record).
+    FirstRow,
+}
+
+/// Where a test's excitation sits in its file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Alignment {
+    pub time: TimeBase,
+    /// Row (fractional) of the excitation's start: the model's t = 0.
+    pub start_row: f64,
+    pub start: Start,
+    /// The first row after the excitation (rows from here on are not compared).
+    pub end_row: usize,
+    /// Rows of the analysis window, [w0, w1).
+    pub window: (usize, usize),
+    /// Whole cycles in the window (sine tests).
+    pub cycles: Option<u32>,
+}
+
+impl Alignment {
+    /// File time of the excitation's start, s.
+    pub fn start_s(&self) -> f64 {
+        self.time.time(self.start_row)
+    }
+    /// File time of the excitation's end (the instant after its last sample), s.
+    pub fn end_s(&self) -> f64 {
+        self.time.time(self.end_row as f64)
+    }
+    /// Recording before the excitation, s.
+    pub fn pre_trigger_s(&self) -> f64 {
+        (self.start_row / self.time.rate_hz).max(0.0)
+    }
+    /// Recording after the excitation, s.
+    pub fn after_s(&self) -> f64 {
+        (self.time.rows - self.end_row) as f64 / self.time.rate_hz
+    }
+}
+
+/// The compared samples of a test: its analysis window in the file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Samples {
+    /// The file's sample rate, Hz.
+    pub rate_hz: f64,
+    /// Model time of each sample (from the excitation's start), s.
+    pub tau: Vec<f64>,
+    /// File time of each sample (on the rebuilt grid), s.
+    pub time: Vec<f64>,
+    /// Reference displacement, velocity and acceleration at each sample.
+    pub ref_x: Vec<f64>,
+    pub ref_v: Vec<f64>,
+    pub ref_a: Vec<f64>,
+    /// The sine's frequency (None for a record), Hz.
+    pub fundamental_hz: Option<f64>,
+    /// Harmonics 1 … n_harm lie below the file's Nyquist frequency (≤ 9).
+    pub n_harm: usize,
+}
+
+impl Samples {
+    pub fn len(&self) -> usize {
+        self.tau.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.tau.is_empty()
+    }
+}
+
+/// Measured channels over the compared samples.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Measured {
+    pub accel: Vec<f64>,
+    pub disp: Vec<f64>,
+    pub force: Option<Vec<f64>>,
+    pub p1: Option<Vec<f64>>,
+    pub p2: Option<Vec<f64>>,
+    pub valve_cmd: Option<Vec<f64>>,
+    pub spool: Option<Vec<f64>>,
+}
+
+/// A measured test, ready to be compared with or fitted by the model.
+#[derive(Debug, Clone)]
+pub struct AlignedTest {
+    pub name: String,
+    pub file: PathBuf,
+    pub excitation: ExcitationSpec,
+    /// The campaign's model with the test's overrides.
+    pub model: ModelParams,
+    pub weights: Weights,
+    pub alignment: Alignment,
+    /// The model's drive at the controller's ticks, lasting a tick beyond the last sample.
+    pub drive: Reference,
+    pub samples: Samples,
+    pub measured: Measured,
+    /// What was done to read the file (rounded time rebuilt, a pre-trigger, omitted harmonics).
+    pub notes: Vec<String>,
+    /// What looks wrong with the file (an error under `--strict`).
+    pub warnings: Vec<String>,
+}
+
+/// Aligns a measured test to the model; `record` is the table holding a record excitation's
+/// column when it is another file than the test's data. Every problem of the file is returned.
+pub fn align(test: &TestSpec, data: &NumTable, record: Option<&NumTable>, open_loop: Option<OpenLoop>) -> Result<AlignedTest, Vec<DataProblem>> {
+    let mut problems = data.check_limits();
+    let time = match data.time_base("time_s") {
+        Ok(t) => Some(t),
+        Err(p) => {
+            problems.push(p);
+            None
+        }
+    };
+    if let Some(mode) = open_loop {
+        if data.column(mode.column()).is_none() {
+            let word = match mode {
+                OpenLoop::Valve => "valve",
+                OpenLoop::Spool => "spool",
+            };
+            problems.push(data.problem(Some(mode.column()), None, format!("missing; `--open-loop {word}` drives the model with it")));
+        }
+    }
+    let Some(time) = time else { return Err(problems) };
+    if !problems.is_empty() {
+        return Err(problems);
+    }
+    let mut model = test.model.clone();
+    if open_loop == Some(OpenLoop::Spool) {
+        // A measured spool already holds the valve's delay and dynamics.
+        model.effects.transport_delay = false;
+        model.effects.spool_dynamics = false;
+    }
+    let mut notes = data.notes.clone();
+    notes.extend(time.note());
+    let mut warnings = Vec::new();
+    let col = |n: &str| data.column(n).expect("required column");
+    let f_s = test.model.controller.f_s;
+    let rate = time.rate_hz;
+    let rows = time.rows;
+
+    // Where the excitation sits in the file, and the model's drive.
+    let (start_row, start, end_row, cycles, mut drive) = match &test.excitation {
+        ExcitationSpec::Sine { sine, .. } => {
+            let given = test.t0_s.map(|t| (t - time.t0_s) * rate);
+            let fit = align_sine(sine, col("ref_disp_m"), rate, given, test.duration_given.then_some(sine.duration_s));
+            warnings.extend(fit.warnings.iter().map(|w| format!("test {:?}: {w}", test.name)));
+            if let Some(e) = fit.error {
+                return Err(vec![data.problem(None, None, format!("test {:?}: {e}", test.name))]);
+            }
+            let motion_s = (fit.end_row as f64 - fit.start_row) / rate;
+            let mut s = *sine;
+            s.duration_s = motion_s;
+            // The default window counts the cycles in the motion as found, give or take the
+            // sample at each end (the end is found to a sample).
+            let n = if test.window_given {
+                sine.window_cycles.unwrap_or(0)
+            } else {
+                Sine { duration_s: motion_s + 1.0 / rate, ..s }.default_cycles()
+            };
+            if n == 0 {
+                return Err(vec![data.problem(None, None, format!(
+                    "test {:?}: the excitation lasts {motion_s:.3} s in the file (from t = {:.4} s): too short for a whole cycle after taper_s + 1 s",
+                    test.name,
+                    time.time(fit.start_row)
+                ))]);
+            }
+            let (start, src) = (fit.start_row, if given.is_some() { Start::Given } else { Start::Detected });
+            (start, src, fit.end_row, Some(n), None)
+        }
+        ExcitationSpec::Record { column, time_column, f_ref_hz, scale, .. } => {
+            let source = record.unwrap_or(data);
+            let Some(values) = source.column(column) else {
+                return Err(vec![source.problem(Some(column), None, format!("missing: the record of test {:?}", test.name))]);
+            };
+            let rec_time = if record.is_some() {
+                match source.time_base(time_column) {
+                    Ok(t) => t,
+                    Err(p) => return Err(vec![p]),
+                }
+            } else {
+                time.clone()
+            };
+            // Model time 0: `t0_s`, else the record's first sample (same clock as the data).
+            let t0 = test.t0_s.unwrap_or(rec_time.t0_s);
+            let first = ((t0 - rec_time.t0_s) * rec_time.rate_hz).ceil().max(0.0) as usize;
+            let rec_t: Vec<f64> = (first..values.len()).map(|i| rec_time.time(i as f64) - t0).collect();
+            let rec_x: Vec<f64> = values[first..].iter().map(|v| v * scale).collect();
+            if rec_t.len() < 2 {
+                return Err(vec![source.problem(Some(column), None, format!("test {:?}: fewer than two record samples after t0_s", test.name))]);
+            }
+            let l = test.model.actuator.l;
+            if let Some((i, v)) = rec_x.iter().enumerate().find(|(_, v)| v.abs() >= l) {
+                return Err(vec![source.problem(Some(column), Some(first + i + 1), format!("displacement {v} m (after scale {scale}) exceeds the stroke (half stroke actuator.l = {l} m)"))]);
+            }
+            let span = rec_t[rec_t.len() - 1];
+            let r = Record { time_s: rec_t, disp_m: rec_x, f_ref_hz: *f_ref_hz }.reference(f_s);
+            let start_row = ((t0 - time.t0_s) * rate).max(0.0);
+            let end_row = (((span + t0 - time.t0_s) * rate + 1e-6).floor() as usize + 1).min(rows);
+            let src = if test.t0_s.is_some() { Start::Given } else { Start::FirstRow };
+            (start_row, src, end_row, None, Some(r))
+        }
+    };
+
+    // The analysis window, in the file's rows.
+    let w_first = start_row.ceil().max(0.0) as usize;
+    let window = match (&test.excitation, cycles) {
+        (ExcitationSpec::Sine { sine, .. }, Some(n)) => {
+            let len = (n as f64 * rate / sine.freq_hz).round() as usize;
+            if len > end_row.saturating_sub(w_first) {
+                return Err(vec![data.problem(None, None, format!(
+                    "test {:?}: {n} whole cycles ({:.3} s) do not fit in the excitation's {:.3} s in the file",
+                    test.name,
+                    n as f64 / sine.freq_hz,
+                    (end_row as f64 - start_row) / rate
+                ))]);
+            }
+            (end_row - len, end_row)
+        }
+        _ => (w_first, end_row),
+    };
+    if window.1 <= window.0 + 1 {
+        return Err(vec![data.problem(None, None, format!("test {:?}: no samples to compare after the excitation's start", test.name))]);
+    }
+    let tau: Vec<f64> = (window.0..window.1).map(|n| (n as f64 - start_row) / rate).collect();
+    let tau_last = tau[tau.len() - 1];
+    let n_ticks = (tau_last * f_s).floor() as usize + 2;
+    let mut drive = match (&test.excitation, drive.take()) {
+        (ExcitationSpec::Sine { sine, .. }, _) => {
+            let mut s = *sine;
+            s.duration_s = n_ticks as f64 / f_s;
+            s.window_cycles = None;
+            s.reference(f_s)
+        }
+        (_, Some(r)) => r,
+        _ => unreachable!("a record has its reference"),
+    };
+    drive.hold_to(n_ticks);
+    // Open loop: the measured column at the ticks (linear between the file's samples).
+    if let Some(mode) = open_loop {
+        let c = col(mode.column());
+        let at = |k: usize| {
+            let q = start_row + k as f64 * rate / f_s;
+            let i = q.floor().clamp(0.0, (rows - 1) as f64) as usize;
+            let w = (q - i as f64).clamp(0.0, 1.0);
+            if w == 0.0 || i + 1 >= rows { c[i.min(rows - 1)] } else { c[i] + w * (c[i + 1] - c[i]) }
+        };
+        let v: Vec<f64> = (0..drive.len()).map(at).collect();
+        drive.drive = match mode {
+            OpenLoop::Valve => Drive::ValveCommand(v),
+            OpenLoop::Spool => Drive::Spool(v),
+        };
+    }
+
+    // Reference states at the samples: analytic for a sine, from the ticks for a record.
+    let (ref_x, ref_v, ref_a): (Vec<f64>, Vec<f64>, Vec<f64>) = match &test.excitation {
+        ExcitationSpec::Sine { sine, .. } => {
+            let st: Vec<[f64; 4]> = tau.iter().map(|&t| sine.states(t)).collect();
+            (st.iter().map(|s| s[0]).collect(), st.iter().map(|s| s[1]).collect(), st.iter().map(|s| s[2]).collect())
+        }
+        ExcitationSpec::Record { .. } => (
+            tau.iter().map(|&t| drive.at_time(&drive.x, t)).collect(),
+            tau.iter().map(|&t| drive.at_time(&drive.v, t)).collect(),
+            tau.iter().map(|&t| drive.at_time(&drive.a, t)).collect(),
+        ),
+    };
+    let fundamental_hz = match &test.excitation {
+        ExcitationSpec::Sine { sine, .. } => Some(sine.freq_hz),
+        ExcitationSpec::Record { .. } => None,
+    };
+    let n_harm = fundamental_hz.map_or(0, |f| (1..=N_HARM).take_while(|&k| (k as f64) * f < 0.5 * rate).count());
+    if let Some(f) = fundamental_hz {
+        if n_harm == 0 {
+            return Err(vec![data.problem(Some("time_s"), None, format!("test {:?}: its {f} Hz excitation is at or above the file's Nyquist frequency ({} Hz)", test.name, 0.5 * rate))]);
+        }
+        if n_harm < N_HARM {
+            notes.push(format!(
+                "h{}{} ({} Hz and up) at or above the Nyquist frequency of a {} Hz file ({} Hz): left out",
+                n_harm + 1,
+                if n_harm + 1 < N_HARM { format!("…h{N_HARM}") } else { String::new() },
+                (n_harm + 1) as f64 * f,
+                timebase::fmt_rate(rate),
+                0.5 * rate
+            ));
+        }
+    }
+    let slice = |n: &str| data.column(n).map(|c| c[window.0..window.1].to_vec());
+    let measured = Measured {
+        accel: slice("accel_mps2").expect("required"),
+        disp: slice("disp_m").expect("required"),
+        force: slice("force_n"),
+        p1: slice("p1_pa"),
+        p2: slice("p2_pa"),
+        valve_cmd: slice("valve_cmd_v"),
+        spool: slice("spool_m"),
+    };
+    let alignment = Alignment { time, start_row, start, end_row, window, cycles };
+    if alignment.start_row >= 1.0 && start != Start::FirstRow {
+        notes.push(format!(
+            "the excitation starts at t = {:.4} s (row {}; {}): {:.3} s of recording before it are not compared",
+            alignment.start_s(),
+            fmt_row(alignment.start_row),
+            if start == Start::Given { "t0_s" } else { "found from ref_disp_m" },
+            alignment.pre_trigger_s()
+        ));
+    }
+    if alignment.end_row < rows {
+        notes.push(format!("the excitation ends at t = {:.4} s: the {:.3} s recorded after it are not compared", alignment.end_s(), alignment.after_s()));
+    }
+    let samples = Samples { rate_hz: rate, time: (window.0..window.1).map(|n| alignment.time.time(n as f64)).collect(), tau, ref_x, ref_v, ref_a, fundamental_hz, n_harm };
+    warnings.extend(channel_checks(&samples, &measured).into_iter().map(|w| format!("test {:?}: {w}", test.name)));
+    Ok(AlignedTest {
+        name: test.name.clone(),
+        file: data.file.clone(),
+        excitation: test.excitation.clone(),
+        model,
+        weights: test.weights,
+        alignment,
+        drive,
+        samples,
+        measured,
+        notes,
+        warnings,
+    })
+}
+
+/// The outcome of aligning a sine to `ref_disp_m`.
+struct SineFit {
+    start_row: f64,
+    end_row: usize,
+    warnings: Vec<String>,
+    error: Option<String>,
+}
+
+/// Σ (r_n − x_r((n − s)/R))² over rows [lo, hi).
+fn misfit(sine: &Sine, r: &[f64], rate: f64, s: f64, lo: usize, hi: usize) -> f64 {
+    (lo..hi).map(|n| (r[n] - sine.displacement((n as f64 - s) / rate)).powi(2)).sum()
+}
+
+/// Golden-section minimum of `f` on [a, b] to `tol`.
+fn golden(f: impl Fn(f64) -> f64, mut a: f64, mut b: f64, tol: f64) -> f64 {
+    let g = (5f64.sqrt() - 1.0) / 2.0;
+    let (mut c, mut d) = (b - g * (b - a), a + g * (b - a));
+    let (mut fc, mut fd) = (f(c), f(d));
+    while (b - a).abs() > tol {
+        if fc < fd {
+            b = d;
+            d = c;
+            fd = fc;
+            c = b - g * (b - a);
+            fc = f(c);
+        } else {
+            a = c;
+            c = d;
+            fc = fd;
+            d = a + g * (b - a);
+            fd = f(d);
+        }
+    }
+    0.5 * (a + b)
+}
+
+/// Frequency from the zero crossings of `r` over rows [lo, hi) (None with fewer than three).
+fn crossing_freq(r: &[f64], rate: f64, lo: usize, hi: usize) -> Option<f64> {
+    let mut first = None;
+    let mut last = 0.0;
+    let mut count = 0usize;
+    for n in lo.max(1)..hi {
+        let (a, b) = (r[n - 1], r[n]);
+        if (a < 0.0) != (b < 0.0) && a != b {
+            let t = (n as f64 - 1.0 + a / (a - b)) / rate;
+            first.get_or_insert(t);
+            last = t;
+            count += 1;
+        }
+    }
+    let first = first?;
+    (count >= 3 && last > first).then(|| (count - 1) as f64 / (2.0 * (last - first)))
+}
+
+/// Finds the start and end of `sine` in `r` (see the module docs).
+fn align_sine(sine: &Sine, r: &[f64], rate: f64, given_row: Option<f64>, duration: Option<f64>) -> SineFit {
+    let n = r.len();
+    let (x, f) = (sine.amp_m, sine.freq_hz);
+    let p = rate / f;
+    let mut out = SineFit { start_row: 0.0, end_row: n, warnings: Vec::new(), error: None };
+    let peak = r.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let onset = r.iter().position(|v| v.abs() > 0.01 * peak);
+    let start = match (given_row, onset) {
+        (Some(s), _) => s,
+        (None, None) => {
+            out.warnings.push("ref_disp_m is zero throughout: the file holds no excitation (is it the right file?); the excitation is taken to start at the first row".into());
+            0.0
+        }
+        (None, Some(on)) => {
+            let on = on as f64;
+            // The start modulo a period, from the phase of the steady sine after the taper.
+            let s0 = (on + sine.taper_s * rate).ceil() as usize;
+            let cyc = ((n.saturating_sub(s0)) as f64 / p).floor().min(4.0);
+            let s_phase = if cyc >= 1.0 {
+                let (mut a, mut b) = (0.0, 0.0);
+                for k in s0..(s0 + (cyc * p).round() as usize).min(n) {
+                    let th = 2.0 * PI * f * k as f64 / rate;
+                    a += r[k] * th.sin();
+                    b += r[k] * th.cos();
+                }
+                ((-b).atan2(a) / (2.0 * PI)).rem_euclid(1.0) * p
+            } else {
+                on
+            };
+            let region = ((on + sine.taper_s * rate + 2.0 * p).ceil() as usize).min(n);
+            let lo = on - 0.2 * sine.taper_s * rate - 1.5 * p;
+            let m0 = ((lo - s_phase) / p).floor() as i64;
+            let m1 = ((on + 0.5 * p - s_phase) / p).ceil() as i64;
+            let best = (m0..=m1)
+                .map(|m| s_phase + m as f64 * p)
+                .filter(|s| *s >= lo && *s <= on + 0.5 * p)
+                .min_by(|a, b| misfit(sine, r, rate, *a, 0, region).total_cmp(&misfit(sine, r, rate, *b, 0, region)))
+                .unwrap_or(on);
+            let s1 = golden(|s| misfit(sine, r, rate, s, 0, region), best - 0.25 * p, best + 0.25 * p, 1e-9);
+            // Where the column leaves the sine, then the start again over the whole excitation.
+            let end = end_of_sine(sine, r, rate, s1, region);
+            let s2 = golden(|s| misfit(sine, r, rate, s, 0, end), s1 - 1.0, s1 + 1.0, 1e-9);
+            // [chosen] A start within 0.01 row of a row is that row (0.01 row is 5 µs at
+            // 2 kHz, 0.02° of a 10 Hz fundamental): a reference column interpolated between
+            // controller ticks moves the fitted start by that much.
+            if (s2 - s2.round()).abs() < 0.01 { s2.round() } else { s2 }
+        }
+    };
+    out.start_row = start;
+    let first = start.ceil().max(0.0) as usize;
+    if first >= n {
+        out.error = Some(format!("the excitation would start at row {:.1}, after the file's last row ({n})", start + 1.0));
+        return out;
+    }
+    let detected_end = end_of_sine(sine, r, rate, start, ((start + sine.taper_s * rate + 2.0 * p).ceil() as usize).clamp(first + 1, n));
+    out.end_row = match duration {
+        Some(d) => {
+            let end = (start + d * rate - 1e-6).ceil().max(0.0) as usize;
+            if end > n {
+                out.error = Some(format!(
+                    "the file ends {:.4} s into the excitation, before its duration_s = {d} s (it starts at row {:.1}); the file is too short",
+                    (n as f64 - start) / rate,
+                    start + 1.0
+                ));
+                return out;
+            }
+            if detected_end + 1 < end && onset.is_some() {
+                out.warnings.push(format!("ref_disp_m leaves the campaign's sine {:.3} s into the excitation, before its duration_s = {d} s", (detected_end as f64 - start) / rate));
+            }
+            end
+        }
+        None => detected_end,
+    };
+    if onset.is_none() {
+        return out;
+    }
+    // The column against the campaign's excitation.
+    let (lo, hi) = (first, out.end_row);
+    let rms_ref = (misfit(sine, r, rate, start, lo, hi) / (hi - lo).max(1) as f64).sqrt();
+    let shape = rms_ref / (x / 2f64.sqrt());
+    let steady = ((start + sine.taper_s * rate).ceil().max(0.0) as usize).min(hi);
+    let f_hat = crossing_freq(r, rate, steady, hi).or_else(|| crossing_freq(r, rate, lo, hi));
+    let a_hat = r[steady..hi].iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let f_off = f_hat.is_some_and(|fh| (fh / f - 1.0).abs() > 0.02);
+    let a_off = steady < hi && (a_hat / x - 1.0).abs() > 0.05;
+    if f_off || a_off || shape > 0.05 {
+        let mut w = format!(
+            "ref_disp_m does not match the campaign's excitation (sine {f} Hz, {x:.4} m): it oscillates at {} with amplitude {a_hat:.4} m, an rms mismatch of {:.0} % after alignment",
+            f_hat.map_or("no clear frequency".to_string(), |v| format!("{v:.3} Hz")),
+            100.0 * shape
+        );
+        if a_off && (a_hat / x / 1000.0 - 1.0).abs() < 0.05 {
+            w.push_str(": ref_disp_m in mm?");
+        } else if f_off {
+            w.push_str(": the file of another test?");
+        } else {
+            w.push_str(": the file of another test, or another unit?");
+        }
+        out.warnings.push(w);
+    }
+    out
+}
+
+/// The first row, after `from`, where `r` leaves the sine started at row `s` for at least a
+/// quarter cycle (the file's end when it never does).
+fn end_of_sine(sine: &Sine, r: &[f64], rate: f64, s: f64, from: usize) -> usize {
+    let n = r.len();
+    let first = s.ceil().max(0.0) as usize;
+    let from = from.clamp(first, n);
+    let e = |k: usize| r[k] - sine.displacement((k as f64 - s) / rate);
+    // The column's own mismatch where it surely follows the sine (noise, rounding).
+    let own = if from > first { ((first..from).map(|k| e(k).powi(2)).sum::<f64>() / (from - first) as f64).sqrt() } else { 0.0 };
+    let tol = (1e-3 * sine.amp_m).max(6.0 * own);
+    let quarter = ((rate / sine.freq_hz / 4.0).round() as usize).max(3);
+    let mut k = from;
+    while k < n {
+        if e(k).abs() > tol {
+            // A departure in the file's last quarter cycle is not one: too short to tell from
+            // an edge effect of the export (a held or interpolated last sample).
+            if k + quarter > n {
+                return n;
+            }
+            let hi = k + quarter;
+            let rms = ((k..hi).map(|j| e(j).powi(2)).sum::<f64>() / (hi - k) as f64).sqrt();
+            if rms > tol {
+                // Rows just before, already at the level the column keeps after the sine (it
+                // stopped at a zero crossing, say), belong to what follows.
+                let level = r[k];
+                while k > from && (r[k - 1] - level).abs() <= tol && e(k - 1).abs() <= tol {
+                    k -= 1;
+                }
+                return k;
+            }
+        }
+        k += 1;
+    }
+    n
+}
+
+/// Harmonic k of `x` at model times `tau`: H = (2/n) Σ x·exp(−j 2π k f τ).
+fn fundamental(x: &[f64], tau: &[f64], f: f64) -> (f64, f64) {
+    let (mut re, mut im) = (0.0, 0.0);
+    for (v, t) in x.iter().zip(tau) {
+        let c = f * t;
+        let (s, co) = (2.0 * PI * (c - c.floor())).sin_cos();
+        re += v * co;
+        im -= v * s;
+    }
+    let k = 2.0 / x.len().max(1) as f64;
+    (re * k, im * k)
+}
+
+/// A 0-based (fractional) row as the 1-based row a user reads: a fraction only when it is one.
+pub fn fmt_row(r: f64) -> String {
+    if r == r.round() { format!("{}", r as i64 + 1) } else { format!("{:.2}", r + 1.0) }
+}
+
+/// Phase difference a − b in degrees, wrapped to (−180°, 180°].
+pub fn wrap_deg(d: f64) -> f64 {
+    let mut d = d % 360.0;
+    if d > 180.0 {
+        d -= 360.0;
+    } else if d <= -180.0 {
+        d += 360.0;
+    }
+    d
+}
+
+/// Common unit mix-ups and the factor each puts into a ratio that should be 1.
+fn unit_cause(ratio: f64, causes: &[(f64, &str)]) -> Option<String> {
+    causes.iter().find(|(k, _)| (ratio / k).ln().abs() < 1.25f64.ln()).map(|(_, c)| c.to_string())
+}
+
+/// Data-only checks on the compared samples: kinematic consistency (units) and the sign of each
+/// channel against the reference.
+fn channel_checks(s: &Samples, m: &Measured) -> Vec<String> {
+    let mut out = Vec::new();
+    match s.fundamental_hz {
+        Some(f) => {
+            let w2 = (2.0 * PI * f).powi(2);
+            let (a1, x1) = (fundamental(&m.accel, &s.tau, f), fundamental(&m.disp, &s.tau, f));
+            let (ar1, xr1) = (fundamental(&s.ref_a, &s.tau, f), fundamental(&s.ref_x, &s.tau, f));
+            let mag = |c: (f64, f64)| c.0.hypot(c.1);
+            let kappa = mag(a1) / (w2 * mag(x1));
+            if kappa.is_finite() && (kappa.ln()).abs() > 1.25f64.ln() {
+                let causes = [
+                    (1.0 / G, "the acceleration is in g (×9.80665 to m/s²)"),
+                    (1e-3, "the displacement is in mm"),
+                    (1e-2, "the displacement is in cm"),
+                    (1e3, "the acceleration is in mm/s²"),
+                    (1e-3 / G, "the acceleration is in g and the displacement in mm"),
+                    (0.0254, "the displacement is in inches"),
+                ];
+                let cause = unit_cause(kappa, &causes).unwrap_or_else(|| "a wrong channel, or sensors that do not see one rigid body".into());
+                out.push(format!(
+                    "the acceleration and displacement channels disagree: |a1|/(w^2 |x1|) = {kappa:.4} (1 for one rigid body; 1/9.81 = 0.102 if the acceleration is in g, 0.001 if the displacement is in mm): likely {cause}"
+                ));
+            }
+            for (name, h, r) in [("accel_mps2", a1, ar1), ("disp_m", x1, xr1)] {
+                let ph = wrap_deg((h.1.atan2(h.0) - r.1.atan2(r.0)).to_degrees());
+                if ph.abs() > 135.0 && mag(h) > 0.0 {
+                    out.push(format!("`{name}` is in antiphase with the reference (its fundamental at {ph:+.1}°): a flipped sign?"));
+                }
+            }
+        }
+        None => {
+            // A record: regression slope of each channel on its reference.
+            for (name, v, r) in [("accel_mps2", &m.accel, &s.ref_a), ("disp_m", &m.disp, &s.ref_x)] {
+                let rr: f64 = r.iter().map(|x| x * x).sum();
+                if rr <= 0.0 {
+                    continue;
+                }
+                let beta = v.iter().zip(r.iter()).map(|(a, b)| a * b).sum::<f64>() / rr;
+                if beta < -0.5 {
+                    out.push(format!("`{name}` follows the reference with slope {beta:.3}: a flipped sign?"));
+                } else if !(0.2..=5.0).contains(&beta) {
+                    let causes: &[(f64, &str)] = if name == "disp_m" { &[(1e3, "the displacement is in mm"), (1e2, "the displacement is in cm")] } else { &[(1.0 / G, "the acceleration is in g"), (1e3, "the acceleration is in mm/s²")] };
+                    let cause = unit_cause(beta, causes).unwrap_or_else(|| "a wrong channel or another unit".into());
+                    out.push(format!("`{name}` follows the reference with slope {beta:.4} (about 1 for a table that tracks): likely {cause}"));
+                }
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sine() -> Sine {
+        Sine { freq_hz: 3.0, amp_m: 0.02, taper_s: 1.0, duration_s: 3.0, window_cycles: None }
+    }
+
+    fn column(s: &Sine, rate: f64, pre_s: f64, post_s: f64) -> Vec<f64> {
+        let n = ((pre_s + s.duration_s + post_s) * rate).round() as usize;
+        (0..n)
+            .map(|k| {
+                let t = k as f64 / rate - pre_s;
+                if t < s.duration_s { s.displacement(t) } else { 0.0 }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_start_and_end_of_a_sine_are_found_to_a_fraction_of_a_row() {
+        let s = sine();
+        for (rate, pre, post) in [(1024.0, 0.0, 0.0), (256.0, 0.5, 0.0), (500.0, 0.3217, 1.0), (2048.0, 0.75, 0.4)] {
+            let r = column(&s, rate, pre, post);
+            let fit = align_sine(&s, &r, rate, None, None);
+            assert!(fit.error.is_none() && fit.warnings.is_empty(), "{rate} Hz: {:?} {:?}", fit.error, fit.warnings);
+            assert!((fit.start_row - pre * rate).abs() < 1e-6, "{rate} Hz: start {} vs {}", fit.start_row, pre * rate);
+            let end = ((pre + s.duration_s) * rate).ceil() as usize;
+            assert!((fit.end_row as i64 - end as i64).abs() <= 1, "{rate} Hz: end {} vs {end}", fit.end_row);
+        }
+        // On a row exactly: the start is snapped to it.
+        let fit = align_sine(&s, &column(&s, 256.0, 0.5, 0.0), 256.0, None, None);
+        assert_eq!(fit.start_row, 128.0);
+        assert_eq!(fit.end_row, 256 * 35 / 10);
+    }
+
+    #[test]
+    fn another_frequency_or_unit_is_named() {
+        let s = sine();
+        let mut other = s;
+        other.freq_hz = 4.0;
+        let fit = align_sine(&s, &column(&other, 1024.0, 0.0, 0.0), 1024.0, None, None);
+        assert!(fit.warnings.iter().any(|w| w.contains("4.000 Hz") && w.contains("another test")), "{:?}", fit.warnings);
+        let mm: Vec<f64> = column(&s, 1024.0, 0.2, 0.0).iter().map(|v| v * 1000.0).collect();
+        let fit = align_sine(&s, &mm, 1024.0, None, None);
+        assert!(fit.warnings.iter().any(|w| w.contains("in mm?")), "{:?}", fit.warnings);
+        let zero = vec![0.0; 3072];
+        let fit = align_sine(&s, &zero, 1024.0, None, None);
+        assert!(fit.warnings.iter().any(|w| w.contains("zero throughout")), "{:?}", fit.warnings);
+    }
+
+    #[test]
+    fn a_short_file_is_an_error_and_duration_is_honoured() {
+        let s = sine();
+        let r = column(&s, 1024.0, 0.5, 0.0);
+        let fit = align_sine(&s, &r, 1024.0, None, Some(4.0));
+        assert!(fit.error.as_deref().is_some_and(|e| e.contains("too short")), "{:?}", fit.error);
+        let fit = align_sine(&s, &r, 1024.0, Some(512.0), Some(2.0));
+        assert_eq!((fit.start_row, fit.end_row), (512.0, 512 + 2048));
+    }
+
+    #[test]
+    fn unit_mixups_are_recognised() {
+        assert!(unit_cause(0.1019, &[(1.0 / G, "g")]).is_some());
+        assert!(unit_cause(0.5, &[(1.0 / G, "g")]).is_none());
+        assert_eq!(wrap_deg(-190.0), 170.0);
+        assert_eq!(wrap_deg(540.0), 180.0);
+    }
+}
