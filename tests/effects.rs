@@ -278,7 +278,7 @@ fn a_switched_off_effect_is_neutral() {
 /// bit, lane by lane, next to lanes where effects are on (the set's "neutral when off").
 #[test]
 fn the_effect_set_is_the_baseline_where_everything_is_off() {
-    use vshake::kernel::effects::{Baseline, EffectSet};
+    use vshake::kernel::effects::{effect_set, Baseline};
     use vshake::kernel::params::{ModelParams, EFFECTS};
     use vshake::kernel::simulate::{self, LaneParams, NoObserver, Solver};
     let base = ModelParams::default();
@@ -293,7 +293,7 @@ fn the_effect_set_is_the_baseline_where_everything_is_off() {
     }
     let refs: Vec<&ModelParams> = sets.iter().collect();
     let lp = LaneParams::<8>::new(&refs).unwrap();
-    let got = simulate::run(&lp, &EffectSet::<8>::new(&refs), &reference, &Solver::default(), &mut NoObserver).unwrap();
+    let got = simulate::run(&lp, &effect_set::<8>(&refs), &reference, &Solver::default(), &mut NoObserver).unwrap();
     assert_eq!(got[0], expected, "all off = baseline, bit for bit");
     for (l, e) in EFFECTS.iter().take(7).enumerate() {
         assert_ne!(got[l + 1].metrics, expected.metrics, "{e} on changes the run");
@@ -307,7 +307,7 @@ fn the_effect_set_is_the_baseline_where_everything_is_off() {
     }
     let refs: Vec<&ModelParams> = sets.iter().collect();
     let lp = LaneParams::<8>::new(&refs).unwrap();
-    let got = simulate::run(&lp, &EffectSet::<8>::new(&refs), &reference, &Solver::default(), &mut NoObserver).unwrap();
+    let got = simulate::run(&lp, &effect_set::<8>(&refs), &reference, &Solver::default(), &mut NoObserver).unwrap();
     assert_eq!(got[0], expected);
     for (l, e) in EFFECTS.iter().skip(7).enumerate() {
         assert_ne!(got[l + 1].metrics, expected.metrics, "{e} on changes the run");

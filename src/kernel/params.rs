@@ -121,13 +121,14 @@ impl fmt::Debug for ParamInfo {
     }
 }
 
-/// Generates one parameter struct, its `Default`, and its registry rows.
+/// Generates one parameter struct, its `Default`, its registry rows and its accessor.
 ///
-/// Row syntax: `name: unit, suffix, default, range, source, "description";`
+/// `pub struct Name in path.to.field as "component" { rows }`, where `path.to.field` is where
+/// [`ModelParams`] keeps it. Row syntax: `name: unit, suffix, default, range, source, "description";`
 macro_rules! params {
     (
         $(#[$meta:meta])*
-        pub struct $Struct:ident in $field:ident as $component:literal {
+        pub struct $Struct:ident in $($field:ident).+ as $component:literal {
             $( $name:ident : $unit:literal, $suffix:literal, $default:expr, $range:expr, $src:ident, $doc:literal; )*
         }
     ) => {
@@ -151,25 +152,36 @@ macro_rules! params {
 
         impl $Struct {
             /// Registry rows of this component.
-            pub const PARAMS: &'static [ParamInfo] = &[
+            pub const PARAMS: &'static [$crate::kernel::params::ParamInfo] = &[
                 $(
-                    ParamInfo {
+                    $crate::kernel::params::ParamInfo {
                         component: $component,
                         name: stringify!($name),
                         unit: $unit,
                         unit_suffix: $suffix,
                         default: $default,
                         range: $range,
-                        source: Source::$src,
+                        source: $crate::kernel::params::Source::$src,
                         doc: $doc,
-                        get: |p: &ModelParams| p.$field.$name,
-                        set: |p: &mut ModelParams, v: f64| p.$field.$name = v,
+                        get: |p: &$crate::kernel::params::ModelParams| $Struct::of(p).$name,
+                        set: |p: &mut $crate::kernel::params::ModelParams, v: f64| $Struct::of_mut(p).$name = v,
                     },
                 )*
             ];
+
+            /// This component's parameters in `m`.
+            pub fn of(m: &$crate::kernel::params::ModelParams) -> &Self {
+                &m.$($field).+
+            }
+
+            /// This component's parameters in `m`, to change.
+            pub fn of_mut(m: &mut $crate::kernel::params::ModelParams) -> &mut Self {
+                &mut m.$($field).+
+            }
         }
     };
 }
+pub(crate) use params;
 
 /// Standard gravity, m/s² (used for amplitudes in g and for the bearing force F_V = M·g).
 pub const G: f64 = 9.80665;
@@ -314,172 +326,7 @@ params! {
     }
 }
 
-params! {
-    /// Effect `spool_dynamics`: the servo-valve spool follows its command through a second-order
-    /// lag, ẍ = ω²(x_c − x) − 2ζω ẋ (the baseline has x = x_c).
-    pub struct SpoolDynamicsParams in spool_dynamics as "spool_dynamics" {
-        freq_hz: "Hz", "hz", 80.0, Range::closed(1.0, 1000.0), Chosen,
-            "Spool natural frequency [chosen: 80 Hz; with 40 Hz the published TVC loop oscillates at small amplitude].";
-        zeta: "-", "", 0.7, Range::closed(0.05, 5.0), Chosen,
-            "Spool damping ratio [chosen].";
-    }
-}
-
-params! {
-    /// Effect `leakage`: internal leakage across the piston, q = c_int (P1 − P2), and external
-    /// leakage from each chamber to drain, q = c_ext·P.
-    pub struct LeakageParams in leakage as "leakage" {
-        c_int: "m³/(s·Pa)", "m3_per_s_pa", 2.0e-11, Range::ge(0.0), Chosen,
-            "Internal (cross-piston) leakage coefficient [chosen: 12 L/min at 10 MPa across the piston].";
-        c_ext: "m³/(s·Pa)", "m3_per_s_pa", 0.0, Range::ge(0.0), Chosen,
-            "External leakage coefficient of each chamber to drain [chosen: none by default].";
-    }
-}
-
-params! {
-    /// Effect `supply`: supply pressure dynamics. A pressure-compensated pump delivers
-    /// Q_p = q_pump·clamp((P_S − P_s)/dp_band, 0, 1) into an accumulator of capacitance c_acc;
-    /// the valves draw Q from it: c_acc dP_s/dt = Q_p − Q. The valves see P_s instead of P_S.
-    pub struct SupplyParams in supply as "supply" {
-        q_pump: "m³/s", "m3_per_s", 0.2, Range::gt(0.0), Chosen,
-            "Pump flow at full stroke [chosen: below the peak draw of large tests, so accumulators carry the peaks].";
-        c_acc: "m³/Pa", "m3_per_pa", 3.5e-8, Range::gt(0.0), Chosen,
-            "Accumulator capacitance V_gas/(n·P) [chosen: 1 m³ of gas at 20.7 MPa, n = 1.4].";
-        dp_band: "Pa", "pa", 1.0e6, Range::gt(0.0), Chosen,
-            "Pressure band over which the pump goes from no flow to full flow [chosen].";
-    }
-}
-
-params! {
-    /// Effect `seal_friction`: actuator seal friction with a Stribeck term,
-    /// F = −tanh(v/v_eps)·(f_c + (f_s − f_c)·exp(−(v/v_s)²)) − sigma·v.
-    pub struct SealFrictionParams in seal_friction as "seal_friction" {
-        f_c: "N", "n", 5000.0, Range::ge(0.0), Chosen,
-            "Coulomb seal friction, all actuators together [chosen].";
-        f_s: "N", "n", 8000.0, Range::ge(0.0), Chosen,
-            "Static (breakaway) seal friction [chosen].";
-        v_s: "m/s", "m_per_s", 0.01, Range::gt(0.0), Chosen,
-            "Stribeck velocity [chosen].";
-        sigma: "N·s/m", "n_s_per_m", 0.0, Range::ge(0.0), Chosen,
-            "Viscous seal friction [chosen: none by default].";
-        v_eps: "m/s", "m_per_s", 1.0e-3, Range::gt(0.0), Chosen,
-            "Velocity that smooths the sign of v [chosen].";
-    }
-}
-
-params! {
-    /// Effect `flow_saturation`: spool-to-flow nonlinearity; the metering area saturates,
-    /// x_eff = x_sat·tanh(x/x_sat).
-    pub struct FlowSaturationParams in flow_saturation as "flow_saturation" {
-        x_sat: "m", "m", 0.012, Range::gt(0.0), Chosen,
-            "Spool opening scale of the saturation x_eff = x_sat·tanh(x/x_sat) [chosen: 12 mm of the 19.05 mm stroke].";
-    }
-}
-
-params! {
-    /// Effect `hold_down`: hold-down strut stiffness nonlinearity, F = −k3·y³ on top of −K·y.
-    pub struct HoldDownParams in hold_down as "hold_down" {
-        k3: "N/m³", "n_per_m3", 1.0e8, Range::any(), Chosen,
-            "Cubic stiffness of the hold-down struts, positive = hardening [chosen: k3·y³ equals K·y at y = 11 cm].";
-    }
-}
-
-params! {
-    /// Effect `asymmetry`: port/valve asymmetry. The flow gain for extension (x > 0) differs from
-    /// that for retraction, and actuator 2's valves differ from actuator 1's.
-    pub struct AsymmetryParams in asymmetry as "asymmetry" {
-        extend_gain: "-", "", 1.05, Range::gt(0.0), Chosen,
-            "Flow gain for x > 0 relative to x < 0 [chosen: a 5 % port mismatch].";
-        act2_gain: "-", "", 1.0, Range::gt(0.0), Chosen,
-            "Flow gain of actuator 2's valves relative to actuator 1's [chosen: equal].";
-    }
-}
-
-params! {
-    /// Effect `transport_delay`: a pure delay τ between the controller's command and the spool
-    /// (pilot stages, driver electronics, digital I/O), before the spool dynamics if those are on.
-    pub struct TransportDelayParams in transport_delay as "transport_delay" {
-        tau: "s", "s", 2.0e-3, Range::closed(0.5e-3, 20.0e-3), Chosen,
-            "Delay between the valve command and the spool [chosen: 2 ms; realised as 4 equal first-order lags, see the effect's doc].";
-    }
-}
-
-params! {
-    /// Effect `compressibility`: effective bulk modulus and dead volume. Each chamber gains a dead
-    /// volume (hoses, manifold) and its oil an entrained-air fraction and a wall compliance:
-    /// 1/β_e = 1/(beta_ratio·β) + air_fraction·p_atm/p², with p the absolute chamber pressure.
-    pub struct CompressibilityParams in compressibility as "compressibility" {
-        dead_volume: "m³", "m3", 0.02, Range::closed(0.0, 1.0), Chosen,
-            "Dead volume added to every chamber (hoses, manifold, valve block) [chosen: 20 L].";
-        beta_ratio: "-", "", 1.0, Range::closed(0.05, 1.0), Chosen,
-            "Effective over nominal bulk modulus at high pressure (hose and wall compliance) [chosen: 1 = none].";
-        air_fraction: "-", "", 0.01, Range::closed(0.0, 0.2), Chosen,
-            "Entrained-air volume fraction at atmospheric pressure, isothermal [chosen: 1 %].";
-    }
-}
-
-params! {
-    /// Effect `reaction_mass`: the actuators push against a reaction mass on a compliant
-    /// foundation, m_r ÿ_r = −F − k_r y_r − c_r ẏ_r. The actuator stroke (and the LVDT) is y − y_r;
-    /// the accelerometer sees the platen's absolute acceleration.
-    pub struct ReactionMassParams in reaction_mass as "reaction_mass" {
-        m_r: "kg", "kg", 2.0e6, Range::gt(0.0), Chosen,
-            "Reaction mass [chosen: order of a large table's foundation block].";
-        f_r: "Hz", "hz", 12.0, Range::closed(0.5, 200.0), Chosen,
-            "Natural frequency of the reaction mass on its foundation [chosen].";
-        zeta_r: "-", "", 0.1, Range::closed(0.0, 2.0), Chosen,
-            "Damping ratio of the reaction mass on its foundation [chosen: soil radiation damping].";
-    }
-}
-
-/// Declares the optional effects: the name list and the on/off switches.
-macro_rules! effect_switches {
-    ($($name:ident),* $(,)?) => {
-        /// Names of the optional effects (components that are off unless their table is given).
-        pub const EFFECTS: [&str; [$(stringify!($name)),*].len()] = [$(stringify!($name)),*];
-
-        /// Which optional effects are on.
-        #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-        pub struct EffectSwitches {
-            $(pub $name: bool,)*
-        }
-
-        impl EffectSwitches {
-            /// The switch of effect `name`.
-            pub fn get_mut(&mut self, name: &str) -> Option<&mut bool> {
-                match name {
-                    $(stringify!($name) => Some(&mut self.$name),)*
-                    _ => None,
-                }
-            }
-            pub fn get(&self, name: &str) -> bool {
-                match name {
-                    $(stringify!($name) => self.$name,)*
-                    _ => false,
-                }
-            }
-        }
-    };
-}
-
-effect_switches!(
-    spool_dynamics,
-    transport_delay,
-    leakage,
-    supply,
-    seal_friction,
-    flow_saturation,
-    compressibility,
-    reaction_mass,
-    hold_down,
-    asymmetry,
-);
-
-impl EffectSwitches {
-    pub fn any(&self) -> bool {
-        EFFECTS.iter().any(|e| self.get(e))
-    }
-}
+pub use super::effects::{EffectParams, EffectSwitches, EFFECTS};
 
 /// Which flow law the servo-valves follow (a structural choice, decided once per batch).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -501,18 +348,11 @@ pub struct ModelParams {
     pub controller: ControllerParams,
     /// Servo-valve flow law (`servovalve.law` in model files: "orifice" or "linear").
     pub valve_law: ValveLaw,
-    /// Optional effects (see [`EFFECTS`]); their parameters below apply when switched on.
+    /// Which library effects are on (see [`EFFECTS`]).
     pub effects: EffectSwitches,
-    pub spool_dynamics: SpoolDynamicsParams,
-    pub leakage: LeakageParams,
-    pub supply: SupplyParams,
-    pub seal_friction: SealFrictionParams,
-    pub flow_saturation: FlowSaturationParams,
-    pub hold_down: HoldDownParams,
-    pub asymmetry: AsymmetryParams,
-    pub transport_delay: TransportDelayParams,
-    pub compressibility: CompressibilityParams,
-    pub reaction_mass: ReactionMassParams,
+    /// The library effects' parameters (`effect_params.<effect>.<name>`), used where the effect
+    /// is switched on.
+    pub effect_params: EffectParams,
 }
 
 /// One problem found by [`ModelParams::validate`].
@@ -530,7 +370,8 @@ impl fmt::Display for ParamIssue {
 }
 
 impl ModelParams {
-    /// Every registered parameter, in a fixed order (components as in the struct).
+    /// Every registered parameter, in a fixed order: the baseline's components, then the library
+    /// effects' in registry order.
     pub fn registry() -> impl Iterator<Item = &'static ParamInfo> {
         ValveParams::PARAMS
             .iter()
@@ -538,16 +379,7 @@ impl ModelParams {
             .chain(PlatenParams::PARAMS)
             .chain(FrictionParams::PARAMS)
             .chain(ControllerParams::PARAMS)
-            .chain(SpoolDynamicsParams::PARAMS)
-            .chain(LeakageParams::PARAMS)
-            .chain(SupplyParams::PARAMS)
-            .chain(SealFrictionParams::PARAMS)
-            .chain(FlowSaturationParams::PARAMS)
-            .chain(HoldDownParams::PARAMS)
-            .chain(AsymmetryParams::PARAMS)
-            .chain(TransportDelayParams::PARAMS)
-            .chain(CompressibilityParams::PARAMS)
-            .chain(ReactionMassParams::PARAMS)
+            .chain(super::effects::LIBRARY.iter().flat_map(|e| e.params))
     }
 
     /// The registry row of `component.name`, if any.
@@ -556,25 +388,12 @@ impl ModelParams {
         Self::registry().find(|p| p.component == c && p.name == n)
     }
 
-    /// Names of the components (in registry order): the baseline's, then the optional effects.
-    pub fn components() -> [&'static str; 15] {
-        [
-            "servovalve",
-            "actuator",
-            "platen",
-            "friction",
-            "controller",
-            "spool_dynamics",
-            "leakage",
-            "supply",
-            "seal_friction",
-            "flow_saturation",
-            "hold_down",
-            "asymmetry",
-            "transport_delay",
-            "compressibility",
-            "reaction_mass",
-        ]
+    /// The baseline's components.
+    pub const BASELINE: [&'static str; 5] = ["servovalve", "actuator", "platen", "friction", "controller"];
+
+    /// Names of the components (in registry order): the baseline's, then the library effects.
+    pub fn components() -> Vec<&'static str> {
+        Self::BASELINE.iter().copied().chain(EFFECTS).collect()
     }
 
     /// Checks every range and every relation between parameters; returns all problems at once.

@@ -12,7 +12,7 @@
 
 use super::sampling::{saltelli_block, Design, UnitDesign};
 use super::study::{Method, StudySpec};
-use crate::kernel::effects::{Baseline, EffectSet};
+use crate::kernel::effects::{effect_set, Baseline};
 use crate::kernel::excitation::Reference;
 use crate::kernel::metrics::Metrics;
 use crate::kernel::params::{ModelParams, ParamInfo};
@@ -191,7 +191,7 @@ impl Plan {
                 // there), so the choice per group does not make a row depend on its neighbours.
                 let results = match LaneParams::<LANES>::new(&models) {
                     Ok(lp) if models.iter().any(|m| m.effects.any()) => {
-                        simulate::run(&lp, &EffectSet::<LANES>::new(&models), reference, &self.solver, &mut NoObserver)
+                        simulate::run(&lp, &effect_set::<LANES>(&models), reference, &self.solver, &mut NoObserver)
                     }
                     Ok(lp) => simulate::run(&lp, &Baseline, reference, &self.solver, &mut NoObserver),
                     Err(e) => Err(e),

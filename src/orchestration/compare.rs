@@ -100,6 +100,8 @@ pub struct Projector {
     n_harm: usize,
     /// Rows of the pseudo-inverse (XᵀX)⁻¹Xᵀ: the mean, then (cos, sin) of each harmonic.
     rows: Vec<Vec<f64>>,
+    /// The basis X at the samples, one row per function (same order as `rows`).
+    basis: Vec<Vec<f64>>,
 }
 
 impl Projector {
@@ -138,9 +140,13 @@ impl Projector {
             }
         }
         let mut rows = vec![vec![0.0; n]; p];
+        let mut xs = vec![vec![0.0; n]; p];
         let mut y = vec![0.0; p];
         for (m, &t) in tau.iter().enumerate() {
             basis(t, &mut b);
+            for i in 0..p {
+                xs[i][m] = b[i];
+            }
             // (XᵀX)⁻¹ bₘ: forward then back substitution.
             for i in 0..p {
                 y[i] = (b[i] - (0..i).map(|k| l[i * p + k] * y[k]).sum::<f64>()) / l[i * p + i];
@@ -152,12 +158,29 @@ impl Projector {
                 rows[i][m] = y[i];
             }
         }
-        Projector { n_harm, rows }
+        Projector { n_harm, rows, basis: xs }
     }
 
     /// Harmonics the projector resolves.
     pub fn n_harm(&self) -> usize {
         self.n_harm
+    }
+
+    /// The mean of `x` over the window (the constant of the least-squares fit).
+    pub fn mean(&self, x: &[f64]) -> f64 {
+        self.rows[0].iter().zip(x).map(|(a, b)| a * b).sum()
+    }
+
+    /// ‖x − P x‖²: what of `x` the mean and the resolved harmonics do not hold (other
+    /// frequencies, higher harmonics, a trend, noise).
+    pub fn remainder_sq(&self, x: &[f64]) -> f64 {
+        let c: Vec<f64> = self.rows.iter().map(|r| r.iter().zip(x).map(|(a, b)| a * b).sum()).collect();
+        x.iter().enumerate().map(|(m, &v)| (v - self.basis.iter().zip(&c).map(|(b, c)| b[m] * c).sum::<f64>()).powi(2)).sum()
+    }
+
+    /// Functions fitted: the mean and two per resolved harmonic.
+    pub fn n_functions(&self) -> usize {
+        self.rows.len()
     }
 
     /// H_1 … H_9 of `x` (one value per sample of the window); those beyond `n_harm` are 0.

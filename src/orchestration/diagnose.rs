@@ -2,17 +2,30 @@
 //!
 //! Every candidate effect of the library is fitted to the campaign (its default free parameters,
 //! [`super::fit::default_free`]; the candidates in parallel) and ranked by the Bayesian
-//! information criterion: ΔBIC = χ²_baseline − χ²_candidate − p·ln n (n features, p parameters
-//! added). With the features scaled by their noise, χ² of a right model is ≈ n − p, so:
+//! information criterion: ΔBIC = χ²_baseline − χ²_candidate − p·ln n (n the features' degrees of
+//! freedom, p parameters added). With the features scaled by their noise, χ² of a right model is
+//! ≈ n − p, so:
 //! - a candidate is *significant* when ΔBIC > [`SIGNIFICANT_BIC`] (Kass & Raftery's "very strong"
-//!   evidence; fitting p parameters to noise alone lowers χ² by about p, far below p·ln n);
+//!   evidence; fitting p parameters to noise alone lowers χ² by about p, far below p·ln n) and its
+//!   fit does not leave a larger residual than the baseline's (the χ² weighs each channel by its
+//!   noise, the residual by its signal, so a fit may trade one channel against another; a
+//!   candidate that makes what the user sees worse is never called significant). Significant
+//!   candidates rank first, each group by ΔBIC;
 //! - the share of the residual it *explains* is 1 − (R_c² − N²)/(R_b² − N²), with R the residual
 //!   rms over every test and channel (what a user sees fall) of the baseline and the candidate and
 //!   N the noise floor of that rms: the part of the baseline's residual beyond noise that the
 //!   candidate removes. (A χ² share would overstate a candidate that mimics the few features of
-//!   largest signal-to-noise ratio while leaving the residual as it was.) A significant best
-//!   candidate that explains less than [`EXPLAINS_ENOUGH`] is reported as such: the missing effect
-//!   is probably not in the library (or several are missing).
+//!   largest signal-to-noise ratio while leaving the residual as it was.)
+//!
+//! **Several missing effects: forward selection with refit.** When the best candidate is
+//! significant and the χ² it leaves is still above what noise leaves by more than any further
+//! parameter's BIC penalty, every remaining candidate is fitted again *on top of it*, its
+//! parameters freed together with the chosen ones' (starting from their estimates); the best is
+//! added if its ΔBIC over the chosen set is significant and it lowers the residual, and so on, up
+//! to [`MAX_EFFECTS`]. The verdict names "A + B" and the share each adds when together they
+//! explain at least [`EXPLAINS_TOGETHER`] of the residual beyond noise; a best candidate that
+//! explains less than [`EXPLAINS_ENOUGH`] (alone or with those added) is reported as such: the
+//! missing effect is probably not in the library.
 
 use super::fit::{self, FeatureInfo, Free, Problem};
 use crate::kernel::params::ModelParams;
@@ -22,8 +35,15 @@ use rayon::prelude::*;
 pub const SIGNIFICANT_BIC: f64 = 10.0;
 /// Share of the residual beyond noise a candidate must explain to be named the missing effect.
 pub const EXPLAINS_ENOUGH: f64 = 0.5;
+/// Share of the residual beyond noise several effects must explain together to be named
+/// together: more than one effect is a claim that the library holds the whole of what is missing,
+/// so they must take the residual (nearly) to the noise; otherwise two wrong effects could each
+/// mimic part of an effect the library does not have.
+pub const EXPLAINS_TOGETHER: f64 = 0.9;
 /// Iterations of each candidate's fit.
 pub const MAX_ITER: usize = 25;
+/// Most effects forward selection names together.
+pub const MAX_EFFECTS: usize = 3;
 
 /// One fitted candidate.
 pub struct Candidate {
@@ -33,25 +53,44 @@ pub struct Candidate {
     pub fit: Result<fit::FitResult, String>,
     pub delta_bic: f64,
     pub explained: f64,
+    /// Whether the fit leaves a campaign residual rms no larger than the baseline's.
+    pub lowers_residual: bool,
 }
 
 impl Candidate {
     pub fn significant(&self) -> bool {
-        self.delta_bic > SIGNIFICANT_BIC
+        self.delta_bic > SIGNIFICANT_BIC && self.lowers_residual
     }
     pub fn chi2(&self) -> f64 {
         self.fit.as_ref().map_or(f64::INFINITY, |f| f.chi2_after())
     }
 }
 
+/// One effect added by forward selection on top of those chosen before it.
+pub struct Step {
+    pub effect: &'static str,
+    pub family: &'static str,
+    /// The joint fit: the parameters of every chosen effect so far, this one's last.
+    pub free: Vec<Free>,
+    pub fit: fit::FitResult,
+    /// ΔBIC over the effects chosen before it.
+    pub delta_bic: f64,
+    /// Share of the baseline's residual beyond noise that the chosen effects explain together,
+    /// this one included.
+    pub explained: f64,
+}
+
 /// The outcome of a diagnosis.
 pub struct Diagnosis {
     pub baseline: fit::Eval,
+    /// Degrees of freedom of the features: the χ² of a model right to the noise.
     pub n: usize,
     /// Noise floor of the residual rms.
     pub noise_rms: f64,
     /// Candidates, best first.
     pub candidates: Vec<Candidate>,
+    /// Effects forward selection added on top of the best candidate, in order.
+    pub more: Vec<Step>,
     pub features: Vec<FeatureInfo>,
 }
 
@@ -60,18 +99,42 @@ pub struct Diagnosis {
 pub enum Verdict {
     /// The baseline already fits to the noise, or no candidate lowers the misfit significantly.
     NothingSignificant,
-    /// The best candidate is significant and explains most of the residual.
-    Missing { effect: &'static str, explained: f64 },
-    /// The best candidate is significant but explains little of the residual.
-    Unexplained { effect: &'static str, explained: f64 },
+    /// The best candidate (and those forward selection added to it) is significant and explains
+    /// most of the residual.
+    Missing { effects: Vec<&'static str>, explained: f64 },
+    /// The best candidate (with those added to it) is significant but explains little of the
+    /// residual.
+    Unexplained { effects: Vec<&'static str>, explained: f64 },
 }
 
 impl Diagnosis {
     pub fn verdict(&self) -> Verdict {
         match self.candidates.first() {
-            Some(c) if c.significant() && c.explained >= EXPLAINS_ENOUGH => Verdict::Missing { effect: c.effect, explained: c.explained },
-            Some(c) if c.significant() => Verdict::Unexplained { effect: c.effect, explained: c.explained },
+            Some(c) if c.significant() => {
+                let effects: Vec<&'static str> = std::iter::once(c.effect).chain(self.more.iter().map(|s| s.effect)).collect();
+                let explained = self.more.last().map_or(c.explained, |s| s.explained);
+                if self.more.is_empty() || explained >= EXPLAINS_TOGETHER {
+                    if explained >= EXPLAINS_ENOUGH {
+                        Verdict::Missing { effects, explained }
+                    } else {
+                        Verdict::Unexplained { effects, explained }
+                    }
+                } else if c.explained >= EXPLAINS_ENOUGH {
+                    // The effects added to it do not close the gap to the noise: name the first only.
+                    Verdict::Missing { effects: vec![c.effect], explained: c.explained }
+                } else {
+                    Verdict::Unexplained { effects, explained }
+                }
+            }
             _ => Verdict::NothingSignificant,
+        }
+    }
+
+    /// The chosen effects' joint fit: the best candidate's, or the last forward-selection step's.
+    pub fn chosen_fit(&self) -> Option<&fit::FitResult> {
+        match self.more.last() {
+            Some(s) => Some(&s.fit),
+            None => self.candidates.first().filter(|c| c.significant()).and_then(|c| c.fit.as_ref().ok()),
         }
     }
 
@@ -79,22 +142,57 @@ impl Diagnosis {
     pub fn summary(&self) -> String {
         let best = self.candidates.first();
         match self.verdict() {
-            Verdict::NothingSignificant => format!(
-                "no candidate explains the residual significantly (best: {}, dBIC = {:.1} <= {SIGNIFICANT_BIC}); no significant missing effect",
-                best.map_or("-", |c| c.effect),
-                best.map_or(f64::NAN, |c| c.delta_bic)
-            ),
-            Verdict::Missing { effect, explained } => format!(
-                "most likely missing: {effect} ({}); it explains {:.0} % of the residual beyond noise (dBIC = {:.0})",
-                fit::family(effect),
+            Verdict::NothingSignificant => match best {
+                Some(c) if c.delta_bic > SIGNIFICANT_BIC => format!(
+                    "no candidate explains the residual significantly (best: {}, dBIC = {:.1}, but its fit leaves a larger residual than the baseline's); no significant missing effect",
+                    c.effect, c.delta_bic
+                ),
+                _ => format!(
+                    "no candidate explains the residual significantly (best: {}, dBIC = {:.1} <= {SIGNIFICANT_BIC}); no significant missing effect",
+                    best.map_or("-", |c| c.effect),
+                    best.map_or(f64::NAN, |c| c.delta_bic)
+                ),
+            },
+            Verdict::Missing { effects, explained } if effects.len() == 1 => format!(
+                "most likely missing: {} ({}); it explains {:.0} % of the residual beyond noise (dBIC = {:.0})",
+                effects[0],
+                fit::family(effects[0]),
                 100.0 * explained,
                 best.map_or(f64::NAN, |c| c.delta_bic)
             ),
-            Verdict::Unexplained { effect, explained } => format!(
-                "the best candidate, {effect}, explains only {:.0} % of the residual beyond noise: the missing effect is probably not in the library (or several are missing)",
+            Verdict::Missing { effects, explained } => format!(
+                "most likely missing: {}; together they explain {:.0} % of the residual beyond noise ({})",
+                effects.iter().map(|e| format!("{e} ({})", fit::family(e))).collect::<Vec<_>>().join(" + "),
+                100.0 * explained,
+                self.shares()
+            ),
+            Verdict::Unexplained { effects, explained } if effects.len() == 1 => format!(
+                "the best candidate, {}, explains only {:.0} % of the residual beyond noise: the missing effect is probably not in the library",
+                effects[0],
                 100.0 * explained
             ),
+            Verdict::Unexplained { effects, explained } => format!(
+                "the best candidates together, {}, explain only {:.0} % of the residual beyond noise ({}): the missing effect is probably not in the library",
+                effects.join(" + "),
+                100.0 * explained,
+                self.shares()
+            ),
         }
+    }
+}
+
+impl Diagnosis {
+    /// What each chosen effect adds, in order: "A 60 %, + B 35 %" (shares of the residual beyond
+    /// noise, each over the effects before it).
+    fn shares(&self) -> String {
+        let Some(first) = self.candidates.first() else { return String::new() };
+        let mut prev = first.explained;
+        let mut parts = vec![format!("{} {:.0} %", first.effect, 100.0 * prev)];
+        for s in &self.more {
+            parts.push(format!("+ {} {:.0} %", s.effect, 100.0 * (s.explained - prev)));
+            prev = s.explained;
+        }
+        parts.join(", ")
     }
 }
 
@@ -112,7 +210,7 @@ pub fn free_of(effect: &str, model: &ModelParams) -> Vec<Free> {
 /// Fits every candidate and ranks them.
 pub fn diagnose(problem: &Problem, candidates: &[&'static str]) -> Diagnosis {
     let baseline = problem.evaluate(1, &|_, m| m.clone()).remove(0);
-    let n = baseline.r.len();
+    let n = problem.dof().round() as usize;
     let chi2_b = baseline.chi2();
     let noise = problem.noise_rms();
     let (rb, n2) = (baseline.residual_rms(), noise * noise);
@@ -123,6 +221,7 @@ pub fn diagnose(problem: &Problem, candidates: &[&'static str]) -> Diagnosis {
             let free = free_of(effect, model0);
             let fit = fit::fit_from(problem, &free, MAX_ITER, baseline.clone());
             let p = free.len() as f64;
+            let lowers_residual = fit.as_ref().is_ok_and(|f| f.after.residual_rms() <= rb);
             let (delta_bic, explained) = match &fit {
                 Ok(f) => {
                     let rc = f.after.residual_rms();
@@ -133,11 +232,73 @@ pub fn diagnose(problem: &Problem, candidates: &[&'static str]) -> Diagnosis {
                 }
                 Err(_) => (f64::NEG_INFINITY, 0.0),
             };
-            Candidate { effect, family: fit::family(effect), free, fit, delta_bic, explained }
+            Candidate { effect, family: fit::family(effect), free, fit, delta_bic, explained, lowers_residual }
         })
         .collect();
-    out.sort_by(|a, b| b.delta_bic.total_cmp(&a.delta_bic));
-    Diagnosis { baseline, n, noise_rms: noise, candidates: out, features: problem.features() }
+    out.sort_by(|a, b| b.significant().cmp(&a.significant()).then(b.delta_bic.total_cmp(&a.delta_bic)));
+    let more = forward_selection(problem, &out, n, (rb, n2));
+    Diagnosis { baseline, n, noise_rms: noise, candidates: out, more, features: problem.features() }
+}
+
+/// Forward selection on top of the best candidate (see the module docs): the effects it adds.
+/// `baseline_rms` is the baseline's residual rms and the square of its noise floor.
+fn forward_selection(problem: &Problem, ranked: &[Candidate], n: usize, baseline_rms: (f64, f64)) -> Vec<Step> {
+    let (rb, n2) = baseline_rms;
+    let ln_n = (n as f64).ln();
+    let excess = rb * rb - n2;
+    let share = |e: &fit::Eval| if excess > 0.0 { (1.0 - (e.residual_rms().powi(2) - n2) / excess).clamp(0.0, 1.0) } else { 0.0 };
+    let Some(best) = ranked.first().filter(|c| c.significant()) else { return Vec::new() };
+    let Ok(best_fit) = &best.fit else { return Vec::new() };
+    let mut chosen: Vec<&'static str> = vec![best.effect];
+    // The chosen parameters at their estimates, and the evaluation they leave.
+    let mut free: Vec<Free> = best.free.iter().zip(&best_fit.estimate).map(|(f, &v)| Free::new(f.info, v)).collect();
+    let mut at = best_fit.after.clone();
+    let mut steps = Vec::new();
+    let model0 = &problem.tests[0].model;
+    while chosen.len() < MAX_EFFECTS {
+        // Room left: even a perfect further effect of one parameter must beat its penalty.
+        if at.chi2() - n as f64 <= ln_n + SIGNIFICANT_BIC {
+            break;
+        }
+        let rest: Vec<&Candidate> = ranked.iter().filter(|c| !chosen.contains(&c.effect) && c.fit.is_ok()).collect();
+        let tried: Vec<(&'static str, Vec<Free>, Result<fit::FitResult, String>)> = rest
+            .par_iter()
+            .map(|c| {
+                let mut f = free.clone();
+                f.extend(free_of(c.effect, model0));
+                let r = fit::fit_from(problem, &f, MAX_ITER, at.clone());
+                (c.effect, f, r)
+            })
+            .collect();
+        let chi2_at = at.chi2();
+        let rms_at = at.residual_rms();
+        let next = tried
+            .into_iter()
+            .filter_map(|(effect, f, r)| {
+                let r = r.ok()?;
+                let p_new = (f.len() - free.len()) as f64;
+                let dbic = chi2_at - r.chi2_after() - p_new * ln_n;
+                (dbic > SIGNIFICANT_BIC && r.after.residual_rms() <= rms_at).then_some((effect, f, r, dbic))
+            })
+            .max_by(|a, b| a.3.total_cmp(&b.3));
+        let Some((effect, f, mut r, mut dbic)) = next else { break };
+        if !r.converged {
+            // The chosen set's parameters started where they compensated for the missing effect:
+            // the joint fit may need more iterations than a candidate's screening fit.
+            let restart: Vec<Free> = f.iter().zip(&r.estimate).map(|(f, &v)| Free::new(f.info, v)).collect();
+            if let Ok(polished) = fit::fit_from(problem, &restart, 4 * MAX_ITER, r.after.clone()) {
+                if polished.chi2_after() <= r.chi2_after() {
+                    dbic += r.chi2_after() - polished.chi2_after();
+                    r = polished;
+                }
+            }
+        }
+        free = f.iter().zip(&r.estimate).map(|(f, &v)| Free::new(f.info, v)).collect();
+        at = r.after.clone();
+        chosen.push(effect);
+        steps.push(Step { effect, family: fit::family(effect), free: f, explained: share(&r.after), fit: r, delta_bic: dbic });
+    }
+    steps
 }
 
 /// The feature groups (test, harmonic) whose χ² a candidate lowers most: (test, harmonic, χ²

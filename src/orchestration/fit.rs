@@ -3,9 +3,15 @@
 //! **Features.** A fit does not match raw time histories (noise, and the window's start, would
 //! dominate); it matches features that average noise out, computed on the file's own samples
 //! (the model interpolated there, [`crate::kernel::resample`]):
-//! - a sine test: the complex harmonics k = 1…9 (those below the file's Nyquist frequency) of
-//!   acceleration, displacement and force (where the file has it) over the analysis window, by
-//!   least squares ([`super::compare::Projector`], built once per test), model minus measured;
+//! - a sine test, per channel (acceleration, displacement, force where the file has it), over
+//!   the analysis window, model minus measured: the complex harmonics k = 1…9 (those below the
+//!   file's Nyquist frequency), by least squares ([`super::compare::Projector`], built once per
+//!   test); the mean (displacement and force: a static offset, e.g. of a leaking loop; the
+//!   accelerometer's mean is its bias, not physics); and the *remainder* ‖(I − P)(model −
+//!   measured)‖/σ, what neither the mean nor the harmonics hold (an oscillation at another
+//!   frequency, harmonics above the 9th, an envelope that drifts). Without the last two a fit could
+//!   lower χ² while leaving a static offset or a limit cycle that the time-domain residual shows;
+//!   with them χ² is the time-domain χ² of the window, split into its parts;
 //! - a record test: the residual of each channel averaged over blocks of 1/64 s
 //!   ([`block_len`] samples; 16 at 1024 Hz).
 //!
@@ -20,7 +26,9 @@
 //!   noise keeps variance 20σ²).
 //!
 //! Both are floored at 1e-6 of the channel's rms so noise-free synthetic data stays finite. A
-//! harmonic of white noise over W samples has σ·√(2/W) per component, a block mean σ/√B.
+//! harmonic of white noise over W samples has σ·√(2/W) per component, a mean σ/√W, a block mean
+//! σ/√B; the remainder's square has W − p degrees of freedom (p functions fitted), so a model
+//! right to the noise leaves χ² ≈ n, the features' degrees of freedom ([`Problem::dof`]).
 //! Campaign channel weights multiply.
 //!
 //! **Solver.** Levenberg–Marquardt on u, the free parameters in scaled coordinates (log of the
@@ -51,46 +59,28 @@ pub fn block_len(rate_hz: f64) -> usize {
     ((rate_hz / 64.0).round() as usize).max(1)
 }
 
-/// The parameters each effect frees by default when it is fitted (the rest keep their defaults):
-/// the ones its signature determines; parameters that only shape it (a smoothing velocity, a
-/// damping ratio that trades off against a frequency) stay fixed unless `--free` names them.
+/// The parameters effect `name` frees by default when it is fitted (its `INFO.free`; empty for
+/// a name the library does not have).
 pub fn default_free(effect: &str) -> &'static [&'static str] {
-    match effect {
-        "spool_dynamics" => &["freq_hz"],
-        "transport_delay" => &["tau"],
-        "leakage" => &["c_int"],
-        "supply" => &["q_pump", "c_acc"],
-        "seal_friction" => &["f_c", "f_s"],
-        "flow_saturation" => &["x_sat"],
-        "compressibility" => &["dead_volume", "air_fraction"],
-        "reaction_mass" => &["m_r", "f_r"],
-        "hold_down" => &["k3"],
-        "asymmetry" => &["extend_gain"],
-        _ => &[],
-    }
+    crate::kernel::effects::info(effect).map_or(&[], |e| e.free)
 }
 
-/// Families of effects whose signatures a campaign of sine tests cannot tell apart (a spool lag
-/// and a delay both add a lag ∝ frequency below the spool's bandwidth).
+/// The family of effect `name` (its `INFO.family`; "other" for a name the library does not have).
 pub fn family(effect: &str) -> &'static str {
-    match effect {
-        "spool_dynamics" | "transport_delay" => "valve dynamics",
-        "leakage" => "leakage",
-        "supply" => "supply pressure",
-        "seal_friction" => "friction",
-        "flow_saturation" => "valve flow nonlinearity",
-        "compressibility" => "compressibility",
-        "reaction_mass" => "reaction mass",
-        "hold_down" => "hold-down stiffness",
-        "asymmetry" => "asymmetry",
-        _ => "other",
-    }
+    crate::kernel::effects::info(effect).map_or("other", |e| e.family)
 }
 
 /// Which channel a feature comes from.
 pub const CHANNELS: [&str; 3] = ["accel", "disp", "force"];
 
-/// What one feature is: its test, channel (index into [`CHANNELS`]) and harmonic (0 for a block).
+/// [`FeatureInfo::harmonic`] of a sine test's mean (displacement and force).
+pub const MEAN: usize = 100;
+/// [`FeatureInfo::harmonic`] of a sine test's remainder: the part of the residual that neither
+/// the mean nor the harmonics hold.
+pub const REMAINDER: usize = 101;
+
+/// What one feature is: its test, channel (index into [`CHANNELS`]) and harmonic (0 for a block,
+/// [`MEAN`], [`REMAINDER`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FeatureInfo {
     pub test: usize,
@@ -118,6 +108,8 @@ pub struct TestData {
     info: Vec<FeatureInfo>,
     /// The harmonic projector of the samples (sine tests), built once.
     proj: Option<super::compare::Projector>,
+    /// Degrees of freedom of the features ([`TestData::dof`]).
+    dof: f64,
 }
 
 fn rms_slice(v: &[f64]) -> f64 {
@@ -167,13 +159,18 @@ pub fn noise_sigma(x: &[f64], tau: &[f64], rate_hz: f64, f: Option<f64>) -> f64 
     (rss / (n - p) as f64).sqrt().max(1e-6 * rms_slice(x)).max(f64::MIN_POSITIVE)
 }
 
-/// The unweighted features of one channel at the samples `s`: the harmonics below the Nyquist
-/// frequency (a sine, `proj` of the samples) or block means (a record).
-fn channel_features(s: &Samples, proj: Option<&super::compare::Projector>, x: &[f64]) -> Vec<f64> {
+/// The unweighted linear features of channel `c` at the samples `s`: the harmonics below the
+/// Nyquist frequency and, for displacement and force, the mean (a sine, `proj` of the samples);
+/// or block means (a record).
+fn channel_features(s: &Samples, proj: Option<&super::compare::Projector>, c: usize, x: &[f64]) -> Vec<f64> {
     match proj {
         Some(p) => {
             let h = p.apply(x);
-            h[..p.n_harm()].iter().flat_map(|c| [c.0, c.1]).collect()
+            let mut f: Vec<f64> = h[..p.n_harm()].iter().flat_map(|c| [c.0, c.1]).collect();
+            if c != 0 {
+                f.push(p.mean(x));
+            }
+            f
         }
         None => {
             let b = block_len(s.rate_hz);
@@ -194,7 +191,7 @@ impl TestData {
     pub fn from_parts(name: String, model: ModelParams, drive: Reference, samples: Samples, measured: [Option<Vec<f64>>; 3], weights: Weights) -> Self {
         let w = [weights.accel, weights.disp, weights.force];
         let proj = samples.fundamental_hz.map(|f| super::compare::Projector::new(&samples.tau, f, samples.n_harm));
-        let mut t = TestData { name, model, drive, samples, measured, weights, sigma: [f64::NAN; 3], meas: Vec::new(), scale: Vec::new(), info: Vec::new(), proj };
+        let mut t = TestData { name, model, drive, samples, measured, weights, sigma: [f64::NAN; 3], meas: Vec::new(), scale: Vec::new(), info: Vec::new(), proj, dof: 0.0 };
         let s = &t.samples;
         let sine = s.fundamental_hz.is_some();
         let n = s.len();
@@ -205,15 +202,36 @@ impl TestData {
             }
             let sigma = noise_sigma(x, &s.tau, s.rate_hz, s.fundamental_hz);
             t.sigma[c] = sigma;
-            let fs = channel_features(s, t.proj.as_ref(), x);
+            let fs = channel_features(s, t.proj.as_ref(), c, x);
             let sd = if sine { sigma * (2.0 / n as f64).sqrt() } else { sigma / (block_len(s.rate_hz) as f64).sqrt() };
+            let n_harm = t.proj.as_ref().map_or(0, |p| 2 * p.n_harm());
             for (i, v) in fs.iter().enumerate() {
                 t.meas.push(*v);
-                t.scale.push(sd / w[c]);
-                t.info.push(FeatureInfo { test: 0, channel: c, harmonic: if sine { i / 2 + 1 } else { 0 } });
+                let (scale, harmonic) = match () {
+                    _ if !sine => (sd, 0),
+                    _ if i < n_harm => (sd, i / 2 + 1),
+                    // The mean of white noise over n samples: σ/√n.
+                    _ => (sigma / (n as f64).sqrt(), MEAN),
+                };
+                t.scale.push(scale / w[c]);
+                t.info.push(FeatureInfo { test: 0, channel: c, harmonic });
+                t.dof += 1.0;
+            }
+            if let Some(p) = &t.proj {
+                // The remainder ‖(I − P)(model − measured)‖/σ: its square is a χ² of n − p degrees
+                // of freedom for a model right to the noise (measured value 0).
+                t.meas.push(0.0);
+                t.scale.push(sigma / w[c]);
+                t.info.push(FeatureInfo { test: 0, channel: c, harmonic: REMAINDER });
+                t.dof += n.saturating_sub(p.n_functions()) as f64;
             }
         }
         t
+    }
+
+    /// The χ² a model right to the noise leaves in this test's features (their degrees of freedom).
+    pub fn dof(&self) -> f64 {
+        self.dof
     }
 
     /// Number of features of this test.
@@ -279,6 +297,11 @@ impl Problem {
             }
         }
         Problem { tests, solver: Solver::default() }
+    }
+
+    /// The χ² a model right to the noise leaves: the features' degrees of freedom.
+    pub fn dof(&self) -> f64 {
+        self.tests.iter().map(|t| t.dof()).sum()
     }
 
     /// The residual rms a model right to the noise would leave: over every test and channel, the
@@ -355,8 +378,13 @@ impl Problem {
                             if t.measured[c].is_none() || !(t.sigma[c] > 0.0) {
                                 continue;
                             }
-                            for v in channel_features(&t.samples, t.proj.as_ref(), &model_ch[c]) {
+                            for v in channel_features(&t.samples, t.proj.as_ref(), c, &model_ch[c]) {
                                 r.push((v - t.meas[at]) / t.scale[at]);
+                                at += 1;
+                            }
+                            if let (Some(p), Some(x)) = (&t.proj, &t.measured[c]) {
+                                let e: Vec<f64> = model_ch[c].iter().zip(x).map(|(a, b)| a - b).collect();
+                                r.push(p.remainder_sq(&e).sqrt() / t.scale[at]);
                                 at += 1;
                             }
                         }
@@ -457,6 +485,7 @@ pub struct FitResult {
     pub u: Vec<f64>,
     pub before: Eval,
     pub after: Eval,
+    /// Degrees of freedom of the features: the χ² of a model right to the noise.
     pub n: usize,
     pub iterations: usize,
     pub converged: bool,
@@ -591,7 +620,7 @@ pub fn fit_from(problem: &Problem, free: &[Free], max_iter: usize, before: Eval)
                 u = trials[b].clone();
                 lambda = lams[b].max(1e-9);
                 (at, j) = (ev[b].0.clone(), ev[b].1.clone().expect("filtered"));
-                if chi2 - new < 1e-3 + 1e-4 * chi2 || step < 1e-8 {
+                if chi2 - new < 1e-2 + 1e-6 * chi2 || step < 1e-8 {
                     converged = true;
                     break;
                 }
@@ -607,7 +636,7 @@ pub fn fit_from(problem: &Problem, free: &[Free], max_iter: usize, before: Eval)
         }
     }
     let after = at;
-    let n = after.r.len();
+    let n = problem.dof().round() as usize;
     let chi2 = after.chi2();
     let (a, _) = normal(&j, &after.r);
     let s2 = if n > p { (chi2 / (n - p) as f64).max(1.0) } else { 1.0 };

@@ -295,8 +295,11 @@ pub fn align(test: &TestSpec, data: &NumTable, record: Option<&NumTable>, open_l
     let mut model = test.model.clone();
     if open_loop == Some(OpenLoop::Spool) {
         // A measured spool already holds the valve's delay and dynamics.
-        model.effects.transport_delay = false;
-        model.effects.spool_dynamics = false;
+        for e in crate::kernel::effects::LIBRARY.iter().filter(|e| e.moves_spool) {
+            if let Some(on) = model.effects.get_mut(e.name) {
+                *on = false;
+            }
+        }
     }
     let mut notes = data.notes.clone();
     notes.extend(time.note());

@@ -2,7 +2,7 @@
 //! engine uses, with an [`Observer`] that keeps the time history of every channel of docs/model.md §5.
 
 use super::spec::SimSpec;
-use crate::kernel::effects::{Baseline, EffectSet};
+use crate::kernel::effects::{effect_set, Baseline};
 use crate::kernel::excitation::Reference;
 use crate::kernel::params::ModelParams;
 use crate::kernel::resample::Resampler;
@@ -84,7 +84,7 @@ pub struct SimOutcome {
 pub fn run_lanes<const N: usize, O: Observer<N>>(models: &[&ModelParams], reference: &Reference, solver: &Solver, obs: &mut O) -> Result<[LaneResult; N], SetupError> {
     let lp = LaneParams::<N>::new(models)?;
     if models.iter().any(|m| m.effects.any()) {
-        simulate::run(&lp, &EffectSet::<N>::new(models), reference, solver, obs)
+        simulate::run(&lp, &effect_set::<N>(models), reference, solver, obs)
     } else {
         simulate::run(&lp, &Baseline, reference, solver, obs)
     }

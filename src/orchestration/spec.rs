@@ -346,7 +346,7 @@ pub fn model_table(model: &ModelParams) -> toml::Table {
             };
             t.insert("law".into(), law.into());
         }
-        if crate::kernel::params::EFFECTS.contains(&comp) && !model.effects.get(comp) {
+        if model.effects.get(comp) == Some(false) {
             continue;
         }
         for p in ModelParams::registry().filter(|p| p.component == comp) {

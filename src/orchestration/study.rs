@@ -349,7 +349,7 @@ impl StudySpec {
         }
         for (i, v) in variables.iter().enumerate() {
             let comp = v.info.component;
-            if crate::kernel::params::EFFECTS.contains(&comp) && !model.effects.get(comp) {
+            if model.effects.get(comp) == Some(false) {
                 issues.push(format!("variables[{i}].name"), format!("effect `{comp}` is not switched on: add a [model.{comp}] table"));
             }
             if variables[..i].iter().any(|w| std::ptr::eq(w.info, v.info)) {

@@ -264,8 +264,12 @@ pub struct SimArgs {
 
 #[derive(Debug, clap::Args)]
 pub struct ParamsArgs {
-    /// Only this component (servovalve, actuator, platen, friction, controller).
+    /// Only this component (servovalve, actuator, platen, friction, controller, or an effect).
     pub component: Option<String>,
+    /// List the effect library instead: each effect's name, family, the parameters a diagnosis
+    /// frees, and what it adds (docs/model.md §7).
+    #[arg(long)]
+    pub effects: bool,
 }
 
 const COMPARE_HELP: &str = "Compare the model with a campaign of measured tests: harmonics, amplitude, part of the cycle, envelope.

@@ -13,17 +13,18 @@ use std::fmt::Write as _;
 use std::io::Write;
 
 fn harmonic_label(k: usize) -> String {
-    if k == 0 {
-        "time blocks".into()
-    } else {
-        format!("h{k}")
+    match k {
+        0 => "time blocks".into(),
+        crate::orchestration::fit::MEAN => "mean".into(),
+        crate::orchestration::fit::REMAINDER => "beyond h1-h9".into(),
+        k => format!("h{k}"),
     }
 }
 
 pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
     let model = load_model(args.model.as_deref())?;
     let candidates: Vec<&'static str> = if args.candidates.is_empty() {
-        EFFECTS.iter().copied().filter(|e| !model.effects.get(e)).collect()
+        EFFECTS.iter().copied().filter(|e| model.effects.get(e) == Some(false)).collect()
     } else {
         args.candidates.iter().map(|c| check_effect(c, "--candidates")).collect::<anyhow::Result<_>>()?
     };
@@ -41,7 +42,7 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
     }
     let mut o = std::io::stdout().lock();
     let chi2_b = d.baseline.chi2();
-    writeln!(o, "study diagnose {} ({} tests, {} features, {} candidates, {:.1} s)", args.campaign.display(), problem.tests.len(), d.n, d.candidates.len(), secs)?;
+    writeln!(o, "study diagnose {} ({} tests, {} features, {} candidates, {:.1} s)", args.campaign.display(), problem.tests.len(), d.features.len(), d.candidates.len(), secs)?;
     writeln!(
         o,
         "\n  baseline: chi2 = {chi2_b:.4e} (about {} for a model right to the noise), residual rms {:.3e} (residual / measured, rms over tests and channels: acceleration, displacement, force; noise floor {:.3e})",
@@ -87,10 +88,28 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
             writeln!(o, "      phase error of the fundamental per test (model - measured, deg): {}", ph.join("  "))?;
         }
     }
+    if !d.more.is_empty() {
+        writeln!(o, "\n  forward selection (each effect fitted on top of those before it, their parameters refitted with it):")?;
+        writeln!(o, "  {:<22} {:>4} {:>11} {:>11} {:>9} {:>11}  parameters (joint fit)", "effect", "iter", "chi2", "dBIC", "explains", "rms resid.")?;
+        for s in &d.more {
+            let params: Vec<String> = s.free.iter().zip(&s.fit.estimate).zip(&s.fit.se).map(|((p, e), se)| format!("{} = {e:.3e} ± {se:.1e} {}", p.info.path(), p.info.unit)).collect();
+            writeln!(
+                o,
+                "  + {:<20} {:>4} {:>11.4e} {:>11.4e} {:>8.1}% {:>11.3e}  {}",
+                s.effect,
+                format!("{}{}", s.fit.iterations, if s.fit.converged { "" } else { "!" }),
+                s.fit.chi2_after(),
+                s.delta_bic,
+                100.0 * s.explained,
+                s.fit.after.residual_rms(),
+                params.join(", ")
+            )?;
+        }
+    }
     writeln!(o, "\n  verdict: {}", d.summary())?;
     if let Some(dir) = &args.report {
         write_report(dir, &args.campaign.display().to_string(), &problem, &d)?;
-        writeln!(o, "\n  wrote {} and its tables (candidates, tests, evidence .parquet)", dir.join("report.html").display())?;
+        writeln!(o, "\n  wrote {} and its tables (candidates, selection, tests, evidence .parquet)", dir.join("report.html").display())?;
     }
     print_checks(&mut o, &loaded.checks, &implausible)?;
     Ok(())
@@ -123,6 +142,32 @@ pub fn write_report(dir: &std::path::Path, campaign: &str, problem: &Problem, d:
             ("explained".into(), Column::F64(cs.iter().map(|c| c.explained).collect())),
             ("significant".into(), Column::Str(cs.iter().map(|c| if c.significant() { "yes".into() } else { "no".into() }).collect())),
             ("failure".into(), Column::Str(cs.iter().map(|c| c.fit.as_ref().err().cloned().unwrap_or_default()).collect())),
+        ],
+        &meta,
+    )?;
+    // The chosen effects: the best candidate, then each forward-selection step (its joint fit).
+    let mut steps: Vec<(&str, &[crate::orchestration::fit::Free], &crate::orchestration::fit::FitResult, f64, f64)> = Vec::new();
+    if let Some(c) = cs.first().filter(|c| c.significant()) {
+        if let Ok(f) = &c.fit {
+            steps.push((c.effect, &c.free, f, c.delta_bic, c.explained));
+        }
+    }
+    for st in &d.more {
+        steps.push((st.effect, &st.free, &st.fit, st.delta_bic, st.explained));
+    }
+    tables::write_table(
+        &dir.join("selection.parquet"),
+        vec![
+            ("step".into(), Column::U32((1..=steps.len() as u32).collect())),
+            ("effect".into(), Column::Str(steps.iter().map(|s| s.0.to_string()).collect())),
+            ("params".into(), Column::Str(steps.iter().map(|s| s.1.iter().map(|f| f.info.path()).collect::<Vec<_>>().join(",")).collect())),
+            ("estimates".into(), Column::Str(steps.iter().map(|s| s.2.estimate.iter().map(|e| format!("{e:e}")).collect::<Vec<_>>().join(",")).collect())),
+            ("std_errors".into(), Column::Str(steps.iter().map(|s| s.2.se.iter().map(|e| format!("{e:e}")).collect::<Vec<_>>().join(",")).collect())),
+            ("chi2".into(), Column::F64(steps.iter().map(|s| s.2.chi2_after()).collect())),
+            ("delta_bic".into(), Column::F64(steps.iter().map(|s| s.3).collect())),
+            ("explained".into(), Column::F64(steps.iter().map(|s| s.4).collect())),
+            ("residual_rms".into(), Column::F64(steps.iter().map(|s| s.2.after.residual_rms()).collect())),
+            ("noise_rms".into(), Column::F64(vec![d.noise_rms; steps.len()])),
         ],
         &meta,
     )?;
@@ -256,7 +301,7 @@ td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}} th{{background:#
             if c.significant() { "yes" } else { "no" }
         )?;
     }
-    writeln!(h, "</table>\n<p>Baseline chi2 = {:.4e} over n = {} features (about n for a model right to the noise).</p>", d.baseline.chi2(), d.n)?;
+    writeln!(h, "</table>\n<p>Baseline chi2 = {:.4e}; about {} for a model right to the noise (the features' degrees of freedom).</p>", d.baseline.chi2(), d.n)?;
     h.push_str("<h2>Evidence</h2>\n");
     for c in d.candidates.iter().take(3) {
         writeln!(h, "<h3>{}</h3>\n<table><tr><th>feature</th><th>test</th><th>chi2 baseline</th><th>chi2 with it</th></tr>", c.effect)?;

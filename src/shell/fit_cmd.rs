@@ -115,7 +115,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         "study fit {} ({} tests, {} features, {} free parameters; {} iterations, {}, {:.1} s)",
         args.campaign.display(),
         problem.tests.len(),
-        r.n,
+        r.after.r.len(),
         free.len(),
         r.iterations,
         if r.converged { "converged" } else { "NOT converged: raise --max-iter" },
@@ -133,7 +133,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             writeln!(o, "  {:<30} {}", f.info.path(), row.join("  "))?;
         }
     }
-    writeln!(o, "\n  chi2 (features scaled by their noise; about n for a model right to the noise): {:.4e} -> {:.4e} (n = {})", r.chi2_before(), r.chi2_after(), r.n)?;
+    writeln!(o, "\n  chi2 (features scaled by their noise; about n, their degrees of freedom, for a model right to the noise): {:.4e} -> {:.4e} (n = {})", r.chi2_before(), r.chi2_after(), r.n)?;
     writeln!(o, "\n  residual rms / measured rms, per test (before -> after):")?;
     writeln!(o, "  {:<24} {:>24} {:>24} {:>24}", "test", "acceleration", "displacement", "force")?;
     for (i, t) in problem.tests.iter().enumerate() {

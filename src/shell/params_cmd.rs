@@ -2,10 +2,20 @@
 
 use super::cli::ParamsArgs;
 use super::BadInput;
+use crate::kernel::effects::LIBRARY;
 use crate::kernel::params::ModelParams;
 use std::io::Write;
 
 pub fn run(args: &ParamsArgs) -> anyhow::Result<()> {
+    if args.effects {
+        let mut out = std::io::stdout().lock();
+        writeln!(out, "{:<18} {:<26} {:<28} adds", "effect", "family", "a diagnosis frees")?;
+        for e in LIBRARY {
+            writeln!(out, "{:<18} {:<26} {:<28} {}", e.name, e.family, e.free.join(", "), e.summary)?;
+        }
+        writeln!(out, "\nSwitch one on with its table [model.NAME] in a model, run or study file; its parameters: study params NAME.")?;
+        return Ok(());
+    }
     if let Some(c) = &args.component {
         if !ModelParams::components().contains(&c.as_str()) {
             return Err(BadInput(format!("unknown component `{c}`; expected one of: {}", ModelParams::components().join(", "))).into());

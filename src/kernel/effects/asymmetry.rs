@@ -3,26 +3,56 @@
 //! by `act2_gain` against actuator 1's. Its signature: even harmonics (h2) and a shifted
 //! displacement, from a table that extends and retracts differently.
 
-use crate::kernel::params::ModelParams;
+use super::{Effect, EffectInfo, LibraryEffect};
+use crate::kernel::params::{params, ModelParams, Range};
+
+/// The effect's entry in the library.
+pub const INFO: EffectInfo = EffectInfo {
+    name: "asymmetry",
+    family: "asymmetry",
+    summary: "the valve flows of extension and retraction, or of the two actuators, differ",
+    params: Params::PARAMS,
+    free: &["extend_gain"],
+    moves_spool: false,
+};
+
+params! {
+    /// Effect `asymmetry`: port/valve asymmetry. The flow gain for extension (x > 0) differs from
+    /// that for retraction, and actuator 2's valves differ from actuator 1's.
+    pub struct Params in effect_params.asymmetry as "asymmetry" {
+        extend_gain: "-", "", 1.05, Range::gt(0.0), Chosen,
+            "Flow gain for x > 0 relative to x < 0 [chosen: a 5 % port mismatch].";
+        act2_gain: "-", "", 1.0, Range::gt(0.0), Chosen,
+            "Flow gain of actuator 2's valves relative to actuator 1's [chosen: equal].";
+    }
+}
 
 pub struct Asymmetry<const N: usize> {
     extend: [f64; N],
     act2: [f64; N],
 }
 
-impl<const N: usize> Asymmetry<N> {
-    pub fn new(p: [&ModelParams; N]) -> Self {
-        let on = |m: &ModelParams| super::switch(m, "asymmetry");
+impl<const N: usize> LibraryEffect<N> for Asymmetry<N> {
+    fn new(p: [&ModelParams; N]) -> Self {
+        let on = super::lane_mask(&p, INFO.name);
         // Off: both gains exactly 1.
         Asymmetry {
-            extend: p.map(|m| 1.0 + on(m) * (m.asymmetry.extend_gain - 1.0)),
-            act2: p.map(|m| 1.0 + on(m) * (m.asymmetry.act2_gain - 1.0)),
+            extend: std::array::from_fn(|l| 1.0 + on[l] * (Params::of(p[l]).extend_gain - 1.0)),
+            act2: std::array::from_fn(|l| 1.0 + on[l] * (Params::of(p[l]).act2_gain - 1.0)),
         }
+    }
+}
+
+impl<const N: usize> Effect<N> for Asymmetry<N> {
+    type State = [[f64; N]; 0];
+
+    fn initial_state(&self) -> Self::State {
+        []
     }
 
     /// Valve flows of actuator `act`, scaled.
     #[inline(always)]
-    pub fn flows(&self, l: usize, act: usize, q: (f64, f64)) -> (f64, f64) {
+    fn flows(&self, l: usize, act: usize, q: (f64, f64), _p1: f64, _p2: f64, _p_s: f64, _s: &Self::State) -> (f64, f64) {
         let g = (if q.0 > 0.0 { self.extend[l] } else { 1.0 }) * (if act == 1 { self.act2[l] } else { 1.0 });
         (g * q.0, g * q.1)
     }

@@ -13,7 +13,32 @@
 //! Isothermal air (polytropic exponent 1) is a choice: bubbles in oil exchange heat quickly, and
 //! it avoids a `powf` in the step.
 
-use crate::kernel::params::ModelParams;
+use super::{Effect, EffectInfo, LibraryEffect};
+use crate::kernel::params::{params, ModelParams, Range};
+
+/// The effect's entry in the library.
+pub const INFO: EffectInfo = EffectInfo {
+    name: "compressibility",
+    family: "compressibility",
+    summary: "a softer oil column: dead volume, entrained air, hose compliance",
+    params: Params::PARAMS,
+    free: &["dead_volume", "air_fraction"],
+    moves_spool: false,
+};
+
+params! {
+    /// Effect `compressibility`: effective bulk modulus and dead volume. Each chamber gains a dead
+    /// volume (hoses, manifold) and its oil an entrained-air fraction and a wall compliance:
+    /// 1/β_e = 1/(beta_ratio·β) + air_fraction·p_atm/p², with p the absolute chamber pressure.
+    pub struct Params in effect_params.compressibility as "compressibility" {
+        dead_volume: "m³", "m3", 0.02, Range::closed(0.0, 1.0), Chosen,
+            "Dead volume added to every chamber (hoses, manifold, valve block) [chosen: 20 L].";
+        beta_ratio: "-", "", 1.0, Range::closed(0.05, 1.0), Chosen,
+            "Effective over nominal bulk modulus at high pressure (hose and wall compliance) [chosen: 1 = none].";
+        air_fraction: "-", "", 0.01, Range::closed(0.0, 0.2), Chosen,
+            "Entrained-air volume fraction at atmospheric pressure, isothermal [chosen: 1 %].";
+    }
+}
 
 /// Atmospheric pressure, Pa (ISO 2533 standard atmosphere).
 pub const P_ATM: f64 = 101_325.0;
@@ -30,17 +55,19 @@ pub struct Compressibility<const N: usize> {
     v_x: [f64; N],
 }
 
-impl<const N: usize> Compressibility<N> {
-    pub fn new(p: [&ModelParams; N]) -> Self {
+impl<const N: usize> LibraryEffect<N> for Compressibility<N> {
+    fn new(p: [&ModelParams; N]) -> Self {
         Compressibility {
-            on: super::lane_mask(&p, "compressibility"),
+            on: super::lane_mask(&p, INFO.name),
             beta: p.map(|m| m.actuator.beta),
-            inv_beta_e: p.map(|m| 1.0 / (m.compressibility.beta_ratio * m.actuator.beta)),
-            air: p.map(|m| m.compressibility.air_fraction * P_ATM),
-            v_x: p.map(|m| m.compressibility.dead_volume),
+            inv_beta_e: p.map(|m| 1.0 / (Params::of(m).beta_ratio * m.actuator.beta)),
+            air: p.map(|m| Params::of(m).air_fraction * P_ATM),
+            v_x: p.map(|m| Params::of(m).dead_volume),
         }
     }
+}
 
+impl<const N: usize> Compressibility<N> {
     /// β_e/V of one chamber at gauge pressure `p`, from the baseline's β/V (`b`).
     #[inline(always)]
     fn one(&self, l: usize, b: f64, p: f64) -> f64 {
@@ -49,10 +76,18 @@ impl<const N: usize> Compressibility<N> {
         let volume = self.beta[l] / b + self.v_x[l];
         b + self.on[l] * (beta_e / volume - b)
     }
+}
+
+impl<const N: usize> Effect<N> for Compressibility<N> {
+    type State = [[f64; N]; 0];
+
+    fn initial_state(&self) -> Self::State {
+        []
+    }
 
     /// β_e/V of both chambers (cap, rod) of an actuator, from the baseline's β/V1, β/V2.
     #[inline(always)]
-    pub fn stiffness(&self, l: usize, b: (f64, f64), p1: f64, p2: f64) -> (f64, f64) {
+    fn chamber_stiffness(&self, l: usize, _act: usize, b: (f64, f64), p1: f64, p2: f64, _s: &Self::State) -> (f64, f64) {
         (self.one(l, b.0, p1), self.one(l, b.1, p2))
     }
 }

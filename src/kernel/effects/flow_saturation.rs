@@ -3,7 +3,27 @@
 //! velocity, so a lower amplitude ratio and more odd distortion at large amplitude, nothing at
 //! small amplitude.
 
-use crate::kernel::params::ModelParams;
+use super::{Effect, EffectInfo, LibraryEffect};
+use crate::kernel::params::{params, ModelParams, Range};
+
+/// The effect's entry in the library.
+pub const INFO: EffectInfo = EffectInfo {
+    name: "flow_saturation",
+    family: "valve flow nonlinearity",
+    summary: "the metering area of the valves saturates toward large openings",
+    params: Params::PARAMS,
+    free: &["x_sat"],
+    moves_spool: false,
+};
+
+params! {
+    /// Effect `flow_saturation`: spool-to-flow nonlinearity; the metering area saturates,
+    /// x_eff = x_sat·tanh(x/x_sat).
+    pub struct Params in effect_params.flow_saturation as "flow_saturation" {
+        x_sat: "m", "m", 0.012, Range::gt(0.0), Chosen,
+            "Spool opening scale of the saturation x_eff = x_sat·tanh(x/x_sat) [chosen: 12 mm of the 19.05 mm stroke].";
+    }
+}
 
 pub struct FlowSaturation<const N: usize> {
     on: [f64; N],
@@ -11,18 +31,32 @@ pub struct FlowSaturation<const N: usize> {
     inv_x_sat: [f64; N],
 }
 
-impl<const N: usize> FlowSaturation<N> {
-    pub fn new(p: [&ModelParams; N]) -> Self {
+impl<const N: usize> LibraryEffect<N> for FlowSaturation<N> {
+    fn new(p: [&ModelParams; N]) -> Self {
         FlowSaturation {
-            on: super::lane_mask(&p, "flow_saturation"),
-            x_sat: p.map(|m| m.flow_saturation.x_sat),
-            inv_x_sat: p.map(|m| 1.0 / m.flow_saturation.x_sat),
+            on: super::lane_mask(&p, INFO.name),
+            x_sat: p.map(|m| Params::of(m).x_sat),
+            inv_x_sat: p.map(|m| 1.0 / Params::of(m).x_sat),
         }
+    }
+}
+
+impl<const N: usize> Effect<N> for FlowSaturation<N> {
+    type State = [[f64; N]; 0];
+
+    fn initial_state(&self) -> Self::State {
+        []
     }
 
     /// Effective opening of spool position `x`.
     #[inline(always)]
-    pub fn opening(&self, l: usize, x: f64) -> f64 {
+    fn spool(&self, l: usize, _act: usize, x: f64, _s: &Self::State) -> f64 {
         x + self.on[l] * (self.x_sat[l] * (x * self.inv_x_sat[l]).tanh() - x)
+    }
+
+    /// A metering nonlinearity: the spool itself is where the command puts it.
+    #[inline(always)]
+    fn spool_position(&self, _l: usize, _act: usize, x: f64, _s: &Self::State) -> f64 {
+        x
     }
 }

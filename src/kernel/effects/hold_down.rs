@@ -2,20 +2,48 @@
 //! −K·y of the baseline. Its signature: odd harmonics and a changed amplitude ratio where the
 //! displacement is large (low frequency, large amplitude), nothing at small displacement.
 
-use crate::kernel::params::ModelParams;
+use super::{Effect, EffectInfo, LibraryEffect};
+use crate::kernel::params::{params, ModelParams, Range};
+
+/// The effect's entry in the library.
+pub const INFO: EffectInfo = EffectInfo {
+    name: "hold_down",
+    family: "hold-down stiffness",
+    summary: "a cubic hardening of the hold-down struts",
+    params: Params::PARAMS,
+    free: &["k3"],
+    moves_spool: false,
+};
+
+params! {
+    /// Effect `hold_down`: hold-down strut stiffness nonlinearity, F = −k3·y³ on top of −K·y.
+    pub struct Params in effect_params.hold_down as "hold_down" {
+        k3: "N/m³", "n_per_m3", 1.0e8, Range::any(), Chosen,
+            "Cubic stiffness of the hold-down struts, positive = hardening [chosen: k3·y³ equals K·y at y = 11 cm].";
+    }
+}
 
 pub struct HoldDown<const N: usize> {
     k3: [f64; N],
 }
 
-impl<const N: usize> HoldDown<N> {
-    pub fn new(p: [&ModelParams; N]) -> Self {
-        HoldDown { k3: p.map(|m| if m.effects.hold_down { m.hold_down.k3 } else { 0.0 }) }
+impl<const N: usize> LibraryEffect<N> for HoldDown<N> {
+    fn new(p: [&ModelParams; N]) -> Self {
+        let on = super::lane_mask(&p, INFO.name);
+        HoldDown { k3: std::array::from_fn(|l| if on[l] > 0.0 { Params::of(p[l]).k3 } else { 0.0 }) }
+    }
+}
+
+impl<const N: usize> Effect<N> for HoldDown<N> {
+    type State = [[f64; N]; 0];
+
+    fn initial_state(&self) -> Self::State {
+        []
     }
 
     /// Force of the cubic term on the platen, N.
     #[inline(always)]
-    pub fn force(&self, l: usize, y: f64) -> f64 {
+    fn extra_force(&self, l: usize, y: f64, _v: f64, _s: &Self::State) -> f64 {
         -self.k3[l] * y * y * y
     }
 }

@@ -4,22 +4,55 @@
 //! that are largest where the force is (low frequency, large amplitude); neutral when off
 //! (both coefficients 0).
 
-use crate::kernel::params::ModelParams;
+use super::{Effect, EffectInfo, LibraryEffect};
+use crate::kernel::params::{params, ModelParams, Range};
+
+/// The effect's entry in the library.
+pub const INFO: EffectInfo = EffectInfo {
+    name: "leakage",
+    family: "leakage",
+    summary: "internal leakage across the piston and external leakage to drain",
+    params: Params::PARAMS,
+    free: &["c_int"],
+    moves_spool: false,
+};
+
+params! {
+    /// Effect `leakage`: internal leakage across the piston, q = c_int (P1 − P2), and external
+    /// leakage from each chamber to drain, q = c_ext·P.
+    pub struct Params in effect_params.leakage as "leakage" {
+        c_int: "m³/(s·Pa)", "m3_per_s_pa", 2.0e-11, Range::ge(0.0), Chosen,
+            "Internal (cross-piston) leakage coefficient [chosen: 12 L/min at 10 MPa across the piston].";
+        c_ext: "m³/(s·Pa)", "m3_per_s_pa", 0.0, Range::ge(0.0), Chosen,
+            "External leakage coefficient of each chamber to drain [chosen: none by default].";
+    }
+}
 
 pub struct Leakage<const N: usize> {
     c_int: [f64; N],
     c_ext: [f64; N],
 }
 
-impl<const N: usize> Leakage<N> {
-    pub fn new(p: [&ModelParams; N]) -> Self {
-        let on = |m: &ModelParams| super::switch(m, "leakage");
-        Leakage { c_int: p.map(|m| on(m) * m.leakage.c_int), c_ext: p.map(|m| on(m) * m.leakage.c_ext) }
+impl<const N: usize> LibraryEffect<N> for Leakage<N> {
+    fn new(p: [&ModelParams; N]) -> Self {
+        let on = super::lane_mask(&p, INFO.name);
+        Leakage {
+            c_int: std::array::from_fn(|l| on[l] * Params::of(p[l]).c_int),
+            c_ext: std::array::from_fn(|l| on[l] * Params::of(p[l]).c_ext),
+        }
+    }
+}
+
+impl<const N: usize> Effect<N> for Leakage<N> {
+    type State = [[f64; N]; 0];
+
+    fn initial_state(&self) -> Self::State {
+        []
     }
 
     /// Net (into chamber 1, out of chamber 2) from the valve flows `q`.
     #[inline(always)]
-    pub fn flows(&self, l: usize, q: (f64, f64), p1: f64, p2: f64) -> (f64, f64) {
+    fn flows(&self, l: usize, _act: usize, q: (f64, f64), p1: f64, p2: f64, _p_s: f64, _s: &Self::State) -> (f64, f64) {
         let cross = self.c_int[l] * (p1 - p2);
         (q.0 - cross - self.c_ext[l] * p1, q.1 - cross + self.c_ext[l] * p2)
     }

@@ -17,24 +17,54 @@
 //! nothing, and an effect is compiled into the same lane kernel (monomorphised, no dynamic dispatch
 //! in the step). Effects keep their parameters as `[f64; N]` per lane.
 //!
-//! The built-in effects, one file each, are combined by [`EffectSet`], which the kernel runs
-//! whenever a lane switches any effect on; an effect that is off in a lane is neutral there (zero
-//! coefficients or a 0/1 lane mask), so the step still has no branch on configuration.
+//! Each library effect is one file in this directory: its `Params` table (unit, default, range,
+//! source of every parameter), its [`EffectInfo`] (name, family, the parameters a diagnosis frees)
+//! and its type, which implements [`Effect`] with its own state type and [`LibraryEffect`]. The
+//! registry (`library!` below, one line per effect) composes them by type into [`EffectSet`]
+//! (nested [`Both`]), whose state is the effects' states side by side ([`Pair`]): no state index
+//! is assigned by hand. The kernel runs the set whenever a lane switches any effect on; an effect
+//! that is off in a lane is neutral there (zero coefficients or a 0/1 lane mask), so the step
+//! still has no branch on configuration.
 //!
 //! # Writing a new effect
 //!
-//! A new effect is a type with per-lane parameters that implements [`Effect`]. For example a
-//! cubic hardening of the hold-down struts, F = −k3·y³:
+//! Copy the smallest file here (`hold_down.rs`) to `my_effect.rs`, change its `INFO`, its `Params`
+//! table and its hooks, and add the line `my_effect::MyEffect,` to the registry. `study params`,
+//! model files (`[model.my_effect]`), `synth --effect`, `fit --effect` and `diagnose` then know
+//! it; the registry's test checks it is complete. For example, a cubic hardening of the hold-down
+//! struts, F = −k3·y³:
 //!
-//! ```
-//! use vshake::kernel::effects::Effect;
+//! ```ignore
+//! use super::{Effect, EffectInfo, LibraryEffect};
+//! use crate::kernel::params::{params, ModelParams, Range};
 //!
-//! /// Cubic hold-down stiffness: F = −k3·y³ (N/m³), per lane.
-//! struct CubicHoldDown<const N: usize> {
-//!     k3: [f64; N],
+//! pub const INFO: EffectInfo = EffectInfo {
+//!     name: "hold_down",
+//!     family: "hold-down stiffness",
+//!     summary: "a cubic hardening of the hold-down struts",
+//!     params: Params::PARAMS,
+//!     free: &["k3"],
+//!     moves_spool: false,
+//! };
+//!
+//! params! {
+//!     pub struct Params in effect_params.hold_down as "hold_down" {
+//!         k3: "N/m³", "n_per_m3", 1.0e8, Range::any(), Chosen, "Cubic stiffness [chosen].";
+//!     }
 //! }
 //!
-//! impl<const N: usize> Effect<N> for CubicHoldDown<N> {
+//! pub struct HoldDown<const N: usize> {
+//!     k3: [f64; N], // per lane; 0 where the effect is off
+//! }
+//!
+//! impl<const N: usize> LibraryEffect<N> for HoldDown<N> {
+//!     fn new(p: [&ModelParams; N]) -> Self {
+//!         let on = super::lane_mask(&p, INFO.name);
+//!         HoldDown { k3: std::array::from_fn(|l| on[l] * Params::of(p[l]).k3) }
+//!     }
+//! }
+//!
+//! impl<const N: usize> Effect<N> for HoldDown<N> {
 //!     type State = [[f64; N]; 0]; // no states of its own
 //!     fn initial_state(&self) -> Self::State {
 //!         []
@@ -44,41 +74,181 @@
 //!         -self.k3[l] * y * y * y
 //!     }
 //! }
-//!
-//! // Run it like any effect: simulate::run(&lane_params, &CubicHoldDown { k3: [2e9; 1] }, ...).
-//! # let _ = CubicHoldDown::<1> { k3: [2e9] };
 //! ```
 //!
-//! To make it switchable from model files, give it a parameter struct in `kernel::params`
-//! (the `params!` table gives unit, default, range, source and the registry entry) and add it to
-//! [`EffectSet`].
+//! An effect with states of its own declares them as `type State = [[f64; N]; K]` and gives
+//! their derivatives in [`Effect::derivs`]. A throwaway effect (a test's specimen) needs only
+//! [`Effect`]: `simulate::run` takes any.
 
-pub mod asymmetry;
-pub mod compressibility;
-pub mod flow_saturation;
-pub mod hold_down;
-pub mod leakage;
-pub mod reaction_mass;
-pub mod seal_friction;
-pub mod spool_dynamics;
-pub mod supply;
-pub mod transport_delay;
+use super::params::{ModelParams, ParamInfo};
 
-use super::params::ModelParams;
+/// What the rest of the tool knows about a library effect: its name (the model-file table and
+/// the parameter paths `name.param`), its family, its parameters and the ones a diagnosis frees.
+/// Each effect's file defines its `INFO`.
+#[derive(Debug, Clone, Copy)]
+pub struct EffectInfo {
+    /// The effect's name: its model-file table, `--effect` name and parameter prefix.
+    pub name: &'static str,
+    /// The family of physics it belongs to. Effects whose signatures a campaign of sine tests
+    /// cannot tell apart (a spool lag and a delay both add a lag ∝ frequency below the spool's
+    /// bandwidth) share a family, and a diagnosis is judged by family.
+    pub family: &'static str,
+    /// One line: what it adds to the model.
+    pub summary: &'static str,
+    /// Its parameters (unit, default, range, source), from its `params!` table.
+    pub params: &'static [ParamInfo],
+    /// The parameters a fit or a diagnosis frees by default: the ones its signature determines;
+    /// parameters that only shape it (a smoothing velocity, a damping ratio that trades off
+    /// against a frequency) stay fixed unless `--free` names them.
+    pub free: &'static [&'static str],
+    /// Whether it changes the spool position a spool LVDT reads (a delay or the spool's own
+    /// dynamics); such effects are switched off when the plant is driven by a measured spool.
+    pub moves_spool: bool,
+}
+
+/// An effect of the library: built per batch from the lanes' parameter sets.
+pub trait LibraryEffect<const N: usize>: Effect<N> + Sized {
+    /// The effect for N lanes; neutral in the lanes that do not switch it on.
+    fn new(lanes: [&ModelParams; N]) -> Self;
+}
+
+/// The registry: one line per effect, `module::Type`. It declares the module (one file in this
+/// directory), lists its `INFO` in [`LIBRARY`], adds its switch to [`EffectSwitches`] and its
+/// parameters to [`EffectParams`] (so `study params`, model files, `synth --effect`,
+/// `fit --effect` and `diagnose` know it), and composes it into [`EffectSet`].
+///
+/// **The order is the order of composition** where effects act on the same quantity: the
+/// command passes through the effects in list order on its way to the valve opening (a delay,
+/// then the spool's dynamics, then the metering nonlinearities), and the valve flows through the
+/// flow effects in list order (port asymmetry before leakage).
+macro_rules! library {
+    ($($module:ident :: $Type:ident),* $(,)?) => {
+        $(pub mod $module;)*
+
+        /// Every effect of the library, in registry order.
+        pub const LIBRARY: &[&EffectInfo] = &[$(&$module::INFO),*];
+
+        /// Names of the library's effects, in registry order.
+        pub const EFFECTS: [&str; [$($module::INFO.name),*].len()] = [$($module::INFO.name),*];
+
+        /// Which library effects a parameter set switches on (all off by default).
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+        pub struct EffectSwitches {
+            $(pub $module: bool,)*
+        }
+
+        impl EffectSwitches {
+            /// The switch of effect `name`; `None` for a name the library does not have.
+            pub fn get_mut(&mut self, name: &str) -> Option<&mut bool> {
+                match name {
+                    $(stringify!($module) => Some(&mut self.$module),)*
+                    _ => None,
+                }
+            }
+            /// Whether effect `name` is on; `None` for a name the library does not have.
+            pub fn get(&self, name: &str) -> Option<bool> {
+                match name {
+                    $(stringify!($module) => Some(self.$module),)*
+                    _ => None,
+                }
+            }
+            /// Whether any effect is on.
+            pub fn any(&self) -> bool {
+                false $(|| self.$module)*
+            }
+        }
+
+        /// The parameters of every library effect (used where the effect is switched on).
+        #[derive(Debug, Clone, PartialEq, Default)]
+        pub struct EffectParams {
+            $(pub $module: $module::Params,)*
+        }
+
+        /// Every library effect composed, per lane; what is off in a lane is neutral there.
+        pub type EffectSet<const N: usize> = library!(@nest N; $($module::$Type),*);
+    };
+    (@nest $n:ident; ) => { Baseline };
+    (@nest $n:ident; $module:ident :: $Type:ident $(, $rm:ident :: $rt:ident)*) => {
+        Both<$module::$Type<$n>, library!(@nest $n; $($rm::$rt),*)>
+    };
+}
+
+library! {
+    transport_delay::TransportDelay,
+    spool_dynamics::SpoolDynamics,
+    flow_saturation::FlowSaturation,
+    asymmetry::Asymmetry,
+    leakage::Leakage,
+    supply::Supply,
+    seal_friction::SealFriction,
+    compressibility::Compressibility,
+    reaction_mass::ReactionMass,
+    hold_down::HoldDown,
+}
+
+/// The library's info of effect `name`, if it has one.
+pub fn info(name: &str) -> Option<&'static EffectInfo> {
+    LIBRARY.iter().copied().find(|e| e.name == name)
+}
+
+/// The library's effects for up to N lanes (missing lanes repeat the last parameter set).
+pub fn effect_set<const N: usize>(sets: &[&ModelParams]) -> EffectSet<N> {
+    EffectSet::<N>::new(std::array::from_fn(|l| sets[l.min(sets.len() - 1)]))
+}
 
 /// 1.0 where effect `name` is switched on in `m`, 0.0 where it is off: the factor an effect's
 /// coefficients are multiplied by, so an off lane is neutral without a branch in the step.
+///
+/// # Panics
+/// When the library has no effect `name` (an effect passes its own `INFO.name`).
 pub fn switch(m: &ModelParams, name: &str) -> f64 {
-    if m.effects.get(name) {
-        1.0
-    } else {
-        0.0
+    match m.effects.get(name) {
+        Some(true) => 1.0,
+        Some(false) => 0.0,
+        None => panic!("effect `{name}` is not in the registry of kernel/effects/mod.rs"),
     }
 }
 
 /// [`switch`] for every lane.
 pub fn lane_mask<const N: usize>(p: &[&ModelParams; N], name: &str) -> [f64; N] {
     std::array::from_fn(|l| switch(p[l], name))
+}
+
+/// Per-lane states of an effect: `[[f64; N]; M]`, or a [`Pair`] of such.
+///
+/// # Safety
+/// An implementor is exactly a contiguous sequence of `[f64; N]` (no padding, nothing else), so
+/// that it can be viewed as a slice of lanes ([`Pair`]'s `AsRef`).
+pub unsafe trait LaneStates<const N: usize>: Copy + Send + Sync + AsRef<[[f64; N]]> + AsMut<[[f64; N]]> {}
+
+// SAFETY: an array of `[f64; N]` is such a sequence.
+unsafe impl<const N: usize, const M: usize> LaneStates<N> for [[f64; N]; M] {}
+
+/// The states of two effects side by side: the state of a [`Both`].
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pair<A, B>(pub A, pub B);
+
+// SAFETY: `repr(C)` lays out A then B; both are sequences of `[f64; N]` (size a multiple of 8,
+// alignment 8), so there is no padding between or after them.
+unsafe impl<const N: usize, A: LaneStates<N>, B: LaneStates<N>> LaneStates<N> for Pair<A, B> {}
+
+impl<const N: usize, A: LaneStates<N>, B: LaneStates<N>> AsRef<[[f64; N]]> for Pair<A, B> {
+    #[inline(always)]
+    fn as_ref(&self) -> &[[f64; N]] {
+        let len = std::mem::size_of::<Self>().checked_div(std::mem::size_of::<[f64; N]>()).unwrap_or(0);
+        // SAFETY: `Self` is `len` contiguous `[f64; N]` (see `LaneStates`), borrowed for `self`'s life.
+        unsafe { std::slice::from_raw_parts(self as *const Self as *const [f64; N], len) }
+    }
+}
+
+impl<const N: usize, A: LaneStates<N>, B: LaneStates<N>> AsMut<[[f64; N]]> for Pair<A, B> {
+    #[inline(always)]
+    fn as_mut(&mut self) -> &mut [[f64; N]] {
+        let len = std::mem::size_of::<Self>().checked_div(std::mem::size_of::<[f64; N]>()).unwrap_or(0);
+        // SAFETY: as in `as_ref`, borrowed mutably for `self`'s life.
+        unsafe { std::slice::from_raw_parts_mut(self as *mut Self as *mut [f64; N], len) }
+    }
 }
 
 /// A view of the plant quantities of one right-hand-side evaluation, for [`Effect::derivs`].
@@ -104,7 +274,7 @@ pub struct PlantView<'a, const N: usize> {
 /// An optional physical effect plugged into the lane kernel.
 pub trait Effect<const N: usize>: Sync {
     /// Extra states per lane, as an array of lanes (`[[f64; N]; 0]` for none).
-    type State: Copy + Send + AsRef<[[f64; N]]> + AsMut<[[f64; N]]>;
+    type State: LaneStates<N>;
 
     /// Extra states at t = 0.
     fn initial_state(&self) -> Self::State;
@@ -174,89 +344,110 @@ impl<const N: usize> Effect<N> for Baseline {
     }
 }
 
-/// Number of states of [`EffectSet`]: spool position and velocity of each actuator (0..4), supply
-/// pressure (4), the transport-delay chain (5..9), reaction-mass displacement and velocity (9, 10).
-pub const SET_STATES: usize = 2 * super::N_ACT + 1 + transport_delay::STAGES + 2;
-
-/// Every built-in effect, per lane; what is off in a lane is neutral there.
-pub struct EffectSet<const N: usize> {
-    pub spool: spool_dynamics::SpoolDynamics<N>,
-    pub leakage: leakage::Leakage<N>,
-    pub supply: supply::Supply<N>,
-    pub seal: seal_friction::SealFriction<N>,
-    pub saturation: flow_saturation::FlowSaturation<N>,
-    pub hold_down: hold_down::HoldDown<N>,
-    pub asymmetry: asymmetry::Asymmetry<N>,
-    pub delay: transport_delay::TransportDelay<N>,
-    pub compressibility: compressibility::Compressibility<N>,
-    pub reaction: reaction_mass::ReactionMass<N>,
-}
-
-impl<const N: usize> EffectSet<N> {
-    /// The effects of up to N lanes (missing lanes repeat the last).
-    pub fn new(sets: &[&ModelParams]) -> Self {
-        let lanes: [&ModelParams; N] = std::array::from_fn(|l| sets[l.min(sets.len() - 1)]);
-        EffectSet {
-            spool: spool_dynamics::SpoolDynamics::new(lanes),
-            leakage: leakage::Leakage::new(lanes),
-            supply: supply::Supply::new(lanes),
-            seal: seal_friction::SealFriction::new(lanes),
-            saturation: flow_saturation::FlowSaturation::new(lanes),
-            hold_down: hold_down::HoldDown::new(lanes),
-            asymmetry: asymmetry::Asymmetry::new(lanes),
-            delay: transport_delay::TransportDelay::new(lanes),
-            compressibility: compressibility::Compressibility::new(lanes),
-            reaction: reaction_mass::ReactionMass::new(lanes),
-        }
+impl<const N: usize> LibraryEffect<N> for Baseline {
+    fn new(_lanes: [&ModelParams; N]) -> Self {
+        Baseline
     }
 }
 
-impl<const N: usize> Effect<N> for EffectSet<N> {
-    type State = [[f64; N]; SET_STATES];
+/// Two effects composed: A acts first where both act on the same quantity (the command, the
+/// flows, the supply pressure, the chamber stiffness, the stroke), their forces add, and B's
+/// states are driven by the command as A leaves it (a spool lag after a delay follows the
+/// delayed command). The state layout follows from the types: `Pair<A::State, B::State>`.
+pub struct Both<A, B>(pub A, pub B);
+
+impl<const N: usize, A: LibraryEffect<N>, B: LibraryEffect<N>> LibraryEffect<N> for Both<A, B> {
+    fn new(lanes: [&ModelParams; N]) -> Self {
+        Both(A::new(lanes), B::new(lanes))
+    }
+}
+
+impl<const N: usize, A: Effect<N>, B: Effect<N>> Effect<N> for Both<A, B> {
+    type State = Pair<A::State, B::State>;
 
     fn initial_state(&self) -> Self::State {
-        let mut s = [[0.0; N]; SET_STATES];
-        s[supply::PS] = self.supply.p_s0;
-        s
+        Pair(self.0.initial_state(), self.1.initial_state())
     }
     #[inline(always)]
     fn supply(&self, l: usize, p_s: f64, s: &Self::State) -> f64 {
-        self.supply.supply(l, p_s, s)
+        self.1.supply(l, self.0.supply(l, p_s, &s.0), &s.1)
     }
     #[inline(always)]
     fn spool(&self, l: usize, act: usize, x_c: f64, s: &Self::State) -> f64 {
-        // The metering area saturates with the spool position.
-        self.saturation.opening(l, self.spool_position(l, act, x_c, s))
+        self.1.spool(l, act, self.0.spool(l, act, x_c, &s.0), &s.1)
     }
     #[inline(always)]
     fn spool_position(&self, l: usize, act: usize, x_c: f64, s: &Self::State) -> f64 {
-        // The command is delayed, then the spool follows it (dynamics).
-        self.spool.spool(l, act, self.delay.delayed(l, x_c, s), s)
+        self.1.spool_position(l, act, self.0.spool_position(l, act, x_c, &s.0), &s.1)
     }
     #[inline(always)]
     fn stroke(&self, l: usize, y: f64, v: f64, s: &Self::State) -> (f64, f64) {
-        self.reaction.stroke(l, y, v, s)
+        let (y, v) = self.0.stroke(l, y, v, &s.0);
+        self.1.stroke(l, y, v, &s.1)
     }
     #[inline(always)]
-    fn chamber_stiffness(&self, l: usize, _act: usize, b: (f64, f64), p1: f64, p2: f64, _s: &Self::State) -> (f64, f64) {
-        self.compressibility.stiffness(l, b, p1, p2)
+    fn chamber_stiffness(&self, l: usize, act: usize, b: (f64, f64), p1: f64, p2: f64, s: &Self::State) -> (f64, f64) {
+        self.1.chamber_stiffness(l, act, self.0.chamber_stiffness(l, act, b, p1, p2, &s.0), p1, p2, &s.1)
     }
     #[inline(always)]
-    fn flows(&self, l: usize, act: usize, q: (f64, f64), p1: f64, p2: f64, _p_s: f64, _s: &Self::State) -> (f64, f64) {
-        // Valve flows scaled by the port asymmetry, then the leakage paths.
-        self.leakage.flows(l, self.asymmetry.flows(l, act, q), p1, p2)
+    fn flows(&self, l: usize, act: usize, q: (f64, f64), p1: f64, p2: f64, p_s: f64, s: &Self::State) -> (f64, f64) {
+        self.1.flows(l, act, self.0.flows(l, act, q, p1, p2, p_s, &s.0), p1, p2, p_s, &s.1)
     }
     #[inline(always)]
-    fn extra_force(&self, l: usize, y: f64, v: f64, _s: &Self::State) -> f64 {
-        self.seal.force(l, v) + self.hold_down.force(l, y)
+    fn extra_force(&self, l: usize, y: f64, v: f64, s: &Self::State) -> f64 {
+        self.0.extra_force(l, y, v, &s.0) + self.1.extra_force(l, y, v, &s.1)
     }
     #[inline(always)]
     fn derivs(&self, plant: &PlantView<'_, N>, s: &Self::State, ds: &mut Self::State) {
-        self.delay.derivs(plant, s, ds);
-        // The spool dynamics are driven by the delayed command.
-        let delayed: [f64; N] = std::array::from_fn(|l| self.delay.delayed(l, plant.x_c[l], s));
-        self.spool.derivs(&PlantView { x_c: &delayed, ..*plant }, s, ds);
-        self.supply.derivs(plant, s, ds);
-        self.reaction.derivs(plant, s, ds);
+        self.0.derivs(plant, &s.0, &mut ds.0);
+        // B sees the command as A leaves it (actuator 0's: a command effect acts on all alike).
+        let x_c: [f64; N] = std::array::from_fn(|l| self.0.spool_position(l, 0, plant.x_c[l], &s.0));
+        self.1.derivs(&PlantView { x_c: &x_c, ..*plant }, &s.1, &mut ds.1);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every registered effect is complete: a family, free parameters that it has, a name that is
+    /// its switch, its parameter table and its module (so a misspelt or half-registered effect
+    /// fails here, not silently in a diagnosis).
+    #[test]
+    fn every_registered_effect_is_complete() {
+        assert_eq!(LIBRARY.len(), EFFECTS.len());
+        let mut sw = EffectSwitches::default();
+        for e in LIBRARY {
+            assert!(!e.family.trim().is_empty(), "{}: no family", e.name);
+            assert!(!e.summary.trim().is_empty(), "{}: no summary", e.name);
+            assert!(!e.free.is_empty(), "{}: no parameter a diagnosis frees", e.name);
+            assert!(!e.params.is_empty(), "{}: no parameters", e.name);
+            for f in e.free {
+                assert!(e.params.iter().any(|p| p.name == *f), "{}: frees `{f}`, which it does not have", e.name);
+            }
+            assert!(e.params.iter().all(|p| p.component == e.name), "{}: its parameters belong to another component", e.name);
+            assert_eq!(sw.get(e.name), Some(false), "{}: no switch of that name", e.name);
+            *sw.get_mut(e.name).unwrap() = true;
+            assert_eq!(sw.get(e.name), Some(true));
+            assert!(info(e.name).is_some_and(|i| std::ptr::eq(i, *e)));
+        }
+        assert!(sw.any());
+        assert_eq!(sw.get("seal_fricton"), None, "a misspelt name is not silently off");
+        assert!(info("seal_fricton").is_none());
+    }
+
+    /// The composed states are the effects' states side by side: the layout follows the types.
+    #[test]
+    fn composed_states_are_contiguous() {
+        let p = ModelParams::default();
+        let set = effect_set::<4>(&[&p]);
+        let s = set.initial_state();
+        let n = s.as_ref().len();
+        assert_eq!(n * std::mem::size_of::<[f64; 4]>(), std::mem::size_of_val(&s));
+        assert_eq!(n, transport_delay::STAGES + 2 * crate::kernel::N_ACT + 1 + 2, "delay, spool, supply, reaction mass");
+        // The supply pressure starts at P_S, every other state at 0.
+        let ps = p.servovalve.p_s;
+        assert_eq!(s.as_ref().iter().filter(|lanes| lanes.iter().all(|&v| v == ps)).count(), 1);
+        assert_eq!(s.as_ref().iter().filter(|lanes| lanes.iter().all(|&v| v == 0.0)).count(), n - 1);
     }
 }

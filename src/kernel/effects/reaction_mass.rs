@@ -11,12 +11,36 @@
 //! reaction path is not in docs/model.md). Its signature: the measured acceleration and displacement
 //! stop being one body's (a₁ ≠ −ω²·x₁), increasingly with frequency, as (m/m_r)·(f/f_r)²/(1 − (f/f_r)²).
 
-use super::PlantView;
-use crate::kernel::params::ModelParams;
+use super::{Effect, EffectInfo, LibraryEffect, PlantView};
+use crate::kernel::params::{params, ModelParams, Range};
 
-/// State indices in [`super::EffectSet`]: reaction-mass displacement and velocity.
-pub const YR: usize = 9;
-pub const VR: usize = 10;
+/// The effect's entry in the library.
+pub const INFO: EffectInfo = EffectInfo {
+    name: "reaction_mass",
+    family: "reaction mass",
+    summary: "the actuators push against a reaction mass on a compliant foundation",
+    params: Params::PARAMS,
+    free: &["m_r", "f_r"],
+    moves_spool: false,
+};
+
+params! {
+    /// Effect `reaction_mass`: the actuators push against a reaction mass on a compliant
+    /// foundation, m_r ÿ_r = −F − k_r y_r − c_r ẏ_r. The actuator stroke (and the LVDT) is y − y_r;
+    /// the accelerometer sees the platen's absolute acceleration.
+    pub struct Params in effect_params.reaction_mass as "reaction_mass" {
+        m_r: "kg", "kg", 2.0e6, Range::gt(0.0), Chosen,
+            "Reaction mass [chosen: order of a large table's foundation block].";
+        f_r: "Hz", "hz", 12.0, Range::closed(0.5, 200.0), Chosen,
+            "Natural frequency of the reaction mass on its foundation [chosen].";
+        zeta_r: "-", "", 0.1, Range::closed(0.0, 2.0), Chosen,
+            "Damping ratio of the reaction mass on its foundation [chosen: soil radiation damping].";
+    }
+}
+
+/// State indices: reaction-mass displacement and velocity.
+pub const YR: usize = 0;
+pub const VR: usize = 1;
 
 pub struct ReactionMass<const N: usize> {
     /// 1/m_r where on, 0 where off (the states then stay at rest).
@@ -25,24 +49,34 @@ pub struct ReactionMass<const N: usize> {
     c: [f64; N],
 }
 
-impl<const N: usize> ReactionMass<N> {
-    pub fn new(p: [&ModelParams; N]) -> Self {
-        let w = p.map(|m| 2.0 * std::f64::consts::PI * m.reaction_mass.f_r);
+impl<const N: usize> LibraryEffect<N> for ReactionMass<N> {
+    fn new(p: [&ModelParams; N]) -> Self {
+        let on = super::lane_mask(&p, INFO.name);
+        let q = p.map(Params::of);
+        let w = q.map(|q| 2.0 * std::f64::consts::PI * q.f_r);
         ReactionMass {
-            inv_m: p.map(|m| if m.effects.reaction_mass { 1.0 / m.reaction_mass.m_r } else { 0.0 }),
-            k: std::array::from_fn(|l| p[l].reaction_mass.m_r * w[l] * w[l]),
-            c: std::array::from_fn(|l| 2.0 * p[l].reaction_mass.zeta_r * p[l].reaction_mass.m_r * w[l]),
+            inv_m: std::array::from_fn(|l| if on[l] > 0.0 { 1.0 / q[l].m_r } else { 0.0 }),
+            k: std::array::from_fn(|l| q[l].m_r * w[l] * w[l]),
+            c: std::array::from_fn(|l| 2.0 * q[l].zeta_r * q[l].m_r * w[l]),
         }
+    }
+}
+
+impl<const N: usize> Effect<N> for ReactionMass<N> {
+    type State = [[f64; N]; 2];
+
+    fn initial_state(&self) -> Self::State {
+        [[0.0; N]; 2]
     }
 
     /// Actuator stroke and stroke rate, from the platen's absolute displacement and velocity.
     #[inline(always)]
-    pub fn stroke<const S: usize>(&self, l: usize, y: f64, v: f64, s: &[[f64; N]; S]) -> (f64, f64) {
+    fn stroke(&self, l: usize, y: f64, v: f64, s: &Self::State) -> (f64, f64) {
         (y - s[YR][l], v - s[VR][l])
     }
 
     #[inline(always)]
-    pub fn derivs<const S: usize>(&self, plant: &PlantView<'_, N>, s: &[[f64; N]; S], ds: &mut [[f64; N]; S]) {
+    fn derivs(&self, plant: &PlantView<'_, N>, s: &Self::State, ds: &mut Self::State) {
         for l in 0..N {
             ds[YR][l] = s[VR][l];
             ds[VR][l] = self.inv_m[l] * (-plant.f_act[l] - self.k[l] * s[YR][l] - self.c[l] * s[VR][l]);

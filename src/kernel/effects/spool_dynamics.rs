@@ -2,11 +2,32 @@
 //! ẍ_s = ω²(x_c − x_s) − 2ζω ẋ_s, ω = 2π·freq_hz. Its signature: a phase lag that grows with
 //! frequency, and a smaller amplitude ratio at higher frequencies.
 
-use super::PlantView;
-use crate::kernel::params::ModelParams;
+use super::{Effect, EffectInfo, LibraryEffect, PlantView};
+use crate::kernel::params::{params, ModelParams, Range};
 use crate::kernel::N_ACT;
 
-/// State indices in [`super::EffectSet`]: position of actuator i's spool at 2i, velocity at 2i+1.
+/// The effect's entry in the library.
+pub const INFO: EffectInfo = EffectInfo {
+    name: "spool_dynamics",
+    family: "valve dynamics",
+    summary: "a second-order lag between the valve command and the spool",
+    params: Params::PARAMS,
+    free: &["freq_hz"],
+    moves_spool: true,
+};
+
+params! {
+    /// Effect `spool_dynamics`: the servo-valve spool follows its command through a second-order
+    /// lag, ẍ = ω²(x_c − x) − 2ζω ẋ (the baseline has x = x_c).
+    pub struct Params in effect_params.spool_dynamics as "spool_dynamics" {
+        freq_hz: "Hz", "hz", 80.0, Range::closed(1.0, 1000.0), Chosen,
+            "Spool natural frequency [chosen: 80 Hz; with 40 Hz the published TVC loop oscillates at small amplitude].";
+        zeta: "-", "", 0.7, Range::closed(0.05, 5.0), Chosen,
+            "Spool damping ratio [chosen].";
+    }
+}
+
+/// State indices: position of actuator i's spool at 2i, velocity at 2i+1.
 pub const X: [usize; N_ACT] = [0, 2];
 pub const V: [usize; N_ACT] = [1, 3];
 
@@ -17,23 +38,31 @@ pub struct SpoolDynamics<const N: usize> {
     two_zw: [f64; N],
 }
 
-impl<const N: usize> SpoolDynamics<N> {
-    pub fn new(p: [&ModelParams; N]) -> Self {
-        let w = p.map(|m| 2.0 * std::f64::consts::PI * m.spool_dynamics.freq_hz);
+impl<const N: usize> LibraryEffect<N> for SpoolDynamics<N> {
+    fn new(p: [&ModelParams; N]) -> Self {
+        let w = p.map(|m| 2.0 * std::f64::consts::PI * Params::of(m).freq_hz);
         SpoolDynamics {
-            on: super::lane_mask(&p, "spool_dynamics"),
+            on: super::lane_mask(&p, INFO.name),
             w2: w.map(|w| w * w),
-            two_zw: std::array::from_fn(|l| 2.0 * p[l].spool_dynamics.zeta * w[l]),
+            two_zw: std::array::from_fn(|l| 2.0 * Params::of(p[l]).zeta * w[l]),
         }
+    }
+}
+
+impl<const N: usize> Effect<N> for SpoolDynamics<N> {
+    type State = [[f64; N]; 2 * N_ACT];
+
+    fn initial_state(&self) -> Self::State {
+        [[0.0; N]; 2 * N_ACT]
     }
 
     #[inline(always)]
-    pub fn spool<const S: usize>(&self, l: usize, act: usize, x_c: f64, s: &[[f64; N]; S]) -> f64 {
+    fn spool(&self, l: usize, act: usize, x_c: f64, s: &Self::State) -> f64 {
         x_c + self.on[l] * (s[X[act]][l] - x_c)
     }
 
     #[inline(always)]
-    pub fn derivs<const S: usize>(&self, plant: &PlantView<'_, N>, s: &[[f64; N]; S], ds: &mut [[f64; N]; S]) {
+    fn derivs(&self, plant: &PlantView<'_, N>, s: &Self::State, ds: &mut Self::State) {
         for act in 0..N_ACT {
             for l in 0..N {
                 ds[X[act]][l] = s[V[act]][l];

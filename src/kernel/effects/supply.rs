@@ -4,11 +4,32 @@
 //! draw of a test exceeds the pump, the supply droops, more at large amplitude, and the envelope
 //! of the acceleration sinks from cycle to cycle.
 
-use super::PlantView;
-use crate::kernel::params::ModelParams;
+use super::{Effect, EffectInfo, LibraryEffect, PlantView};
+use crate::kernel::params::{params, ModelParams, Range};
 
-/// State index of the supply pressure in [`super::EffectSet`].
-pub const PS: usize = 4;
+/// The effect's entry in the library.
+pub const INFO: EffectInfo = EffectInfo {
+    name: "supply",
+    family: "supply pressure",
+    summary: "supply pressure droop: a pump of limited flow and an accumulator",
+    params: Params::PARAMS,
+    free: &["q_pump", "c_acc"],
+    moves_spool: false,
+};
+
+params! {
+    /// Effect `supply`: supply pressure dynamics. A pressure-compensated pump delivers
+    /// Q_p = q_pump·clamp((P_S − P_s)/dp_band, 0, 1) into an accumulator of capacitance c_acc;
+    /// the valves draw Q from it: c_acc dP_s/dt = Q_p − Q. The valves see P_s instead of P_S.
+    pub struct Params in effect_params.supply as "supply" {
+        q_pump: "m³/s", "m3_per_s", 0.2, Range::gt(0.0), Chosen,
+            "Pump flow at full stroke [chosen: below the peak draw of large tests, so accumulators carry the peaks].";
+        c_acc: "m³/Pa", "m3_per_pa", 3.5e-8, Range::gt(0.0), Chosen,
+            "Accumulator capacitance V_gas/(n·P) [chosen: 1 m³ of gas at 20.7 MPa, n = 1.4].";
+        dp_band: "Pa", "pa", 1.0e6, Range::gt(0.0), Chosen,
+            "Pressure band over which the pump goes from no flow to full flow [chosen].";
+    }
+}
 
 pub struct Supply<const N: usize> {
     on: [f64; N],
@@ -19,28 +40,37 @@ pub struct Supply<const N: usize> {
     inv_band: [f64; N],
 }
 
-impl<const N: usize> Supply<N> {
-    pub fn new(p: [&ModelParams; N]) -> Self {
+impl<const N: usize> LibraryEffect<N> for Supply<N> {
+    fn new(p: [&ModelParams; N]) -> Self {
         Supply {
-            on: super::lane_mask(&p, "supply"),
+            on: super::lane_mask(&p, INFO.name),
             p_s0: p.map(|m| m.servovalve.p_s),
-            q_pump: p.map(|m| m.supply.q_pump),
-            inv_c: p.map(|m| 1.0 / m.supply.c_acc),
-            inv_band: p.map(|m| 1.0 / m.supply.dp_band),
+            q_pump: p.map(|m| Params::of(m).q_pump),
+            inv_c: p.map(|m| 1.0 / Params::of(m).c_acc),
+            inv_band: p.map(|m| 1.0 / Params::of(m).dp_band),
         }
     }
+}
 
-    #[inline(always)]
-    pub fn supply<const S: usize>(&self, l: usize, p_s: f64, s: &[[f64; N]; S]) -> f64 {
-        p_s + self.on[l] * (s[PS][l] - p_s)
+impl<const N: usize> Effect<N> for Supply<N> {
+    /// The supply pressure P_s the valves see, Pa.
+    type State = [[f64; N]; 1];
+
+    fn initial_state(&self) -> Self::State {
+        [self.p_s0]
     }
 
     #[inline(always)]
-    pub fn derivs<const S: usize>(&self, plant: &PlantView<'_, N>, s: &[[f64; N]; S], ds: &mut [[f64; N]; S]) {
+    fn supply(&self, l: usize, p_s: f64, s: &Self::State) -> f64 {
+        p_s + self.on[l] * (s[0][l] - p_s)
+    }
+
+    #[inline(always)]
+    fn derivs(&self, plant: &PlantView<'_, N>, s: &Self::State, ds: &mut Self::State) {
         for l in 0..N {
-            let q_p = self.q_pump[l] * ((self.p_s0[l] - s[PS][l]) * self.inv_band[l]).clamp(0.0, 1.0);
+            let q_p = self.q_pump[l] * ((self.p_s0[l] - s[0][l]) * self.inv_band[l]).clamp(0.0, 1.0);
             // Off: the state is held at P_S (derivative 0), so it never drifts.
-            ds[PS][l] = self.on[l] * (q_p - plant.q_supply[l]) * self.inv_c[l];
+            ds[0][l] = self.on[l] * (q_p - plant.q_supply[l]) * self.inv_c[l];
         }
     }
 }

@@ -11,13 +11,30 @@
 //! phase is within 0.01 % of −ωτ and the magnitude within 0.02 % of 1 (a choice; documented in the
 //! README's effects table).
 
-use super::PlantView;
-use crate::kernel::params::ModelParams;
+use super::{Effect, EffectInfo, LibraryEffect, PlantView};
+use crate::kernel::params::{params, ModelParams, Range};
+
+/// The effect's entry in the library.
+pub const INFO: EffectInfo = EffectInfo {
+    name: "transport_delay",
+    family: "valve dynamics",
+    summary: "a pure delay between the valve command and the spool",
+    params: Params::PARAMS,
+    free: &["tau"],
+    moves_spool: true,
+};
+
+params! {
+    /// Effect `transport_delay`: a pure delay τ between the controller's command and the spool
+    /// (pilot stages, driver electronics, digital I/O), before the spool dynamics if those are on.
+    pub struct Params in effect_params.transport_delay as "transport_delay" {
+        tau: "s", "s", 2.0e-3, Range::closed(0.5e-3, 20.0e-3), Chosen,
+            "Delay between the valve command and the spool [chosen: 2 ms; realised as 4 equal first-order lags, see the effect's doc].";
+    }
+}
 
 /// Number of first-order stages.
 pub const STAGES: usize = 4;
-/// State indices in [`super::EffectSet`]: the outputs of the stages, the last is the delayed command.
-pub const D: [usize; STAGES] = [5, 6, 7, 8];
 
 pub struct TransportDelay<const N: usize> {
     on: [f64; N],
@@ -25,26 +42,33 @@ pub struct TransportDelay<const N: usize> {
     rate: [f64; N],
 }
 
-impl<const N: usize> TransportDelay<N> {
-    pub fn new(p: [&ModelParams; N]) -> Self {
-        let default_tau = crate::kernel::params::TransportDelayParams::default().tau;
-        TransportDelay {
-            on: super::lane_mask(&p, "transport_delay"),
-            rate: p.map(|m| STAGES as f64 / if m.effects.transport_delay { m.transport_delay.tau } else { default_tau }),
-        }
+impl<const N: usize> LibraryEffect<N> for TransportDelay<N> {
+    fn new(p: [&ModelParams; N]) -> Self {
+        let on = super::lane_mask(&p, INFO.name);
+        let default_tau = Params::default().tau;
+        TransportDelay { on, rate: std::array::from_fn(|l| STAGES as f64 / if on[l] > 0.0 { Params::of(p[l]).tau } else { default_tau }) }
+    }
+}
+
+impl<const N: usize> Effect<N> for TransportDelay<N> {
+    /// The outputs of the stages; the last is the delayed command.
+    type State = [[f64; N]; STAGES];
+
+    fn initial_state(&self) -> Self::State {
+        [[0.0; N]; STAGES]
     }
 
     /// The delayed command of lane `l` (the command itself where the effect is off).
     #[inline(always)]
-    pub fn delayed<const S: usize>(&self, l: usize, x_c: f64, s: &[[f64; N]; S]) -> f64 {
-        x_c + self.on[l] * (s[D[STAGES - 1]][l] - x_c)
+    fn spool(&self, l: usize, _act: usize, x_c: f64, s: &Self::State) -> f64 {
+        x_c + self.on[l] * (s[STAGES - 1][l] - x_c)
     }
 
     #[inline(always)]
-    pub fn derivs<const S: usize>(&self, plant: &PlantView<'_, N>, s: &[[f64; N]; S], ds: &mut [[f64; N]; S]) {
+    fn derivs(&self, plant: &PlantView<'_, N>, s: &Self::State, ds: &mut Self::State) {
         for l in 0..N {
             let mut input = plant.x_c[l];
-            for &d in &D {
+            for d in 0..STAGES {
                 ds[d][l] = self.rate[l] * (input - s[d][l]);
                 input = s[d][l];
             }
