@@ -177,6 +177,7 @@ library! {
     transport_delay::TransportDelay,
     spool_dynamics::SpoolDynamics,
     flow_saturation::FlowSaturation,
+    flow_gain::FlowGain,
     asymmetry::Asymmetry,
     leakage::Leakage,
     supply::Supply,
