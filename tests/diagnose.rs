@@ -326,6 +326,45 @@ fn an_effect_outside_the_library_gets_no_confident_answer() {
     assert!(r.residual["baseline"] > 0.02, "the specimen leaves a clear residual: {}", r.residual["baseline"]);
 }
 
+/// A flow gain that grows with the opening (an expansion: ports that widen), x_eff = x·(1 + a·|x|/x_ref),
+/// written here, not in the library: the library's `flow_saturation` (tanh) cannot expand.
+struct Expansion {
+    a: f64,
+    inv_ref: f64,
+}
+
+impl vshake::kernel::effects::Effect<1> for Expansion {
+    type State = [[f64; 1]; 0];
+    fn initial_state(&self) -> Self::State {
+        []
+    }
+    fn spool(&self, _l: usize, _act: usize, x: f64, _s: &Self::State) -> f64 {
+        x * (1.0 + self.a * x.abs() * self.inv_ref)
+    }
+    fn spool_position(&self, _l: usize, _act: usize, x: f64, _s: &Self::State) -> f64 {
+        x
+    }
+}
+
+/// Issue 11: a flow gain rising with opening (not a form the library names) is explained by the
+/// flexible flow-gain curve, and the diagnosis names its family.
+#[test]
+fn a_flow_gain_rising_with_opening_is_explained_by_the_flow_gain_curve() {
+    let d = tempfile::tempdir().unwrap();
+    write_hidden(d.path(), &Expansion { a: 1.0, inv_ref: 1.0 / 19.05e-3 });
+    let r = diagnose(d.path());
+    println!("{}", r.stdout);
+    let (first, best) = r.first();
+    assert_eq!(first, "flow_gain", "ranked first: {first}\n{}", r.stdout);
+    assert_eq!(best.family, "valve flow nonlinearity");
+    assert!(best.significant && best.explained > 0.9, "{first}: {best:?}\n{}", r.stdout);
+    assert!(r.stdout.contains("most likely missing: flow_gain (valve flow nonlinearity)"), "{}", r.stdout);
+    // The curve it finds rises with the opening, as the hidden one does (g = 1 + r at knot r).
+    let g = &r.cands["flow_gain"].estimates;
+    assert!(g[1] < g[2] && g[2] < g[3], "the fitted gains rise with opening: {g:?}");
+    assert!(r.residual["flow_gain"] < 0.5 * r.residual["baseline"], "{}", r.stdout);
+}
+
 /// The reported standard errors are the real spread of the estimates: the same hidden effect
 /// under eight noise seeds, fitted each time; the standard deviation of the eight estimates must
 /// agree with the mean reported standard error (within the sampling spread of an 8-sample
