@@ -276,6 +276,18 @@ fn a_switched_off_effect_is_neutral() {
 
 /// Every built-in effect switched off in the composite set reproduces the baseline kernel to the
 /// bit, lane by lane, next to lanes where effects are on (the set's "neutral when off").
+/// An effect is switched on with its first freed parameter 10 % off its default, so one whose
+/// defaults are neutral (a flow-gain curve of 1) changes the run too.
+fn switched_on(base: &vshake::kernel::params::ModelParams, e: &str) -> vshake::kernel::params::ModelParams {
+    let mut m = base.clone();
+    *m.effects.get_mut(e).unwrap() = true;
+    let info = vshake::kernel::effects::info(e).unwrap();
+    let p = vshake::kernel::params::ModelParams::lookup(&format!("{e}.{}", info.free[0])).unwrap();
+    let v = 1.1 * (p.get)(&m);
+    (p.set)(&mut m, v);
+    m
+}
+
 #[test]
 fn the_effect_set_is_the_baseline_where_everything_is_off() {
     use vshake::kernel::effects::{effect_set, Baseline};
@@ -287,9 +299,7 @@ fn the_effect_set_is_the_baseline_where_everything_is_off() {
     // Lane 0 off, lanes 1.. with one effect each.
     let mut sets = vec![base.clone()];
     for e in EFFECTS.iter().take(7) {
-        let mut m = base.clone();
-        *m.effects.get_mut(e).unwrap() = true;
-        sets.push(m);
+        sets.push(switched_on(&base, e));
     }
     let refs: Vec<&ModelParams> = sets.iter().collect();
     let lp = LaneParams::<8>::new(&refs).unwrap();
@@ -301,9 +311,7 @@ fn the_effect_set_is_the_baseline_where_everything_is_off() {
     // The remaining effects, each on in its own lane next to an all-off lane.
     let mut sets = vec![base.clone()];
     for e in EFFECTS.iter().skip(7) {
-        let mut m = base.clone();
-        *m.effects.get_mut(e).unwrap() = true;
-        sets.push(m);
+        sets.push(switched_on(&base, e));
     }
     let refs: Vec<&ModelParams> = sets.iter().collect();
     let lp = LaneParams::<8>::new(&refs).unwrap();
