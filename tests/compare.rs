@@ -1,6 +1,8 @@
 //! Model versus measurement: synthetic campaigns whose truth is known, and every malformed
 //! measured file of docs/formats.md.
 
+mod common;
+use common::followed_state;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -44,9 +46,10 @@ fn the_models_own_output_compares_at_floating_point_level() {
     let h = vshake::shell::tables::read_columns_allow_nan(&report.join("harmonics.parquet"), &["residual_abs"]).unwrap();
     assert_eq!(h.rows(), 4 * 9);
     assert!(h.column("residual_abs").unwrap().iter().all(|v| *v < 1e-12));
-    // The HTML report: one plot across the campaign, and an overlay and harmonic bars per test.
+    // The HTML report: one plot across the campaign, the state map, and an overlay and harmonic
+    // bars per test.
     let html = std::fs::read_to_string(report.join("report.html")).unwrap();
-    assert_eq!(html.matches("<svg").count(), 1 + 2 * 4, "plots in the report");
+    assert_eq!(html.matches("<svg").count(), 2 + 2 * 4, "plots in the report");
     assert_eq!(html.matches("class=\"plot overlay\"").count(), 4);
     assert!(html.contains("id=\"test-sine_2hz_1p00g\"") && html.contains("<table id=\"summary\">"));
     // The reference case reproduces docs/model.md §5 through the whole file path.
@@ -177,4 +180,59 @@ fn malformed_measured_files_name_file_column_and_row() {
     let (code, _, stderr) = study(&["compare", d.path().join("c2.toml").to_str().unwrap()]);
     assert_eq!(code, 2);
     assert!(stderr.contains("test[0].excitation.colour: unknown key"), "{stderr}");
+}
+
+/// Issue 11, the residual in state space: effects whose state is known (a friction force on the
+/// velocity, a spring on the displacement, a leakage on the load pressure) are placed there by
+/// the map's regressions, each through the balance it breaks; with nothing hidden no state is named.
+#[test]
+fn the_state_map_places_known_effects_on_their_states() {
+    let diag = Path::new(env!("CARGO_MANIFEST_DIR")).join("studies/campaigns/diagnosis.toml");
+    let cases: [(&[&str], Option<(&str, &str, &str)>); 4] = [
+        (&["--effect", "seal_friction", "--set", "seal_friction.f_c=9000"], Some(("platen_force", "velocity", "sign(v)"))),
+        (&["--effect", "hold_down", "--set", "hold_down.k3=3e8"], Some(("platen_force", "displacement", "y³"))),
+        (&["--effect", "leakage"], Some(("valve_flow", "pressure_difference", "Δp"))),
+        (&[], None),
+    ];
+    for (extra, want) in cases {
+        let d = tempfile::tempdir().unwrap();
+        let mut args = vec!["synth", diag.to_str().unwrap(), "--out", d.path().to_str().unwrap(), "--noise", "accel=0.02,disp=1e-5,force=2000"];
+        args.extend_from_slice(extra);
+        let (code, out, err) = study(&args);
+        assert_eq!(code, 0, "{out}{err}");
+        let rep = d.path().join("report");
+        let (code, out, err) = study(&["compare", d.path().join("diagnosis.toml").to_str().unwrap(), "--report", rep.to_str().unwrap()]);
+        assert_eq!(code, 0, "{out}{err}");
+        let (res, state, term, r2) = followed_state(&rep);
+        match want {
+            Some(w) => {
+                assert_eq!((res.as_str(), state.as_str(), term.as_str()), w, "{extra:?}: R² {r2}\n{out}");
+                assert!(r2 > 0.5, "{extra:?}: R² {r2}");
+                assert!(out.contains("-> the "), "{extra:?}: the sentence is printed\n{out}");
+            }
+            None => {
+                assert!(r2 < 0.5, "nothing hidden, yet {res} follows {term} in {state} with R² {r2}\n{out}");
+                assert!(out.contains("-> no state's terms explain the residual"), "{out}");
+            }
+        }
+    }
+}
+
+/// Issue 11, part 5: the bundled campaign of the README tutorial "An effect the library does not
+/// have" hides a spool overlap; the map points at small spool openings.
+#[test]
+fn the_overlap_tutorial_campaign_points_at_small_spool_openings() {
+    let c = Path::new(env!("CARGO_MANIFEST_DIR")).join("studies/overlap/campaign.toml");
+    let d = tempfile::tempdir().unwrap();
+    let rep = d.path().join("report");
+    let (code, out, err) = study(&["compare", c.to_str().unwrap(), "--report", rep.to_str().unwrap()]);
+    assert_eq!(code, 0, "{out}{err}");
+    let (res, state, term, r2) = followed_state(&rep);
+    assert!(res.starts_with("valve_") && state == "spool_opening", "{res} follows {term} in {state}, R² {r2}\n{out}");
+    assert!(term == "sign(x)" || term.starts_with("sign(x)·min"), "a term of small openings: {term}\n{out}");
+    assert!(r2 > 0.9, "{r2}");
+    assert!(out.contains("at small spool openings"), "{out}");
+    // The report shows the map as a plot.
+    let html = std::fs::read_to_string(rep.join("report.html")).unwrap();
+    assert!(html.contains("id=\"state-map\"><svg"), "the state map is drawn");
 }

@@ -316,6 +316,19 @@ pub struct Compared {
     pub accel_model: Vec<f64>,
     pub disp_model: Vec<f64>,
     pub force_model: Vec<f64>,
+    /// The plant's states at the compared samples ([`super::statemap::test_states`]): measured
+    /// where the file has the channel, the model's otherwise.
+    pub states: [Vec<f64>; 5],
+    /// The model's own spool position and platen velocity at the compared samples.
+    pub spool_model: Vec<f64>,
+    pub vel_model: Vec<f64>,
+    /// The cap-side pressure the states were computed with (measured, or the model's corrected by
+    /// the measured force), and the model's own.
+    pub p1: Vec<f64>,
+    pub p1_model: Vec<f64>,
+    /// The rod-side pressure likewise.
+    pub p2: Vec<f64>,
+    pub p2_model: Vec<f64>,
 }
 
 impl Compared {
@@ -346,7 +359,24 @@ pub fn compare_test(test: &AlignedTest, solver: &Solver) -> Result<Compared, Str
         &Channels { accel: &m.accel, disp: &m.disp, force: m.force.as_deref() },
         &Channels { accel: &accel, disp: &disp, force: Some(&force) },
     );
-    Ok(Compared { test: test.clone(), comparison, accel_model: accel, disp_model: disp, force_model: force })
+    let pick = |measured: &Option<Vec<f64>>, c: usize| measured.clone().unwrap_or_else(|| rs.channel(c, 0));
+    // Chamber pressures: measured, else the model's corrected by the measured force where the
+    // file has it (a load the model lacks moves them: the force residual split between the
+    // chambers, A1·δP1 − A2·δP2 = r_F/n_act with A1·δP1 = −A2·δP2 [chosen]).
+    let (mut p1, mut p2) = (pick(&m.p1, ch::P1), pick(&m.p2, ch::P2));
+    if let (Some(f), None, None) = (&m.force, &m.p1, &m.p2) {
+        let (a1, a2, n_act) = (test.model.actuator.a1, test.model.actuator.a2, crate::kernel::N_ACT as f64);
+        for k in 0..p1.len() {
+            let r = f[k] - force[k];
+            p1[k] += r / (2.0 * n_act * a1);
+            p2[k] -= r / (2.0 * n_act * a2);
+        }
+    }
+    // The spool: measured, else the opening the measured command asks for, else the model's.
+    let sv = &test.model.servovalve;
+    let spool = m.spool.clone().or_else(|| m.valve_cmd.as_ref().map(|u| u.iter().map(|u| sv.k_sp * u.clamp(-sv.u_lim, sv.u_lim)).collect())).unwrap_or_else(|| rs.channel(ch::SPOOL, 0));
+    let states = super::statemap::test_states(&test.model, &spool, &rs.channel(ch::VEL, 0), &p1, &p2, &m.disp);
+    Ok(Compared { test: test.clone(), comparison, accel_model: accel, disp_model: disp, force_model: force, states, spool_model: rs.channel(ch::SPOOL, 0), vel_model: rs.channel(ch::VEL, 0), p1, p1_model: rs.channel(ch::P1, 0), p2, p2_model: rs.channel(ch::P2, 0) })
 }
 
 #[cfg(test)]

@@ -13,4 +13,5 @@ pub mod sim;
 pub mod study;
 pub mod timebase;
 pub mod spec;
+pub mod statemap;
 pub mod toml_fields;

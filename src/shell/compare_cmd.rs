@@ -7,6 +7,7 @@ use super::tables::{self, Column};
 use super::RunFailed;
 use crate::kernel::metrics::N_HARM;
 use crate::orchestration::compare::{self, Compared, Comparison};
+use crate::orchestration::statemap::{self, StateMap};
 use crate::orchestration::measured::{self, fmt_row, AlignedTest, Start};
 use crate::orchestration::spec::ExcitationSpec;
 use crate::orchestration::timebase::fmt_rate;
@@ -65,16 +66,18 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<()> {
     print_files(&mut o, &results)?;
     print_bins(&mut o, &results)?;
     print_amplitudes(&mut o, &results)?;
+    let state_map = statemap::map(&results);
+    print_state_map(&mut o, &state_map)?;
     report_checks(&mut o, &args.campaign, &tests, &residual_warnings, args.strict)?;
     let n_warn = tests.iter().map(|t| t.warnings.len()).sum::<usize>() + residual_warnings.len();
     if let Some(dir) = &args.report {
-        write_tables(dir, &results, args.open_loop)?;
-        let page = super::report::html(&format!("vshake: model versus measurement, {} ({})", args.campaign.display(), drive_label(args.open_loop)), &results, &residual_warnings)?;
+        write_tables(dir, &results, &state_map, args.open_loop)?;
+        let page = super::report::html(&format!("vshake: model versus measurement, {} ({})", args.campaign.display(), drive_label(args.open_loop)), &results, &state_map, &residual_warnings)?;
         let path = dir.join("report.html");
         let out = tables::AtomicFile::new(&path);
         std::fs::write(&out.tmp, page)?;
         out.commit()?;
-        writeln!(o, "\n  wrote {} and its tables (tests, harmonics, bins, cycles, overlay .parquet)", path.display())?;
+        writeln!(o, "\n  wrote {} and its tables (tests, harmonics, bins, cycles, overlay, statemap, stateterms .parquet)", path.display())?;
     }
     if n_warn > 0 {
         eprintln!("warning: {n_warn} warning(s) about the measured data: see the WARNINGS block of the output");
@@ -184,6 +187,66 @@ fn print_amplitudes(o: &mut dyn Write, results: &[Compared]) -> std::io::Result<
     writeln!(o)
 }
 
+/// Where in state space the residual lies: per residual, the share each state's terms explain
+/// and their strongest terms, then the one sentence.
+pub fn print_state_map(o: &mut dyn Write, map: &StateMap) -> std::io::Result<()> {
+    writeln!(o)?;
+    writeln!(o, "  where in state space ({} samples; R^2 of a sparse regression on each state's terms, then its terms with their R^2 alone; docs/model.md §8):", map.samples)?;
+    for r in statemap::REGRESSED {
+        if map.by_state(r).is_empty() {
+            continue;
+        }
+        writeln!(o, "  {}:", r.label())?;
+        for reg in map.by_state(r) {
+            let terms: Vec<String> = reg.terms.iter().take(3).map(|t| format!("{} ({:.2})", t.formula(), t.alone)).collect();
+            let st = reg.state.map_or("all states", |s| s.label());
+            writeln!(o, "    {:<28} R^2 {:>5.2}  {}", st, reg.r2, if terms.is_empty() { "-".to_string() } else { terms.join(", ") })?;
+        }
+    }
+    match map.sentence() {
+        Some(s) => writeln!(o, "  -> {s}")?,
+        None => writeln!(o, "  -> no state's terms explain the residual (R^2 < {}): noise, or a dynamic effect", statemap::MIN_R2)?,
+    }
+    Ok(())
+}
+
+/// The state map's tables: `statemap.parquet` (per state and bin, each residual's mean and rms)
+/// and `stateterms.parquet` (per regression, its R² and the terms kept).
+pub fn write_state_map(dir: &std::path::Path, map: &StateMap, meta: &[(String, String)]) -> anyhow::Result<()> {
+    use statemap::Residual;
+    let b = &map.bins;
+    let f = |g: &dyn Fn(&statemap::MapBin) -> f64| Column::F64(b.iter().map(g).collect());
+    let mut cols = vec![
+        ("state".to_string(), Column::Str(b.iter().map(|x| x.state.name().to_string()).collect())),
+        ("bin_lo".to_string(), f(&|x| x.lo)),
+        ("bin_hi".to_string(), f(&|x| x.hi)),
+        ("scale".to_string(), f(&|x| x.scale)),
+        ("scale_unit".to_string(), Column::Str(b.iter().map(|x| x.state.scale_unit().to_string()).collect())),
+        ("samples".to_string(), Column::U32(b.iter().map(|x| x.samples as u32).collect())),
+    ];
+    for (i, r) in Residual::ALL.iter().enumerate() {
+        cols.push((format!("mean_{}", r.name()), f(&|x| x.mean[i])));
+        cols.push((format!("rms_{}", r.name()), f(&|x| x.rms[i])));
+    }
+    tables::write_table(&dir.join("statemap.parquet"), cols, meta)?;
+    let regs: Vec<&statemap::Regression> = map.per_state.iter().flatten().chain(&map.joint).collect();
+    let rows: Vec<(&statemap::Regression, Option<&statemap::TermFit>)> =
+        regs.iter().flat_map(|g| if g.terms.is_empty() { vec![(*g, None)] } else { g.terms.iter().map(|t| (*g, Some(t))).collect() }).collect();
+    tables::write_table(
+        &dir.join("stateterms.parquet"),
+        vec![
+            ("residual".into(), Column::Str(rows.iter().map(|(g, _)| g.residual.name().to_string()).collect())),
+            ("states".into(), Column::Str(rows.iter().map(|(g, _)| g.state.map_or("all", |s| s.name()).to_string()).collect())),
+            ("r2".into(), Column::F64(rows.iter().map(|(g, _)| g.r2).collect())),
+            ("term_state".into(), Column::Str(rows.iter().map(|(_, t)| t.map_or(String::new(), |t| t.state.name().to_string())).collect())),
+            ("term".into(), Column::Str(rows.iter().map(|(_, t)| t.map_or(String::new(), |t| t.formula())).collect())),
+            ("coef".into(), Column::F64(rows.iter().map(|(_, t)| t.map_or(f64::NAN, |t| t.coef)).collect())),
+            ("r2_alone".into(), Column::F64(rows.iter().map(|(_, t)| t.map_or(f64::NAN, |t| t.alone)).collect())),
+        ],
+        meta,
+    )
+}
+
 /// How the model was driven, in words.
 pub fn drive_label(open_loop: Option<OpenLoop>) -> String {
     match open_loop {
@@ -193,7 +256,7 @@ pub fn drive_label(open_loop: Option<OpenLoop>) -> String {
 }
 
 /// The Parquet tables of a comparison: one per kind of thing a report plots.
-pub fn write_tables(dir: &std::path::Path, results: &[Compared], open_loop: Option<OpenLoop>) -> anyhow::Result<()> {
+pub fn write_tables(dir: &std::path::Path, results: &[Compared], map: &StateMap, open_loop: Option<OpenLoop>) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir)?;
     let meta = vec![
         ("vshake.kind".to_string(), "compare".to_string()),
@@ -233,6 +296,7 @@ pub fn write_tables(dir: &std::path::Path, results: &[Compared], open_loop: Opti
         ("notes".to_string(), s(&|r| r.test.notes.join("\n"))),
     ]);
     tables::write_table(&dir.join("tests.parquet"), cols, &meta)?;
+    write_state_map(dir, map, &meta)?;
 
     let rows: Vec<(&Compared, usize)> = results.iter().flat_map(|r| (0..N_HARM).map(move |k| (r, k))).collect();
     let hx = |f: &dyn Fn(&Comparison, usize) -> f64| Column::F64(rows.iter().map(|(r, k)| f(&r.comparison, *k)).collect());

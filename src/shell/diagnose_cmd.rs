@@ -7,7 +7,9 @@ use super::tables::{self, Column};
 use super::{campaign_io::load_model, RunFailed};
 use crate::kernel::params::EFFECTS;
 use crate::orchestration::diagnose::{self, Diagnosis};
-use crate::orchestration::fit::Problem;
+use crate::orchestration::fit::{self, Problem};
+use crate::orchestration::measured::AlignedTest;
+use crate::orchestration::{compare, statemap::{self, StateMap}};
 use plotters::prelude::*;
 use std::fmt::Write as _;
 use std::io::Write;
@@ -31,7 +33,12 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
     let loaded = load_problem(&args.campaign, &model, args.strict)?;
     let problem = loaded.problem;
     let t0 = std::time::Instant::now();
-    let d = diagnose::diagnose(&problem, &candidates);
+    let mut d = diagnose::diagnose(&problem, &candidates);
+    d.state_map = state_map(&loaded.aligned);
+    if let Some((free, fit)) = d.named_fit() {
+        let fitted: Vec<_> = loaded.aligned.iter().map(|t| AlignedTest { model: fit::apply(&t.model, free, &fit.u), ..t.clone() }).collect();
+        d.state_map_after = state_map(&fitted);
+    }
     let secs = t0.elapsed().as_secs_f64();
     if let Some(f) = &d.baseline.failure {
         return Err(RunFailed(format!("the starting model fails: {f}")).into());
@@ -106,13 +113,30 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
             )?;
         }
     }
+    if let Some(map) = &d.state_map {
+        writeln!(o, "\n  the starting model's residual:")?;
+        super::compare_cmd::print_state_map(&mut o, map)?;
+    }
+    if let (Some(map), Some(true)) = (&d.state_map_after, d.named_fit().map(|(_, f)| f.after.residual_rms() > diagnose::NOISE_FACTOR * d.noise_rms)) {
+        writeln!(o, "\n  the residual the named effects leave:")?;
+        super::compare_cmd::print_state_map(&mut o, map)?;
+    }
     writeln!(o, "\n  verdict: {}", d.summary())?;
     if let Some(dir) = &args.report {
         write_report(dir, &args.campaign.display().to_string(), &problem, &d)?;
-        writeln!(o, "\n  wrote {} and its tables (candidates, selection, tests, evidence .parquet)", dir.join("report.html").display())?;
+        writeln!(o, "\n  wrote {} and its tables (candidates, selection, tests, evidence, statemap, stateterms .parquet)", dir.join("report.html").display())?;
     }
     print_checks(&mut o, &loaded.checks, &implausible)?;
     Ok(())
+}
+
+/// The starting model's residual mapped onto the plant's states (None when a test's model run
+/// fails: the diagnosis reports that itself).
+fn state_map(aligned: &[AlignedTest]) -> Option<StateMap> {
+    use rayon::prelude::*;
+    let solver = Default::default();
+    let compared: Result<Vec<_>, String> = aligned.par_iter().map(|t| compare::compare_test(t, &solver)).collect();
+    compared.ok().map(|c| statemap::map(&c))
 }
 
 /// The Parquet tables and the HTML page of a diagnosis.
@@ -124,6 +148,9 @@ pub fn write_report(dir: &std::path::Path, campaign: &str, problem: &Problem, d:
         ("vshake.verdict".to_string(), d.summary()),
         ("vshake.version".to_string(), env!("CARGO_PKG_VERSION").to_string()),
     ];
+    if let Some(map) = &d.state_map {
+        super::compare_cmd::write_state_map(dir, map, &meta)?;
+    }
     let cs = &d.candidates;
     tables::write_table(
         &dir.join("candidates.parquet"),
@@ -310,6 +337,9 @@ td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}} th{{background:#
         }
         h.push_str("</table>\n");
     }
-    h.push_str("<p>The numbers are in the Parquet tables beside this page (candidates, tests, evidence).</p>\n</body></html>\n");
+    if let Some(map) = &d.state_map {
+        h.push_str(&super::report::state_map_section(map)?);
+    }
+    h.push_str("<p>The numbers are in the Parquet tables beside this page (candidates, selection, tests, evidence, statemap, stateterms).</p>\n</body></html>\n");
     Ok(h)
 }

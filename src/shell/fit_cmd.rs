@@ -13,6 +13,8 @@ use std::path::Path;
 pub struct Loaded {
     pub campaign: LoadedCampaign,
     pub problem: Problem,
+    /// The tests as aligned to the model.
+    pub aligned: Vec<crate::orchestration::measured::AlignedTest>,
     /// The notes and warnings about the data files, as printed.
     pub checks: String,
 }
@@ -28,7 +30,7 @@ pub fn load_problem(campaign: &Path, model: &ModelParams, strict: bool) -> anyho
     let mut checks = Vec::new();
     report_checks(&mut checks, campaign, &aligned, &[], strict)?;
     let tests = aligned.iter().map(TestData::new).collect();
-    Ok(Loaded { campaign: lc, problem: Problem::new(tests), checks: String::from_utf8_lossy(&checks).into_owned() })
+    Ok(Loaded { campaign: lc, problem: Problem::new(tests), aligned, checks: String::from_utf8_lossy(&checks).into_owned() })
 }
 
 /// Warnings for tests whose baseline residual is above half the signal (the evaluation `e`).
@@ -144,7 +146,8 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         writeln!(o, "  {:<24} {:>24} {:>24} {:>24}", t.name, cell(0), cell(1), cell(2))?;
     }
     let (b, a) = (r.before.residual_rms(), r.after.residual_rms());
-    writeln!(o, "  {:<24} {:>10.3e} -> {:>10.3e} ({:+.0} %) over every test and channel", "campaign", b, a, 100.0 * (a / b - 1.0))?;
+    let noise = problem.noise_rms();
+    writeln!(o, "  {:<24} {:>10.3e} -> {:>10.3e} ({:+.0} %) over every test and channel; noise floor {noise:.3e} ({:.2}x after)", "campaign", b, a, 100.0 * (a / b - 1.0), a / noise)?;
     // The fitted model: the starting model with the fitted parameters (and their effects on).
     let fitted = fit::apply(&model, &free, &r.u);
     let mut root = toml::Table::new();

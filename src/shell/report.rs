@@ -1,10 +1,11 @@
 //! The HTML report of `study compare`: a summary table and, drawn by plotters as inline SVG, the
 //! time-history overlay with its residual, the harmonic bars (model against measured) per test,
-//! and the error against amplitude across the campaign. The numbers behind every plot are the
-//! Parquet tables written beside it. A non-finite value is never drawn: a line breaks around it
-//! and a bar is left out, and a table cell shows "-".
+//! the error against amplitude across the campaign, and the residual mapped onto the plant's
+//! states. The numbers behind every plot are the Parquet tables written beside it. A non-finite
+//! value is never drawn: a line breaks around it and a bar is left out, and a table cell shows "-".
 
 use crate::orchestration::compare::Compared;
+use crate::orchestration::statemap::{self, Residual, State, StateMap};
 use crate::orchestration::timebase::fmt_rate;
 use crate::kernel::metrics::N_HARM;
 use plotters::prelude::*;
@@ -165,6 +166,53 @@ fn amplitude_svg(results: &[Compared]) -> Result<Option<String>, Box<dyn std::er
     Ok(Some(s))
 }
 
+/// The state map: per regressed residual, its mean in each bin of each scaled state.
+fn state_map_svg(map: &StateMap) -> Result<String, Box<dyn std::error::Error>> {
+    let shown: Vec<(usize, Residual)> = Residual::ALL.iter().copied().enumerate().filter(|(_, r)| statemap::REGRESSED.contains(r) && !map.by_state(*r).is_empty()).collect();
+    let mut s = String::new();
+    {
+        let root = SVGBackend::with_string(&mut s, (760, 260 * shown.len().max(1) as u32)).into_drawing_area();
+        root.fill(&WHITE)?;
+        for ((i, r), area) in shown.iter().zip(root.split_evenly((shown.len().max(1), 1))) {
+            let (y0, y1) = range(map.bins.iter().map(|b| b.mean[*i]));
+            let mut c = ChartBuilder::on(&area)
+                .caption(format!("{}: mean per bin of each state", r.label()), ("sans-serif", 15))
+                .margin(8)
+                .x_label_area_size(30)
+                .y_label_area_size(60)
+                .build_cartesian_2d(-1f64..1f64, y0..y1)?;
+            c.configure_mesh().x_desc("state / its scale (spool: / full stroke)").y_desc("/ rms measured").draw()?;
+            for (k, st) in State::ALL.iter().enumerate() {
+                let color = Palette99::pick(k).to_rgba();
+                let pts = map.bins.iter().filter(|b| b.state == *st).map(|b| (0.5 * (b.lo + b.hi), b.mean[*i]));
+                draw_line(&mut c, pts, color.stroke_width(2), Some(st.label()))?;
+            }
+            c.configure_series_labels().position(SeriesLabelPosition::UpperLeft).background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+        }
+        root.present()?;
+    }
+    Ok(s)
+}
+
+/// The report's section on where in state space the residual lies: the sentence, the plot and
+/// the per-state regressions.
+pub fn state_map_section(map: &StateMap) -> anyhow::Result<String> {
+    let mut h = String::from("<h2>Where in state space</h2>\n");
+    match map.sentence() {
+        Some(s) => writeln!(h, "<p id=\"state-sentence\">{}</p>", esc(&s))?,
+        None => writeln!(h, "<p id=\"state-sentence\">No state's terms explain the residual (R² < {}).</p>", statemap::MIN_R2)?,
+    }
+    let svg = state_map_svg(map).map_err(|e| anyhow::anyhow!("drawing a plot: {e}"))?;
+    writeln!(h, "<figure class=\"plot\" id=\"state-map\">{svg}</figure>")?;
+    h.push_str("<table id=\"state-terms\"><tr><th>residual</th><th>state</th><th>R²</th><th>terms kept (R² alone)</th></tr>\n");
+    for reg in map.per_state.iter().flatten() {
+        let terms: Vec<String> = reg.terms.iter().map(|t| format!("{} ({:.2})", t.formula(), t.alone)).collect();
+        writeln!(h, "<tr><td>{}</td><td>{}</td><td>{:.2}</td><td style=\"text-align:left\">{}</td></tr>", reg.residual.label(), reg.state.map_or("all", |s| s.label()), reg.r2, esc(&terms.join(", ")))?;
+    }
+    h.push_str("</table>\n");
+    Ok(h)
+}
+
 fn esc(s: &str) -> String {
     s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
 }
@@ -175,7 +223,7 @@ fn num(v: f64, f: impl Fn(f64) -> String) -> String {
 }
 
 /// The whole report as one self-contained HTML page.
-pub fn html(title: &str, results: &[Compared], extra_warnings: &[String]) -> anyhow::Result<String> {
+pub fn html(title: &str, results: &[Compared], map: &StateMap, extra_warnings: &[String]) -> anyhow::Result<String> {
     let plot = |r: Result<String, Box<dyn std::error::Error>>| r.map_err(|e| anyhow::anyhow!("drawing a plot: {e}"));
     let mut h = String::new();
     write!(
@@ -235,6 +283,7 @@ figure{{margin:12px 0}} .legend span{{display:inline-block;width:14px;height:4px
     if let Some(svg) = amplitude_svg(results).map_err(|e| anyhow::anyhow!("drawing a plot: {e}"))? {
         write!(h, "<h2>Across the campaign</h2>\n<figure class=\"plot\" id=\"amplitude\">{svg}</figure>\n")?;
     }
+    h.push_str(&state_map_section(map)?);
     for r in results {
         writeln!(h, "<h2 id=\"test-{n}\">{n}</h2>", n = esc(&r.test.name))?;
         writeln!(h, "<figure class=\"plot overlay\">{}</figure>", plot(overlay_svg(r))?)?;
@@ -242,6 +291,6 @@ figure{{margin:12px 0}} .legend span{{display:inline-block;width:14px;height:4px
             writeln!(h, "<figure class=\"plot harmonics\">{}</figure>", plot(harmonics_svg(r))?)?;
         }
     }
-    h.push_str("<p>The numbers behind every plot are in the Parquet tables beside this page (tests, harmonics, bins, cycles, overlay).</p>\n</body></html>\n");
+    h.push_str("<p>The numbers behind every plot are in the Parquet tables beside this page (tests, harmonics, bins, cycles, overlay, statemap, stateterms).</p>\n</body></html>\n");
     Ok(h)
 }

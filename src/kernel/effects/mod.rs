@@ -183,6 +183,7 @@ library! {
     supply::Supply,
     seal_friction::SealFriction,
     compressibility::Compressibility,
+    bulk_curve::BulkCurve,
     reaction_mass::ReactionMass,
     hold_down::HoldDown,
 }
