@@ -22,8 +22,9 @@
 //! parameter's BIC penalty, every remaining candidate is fitted again *on top of it*, its
 //! parameters freed together with the chosen ones' (starting from their estimates); the best is
 //! added if its ΔBIC over the chosen set is significant and it removes at least [`ADDS_ENOUGH`]
-//! of the residual beyond noise the set leaves, and so on, up to [`MAX_EFFECTS`]. The verdict names "A + B" and the share each adds when together they
-//! explain at least [`EXPLAINS_TOGETHER`] of the residual beyond noise; a best candidate that
+//! of the residual beyond noise the set leaves, and so on, up to [`MAX_EFFECTS`]. The verdict
+//! names "A + B" and the share each adds when together they explain at least
+//! [`EXPLAINS_TOGETHER`] of the residual beyond noise; a best candidate that
 //! explains less than [`EXPLAINS_ENOUGH`] (alone or with those added) is reported as such: the
 //! missing effect is probably not in the library, and the starting model's residual mapped onto
 //! the plant's states ([`super::statemap`]) names the state and term it follows. A named set that
