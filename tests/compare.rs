@@ -236,3 +236,51 @@ fn the_overlap_tutorial_campaign_points_at_small_spool_openings() {
     let html = std::fs::read_to_string(rep.join("report.html")).unwrap();
     assert!(html.contains("id=\"state-map\"><svg"), "the state map is drawn");
 }
+
+/// Issue 11: effects with memory, which no static term of one state holds, are named through a
+/// term with memory on the right state, with the filter's parameters: a mass the model lacks (an
+/// oscillator above the tests, its mass the missing mass) and a spool that lags its command
+/// (files with the valve command but neither the spool nor the pressures, as a controller's
+/// export has them; the lag on the opening, at the spool's frequency).
+#[test]
+fn effects_with_memory_are_named_through_a_filter_on_their_state() {
+    use vshake::shell::tables::{read_bools, read_columns_allow_nan, read_strings};
+    let diag = Path::new(env!("CARGO_MANIFEST_DIR")).join("studies/campaigns/diagnosis.toml");
+    let cases: [(&[&str], (&str, &str), (f64, f64, f64)); 2] = [
+        // 16 t more than the model's 144 t: the oscillator's frequency lies far above the tests.
+        (&["--set", "platen.m=160000"], ("platen_force", "displacement"), (50.0, f64::INFINITY, 16_000.0)),
+        // A 40 Hz spool: the lag's frequency within 10 %, all of the opening lagging.
+        (&["--effect", "spool_dynamics", "--set", "spool_dynamics.freq_hz=40"], ("valve_opening", "spool_opening"), (36.0, 44.0, 1.0)),
+    ];
+    for (extra, want, (f_lo, f_hi, gain)) in cases {
+        let d = tempfile::tempdir().unwrap();
+        let mut args = vec!["synth", diag.to_str().unwrap(), "--out", d.path().to_str().unwrap(), "--noise", "accel=0.02,disp=1e-5,force=2000"];
+        args.extend_from_slice(extra);
+        let (code, out, err) = study(&args);
+        assert_eq!(code, 0, "{out}{err}");
+        // Keep what a controller's export has: no spool position, no chamber pressures.
+        for e in std::fs::read_dir(d.path()).unwrap() {
+            let p = e.unwrap().path();
+            if p.extension().is_some_and(|x| x == "parquet") {
+                let keep = ["time_s", "ref_disp_m", "disp_m", "accel_mps2", "valve_cmd_v", "force_n"];
+                let t = read_columns_allow_nan(&p, &keep).unwrap();
+                let cols: Vec<(&str, Vec<f64>)> = keep.iter().map(|&k| (k, t.column(k).unwrap().to_vec())).collect();
+                vshake::shell::synth_cmd::write_measured(&p, &cols, &[]).unwrap();
+            }
+        }
+        let rep = d.path().join("report");
+        let (code, out, err) = study(&["compare", d.path().join("diagnosis.toml").to_str().unwrap(), "--report", rep.to_str().unwrap()]);
+        assert_eq!(code, 0, "{out}{err}");
+        let (res, state, term, r2) = followed_state(&rep);
+        assert_eq!((res.as_str(), state.as_str()), want, "{extra:?}: {term}, R² {r2}\n{out}");
+        assert!(r2 > 0.9, "{extra:?}: R² {r2}\n{out}");
+        assert!(out.contains("through a term with memory"), "{out}");
+        let p = rep.join("stateterms.parquet");
+        let i = read_bools(&p, "named").unwrap().iter().position(|&b| b).unwrap();
+        assert!(read_strings(&p, "term").unwrap()[i].contains('('), "the filter's parameters are in the term");
+        let num = read_columns_allow_nan(&p, &["f_n_hz", "coef"]).unwrap();
+        let (f_n, g) = (num.column("f_n_hz").unwrap()[i], num.column("coef").unwrap()[i]);
+        assert!(f_n > f_lo && f_n < f_hi, "{extra:?}: f_n {f_n} Hz\n{out}");
+        assert!((g / gain - 1.0).abs() < 0.05, "{extra:?}: gain {g}, want {gain}\n{out}");
+    }
+}

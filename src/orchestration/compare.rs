@@ -178,6 +178,12 @@ impl Projector {
         x.iter().enumerate().map(|(m, &v)| (v - self.basis.iter().zip(&c).map(|(b, c)| b[m] * c).sum::<f64>()).powi(2)).sum()
     }
 
+    /// The basis at the samples, one row per function: the constant, then cos and sin of each
+    /// resolved harmonic.
+    pub fn basis(&self) -> &[Vec<f64>] {
+        &self.basis
+    }
+
     /// Functions fitted: the mean and two per resolved harmonic.
     pub fn n_functions(&self) -> usize {
         self.rows.len()

@@ -7,6 +7,7 @@ pub mod compare;
 pub mod diagnose;
 pub mod fit;
 pub mod measured;
+pub mod memory;
 pub mod sampling;
 pub mod sensitivity;
 pub mod sim;

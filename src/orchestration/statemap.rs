@@ -52,8 +52,13 @@
 //! explain the largest share of the residual (R²) is the one the residual follows; of the terms
 //! kept, the one that alone explains most is named. A regression on all states together is kept
 //! as the sparse model.
+//!
+//! A load or a valve with dynamics of its own follows no state at the same instant; the platen's
+//! balance and the missing opening are also regressed on terms with memory ([`super::memory`]),
+//! named instead when they explain [`MEMORY_MARGIN`] more.
 
 use super::compare::{Compared, Projector};
+use super::memory::{self, Input, Kind, MemoryFit};
 use crate::kernel::params::ModelParams;
 use crate::kernel::servovalve::sq;
 use faer::prelude::*;
@@ -444,8 +449,26 @@ pub struct StateMap {
     pub per_state: Vec<Vec<Regression>>,
     /// Per residual: the regression on every state's terms together.
     pub joint: Vec<Regression>,
+    /// Residuals regressed on a term with memory ([`super::memory`]): the platen's force balance
+    /// (the residual force when the files have no force) on the force of an oscillator carried by
+    /// the platen, the missing opening on a lag of the opening.
+    pub memory: Vec<(Residual, MemoryFit)>,
+    /// The lowest and highest fundamental of the sine tests, Hz (None: no sine).
+    pub band: Option<(f64, f64)>,
     pub samples: usize,
 }
+
+/// What the map names: a static term of one state, or a term with memory.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Named<'a> {
+    Static(&'a Regression, &'a TermFit),
+    Memory(Residual, &'a MemoryFit),
+}
+
+/// A term with memory is named over the static terms only when it explains this much more of the
+/// residual. [chosen: a spring or a damper to the ground is also an oscillator tuned below the
+/// tests; the static reading, simpler, keeps it unless the memory clearly adds.]
+pub const MEMORY_MARGIN: f64 = 0.05;
 
 /// The residuals that are regressed on the states: the platen's force balance and the chambers'
 /// flow balance; the residual force itself when the files have no force.
@@ -472,13 +495,31 @@ pub fn map(compared: &[Compared]) -> StateMap {
         }
     }
     let n = states[0].len();
-    for (r, sq) in res.iter_mut().zip(scale_sq) {
+    let mut res_scale = [1.0; 5];
+    for ((r, sq), out) in res.iter_mut().zip(scale_sq).zip(&mut res_scale) {
         let sc = (sq / n.max(1) as f64).sqrt();
-        let sc = if sc > 0.0 { sc } else { 1.0 };
+        *out = if sc > 0.0 { sc } else { 1.0 };
         if let Some(r) = r {
-            r.iter_mut().for_each(|r| *r /= sc);
+            r.iter_mut().for_each(|r| *r /= *out);
         }
     }
+    // The platen's balance on a term with memory, in newtons.
+    let at = |r: Residual| Residual::ALL.iter().position(|&x| x == r).unwrap_or(0);
+    let platen = if res[at(Residual::PlatenForce)].is_some() { Residual::PlatenForce } else { Residual::Force };
+    let mut memory = Vec::new();
+    for (kind, r) in [(Kind::Carried, platen), (Kind::Lag, Residual::ValveOpening)] {
+        let Some(y) = &res[at(r)] else { continue };
+        let y: Vec<f64> = y.iter().map(|v| v * res_scale[at(r)]).collect();
+        if let Some(mut fit) = memory::fit(kind, &compared.iter().map(|c| input_of(kind, c)).collect::<Vec<_>>(), &y) {
+            // The residual force in closed loop is what the controller left: no mass can be read.
+            if r == Residual::Force {
+                fit.gain = f64::NAN;
+            }
+            memory.push((r, fit));
+        }
+    }
+    let fundamentals = compared.iter().filter_map(|c| c.test.samples.fundamental_hz);
+    let band = fundamentals.clone().reduce(f64::min).zip(fundamentals.reduce(f64::max));
     let mut scales = [1.0; 5];
     for (i, st) in State::ALL.iter().enumerate() {
         if *st != State::SpoolOpening {
@@ -500,7 +541,23 @@ pub fn map(compared: &[Compared]) -> StateMap {
         let all: Vec<(State, &Vec<f64>)> = State::of(r).iter().map(|&st| (st, &states[idx(st)])).collect();
         joint.push(stlsq(r, None, &all, y));
     }
-    StateMap { bins, per_state, joint, samples: n }
+    StateMap { bins, per_state, joint, memory, band, samples: n }
+}
+
+/// A test's input to a term with memory of family `kind` ([`memory::fit`]): the measured
+/// displacement (for a record its second rate after the 10 ms average: the base acceleration)
+/// or the spool opening.
+fn input_of(kind: Kind, c: &Compared) -> Input {
+    let s = &c.test.samples;
+    let x = match kind {
+        Kind::Carried => &c.test.measured.disp,
+        Kind::Lag => &c.states[0],
+    };
+    match (s.fundamental_hz, kind) {
+        (Some(f), _) => Input::sine(&Projector::new(&s.tau, f, s.n_harm), f, x),
+        (None, Kind::Carried) => Input::Record { x: rate_of(&rate_of(x, s.rate_hz), s.rate_hz), dt: 1.0 / s.rate_hz },
+        (None, Kind::Lag) => Input::Record { x: x.clone(), dt: 1.0 / s.rate_hz },
+    }
 }
 
 fn bins_of(state: State, scale: f64, x: &[f64], res: &[Option<Vec<f64>>; 5]) -> Vec<MapBin> {
@@ -616,11 +673,34 @@ impl StateMap {
             .and_then(|reg| reg.terms.first().map(|t| (reg, t)))
     }
 
+    /// What the residual follows, if anything explains at least [`MIN_R2`] of it: the strongest
+    /// static term, or the strongest term with memory when it explains [`MEMORY_MARGIN`] more.
+    pub fn named(&self) -> Option<Named<'_>> {
+        let fixed = self.strongest().filter(|(reg, _)| reg.state.is_some());
+        let fixed_r2 = fixed.map_or(0.0, |(reg, _)| reg.r2);
+        match self.memory.iter().max_by(|a, b| a.1.r2.total_cmp(&b.1.r2)) {
+            Some((r, o)) if o.r2 >= MIN_R2 && o.r2 >= fixed_r2 + MEMORY_MARGIN => Some(Named::Memory(*r, o)),
+            _ => fixed.filter(|(reg, _)| reg.r2 >= MIN_R2).map(|(reg, t)| Named::Static(reg, t)),
+        }
+    }
+
     /// One sentence: which state and term the residual follows, and what that suggests.
     pub fn sentence(&self) -> Option<String> {
-        let (reg, t) = self.strongest().filter(|(reg, _)| reg.r2 >= MIN_R2)?;
-        let st = reg.state?;
-        Some(format!("the {} follows {} in {} (R² = {:.2}): {}", reg.residual.label(), t.formula(), st.label(), reg.r2, reading(st, t.term)))
+        Some(match self.named()? {
+            Named::Static(reg, t) => {
+                let st = reg.state?;
+                format!("the {} follows {} in {} (R² = {:.2}): {}", reg.residual.label(), t.formula(), st.label(), reg.r2, reading(st, t.term))
+            }
+            Named::Memory(r, o) => format!(
+                "the {} follows the {} through a term with memory, {} ({}; R² = {:.2}): {}",
+                r.label(),
+                o.kind.state().label(),
+                o.kind.name(),
+                o.describe(),
+                o.r2,
+                o.reading(self.band)
+            ),
+        })
     }
 }
 

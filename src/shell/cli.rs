@@ -292,6 +292,12 @@ the excitation is found in the file, and the model (at its own controller rate) 
 Every problem of every file is reported at once (exit code 2); warnings (a file that does not match its test, \
 units, a flipped sign) are printed, and are errors with --strict. The formats: docs/formats.md.
 
+The output ends with where in state space the model fails: the platen's force balance and the chambers' flow \
+balance, evaluated at the measured motion, regressed on static terms of each state (spool opening, velocity, \
+pressure difference, displacement, valve flow) and on terms with memory (an oscillator the platen carries; \
+a lag of the opening), and one sentence naming the state and term they follow (docs/model.md §8; the tables \
+statemap.parquet and stateterms.parquet beside the report).
+
 Example: study compare studies/tutorial/campaign.toml --report /tmp/report";
 
 const RUN_HELP: &str = "Run a study file through the batch engine and write one Parquet row per sample x excitation: \

@@ -202,10 +202,13 @@ pub fn print_state_map(o: &mut dyn Write, map: &StateMap) -> std::io::Result<()>
             let st = reg.state.map_or("all states", |s| s.label());
             writeln!(o, "    {:<28} R^2 {:>5.2}  {}", st, reg.r2, if terms.is_empty() { "-".to_string() } else { terms.join(", ") })?;
         }
+        for (_, m) in map.memory.iter().filter(|(res, _)| *res == r) {
+            writeln!(o, "    {:<28} R^2 {:>5.2}  {}", m.kind.name(), m.r2, m.describe())?;
+        }
     }
     match map.sentence() {
         Some(s) => writeln!(o, "  -> {s}")?,
-        None => writeln!(o, "  -> no state's terms explain the residual (R^2 < {}): noise, or a dynamic effect", statemap::MIN_R2)?,
+        None => writeln!(o, "  -> no state's terms explain the residual (R^2 < {}): noise, or an effect neither a static term nor an oscillator holds", statemap::MIN_R2)?,
     }
     Ok(())
 }
@@ -229,22 +232,79 @@ pub fn write_state_map(dir: &std::path::Path, map: &StateMap, meta: &[(String, S
         cols.push((format!("rms_{}", r.name()), f(&|x| x.rms[i])));
     }
     tables::write_table(&dir.join("statemap.parquet"), cols, meta)?;
-    let regs: Vec<&statemap::Regression> = map.per_state.iter().flatten().chain(&map.joint).collect();
-    let rows: Vec<(&statemap::Regression, Option<&statemap::TermFit>)> =
-        regs.iter().flat_map(|g| if g.terms.is_empty() { vec![(*g, None)] } else { g.terms.iter().map(|t| (*g, Some(t))).collect() }).collect();
-    tables::write_table(
-        &dir.join("stateterms.parquet"),
+    tables::write_table(&dir.join("stateterms.parquet"), state_term_rows(map).into_columns(), meta)
+}
+
+/// The rows of `stateterms.parquet`: every regression's terms (one row without a term when it
+/// kept none), then the terms with memory (the filter's `f_n_hz` and `zeta`; its gain in `coef`:
+/// for the oscillator the mass, kg); `named` marks the row the map's sentence names.
+#[derive(Default)]
+struct StateTermRows {
+    residual: Vec<String>,
+    states: Vec<String>,
+    r2: Vec<f64>,
+    term_state: Vec<String>,
+    term: Vec<String>,
+    coef: Vec<f64>,
+    r2_alone: Vec<f64>,
+    named: Vec<bool>,
+    /// The oscillator's natural frequency (Hz) and damping ratio; NaN for a static term.
+    f_n_hz: Vec<f64>,
+    zeta: Vec<f64>,
+}
+
+impl StateTermRows {
+    #[allow(clippy::too_many_arguments)]
+    fn push(&mut self, residual: statemap::Residual, states: &str, r2: f64, term_state: &str, term: String, coef: f64, alone: f64, named: bool) {
+        self.residual.push(residual.name().into());
+        self.states.push(states.into());
+        self.r2.push(r2);
+        self.term_state.push(term_state.into());
+        self.term.push(term);
+        self.coef.push(coef);
+        self.r2_alone.push(alone);
+        self.named.push(named);
+        self.f_n_hz.push(f64::NAN);
+        self.zeta.push(f64::NAN);
+    }
+
+    fn into_columns(self) -> Vec<(String, Column)> {
         vec![
-            ("residual".into(), Column::Str(rows.iter().map(|(g, _)| g.residual.name().to_string()).collect())),
-            ("states".into(), Column::Str(rows.iter().map(|(g, _)| g.state.map_or("all", |s| s.name()).to_string()).collect())),
-            ("r2".into(), Column::F64(rows.iter().map(|(g, _)| g.r2).collect())),
-            ("term_state".into(), Column::Str(rows.iter().map(|(_, t)| t.map_or(String::new(), |t| t.state.name().to_string())).collect())),
-            ("term".into(), Column::Str(rows.iter().map(|(_, t)| t.map_or(String::new(), |t| t.formula())).collect())),
-            ("coef".into(), Column::F64(rows.iter().map(|(_, t)| t.map_or(f64::NAN, |t| t.coef)).collect())),
-            ("r2_alone".into(), Column::F64(rows.iter().map(|(_, t)| t.map_or(f64::NAN, |t| t.alone)).collect())),
-        ],
-        meta,
-    )
+            ("residual".into(), Column::Str(self.residual)),
+            ("states".into(), Column::Str(self.states)),
+            ("r2".into(), Column::F64(self.r2)),
+            ("term_state".into(), Column::Str(self.term_state)),
+            ("term".into(), Column::Str(self.term)),
+            ("coef".into(), Column::F64(self.coef)),
+            ("r2_alone".into(), Column::F64(self.r2_alone)),
+            ("named".into(), Column::Bool(self.named)),
+            ("f_n_hz".into(), Column::F64(self.f_n_hz)),
+            ("zeta".into(), Column::F64(self.zeta)),
+        ]
+    }
+}
+
+fn state_term_rows(map: &StateMap) -> StateTermRows {
+    use statemap::Named;
+    let named = map.named();
+    let mut rows = StateTermRows::default();
+    for g in map.per_state.iter().flatten().chain(&map.joint) {
+        let states = g.state.map_or("all", |s| s.name());
+        if g.terms.is_empty() {
+            rows.push(g.residual, states, g.r2, "", String::new(), f64::NAN, f64::NAN, false);
+        }
+        for t in &g.terms {
+            let is = matches!(named, Some(Named::Static(ng, nt)) if std::ptr::eq(ng, g) && std::ptr::eq(nt, t));
+            rows.push(g.residual, states, g.r2, t.state.name(), t.formula(), t.coef, t.alone, is);
+        }
+    }
+    for (r, m) in &map.memory {
+        let st = m.kind.state().name();
+        let term = format!("{} (f_n {:.3} Hz, ζ {:.4})", m.kind.name(), m.f_n, m.zeta);
+        rows.push(*r, st, m.r2, st, term, m.gain, m.r2, matches!(named, Some(Named::Memory(_, n)) if std::ptr::eq(n, m)));
+        (rows.f_n_hz[rows.r2.len() - 1], rows.zeta[rows.r2.len() - 1]) = (m.f_n, m.zeta);
+    }
+    rows
 }
 
 /// How the model was driven, in words.

@@ -209,6 +209,9 @@ pub fn state_map_section(map: &StateMap) -> anyhow::Result<String> {
         let terms: Vec<String> = reg.terms.iter().map(|t| format!("{} ({:.2})", t.formula(), t.alone)).collect();
         writeln!(h, "<tr><td>{}</td><td>{}</td><td>{:.2}</td><td style=\"text-align:left\">{}</td></tr>", reg.residual.label(), reg.state.map_or("all", |s| s.label()), reg.r2, esc(&terms.join(", ")))?;
     }
+    for (r, m) in &map.memory {
+        writeln!(h, "<tr><td>{}</td><td>{}</td><td>{:.2}</td><td style=\"text-align:left\">{}</td></tr>", r.label(), m.kind.name(), m.r2, esc(&m.describe()))?;
+    }
     h.push_str("</table>\n");
     Ok(h)
 }

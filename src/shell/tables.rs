@@ -349,6 +349,7 @@ pub enum Column {
     Str(Vec<String>),
     /// Nullable string.
     OptStr(Vec<Option<String>>),
+    Bool(Vec<bool>),
 }
 
 impl Column {
@@ -360,6 +361,7 @@ impl Column {
             Column::U32(_) => Field::new(name, DataType::UInt32, false),
             Column::Str(_) => Field::new(name, DataType::Utf8, false),
             Column::OptStr(_) => Field::new(name, DataType::Utf8, true),
+            Column::Bool(_) => Field::new(name, DataType::Boolean, false),
         }
     }
     fn array(self) -> ArrayRef {
@@ -370,6 +372,7 @@ impl Column {
             Column::U32(v) => Arc::new(arrow_array::UInt32Array::from(v)),
             Column::Str(v) => Arc::new(arrow_array::StringArray::from(v)),
             Column::OptStr(v) => Arc::new(arrow_array::StringArray::from(v)),
+            Column::Bool(v) => Arc::new(arrow_array::BooleanArray::from(v)),
         }
     }
 }
@@ -548,6 +551,25 @@ mod tests {
 
 /// The string column `column` of a Parquet file (null cells as empty strings).
 pub fn read_strings(path: &Path, column: &str) -> Result<Vec<String>, TableError> {
+    read_values(path, column, "a string", |arr, out| {
+        let s = arr.as_any().downcast_ref::<arrow_array::StringArray>()?;
+        out.extend((0..s.len()).map(|i| if s.is_null(i) { String::new() } else { s.value(i).to_string() }));
+        Some(())
+    })
+}
+
+/// A Boolean column of a Parquet file (a null reads as false).
+pub fn read_bools(path: &Path, column: &str) -> Result<Vec<bool>, TableError> {
+    read_values(path, column, "Boolean", |arr, out| {
+        let b = arr.as_any().downcast_ref::<arrow_array::BooleanArray>()?;
+        out.extend((0..b.len()).map(|i| !b.is_null(i) && b.value(i)));
+        Some(())
+    })
+}
+
+/// One column of a Parquet file, each batch's array appended by `take` (None: not of the type
+/// `kind` names).
+fn read_values<T>(path: &Path, column: &str, kind: &str, take: impl Fn(&ArrayRef, &mut Vec<T>) -> Option<()>) -> Result<Vec<T>, TableError> {
     let file = path.to_path_buf();
     let fmt = |e: &dyn std::fmt::Display| TableError::Format { file: file.clone(), kind: "Parquet", message: e.to_string() };
     let f = File::open(path).map_err(|e| TableError::Io { file: file.clone(), err: e })?;
@@ -560,14 +582,14 @@ pub fn read_strings(path: &Path, column: &str) -> Result<Vec<String>, TableError
     for batch in builder.build().map_err(|e| fmt(&e))? {
         let batch = batch.map_err(|e| fmt(&e))?;
         let arr = batch.column_by_name(column).expect("column in schema");
-        let s = arr.as_any().downcast_ref::<arrow_array::StringArray>().ok_or_else(|| TableError::BadCell {
+        let row = out.len() + 1;
+        take(arr, &mut out).ok_or_else(|| TableError::BadCell {
             file: file.clone(),
             column: column.to_string(),
-            row: out.len() + 1,
+            row,
             line: String::new(),
-            message: format!("column type {} is not a string", arr.data_type()),
+            message: format!("column type {} is not {kind}", arr.data_type()),
         })?;
-        out.extend((0..s.len()).map(|i| if s.is_null(i) { String::new() } else { s.value(i).to_string() }));
     }
     Ok(out)
 }
