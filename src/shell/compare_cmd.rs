@@ -248,7 +248,7 @@ struct StateTermRows {
     coef: Vec<f64>,
     r2_alone: Vec<f64>,
     named: Vec<bool>,
-    /// The oscillator's natural frequency (Hz) and damping ratio; NaN for a static term.
+    /// A term with memory's natural frequency (Hz) and damping ratio; NaN for a static term.
     f_n_hz: Vec<f64>,
     zeta: Vec<f64>,
 }
