@@ -1,5 +1,5 @@
 //! Criterion benchmarks of the lane kernel: one 3 s run of the 3 Hz, 1.73 g reference case
-//! (RK4, 8 substeps per 1024 Hz tick: converged, see tests/reference.rs), as the scalar path
+//! (RK4, 4 substeps per 1024 Hz tick: converged, see tests/reference.rs), as the scalar path
 //! (1 lane), the batch kernel (8 lanes) on one thread, and two batches on two threads.
 //! Throughput is reported in simulated seconds (criterion's "elements" = simulated seconds).
 //!

@@ -321,3 +321,33 @@ fn the_effect_set_is_the_baseline_where_everything_is_off() {
         assert_ne!(got[l + 1].metrics, expected.metrics, "{e} on changes the run");
     }
 }
+
+/// A diagnosis screens the library one effect at a time through a kernel made for that effect
+/// alone (`run_lanes_single`): the same numbers as the whole effect set, bit for bit, for every
+/// registered effect, in lanes where it is on (at different strengths) and next to a lane where
+/// it is off.
+#[test]
+fn a_kernel_for_one_effect_equals_the_effect_set_bit_for_bit() {
+    use vshake::kernel::effects::{effect_set, EFFECTS};
+    use vshake::kernel::params::ModelParams;
+    use vshake::kernel::simulate::{self, LaneParams, NoObserver, Solver};
+    use vshake::orchestration::sim::run_lanes_single;
+    let base = ModelParams::default();
+    let reference = vshake::kernel::excitation::Sine { freq_hz: 5.0, amp_m: 0.02, taper_s: 0.5, duration_s: 1.5, window_cycles: Some(4) }.reference(1024.0);
+    for e in EFFECTS {
+        let mut sets = vec![base.clone()];
+        for k in 1..8 {
+            let mut m = switched_on(&base, e);
+            let info = vshake::kernel::effects::info(e).unwrap();
+            let p = ModelParams::lookup(&format!("{e}.{}", info.free[0])).unwrap();
+            let v = (p.get)(&m) * (1.0 + 0.05 * k as f64);
+            (p.set)(&mut m, v);
+            sets.push(m);
+        }
+        let refs: Vec<&ModelParams> = sets.iter().collect();
+        let whole = simulate::run(&LaneParams::<8>::new(&refs).unwrap(), &effect_set::<8>(&refs), &reference, &Solver::default(), &mut NoObserver).unwrap();
+        let single = run_lanes_single::<8, _>(&refs, &reference, &Solver::default(), &mut NoObserver).unwrap();
+        assert_eq!(single, whole, "{e}: the kernel for it alone = the effect set");
+        assert_ne!(single[1].metrics, single[0].metrics, "{e} on changes the run");
+    }
+}

@@ -77,15 +77,20 @@ pub struct Basis {
 }
 
 impl Basis {
-    /// Basis at tick `k` of rate `f_s` for fundamental `f` (phase reduced to one cycle first).
+    /// Basis at tick `k` of rate `f_s` for fundamental `f`: one sine and cosine of the
+    /// fundamental's phase (reduced to one cycle first), the harmonics by the angle-addition
+    /// recurrence cos kθ = cos θ·cos (k−1)θ − sin θ·sin (k−1)θ (and its sine twin). Nine
+    /// sin_cos calls per tick cost as much as the rest of the tick; the recurrence is within
+    /// 1e-14 of them (`recurrence_matches_sin_cos`).
     pub fn at(k: usize, f_s: f64, f: f64) -> Basis {
         let mut b = Basis { cos: [0.0; N_HARM], sin: [0.0; N_HARM] };
         let cycles = f * (k as f64) / f_s;
-        for h in 0..N_HARM {
-            let c = cycles * (h + 1) as f64;
-            let (s, co) = (2.0 * std::f64::consts::PI * (c - c.floor())).sin_cos();
-            b.cos[h] = co;
-            b.sin[h] = s;
+        let (s1, c1) = (2.0 * std::f64::consts::PI * (cycles - cycles.floor())).sin_cos();
+        b.cos[0] = c1;
+        b.sin[0] = s1;
+        for h in 1..N_HARM {
+            b.cos[h] = c1 * b.cos[h - 1] - s1 * b.sin[h - 1];
+            b.sin[h] = s1 * b.cos[h - 1] + c1 * b.sin[h - 1];
         }
         b
     }
@@ -237,5 +242,17 @@ mod tests {
         assert!(m.h(5).abs() < 1e-12);
         assert!((m.thd_odd - 0.05).abs() < 1e-12);
         assert!((m.rms_err_disp_ratio).abs() < 1e-15);
+    }
+
+    #[test]
+    fn recurrence_matches_sin_cos() {
+        for k in [0usize, 1, 17, 1000, 123_457] {
+            // 3.75 Hz at 1024 Hz: every phase below is exact in binary, so only sin_cos rounds.
+            let b = Basis::at(k, 1024.0, 3.75);
+            for h in 0..N_HARM {
+                let phase = 2.0 * std::f64::consts::PI * ((h + 1) as f64 * 3.75 * k as f64 / 1024.0).fract();
+                assert!((b.cos[h] - phase.cos()).abs() < 1e-14 && (b.sin[h] - phase.sin()).abs() < 1e-14, "k {k} harmonic {}", h + 1);
+            }
+        }
     }
 }

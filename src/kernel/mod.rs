@@ -11,7 +11,6 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod actuator;
-pub mod calibrate;
 pub mod controller;
 pub mod effects;
 pub mod excitation;

@@ -111,7 +111,7 @@ mod tests {
         x.iter().zip(&y).map(|(p, q)| (p - q).abs()).fold(0.0, f64::max) / rms
     }
 
-    /// Samples at 500 Hz (no common tick with 1024 Hz) from the default 8 substeps against the
+    /// Samples at 500 Hz (no common tick with 1024 Hz) from 8 substeps against the
     /// same run at 256 substeps: they agree as closely as the two runs' tick values do (the
     /// integrator's own convergence), far below any sensor noise.
     #[test]
@@ -147,7 +147,7 @@ mod tests {
         run(&lp, &Baseline, &r, &Solver::default(), &mut ticks).unwrap();
         let mut mixed: Vec<f64> = (0..1500).flat_map(|k| [k as f64 / 1024.0, (k as f64 + 0.3) / 1024.0]).collect();
         mixed.truncate(2 * 1499);
-        let both = sampled(&mixed, 8);
+        let both = sampled(&mixed, Solver::default().substeps);
         for (c, ci) in [ch::ACCEL, ch::DISP, ch::FORCE].into_iter().enumerate() {
             let y = both.channel(ci, 0);
             for k in 0..1499 {

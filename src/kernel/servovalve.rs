@@ -19,7 +19,30 @@
 /// Regularised orifice law sq(Δp) = Δp / (Δp² + p_tr²)^¼, with `p_tr2` = p_tr².
 #[inline(always)]
 pub fn sq(dp: f64, p_tr2: f64) -> f64 {
-    dp / (dp * dp + p_tr2).sqrt().sqrt()
+    dp * inv_fourth_root(dp * dp + p_tr2)
+}
+
+/// Seed of [`inv_fourth_root`]: the bits of s^(−¼) are about `FOURTH_ROOT_SEED − bits(s)/4`
+/// (the exponent field divided by −4, the mantissa approximated linearly). This constant
+/// minimises the seed's largest relative error, 3.1 % [found numerically over four octaves].
+const FOURTH_ROOT_SEED: u64 = 0x4feb_0c0b_ba5e_3540;
+
+/// s^(−¼) for a positive normal s, to within 2 ulp, with multiplications and additions only.
+///
+/// A seed from the bits of s (3.1 %) and four Newton steps on y⁻⁴ = s,
+/// y ← y·(5 − s·y⁴)/4, each squaring the relative error (times 2.5): 3.1e-2, 2.5e-3, 1.6e-5,
+/// 6.2e-10, then rounding. It replaces two square roots and a division, which share the one
+/// divide/square-root unit, with 26 operations on the multiply and add pipes; the kernel has
+/// spare room there and none on the divider. Integer and IEEE operations only, with no fused
+/// multiply-add, so every build and every CPU gives the same bits.
+#[inline(always)]
+pub fn inv_fourth_root(s: f64) -> f64 {
+    let mut y = f64::from_bits(FOURTH_ROOT_SEED.wrapping_sub(s.to_bits() >> 2));
+    for _ in 0..4 {
+        let y2 = y * y;
+        y = y * (1.25 - 0.25 * s * (y2 * y2));
+    }
+    y
 }
 
 /// Per-lane valve coefficients, with the number of valves per actuator folded in.
@@ -90,6 +113,23 @@ mod tests {
         let h = 1.0;
         let slope = (sq(h, p_tr2) - sq(-h, p_tr2)) / (2.0 * h);
         assert!((slope - 1.0 / 1e5f64.sqrt()).abs() < 1e-9);
+    }
+
+    #[test]
+    fn inv_fourth_root_is_accurate_to_two_ulp() {
+        // Four octaves of mantissa (the seed's period) at several scales, and the kernel's range.
+        let mut worst = 0.0f64;
+        let mut s = 1e-300;
+        while s < 1e300 {
+            for k in 0..997 {
+                let x = s * (1.0 + 15.0 * k as f64 / 997.0);
+                let exact = x.powf(-0.25);
+                let y = inv_fourth_root(x);
+                worst = worst.max(((y - exact) / exact).abs());
+            }
+            s *= 1e7;
+        }
+        assert!(worst < 2.0 * f64::EPSILON, "largest relative error {worst:e}");
     }
 
     #[test]

@@ -361,7 +361,7 @@ impl Problem {
                     return vec![Err(format!("test {:?}: {msg}", t.name)); hi - lo];
                 }
                 let mut rs = Resampler::<LANES>::new(&t.samples.tau);
-                let res = match super::sim::run_lanes::<LANES, _>(&refs, &t.drive, &self.solver, &mut rs) {
+                let res = match super::sim::run_lanes_single::<LANES, _>(&refs, &t.drive, &self.solver, &mut rs) {
                     Ok(r) => r,
                     Err(e) => return vec![Err(format!("test {:?}: {e}", t.name)); hi - lo],
                 };

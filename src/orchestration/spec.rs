@@ -14,7 +14,7 @@
 //! window_cycles = 4           # default: every whole cycle after taper_s + 1 s
 //!
 //! [solver]
-//! substeps = 8                # RK4 steps per controller tick
+//! substeps = 4                # RK4 steps per controller tick (default 4)
 //! ```
 //!
 //! A record excitation names a file and its columns instead:
@@ -379,7 +379,7 @@ window_cycles = 4
         assert_eq!(s.model.platen.m, 150000.0);
         assert_eq!(s.model.valve_law, ValveLaw::Linear);
         assert_eq!(s.model.platen.k, 1.266e6);
-        assert_eq!(s.solver.substeps, 8);
+        assert_eq!(s.solver.substeps, Solver::default().substeps);
         let ExcitationSpec::Sine { sine, .. } = s.excitation else { panic!() };
         assert_eq!(sine.duration_s, 3.0);
         assert_eq!(sine.window_cycles, Some(4));

@@ -34,7 +34,7 @@
 //! histories = [0]               # sample ids whose full time history is also written
 //!
 //! [solver]
-//! substeps = 8
+//! substeps = 4                  # RK4 steps per controller tick (default 4)
 //! chunk = 64                    # samples per parallel work item (results do not depend on it)
 //! ```
 //!

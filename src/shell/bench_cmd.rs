@@ -1,9 +1,10 @@
 //! `study bench`: throughput of the kernel in simulated seconds per wall second, the scalar path
-//! beside it, the machine's limit for this kernel, and a CI gate on ratios measured in the same
-//! run (never on absolute times: machines differ).
+//! beside it, the limit set by the model's minimal operation count on this machine
+//! ([`super::calibrate`]), and a CI gate on ratios measured in the same run (never on absolute
+//! times: machines differ).
 
+use super::calibrate::{self, Rates, MINIMAL, TICK_OPS, WINDOW_OPS};
 use super::cli::BenchArgs;
-use crate::kernel::calibrate;
 use crate::kernel::effects::Baseline;
 use crate::kernel::excitation::{Reference, Sine};
 use crate::kernel::params::ModelParams;
@@ -50,7 +51,9 @@ pub struct Figures {
     pub scalar: f64,
     pub batch1: f64,
     pub batch2: f64,
+    /// The model's limit on one thread (see [`calibrate`]).
     pub limit: f64,
+    pub rates: Rates,
     pub rhs_per_sim_s: f64,
 }
 
@@ -61,6 +64,7 @@ impl Figures {
     pub fn batch_over_limit(&self) -> f64 {
         self.batch1 / self.limit
     }
+    /// Cycles per lane per right-hand-side evaluation (the tick's own work included).
     pub fn cycles_per_rhs(&self, sim_s_per_s: f64) -> f64 {
         self.clock_hz / (sim_s_per_s * self.rhs_per_sim_s)
     }
@@ -73,26 +77,32 @@ impl Figures {
 pub fn measure(secs: f64) -> anyhow::Result<Figures> {
     const ROUNDS: usize = 5;
     let budget = secs / (5.0 * ROUNDS as f64);
-    let rhs_per_sim_s = 1024.0 * Solver::default().substeps as f64 * STAGES;
-    let mut f = Figures { clock_hz: 0.0, scalar: 0.0, batch1: 0.0, batch2: 0.0, limit: 0.0, rhs_per_sim_s };
-    // Size the divide/square-root loop to the budget once.
-    let probe = 100_000;
-    let t = Instant::now();
-    std::hint::black_box(calibrate::sqrt_div_mix(probe, 1.0));
-    let mix_iters = ((budget / t.elapsed().as_secs_f64().max(1e-6)) as usize * probe).max(probe);
+    let r = reference();
+    let substeps = Solver::default().substeps as f64;
+    let rhs_per_tick = substeps * STAGES;
+    let window_share = (r.window.1 - r.window.0) as f64 / r.len() as f64;
+    let mut f = Figures {
+        clock_hz: 0.0,
+        scalar: 0.0,
+        batch1: 0.0,
+        batch2: 0.0,
+        limit: 0.0,
+        rates: Rates { flops: 0.0, divs: 0.0, sqrts: 0.0 },
+        rhs_per_sim_s: r.f_s * rhs_per_tick,
+    };
     let chain_iters = 50_000_000;
     for _ in 0..ROUNDS {
         // Clock: a dependent chain of 1-cycle operations, 2 per iteration.
         let t = Instant::now();
         std::hint::black_box(calibrate::add_chain(std::hint::black_box(chain_iters), 1));
         f.clock_hz = f.clock_hz.max(2.0 * chain_iters as f64 / t.elapsed().as_secs_f64());
-        let t = Instant::now();
-        std::hint::black_box(calibrate::sqrt_div_mix(std::hint::black_box(mix_iters), 1.0));
-        f.limit = f.limit.max((mix_iters * LANES) as f64 / t.elapsed().as_secs_f64() / rhs_per_sim_s);
+        let m = calibrate::rates(budget / 3.0);
+        f.rates = Rates { flops: f.rates.flops.max(m.flops), divs: f.rates.divs.max(m.divs), sqrts: f.rates.sqrts.max(m.sqrts) };
         f.scalar = f.scalar.max(throughput::<1>(1, budget)?);
         f.batch1 = f.batch1.max(throughput::<LANES>(1, budget)?);
         f.batch2 = f.batch2.max(throughput::<LANES>(2, budget)?);
     }
+    f.limit = f.rates.limit(rhs_per_tick, window_share, r.f_s);
     Ok(f)
 }
 
@@ -139,13 +149,26 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     }
     let f = measure(args.seconds)?;
     let mut out = std::io::stdout().lock();
-    let h_us = 1e6 / (1024.0 * Solver::default().substeps as f64);
-    writeln!(out, "study bench: 3 s sine at 1.73 g, RK4 h = {h_us:.1} µs ({} substeps per 1024 Hz tick; converged: a quarter of the step changes no metric by more than 1e-5), {} kernel", Solver::default().substeps, Isa::detected())?;
+    let substeps = Solver::default().substeps;
+    let h_us = 1e6 / (1024.0 * substeps as f64);
+    writeln!(out, "study bench: 3 s sine at 1.73 g, RK4 h = {h_us:.1} µs ({substeps} substeps per 1024 Hz tick; converged: every metric within 1e-5 of the 32-substep answer), {} kernel", Isa::detected())?;
     writeln!(out, "  clock (dependent add chain)        {:>8.2} GHz", f.clock_hz / 1e9)?;
     writeln!(out, "  {:<34} {:>8.0} sim-s/wall-s  {:>6.1} cycles per lane per RHS", "scalar path (1 lane, 1 thread)", f.scalar, f.cycles_per_rhs(f.scalar))?;
     writeln!(out, "  {:<34} {:>8.0} sim-s/wall-s  {:>6.1} cycles per lane per RHS", format!("batch ({LANES} lanes, 1 thread)"), f.batch1, f.cycles_per_rhs(f.batch1))?;
     writeln!(out, "  {:<34} {:>8.0} sim-s/wall-s  ({:.2}x one thread)", format!("batch ({LANES} lanes, 2 threads)"), f.batch2, f.batch2 / f.batch1)?;
-    writeln!(out, "  {:<34} {:>8.0} sim-s/wall-s  {:>6.1} cycles per lane per RHS", "limit: 9 sqrt + 6 div per RHS", f.limit, f.cycles_per_rhs(f.limit))?;
+    writeln!(out, "  {:<34} {:>8.0} sim-s/wall-s  {:>6.1} cycles per lane per RHS", "limit (1 thread)", f.limit, f.cycles_per_rhs(f.limit))?;
+    writeln!(
+        out,
+        "    the model's minimal operation count per lane: {} mul/add, {} div, {} sqrt, {} (.)^-1/4 per RHS, {TICK_OPS} per tick (+{WINDOW_OPS} in the window);",
+        MINIMAL.flops, MINIMAL.divs, MINIMAL.sqrts, MINIMAL.fourth_roots
+    )?;
+    writeln!(
+        out,
+        "    this thread's rates: {:.1} G mul/add, {:.2} G div, {:.2} G sqrt per s (lane-operations, best split of the (.)^-1/4 between the units)",
+        f.rates.flops / 1e9,
+        f.rates.divs / 1e9,
+        f.rates.sqrts / 1e9
+    )?;
     writeln!(out, "  ratios: batch/scalar {:.2}, batch/limit {:.2}, 2 threads/1 thread {:.2}", f.batch_over_scalar(), f.batch_over_limit(), f.batch2 / f.batch1)?;
     if let Some(path) = &args.write_baseline {
         let text = format!(

@@ -340,7 +340,7 @@ The study file (TOML), SALib-style variables in Dakota-style blocks:
   histories = [0]             # full time histories of these samples
 
   [solver]
-  substeps = 8
+  substeps = 4
   chunk = 64
 
 Example: study run studies/gains_sweep.toml";
@@ -363,7 +363,7 @@ The run file is TOML:
   window_cycles = 4         # analysis window: last N whole cycles (default: all after taper_s + 1 s)
 
   [solver]
-  substeps = 8              # RK4 steps per controller tick (default 8: h = 122 µs at 1024 Hz)
+  substeps = 4              # RK4 steps per controller tick (default 4: h = 244 µs at 1024 Hz)
 
 A record excitation drives the table with a sampled displacement:
 

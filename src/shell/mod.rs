@@ -2,6 +2,7 @@
 //! maps them to the documented exit codes.
 
 pub mod bench_cmd;
+pub mod calibrate;
 pub mod campaign_io;
 pub mod cli;
 pub mod compare_cmd;

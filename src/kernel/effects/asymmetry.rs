@@ -50,6 +50,11 @@ impl<const N: usize> Effect<N> for Asymmetry<N> {
         []
     }
 
+    /// The actuators differ only where actuator 2's gain is not 1.
+    fn symmetric(&self) -> bool {
+        self.act2.iter().all(|&g| g == 1.0)
+    }
+
     /// Valve flows of actuator `act`, scaled.
     #[inline(always)]
     fn flows(&self, l: usize, act: usize, q: (f64, f64), _p1: f64, _p2: f64, _p_s: f64, _s: &Self::State) -> (f64, f64) {

@@ -23,8 +23,10 @@
 //! registry (`library!` below, one line per effect) composes them by type into [`EffectSet`]
 //! (nested [`Both`]), whose state is the effects' states side by side ([`Pair`]): no state index
 //! is assigned by hand. The kernel runs the set whenever a lane switches any effect on; an effect
-//! that is off in a lane is neutral there (zero coefficients or a 0/1 lane mask), so the step
-//! still has no branch on configuration.
+//! that is off in a lane is neutral there (zero coefficients or a 0/1 lane mask), so the lanes of
+//! a batch share one step. An effect that no lane of the batch switches on is skipped altogether
+//! ([`Gated`]: one branch per hook whose outcome is fixed for the whole run), so a batch pays
+//! only for the effects it uses.
 //!
 //! # Writing a new effect
 //!
@@ -164,12 +166,25 @@ macro_rules! library {
             $(pub $module: $module::Params,)*
         }
 
+        $(impl<const N: usize> Named for $module::$Type<N> {
+            const NAME: &'static str = $module::INFO.name;
+        })*
+
         /// Every library effect composed, per lane; what is off in a lane is neutral there.
         pub type EffectSet<const N: usize> = library!(@nest N; $($module::$Type),*);
+
+        /// Calls `f` with library effect `name` alone, built for `lanes` (see [`EffectFn`]);
+        /// `None` for a name the library does not have.
+        pub fn with_single<const N: usize, F: EffectFn<N>>(name: &str, lanes: [&ModelParams; N], f: F) -> Option<F::Output> {
+            match name {
+                $(stringify!($module) => Some(f.call(&<$module::$Type<N> as LibraryEffect<N>>::new(lanes))),)*
+                _ => None,
+            }
+        }
     };
     (@nest $n:ident; ) => { Baseline };
     (@nest $n:ident; $module:ident :: $Type:ident $(, $rm:ident :: $rt:ident)*) => {
-        Both<$module::$Type<$n>, library!(@nest $n; $($rm::$rt),*)>
+        Both<Gated<$module::$Type<$n>>, library!(@nest $n; $($rm::$rt),*)>
     };
 }
 
@@ -281,6 +296,15 @@ pub trait Effect<const N: usize>: Sync {
     /// Extra states at t = 0.
     fn initial_state(&self) -> Self::State;
 
+    /// Whether the two actuators stay identical in every lane under this effect (it treats them
+    /// alike). Then the kernel integrates one equivalent actuator and doubles its force and its
+    /// supply flow: the same numbers, bit for bit, at half the valve and chamber work. An effect
+    /// that gives the actuators different laws (`asymmetry.act2_gain ≠ 1`) says `false`.
+    #[inline(always)]
+    fn symmetric(&self) -> bool {
+        true
+    }
+
     /// Supply pressure seen by the valves of lane `l`, from the nominal P_S.
     #[inline(always)]
     fn supply(&self, _l: usize, p_s: f64, _s: &Self::State) -> f64 {
@@ -370,6 +394,9 @@ impl<const N: usize, A: Effect<N>, B: Effect<N>> Effect<N> for Both<A, B> {
     fn initial_state(&self) -> Self::State {
         Pair(self.0.initial_state(), self.1.initial_state())
     }
+    fn symmetric(&self) -> bool {
+        self.0.symmetric() && self.1.symmetric()
+    }
     #[inline(always)]
     fn supply(&self, l: usize, p_s: f64, s: &Self::State) -> f64 {
         self.1.supply(l, self.0.supply(l, p_s, &s.0), &s.1)
@@ -405,6 +432,88 @@ impl<const N: usize, A: Effect<N>, B: Effect<N>> Effect<N> for Both<A, B> {
         // B sees the command as A leaves it (actuator 0's: a command effect acts on all alike).
         let x_c: [f64; N] = std::array::from_fn(|l| self.0.spool_position(l, 0, plant.x_c[l], &s.0));
         self.1.derivs(&PlantView { x_c: &x_c, ..*plant }, &s.1, &mut ds.1);
+    }
+}
+
+/// Code generic over the effect type, to run with the type [`with_single`] picks (a closure
+/// cannot be generic).
+///
+/// [`EffectSet`] runs every library effect's hooks in every lane, with a branch per effect and
+/// hook that keeps the compiler from vectorising the lane loop; a kernel made for one effect
+/// runs at the baseline's speed plus the effect's own work (a diagnosis screens the library one
+/// effect at a time). Both give the same numbers, bit for bit (`tests/effects.rs`).
+pub trait EffectFn<const N: usize> {
+    type Output;
+    fn call<E: Effect<N>>(self, effect: &E) -> Self::Output;
+}
+
+/// A library effect's registry name, known to its type (the registry implements it).
+pub trait Named {
+    const NAME: &'static str;
+}
+
+/// A library effect that is skipped when no lane of the batch switches it on: every hook passes
+/// its input through, the extra force is 0 and the extra states stand still. The same numbers as
+/// the effect's own neutral lanes (an off lane's mask multiplies its contribution by 0), without
+/// evaluating it (a seal friction's tanh and exp, a saturation's tanh, for every lane of every
+/// evaluation).
+pub struct Gated<E> {
+    on: bool,
+    effect: E,
+}
+
+impl<const N: usize, E: LibraryEffect<N> + Named> LibraryEffect<N> for Gated<E> {
+    fn new(lanes: [&ModelParams; N]) -> Self {
+        Gated { on: lanes.iter().any(|p| switch(p, E::NAME) != 0.0), effect: E::new(lanes) }
+    }
+}
+
+impl<const N: usize, E: Effect<N>> Effect<N> for Gated<E> {
+    type State = E::State;
+
+    fn initial_state(&self) -> Self::State {
+        self.effect.initial_state()
+    }
+    fn symmetric(&self) -> bool {
+        !self.on || self.effect.symmetric()
+    }
+    #[inline(always)]
+    fn supply(&self, l: usize, p_s: f64, s: &Self::State) -> f64 {
+        if self.on { self.effect.supply(l, p_s, s) } else { p_s }
+    }
+    #[inline(always)]
+    fn spool(&self, l: usize, act: usize, x_c: f64, s: &Self::State) -> f64 {
+        if self.on { self.effect.spool(l, act, x_c, s) } else { x_c }
+    }
+    #[inline(always)]
+    fn spool_position(&self, l: usize, act: usize, x_c: f64, s: &Self::State) -> f64 {
+        if self.on { self.effect.spool_position(l, act, x_c, s) } else { x_c }
+    }
+    #[inline(always)]
+    fn stroke(&self, l: usize, y: f64, v: f64, s: &Self::State) -> (f64, f64) {
+        if self.on { self.effect.stroke(l, y, v, s) } else { (y, v) }
+    }
+    #[inline(always)]
+    fn chamber_stiffness(&self, l: usize, act: usize, b: (f64, f64), p1: f64, p2: f64, s: &Self::State) -> (f64, f64) {
+        if self.on { self.effect.chamber_stiffness(l, act, b, p1, p2, s) } else { b }
+    }
+    #[inline(always)]
+    fn flows(&self, l: usize, act: usize, q: (f64, f64), p1: f64, p2: f64, p_s: f64, s: &Self::State) -> (f64, f64) {
+        if self.on { self.effect.flows(l, act, q, p1, p2, p_s, s) } else { q }
+    }
+    #[inline(always)]
+    fn extra_force(&self, l: usize, y: f64, v: f64, s: &Self::State) -> f64 {
+        if self.on { self.effect.extra_force(l, y, v, s) } else { 0.0 }
+    }
+    #[inline(always)]
+    fn derivs(&self, plant: &PlantView<'_, N>, s: &Self::State, ds: &mut Self::State) {
+        if self.on {
+            self.effect.derivs(plant, s, ds);
+        } else {
+            for d in ds.as_mut() {
+                *d = [0.0; N];
+            }
+        }
     }
 }
 
