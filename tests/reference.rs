@@ -81,6 +81,7 @@ fn default_step_is_converged() {
                 assert_ne!(a.status, LaneStatus::Ok, "corner {c} at {g} g: only the default step's run finished");
                 continue;
             }
+            assert_eq!(a.status, LaneStatus::Ok, "corner {c} at {g} g: the 32-substep run finished, the default step's did not");
             for ((name, x), (_, y)) in a.metrics.columns().into_iter().zip(b.metrics.columns()) {
                 if (x - y).abs() > worst.0 {
                     worst = ((x - y).abs(), format!("corner {c}, {g} g, {name}: {x} against {y}"));
