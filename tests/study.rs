@@ -106,7 +106,7 @@ window_cycles = 5
 fn run_rows(plan: &Plan, threads: usize, chunk: usize) -> Vec<Row> {
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
     let mut rows: Vec<Row> = Vec::new();
-    batch::run_plan(plan, 0..plan.samples(), &pool, chunk, &mut rows, &|_| {}).unwrap();
+    batch::run_plan(plan, 0..plan.samples(), &pool, chunk, &mut rows, &|_| {}, &|| false).unwrap();
     rows
 }
 

@@ -31,6 +31,12 @@ pub struct Metrics {
 }
 
 impl Metrics {
+    /// The highest harmonic k ≤ 9 of `f0` strictly below the Nyquist frequency f_s/2 (0 when
+    /// even the fundamental is not).
+    pub fn highest_harmonic(f0: f64, f_s: f64) -> usize {
+        (1..=N_HARM).take_while(|&k| (k as f64) * f0 < 0.5 * f_s).last().unwrap_or(0)
+    }
+
     pub const NAN: Metrics = Metrics {
         amp_ratio: f64::NAN,
         phase_err_deg: f64::NAN,
@@ -181,8 +187,11 @@ impl<const N: usize> MetricsAcc<N> {
         }
     }
 
-    /// Final metrics of lane `l`.
-    pub fn finish(&self, l: usize, harmonics: bool) -> Metrics {
+    /// Final metrics of lane `l`. `harmonics` is the highest harmonic below the Nyquist
+    /// frequency (None: no fundamental, no harmonic metrics). A harmonic at or above Nyquist
+    /// would be an alias of a lower frequency, so its ratio is NaN and it is left out of the
+    /// THD sums ([`Metrics::highest_harmonic`]).
+    pub fn finish(&self, l: usize, harmonics: Option<usize>) -> Metrics {
         // H_k = (2/n)(Σ s cos − j Σ s sin): magnitude and angle; the 2/n cancels in every ratio.
         let mag = |re: f64, im: f64| re.hypot(im);
         let ang = |re: f64, im: f64| (-im).atan2(re);
@@ -202,15 +211,17 @@ impl<const N: usize> MetricsAcc<N> {
             m.rms_err_disp_ratio = (self.err_x2[l] / self.xr2).sqrt();
             m.peak_err_accel_mps2 = self.peak_err_a[l];
         }
-        if harmonics && self.n > 0 {
+        if let (Some(top), true) = (harmonics, self.n > 0) {
             let h1 = mag(self.a_re[0][l], self.a_im[0][l]);
             m.amp_ratio = h1 / mag(self.ar_re, self.ar_im);
             m.phase_err_deg = wrap(ang(self.a_re[0][l], self.a_im[0][l]) - ang(self.ar_re, self.ar_im));
-            for k in 2..=N_HARM {
+            for k in 2..=top.min(N_HARM) {
                 m.h[k - 2] = mag(self.a_re[k - 1][l], self.a_im[k - 1][l]) / h1;
             }
-            m.thd_odd = [3, 5, 7, 9].iter().map(|&k| m.h(k).powi(2)).sum::<f64>().sqrt();
-            m.thd_even = [2, 4, 6, 8].iter().map(|&k| m.h(k).powi(2)).sum::<f64>().sqrt();
+            let h = m.h;
+            let thd = |ks: [usize; 4]| ks.into_iter().filter(|&k| k <= top).map(|k| h[k - 2].powi(2)).sum::<f64>().sqrt();
+            m.thd_odd = thd([3, 5, 7, 9]);
+            m.thd_even = thd([2, 4, 6, 8]);
             m.disp_amp_ratio = mag(self.x_re[l], self.x_im[l]) / mag(self.xr_re, self.xr_im);
             m.disp_phase_err_deg = wrap(ang(self.x_re[l], self.x_im[l]) - ang(self.xr_re, self.xr_im));
         }
@@ -234,7 +245,7 @@ mod tests {
             let a = 2.0 * (w * t + 0.1).sin() + 0.1 * (3.0 * w * t).sin() + 0.04 * (2.0 * w * t).cos();
             acc.window_tick(Some(&Basis::at(k, f_s, f)), ar, ar, &[a], &[ar]);
         }
-        let m = acc.finish(0, true);
+        let m = acc.finish(0, Some(N_HARM));
         assert!((m.amp_ratio - 2.0).abs() < 1e-12);
         assert!((m.phase_err_deg - 0.1f64.to_degrees()).abs() < 1e-9);
         assert!((m.h(3) - 0.05).abs() < 1e-12);
@@ -242,6 +253,29 @@ mod tests {
         assert!(m.h(5).abs() < 1e-12);
         assert!((m.thd_odd - 0.05).abs() < 1e-12);
         assert!((m.rms_err_disp_ratio).abs() < 1e-15);
+    }
+
+    #[test]
+    fn harmonics_at_or_above_nyquist_are_omitted() {
+        assert_eq!(Metrics::highest_harmonic(3.0, 1024.0), 9);
+        assert_eq!(Metrics::highest_harmonic(200.0, 1024.0), 2); // 600 Hz ≥ 512 Hz
+        assert_eq!(Metrics::highest_harmonic(128.0, 1024.0), 3); // 512 Hz is not below 512 Hz
+        assert_eq!(Metrics::highest_harmonic(600.0, 1024.0), 0);
+        // 200 Hz at 1024 Hz: the 3rd harmonic (600 Hz) aliases onto 424 Hz; it must not be reported.
+        let (f_s, f) = (1024.0, 200.0);
+        let w = 2.0 * std::f64::consts::PI * f;
+        let mut acc = MetricsAcc::<1>::default();
+        for k in 0..1024 {
+            let t = k as f64 / f_s;
+            let ar = (w * t).sin();
+            let a = ar + 0.1 * (3.0 * w * t).sin() + 0.05 * (2.0 * w * t).sin();
+            acc.window_tick(Some(&Basis::at(k, f_s, f)), ar, ar, &[a], &[ar]);
+        }
+        let m = acc.finish(0, Some(Metrics::highest_harmonic(f, f_s)));
+        assert!((m.h(2) - 0.05).abs() < 1e-9, "{}", m.h(2));
+        assert!((3..=9).all(|k| m.h(k).is_nan()));
+        assert_eq!(m.thd_odd, 0.0);
+        assert!((m.thd_even - 0.05).abs() < 1e-9);
     }
 
     #[test]

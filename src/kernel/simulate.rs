@@ -747,7 +747,7 @@ fn integrate<const N: usize, const A: usize, V: FlowLaw, D: Damping, E: Effect<N
     }
 
     std::array::from_fn(|l| match status[l] {
-        LaneStatus::Ok => LaneResult { status: status[l], metrics: acc.finish(l, fundamental.is_some()) },
+        LaneStatus::Ok => LaneResult { status: status[l], metrics: acc.finish(l, fundamental.map(|f0| Metrics::highest_harmonic(f0, lp.f_s))) },
         failed => LaneResult { status: failed, metrics: Metrics::NAN },
     })
 }

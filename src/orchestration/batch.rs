@@ -176,7 +176,12 @@ impl Plan {
 
     /// Runs samples `range` for every excitation: rows in (sample, excitation) order.
     pub fn run_chunk(&self, range: Range<usize>) -> Vec<Row> {
-        let samples: Vec<Sample> = range.map(|i| self.sample(i)).collect();
+        self.run_samples(range)
+    }
+
+    /// Runs the samples `ids` for every excitation: rows in (sample, excitation) order.
+    pub fn run_samples(&self, ids: impl IntoIterator<Item = usize>) -> Vec<Row> {
+        let samples: Vec<Sample> = ids.into_iter().map(|i| self.sample(i)).collect();
         let n_exc = self.references.len();
         let mut rows: Vec<Option<Row>> = vec![None; samples.len() * n_exc];
         let valid: Vec<usize> = (0..samples.len()).filter(|&i| samples[i].model.is_ok()).collect();
@@ -237,17 +242,76 @@ impl RowSink for Vec<Row> {
     }
 }
 
-/// Counts of a finished run.
+/// A short timed run of samples spread evenly over a range, to size a run before it starts.
+#[derive(Debug, Clone)]
+pub struct Calibration {
+    /// Samples in the timed round.
+    pub samples: usize,
+    /// Wall seconds of the timed round (every thread of the pool busy).
+    pub secs: f64,
+    /// The round's rows (e.g. to measure their size on disk).
+    pub rows: Vec<Row>,
+}
+
+impl Calibration {
+    /// Estimated wall seconds for `samples` samples.
+    pub fn wall_s(&self, samples: usize) -> f64 {
+        self.secs / self.samples.max(1) as f64 * samples as f64
+    }
+}
+
+/// Times rounds of samples spread evenly over `range` (each round twice the last, starting at
+/// two groups of [`LANES`] per thread), until a round takes `round` or covers the range; the
+/// last round is the measure (the first ones warm the threads and caches up). Failing samples end
+/// early in a real run too, so spreading the samples over the design weighs them as the run will.
+pub fn calibrate(plan: &Plan, range: Range<usize>, pool: &rayon::ThreadPool, round: std::time::Duration) -> Calibration {
+    let len = range.len();
+    let mut n = (2 * LANES * pool.current_num_threads()).min(len).max(1);
+    loop {
+        // Offset by half a stride, so that a round does not start on the range's first sample only.
+        let ids: Vec<usize> = (0..n).map(|i| range.start + ((2 * i + 1) * len) / (2 * n)).collect();
+        let t = std::time::Instant::now();
+        let rows: Vec<Row> = pool.install(|| ids.par_chunks(LANES).flat_map_iter(|g| plan.run_samples(g.iter().copied())).collect());
+        let secs = t.elapsed().as_secs_f64();
+        if secs >= round.as_secs_f64() || n >= len {
+            return Calibration { samples: n, secs, rows };
+        }
+        n = (2 * n).min(len);
+    }
+}
+
+/// Counts of a finished (or stopped) run.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Summary {
     pub rows: usize,
     pub ok: usize,
     pub failed: usize,
     pub invalid: usize,
+    /// The first sample not written: the range's end unless the run was stopped.
+    pub next: usize,
+    /// Whether `stop` ended the run before the range's end.
+    pub stopped: bool,
+}
+
+impl Summary {
+    fn count(&mut self, rows: &[Row]) {
+        for r in rows {
+            self.rows += 1;
+            match r.status {
+                RowStatus::Ok => self.ok += 1,
+                RowStatus::Failed { .. } => self.failed += 1,
+                RowStatus::Invalid { .. } => self.invalid += 1,
+            }
+        }
+    }
 }
 
 /// Runs samples `range` of a plan on `pool` in chunks of `chunk` samples, sending rows to `sink`
 /// in order. `progress(rows_done)` is called from worker threads as chunks finish.
+///
+/// `stop()` is asked before each chunk starts: once it says yes, chunks in flight finish, the
+/// rows of every chunk before the first one not run go to the sink, and the run returns with
+/// `stopped` and the first sample not written (`next`), from which a later run continues.
 pub fn run_plan(
     plan: &Plan,
     range: Range<usize>,
@@ -255,32 +319,38 @@ pub fn run_plan(
     chunk: usize,
     sink: &mut dyn RowSink,
     progress: &(dyn Fn(usize) + Sync),
+    stop: &(dyn Fn() -> bool + Sync),
 ) -> anyhow::Result<Summary> {
     let chunk = chunk.max(1);
-    let starts: Vec<usize> = range.clone().step_by(chunk).collect();
     let wave = (pool.current_num_threads() * 4).max(1);
-    let mut summary = Summary::default();
-    for wave_starts in starts.chunks(wave) {
-        let results: Vec<Vec<Row>> = pool.install(|| {
-            wave_starts
+    let mut summary = Summary { next: range.start, ..Summary::default() };
+    while summary.next < range.end {
+        let starts: Vec<usize> = (summary.next..range.end).step_by(chunk).take(wave).collect();
+        let results: Vec<Option<Vec<Row>>> = pool.install(|| {
+            starts
                 .par_iter()
                 .map(|&s| {
+                    if stop() {
+                        return None;
+                    }
                     let rows = plan.run_chunk(s..(s + chunk).min(range.end));
                     progress(rows.len());
-                    rows
+                    Some(rows)
                 })
                 .collect()
         });
-        for rows in &results {
-            for r in rows {
-                summary.rows += 1;
-                match r.status {
-                    RowStatus::Ok => summary.ok += 1,
-                    RowStatus::Failed { .. } => summary.failed += 1,
-                    RowStatus::Invalid { .. } => summary.invalid += 1,
-                }
-            }
+        for (rows, &s) in results.iter().zip(&starts) {
+            let Some(rows) = rows else {
+                summary.stopped = true;
+                return Ok(summary);
+            };
+            summary.count(rows);
             sink.write(rows)?;
+            summary.next = (s + chunk).min(range.end);
+        }
+        if stop() && summary.next < range.end {
+            summary.stopped = true;
+            return Ok(summary);
         }
     }
     Ok(summary)

@@ -163,6 +163,8 @@ pub fn read_excitation_in(
             }
             if duration <= 0.0 || duration > 3600.0 {
                 issues.push(f.path_of("duration_s"), format!("{duration} s must be in (0, 3600] s"));
+            } else if taper >= duration {
+                issues.push(f.path_of("taper_s"), format!("{taper} s must be shorter than duration_s = {duration} s (the taper would fill the whole run)"));
             }
             let amp = match (amp_g, amp_m, freq) {
                 (Some(_), Some(_), _) => {

@@ -113,11 +113,77 @@ pub struct StudySpec {
     pub histories: Vec<u64>,
     pub solver: Solver,
     pub chunk: usize,
+    /// What the study file leaves out that a user should know (e.g. harmonics omitted at or
+    /// above the Nyquist frequency); printed by `study run`.
+    pub notes: Vec<String>,
 }
 
 /// Every metric column name, in table order.
 pub fn all_metric_names() -> Vec<&'static str> {
     Metrics::NAN.columns().into_iter().map(|(n, _)| n).collect()
+}
+
+/// Largest memory a design may hold before its first sample (a Latin hypercube's permutations).
+pub const DESIGN_MAX_BYTES: usize = 1 << 30;
+
+/// The limits of each design's size: Sobol' points, Saltelli base points, and the memory of a
+/// Latin hypercube's permutations (one u32 per sample and varied dimension, all made before the
+/// first sample runs); Monte Carlo and grid points are made one at a time.
+fn design_size(method: &Method, samples: usize, varied: usize) -> Result<(), String> {
+    match method {
+        Method::Sobol if samples > SOBOL_MAX_POINTS => Err(format!("{samples}: the Sobol' sequence has at most {SOBOL_MAX_POINTS} points; use lhs or monte_carlo for more")),
+        Method::Saltelli if samples > SOBOL_MAX_POINTS => Err(format!("{samples}: a Saltelli design takes at most {SOBOL_MAX_POINTS} base points")),
+        Method::Lhs if samples > u32::MAX as usize || samples.saturating_mul(varied).saturating_mul(4) > DESIGN_MAX_BYTES => Err(format!(
+            "{samples}: a Latin hypercube of {samples} samples in {varied} dimensions keeps {varied} permutations of {samples} entries in memory ({:.1} GiB, at most {} GiB); use monte_carlo or sobol, or at most {} samples",
+            samples as f64 * varied as f64 * 4.0 / (1u64 << 30) as f64,
+            DESIGN_MAX_BYTES >> 30,
+            DESIGN_MAX_BYTES / 4 / varied.max(1)
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// Harmonic metrics at or above the Nyquist frequency f_s/2 of some sine excitation: the
+/// harmonic would be an alias of a lower frequency. Listed in `[responses] metrics`, it is refused
+/// (an issue at its index); by default it is kept as a column of NaN for that excitation (and left
+/// out of the THD sums), with a note.
+fn aliased_harmonics(excitations: &[NamedExcitation], metrics: &[&str], listed: bool, f_s: f64, issues: &mut Issues) -> Vec<String> {
+    let mut notes = Vec::new();
+    for e in excitations {
+        let ExcitationSpec::Sine { sine, .. } = &e.spec else { continue };
+        let top = Metrics::highest_harmonic(sine.freq_hz, f_s);
+        let aliased: Vec<(usize, usize)> = metrics
+            .iter()
+            .enumerate()
+            .filter_map(|(i, m)| Some((i, m.strip_prefix('h')?.strip_suffix("_ratio")?.parse::<usize>().ok()?)))
+            .filter(|&(_, k)| k > top)
+            .collect();
+        if aliased.is_empty() {
+            continue;
+        }
+        let nyq = 0.5 * f_s;
+        if listed {
+            for (i, k) in aliased {
+                issues.push(
+                    format!("responses.metrics[{i}]"),
+                    format!(
+                        "h{k}_ratio: harmonic {k} of excitation `{}` ({} Hz) is at or above the Nyquist frequency {nyq} Hz of f_s = {f_s} Hz; remove it or lower freq_hz",
+                        e.name,
+                        k as f64 * sine.freq_hz
+                    ),
+                );
+            }
+        } else {
+            let ks: Vec<String> = aliased.iter().map(|(_, k)| format!("h{k}")).collect();
+            notes.push(format!(
+                "excitation `{}` ({} Hz): {} at or above the Nyquist frequency {nyq} Hz are NaN and left out of thd_odd/thd_even",
+                e.name,
+                sine.freq_hz,
+                ks.join(", ")
+            ));
+        }
+    }
+    notes
 }
 
 const DIST_KEYS: [&str; 12] = ["name", "distribution", "value", "low", "high", "mean", "std", "mu", "sigma", "mode", "values", "levels"];
@@ -268,6 +334,8 @@ impl StudySpec {
         let mut root = Fields::new("", &table);
 
         let (mut name, mut description, mut seed, mut samples) = (None, String::new(), 0u64, None);
+        // Whether `samples` is written at all: a bad value is reported as bad, never as missing.
+        let mut samples_given = false;
         match root.table("study", &mut issues) {
             Some(mut s) => {
                 name = s.str("name", &mut issues).map(str::to_string);
@@ -278,6 +346,7 @@ impl StudySpec {
                     }
                     seed = v as u64;
                 }
+                samples_given = s.has("samples");
                 if let Some(n) = s.int("samples", &mut issues) {
                     if n < 1 {
                         issues.push(s.path_of("samples"), format!("{n} must be at least 1"));
@@ -377,7 +446,9 @@ impl StudySpec {
         }
 
         let mut metrics = all_metric_names();
+        let mut metrics_listed = false;
         if let Some(mut r) = root.table("responses", &mut issues) {
+            metrics_listed = r.has("metrics");
             if let Some(list) = r.str_array("metrics", &mut issues) {
                 let all = all_metric_names();
                 let mut chosen = Vec::new();
@@ -397,6 +468,8 @@ impl StudySpec {
             }
             r.finish(&["metrics"], &mut issues);
         }
+
+        let notes = aliased_harmonics(&excitations, &metrics, metrics_listed, model.controller.f_s, &mut issues);
 
         let mut output = None;
         let mut histories = Vec::new();
@@ -434,16 +507,15 @@ impl StudySpec {
 
         let varied = variables.iter().filter(|v| v.dist.varies()).count();
         match &method {
-            Method::MonteCarlo | Method::Lhs | Method::Sobol | Method::Saltelli if samples.is_none() => {
+            Method::MonteCarlo | Method::Lhs | Method::Sobol | Method::Saltelli if samples.is_none() && !samples_given => {
                 issues.push("study.samples", format!("missing (required by sampling = \"{}\")", method.name()));
             }
-            Method::Sobol if samples.unwrap_or(0) > SOBOL_MAX_POINTS => {
-                issues.push("study.samples", format!("the Sobol' sequence has at most {SOBOL_MAX_POINTS} points; use lhs or monte_carlo for more"));
-            }
-            Method::Saltelli if samples.unwrap_or(0) > SOBOL_MAX_POINTS => {
-                issues.push("study.samples", format!("a Saltelli design takes at most {SOBOL_MAX_POINTS} base points"));
-            }
             _ => {}
+        }
+        if let Some(n) = samples {
+            if let Err(why) = design_size(&method, n, varied) {
+                issues.push("study.samples", why);
+            }
         }
         if matches!(method, Method::Sobol | Method::Saltelli) && 2 * varied > SOBOL_MAX_DIMS {
             issues.push("variables", format!("at most {} varied parameters for Sobol' designs", SOBOL_MAX_DIMS / 2));
@@ -477,10 +549,16 @@ impl StudySpec {
             histories,
             solver,
             chunk,
+            notes,
         })
     }
 
     /// The varied variables (the design's dimensions), in file order.
+    /// Whether the design can be made with `samples` as it is now (after `--samples`).
+    pub fn check_design_size(&self) -> Result<(), String> {
+        design_size(&self.method, self.samples, self.varied().len())
+    }
+
     pub fn varied(&self) -> Vec<&Variable> {
         self.variables.iter().filter(|v| v.dist.varies()).collect()
     }

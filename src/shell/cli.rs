@@ -46,8 +46,25 @@ pub enum Command {
 
 #[derive(Debug, clap::Args)]
 pub struct RunArgs {
-    /// The study file (TOML).
-    pub file: PathBuf,
+    /// The study file (TOML); not needed with --resume.
+    #[arg(required_unless_present = "resume")]
+    pub file: Option<PathBuf>,
+    /// Continue a results file that a stop (Ctrl-C, SIGTERM) left incomplete, or that a kill left
+    /// as FILE.tmp with a checkpoint; the study, shard and seed come from the file. The result
+    /// equals an uninterrupted run's. A complete file is left as it is.
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["file", "samples", "shard", "out"])]
+    pub resume: Option<PathBuf>,
+    /// Print the samples, the runs, the estimated wall time (from a short timed run) and the
+    /// output size, and stop; nothing is written.
+    #[arg(long)]
+    pub dry_run: bool,
+    /// Start a run estimated to take more than a day without asking.
+    #[arg(long)]
+    pub yes: bool,
+    /// Seconds between checkpoints, which keep the rows written so far readable after a kill
+    /// (see --resume).
+    #[arg(long, default_value_t = 30.0, value_name = "SECONDS")]
+    pub checkpoint_secs: f64,
     /// Results file (default: [output] file of the study, else <name>.parquet).
     #[arg(long)]
     pub out: Option<PathBuf>,

@@ -2,7 +2,7 @@
 //! run, refusing missing, duplicate or mismatched shards.
 
 use super::cli::MergeArgs;
-use super::run_cmd::SHARD_KEYS;
+use super::run_cmd::{completion, incomplete, COMPLETE_KEY, ROWS_DONE_KEY, ROWS_TOTAL_KEY, SHARD_KEYS};
 use super::tables::{self, ParquetStream};
 use super::BadInput;
 use anyhow::Context;
@@ -44,11 +44,26 @@ fn shards(dir: &Path, skip: &Path) -> anyhow::Result<Vec<ShardFile>> {
         return Err(BadInput(format!("{}: no .parquet shard files", dir.display())).into());
     }
     let mut list = Vec::new();
+    let mut unfinished = Vec::new();
     for path in files {
-        let meta: BTreeMap<String, String> = tables::parquet_metadata(&path).map_err(super::sim_cmd::input_if_user)?.into_iter().collect();
+        let pairs = tables::parquet_metadata(&path).map_err(super::sim_cmd::input_if_user)?;
+        let done = incomplete(&pairs);
+        let meta: BTreeMap<String, String> = pairs.into_iter().collect();
         let mut f = ShardFile { path, meta, index: 0 };
         f.index = get(&f, SHARD_KEYS[0])?.parse().map_err(|_| BadInput(format!("{}: bad {}", f.path.display(), SHARD_KEYS[0])))?;
-        list.push(f);
+        match done {
+            // A stopped shard counts as missing: its rows are not all there.
+            Some((rows, total)) => unfinished.push(format!(
+                "{}: shard {} is incomplete ({rows} of {total} rows; continue it with `study run --resume {}`)",
+                f.path.display(),
+                f.index,
+                f.path.display()
+            )),
+            None => list.push(f),
+        }
+    }
+    if list.is_empty() {
+        return Err(BadInput(format!("{}: no complete shard\n{}", dir.display(), unfinished.join("\n"))).into());
     }
     let first = &list[0];
     for f in &list[1..] {
@@ -79,8 +94,9 @@ fn shards(dir: &Path, skip: &Path) -> anyhow::Result<Vec<ShardFile>> {
     }
     let missing: Vec<String> = (0..count).filter(|i| !by_index.contains_key(i)).map(|i| format!("{i}/{count}")).collect();
     if !missing.is_empty() {
+        let also = unfinished.iter().map(|u| format!("\n  {u}")).collect::<String>();
         return Err(BadInput(format!(
-            "{}: shard{} {} missing (found {} of {count}: {})",
+            "{}: shard{} {} missing (found {} complete of {count}: {}){also}",
             dir.display(),
             if missing.len() > 1 { "s" } else { "" },
             missing.join(", "),
@@ -111,7 +127,9 @@ pub fn run(args: &MergeArgs) -> anyhow::Result<()> {
     let list = shards(&args.dir, &out)?;
     let first = &list[0];
     // The merged file says what the unsharded run says: the shard keys go.
-    let meta: Vec<(String, String)> = first.meta.iter().filter(|(k, _)| !SHARD_KEYS.contains(&k.as_str()) && *k != "ARROW:schema").map(|(k, v)| (k.clone(), v.clone())).collect();
+    let dropped = [COMPLETE_KEY, ROWS_DONE_KEY, ROWS_TOTAL_KEY, "ARROW:schema"];
+    let meta: Vec<(String, String)> =
+        first.meta.iter().filter(|(k, _)| !SHARD_KEYS.contains(&k.as_str()) && !dropped.contains(&k.as_str())).map(|(k, v)| (k.clone(), v.clone())).collect();
     let (fields, _) = tables::parquet_batches(&first.path).map_err(super::sim_cmd::input_if_user)?;
     let mut stream = ParquetStream::create_with_fields(&out, fields.clone(), &meta)?;
     let mut rows = 0usize;
@@ -135,7 +153,7 @@ pub fn run(args: &MergeArgs) -> anyhow::Result<()> {
     if let Some(e) = expected.filter(|e| *e != rows) {
         return Err(BadInput(format!("{}: the shards hold {rows} rows, the study has {e}", args.dir.display())).into());
     }
-    stream.finish().with_context(|| format!("writing {}", out.display()))?;
+    stream.finish_with(&completion(rows, rows)).with_context(|| format!("writing {}", out.display()))?;
     let mut o = std::io::stdout().lock();
     writeln!(o, "study merge {}: {} shards, {rows} rows -> {}", args.dir.display(), list.len(), out.display())?;
     Ok(())

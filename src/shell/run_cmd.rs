@@ -4,7 +4,7 @@ use super::cli::RunArgs;
 use super::progress::Progress;
 use super::sim_cmd::{input_if_user, reference_for};
 use super::tables::{self, Column, ParquetStream};
-use super::BadInput;
+use super::{interrupt, BadInput};
 use crate::kernel::params::{ModelParams, ParamInfo};
 use crate::kernel::simulate::Isa;
 use crate::kernel::LANES;
@@ -14,7 +14,9 @@ use crate::orchestration::spec::SimSpec;
 use crate::orchestration::study::{Method, StudySpec};
 use anyhow::Context;
 use std::io::Write;
+use std::ops::Range;
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 /// Version of the results table layout (docs/formats.md "Results").
 pub const SCHEMA_VERSION: &str = "1";
@@ -101,8 +103,25 @@ impl ResultsSink {
         t
     }
 
-    pub fn finish(self) -> anyhow::Result<()> {
-        self.stream.finish()
+    /// Makes the rows survive a hard kill (see [`ParquetStream::checkpoints`]).
+    pub fn checkpoints(mut self, every: Duration) -> Self {
+        self.stream = self.stream.checkpoints(every);
+        self
+    }
+
+    /// Appends rows copied from another results file with the same columns.
+    pub fn write_batch(&mut self, batch: &arrow_array::RecordBatch) -> anyhow::Result<()> {
+        self.stream.write_batch(batch)
+    }
+
+    /// Rows written so far.
+    pub fn rows(&self) -> usize {
+        self.stream.rows()
+    }
+
+    /// Closes the file with its completion keys ([`completion`]).
+    pub fn finish(self, completion: &[(String, String)]) -> anyhow::Result<()> {
+        self.stream.finish_with(completion)
     }
 }
 
@@ -179,35 +198,188 @@ pub fn pool(threads: usize) -> anyhow::Result<rayon::ThreadPool> {
     Ok(b.build()?)
 }
 
-pub fn run(args: &RunArgs) -> anyhow::Result<()> {
-    let mut spec = load_study(&args.file)?;
-    if let Some(n) = args.samples {
-        if n == 0 {
-            return Err(BadInput("--samples must be at least 1".into()).into());
+/// Metadata keys set when a results file is closed: whether it holds every row of its study (or
+/// shard), and how many it holds of how many. A file without them (older versions) is complete.
+pub const COMPLETE_KEY: &str = "vshake.complete";
+pub const ROWS_DONE_KEY: &str = "vshake.rows_done";
+pub const ROWS_TOTAL_KEY: &str = "vshake.rows_total";
+/// The study file a results file was made from (absolute), whose folder relative paths in the
+/// study are read from when the run is resumed.
+pub const STUDY_FILE_KEY: &str = "vshake.study_file";
+
+/// The completion keys of a file holding `done` of `total` rows.
+pub fn completion(done: usize, total: usize) -> Vec<(String, String)> {
+    vec![
+        (COMPLETE_KEY.to_string(), (done == total).to_string()),
+        (ROWS_DONE_KEY.to_string(), done.to_string()),
+        (ROWS_TOTAL_KEY.to_string(), total.to_string()),
+    ]
+}
+
+/// `Some((done, total))` when a results file's metadata marks it incomplete.
+pub fn incomplete(meta: &[(String, String)]) -> Option<(String, String)> {
+    let get = |k: &str| meta.iter().find(|(key, _)| key == k).map(|(_, v)| v.clone());
+    (get(COMPLETE_KEY).as_deref() == Some("false")).then(|| (get(ROWS_DONE_KEY).unwrap_or_else(|| "?".into()), get(ROWS_TOTAL_KEY).unwrap_or_else(|| "?".into())))
+}
+
+/// A run to do: the study, its plan, the slice of samples the file covers, the output file and
+/// its metadata, and the rows an interrupted run already wrote.
+pub struct Job {
+    pub spec: StudySpec,
+    pub plan: Plan,
+    pub shard: Option<Shard>,
+    pub range: Range<usize>,
+    pub out: PathBuf,
+    pub meta: Vec<(String, String)>,
+    pub kept: Option<super::resume::Kept>,
+    /// Where the study's relative paths start.
+    pub base: PathBuf,
+}
+
+impl Job {
+    /// A new run of `args.file`: everything it needs is read and checked here, before any work.
+    fn fresh(args: &RunArgs, file: &Path) -> anyhow::Result<Job> {
+        let mut spec = load_study(file)?;
+        if let Some(n) = args.samples {
+            if n == 0 {
+                return Err(BadInput("--samples must be at least 1".into()).into());
+            }
+            spec.samples = n;
+            spec.check_design_size().map_err(|why| BadInput(format!("--samples {n}: {why}")))?;
         }
-        spec.samples = n;
+        let base = file.parent().unwrap_or(Path::new(".")).to_path_buf();
+        let plan = plan_for(&spec, &base)?;
+        let shard = args.shard.as_deref().map(|s| Shard::parse(s, plan.samples())).transpose()?;
+        let range = shard.as_ref().map_or(0..plan.samples(), |s| s.range.clone());
+        for (i, &id) in spec.histories.iter().enumerate() {
+            if id as usize >= plan.samples() {
+                return Err(BadInput(format!("{}: output.histories[{i}]: sample {id} does not exist (the study has samples 0 to {})", file.display(), plan.samples() - 1)).into());
+            }
+        }
+        let out = output_path(args.out.as_deref(), &spec, shard.as_ref())?;
+        let study_file = std::fs::canonicalize(file).unwrap_or_else(|_| file.to_path_buf());
+        let mut extra = vec![(STUDY_FILE_KEY.to_string(), study_file.display().to_string())];
+        extra.extend(shard.as_ref().map_or_else(Vec::new, |s| s.metadata()));
+        let meta = results_metadata(&spec, &plan, &extra);
+        Ok(Job { spec, plan, shard, range, out, meta, kept: None, base })
     }
-    // Chunk size and threads are how the run is scheduled, not what it computes: they stay out of
-    // the resolved study in the metadata, so shards run with different ones still merge.
-    let chunk = args.chunk.map_or(spec.chunk, |c| c.max(1));
-    let base = args.file.parent().unwrap_or(Path::new("."));
-    let plan = plan_for(&spec, base)?;
-    let shard = args.shard.as_deref().map(|s| Shard::parse(s, plan.samples())).transpose()?;
-    let range = shard.as_ref().map_or(0..plan.samples(), |s| s.range.clone());
-    let out: PathBuf = match (&args.out, &shard) {
-        (Some(o), _) => o.clone(),
-        (None, None) => spec.output.clone(),
-        (None, Some(s)) => {
+
+    fn samples_kept(&self) -> usize {
+        self.kept.as_ref().map_or(0, |k| k.samples)
+    }
+
+    fn rows_total(&self) -> usize {
+        self.range.len() * self.plan.references.len()
+    }
+}
+
+/// The results file: `--out` (inside it as `<name>.parquet` when it is a folder), else the
+/// study's `[output] file` (with `.shard-I-of-N` for a shard). Refused when it is a folder or its
+/// folder cannot be written: before any work.
+fn output_path(out: Option<&Path>, spec: &StudySpec, shard: Option<&Shard>) -> anyhow::Result<PathBuf> {
+    let default = match shard {
+        None => spec.output.clone(),
+        Some(s) => {
             let stem = spec.output.file_stem().map(|x| x.to_string_lossy().to_string()).unwrap_or_else(|| "results".into());
             spec.output.with_file_name(format!("{stem}.shard-{}-of-{}.parquet", s.index, s.count))
         }
     };
+    let out = match out {
+        Some(o) if o.is_dir() => o.join(default.file_name().unwrap_or_else(|| std::ffi::OsStr::new("results.parquet"))),
+        Some(o) => o.to_path_buf(),
+        None => default,
+    };
+    if out.is_dir() {
+        return Err(BadInput(format!("{}: is a folder; name the results file (e.g. --out {}.parquet)", out.display(), spec.name)).into());
+    }
+    check_writable(&out)?;
+    Ok(out)
+}
+
+/// Checks that the results file's folder (or the nearest existing ancestor of it, which the run
+/// will create the rest of) takes a new file.
+fn check_writable(out: &Path) -> anyhow::Result<()> {
+    let mut dir = out.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new(".")).to_path_buf();
+    while !dir.exists() {
+        match dir.parent() {
+            Some(p) if !p.as_os_str().is_empty() => dir = p.to_path_buf(),
+            _ => dir = PathBuf::from("."),
+        }
+    }
+    if !dir.is_dir() {
+        return Err(BadInput(format!("{}: cannot write the results file: {} is not a folder", out.display(), dir.display())).into());
+    }
+    let probe = dir.join(format!(".vshake-probe-{}", std::process::id()));
+    match std::fs::File::create(&probe) {
+        Ok(_) => {
+            let _ = std::fs::remove_file(&probe);
+            Ok(())
+        }
+        Err(e) => Err(BadInput(format!("{}: cannot write the results file in {}: {e}", out.display(), dir.display())).into()),
+    }
+}
+
+pub fn run(args: &RunArgs) -> anyhow::Result<()> {
+    let job = match (&args.resume, &args.file) {
+        (Some(f), _) => match super::resume::job(f)? {
+            Some(j) => j,
+            None => return Ok(()),
+        },
+        (None, Some(file)) => Job::fresh(args, file)?,
+        (None, None) => return Err(BadInput("give a study file (study run STUDY.toml) or --resume RESULTS.parquet".into()).into()),
+    };
+    let chunk = args.chunk.map_or(job.spec.chunk, |c| c.max(1));
     let pool = pool(args.threads)?;
+    let todo = (job.range.start + job.samples_kept())..job.range.end;
+    print_header(&job, args, &pool, chunk)?;
+    if args.dry_run {
+        return super::sizing::dry_run(&job, todo, &pool);
+    }
+    super::sizing::gate_long_run(&job, todo.clone(), &pool, args.yes)?;
+    if !job.spec.histories.is_empty() {
+        let dir = history_dir(&job.out);
+        std::fs::create_dir_all(&dir).map_err(|e| BadInput(format!("{}: cannot create the histories folder: {e}", dir.display())))?;
+    }
+    interrupt::install().context("catching SIGINT and SIGTERM")?;
+    let mut sink = ResultsSink::create(&job.out, &job.plan, &job.spec, &job.meta)?.checkpoints(Duration::from_secs_f64(args.checkpoint_secs));
+    if let Some(k) = &job.kept {
+        k.copy_into(&mut sink, &job)?;
+    }
+    let progress = Progress::new(&job.spec.name, todo.len() * job.plan.references.len(), args.quiet, args.log_progress);
+    let summary = batch::run_plan(&job.plan, todo.clone(), &pool, chunk, &mut sink, &|n| progress.inc(n), &|| interrupt::requested().is_some())?;
+    progress.finish();
+    let (done, total) = (sink.rows(), job.rows_total());
+    sink.finish(&completion(done, total)).with_context(|| format!("writing {}", job.out.display()))?;
+    if let Some(k) = &job.kept {
+        k.discard();
+    }
+    if summary.stopped {
+        let signal = interrupt::requested().unwrap_or(signal_hook::consts::SIGTERM);
+        return Err(interrupt::Interrupted {
+            signal,
+            message: format!(
+                "stopped by {}: {done} of {total} rows written to {}, marked incomplete; continue with: study run --resume {}",
+                interrupt::name(signal),
+                job.out.display(),
+                job.out.display()
+            ),
+        }
+        .into());
+    }
+    print_done(&job, &summary, &progress, todo.len())?;
+    write_histories(&job)
+}
+
+fn print_header(job: &Job, args: &RunArgs, pool: &rayon::ThreadPool, chunk: usize) -> anyhow::Result<()> {
+    let (spec, plan) = (&job.spec, &job.plan);
     let varied = if matches!(spec.method, Method::File { .. }) { plan.columns.len() } else { spec.varied().len() };
-    let mut stdout = std::io::stdout().lock();
-    writeln!(stdout, "study run {}", args.file.display())?;
+    let mut o = std::io::stdout().lock();
+    match &args.resume {
+        Some(f) => writeln!(o, "study run --resume {}", f.display())?,
+        None => writeln!(o, "study run {}", args.file.as_deref().unwrap_or(Path::new("?")).display())?,
+    }
     writeln!(
-        stdout,
+        o,
         "  design      {}, {} samples x {} excitations = {} runs, {} varied parameters, seed {}",
         spec.method.name(),
         plan.samples(),
@@ -217,7 +389,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
         spec.seed
     )?;
     writeln!(
-        stdout,
+        o,
         "  engine      {} threads, chunks of {} samples, {} kernel ({} lanes), RK4 {} substeps",
         pool.current_num_threads(),
         chunk,
@@ -225,21 +397,25 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
         LANES,
         spec.solver.substeps
     )?;
-    if let Some(s) = &shard {
-        writeln!(stdout, "  shard       {}/{}: samples {}..{} ({} of {})", s.index, s.count, s.range.start, s.range.end, s.range.len(), plan.samples())?;
+    if let Some(s) = &job.shard {
+        writeln!(o, "  shard       {}/{}: samples {}..{} ({} of {})", s.index, s.count, s.range.start, s.range.end, s.range.len(), plan.samples())?;
     }
-    stdout.flush()?;
+    if let Some(k) = &job.kept {
+        writeln!(o, "  resume      {} samples ({} rows) kept from {}; {} samples to go", k.samples, k.samples * plan.references.len(), k.source.display(), job.range.len() - k.samples)?;
+    }
+    for n in &spec.notes {
+        writeln!(o, "  note        {n}")?;
+    }
+    o.flush()?;
+    Ok(())
+}
 
-    let meta = results_metadata(&spec, &plan, &shard.as_ref().map_or_else(Vec::new, |s| s.metadata()));
-    let mut sink = ResultsSink::create(&out, &plan, &spec, &meta)?;
-    let progress = Progress::new(&spec.name, range.len() * plan.references.len(), args.quiet, args.log_progress);
-    let summary = batch::run_plan(&plan, range.clone(), &pool, chunk, &mut sink, &|n| progress.inc(n))?;
-    progress.finish();
-    sink.finish().with_context(|| format!("writing {}", out.display()))?;
+fn print_done(job: &Job, summary: &batch::Summary, progress: &Progress, samples: usize) -> anyhow::Result<()> {
     let secs = progress.elapsed().as_secs_f64();
-    let sim_s: f64 = plan.references.iter().map(|r| r.len() as f64 / r.f_s).sum::<f64>() * range.len() as f64;
+    let sim_s: f64 = job.plan.references.iter().map(|r| r.len() as f64 / r.f_s).sum::<f64>() * samples as f64;
+    let mut o = std::io::stdout().lock();
     writeln!(
-        stdout,
+        o,
         "  done        {} rows in {secs:.1} s ({:.0} simulated s per wall s): {} ok, {} failed, {} invalid",
         summary.rows,
         sim_s / secs,
@@ -247,36 +423,32 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
         summary.failed,
         summary.invalid
     )?;
-    writeln!(stdout, "  wrote       {}", out.display())?;
+    writeln!(o, "  wrote       {}", job.out.display())?;
+    Ok(())
+}
 
-    if !spec.histories.is_empty() {
-        let dir = history_dir(&out);
-        std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
-        for &id in &spec.histories {
-            if id as usize >= plan.samples() {
-                writeln!(stdout, "  history     sample {id} does not exist (the study has {} samples); skipped", plan.samples())?;
-                continue;
-            }
-            if !range.contains(&(id as usize)) {
-                continue; // another shard's
-            }
-            let sample = plan.sample(id as usize);
-            let Ok(model) = sample.model else { continue };
-            for (e, exc) in spec.excitations.iter().enumerate() {
-                let sim_spec = SimSpec { model: model.clone(), excitation: exc.spec.clone(), solver: spec.solver };
-                let outcome = sim::run_sim(&sim_spec, &plan.references[e])?;
-                let path = dir.join(format!("sample{id}_{}.parquet", exc.name));
-                let cols: Vec<(&str, &[f64])> = sim::CHANNELS.iter().map(|(n, _)| *n).zip(outcome.history.columns.iter().map(Vec::as_slice)).collect();
-                let meta = vec![
-                    ("vshake.kind".to_string(), "time_history".to_string()),
-                    ("vshake.spec".to_string(), sim_spec.resolved_toml()),
-                    ("vshake.sample_id".to_string(), id.to_string()),
-                    ("vshake.version".to_string(), env!("CARGO_PKG_VERSION").to_string()),
-                    ("vshake.schema_version".to_string(), SCHEMA_VERSION.to_string()),
-                ];
-                tables::write_parquet(&path, &cols, &meta)?;
-                writeln!(stdout, "  history     {}", path.display())?;
-            }
+/// The full histories the study asks for (`[output] histories`) that fall in this file's slice.
+fn write_histories(job: &Job) -> anyhow::Result<()> {
+    let (spec, plan) = (&job.spec, &job.plan);
+    let dir = history_dir(&job.out);
+    let mut o = std::io::stdout().lock();
+    for &id in spec.histories.iter().filter(|&&id| job.range.contains(&(id as usize))) {
+        let sample = plan.sample(id as usize);
+        let Ok(model) = sample.model else { continue };
+        for (e, exc) in spec.excitations.iter().enumerate() {
+            let sim_spec = SimSpec { model: model.clone(), excitation: exc.spec.clone(), solver: spec.solver };
+            let outcome = sim::run_sim(&sim_spec, &plan.references[e])?;
+            let path = dir.join(format!("sample{id}_{}.parquet", exc.name));
+            let cols: Vec<(&str, &[f64])> = sim::CHANNELS.iter().map(|(n, _)| *n).zip(outcome.history.columns.iter().map(Vec::as_slice)).collect();
+            let meta = vec![
+                ("vshake.kind".to_string(), "time_history".to_string()),
+                ("vshake.spec".to_string(), sim_spec.resolved_toml()),
+                ("vshake.sample_id".to_string(), id.to_string()),
+                ("vshake.version".to_string(), env!("CARGO_PKG_VERSION").to_string()),
+                ("vshake.schema_version".to_string(), SCHEMA_VERSION.to_string()),
+            ];
+            tables::write_parquet(&path, &cols, &meta)?;
+            writeln!(o, "  history     {}", path.display())?;
         }
     }
     Ok(())

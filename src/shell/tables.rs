@@ -315,7 +315,7 @@ fn read_parquet(path: &Path, wanted: &[&str], optional: &[&str], allow_nan: bool
 pub struct AtomicFile {
     pub path: PathBuf,
     pub tmp: PathBuf,
-    committed: bool,
+    pub committed: bool,
 }
 
 impl AtomicFile {
@@ -325,6 +325,10 @@ impl AtomicFile {
         AtomicFile { path: path.to_path_buf(), tmp: PathBuf::from(tmp), committed: false }
     }
     pub fn commit(mut self) -> std::io::Result<()> {
+        self.commit_in_place()
+    }
+    /// Renames the temp file into place, keeping the guard (for owners that implement Drop).
+    pub fn commit_in_place(&mut self) -> std::io::Result<()> {
         std::fs::rename(&self.tmp, &self.path)?;
         self.committed = true;
         Ok(())
@@ -381,11 +385,36 @@ impl Column {
 const ROW_GROUP_BYTES: usize = 4 << 20;
 
 /// A Parquet file written batch by batch (zstd, bounded row groups), atomically: it appears
-/// under its name only when [`ParquetStream::finish`] succeeds.
+/// under its name only when [`ParquetStream::finish`] (or [`ParquetStream::finish_incomplete`])
+/// succeeds.
+///
+/// With [`ParquetStream::checkpoints`], the rows also survive a hard kill (SIGKILL, power loss):
+/// every few seconds the buffered rows become a row group, the file is synced, and a footer for
+/// the row groups written so far goes to `path.tmp.checkpoint` (8 bytes little-endian: the length
+/// of `path.tmp` it describes; then the footer). [`recover_killed`] turns the pair into a
+/// readable file.
 pub struct ParquetStream {
     file: AtomicFile,
     writer: ArrowWriter<File>,
     schema: Arc<Schema>,
+    /// The key-value metadata in the order given (the schema's copy is a map).
+    kv: Vec<KeyValue>,
+    checkpoint: Option<Checkpoint>,
+}
+
+struct Checkpoint {
+    every: std::time::Duration,
+    last: std::time::Instant,
+    path: PathBuf,
+    /// The file's key-value metadata, `ARROW:schema` included, for the checkpoint footers.
+    kv: Vec<KeyValue>,
+}
+
+/// The checkpoint sidecar of a results file being written: `path.tmp.checkpoint`.
+pub fn checkpoint_path(path: &Path) -> PathBuf {
+    let mut p = path.as_os_str().to_owned();
+    p.push(".tmp.checkpoint");
+    PathBuf::from(p)
 }
 
 impl ParquetStream {
@@ -409,10 +438,11 @@ impl ParquetStream {
                 props = props.set_column_dictionary_enabled(f.name().as_str().into(), true);
             }
         }
+        let kv: Vec<KeyValue> = metadata.iter().map(|(k, v)| KeyValue::new(k.clone(), v.clone())).collect();
         let props = props
             .set_compression(Compression::ZSTD(ZstdLevel::default()))
             .set_max_row_group_row_count(Some(16_384))
-            .set_key_value_metadata(Some(metadata.iter().map(|(k, v)| KeyValue::new(k.clone(), v.clone())).collect()))
+            .set_key_value_metadata(Some(kv.clone()))
             .build();
         let file = AtomicFile::new(path);
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
@@ -420,39 +450,152 @@ impl ParquetStream {
         }
         let f = File::create(&file.tmp).with_context(|| format!("cannot create {}", file.tmp.display()))?;
         let writer = ArrowWriter::try_new(f, schema.clone(), Some(props))?;
-        Ok(ParquetStream { file, writer, schema })
+        Ok(ParquetStream { file, writer, schema, kv, checkpoint: None })
+    }
+
+    /// Makes the rows recoverable after a hard kill, at most `every` apart (see the type's doc).
+    pub fn checkpoints(mut self, every: std::time::Duration) -> Self {
+        let mut kv = self.kv.clone();
+        kv.push(KeyValue::new("ARROW:schema".to_string(), parquet::arrow::encode_arrow_schema(&self.schema)));
+        self.checkpoint = Some(Checkpoint { every, last: std::time::Instant::now(), path: checkpoint_path(&self.file.path), kv });
+        self
     }
 
     /// Appends a record batch whose columns match this table's fields.
     pub fn write_batch(&mut self, batch: &RecordBatch) -> anyhow::Result<()> {
         let batch = RecordBatch::try_new(self.schema.clone(), batch.columns().to_vec())?;
         self.writer.write(&batch)?;
-        if self.writer.in_progress_size() > ROW_GROUP_BYTES {
-            self.writer.flush()?;
-        }
-        Ok(())
+        self.after_write()
     }
 
     /// Appends rows (columns in the template's order).
     pub fn write(&mut self, columns: Vec<Column>) -> anyhow::Result<()> {
         let batch = RecordBatch::try_new(self.schema.clone(), columns.into_iter().map(Column::array).collect())?;
         self.writer.write(&batch)?;
-        // Bound the buffered row group by bytes, so memory stays flat however many rows follow.
-        if self.writer.in_progress_size() > ROW_GROUP_BYTES {
+        self.after_write()
+    }
+
+    /// Bounds the buffered row group by bytes, so memory stays flat however many rows follow;
+    /// and, with checkpoints, flushes and checkpoints when one is due.
+    fn after_write(&mut self) -> anyhow::Result<()> {
+        let due = self.checkpoint.as_ref().is_some_and(|c| c.last.elapsed() >= c.every);
+        if self.writer.in_progress_size() > ROW_GROUP_BYTES || (due && self.writer.in_progress_rows() > 0) {
             self.writer.flush()?;
+        }
+        if due && !self.writer.flushed_row_groups().is_empty() {
+            self.save_checkpoint()?;
         }
         Ok(())
     }
 
+    /// Syncs the row groups written so far and writes their footer to the sidecar (atomically).
+    fn save_checkpoint(&mut self) -> anyhow::Result<()> {
+        use parquet::file::metadata::{FileMetaData, ParquetMetaData, ParquetMetaDataWriter};
+        use std::io::Write;
+        let Some(c) = self.checkpoint.as_mut() else { return Ok(()) };
+        self.writer.sync()?;
+        let len = self.writer.bytes_written() as u64;
+        let groups = self.writer.flushed_row_groups().to_vec();
+        let rows = groups.iter().map(|g| g.num_rows()).sum();
+        let descr = groups[0].schema_descr_ptr();
+        let meta = ParquetMetaData::new(FileMetaData::new(1, rows, Some("vshake checkpoint".into()), Some(c.kv.clone()), descr, None), groups);
+        let mut bytes = len.to_le_bytes().to_vec();
+        ParquetMetaDataWriter::new(&mut bytes, &meta).finish()?;
+        let side = AtomicFile::new(&c.path);
+        let mut f = File::create(&side.tmp)?;
+        f.write_all(&bytes)?;
+        f.sync_all()?;
+        side.commit()?;
+        c.last = std::time::Instant::now();
+        Ok(())
+    }
+
+    /// Rows written so far (flushed or buffered).
+    pub fn rows(&self) -> usize {
+        self.writer.flushed_row_groups().iter().map(|g| g.num_rows() as usize).sum::<usize>() + self.writer.in_progress_rows()
+    }
+
     /// Closes the file and moves it into place.
     pub fn finish(self) -> anyhow::Result<()> {
+        self.finish_with(&[])
+    }
+
+    /// Closes the file with these key-value pairs added to its metadata, and moves it into place.
+    pub fn finish_with(mut self, extra: &[(String, String)]) -> anyhow::Result<()> {
         use anyhow::Context;
-        self.writer.close()?;
+        for (k, v) in extra {
+            self.writer.append_key_value_metadata(KeyValue::new(k.clone(), v.clone()));
+        }
+        self.writer.finish()?;
         let path = self.file.path.clone();
-        self.file.commit().with_context(|| format!("cannot move the finished file to {}", path.display()))?;
+        self.file.commit_in_place().with_context(|| format!("cannot move the finished file to {}", path.display()))?;
+        if let Some(c) = &self.checkpoint {
+            let _ = std::fs::remove_file(&c.path);
+        }
         Ok(())
     }
 }
+
+impl Drop for ParquetStream {
+    /// A stream dropped unfinished (an error) leaves neither its temp file ([`AtomicFile`]) nor
+    /// its checkpoint.
+    fn drop(&mut self) {
+        if let Some(c) = &self.checkpoint {
+            if !self.file.committed {
+                let _ = std::fs::remove_file(&c.path);
+            }
+        }
+    }
+}
+
+/// What [`recover_killed`] found.
+#[derive(Debug)]
+pub enum Recovered {
+    /// No `path.tmp`: nothing was killed.
+    Nothing,
+    /// `path.tmp` exists without a checkpoint: killed before its first checkpoint.
+    NoCheckpoint(PathBuf),
+    /// The checkpointed rows, now a readable Parquet file at this path (`path.killed`).
+    File(PathBuf),
+}
+
+/// Turns the temp file of a killed stream and its checkpoint into a readable Parquet file
+/// `path.killed` holding every checkpointed row group (the bytes after the checkpoint are
+/// dropped). The temp file and the checkpoint are consumed.
+pub fn recover_killed(path: &Path) -> anyhow::Result<Recovered> {
+    use anyhow::Context;
+    use std::io::{Seek, Write};
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".tmp");
+    let tmp = PathBuf::from(tmp);
+    let side = checkpoint_path(path);
+    if !tmp.exists() {
+        return Ok(Recovered::Nothing);
+    }
+    let Ok(bytes) = std::fs::read(&side) else { return Ok(Recovered::NoCheckpoint(tmp)) };
+    let bad = || BadCheckpoint(side.clone());
+    let len = u64::from_le_bytes(bytes.get(..8).ok_or_else(bad)?.try_into().map_err(|_| bad())?);
+    let have = std::fs::metadata(&tmp).with_context(|| format!("reading {}", tmp.display()))?.len();
+    if have < len {
+        return Err(BadCheckpoint(side).into());
+    }
+    let mut killed = path.as_os_str().to_owned();
+    killed.push(".killed");
+    let killed = PathBuf::from(killed);
+    std::fs::rename(&tmp, &killed).with_context(|| format!("cannot move {} to {}", tmp.display(), killed.display()))?;
+    let mut f = std::fs::OpenOptions::new().write(true).open(&killed).with_context(|| format!("cannot open {}", killed.display()))?;
+    f.set_len(len)?;
+    f.seek(std::io::SeekFrom::End(0))?;
+    f.write_all(&bytes[8..])?;
+    f.sync_all()?;
+    std::fs::remove_file(&side)?;
+    Ok(Recovered::File(killed))
+}
+
+/// A checkpoint that does not describe its temp file.
+#[derive(Debug, thiserror::Error)]
+#[error("{}: the checkpoint does not match its temp file (it describes more bytes than the file holds); start the run again", .0.display())]
+pub struct BadCheckpoint(pub PathBuf);
 
 /// Writes f64 columns as one Parquet file (zstd) with key-value metadata, atomically.
 pub fn write_parquet(path: &Path, columns: &[(&str, &[f64])], metadata: &[(String, String)]) -> anyhow::Result<()> {
@@ -465,6 +608,14 @@ pub fn write_table(path: &Path, columns: Vec<(String, Column)>, metadata: &[(Str
     let mut s = ParquetStream::create(path, &columns, metadata)?;
     s.write(columns.into_iter().map(|(_, c)| c).collect())?;
     s.finish()
+}
+
+/// The number of rows of a Parquet file (from its footer).
+pub fn parquet_rows(path: &Path) -> Result<usize, TableError> {
+    let file = path.to_path_buf();
+    let f = File::open(path).map_err(|e| TableError::Io { file: file.clone(), err: e })?;
+    let builder = ParquetRecordBatchReaderBuilder::try_new(f).map_err(|e| TableError::Format { file, kind: "Parquet", message: e.to_string() })?;
+    Ok(builder.metadata().file_metadata().num_rows().max(0) as usize)
 }
 
 /// The key-value metadata of a Parquet file.

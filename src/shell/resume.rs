@@ -1,0 +1,109 @@
+//! `study run --resume FILE`: continue a run that was stopped (SIGINT, SIGTERM: the file is
+//! closed and marked incomplete) or killed (SIGKILL, a crash: the temp file and its checkpoint
+//! are turned back into a readable file). The study comes from the file's own metadata (the
+//! resolved study, the study file's folder for relative paths, the shard), so the resumed run
+//! computes exactly what the first one would have; every sample depends only on (seed, sample
+//! id), so the finished file equals an uninterrupted run's row for row, bit for bit.
+
+use super::run_cmd::{incomplete, plan_for, Job, ResultsSink, Shard, COMPLETE_KEY, ROWS_DONE_KEY, ROWS_TOTAL_KEY, SHARD_KEYS, STUDY_FILE_KEY};
+use super::sim_cmd::input_if_user;
+use super::tables::{self, Recovered};
+use super::BadInput;
+use crate::orchestration::study::StudySpec;
+use anyhow::Context;
+use arrow_array::{Array, UInt64Array};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// Rows of an interrupted run carried into the resumed one: its first `samples` samples.
+pub struct Kept {
+    pub source: PathBuf,
+    pub samples: usize,
+    /// The source is a file recovered from a killed run (`FILE.killed`), removed once its rows
+    /// are safe in the new file.
+    temporary: bool,
+}
+
+impl Kept {
+    /// Copies the kept rows into `sink`, checking that they are the slice's first samples.
+    pub fn copy_into(&self, sink: &mut ResultsSink, job: &Job) -> anyhow::Result<()> {
+        let n_exc = job.plan.references.len();
+        let mut left = self.samples * n_exc;
+        let (_, reader) = tables::parquet_batches(&self.source).map_err(input_if_user)?;
+        let mut expect = job.range.start as u64;
+        let mut in_sample = 0;
+        for batch in reader {
+            let batch = batch.with_context(|| format!("reading {}", self.source.display()))?;
+            let batch = batch.slice(0, batch.num_rows().min(left));
+            let ids = batch.column_by_name("sample_id").and_then(|c| c.as_any().downcast_ref::<UInt64Array>()).ok_or_else(|| BadInput(format!("{}: no sample_id column", self.source.display())))?;
+            for id in ids.values().iter() {
+                if *id != expect {
+                    return Err(BadInput(format!("{}: row of sample {id} where sample {expect} was expected: not the rows of this study's run", self.source.display())).into());
+                }
+                in_sample += 1;
+                if in_sample == n_exc {
+                    (expect, in_sample) = (expect + 1, 0);
+                }
+            }
+            left -= batch.num_rows();
+            sink.write_batch(&batch)?;
+            if left == 0 {
+                break;
+            }
+        }
+        Ok(())
+    }
+
+    /// Removes a recovered file once the new file holds its rows.
+    pub fn discard(&self) {
+        if self.temporary {
+            let _ = std::fs::remove_file(&self.source);
+        }
+    }
+}
+
+/// The job that continues `file`, or None when it is already complete (said on stdout).
+pub fn job(file: &Path) -> anyhow::Result<Option<Job>> {
+    let (source, temporary) = match tables::recover_killed(file)? {
+        Recovered::File(p) => (p, true),
+        Recovered::NoCheckpoint(tmp) if !file.exists() => {
+            return Err(BadInput(format!(
+                "{}: the run was killed before its first checkpoint (no rows were safely written), so there is nothing to resume; start it again",
+                tmp.display()
+            ))
+            .into())
+        }
+        // A temp file without a checkpoint beside a stopped file: a resumed run killed before its
+        // first checkpoint; the stopped file still holds every row it had.
+        Recovered::NoCheckpoint(_) | Recovered::Nothing => (file.to_path_buf(), false),
+    };
+    if !source.exists() {
+        return Err(BadInput(format!("{}: not found (nothing to resume)", file.display())).into());
+    }
+    let meta = tables::parquet_metadata(&source).map_err(input_if_user)?;
+    let get = |k: &str| meta.iter().find(|(key, _)| key == k).map(|(_, v)| v.as_str());
+    if get("vshake.kind") != Some("study_results") {
+        return Err(BadInput(format!("{}: not a results file of `study run` (no vshake.kind = study_results in its metadata)", file.display())).into());
+    }
+    let rows = tables::parquet_rows(&source).map_err(input_if_user)?;
+    if !temporary && incomplete(&meta).is_none() {
+        writeln!(std::io::stdout(), "study run --resume {}: the file is complete ({rows} rows); nothing to do", file.display())?;
+        return Ok(None);
+    }
+    let need = |k: &str| get(k).ok_or_else(|| BadInput(format!("{}: no {k} in its metadata; it cannot be resumed", file.display())));
+    let what = format!("{} (the study in its metadata)", source.display());
+    let spec = StudySpec::from_toml(need("vshake.study")?, &what)?;
+    let base = Path::new(need(STUDY_FILE_KEY)?).parent().unwrap_or(Path::new(".")).to_path_buf();
+    let plan = plan_for(&spec, &base)?;
+    let shard = match (get(SHARD_KEYS[0]), get(SHARD_KEYS[1])) {
+        (Some(i), Some(n)) => Some(Shard::parse(&format!("{i}/{n}"), plan.samples())?),
+        _ => None,
+    };
+    let range = shard.as_ref().map_or(0..plan.samples(), |s| s.range.clone());
+    // A row group may end inside a sample's excitations: only whole samples are kept.
+    let samples = (rows / plan.references.len()).min(range.len());
+    let dropped = [COMPLETE_KEY, ROWS_DONE_KEY, ROWS_TOTAL_KEY, "ARROW:schema"];
+    let meta: Vec<(String, String)> = meta.into_iter().filter(|(k, _)| !dropped.contains(&k.as_str())).collect();
+    let kept = Some(Kept { source, samples, temporary });
+    Ok(Some(Job { spec, plan, shard, range, out: file.to_path_buf(), meta, kept, base }))
+}
