@@ -20,11 +20,19 @@ fn main() {
     std::panic::set_hook(Box::new(|info| {
         let place = info.location().map(|l| format!(" at {}:{}", l.file(), l.line())).unwrap_or_default();
         let what = info.payload().downcast_ref::<&str>().map(|s| s.to_string()).or_else(|| info.payload().downcast_ref::<String>().cloned()).unwrap_or_default();
+        // The latest panic: one caught on the way (a corrupt Parquet file) is replaced by the
+        // one that reaches the top.
         if let Ok(mut p) = PANIC.lock() {
-            p.get_or_insert(format!("{what}{place}"));
+            *p = Some(format!("{what}{place}"));
         }
     }));
-    let result = std::panic::catch_unwind(|| vshake::shell::dispatch(cli));
+    let result = std::panic::catch_unwind(|| {
+        // How the tests reach this path: no command panics on purpose.
+        if std::env::var_os("VSHAKE_PANIC_FOR_TEST").is_some() {
+            panic!("VSHAKE_PANIC_FOR_TEST is set");
+        }
+        vshake::shell::dispatch(cli)
+    });
     let Ok(result) = result else {
         let what = PANIC.lock().ok().and_then(|p| p.clone()).unwrap_or_else(|| "a panic".into());
         eprintln!("internal error (a bug in vshake, please report it with the command that caused it): {what}");

@@ -118,6 +118,9 @@ fn sigterm_then_resume_equals_an_uninterrupted_run() {
     assert_eq!(cells(&out)[0].1.len(), done, "every finished row is readable");
     assert!(!with_suffix(&out, ".tmp.checkpoint").exists());
 
+    let (code, _, err) = study(&["sensitivity", s(&out)]);
+    assert!(code == 2 && err.contains("incomplete") && err.contains("--resume"), "sensitivity reads only complete files: {err}");
+
     let (code, stdout, err) = study(&["run", "--resume", s(&out), "-q"]);
     assert_eq!(code, 0, "{stdout}{err}");
     assert!(stdout.contains(&format!("{} samples ({done} rows) kept", done / 2)), "{stdout}");
@@ -317,4 +320,15 @@ fn impossible_settings_are_refused() {
         assert_eq!(code, 2, "{err}");
         assert!(err.contains("study.samples") && !err.contains("missing"), "samples = {bad}: {err}");
     }
+}
+
+/// A panic anywhere is caught at the top: an internal error with its own exit code (70) and the
+/// place, not a Rust backtrace dump.
+#[test]
+fn a_panic_is_reported_as_an_internal_error() {
+    let o = bin().arg("params").env("VSHAKE_PANIC_FOR_TEST", "1").output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(70), "{err}");
+    assert!(err.starts_with("internal error (a bug in vshake") && err.contains("VSHAKE_PANIC_FOR_TEST is set at src/main.rs:"), "{err}");
+    assert!(!err.contains("panicked at"), "{err}");
 }

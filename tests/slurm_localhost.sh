@@ -88,3 +88,26 @@ test "$(ls "$work/job/shards" | grep -c '\.parquet$')" = "$shards"
 echo "-- the merged table against the single-process run"
 "$study" run studies/smoke.toml --out "$work/single.parquet" -q
 python3 tests/check_merge.py "$work/single.parquet" "$work/job/smoke.parquet"
+
+echo "-- a task stopped before its time limit requeues itself and resumes its shard"
+# Slurm sends the batch shell SIGTERM ahead of the time limit (--signal=B:TERM@300); here the same
+# signal is sent at once with scancel, while shard 0 of the gains sweep is running.
+"$study" slurm studies/gains_sweep.toml --shards 2 --partition ci --cpus 1 --time 00:10:00 --dir "$work/requeue"
+bash "$work/requeue/submit.sh"
+tmp0="$work/requeue/shards/gains_sweep.shard-0-of-2.parquet.tmp"
+for i in $(seq 1 120); do [ -e "$tmp0" ] && break; sleep 0.5; done
+sleep 2
+task0=$(squeue -h -o "%i %T" | awk '$1 ~ /_0$/ && $2 == "RUNNING" {print $1}')
+test -n "$task0" || { echo "shard 0 is not running"; squeue; exit 1; }
+scancel --signal=TERM --batch "$task0"
+for i in $(seq 1 300); do
+  [ -z "$(squeue -h 2>/dev/null)" ] && break
+  sleep 1
+done
+squeue
+cat "$work/requeue/logs/shard-0.out"
+grep -q "requeueing to resume" "$work/requeue/logs/shard-0.out" || { echo "shard 0 did not requeue"; exit 1; }
+grep -q "kept from" "$work/requeue/logs/shard-0.out" || { echo "the requeued shard 0 did not resume"; exit 1; }
+test -s "$work/requeue/gains_sweep.parquet" || { echo "no merged table"; cat "$work"/requeue/logs/*.out; exit 1; }
+"$study" run studies/gains_sweep.toml --out "$work/gains_single.parquet" -q
+python3 tests/check_merge.py "$work/gains_single.parquet" "$work/requeue/gains_sweep.parquet"

@@ -47,6 +47,10 @@ pub fn read_measured(path: &Path) -> Result<NumTable, Vec<String>> {
 /// Reads one test's files and aligns it; its problems as lines.
 fn load_test(lc: &LoadedCampaign, test: &TestSpec, open_loop: Option<OpenLoop>) -> anyhow::Result<Result<AlignedTest, Vec<String>>> {
     let path = lc.base.join(&test.data);
+    if !path.is_file() {
+        let what = if path.is_dir() { "a folder, not a data file" } else { "not found" };
+        return Ok(Err(vec![format!("{}: {what} (the data of test `{}` in {})", path.display(), test.name, lc.file.display())]));
+    }
     let data = match read_measured(&path) {
         Ok(t) => t,
         Err(problems) => return Ok(Err(problems)),

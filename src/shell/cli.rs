@@ -360,7 +360,16 @@ The study file (TOML), SALib-style variables in Dakota-style blocks:
   substeps = 4
   chunk = 64
 
-Example: study run studies/gains_sweep.toml";
+Before any work, the study, its files, the results path and the design's size are checked (exit 2 \
+naming the key). --dry-run prints the runs, an estimated wall time and the output size. Ctrl-C or \
+SIGTERM stops after the chunks in flight, closes the file marked incomplete (exit 130 or 143) and \
+`study run --resume FILE` finishes it, equal to an uninterrupted run; a killed run resumes from its \
+last checkpoint. docs/formats.md (\"Study files\", \"Results\", \"Interrupted and resumed runs\").
+
+Examples:
+  study run studies/gains_sweep.toml
+  study run studies/gains_sweep.toml --dry-run
+  study run --resume gains_sweep.parquet";
 
 const SIM_HELP: &str = "Run one configuration of the virtual shake table and print the metrics of docs/model.md §5 \
 (amplitude ratio, phase error, harmonics h2..h9, THD, tracking errors, max |u|).

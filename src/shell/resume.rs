@@ -93,8 +93,7 @@ pub fn job(file: &Path) -> anyhow::Result<Option<Job>> {
     let need = |k: &str| get(k).ok_or_else(|| BadInput(format!("{}: no {k} in its metadata; it cannot be resumed", file.display())));
     let what = format!("{} (the study in its metadata)", source.display());
     let spec = StudySpec::from_toml(need("vshake.study")?, &what)?;
-    let base = Path::new(need(STUDY_FILE_KEY)?).parent().unwrap_or(Path::new(".")).to_path_buf();
-    let plan = plan_for(&spec, &base)?;
+    let plan = plan_for(&spec, Path::new(need(STUDY_FILE_KEY)?).parent().unwrap_or(Path::new(".")))?;
     let shard = match (get(SHARD_KEYS[0]), get(SHARD_KEYS[1])) {
         (Some(i), Some(n)) => Some(Shard::parse(&format!("{i}/{n}"), plan.samples())?),
         _ => None,
@@ -105,5 +104,5 @@ pub fn job(file: &Path) -> anyhow::Result<Option<Job>> {
     let dropped = [COMPLETE_KEY, ROWS_DONE_KEY, ROWS_TOTAL_KEY, "ARROW:schema"];
     let meta: Vec<(String, String)> = meta.into_iter().filter(|(k, _)| !dropped.contains(&k.as_str())).collect();
     let kept = Some(Kept { source, samples, temporary });
-    Ok(Some(Job { spec, plan, shard, range, out: file.to_path_buf(), meta, kept, base }))
+    Ok(Some(Job { spec, plan, shard, range, out: file.to_path_buf(), meta, kept }))
 }

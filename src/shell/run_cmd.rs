@@ -232,8 +232,6 @@ pub struct Job {
     pub out: PathBuf,
     pub meta: Vec<(String, String)>,
     pub kept: Option<super::resume::Kept>,
-    /// Where the study's relative paths start.
-    pub base: PathBuf,
 }
 
 impl Job {
@@ -247,8 +245,7 @@ impl Job {
             spec.samples = n;
             spec.check_design_size().map_err(|why| BadInput(format!("--samples {n}: {why}")))?;
         }
-        let base = file.parent().unwrap_or(Path::new(".")).to_path_buf();
-        let plan = plan_for(&spec, &base)?;
+        let plan = plan_for(&spec, file.parent().unwrap_or(Path::new(".")))?;
         let shard = args.shard.as_deref().map(|s| Shard::parse(s, plan.samples())).transpose()?;
         let range = shard.as_ref().map_or(0..plan.samples(), |s| s.range.clone());
         for (i, &id) in spec.histories.iter().enumerate() {
@@ -261,7 +258,7 @@ impl Job {
         let mut extra = vec![(STUDY_FILE_KEY.to_string(), study_file.display().to_string())];
         extra.extend(shard.as_ref().map_or_else(Vec::new, |s| s.metadata()));
         let meta = results_metadata(&spec, &plan, &extra);
-        Ok(Job { spec, plan, shard, range, out, meta, kept: None, base })
+        Ok(Job { spec, plan, shard, range, out, meta, kept: None })
     }
 
     fn samples_kept(&self) -> usize {
@@ -320,6 +317,9 @@ fn check_writable(out: &Path) -> anyhow::Result<()> {
 }
 
 pub fn run(args: &RunArgs) -> anyhow::Result<()> {
+    if !(args.checkpoint_secs.is_finite() && args.checkpoint_secs > 0.0) {
+        return Err(BadInput(format!("--checkpoint-secs {}: must be a positive number of seconds", args.checkpoint_secs)).into());
+    }
     let job = match (&args.resume, &args.file) {
         (Some(f), _) => match super::resume::job(f)? {
             Some(j) => j,

@@ -30,6 +30,15 @@ pub fn run(args: &SensitivityArgs) -> anyhow::Result<()> {
     if get("vshake.kind")? != "study_results" {
         return Err(BadInput(format!("{}: not a study results file", file.display())).into());
     }
+    let pairs: Vec<(String, String)> = meta.iter().map(|(k, v)| (k.clone(), v.clone())).collect();
+    if let Some((done, total)) = super::run_cmd::incomplete(&pairs) {
+        return Err(BadInput(format!(
+            "{}: incomplete ({done} of {total} rows; the run was stopped): finish it first with `study run --resume {}`",
+            file.display(),
+            file.display()
+        ))
+        .into());
+    }
     let design = get("vshake.design")?;
     let paths: Vec<String> = get("vshake.parameters")?.split(',').filter(|s| !s.is_empty()).map(str::to_string).collect();
     let pcols: Vec<String> = get("vshake.parameter_columns")?.split(',').filter(|s| !s.is_empty()).map(str::to_string).collect();

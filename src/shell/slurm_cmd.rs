@@ -66,18 +66,42 @@ pub fn run(args: &SlurmArgs) -> anyhow::Result<()> {
         common += &format!("#SBATCH --account={a}\n");
     }
     let shard_out = dir.join("shards").join(format!("{name}.shard-${{SLURM_ARRAY_TASK_ID}}-of-{n}.parquet"));
+    // Slurm sends SIGTERM to the batch shell 5 minutes before the time limit (--signal=B:TERM@300);
+    // the shell passes it on to `study`, which finishes the chunks in flight, closes its file
+    // marked incomplete and exits with 143; the task then requeues itself, and the requeued task
+    // (or one requeued after preemption or a node failure) continues with --resume.
     let array = format!(
         "#!/bin/bash\n\
 # Written by `study slurm` (vshake {ver}): {samples} samples x {exc} excitations of {study} in {n} shards.\n\
 # Task I runs `study run --shard I/{n}`, a contiguous slice of the design; the merge job joins them.\n\
+# Near the time limit the task stops cleanly and requeues itself; a requeued task resumes its shard.\n\
 #SBATCH --job-name=vshake-{name}\n\
 #SBATCH --array=0-{last}\n\
 #SBATCH --ntasks=1\n\
 #SBATCH --cpus-per-task={cpus}\n\
 #SBATCH --time={time}\n\
+#SBATCH --signal=B:TERM@300\n\
+#SBATCH --requeue\n\
+#SBATCH --open-mode=append\n\
 {common}#SBATCH --output={logs}/shard-%a.out\n\
-set -euo pipefail\n\
-exec {bin} run {study_q} --shard \"${{SLURM_ARRAY_TASK_ID}}/{n}\" --threads \"${{SLURM_CPUS_PER_TASK:-{cpus}}}\" --log-progress --out \"{shard_out}\"\n",
+set -uo pipefail\n\
+out=\"{shard_out}\"\n\
+threads=\"${{SLURM_CPUS_PER_TASK:-{cpus}}}\"\n\
+if [ -e \"$out\" ] || [ -e \"$out.tmp.checkpoint\" ]; then\n\
+  {bin} run --resume \"$out\" --threads \"$threads\" --log-progress &\n\
+else\n\
+  {bin} run {study_q} --shard \"${{SLURM_ARRAY_TASK_ID}}/{n}\" --threads \"$threads\" --log-progress --out \"$out\" &\n\
+fi\n\
+pid=$!\n\
+trap 'kill -TERM \"$pid\" 2>/dev/null' TERM\n\
+wait \"$pid\"; status=$?\n\
+# wait returns early when the trap runs: wait again for study to close its file.\n\
+while kill -0 \"$pid\" 2>/dev/null; do wait \"$pid\"; status=$?; done\n\
+if [ \"$status\" -eq 143 ]; then\n\
+  echo \"stopped before the time limit; requeueing to resume\"\n\
+  scontrol requeue \"${{SLURM_ARRAY_JOB_ID}}_${{SLURM_ARRAY_TASK_ID}}\"\n\
+fi\n\
+exit \"$status\"\n",
         ver = env!("CARGO_PKG_VERSION"),
         samples = plan.samples(),
         exc = plan.references.len(),

@@ -124,6 +124,21 @@ fn missing(file: &Path, column: &str, found: &[String]) -> TableError {
 
 /// The column names of a CSV (header row) or Parquet file.
 pub fn column_names(path: &Path) -> Result<Vec<String>, TableError> {
+    guarded(path, || column_names_unguarded(path))
+}
+
+/// Runs a Parquet read, turning a panic of the Parquet reader into a format error naming the file.
+/// The reader asserts on some corrupt footers instead of returning an error (found by
+/// `tests/parsers.rs`: "column start and length should not be negative"); a user's corrupt file is
+/// bad input, not a crash.
+fn guarded<T>(path: &Path, read: impl FnOnce() -> Result<T, TableError>) -> Result<T, TableError> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(read)).unwrap_or_else(|panic| {
+        let what = panic.downcast_ref::<&str>().map(|s| s.to_string()).or_else(|| panic.downcast_ref::<String>().cloned()).unwrap_or_default();
+        Err(TableError::Format { file: path.to_path_buf(), kind: "Parquet", message: format!("the file is corrupt ({what})") })
+    })
+}
+
+fn column_names_unguarded(path: &Path) -> Result<Vec<String>, TableError> {
     let file = path.to_path_buf();
     let f = File::open(path).map_err(|e| TableError::Io { file: file.clone(), err: e })?;
     if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("parquet") || e.eq_ignore_ascii_case("pq")) {
@@ -167,7 +182,7 @@ pub fn read_columns_lenient(path: &Path, wanted: &[&str], optional: &[&str]) -> 
 
 fn read_columns_lenient_impl(path: &Path, wanted: &[&str], optional: &[&str], allow_nan: bool) -> Result<(NumTable, BadCells), TableError> {
     let is_parquet = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("parquet") || e.eq_ignore_ascii_case("pq"));
-    let (table, bad) = if is_parquet { read_parquet(path, wanted, optional, allow_nan)? } else { read_csv(path, wanted, optional)? };
+    let (table, bad) = if is_parquet { guarded(path, || read_parquet(path, wanted, optional, allow_nan))? } else { read_csv(path, wanted, optional)? };
     if table.rows() == 0 {
         return Err(TableError::Empty { file: path.to_path_buf() });
     }
@@ -612,6 +627,10 @@ pub fn write_table(path: &Path, columns: Vec<(String, Column)>, metadata: &[(Str
 
 /// The number of rows of a Parquet file (from its footer).
 pub fn parquet_rows(path: &Path) -> Result<usize, TableError> {
+    guarded(path, || parquet_rows_unguarded(path))
+}
+
+fn parquet_rows_unguarded(path: &Path) -> Result<usize, TableError> {
     let file = path.to_path_buf();
     let f = File::open(path).map_err(|e| TableError::Io { file: file.clone(), err: e })?;
     let builder = ParquetRecordBatchReaderBuilder::try_new(f).map_err(|e| TableError::Format { file, kind: "Parquet", message: e.to_string() })?;
@@ -620,6 +639,10 @@ pub fn parquet_rows(path: &Path) -> Result<usize, TableError> {
 
 /// The key-value metadata of a Parquet file.
 pub fn parquet_metadata(path: &Path) -> Result<Vec<(String, String)>, TableError> {
+    guarded(path, || parquet_metadata_unguarded(path))
+}
+
+fn parquet_metadata_unguarded(path: &Path) -> Result<Vec<(String, String)>, TableError> {
     let file = path.to_path_buf();
     let f = File::open(path).map_err(|e| TableError::Io { file: file.clone(), err: e })?;
     let builder = ParquetRecordBatchReaderBuilder::try_new(f).map_err(|e| TableError::Format { file, kind: "Parquet", message: e.to_string() })?;

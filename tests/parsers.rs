@@ -1,0 +1,224 @@
+//! Property tests of every parser a user's file meets: the study TOML, the campaign TOML, and
+//! measured tests as CSV and as Parquet. Random bytes, random byte mutations of valid files and
+//! random values put into valid files never panic; each ends either accepted or refused as bad
+//! input (exit code 2) with a message that names the file.
+//!
+//! `cargo test` runs 256 cases per property; CI's property step runs 100 000
+//! (`PROPTEST_CASES=100000 cargo test --release --test parsers`).
+
+use proptest::prelude::*;
+use std::path::{Path, PathBuf};
+use vshake::shell::campaign_io::{load_campaign, load_tests};
+use vshake::shell::run_cmd::{load_study, plan_for};
+use vshake::shell::{exit_code, tables};
+
+fn repo(p: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join(p)
+}
+
+/// The outcome a user may see: accepted, or bad input (exit 2) naming the file.
+fn check(result: anyhow::Result<()>, file: &Path) -> Result<(), TestCaseError> {
+    if let Err(e) = result {
+        let message = format!("{e:#}");
+        prop_assert_eq!(exit_code(&e), 2, "not bad input: {}", message);
+        let name = file.file_name().unwrap().to_string_lossy().to_string();
+        prop_assert!(message.contains(&name), "the message does not name {}: {}", name, message);
+    }
+    Ok(())
+}
+
+/// A byte edit: replace, insert or delete at a position (taken modulo the length).
+#[derive(Debug, Clone)]
+enum Edit {
+    Set(usize, u8),
+    Insert(usize, u8),
+    Delete(usize),
+    Truncate(usize),
+}
+
+fn edits() -> impl Strategy<Value = Vec<Edit>> {
+    let edit = prop_oneof![
+        (any::<usize>(), any::<u8>()).prop_map(|(p, b)| Edit::Set(p, b)),
+        (any::<usize>(), any::<u8>()).prop_map(|(p, b)| Edit::Insert(p, b)),
+        any::<usize>().prop_map(Edit::Delete),
+        any::<usize>().prop_map(Edit::Truncate),
+    ];
+    proptest::collection::vec(edit, 1..8)
+}
+
+fn mutate(seed: &[u8], edits: &[Edit]) -> Vec<u8> {
+    let mut b = seed.to_vec();
+    for e in edits {
+        let n = b.len().max(1);
+        match *e {
+            Edit::Set(p, x) if !b.is_empty() => b[p % n] = x,
+            Edit::Insert(p, x) => b.insert(p % (b.len() + 1), x),
+            Edit::Delete(p) if !b.is_empty() => {
+                b.remove(p % n);
+            }
+            Edit::Truncate(p) => b.truncate(p % n),
+            _ => {}
+        }
+    }
+    b
+}
+
+/// Values that break assumptions: wrong types, out of range, non-finite, huge, empty.
+const ODD_VALUES: [&str; 22] = [
+    "-1", "0", "1e400", "-1e400", "nan", "inf", "-inf", "1e9", "1000000000", "9223372036854775807", "-9223372036854775808", "\"\"", "\"x\"", "[]",
+    "{}", "[1, \"a\"]", "true", "0.5", "1e-300", "65537", "\"lhs\"", "\"../../nope.csv\"",
+];
+
+/// Puts an odd value after the `=` of some lines of a TOML text.
+fn odd_values(text: &str, picks: &[(usize, usize)]) -> String {
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    for &(line, value) in picks {
+        let i = line % lines.len();
+        if let Some((key, _)) = lines[i].split_once('=') {
+            lines[i] = format!("{key}= {}", ODD_VALUES[value % ODD_VALUES.len()]);
+        }
+    }
+    lines.join("\n")
+}
+
+fn picks() -> impl Strategy<Value = Vec<(usize, usize)>> {
+    proptest::collection::vec((any::<usize>(), any::<usize>()), 1..5)
+}
+
+// ---- study files ----------------------------------------------------------------------------
+
+fn study_seeds() -> Vec<Vec<u8>> {
+    ["studies/gains_sweep.toml", "studies/port_width.toml", "studies/smoke.toml"].iter().map(|p| std::fs::read(repo(p)).unwrap()).collect()
+}
+
+/// Loads a study as `study run` does; an accepted one is also planned (references and the
+/// first sample) when it is small enough to plan quickly.
+fn try_study(dir: &Path, bytes: &[u8]) -> Result<(), TestCaseError> {
+    let path = dir.join("fuzzed_study.toml");
+    std::fs::write(&path, bytes).unwrap();
+    let result = load_study(&path).and_then(|spec| {
+        let small = spec.samples <= 100_000
+            && spec.excitations.iter().all(|e| match &e.spec {
+                vshake::orchestration::spec::ExcitationSpec::Sine { sine, .. } => sine.duration_s <= 60.0,
+                _ => true,
+            });
+        if small {
+            let plan = plan_for(&spec, dir)?;
+            if plan.samples() > 0 {
+                let _ = plan.sample(0);
+            }
+        }
+        Ok(())
+    });
+    check(result, &path)
+}
+
+proptest! {
+    #[test]
+    fn study_files_of_random_bytes(bytes in proptest::collection::vec(any::<u8>(), 0..600)) {
+        let d = tempfile::tempdir().unwrap();
+        try_study(d.path(), &bytes)?;
+    }
+
+    #[test]
+    fn study_files_with_mutated_bytes(seed in 0usize..3, e in edits()) {
+        let d = tempfile::tempdir().unwrap();
+        try_study(d.path(), &mutate(&study_seeds()[seed], &e))?;
+    }
+
+    #[test]
+    fn study_files_with_odd_values(seed in 0usize..3, p in picks()) {
+        let d = tempfile::tempdir().unwrap();
+        let text = String::from_utf8(study_seeds()[seed].clone()).unwrap();
+        try_study(d.path(), odd_values(&text, &p).as_bytes())?;
+    }
+}
+
+// ---- campaign files and measured tests ------------------------------------------------------
+
+const CAMPAIGN: &str = "[campaign]\nname = \"fuzz\"\n\n[[test]]\nname = \"t\"\ndata = \"DATA\"\n\
+excitation = { kind = \"sine\", freq_hz = 16.0, amp_g = 0.5, taper_s = 0.125, duration_s = 0.75, window_cycles = 4 }\n";
+
+/// A small valid measured test (16 Hz, 0.75 s at 1024 Hz) as CSV text.
+fn measured_csv() -> String {
+    let mut s = String::from("time_s,ref_disp_m,disp_m,accel_mps2\n");
+    for k in 0..=768 {
+        let t = k as f64 / 1024.0;
+        let w = 2.0 * std::f64::consts::PI * 16.0;
+        let x = 4.85e-4 * (w * t).sin() * (t / 0.125).min(1.0);
+        s += &format!("{t:.6},{x:.6e},{:.6e},{:.6e}\n", 0.98 * x, -w * w * 0.98 * x);
+    }
+    s
+}
+
+fn measured_parquet(dir: &Path) -> Vec<u8> {
+    let csv = dir.join("seed.csv");
+    std::fs::write(&csv, measured_csv()).unwrap();
+    let names = ["time_s", "ref_disp_m", "disp_m", "accel_mps2"];
+    let t = tables::read_columns(&csv, &names, &[]).unwrap();
+    let cols: Vec<(&str, &[f64])> = names.iter().map(|n| (*n, t.column(n).unwrap())).collect();
+    let pq = dir.join("seed.parquet");
+    tables::write_parquet(&pq, &cols, &[]).unwrap();
+    std::fs::read(&pq).unwrap()
+}
+
+/// Loads a campaign and its one test as `study compare` does.
+fn try_campaign(dir: &Path, campaign: &[u8], data_name: &str, data: &[u8]) -> Result<(), TestCaseError> {
+    let path = dir.join("fuzzed_campaign.toml");
+    std::fs::write(&path, campaign).unwrap();
+    std::fs::write(dir.join(data_name), data).unwrap();
+    let model = vshake::kernel::params::ModelParams::default();
+    let result = load_campaign(&path, &model).and_then(|lc| load_tests(&lc, None).map(|_| ()));
+    match &result {
+        // A problem in the data names the data file; one in the campaign, the campaign.
+        Err(e) if format!("{e:#}").contains(data_name) => check(result, &dir.join(data_name)),
+        _ => check(result, &path),
+    }
+}
+
+proptest! {
+    #[test]
+    fn campaign_files_of_random_bytes(bytes in proptest::collection::vec(any::<u8>(), 0..600)) {
+        let d = tempfile::tempdir().unwrap();
+        try_campaign(d.path(), &bytes, "t.csv", measured_csv().as_bytes())?;
+    }
+
+    #[test]
+    fn campaign_files_with_mutated_bytes(e in edits()) {
+        let d = tempfile::tempdir().unwrap();
+        try_campaign(d.path(), &mutate(CAMPAIGN.replace("DATA", "t.csv").as_bytes(), &e), "t.csv", measured_csv().as_bytes())?;
+    }
+
+    #[test]
+    fn campaign_files_with_odd_values(p in picks()) {
+        let d = tempfile::tempdir().unwrap();
+        // One key per line, so that every value can be replaced.
+        let text = CAMPAIGN.replace("DATA", "t.csv").replace("excitation = { kind = \"sine\", ", "[test.excitation]\nkind = \"sine\"\n").replace(", ", "\n").replace(" }", "");
+        try_campaign(d.path(), odd_values(&text, &p).as_bytes(), "t.csv", measured_csv().as_bytes())?;
+    }
+
+    #[test]
+    fn csv_tests_of_random_bytes(bytes in proptest::collection::vec(any::<u8>(), 0..2000)) {
+        let d = tempfile::tempdir().unwrap();
+        try_campaign(d.path(), CAMPAIGN.replace("DATA", "t.csv").as_bytes(), "t.csv", &bytes)?;
+    }
+
+    #[test]
+    fn csv_tests_with_mutated_bytes(e in edits()) {
+        let d = tempfile::tempdir().unwrap();
+        try_campaign(d.path(), CAMPAIGN.replace("DATA", "t.csv").as_bytes(), "t.csv", &mutate(measured_csv().as_bytes(), &e))?;
+    }
+
+    #[test]
+    fn parquet_tests_of_random_bytes(bytes in proptest::collection::vec(any::<u8>(), 0..2000)) {
+        let d = tempfile::tempdir().unwrap();
+        try_campaign(d.path(), CAMPAIGN.replace("DATA", "t.parquet").as_bytes(), "t.parquet", &bytes)?;
+    }
+
+    #[test]
+    fn parquet_tests_with_mutated_bytes(e in edits()) {
+        let d = tempfile::tempdir().unwrap();
+        let seed = measured_parquet(d.path());
+        try_campaign(d.path(), CAMPAIGN.replace("DATA", "t.parquet").as_bytes(), "t.parquet", &mutate(&seed, &e))?;
+    }
+}
