@@ -96,7 +96,7 @@ fn shards(dir: &Path, skip: &Path) -> anyhow::Result<Vec<ShardFile>> {
     if !missing.is_empty() {
         let also = unfinished.iter().map(|u| format!("\n  {u}")).collect::<String>();
         return Err(BadInput(format!(
-            "{}: shard{} {} missing (found {} complete of {count}: {}){also}",
+            "{}: shard{} {} missing (found {} of {count}: {}){also}",
             dir.display(),
             if missing.len() > 1 { "s" } else { "" },
             missing.join(", "),

@@ -13,7 +13,7 @@ pub const LONG_RUN_S: f64 = 86_400.0;
 
 /// Length of the timed round of a calibration: long enough to be steady (a round of a few
 /// hundred samples), short beside any run worth estimating.
-const CALIBRATION_ROUND: Duration = Duration::from_millis(300);
+const CALIBRATION_ROUND: Duration = Duration::from_millis(600);
 
 /// What to do with a run of an estimated wall time.
 #[derive(Debug, PartialEq)]
