@@ -75,6 +75,18 @@ impl Metrics {
     }
 }
 
+/// A phase difference in degrees, wrapped to (−180°, 180°] (the one wrapping of every phase
+/// metric: the kernel's, compare's and fit's).
+pub fn wrap_deg(d: f64) -> f64 {
+    let mut d = d % 360.0;
+    if d > 180.0 {
+        d -= 360.0;
+    } else if d <= -180.0 {
+        d += 360.0;
+    }
+    d
+}
+
 /// cos and sin of k·2πf·t for k = 1…9 at one tick (shared by every lane).
 #[derive(Debug, Clone, Copy)]
 pub struct Basis {
@@ -195,15 +207,7 @@ impl<const N: usize> MetricsAcc<N> {
         // H_k = (2/n)(Σ s cos − j Σ s sin): magnitude and angle; the 2/n cancels in every ratio.
         let mag = |re: f64, im: f64| re.hypot(im);
         let ang = |re: f64, im: f64| (-im).atan2(re);
-        let wrap = |d: f64| {
-            let mut d = d.to_degrees() % 360.0;
-            if d > 180.0 {
-                d -= 360.0;
-            } else if d <= -180.0 {
-                d += 360.0;
-            }
-            d
-        };
+        let wrap = |d: f64| wrap_deg(d.to_degrees());
         let mut m = Metrics::NAN;
         m.max_abs_u_v = self.max_u[l];
         if self.n > 0 {

@@ -706,16 +706,7 @@ pub fn fmt_row(r: f64) -> String {
     if r == r.round() { format!("{}", r as i64 + 1) } else { format!("{:.2}", r + 1.0) }
 }
 
-/// Phase difference a − b in degrees, wrapped to (−180°, 180°].
-pub fn wrap_deg(d: f64) -> f64 {
-    let mut d = d % 360.0;
-    if d > 180.0 {
-        d -= 360.0;
-    } else if d <= -180.0 {
-        d += 360.0;
-    }
-    d
-}
+pub use crate::kernel::metrics::wrap_deg;
 
 /// Common unit mix-ups and the factor each puts into a ratio that should be 1.
 fn unit_cause(ratio: f64, causes: &[(f64, &str)]) -> Option<String> {

@@ -123,6 +123,13 @@ pub fn all_metric_names() -> Vec<&'static str> {
     Metrics::NAN.columns().into_iter().map(|(n, _)| n).collect()
 }
 
+/// Why a parameter cannot differ between the samples of a study (None: it can). The one such
+/// parameter is the controller rate, which every lane of a batch shares (the reference is sampled
+/// at it). Used for `[[variables]]` and for the columns of a design file.
+pub fn cannot_vary(info: &ParamInfo) -> Option<&'static str> {
+    (info.path() == "controller.f_s").then_some("controller.f_s cannot be varied: every lane of a batch shares the controller rate; set it under [model.controller]")
+}
+
 /// Largest memory a design may hold before its first sample (a Latin hypercube's permutations).
 pub const DESIGN_MAX_BYTES: usize = 1 << 30;
 
@@ -207,10 +214,8 @@ fn read_variable(mut f: Fields<'_>, issues: &mut Issues) -> Option<Variable> {
             None
         }
     };
-    if let Some(i) = info {
-        if i.path() == "controller.f_s" {
-            issues.push(f.path_of("name"), "controller.f_s cannot be varied: every lane of a batch shares the controller rate; set it under [model.controller]");
-        }
+    if let Some(why) = info.and_then(cannot_vary) {
+        issues.push(f.path_of("name"), why);
     }
     let mut num = |key: &str, issues: &mut Issues| f.f64(key, issues);
     let d = match dist {

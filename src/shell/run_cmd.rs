@@ -11,7 +11,7 @@ use crate::kernel::LANES;
 use crate::orchestration::batch::{self, Plan, Row, RowSink, RowStatus};
 use crate::orchestration::sim;
 use crate::orchestration::spec::SimSpec;
-use crate::orchestration::study::{Method, StudySpec};
+use crate::orchestration::study::{cannot_vary, Method, StudySpec};
 use anyhow::Context;
 use std::io::Write;
 use std::ops::Range;
@@ -37,11 +37,9 @@ pub fn plan_for(spec: &StudySpec, base: &Path) -> anyhow::Result<Plan> {
             let mut infos: Vec<&'static ParamInfo> = Vec::new();
             for n in &names {
                 let info = ModelParams::lookup(n).or_else(|| ModelParams::registry().find(|p| p.column_name() == *n || p.name == n));
-                match info {
-                    Some(i) if i.path() == "controller.f_s" => {
-                        return Err(BadInput(format!("{}: column `{n}`: controller.f_s cannot be varied (every lane of a batch shares it)", path.display())).into())
-                    }
-                    Some(i) => infos.push(i),
+                match info.map(|i| (i, cannot_vary(i))) {
+                    Some((_, Some(why))) => return Err(BadInput(format!("{}: column `{n}`: {why}", path.display())).into()),
+                    Some((i, None)) => infos.push(i),
                     None => {
                         return Err(BadInput(format!(
                             "{}: column `{n}` is not a model parameter (use a path such as controller.g_d, or a column name such as g_d; `study params` lists them)",
@@ -328,6 +326,8 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
         (None, Some(file)) => Job::fresh(args, file)?,
         (None, None) => return Err(BadInput("give a study file (study run STUDY.toml) or --resume RESULTS.parquet".into()).into()),
     };
+    // Chunk size and threads are how the run is scheduled, not what it computes: they stay out of
+    // the resolved study in the metadata, so shards (and resumed runs) with other ones still merge.
     let chunk = args.chunk.map_or(job.spec.chunk, |c| c.max(1));
     let pool = pool(args.threads)?;
     let todo = (job.range.start + job.samples_kept())..job.range.end;
