@@ -10,7 +10,7 @@ use common::followed_state;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use vshake::shell::tables::{read_columns_allow_nan, read_strings};
+use vshake::shell::tables::{read_bools, read_columns_allow_nan, read_f64_lists, read_string_lists, read_strings};
 
 /// Sensor noise of the synthetic campaigns: about 1 % of the smallest test's rms per channel.
 const NOISE: &str = "accel=0.02,disp=1e-5,force=2000";
@@ -58,8 +58,10 @@ fn diagnose(dir: &Path) -> Diagnosis {
     let c = report.join("candidates.parquet");
     let num = read_columns_allow_nan(&c, &["rank", "explained"]).unwrap();
     let s = |col: &str| read_strings(&c, col).unwrap();
-    let (effects, families, params, est, se, sig) = (s("effect"), s("family"), s("params"), s("estimates"), s("std_errors"), s("significant"));
-    let list = |v: &str| -> Vec<f64> { v.split(',').filter(|x| !x.is_empty()).map(|x| x.parse().unwrap()).collect() };
+    let (effects, families) = (s("effect"), s("family"));
+    let params = read_string_lists(&c, "params").unwrap();
+    let (est, se) = (read_f64_lists(&c, "estimates").unwrap(), read_f64_lists(&c, "std_errors").unwrap());
+    let sig = read_bools(&c, "significant").unwrap();
     let mut cands = HashMap::new();
     for i in 0..effects.len() {
         cands.insert(
@@ -67,10 +69,10 @@ fn diagnose(dir: &Path) -> Diagnosis {
             Cand {
                 rank: num.column("rank").unwrap()[i] as usize,
                 family: families[i].clone(),
-                params: params[i].split(',').map(String::from).collect(),
-                estimates: list(&est[i]),
-                std_errors: list(&se[i]),
-                significant: sig[i] == "yes",
+                params: params[i].clone(),
+                estimates: est[i].clone(),
+                std_errors: se[i].clone(),
+                significant: sig[i],
                 explained: num.column("explained").unwrap()[i],
             },
         );
@@ -156,9 +158,8 @@ fn hidden_pair(a: (&str, &str, &[(&str, f64)]), b: (&str, &str, &[(&str, f64)]))
     let last = num.column("residual_rms").unwrap().len() - 1;
     let (after, noise) = (num.column("residual_rms").unwrap()[last], num.column("noise_rms").unwrap()[last]);
     assert!(after <= 1.5 * noise, "joint fit leaves {after}, noise floor {noise}\n{}", r.stdout);
-    let (params, est, se) = (read_strings(&sel, "params").unwrap(), read_strings(&sel, "estimates").unwrap(), read_strings(&sel, "std_errors").unwrap());
-    let list = |v: &str| -> Vec<f64> { v.split(',').map(|x| x.parse().unwrap()).collect() };
-    let (names, est, se): (Vec<&str>, Vec<f64>, Vec<f64>) = (params[last].split(',').collect(), list(&est[last]), list(&se[last]));
+    let (params, est, se) = (read_string_lists(&sel, "params").unwrap(), read_f64_lists(&sel, "estimates").unwrap(), read_f64_lists(&sel, "std_errors").unwrap());
+    let (names, est, se) = (&params[last], &est[last], &se[last]);
     for (e, _, truth) in [a, b] {
         for (p, v) in truth {
             let i = names.iter().position(|n| *n == format!("{e}.{p}")).unwrap_or_else(|| panic!("{e}.{p} not in the joint fit: {names:?}"));

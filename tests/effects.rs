@@ -278,10 +278,10 @@ fn a_switched_off_effect_is_neutral() {
 /// bit, lane by lane, next to lanes where effects are on (the set's "neutral when off").
 /// An effect is switched on with its first freed parameter 10 % off its default, so one whose
 /// defaults are neutral (a flow-gain curve of 1) changes the run too.
-fn switched_on(base: &vshake::kernel::params::ModelParams, e: &str) -> vshake::kernel::params::ModelParams {
+fn switched_on(base: &vshake::kernel::params::ModelParams, e: vshake::kernel::effects::EffectId) -> vshake::kernel::params::ModelParams {
     let mut m = base.clone();
-    *m.effects.get_mut(e).unwrap() = true;
-    let info = vshake::kernel::effects::info(e).unwrap();
+    *m.effects.get_mut(e) = true;
+    let info = e.info();
     let p = vshake::kernel::params::ModelParams::lookup(&format!("{e}.{}", info.free[0])).unwrap();
     let v = 1.1 * (p.get)(&m);
     (p.set)(&mut m, v);
@@ -291,33 +291,34 @@ fn switched_on(base: &vshake::kernel::params::ModelParams, e: &str) -> vshake::k
 #[test]
 fn the_effect_set_is_the_baseline_where_everything_is_off() {
     use vshake::kernel::effects::{effect_set, Baseline};
-    use vshake::kernel::params::{ModelParams, EFFECTS};
+    use vshake::kernel::effects::EffectId;
+    use vshake::kernel::params::ModelParams;
     use vshake::kernel::simulate::{self, LaneParams, NoObserver, Solver};
     let base = ModelParams::default();
     let reference = vshake::kernel::excitation::Sine { freq_hz: 3.0, amp_m: 0.0488, taper_s: 1.0, duration_s: 3.0, window_cycles: Some(4) }.reference(1024.0);
     let [expected] = simulate::run(&LaneParams::<1>::new(&[&base]).unwrap(), &Baseline, &reference, &Solver::default(), &mut NoObserver).unwrap();
     // Lane 0 off, lanes 1.. with one effect each.
     let mut sets = vec![base.clone()];
-    for e in EFFECTS.iter().take(7) {
+    for e in EffectId::ALL.into_iter().take(7) {
         sets.push(switched_on(&base, e));
     }
     let refs: Vec<&ModelParams> = sets.iter().collect();
     let lp = LaneParams::<8>::new(&refs).unwrap();
     let got = simulate::run(&lp, &effect_set::<8>(&refs), &reference, &Solver::default(), &mut NoObserver).unwrap();
     assert_eq!(got[0], expected, "all off = baseline, bit for bit");
-    for (l, e) in EFFECTS.iter().take(7).enumerate() {
+    for (l, e) in EffectId::ALL.into_iter().take(7).enumerate() {
         assert_ne!(got[l + 1].metrics, expected.metrics, "{e} on changes the run");
     }
     // The remaining effects, each on in its own lane next to an all-off lane.
     let mut sets = vec![base.clone()];
-    for e in EFFECTS.iter().skip(7) {
+    for e in EffectId::ALL.into_iter().skip(7) {
         sets.push(switched_on(&base, e));
     }
     let refs: Vec<&ModelParams> = sets.iter().collect();
     let lp = LaneParams::<8>::new(&refs).unwrap();
     let got = simulate::run(&lp, &effect_set::<8>(&refs), &reference, &Solver::default(), &mut NoObserver).unwrap();
     assert_eq!(got[0], expected);
-    for (l, e) in EFFECTS.iter().skip(7).enumerate() {
+    for (l, e) in EffectId::ALL.into_iter().skip(7).enumerate() {
         assert_ne!(got[l + 1].metrics, expected.metrics, "{e} on changes the run");
     }
 }
@@ -328,17 +329,17 @@ fn the_effect_set_is_the_baseline_where_everything_is_off() {
 /// it is off.
 #[test]
 fn a_kernel_for_one_effect_equals_the_effect_set_bit_for_bit() {
-    use vshake::kernel::effects::{effect_set, EFFECTS};
+    use vshake::kernel::effects::{effect_set, EffectId};
     use vshake::kernel::params::ModelParams;
     use vshake::kernel::simulate::{self, LaneParams, NoObserver, Solver};
     use vshake::orchestration::sim::run_lanes_single;
     let base = ModelParams::default();
     let reference = vshake::kernel::excitation::Sine { freq_hz: 5.0, amp_m: 0.02, taper_s: 0.5, duration_s: 1.5, window_cycles: Some(4) }.reference(1024.0);
-    for e in EFFECTS {
+    for e in EffectId::ALL {
         let mut sets = vec![base.clone()];
         for k in 1..8 {
             let mut m = switched_on(&base, e);
-            let info = vshake::kernel::effects::info(e).unwrap();
+            let info = e.info();
             let p = ModelParams::lookup(&format!("{e}.{}", info.free[0])).unwrap();
             let v = (p.get)(&m) * (1.0 + 0.05 * k as f64);
             (p.set)(&mut m, v);

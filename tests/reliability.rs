@@ -105,7 +105,7 @@ fn signal(child: &Child, sig: &str) {
 fn sigterm_then_resume_equals_an_uninterrupted_run() {
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("stopped.parquet");
-    let mut child = start(&out, &[]);
+    let child = start(&out, &[]);
     wait_for(&with_suffix(&out, ".tmp"), Duration::from_millis(1500));
     signal(&child, "-TERM");
     let o = child.wait_with_output().unwrap();

@@ -83,8 +83,8 @@ impl fmt::Display for Range {
 /// One entry of the parameter registry.
 #[derive(Clone, Copy)]
 pub struct ParamInfo {
-    /// Component (`servovalve`, `actuator`, `platen`, `friction`, `controller`).
-    pub component: &'static str,
+    /// The part of the model it belongs to: a baseline part or a library effect.
+    pub component: Component,
     /// Field name inside the component; the full path is `component.name`.
     pub name: &'static str,
     /// Unit as printed for humans.
@@ -103,7 +103,7 @@ pub struct ParamInfo {
 impl ParamInfo {
     /// `component.name`.
     pub fn path(&self) -> String {
-        format!("{}.{}", self.component, self.name)
+        format!("{}.{}", self.component.name(), self.name)
     }
     /// Column name for result tables: `name_unitsuffix` (e.g. `kv_m_per_s_sqrt_pa`).
     pub fn column_name(&self) -> String {
@@ -123,12 +123,12 @@ impl fmt::Debug for ParamInfo {
 
 /// Generates one parameter struct, its `Default`, its registry rows and its accessor.
 ///
-/// `pub struct Name in path.to.field as "component" { rows }`, where `path.to.field` is where
+/// `pub struct Name in path.to.field as (Component::Part) { rows }`, where `path.to.field` is where
 /// [`ModelParams`] keeps it. Row syntax: `name: unit, suffix, default, range, source, "description";`
 macro_rules! params {
     (
         $(#[$meta:meta])*
-        pub struct $Struct:ident in $($field:ident).+ as $component:literal {
+        pub struct $Struct:ident in $($field:ident).+ as $component:tt {
             $( $name:ident : $unit:literal, $suffix:literal, $default:expr, $range:expr, $src:ident, $doc:literal; )*
         }
     ) => {
@@ -194,7 +194,7 @@ pub const KV_DEFAULT: f64 = (10_000.0e-3 / 60.0) / (0.254 * 19.05e-3 * 1_856.744
 
 params! {
     /// Servo-valve (four-port, square-root orifice flow), docs/model.md §3.
-    pub struct ValveParams in servovalve as "servovalve" {
+    pub struct ValveParams in servovalve as (Component::Servovalve) {
         p_s: "Pa", "pa", 20.7e6, Range::gt(0.0), Paper,
             "Supply pressure P_S.";
         p_r: "Pa", "pa", 0.35e6, Range::ge(0.0), Paper,
@@ -222,7 +222,7 @@ params! {
 
 params! {
     /// Single-ended actuator with stroke-dependent chamber volumes, docs/model.md §3.
-    pub struct ActuatorParams in actuator as "actuator" {
+    pub struct ActuatorParams in actuator as (Component::Actuator) {
         beta: "Pa", "pa", 689.5e6, Range::gt(0.0), Paper,
             "Oil bulk modulus β.";
         a1: "m²", "m2", 0.2027, Range::gt(0.0), Paper,
@@ -240,7 +240,7 @@ params! {
 
 params! {
     /// Rigid platen with hold-down stiffness and dissipation, docs/model.md §3.
-    pub struct PlatenParams in platen as "platen" {
+    pub struct PlatenParams in platen as (Component::Platen) {
         m: "kg", "kg", 144_000.0, Range::gt(0.0), Paper,
             "Effective platen mass M.";
         k: "N/m", "n_per_m", 1.266e6, Range::ge(0.0), Paper,
@@ -256,7 +256,7 @@ params! {
 
 params! {
     /// Viscoplastic friction law dz/dt = (v/Y)(1 − z²[κ + (1−κ) sign(z v)]), docs/model.md §3.
-    pub struct FrictionParams in friction as "friction" {
+    pub struct FrictionParams in friction as (Component::Friction) {
         y_yield: "m", "m", 0.2e-3, Range::gt(0.0), Paper,
             "Yield displacement Y of the friction law.";
         kappa: "-", "", 0.5, Range::closed(0.0, 1.0), Paper,
@@ -266,7 +266,7 @@ params! {
 
 params! {
     /// Three-variable controller (TVC) replica, docs/model.md §2.
-    pub struct ControllerParams in controller as "controller" {
+    pub struct ControllerParams in controller as (Component::Controller) {
         f_s: "Hz", "hz", 1024.0, Range::closed(64.0, 65536.0), Chosen,
             "Controller sample rate f_s [chosen: MTS 469D class]. Batch-uniform: every lane of a batch shares it.";
         d_max: "m", "m", 0.75, Range::gt(0.0), Paper,
@@ -326,7 +326,56 @@ params! {
     }
 }
 
-pub use super::effects::{EffectParams, EffectSwitches, EFFECTS};
+pub use super::effects::{EffectId, EffectParams, EffectSwitches, EFFECTS};
+
+/// A part of the model that has parameters: a part of the baseline, or a library effect. Its
+/// name is its model-file table (`[model.servovalve]`, `[model.leakage]`) and the prefix of its
+/// parameters' paths.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Component {
+    Servovalve,
+    Actuator,
+    Platen,
+    Friction,
+    Controller,
+    Effect(EffectId),
+}
+
+impl Component {
+    /// The baseline's parts, in registry order.
+    pub const BASELINE: [Component; 5] = [Component::Servovalve, Component::Actuator, Component::Platen, Component::Friction, Component::Controller];
+
+    /// Its name (model-file table, parameter prefix).
+    pub fn name(self) -> &'static str {
+        match self {
+            Component::Servovalve => "servovalve",
+            Component::Actuator => "actuator",
+            Component::Platen => "platen",
+            Component::Friction => "friction",
+            Component::Controller => "controller",
+            Component::Effect(e) => e.name(),
+        }
+    }
+
+    /// The library effect it is, if it is one.
+    pub fn effect(self) -> Option<EffectId> {
+        match self {
+            Component::Effect(e) => Some(e),
+            Component::Servovalve | Component::Actuator | Component::Platen | Component::Friction | Component::Controller => None,
+        }
+    }
+
+    /// The component called `name`; `None` for a name the model does not have.
+    pub fn parse(name: &str) -> Option<Component> {
+        ModelParams::components().find(|c| c.name() == name)
+    }
+}
+
+impl std::fmt::Display for Component {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
 
 /// Which flow law the servo-valves follow (a structural choice, decided once per batch).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -385,15 +434,13 @@ impl ModelParams {
     /// The registry row of `component.name`, if any.
     pub fn lookup(path: &str) -> Option<&'static ParamInfo> {
         let (c, n) = path.split_once('.')?;
+        let c = Component::parse(c)?;
         Self::registry().find(|p| p.component == c && p.name == n)
     }
 
-    /// The baseline's components.
-    pub const BASELINE: [&'static str; 5] = ["servovalve", "actuator", "platen", "friction", "controller"];
-
-    /// Names of the components (in registry order): the baseline's, then the library effects.
-    pub fn components() -> Vec<&'static str> {
-        Self::BASELINE.iter().copied().chain(EFFECTS).collect()
+    /// The components (in registry order): the baseline's parts, then the library effects.
+    pub fn components() -> impl Iterator<Item = Component> {
+        Component::BASELINE.into_iter().chain(EffectId::ALL.map(Component::Effect))
     }
 
     /// Checks every range and every relation between parameters; returns all problems at once.

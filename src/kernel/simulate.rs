@@ -784,8 +784,9 @@ mod tests {
             .enumerate()
             .map(|(i, p)| {
                 let mut p = p.clone();
-                for (k, name) in ["spool_dynamics", "transport_delay", "supply", "seal_friction", "leakage"].into_iter().enumerate() {
-                    *p.effects.get_mut(name).unwrap() = (i + k) % 3 != 0;
+                use crate::kernel::effects::EffectId;
+                for (k, id) in [EffectId::SpoolDynamics, EffectId::TransportDelay, EffectId::Supply, EffectId::SealFriction, EffectId::Leakage].into_iter().enumerate() {
+                    *p.effects.get_mut(id) = (i + k) % 3 != 0;
                 }
                 p
             })

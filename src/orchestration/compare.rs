@@ -18,7 +18,8 @@
 //!
 //! For a record the harmonic and envelope quantities are NaN/empty.
 
-use super::measured::{wrap_deg, AlignedTest, Samples};
+use super::measured::{wrap_deg, AlignedTest, OpenLoop, Samples};
+use rayon::prelude::*;
 use super::sim;
 use crate::kernel::metrics::N_HARM;
 use crate::kernel::resample::ch;
@@ -383,6 +384,35 @@ pub fn compare_test(test: &AlignedTest, solver: &Solver) -> Result<Compared, Str
     let spool = m.spool.clone().or_else(|| m.valve_cmd.as_ref().map(|u| u.iter().map(|u| sv.k_sp * u.clamp(-sv.u_lim, sv.u_lim)).collect())).unwrap_or_else(|| rs.channel(ch::SPOOL, 0));
     let states = super::statemap::test_states(&test.model, &spool, &rs.channel(ch::VEL, 0), &p1, &p2, &m.disp);
     Ok(Compared { test: test.clone(), comparison, accel_model: accel, disp_model: disp, force_model: force, states, spool_model: rs.channel(ch::SPOOL, 0), vel_model: rs.channel(ch::VEL, 0), p1, p1_model: rs.channel(ch::P1, 0), p2, p2_model: rs.channel(ch::P2, 0) })
+}
+
+/// A comparison to run: the tests as aligned to the model (each with its model and its drive:
+/// closed loop, or open loop on the measured column `open_loop` names) and the solver.
+pub struct CompareSpec {
+    pub tests: Vec<AlignedTest>,
+    pub open_loop: Option<OpenLoop>,
+    pub solver: Solver,
+}
+
+impl CompareSpec {
+    /// How the model is driven, in words.
+    pub fn drive_label(&self) -> String {
+        drive_label(self.open_loop)
+    }
+
+    /// Compares every test, in parallel on the current thread pool; a model failure stops the
+    /// comparison with its test and reason.
+    pub fn run(&self) -> Result<Vec<Compared>, String> {
+        self.tests.par_iter().map(|t| compare_test(t, &self.solver)).collect()
+    }
+}
+
+/// How a model driven by `open_loop` (or closed loop) runs, in words.
+pub fn drive_label(open_loop: Option<OpenLoop>) -> String {
+    match open_loop {
+        None => "closed loop".to_string(),
+        Some(m) => format!("open loop on the measured {}", m.column()),
+    }
 }
 
 #[cfg(test)]

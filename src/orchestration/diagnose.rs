@@ -1,7 +1,7 @@
 //! Diagnosis: which physical effect is most likely missing from the model.
 //!
 //! Every candidate effect of the library is fitted to the campaign (its default free parameters,
-//! [`super::fit::default_free`]; the candidates in parallel) and ranked by the Bayesian
+//! the `free` list of its `EffectInfo`; the candidates in parallel) and ranked by the Bayesian
 //! information criterion: ΔBIC = χ²_baseline − χ²_candidate − p·ln n (n the features' degrees of
 //! freedom, p parameters added). With the features scaled by their noise, χ² of a right model is
 //! ≈ n − p, so:
@@ -32,7 +32,7 @@
 //! what it leaves.
 
 use super::fit::{self, FeatureInfo, Free, Problem};
-use crate::kernel::params::ModelParams;
+use crate::kernel::params::{EffectId, ModelParams};
 use rayon::prelude::*;
 
 /// ΔBIC above which a candidate counts as significant.
@@ -60,7 +60,7 @@ pub const NOISE_FACTOR: f64 = 1.5;
 
 /// One fitted candidate.
 pub struct Candidate {
-    pub effect: &'static str,
+    pub effect: EffectId,
     pub family: &'static str,
     pub free: Vec<Free>,
     pub fit: Result<fit::FitResult, String>,
@@ -81,7 +81,7 @@ impl Candidate {
 
 /// One effect added by forward selection on top of those chosen before it.
 pub struct Step {
-    pub effect: &'static str,
+    pub effect: EffectId,
     pub family: &'static str,
     /// The joint fit: the parameters of every chosen effect so far, this one's last.
     pub free: Vec<Free>,
@@ -121,17 +121,17 @@ pub enum Verdict {
     NothingSignificant,
     /// The best candidate (and those forward selection added to it) is significant and explains
     /// most of the residual.
-    Missing { effects: Vec<&'static str>, explained: f64 },
+    Missing { effects: Vec<EffectId>, explained: f64 },
     /// The best candidate (with those added to it) is significant but explains little of the
     /// residual.
-    Unexplained { effects: Vec<&'static str>, explained: f64 },
+    Unexplained { effects: Vec<EffectId>, explained: f64 },
 }
 
 impl Diagnosis {
     pub fn verdict(&self) -> Verdict {
         match self.candidates.first() {
             Some(c) if c.significant() => {
-                let effects: Vec<&'static str> = std::iter::once(c.effect).chain(self.more.iter().map(|s| s.effect)).collect();
+                let effects: Vec<EffectId> = std::iter::once(c.effect).chain(self.more.iter().map(|s| s.effect)).collect();
                 let explained = self.more.last().map_or(c.explained, |s| s.explained);
                 if self.more.is_empty() || explained >= EXPLAINS_TOGETHER {
                     if explained >= EXPLAINS_ENOUGH {
@@ -197,7 +197,7 @@ impl Diagnosis {
                 ),
                 _ => format!(
                     "no candidate explains the residual significantly (best: {}, dBIC = {:.1} <= {SIGNIFICANT_BIC}); no significant missing effect{}",
-                    best.map_or("-", |c| c.effect),
+                    best.map_or("-", |c| c.effect.name()),
                     best.map_or(f64::NAN, |c| c.delta_bic),
                     self.where_it_fails()
                 ),
@@ -205,14 +205,14 @@ impl Diagnosis {
             Verdict::Missing { effects, explained } if effects.len() == 1 => format!(
                 "most likely missing: {} ({}); it explains {:.0} % of the residual beyond noise (dBIC = {:.0}){}",
                 effects[0],
-                fit::family(effects[0]),
+                effects[0].info().family,
                 100.0 * explained,
                 best.map_or(f64::NAN, |c| c.delta_bic),
                 self.short_of_noise()
             ),
             Verdict::Missing { effects, explained } => format!(
                 "most likely missing: {}; together they explain {:.0} % of the residual beyond noise ({}){}",
-                effects.iter().map(|e| format!("{e} ({})", fit::family(e))).collect::<Vec<_>>().join(" + "),
+                effects.iter().map(|e| format!("{e} ({})", e.info().family)).collect::<Vec<_>>().join(" + "),
                 100.0 * explained,
                 self.shares(),
                 self.short_of_noise()
@@ -225,7 +225,7 @@ impl Diagnosis {
             ),
             Verdict::Unexplained { effects, explained } => format!(
                 "the best candidates together, {}, explain only {:.0} % of the residual beyond noise ({}): the missing effect is probably not in the library{}",
-                effects.join(" + "),
+                effects.iter().map(|e| e.name()).collect::<Vec<_>>().join(" + "),
                 100.0 * explained,
                 self.shares(),
                 self.where_it_fails()
@@ -260,8 +260,10 @@ impl Diagnosis {
 }
 
 /// The free parameters of `effect` at their values in `model`.
-pub fn free_of(effect: &str, model: &ModelParams) -> Vec<Free> {
-    fit::default_free(effect)
+pub fn free_of(effect: EffectId, model: &ModelParams) -> Vec<Free> {
+    effect
+        .info()
+        .free
         .iter()
         .map(|n| {
             let info = ModelParams::lookup(&format!("{effect}.{n}")).expect("default free parameters are registered");
@@ -271,7 +273,7 @@ pub fn free_of(effect: &str, model: &ModelParams) -> Vec<Free> {
 }
 
 /// Fits every candidate and ranks them.
-pub fn diagnose(problem: &Problem, candidates: &[&'static str]) -> Diagnosis {
+pub fn diagnose(problem: &Problem, candidates: &[EffectId]) -> Diagnosis {
     let baseline = problem.evaluate(1, &|_, m| m.clone()).remove(0);
     let n = problem.dof().round() as usize;
     let chi2_b = baseline.chi2();
@@ -295,7 +297,7 @@ pub fn diagnose(problem: &Problem, candidates: &[&'static str]) -> Diagnosis {
                 }
                 Err(_) => (f64::NEG_INFINITY, 0.0),
             };
-            Candidate { effect, family: fit::family(effect), free, fit, delta_bic, explained, lowers_residual }
+            Candidate { effect, family: effect.info().family, free, fit, delta_bic, explained, lowers_residual }
         })
         .collect();
     out.sort_by(|a, b| b.significant().cmp(&a.significant()).then(b.delta_bic.total_cmp(&a.delta_bic)));
@@ -312,7 +314,7 @@ fn forward_selection(problem: &Problem, ranked: &[Candidate], n: usize, baseline
     let share = |e: &fit::Eval| if excess > 0.0 { (1.0 - (e.residual_rms().powi(2) - n2) / excess).clamp(0.0, 1.0) } else { 0.0 };
     let Some(best) = ranked.first().filter(|c| c.significant()) else { return Vec::new() };
     let Ok(best_fit) = &best.fit else { return Vec::new() };
-    let mut chosen: Vec<&'static str> = vec![best.effect];
+    let mut chosen: Vec<EffectId> = vec![best.effect];
     // The chosen parameters at their estimates, and the evaluation they leave.
     let mut free: Vec<Free> = best.free.iter().zip(&best_fit.estimate).map(|(f, &v)| Free::new(f.info, v)).collect();
     let mut at = best_fit.after.clone();
@@ -326,7 +328,7 @@ fn forward_selection(problem: &Problem, ranked: &[Candidate], n: usize, baseline
             break;
         }
         let rest: Vec<&Candidate> = ranked.iter().filter(|c| !chosen.contains(&c.effect) && c.fit.is_ok()).collect();
-        let tried: Vec<(&'static str, Vec<Free>, Result<fit::FitResult, String>)> = rest
+        let tried: Vec<(EffectId, Vec<Free>, Result<fit::FitResult, String>)> = rest
             .par_iter()
             .map(|c| {
                 let mut f = free.clone();
@@ -363,7 +365,7 @@ fn forward_selection(problem: &Problem, ranked: &[Candidate], n: usize, baseline
         free = f.iter().zip(&r.estimate).map(|(f, &v)| Free::new(f.info, v)).collect();
         at = r.after.clone();
         chosen.push(effect);
-        steps.push(Step { effect, family: fit::family(effect), free: f, explained: share(&r.after), fit: r, delta_bic: dbic });
+        steps.push(Step { effect, family: effect.info().family, free: f, explained: share(&r.after), fit: r, delta_bic: dbic });
     }
     steps
 }

@@ -59,16 +59,6 @@ pub fn block_len(rate_hz: f64) -> usize {
     ((rate_hz / 64.0).round() as usize).max(1)
 }
 
-/// The parameters effect `name` frees by default when it is fitted (its `INFO.free`; empty for
-/// a name the library does not have).
-pub fn default_free(effect: &str) -> &'static [&'static str] {
-    crate::kernel::effects::info(effect).map_or(&[], |e| e.free)
-}
-
-/// The family of effect `name` (its `INFO.family`; "other" for a name the library does not have).
-pub fn family(effect: &str) -> &'static str {
-    crate::kernel::effects::info(effect).map_or("other", |e| e.family)
-}
 
 /// Which channel a feature comes from.
 pub const CHANNELS: [&str; 3] = ["accel", "disp", "force"];
@@ -465,8 +455,8 @@ impl Free {
 pub fn apply(model: &ModelParams, free: &[Free], u: &[f64]) -> ModelParams {
     let mut m = model.clone();
     for (f, &x) in free.iter().zip(u) {
-        if let Some(on) = m.effects.get_mut(f.info.component) {
-            *on = true;
+        if let Some(e) = f.info.component.effect() {
+            *m.effects.get_mut(e) = true;
         }
         (f.info.set)(&mut m, f.value(x));
     }

@@ -295,10 +295,8 @@ pub fn align(test: &TestSpec, data: &NumTable, record: Option<&NumTable>, open_l
     let mut model = test.model.clone();
     if open_loop == Some(OpenLoop::Spool) {
         // A measured spool already holds the valve's delay and dynamics.
-        for e in crate::kernel::effects::LIBRARY.iter().filter(|e| e.moves_spool) {
-            if let Some(on) = model.effects.get_mut(e.name) {
-                *on = false;
-            }
+        for e in crate::kernel::effects::EffectId::ALL.into_iter().filter(|e| e.info().moves_spool) {
+            *model.effects.get_mut(e) = false;
         }
     }
     let mut notes = data.notes.clone();

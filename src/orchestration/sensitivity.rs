@@ -167,6 +167,84 @@ pub fn prcc(x: &[Vec<f64>], y: &[f64]) -> Vec<f64> {
         .collect()
 }
 
+/// A study's results as the analysis reads them: columns of one results table, row by row.
+pub struct Results<'a> {
+    /// The excitation of each row (its index).
+    pub excitation: &'a [f64],
+    /// For a Saltelli design, each row's base point and block (0 = A, 1 = B, 2 + i = AB_i).
+    pub saltelli: Option<(&'a [f64], &'a [f64])>,
+    /// The varied parameters' columns, in design order.
+    pub inputs: Vec<&'a [f64]>,
+}
+
+/// The indices of one output (one metric at one excitation), per varied parameter in design
+/// order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Indices {
+    /// Sobol' indices (a Saltelli design with at least two complete base points).
+    pub sobol: Option<Vec<SobolIndex>>,
+    pub src: Vec<f64>,
+    pub prcc: Vec<f64>,
+    /// R² of the linear fit behind the SRCs.
+    pub r2: f64,
+    /// Runs the regression measures used.
+    pub n: usize,
+    /// Failed runs left out: base points (Saltelli) or rows.
+    pub dropped: usize,
+}
+
+/// The outputs of a Saltelli design regrouped by base point: one row `[f_A, f_B, f_AB_1, …,
+/// f_AB_d]` per base point whose every block finished, and the number of base points dropped
+/// because one of their runs failed (NaN) or is absent.
+pub fn saltelli_blocks(rows: &[usize], base: &[f64], block: &[f64], y: &[f64], d: usize) -> (Vec<Vec<f64>>, usize) {
+    let n_base = rows.iter().map(|&r| base[r] as usize + 1).max().unwrap_or(0);
+    let mut table = vec![vec![f64::NAN; d + 2]; n_base];
+    for &r in rows {
+        let (b, k) = (base[r] as usize, block[r] as usize);
+        if k < d + 2 {
+            table[b][k] = y[r];
+        }
+    }
+    let complete: Vec<Vec<f64>> = table.into_iter().filter(|v| v.iter().all(|x| x.is_finite())).collect();
+    let dropped = n_base - complete.len();
+    (complete, dropped)
+}
+
+/// Sobol' indices (Saltelli designs), SRC and PRCC of output `y` at excitation `e`. The
+/// bootstrap's seed depends only on `e`, so the result does not depend on the order outputs are
+/// analysed in.
+pub fn analyse(results: &Results<'_>, e: usize, y: &[f64], bootstrap: usize) -> Indices {
+    let d = results.inputs.len();
+    let rows: Vec<usize> = (0..y.len()).filter(|&r| results.excitation[r] as usize == e).collect();
+    let (sobol_idx, dropped, used) = match results.saltelli {
+        Some((base, block)) => {
+            let (complete, dropped) = saltelli_blocks(&rows, base, block, y, d);
+            let sobol_idx = (complete.len() >= 2).then(|| {
+                let fa: Vec<f64> = complete.iter().map(|v| v[0]).collect();
+                let fb: Vec<f64> = complete.iter().map(|v| v[1]).collect();
+                let fab: Vec<Vec<f64>> = (0..d).map(|i| complete.iter().map(|v| v[2 + i]).collect()).collect();
+                sobol(&fa, &fb, &fab, bootstrap, 0x5eed ^ ((e as u64) << 8))
+            });
+            // The regression measures use the A and B points: independent samples of the design.
+            (sobol_idx, dropped, rows.iter().copied().filter(|&r| block[r] < 2.0 && y[r].is_finite()).collect::<Vec<_>>())
+        }
+        None => {
+            let used: Vec<usize> = rows.iter().copied().filter(|&r| y[r].is_finite()).collect();
+            (None, rows.len() - used.len(), used)
+        }
+    };
+    let n = used.len();
+    let (src_v, r2, prcc_v) = if n > d + 2 && used.iter().any(|&r| y[r] != y[used[0]]) {
+        let x: Vec<Vec<f64>> = results.inputs.iter().map(|c| used.iter().map(|&r| c[r]).collect()).collect();
+        let yy: Vec<f64> = used.iter().map(|&r| y[r]).collect();
+        let (s, r2) = src(&x, &yy);
+        (s, r2, prcc(&x, &yy))
+    } else {
+        (vec![f64::NAN; d], f64::NAN, vec![f64::NAN; d])
+    };
+    Indices { sobol: sobol_idx, src: src_v, prcc: prcc_v, r2, n, dropped }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

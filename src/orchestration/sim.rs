@@ -1,9 +1,10 @@
 //! One configuration through the kernel (`study sim`): lane 0 of the same lane kernel the batch
 //! engine uses, with an [`Observer`] that keeps the time history of every channel of docs/model.md §5.
 
-use super::spec::SimSpec;
-use crate::kernel::effects::{effect_set, with_single, Baseline, Effect, EffectFn, EFFECTS};
-use crate::kernel::excitation::Reference;
+use super::measured::{DataProblem, NumTable};
+use super::spec::{ExcitationSpec, SimSpec};
+use crate::kernel::effects::{effect_set, with_single, Baseline, Effect, EffectFn, EffectId};
+use crate::kernel::excitation::{Record, Reference};
 use crate::kernel::params::ModelParams;
 use crate::kernel::resample::Resampler;
 use crate::kernel::simulate::{self, LaneParams, LaneResult, Observer, SetupError, Solver, TickView, idx};
@@ -96,12 +97,12 @@ pub fn run_lanes<const N: usize, O: Observer<N>>(models: &[&ModelParams], refere
 /// numbers as the effect set, bit for bit, several times faster
 /// ([`crate::kernel::effects::EffectFn`]).
 pub fn run_lanes_single<const N: usize, O: Observer<N>>(models: &[&ModelParams], reference: &Reference, solver: &Solver, obs: &mut O) -> Result<[LaneResult; N], SetupError> {
-    let on: Vec<&str> = EFFECTS.iter().copied().filter(|&e| models.iter().any(|m| m.effects.get(e) == Some(true))).collect();
-    if let [name] = on[..] {
+    let on: Vec<EffectId> = EffectId::ALL.into_iter().filter(|&e| models.iter().any(|m| m.effects.get(e))).collect();
+    if let [id] = on[..] {
         let lp = LaneParams::<N>::new(models)?;
         let lanes: [&ModelParams; N] = std::array::from_fn(|l| models[l.min(models.len() - 1)]);
         let single = Single { lp: &lp, reference, solver, obs: &mut *obs };
-        if let Some(Some(done)) = with_single(name, lanes, single) {
+        if let Some(done) = with_single(id, lanes, single) {
             return done;
         }
     }
@@ -120,6 +121,27 @@ impl<const N: usize, O: Observer<N>> EffectFn<N> for Single<'_, N, O> {
     type Output = Option<Result<[LaneResult; N], SetupError>>;
     fn call<E: Effect<N>>(self, effect: &E) -> Self::Output {
         simulate::run_usual(self.lp, effect, self.reference, self.solver, self.obs)
+    }
+}
+
+/// The reference of one excitation for `model`. A record's columns (its time and displacement)
+/// come in `record`, read by the caller; rounded time is rebuilt into its uniform grid (a gap or
+/// a drift is refused), and a displacement beyond the stroke is refused at its row.
+pub fn reference_for(excitation: &ExcitationSpec, model: &ModelParams, record: Option<&NumTable>) -> Result<Reference, DataProblem> {
+    let f_s = model.controller.f_s;
+    match (excitation, record) {
+        (ExcitationSpec::Sine { sine, .. }, _) => Ok(sine.reference(f_s)),
+        (ExcitationSpec::Record { column, time_column, f_ref_hz, scale, .. }, Some(t)) => {
+            let grid = t.time_base(time_column)?;
+            let disp: Vec<f64> = t.column(column).expect("the record's column was read").iter().map(|d| d * scale).collect();
+            let l = model.actuator.l;
+            if let Some((row, d)) = disp.iter().enumerate().find(|(_, d)| d.abs() >= l) {
+                return Err(t.problem(Some(column), Some(row + 1), format!("displacement {d} m (after scale {scale}) exceeds the stroke (half stroke actuator.l = {l} m)")));
+            }
+            let rec = Record { time_s: (0..t.rows()).map(|i| grid.time(i as f64)).collect(), disp_m: disp, f_ref_hz: *f_ref_hz };
+            Ok(rec.reference(f_s))
+        }
+        (ExcitationSpec::Record { file, .. }, None) => panic!("the record {} was not read before its reference was built", file.display()),
     }
 }
 

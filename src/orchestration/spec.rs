@@ -23,7 +23,7 @@
 
 use super::toml_fields::{Fields, InputError, Issues};
 use crate::kernel::excitation::Sine;
-use crate::kernel::params::{ModelParams, ValveLaw};
+use crate::kernel::params::{Component, ModelParams, ValveLaw};
 use crate::kernel::simulate::Solver;
 use std::path::PathBuf;
 
@@ -46,6 +46,17 @@ pub enum ExcitationSpec {
 
 impl ExcitationSpec {
     /// One-line description for printouts.
+    /// The excitation in a few words, with its frequency and amplitude in g (NaN for a record).
+    pub fn label(&self) -> (String, f64, f64) {
+        match self {
+            ExcitationSpec::Sine { sine, amp_g } => {
+                let g = amp_g.unwrap_or(sine.amp_m * (2.0 * std::f64::consts::PI * sine.freq_hz).powi(2) / crate::kernel::params::G);
+                (format!("sine {} Hz {:.2} g", sine.freq_hz, g), sine.freq_hz, g)
+            }
+            ExcitationSpec::Record { column, .. } => (format!("record {column}"), f64::NAN, f64::NAN),
+        }
+    }
+
     pub fn describe(&self) -> String {
         match self {
             ExcitationSpec::Sine { sine, amp_g } => {
@@ -79,15 +90,15 @@ pub struct SimSpec {
 /// Reads `[model.<component>]` overrides into `model` (defaults for everything not named).
 pub fn read_model(mut f: Fields<'_>, model: &mut ModelParams, issues: &mut Issues) {
     for comp in ModelParams::components() {
-        let Some(mut t) = f.table(comp, issues) else { continue };
+        let Some(mut t) = f.table(comp.name(), issues) else { continue };
         let names: Vec<&str> = ModelParams::registry().filter(|p| p.component == comp).map(|p| p.name).collect();
         let mut expected = names.clone();
-        if let Some(switch) = model.effects.get_mut(comp) {
+        if let Some(e) = comp.effect() {
             // An optional effect is on when its table is given (`enabled = false` switches it off).
             expected.push("enabled");
-            *switch = t.bool("enabled", issues).unwrap_or(true);
+            *model.effects.get_mut(e) = t.bool("enabled", issues).unwrap_or(true);
         }
-        if comp == "servovalve" {
+        if comp == Component::Servovalve {
             expected.push("law");
             if let Some(law) = t.str("law", issues) {
                 match law {
@@ -105,7 +116,7 @@ pub fn read_model(mut f: Fields<'_>, model: &mut ModelParams, issues: &mut Issue
         }
         t.finish(&expected, issues);
     }
-    f.finish(&ModelParams::components(), issues);
+    f.finish(&ModelParams::components().map(Component::name).collect::<Vec<_>>(), issues);
 }
 
 /// Validates a model, prefixing every path with `prefix` (e.g. `model`).
@@ -138,121 +149,116 @@ pub fn read_excitation_in(
     default_file: Option<&std::path::Path>,
 ) -> Option<ExcitationSpec> {
     let kind = f.str("kind", issues);
-    let out = match kind {
-        Some("sine") => {
-            let freq = f.f64("freq_hz", issues);
-            let amp_g = f.f64("amp_g", issues);
-            let amp_m = f.f64("amp_m", issues);
-            let taper = f.f64("taper_s", issues).unwrap_or(1.0);
-            let duration = f.f64("duration_s", issues).unwrap_or(taper + 2.0);
-            let cycles = f.int("window_cycles", issues);
-            let nyq = 0.5 * model.controller.f_s;
-            let freq = match freq {
-                Some(x) if x > 0.0 && x < nyq => Some(x),
-                Some(x) => {
-                    issues.push(f.path_of("freq_hz"), format!("{x} Hz must be in (0, {nyq}) Hz (below the controller's Nyquist frequency)"));
-                    None
-                }
-                None => {
-                    issues.push(f.path_of("freq_hz"), "missing (sine frequency in Hz)");
-                    None
-                }
-            };
-            if taper < 0.0 {
-                issues.push(f.path_of("taper_s"), format!("{taper} s must not be negative"));
-            }
-            if duration <= 0.0 || duration > 3600.0 {
-                issues.push(f.path_of("duration_s"), format!("{duration} s must be in (0, 3600] s"));
-            } else if taper >= duration {
-                issues.push(f.path_of("taper_s"), format!("{taper} s must be shorter than duration_s = {duration} s (the taper would fill the whole run)"));
-            }
-            let amp = match (amp_g, amp_m, freq) {
-                (Some(_), Some(_), _) => {
-                    issues.push(f.path_of("amp_m"), "give the amplitude once: amp_g or amp_m, not both");
-                    None
-                }
-                (None, None, _) => {
-                    issues.push(f.path_of("amp_g"), "missing (acceleration amplitude in g, or amp_m in metres)");
-                    None
-                }
-                (Some(g), None, Some(fr)) => Some((Sine::amp_from_g(g, fr), "amp_g", g)),
-                (None, Some(m), Some(_)) => Some((m, "amp_m", m)),
-                _ => None,
-            };
-            let mut ok_amp = None;
-            if let Some((x, key, given)) = amp {
-                let l = model.actuator.l;
-                if x <= 0.0 {
-                    issues.push(f.path_of(key), format!("{given} must be positive"));
-                } else if x >= l {
-                    issues.push(
-                        f.path_of(key),
-                        format!("displacement amplitude {x:.4} m exceeds the stroke: |x| must stay below the half stroke actuator.l = {l} m"),
-                    );
-                } else {
-                    ok_amp = Some(x);
-                }
-            }
-            let cycles = match cycles {
-                Some(c) if c >= 1 => Some(c as u32),
-                Some(c) => {
-                    issues.push(f.path_of("window_cycles"), format!("{c} must be at least 1"));
-                    None
-                }
-                None => None,
-            };
-            let (Some(freq), Some(x_amp)) = (freq, ok_amp) else {
-                f.finish(&[&SINE_KEYS[..], extra].concat(), issues);
-                return None;
-            };
-            let mut sine = Sine { freq_hz: freq, amp_m: x_amp, taper_s: taper, duration_s: duration, window_cycles: cycles };
-            let n = cycles.unwrap_or_else(|| sine.default_cycles());
-            sine.window_cycles = Some(n);
-            if n == 0 {
-                issues.push(f.path_of("duration_s"), format!("{duration} s leaves no whole cycle after taper_s + 1 s for the analysis window; lengthen the run or set window_cycles"));
-            } else if n as f64 / freq > duration + 1e-9 {
-                issues.push(f.path_of("window_cycles"), format!("{n} cycles ({:.3} s) do not fit in the {duration} s run", n as f64 / freq));
-            }
-            Some(ExcitationSpec::Sine { sine, amp_g: amp_g.filter(|_| amp_m.is_none()) })
-        }
-        Some("record") => {
-            let file = f.str("file", issues);
-            let column = f.str("column", issues).unwrap_or("ref_disp_m");
-            let time_column = f.str("time_column", issues).unwrap_or("time_s");
-            let f_ref = f.f64("f_ref_hz", issues).unwrap_or(50.0);
-            let scale = f.f64("scale", issues).unwrap_or(1.0);
-            if !(f_ref > 0.0 && f_ref < 0.5 * model.controller.f_s) {
-                issues.push(f.path_of("f_ref_hz"), format!("{f_ref} Hz must be in (0, f_s/2)"));
-            }
-            match file.map(PathBuf::from).or_else(|| default_file.map(PathBuf::from)) {
-                Some(file) => Some(ExcitationSpec::Record {
-                    file,
-                    column: column.to_string(),
-                    time_column: time_column.to_string(),
-                    f_ref_hz: f_ref,
-                    scale,
-                }),
-                None => {
-                    issues.push(f.path_of("file"), "missing (the CSV or Parquet file holding the record)");
-                    None
-                }
-            }
-        }
+    let (out, expected): (_, &[&str]) = match kind {
+        Some("sine") => (read_sine(&mut f, model, issues), &SINE_KEYS),
+        Some("record") => (read_record(&mut f, model, issues, default_file), &RECORD_KEYS),
         Some(other) => {
             issues.push(f.path_of("kind"), format!("unknown excitation kind {other:?}; expected \"sine\" or \"record\""));
-            None
+            (None, &SINE_KEYS)
         }
         None => {
             issues.push(f.path_of("kind"), "missing (\"sine\" or \"record\")");
-            None
+            (None, &SINE_KEYS)
         }
-    };
-    let expected: &[&str] = match kind {
-        Some("record") => &RECORD_KEYS,
-        _ => &SINE_KEYS,
     };
     f.finish(&[expected, extra].concat(), issues);
     out
+}
+
+/// A sine: its frequency below Nyquist, its amplitude (in g or in metres) within the stroke,
+/// a taper shorter than the run, and an analysis window that fits.
+fn read_sine(f: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues) -> Option<ExcitationSpec> {
+    let freq = f.f64("freq_hz", issues);
+    let amp_g = f.f64("amp_g", issues);
+    let amp_m = f.f64("amp_m", issues);
+    let taper = f.f64("taper_s", issues).unwrap_or(1.0);
+    let duration = f.f64("duration_s", issues).unwrap_or(taper + 2.0);
+    let cycles = f.int("window_cycles", issues);
+    let nyq = 0.5 * model.controller.f_s;
+    let freq = match freq {
+        Some(x) if x > 0.0 && x < nyq => Some(x),
+        Some(x) => {
+            issues.push(f.path_of("freq_hz"), format!("{x} Hz must be in (0, {nyq}) Hz (below the controller's Nyquist frequency)"));
+            None
+        }
+        None => {
+            issues.push(f.path_of("freq_hz"), "missing (sine frequency in Hz)");
+            None
+        }
+    };
+    if taper < 0.0 {
+        issues.push(f.path_of("taper_s"), format!("{taper} s must not be negative"));
+    }
+    if duration <= 0.0 || duration > 3600.0 {
+        issues.push(f.path_of("duration_s"), format!("{duration} s must be in (0, 3600] s"));
+    } else if taper >= duration {
+        issues.push(f.path_of("taper_s"), format!("{taper} s must be shorter than duration_s = {duration} s (the taper would fill the whole run)"));
+    }
+    let x_amp = sine_amplitude(f, model, (amp_g, amp_m), freq, issues);
+    let cycles = match cycles {
+        Some(c) if c >= 1 => Some(c as u32),
+        Some(c) => {
+            issues.push(f.path_of("window_cycles"), format!("{c} must be at least 1"));
+            None
+        }
+        None => None,
+    };
+    let (Some(freq), Some(x_amp)) = (freq, x_amp) else { return None };
+    let mut sine = Sine { freq_hz: freq, amp_m: x_amp, taper_s: taper, duration_s: duration, window_cycles: cycles };
+    let n = cycles.unwrap_or_else(|| sine.default_cycles());
+    sine.window_cycles = Some(n);
+    if n == 0 {
+        issues.push(f.path_of("duration_s"), format!("{duration} s leaves no whole cycle after taper_s + 1 s for the analysis window; lengthen the run or set window_cycles"));
+    } else if n as f64 / freq > duration + 1e-9 {
+        issues.push(f.path_of("window_cycles"), format!("{n} cycles ({:.3} s) do not fit in the {duration} s run", n as f64 / freq));
+    }
+    Some(ExcitationSpec::Sine { sine, amp_g: amp_g.filter(|_| amp_m.is_none()) })
+}
+
+/// A sine's displacement amplitude, m, from `amp_g` or `amp_m` (exactly one), positive and below
+/// the half stroke.
+fn sine_amplitude(f: &Fields<'_>, model: &ModelParams, (amp_g, amp_m): (Option<f64>, Option<f64>), freq: Option<f64>, issues: &mut Issues) -> Option<f64> {
+    let (x, key, given) = match (amp_g, amp_m, freq) {
+        (Some(_), Some(_), _) => {
+            issues.push(f.path_of("amp_m"), "give the amplitude once: amp_g or amp_m, not both");
+            return None;
+        }
+        (None, None, _) => {
+            issues.push(f.path_of("amp_g"), "missing (acceleration amplitude in g, or amp_m in metres)");
+            return None;
+        }
+        (Some(g), None, Some(fr)) => (Sine::amp_from_g(g, fr), "amp_g", g),
+        (None, Some(m), Some(_)) => (m, "amp_m", m),
+        (_, _, None) => return None,
+    };
+    let l = model.actuator.l;
+    if x <= 0.0 {
+        issues.push(f.path_of(key), format!("{given} must be positive"));
+        None
+    } else if x >= l {
+        issues.push(f.path_of(key), format!("displacement amplitude {x:.4} m exceeds the stroke: |x| must stay below the half stroke actuator.l = {l} m"));
+        None
+    } else {
+        Some(x)
+    }
+}
+
+/// A record: its file (or the campaign test's own data file), columns, the reference filter's
+/// cut-off and a scale.
+fn read_record(f: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues, default_file: Option<&std::path::Path>) -> Option<ExcitationSpec> {
+    let file = f.str("file", issues);
+    let column = f.str("column", issues).unwrap_or("ref_disp_m");
+    let time_column = f.str("time_column", issues).unwrap_or("time_s");
+    let f_ref = f.f64("f_ref_hz", issues).unwrap_or(50.0);
+    let scale = f.f64("scale", issues).unwrap_or(1.0);
+    if !(f_ref > 0.0 && f_ref < 0.5 * model.controller.f_s) {
+        issues.push(f.path_of("f_ref_hz"), format!("{f_ref} Hz must be in (0, f_s/2)"));
+    }
+    let Some(file) = file.map(PathBuf::from).or_else(|| default_file.map(PathBuf::from)) else {
+        issues.push(f.path_of("file"), "missing (the CSV or Parquet file holding the record)");
+        return None;
+    };
+    Some(ExcitationSpec::Record { file, column: column.to_string(), time_column: time_column.to_string(), f_ref_hz: f_ref, scale })
 }
 
 /// The keys of a sine excitation (campaign tests, study excitations); docs/formats.md lists each.
@@ -341,20 +347,20 @@ pub fn model_table(model: &ModelParams) -> toml::Table {
     let mut m = toml::Table::new();
     for comp in ModelParams::components() {
         let mut t = toml::Table::new();
-        if comp == "servovalve" {
+        if comp == Component::Servovalve {
             let law = match model.valve_law {
                 ValveLaw::Orifice => "orifice",
                 ValveLaw::Linear => "linear",
             };
             t.insert("law".into(), law.into());
         }
-        if model.effects.get(comp) == Some(false) {
+        if comp.effect().is_some_and(|e| !model.effects.get(e)) {
             continue;
         }
         for p in ModelParams::registry().filter(|p| p.component == comp) {
             t.insert(p.name.into(), (p.get)(model).into());
         }
-        m.insert(comp.into(), toml::Value::Table(t));
+        m.insert(comp.name().into(), toml::Value::Table(t));
     }
     m
 }

@@ -150,6 +150,219 @@ fn design_size(method: &Method, samples: usize, varied: usize) -> Result<(), Str
     }
 }
 
+/// Whether `name` is a word safe in file names and in comma-separated metadata lists: letters,
+/// digits, `_`, `-` and `.` (study and excitation names).
+pub fn is_word(name: &str) -> bool {
+    !name.is_empty() && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-' || c == '.')
+}
+
+/// `[study]`: name, description, seed, samples.
+struct Header {
+    name: Option<String>,
+    description: String,
+    seed: u64,
+    samples: Option<usize>,
+    /// Whether `samples` is written at all: a bad value is reported as bad, never as missing.
+    samples_given: bool,
+}
+
+fn read_header(root: &mut Fields<'_>, issues: &mut Issues) -> Header {
+    let mut h = Header { name: None, description: String::new(), seed: 0, samples: None, samples_given: false };
+    let Some(mut s) = root.table("study", issues) else {
+        issues.push("study", "missing table ([study] name, seed, samples)");
+        return h;
+    };
+    h.name = s.str("name", issues).map(str::to_string);
+    h.description = s.str("description", issues).unwrap_or("").to_string();
+    if let Some(v) = s.int("seed", issues) {
+        if v < 0 {
+            issues.push(s.path_of("seed"), "must not be negative");
+        }
+        h.seed = v as u64;
+    }
+    h.samples_given = s.has("samples");
+    if let Some(n) = s.int("samples", issues) {
+        if n < 1 {
+            issues.push(s.path_of("samples"), format!("{n} must be at least 1"));
+        } else {
+            h.samples = Some(n as usize);
+        }
+    }
+    match &h.name {
+        None => issues.push("study.name", "missing (names the study and its default output file)"),
+        Some(n) if !is_word(n) => issues.push("study.name", format!("{n:?} must be a non-empty file-name-safe word (letters, digits, _ - .)")),
+        Some(_) => {}
+    }
+    s.finish(&["name", "description", "seed", "samples"], issues);
+    h
+}
+
+/// `[method]`: the sampling method (Monte Carlo when absent).
+fn read_method(root: &mut Fields<'_>, issues: &mut Issues) -> Method {
+    let Some(mut m) = root.table("method", issues) else { return Method::MonteCarlo };
+    let sampling = m.str("sampling", issues).unwrap_or("monte_carlo");
+    let levels = m.int("levels", issues);
+    let mfile = m.str("file", issues);
+    let method = match sampling {
+        "monte_carlo" => Method::MonteCarlo,
+        "lhs" => Method::Lhs,
+        "sobol" => Method::Sobol,
+        "saltelli" => Method::Saltelli,
+        "grid" => {
+            let l = levels.unwrap_or(5);
+            if !(1..=1000).contains(&l) {
+                issues.push(m.path_of("levels"), format!("{l} must be in 1..=1000"));
+            }
+            Method::Grid { levels: l.clamp(1, 1000) as usize }
+        }
+        "file" => match mfile {
+            Some(p) => Method::File { path: PathBuf::from(p) },
+            None => {
+                issues.push(m.path_of("file"), "missing (the CSV or Parquet design file)");
+                Method::MonteCarlo
+            }
+        },
+        other => {
+            issues.push(m.path_of("sampling"), format!("unknown method {other:?}; expected monte_carlo, lhs, sobol, grid, saltelli or file"));
+            Method::MonteCarlo
+        }
+    };
+    m.finish(&["sampling", "levels", "file"], issues);
+    method
+}
+
+/// `[[variables]]`: each one read and checked against the model (an effect's parameter needs the
+/// effect on; a parameter is listed once).
+fn read_variables(root: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues) -> Vec<Variable> {
+    let variables: Vec<Variable> = root.tables("variables", issues).unwrap_or_default().into_iter().filter_map(|v| read_variable(v, issues)).collect();
+    for (i, v) in variables.iter().enumerate() {
+        let comp = v.info.component;
+        if comp.effect().is_some_and(|e| !model.effects.get(e)) {
+            issues.push(format!("variables[{i}].name"), format!("effect `{comp}` is not switched on: add a [model.{comp}] table"));
+        }
+        if variables[..i].iter().any(|w| std::ptr::eq(w.info, v.info)) {
+            issues.push(format!("variables[{i}].name"), format!("{} is listed twice", v.path()));
+        }
+    }
+    variables
+}
+
+/// `[[excitations]]`: at least one, each with a distinct name that is a word ([`is_word`]).
+fn read_excitations(root: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues) -> Vec<NamedExcitation> {
+    let mut excitations: Vec<NamedExcitation> = Vec::new();
+    match root.tables("excitations", issues) {
+        Some(list) if list.is_empty() => issues.push("excitations", "the excitation list is empty: every sample needs at least one excitation"),
+        Some(list) => {
+            for (i, mut e) in list.into_iter().enumerate() {
+                let ename = e.str("name", issues).map(str::to_string).unwrap_or_else(|| format!("exc{i}"));
+                let path = e.path_of("name");
+                if !is_word(&ename) {
+                    issues.push(path.clone(), format!("{ename:?} must be a non-empty word of letters, digits, _ - . (it names history files and is listed in the results' metadata)"));
+                }
+                // Read the excitation keys from the same table (name is consumed above).
+                if let Some(x) = read_named_excitation(e, model, issues) {
+                    if excitations.iter().any(|n| n.name == ename) {
+                        issues.push(path, format!("excitation name {ename:?} is used twice"));
+                    }
+                    excitations.push(NamedExcitation { name: ename, spec: x });
+                }
+            }
+        }
+        None => issues.push("excitations", "missing ([[excitations]] with kind = \"sine\" or \"record\")"),
+    }
+    excitations
+}
+
+/// `[responses] metrics`: the metrics written (every one when absent), and whether the list
+/// was written.
+fn read_responses(root: &mut Fields<'_>, issues: &mut Issues) -> (Vec<&'static str>, bool) {
+    let all = all_metric_names();
+    let Some(mut r) = root.table("responses", issues) else { return (all, false) };
+    let listed = r.has("metrics");
+    let mut metrics = all.clone();
+    if let Some(list) = r.str_array("metrics", issues) {
+        metrics = Vec::new();
+        for (i, m) in list.iter().enumerate() {
+            match all.iter().find(|a| *a == m) {
+                Some(a) => metrics.push(*a),
+                None => {
+                    let hint = super::toml_fields::suggest(m, &all).map(|s| format!(" (did you mean `{s}`?)")).unwrap_or_default();
+                    issues.push(format!("responses.metrics[{i}]"), format!("unknown metric {m:?}{hint}; expected one of: {}", all.join(", ")));
+                }
+            }
+        }
+        if list.is_empty() {
+            issues.push("responses.metrics", "the metric list is empty");
+        }
+    }
+    r.finish(&["metrics"], issues);
+    (metrics, listed)
+}
+
+/// `[output]`: the results file and the samples whose full histories are written.
+fn read_output(root: &mut Fields<'_>, issues: &mut Issues) -> (Option<PathBuf>, Vec<u64>) {
+    let Some(mut o) = root.table("output", issues) else { return (None, Vec::new()) };
+    let output = o.str("file", issues).map(PathBuf::from);
+    let mut histories = Vec::new();
+    if let Some(h) = o.f64_array("histories", issues) {
+        for (i, x) in h.iter().enumerate() {
+            if *x < 0.0 || x.fract() != 0.0 {
+                issues.push(format!("output.histories[{i}]"), format!("{x} is not a sample id"));
+            } else {
+                histories.push(*x as u64);
+            }
+        }
+        if histories.len() > 100 {
+            issues.push("output.histories", "at most 100 full histories may be requested");
+        }
+    }
+    o.finish(&["file", "histories"], issues);
+    (output, histories)
+}
+
+/// `[solver]`: the solver and the samples per work item.
+fn read_study_solver(root: &mut Fields<'_>, issues: &mut Issues) -> (Solver, usize) {
+    let Some(mut s) = root.table("solver", issues) else { return (Solver::default(), 64) };
+    let mut chunk = 64;
+    if let Some(c) = s.int("chunk", issues) {
+        if (1..=1 << 20).contains(&c) {
+            chunk = c as usize;
+        } else {
+            issues.push(s.path_of("chunk"), format!("{c} must be in 1..=1048576"));
+        }
+    }
+    // `substeps` is read by the shared solver reader; `chunk` was taken above.
+    (spec::read_solver(s, issues, &["chunk"]), chunk)
+}
+
+/// The design as a whole: samples where the method needs them, its size, its dimensions.
+fn check_design(method: &Method, header: &Header, variables: &[Variable], issues: &mut Issues) {
+    let varied = variables.iter().filter(|v| v.dist.varies()).count();
+    if matches!(method, Method::MonteCarlo | Method::Lhs | Method::Sobol | Method::Saltelli) && header.samples.is_none() && !header.samples_given {
+        issues.push("study.samples", format!("missing (required by sampling = \"{}\")", method.name()));
+    }
+    if let Some(n) = header.samples {
+        if let Err(why) = design_size(method, n, varied) {
+            issues.push("study.samples", why);
+        }
+    }
+    if matches!(method, Method::Sobol | Method::Saltelli) && 2 * varied > SOBOL_MAX_DIMS {
+        issues.push("variables", format!("at most {} varied parameters for Sobol' designs", SOBOL_MAX_DIMS / 2));
+    }
+    if matches!(method, Method::Saltelli) && varied == 0 {
+        issues.push("variables", "a Saltelli design needs at least one varied parameter");
+    }
+    if let Method::Grid { levels } = method {
+        let runs: f64 = variables.iter().map(|v| v.dist.grid(*levels).len() as f64).product();
+        if runs > 1e8 {
+            issues.push("method.levels", format!("the grid has {runs:.3e} points"));
+        }
+    }
+    if matches!(method, Method::File { .. }) && !variables.is_empty() {
+        issues.push("variables", "a design file names its own parameters (its columns); remove [[variables]] or choose another sampling");
+    }
+}
+
 /// Harmonic metrics at or above the Nyquist frequency f_s/2 of some sine excitation: the
 /// harmonic would be an alias of a lower frequency. Listed in `[responses] metrics`, it is refused
 /// (an issue at its index); by default it is kept as a column of NaN for that excitation (and left
@@ -196,139 +409,125 @@ fn aliased_harmonics(excitations: &[NamedExcitation], metrics: &[&str], listed: 
 const DIST_KEYS: [&str; 12] = ["name", "distribution", "value", "low", "high", "mean", "std", "mu", "sigma", "mode", "values", "levels"];
 
 fn read_variable(mut f: Fields<'_>, issues: &mut Issues) -> Option<Variable> {
-    let name = f.str("name", issues);
-    let dist = f.str("distribution", issues);
-    let info = match name {
-        Some(n) => match ModelParams::lookup(n) {
-            Some(i) => Some(i),
-            None => {
-                let all: Vec<String> = ModelParams::registry().map(|p| p.path()).collect();
-                let refs: Vec<&str> = all.iter().map(String::as_str).collect();
-                let hint = super::toml_fields::suggest(n, &refs).map(|s| format!(" (did you mean `{s}`?)")).unwrap_or_default();
-                issues.push(f.path_of("name"), format!("unknown parameter `{n}`{hint}; `study params` lists them"));
-                None
-            }
-        },
-        None => {
-            issues.push(f.path_of("name"), "missing (a parameter path such as \"controller.g_d\")");
-            None
-        }
-    };
-    if let Some(why) = info.and_then(cannot_vary) {
-        issues.push(f.path_of("name"), why);
-    }
-    let mut num = |key: &str, issues: &mut Issues| f.f64(key, issues);
-    let d = match dist {
-        Some("fixed") => num("value", issues).map(|value| Distribution::Fixed { value }),
-        Some("uniform") | Some("log_uniform") => {
-            let (lo, hi) = (num("low", issues), num("high", issues));
-            match (lo, hi) {
-                (Some(low), Some(high)) => {
-                    if low >= high {
-                        issues.push(f.path_of("low"), format!("low = {low} must be below high = {high}"));
-                        None
-                    } else if dist == Some("log_uniform") && low <= 0.0 {
-                        issues.push(f.path_of("low"), format!("low = {low} must be positive for a log-uniform distribution"));
-                        None
-                    } else if dist == Some("uniform") {
-                        Some(Distribution::Uniform { low, high })
-                    } else {
-                        Some(Distribution::LogUniform { low, high })
-                    }
-                }
-                _ => {
-                    issues.push(f.path_of("low"), "low and high are required");
-                    None
-                }
-            }
-        }
-        Some("normal") => {
-            let (mean, std) = (num("mean", issues), num("std", issues));
-            let (low, high) = (num("low", issues), num("high", issues));
-            match (mean, std) {
-                (Some(mean), Some(std)) if std > 0.0 => {
-                    if let (Some(l), Some(h)) = (low, high) {
-                        if l >= h {
-                            issues.push(f.path_of("low"), format!("low = {l} must be below high = {h}"));
-                        }
-                    }
-                    Some(Distribution::Normal { mean, std, low, high })
-                }
-                (Some(_), Some(std)) => {
-                    issues.push(f.path_of("std"), format!("std = {std} must be positive"));
-                    None
-                }
-                _ => {
-                    issues.push(f.path_of("mean"), "mean and std are required");
-                    None
-                }
-            }
-        }
-        Some("log_normal") => match (num("mu", issues), num("sigma", issues)) {
-            (Some(mu), Some(sigma)) if sigma > 0.0 => Some(Distribution::LogNormal { mu, sigma }),
-            (Some(_), Some(sigma)) => {
-                issues.push(f.path_of("sigma"), format!("sigma = {sigma} must be positive"));
-                None
-            }
-            _ => {
-                issues.push(f.path_of("mu"), "mu and sigma (of ln x) are required");
-                None
-            }
-        },
-        Some("triangular") => match (num("low", issues), num("mode", issues), num("high", issues)) {
-            (Some(low), Some(mode), Some(high)) if low <= mode && mode <= high && low < high => Some(Distribution::Triangular { low, mode, high }),
-            (Some(low), Some(mode), Some(high)) => {
-                issues.push(f.path_of("mode"), format!("need low <= mode <= high and low < high (got {low}, {mode}, {high})"));
-                None
-            }
-            _ => {
-                issues.push(f.path_of("low"), "low, mode and high are required");
-                None
-            }
-        },
-        Some("list") => match f.f64_array("values", issues) {
-            Some(v) if !v.is_empty() => Some(Distribution::List { values: v }),
-            Some(_) => {
-                issues.push(f.path_of("values"), "the list is empty");
-                None
-            }
-            None => {
-                issues.push(f.path_of("values"), "missing (the list of values)");
-                None
-            }
-        },
-        Some(other) => {
-            issues.push(
-                f.path_of("distribution"),
-                format!("unknown distribution {other:?}; expected fixed, uniform, log_uniform, normal, log_normal, triangular or list"),
-            );
-            None
-        }
-        None => {
-            issues.push(f.path_of("distribution"), "missing");
-            None
-        }
-    };
-    // Values outside the parameter's valid range are caught per sample, except where the whole
-    // support is outside: a fixed value, a list entry, or both bounds.
+    let info = read_parameter(&mut f, issues);
+    let d = read_distribution(&mut f, issues);
     if let (Some(info), Some(d)) = (info, &d) {
-        let bad: Vec<f64> = match d {
-            Distribution::Fixed { value } => vec![*value],
-            Distribution::List { values } => values.clone(),
-            Distribution::Uniform { low, high } | Distribution::LogUniform { low, high } | Distribution::Triangular { low, high, .. } => {
-                if !info.range.contains(*low) && !info.range.contains(*high) { vec![*low] } else { vec![] }
-            }
-            _ => vec![],
-        }
-        .into_iter()
-        .filter(|v| !info.range.contains(*v))
-        .collect();
-        if let Some(v) = bad.first() {
-            issues.push(f.path_of("name"), format!("{} = {v} {} is outside its valid range {}", info.path(), info.unit, info.range));
-        }
+        check_support(&f, info, d, issues);
     }
     f.finish(&DIST_KEYS, issues);
     Some(Variable { info: info?, dist: d? })
+}
+
+/// A variable's `name`: a registered parameter that may vary.
+fn read_parameter(f: &mut Fields<'_>, issues: &mut Issues) -> Option<&'static ParamInfo> {
+    let Some(n) = f.str("name", issues) else {
+        issues.push(f.path_of("name"), "missing (a parameter path such as \"controller.g_d\")");
+        return None;
+    };
+    let Some(info) = ModelParams::lookup(n) else {
+        let all: Vec<String> = ModelParams::registry().map(|p| p.path()).collect();
+        let refs: Vec<&str> = all.iter().map(String::as_str).collect();
+        let hint = super::toml_fields::suggest(n, &refs).map(|s| format!(" (did you mean `{s}`?)")).unwrap_or_default();
+        issues.push(f.path_of("name"), format!("unknown parameter `{n}`{hint}; `study params` lists them"));
+        return None;
+    };
+    if let Some(why) = cannot_vary(info) {
+        issues.push(f.path_of("name"), why);
+    }
+    Some(info)
+}
+
+/// A variable's `distribution` and its keys.
+fn read_distribution(f: &mut Fields<'_>, issues: &mut Issues) -> Option<Distribution> {
+    let fail = |path: String, why: String, issues: &mut Issues| -> Option<Distribution> {
+        issues.push(path, why);
+        None
+    };
+    match f.str("distribution", issues) {
+        Some("fixed") => f.f64("value", issues).map(|value| Distribution::Fixed { value }),
+        Some(kind @ ("uniform" | "log_uniform")) => read_bounded(f, kind == "log_uniform", issues),
+        Some("normal") => read_normal(f, issues),
+        Some("log_normal") => match (f.f64("mu", issues), f.f64("sigma", issues)) {
+            (Some(mu), Some(sigma)) if sigma > 0.0 => Some(Distribution::LogNormal { mu, sigma }),
+            (Some(_), Some(sigma)) => fail(f.path_of("sigma"), format!("sigma = {sigma} must be positive"), issues),
+            _ => fail(f.path_of("mu"), "mu and sigma (of ln x) are required".into(), issues),
+        },
+        Some("triangular") => match (f.f64("low", issues), f.f64("mode", issues), f.f64("high", issues)) {
+            (Some(low), Some(mode), Some(high)) if low <= mode && mode <= high && low < high => Some(Distribution::Triangular { low, mode, high }),
+            (Some(low), Some(mode), Some(high)) => fail(f.path_of("mode"), format!("need low <= mode <= high and low < high (got {low}, {mode}, {high})"), issues),
+            _ => fail(f.path_of("low"), "low, mode and high are required".into(), issues),
+        },
+        Some("list") => match f.f64_array("values", issues) {
+            Some(v) if !v.is_empty() => Some(Distribution::List { values: v }),
+            Some(_) => fail(f.path_of("values"), "the list is empty".into(), issues),
+            None => fail(f.path_of("values"), "missing (the list of values)".into(), issues),
+        },
+        Some(other) => fail(
+            f.path_of("distribution"),
+            format!("unknown distribution {other:?}; expected fixed, uniform, log_uniform, normal, log_normal, triangular or list"),
+            issues,
+        ),
+        None => fail(f.path_of("distribution"), "missing".into(), issues),
+    }
+}
+
+/// A uniform or log-uniform distribution: `low` < `high` (and `low` > 0 for a log-uniform one).
+fn read_bounded(f: &mut Fields<'_>, log: bool, issues: &mut Issues) -> Option<Distribution> {
+    let (Some(low), Some(high)) = (f.f64("low", issues), f.f64("high", issues)) else {
+        issues.push(f.path_of("low"), "low and high are required");
+        return None;
+    };
+    if low >= high {
+        issues.push(f.path_of("low"), format!("low = {low} must be below high = {high}"));
+        None
+    } else if log && low <= 0.0 {
+        issues.push(f.path_of("low"), format!("low = {low} must be positive for a log-uniform distribution"));
+        None
+    } else if log {
+        Some(Distribution::LogUniform { low, high })
+    } else {
+        Some(Distribution::Uniform { low, high })
+    }
+}
+
+/// A normal distribution, optionally truncated to [`low`, `high`].
+fn read_normal(f: &mut Fields<'_>, issues: &mut Issues) -> Option<Distribution> {
+    let (mean, std) = (f.f64("mean", issues), f.f64("std", issues));
+    let (low, high) = (f.f64("low", issues), f.f64("high", issues));
+    match (mean, std) {
+        (Some(mean), Some(std)) if std > 0.0 => {
+            if let (Some(l), Some(h)) = (low, high) {
+                if l >= h {
+                    issues.push(f.path_of("low"), format!("low = {l} must be below high = {h}"));
+                }
+            }
+            Some(Distribution::Normal { mean, std, low, high })
+        }
+        (Some(_), Some(std)) => {
+            issues.push(f.path_of("std"), format!("std = {std} must be positive"));
+            None
+        }
+        _ => {
+            issues.push(f.path_of("mean"), "mean and std are required");
+            None
+        }
+    }
+}
+
+/// Values outside the parameter's valid range are caught per sample, except where the whole
+/// support is outside: a fixed value, a list entry, or both bounds.
+fn check_support(f: &Fields<'_>, info: &ParamInfo, d: &Distribution, issues: &mut Issues) {
+    let candidates: Vec<f64> = match d {
+        Distribution::Fixed { value } => vec![*value],
+        Distribution::List { values } => values.clone(),
+        Distribution::Uniform { low, high } | Distribution::LogUniform { low, high } | Distribution::Triangular { low, high, .. } => {
+            if !info.range.contains(*low) && !info.range.contains(*high) { vec![*low] } else { vec![] }
+        }
+        Distribution::Normal { .. } | Distribution::LogNormal { .. } => vec![],
+    };
+    if let Some(v) = candidates.into_iter().find(|v| !info.range.contains(*v)) {
+        issues.push(f.path_of("name"), format!("{} = {v} {} is outside its valid range {}", info.path(), info.unit, info.range));
+    }
 }
 
 impl StudySpec {
@@ -337,215 +536,29 @@ impl StudySpec {
         let table = super::toml_fields::parse(text, file)?;
         let mut issues = Issues::default();
         let mut root = Fields::new("", &table);
-
-        let (mut name, mut description, mut seed, mut samples) = (None, String::new(), 0u64, None);
-        // Whether `samples` is written at all: a bad value is reported as bad, never as missing.
-        let mut samples_given = false;
-        match root.table("study", &mut issues) {
-            Some(mut s) => {
-                name = s.str("name", &mut issues).map(str::to_string);
-                description = s.str("description", &mut issues).unwrap_or("").to_string();
-                if let Some(v) = s.int("seed", &mut issues) {
-                    if v < 0 {
-                        issues.push(s.path_of("seed"), "must not be negative");
-                    }
-                    seed = v as u64;
-                }
-                samples_given = s.has("samples");
-                if let Some(n) = s.int("samples", &mut issues) {
-                    if n < 1 {
-                        issues.push(s.path_of("samples"), format!("{n} must be at least 1"));
-                    } else {
-                        samples = Some(n as usize);
-                    }
-                }
-                if name.is_none() {
-                    issues.push("study.name", "missing (names the study and its default output file)");
-                }
-                s.finish(&["name", "description", "seed", "samples"], &mut issues);
-            }
-            None => issues.push("study", "missing table ([study] name, seed, samples)"),
-        }
-        if let Some(n) = &name {
-            if n.is_empty() || !n.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-' || c == '.') {
-                issues.push("study.name", format!("{n:?} must be a non-empty file-name-safe word (letters, digits, _ - .)"));
-            }
-        }
-
-        let mut method = Method::MonteCarlo;
-        if let Some(mut m) = root.table("method", &mut issues) {
-            let sampling = m.str("sampling", &mut issues).unwrap_or("monte_carlo");
-            let levels = m.int("levels", &mut issues);
-            let mfile = m.str("file", &mut issues);
-            method = match sampling {
-                "monte_carlo" => Method::MonteCarlo,
-                "lhs" => Method::Lhs,
-                "sobol" => Method::Sobol,
-                "saltelli" => Method::Saltelli,
-                "grid" => {
-                    let l = levels.unwrap_or(5);
-                    if !(1..=1000).contains(&l) {
-                        issues.push(m.path_of("levels"), format!("{l} must be in 1..=1000"));
-                    }
-                    Method::Grid { levels: l.clamp(1, 1000) as usize }
-                }
-                "file" => match mfile {
-                    Some(p) => Method::File { path: PathBuf::from(p) },
-                    None => {
-                        issues.push(m.path_of("file"), "missing (the CSV or Parquet design file)");
-                        Method::MonteCarlo
-                    }
-                },
-                other => {
-                    issues.push(
-                        m.path_of("sampling"),
-                        format!("unknown method {other:?}; expected monte_carlo, lhs, sobol, grid, saltelli or file"),
-                    );
-                    Method::MonteCarlo
-                }
-            };
-            m.finish(&["sampling", "levels", "file"], &mut issues);
-        }
-
+        let header = read_header(&mut root, &mut issues);
+        let method = read_method(&mut root, &mut issues);
         let mut model = ModelParams::default();
         if let Some(m) = root.table("model", &mut issues) {
             spec::read_model(m, &mut model, &mut issues);
         }
         spec::validate_model(&model, "model", &mut issues);
-
-        let mut variables = Vec::new();
-        if let Some(list) = root.tables("variables", &mut issues) {
-            for v in list {
-                if let Some(v) = read_variable(v, &mut issues) {
-                    variables.push(v);
-                }
-            }
-        }
-        for (i, v) in variables.iter().enumerate() {
-            let comp = v.info.component;
-            if model.effects.get(comp) == Some(false) {
-                issues.push(format!("variables[{i}].name"), format!("effect `{comp}` is not switched on: add a [model.{comp}] table"));
-            }
-            if variables[..i].iter().any(|w| std::ptr::eq(w.info, v.info)) {
-                issues.push(format!("variables[{i}].name"), format!("{} is listed twice", v.path()));
-            }
-        }
-
-        let mut excitations = Vec::new();
-        match root.tables("excitations", &mut issues) {
-            Some(list) if list.is_empty() => issues.push("excitations", "the excitation list is empty: every sample needs at least one excitation"),
-            Some(list) => {
-                for (i, mut e) in list.into_iter().enumerate() {
-                    let ename = e.str("name", &mut issues).map(str::to_string).unwrap_or_else(|| format!("exc{i}"));
-                    let path = e.path_of("");
-                    // Read the excitation keys from the same table (name is consumed above).
-                    if let Some(x) = read_named_excitation(e, &model, &mut issues) {
-                        if excitations.iter().any(|n: &NamedExcitation| n.name == ename) {
-                            issues.push(format!("{}name", path), format!("excitation name {ename:?} is used twice"));
-                        }
-                        excitations.push(NamedExcitation { name: ename, spec: x });
-                    }
-                }
-            }
-            None => issues.push("excitations", "missing ([[excitations]] with kind = \"sine\" or \"record\")"),
-        }
-
-        let mut metrics = all_metric_names();
-        let mut metrics_listed = false;
-        if let Some(mut r) = root.table("responses", &mut issues) {
-            metrics_listed = r.has("metrics");
-            if let Some(list) = r.str_array("metrics", &mut issues) {
-                let all = all_metric_names();
-                let mut chosen = Vec::new();
-                for (i, m) in list.iter().enumerate() {
-                    match all.iter().find(|a| *a == m) {
-                        Some(a) => chosen.push(*a),
-                        None => {
-                            let hint = super::toml_fields::suggest(m, &all).map(|s| format!(" (did you mean `{s}`?)")).unwrap_or_default();
-                            issues.push(format!("responses.metrics[{i}]"), format!("unknown metric {m:?}{hint}; expected one of: {}", all.join(", ")));
-                        }
-                    }
-                }
-                if list.is_empty() {
-                    issues.push("responses.metrics", "the metric list is empty");
-                }
-                metrics = chosen;
-            }
-            r.finish(&["metrics"], &mut issues);
-        }
-
+        let variables = read_variables(&mut root, &model, &mut issues);
+        let excitations = read_excitations(&mut root, &model, &mut issues);
+        let (metrics, metrics_listed) = read_responses(&mut root, &mut issues);
         let notes = aliased_harmonics(&excitations, &metrics, metrics_listed, model.controller.f_s, &mut issues);
-
-        let mut output = None;
-        let mut histories = Vec::new();
-        if let Some(mut o) = root.table("output", &mut issues) {
-            output = o.str("file", &mut issues).map(PathBuf::from);
-            if let Some(h) = o.f64_array("histories", &mut issues) {
-                for (i, x) in h.iter().enumerate() {
-                    if *x < 0.0 || x.fract() != 0.0 {
-                        issues.push(format!("output.histories[{i}]"), format!("{x} is not a sample id"));
-                    } else {
-                        histories.push(*x as u64);
-                    }
-                }
-                if histories.len() > 100 {
-                    issues.push("output.histories", "at most 100 full histories may be requested");
-                }
-            }
-            o.finish(&["file", "histories"], &mut issues);
-        }
-
-        let mut solver = Solver::default();
-        let mut chunk = 64;
-        if let Some(mut s) = root.table("solver", &mut issues) {
-            if let Some(c) = s.int("chunk", &mut issues) {
-                if (1..=1 << 20).contains(&c) {
-                    chunk = c as usize;
-                } else {
-                    issues.push(s.path_of("chunk"), format!("{c} must be in 1..=1048576"));
-                }
-            }
-            // `substeps` is read by the shared solver reader; `chunk` was taken above.
-            solver = spec::read_solver(s, &mut issues, &["chunk"]);
-        }
+        let (output, histories) = read_output(&mut root, &mut issues);
+        let (solver, chunk) = read_study_solver(&mut root, &mut issues);
         root.finish(&["study", "method", "model", "variables", "excitations", "responses", "output", "solver"], &mut issues);
-
-        let varied = variables.iter().filter(|v| v.dist.varies()).count();
-        match &method {
-            Method::MonteCarlo | Method::Lhs | Method::Sobol | Method::Saltelli if samples.is_none() && !samples_given => {
-                issues.push("study.samples", format!("missing (required by sampling = \"{}\")", method.name()));
-            }
-            _ => {}
-        }
-        if let Some(n) = samples {
-            if let Err(why) = design_size(&method, n, varied) {
-                issues.push("study.samples", why);
-            }
-        }
-        if matches!(method, Method::Sobol | Method::Saltelli) && 2 * varied > SOBOL_MAX_DIMS {
-            issues.push("variables", format!("at most {} varied parameters for Sobol' designs", SOBOL_MAX_DIMS / 2));
-        }
-        if matches!(method, Method::Saltelli) && varied == 0 {
-            issues.push("variables", "a Saltelli design needs at least one varied parameter");
-        }
-        if let Method::Grid { levels } = method {
-            let runs: f64 = variables.iter().map(|v| v.dist.grid(levels).len() as f64).product();
-            if runs > 1e8 {
-                issues.push("method.levels", format!("the grid has {runs:.3e} points"));
-            }
-        }
-        if matches!(method, Method::File { .. }) && !variables.is_empty() {
-            issues.push("variables", "a design file names its own parameters (its columns); remove [[variables]] or choose another sampling");
-        }
-
+        check_design(&method, &header, &variables, &mut issues);
         issues.into_result(file)?;
-        let name = name.expect("checked");
+        let name = header.name.expect("checked");
         Ok(StudySpec {
             output: output.unwrap_or_else(|| PathBuf::from(format!("{name}.parquet"))),
             name,
-            description,
-            seed,
-            samples: samples.unwrap_or(0),
+            description: header.description,
+            seed: header.seed,
+            samples: header.samples.unwrap_or(0),
             method,
             model,
             variables,
@@ -558,12 +571,12 @@ impl StudySpec {
         })
     }
 
-    /// The varied variables (the design's dimensions), in file order.
     /// Whether the design can be made with `samples` as it is now (after `--samples`).
     pub fn check_design_size(&self) -> Result<(), String> {
         design_size(&self.method, self.samples, self.varied().len())
     }
 
+    /// The varied variables (the design's dimensions), in file order.
     pub fn varied(&self) -> Vec<&Variable> {
         self.variables.iter().filter(|v| v.dist.varies()).collect()
     }
@@ -589,75 +602,9 @@ impl StudySpec {
         s.insert("seed".into(), (self.seed as i64).into());
         s.insert("samples".into(), (self.samples as i64).into());
         root.insert("study".into(), s.into());
-        let mut m = toml::Table::new();
-        m.insert("sampling".into(), self.method.name().into());
-        match &self.method {
-            Method::Grid { levels } => {
-                m.insert("levels".into(), (*levels as i64).into());
-            }
-            Method::File { path } => {
-                m.insert("file".into(), path.display().to_string().into());
-            }
-            _ => {}
-        }
-        root.insert("method".into(), m.into());
+        root.insert("method".into(), self.method_table().into());
         root.insert("model".into(), spec::model_table(&self.model).into());
-        let vars: Vec<toml::Value> = self
-            .variables
-            .iter()
-            .map(|v| {
-                let mut t = toml::Table::new();
-                t.insert("name".into(), v.path().into());
-                let mut put = |k: &str, x: f64| {
-                    t.insert(k.into(), x.into());
-                };
-                let kind = match &v.dist {
-                    Distribution::Fixed { value } => {
-                        put("value", *value);
-                        "fixed"
-                    }
-                    Distribution::Uniform { low, high } => {
-                        put("low", *low);
-                        put("high", *high);
-                        "uniform"
-                    }
-                    Distribution::LogUniform { low, high } => {
-                        put("low", *low);
-                        put("high", *high);
-                        "log_uniform"
-                    }
-                    Distribution::Normal { mean, std, low, high } => {
-                        put("mean", *mean);
-                        put("std", *std);
-                        if let Some(l) = low {
-                            put("low", *l);
-                        }
-                        if let Some(h) = high {
-                            put("high", *h);
-                        }
-                        "normal"
-                    }
-                    Distribution::LogNormal { mu, sigma } => {
-                        put("mu", *mu);
-                        put("sigma", *sigma);
-                        "log_normal"
-                    }
-                    Distribution::Triangular { low, mode, high } => {
-                        put("low", *low);
-                        put("mode", *mode);
-                        put("high", *high);
-                        "triangular"
-                    }
-                    Distribution::List { values } => {
-                        t.insert("values".into(), toml::Value::Array(values.iter().map(|x| (*x).into()).collect()));
-                        "list"
-                    }
-                };
-                t.insert("distribution".into(), kind.into());
-                toml::Value::Table(t)
-            })
-            .collect();
-        root.insert("variables".into(), toml::Value::Array(vars));
+        root.insert("variables".into(), toml::Value::Array(self.variables.iter().map(|v| variable_table(v).into()).collect()));
         let exc: Vec<toml::Value> = self
             .excitations
             .iter()
@@ -683,6 +630,48 @@ impl StudySpec {
         root.insert("solver".into(), sv.into());
         toml::to_string(&root).expect("TOML of plain values")
     }
+
+    /// `[method]` as written.
+    fn method_table(&self) -> toml::Table {
+        let mut m = toml::Table::new();
+        m.insert("sampling".into(), self.method.name().into());
+        match &self.method {
+            Method::Grid { levels } => {
+                m.insert("levels".into(), (*levels as i64).into());
+            }
+            Method::File { path } => {
+                m.insert("file".into(), path.display().to_string().into());
+            }
+            Method::MonteCarlo | Method::Lhs | Method::Sobol | Method::Saltelli => {}
+        }
+        m
+    }
+}
+
+/// One `[[variables]]` entry as written: its name, distribution and the distribution's keys.
+fn variable_table(v: &Variable) -> toml::Table {
+    let mut t = toml::Table::new();
+    t.insert("name".into(), v.path().into());
+    let (kind, keys): (&str, Vec<(&str, f64)>) = match &v.dist {
+        Distribution::Fixed { value } => ("fixed", vec![("value", *value)]),
+        Distribution::Uniform { low, high } => ("uniform", vec![("low", *low), ("high", *high)]),
+        Distribution::LogUniform { low, high } => ("log_uniform", vec![("low", *low), ("high", *high)]),
+        Distribution::Normal { mean, std, low, high } => {
+            let bounds = [("low", *low), ("high", *high)].into_iter().filter_map(|(k, x)| x.map(|x| (k, x)));
+            ("normal", [("mean", *mean), ("std", *std)].into_iter().chain(bounds).collect())
+        }
+        Distribution::LogNormal { mu, sigma } => ("log_normal", vec![("mu", *mu), ("sigma", *sigma)]),
+        Distribution::Triangular { low, mode, high } => ("triangular", vec![("low", *low), ("mode", *mode), ("high", *high)]),
+        Distribution::List { values } => {
+            t.insert("values".into(), toml::Value::Array(values.iter().map(|x| (*x).into()).collect()));
+            ("list", vec![])
+        }
+    };
+    for (k, x) in keys {
+        t.insert(k.into(), x.into());
+    }
+    t.insert("distribution".into(), kind.into());
+    t
 }
 
 fn read_named_excitation(f: Fields<'_>, model: &ModelParams, issues: &mut Issues) -> Option<ExcitationSpec> {

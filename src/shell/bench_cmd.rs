@@ -117,7 +117,7 @@ fn read_baseline(path: &std::path::Path) -> anyhow::Result<(f64, f64)> {
 fn bench_diagnose(campaign: &std::path::Path, max_seconds: Option<f64>) -> anyhow::Result<()> {
     let model = crate::kernel::params::ModelParams::default();
     let problem = super::fit_cmd::load_problem(campaign, &model, false)?.problem;
-    let candidates = crate::kernel::params::EFFECTS;
+    let candidates = crate::kernel::params::EffectId::ALL;
     let simulated: f64 = problem.tests.iter().map(|t| t.drive.len() as f64 / t.drive.f_s).sum();
     let t0 = std::time::Instant::now();
     let d = crate::orchestration::diagnose::diagnose(&problem, &candidates);

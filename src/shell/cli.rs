@@ -138,6 +138,9 @@ pub struct SensitivityArgs {
     /// Bootstrap resamples for the Sobol' confidence intervals.
     #[arg(long, default_value_t = 500)]
     pub bootstrap: usize,
+    /// Worker threads (0 = every core).
+    #[arg(long, default_value_t = 0)]
+    pub threads: usize,
 }
 
 #[derive(Debug, clap::Args)]
@@ -159,6 +162,9 @@ pub struct CompareArgs {
     /// sign, a residual above half the signal) as an error (exit code 2).
     #[arg(long)]
     pub strict: bool,
+    /// Worker threads (0 = every core).
+    #[arg(long, default_value_t = 0)]
+    pub threads: usize,
 }
 
 #[derive(Debug, clap::Args)]
@@ -183,6 +189,9 @@ pub struct FitArgs {
     /// Treat every warning about the data as an error (exit code 2).
     #[arg(long)]
     pub strict: bool,
+    /// Worker threads (0 = every core).
+    #[arg(long, default_value_t = 0)]
+    pub threads: usize,
 }
 
 #[derive(Debug, clap::Args)]
@@ -201,6 +210,9 @@ pub struct DiagnoseArgs {
     /// Treat every warning about the data as an error (exit code 2).
     #[arg(long)]
     pub strict: bool,
+    /// Worker threads (0 = every core).
+    #[arg(long, default_value_t = 0)]
+    pub threads: usize,
 }
 
 /// The measured column an open-loop comparison drives the plant with.

@@ -2,10 +2,11 @@
 
 use super::cli::DiagnoseArgs;
 use super::fit_cmd::{check_effect, load_problem, print_checks, residual_warnings};
+use super::meta::{self, Key, Kind};
 use super::BadInput;
 use super::tables::{self, Column};
 use super::{campaign_io::load_model, RunFailed};
-use crate::kernel::params::EFFECTS;
+use crate::kernel::params::EffectId;
 use crate::orchestration::diagnose::{self, Diagnosis};
 use crate::orchestration::fit::{self, Problem};
 use crate::orchestration::measured::AlignedTest;
@@ -25,8 +26,8 @@ fn harmonic_label(k: usize) -> String {
 
 pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
     let model = load_model(args.model.as_deref())?;
-    let candidates: Vec<&'static str> = if args.candidates.is_empty() {
-        EFFECTS.iter().copied().filter(|e| model.effects.get(e) == Some(false)).collect()
+    let candidates: Vec<EffectId> = if args.candidates.is_empty() {
+        EffectId::ALL.into_iter().filter(|&e| !model.effects.get(e)).collect()
     } else {
         args.candidates.iter().map(|c| check_effect(c, "--candidates")).collect::<anyhow::Result<_>>()?
     };
@@ -115,11 +116,11 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
     }
     if let Some(map) = &d.state_map {
         writeln!(o, "\n  the starting model's residual:")?;
-        super::compare_cmd::print_state_map(&mut o, map)?;
+        super::state_map::print(&mut o, map)?;
     }
     if let (Some(map), Some(true)) = (&d.state_map_after, d.named_fit().map(|(_, f)| f.after.residual_rms() > diagnose::NOISE_FACTOR * d.noise_rms)) {
         writeln!(o, "\n  the residual the named effects leave:")?;
-        super::compare_cmd::print_state_map(&mut o, map)?;
+        super::state_map::print(&mut o, map)?;
     }
     writeln!(o, "\n  verdict: {}", d.summary())?;
     if let Some(dir) = &args.report {
@@ -142,14 +143,10 @@ fn state_map(aligned: &[AlignedTest]) -> Option<StateMap> {
 /// The Parquet tables and the HTML page of a diagnosis.
 pub fn write_report(dir: &std::path::Path, campaign: &str, problem: &Problem, d: &Diagnosis) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir)?;
-    let meta = vec![
-        ("vshake.kind".to_string(), "diagnose".to_string()),
-        ("vshake.campaign".to_string(), campaign.to_string()),
-        ("vshake.verdict".to_string(), d.summary()),
-        ("vshake.version".to_string(), env!("CARGO_PKG_VERSION").to_string()),
-    ];
+    let mut meta = meta::header(Kind::Diagnose);
+    meta.extend([meta::pair(Key::Campaign, campaign), meta::pair(Key::Verdict, d.summary())]);
     if let Some(map) = &d.state_map {
-        super::compare_cmd::write_state_map(dir, map, &meta)?;
+        super::state_map::write(dir, map, &meta)?;
     }
     let cs = &d.candidates;
     tables::write_table(
@@ -159,15 +156,15 @@ pub fn write_report(dir: &std::path::Path, campaign: &str, problem: &Problem, d:
             ("effect".into(), Column::Str(cs.iter().map(|c| c.effect.to_string()).collect())),
             ("family".into(), Column::Str(cs.iter().map(|c| c.family.to_string()).collect())),
             ("n_params".into(), Column::U32(cs.iter().map(|c| c.free.len() as u32).collect())),
-            ("params".into(), Column::Str(cs.iter().map(|c| c.free.iter().map(|f| f.info.path()).collect::<Vec<_>>().join(",")).collect())),
-            ("estimates".into(), Column::Str(cs.iter().map(|c| c.fit.as_ref().map_or(String::new(), |f| f.estimate.iter().map(|e| format!("{e:e}")).collect::<Vec<_>>().join(","))).collect())),
-            ("std_errors".into(), Column::Str(cs.iter().map(|c| c.fit.as_ref().map_or(String::new(), |f| f.se.iter().map(|e| format!("{e:e}")).collect::<Vec<_>>().join(","))).collect())),
+            ("params".into(), Column::StrList(cs.iter().map(|c| c.free.iter().map(|f| f.info.path()).collect()).collect())),
+            ("estimates".into(), Column::F64List(cs.iter().map(|c| c.fit.as_ref().map_or(Vec::new(), |f| f.estimate.clone())).collect())),
+            ("std_errors".into(), Column::F64List(cs.iter().map(|c| c.fit.as_ref().map_or(Vec::new(), |f| f.se.clone())).collect())),
             ("chi2".into(), Column::F64(cs.iter().map(|c| c.chi2()).collect())),
             ("chi2_baseline".into(), Column::F64(vec![d.baseline.chi2(); cs.len()])),
             ("n_features".into(), Column::U32(vec![d.n as u32; cs.len()])),
             ("delta_bic".into(), Column::F64(cs.iter().map(|c| c.delta_bic).collect())),
             ("explained".into(), Column::F64(cs.iter().map(|c| c.explained).collect())),
-            ("significant".into(), Column::Str(cs.iter().map(|c| if c.significant() { "yes".into() } else { "no".into() }).collect())),
+            ("significant".into(), Column::Bool(cs.iter().map(|c| c.significant()).collect())),
             ("failure".into(), Column::Str(cs.iter().map(|c| c.fit.as_ref().err().cloned().unwrap_or_default()).collect())),
         ],
         &meta,
@@ -176,20 +173,20 @@ pub fn write_report(dir: &std::path::Path, campaign: &str, problem: &Problem, d:
     let mut steps: Vec<(&str, &[crate::orchestration::fit::Free], &crate::orchestration::fit::FitResult, f64, f64)> = Vec::new();
     if let Some(c) = cs.first().filter(|c| c.significant()) {
         if let Ok(f) = &c.fit {
-            steps.push((c.effect, &c.free, f, c.delta_bic, c.explained));
+            steps.push((c.effect.name(), &c.free, f, c.delta_bic, c.explained));
         }
     }
     for st in &d.more {
-        steps.push((st.effect, &st.free, &st.fit, st.delta_bic, st.explained));
+        steps.push((st.effect.name(), &st.free, &st.fit, st.delta_bic, st.explained));
     }
     tables::write_table(
         &dir.join("selection.parquet"),
         vec![
             ("step".into(), Column::U32((1..=steps.len() as u32).collect())),
             ("effect".into(), Column::Str(steps.iter().map(|s| s.0.to_string()).collect())),
-            ("params".into(), Column::Str(steps.iter().map(|s| s.1.iter().map(|f| f.info.path()).collect::<Vec<_>>().join(",")).collect())),
-            ("estimates".into(), Column::Str(steps.iter().map(|s| s.2.estimate.iter().map(|e| format!("{e:e}")).collect::<Vec<_>>().join(",")).collect())),
-            ("std_errors".into(), Column::Str(steps.iter().map(|s| s.2.se.iter().map(|e| format!("{e:e}")).collect::<Vec<_>>().join(",")).collect())),
+            ("params".into(), Column::StrList(steps.iter().map(|s| s.1.iter().map(|f| f.info.path()).collect()).collect())),
+            ("estimates".into(), Column::F64List(steps.iter().map(|s| s.2.estimate.clone()).collect())),
+            ("std_errors".into(), Column::F64List(steps.iter().map(|s| s.2.se.clone()).collect())),
             ("chi2".into(), Column::F64(steps.iter().map(|s| s.2.chi2_after()).collect())),
             ("delta_bic".into(), Column::F64(steps.iter().map(|s| s.3).collect())),
             ("explained".into(), Column::F64(steps.iter().map(|s| s.4).collect())),
@@ -205,7 +202,7 @@ pub fn write_report(dir: &std::path::Path, campaign: &str, problem: &Problem, d:
     for (t, test) in problem.tests.iter().enumerate() {
         rows.push((test.name.clone(), "baseline", d.baseline.test_rms(t), phase_b[t]));
         for (i, c) in cs.iter().enumerate() {
-            rows.push((test.name.clone(), c.effect, c.fit.as_ref().map_or(f64::NAN, |f| f.after.test_rms(t)), phase_c[i][t]));
+            rows.push((test.name.clone(), c.effect.name(), c.fit.as_ref().map_or(f64::NAN, |f| f.after.test_rms(t)), phase_c[i][t]));
         }
     }
     tables::write_table(
@@ -221,7 +218,7 @@ pub fn write_report(dir: &std::path::Path, campaign: &str, problem: &Problem, d:
     let mut ev: Vec<(&str, usize, usize, f64, f64)> = Vec::new();
     for c in cs {
         for (t, k, b, a) in diagnose::evidence(d, c, usize::MAX) {
-            ev.push((c.effect, t, k, b, a));
+            ev.push((c.effect.name(), t, k, b, a));
         }
     }
     tables::write_table(

@@ -3,7 +3,7 @@
 use super::campaign_io::{load_campaign, load_model, load_tests, report_checks, LoadedCampaign};
 use super::cli::FitArgs;
 use super::{BadInput, RunFailed};
-use crate::kernel::params::{ModelParams, EFFECTS};
+use crate::kernel::params::{EffectId, ModelParams, EFFECTS};
 use crate::orchestration::fit::{self, Free, Problem, TestData};
 use crate::orchestration::toml_fields::suggest;
 use std::io::Write;
@@ -44,9 +44,9 @@ pub fn residual_warnings(problem: &Problem, e: &fit::Eval) -> Vec<String> {
         .collect()
 }
 
-/// Checks an effect name against the library.
-pub fn check_effect(e: &str, flag: &str) -> anyhow::Result<&'static str> {
-    EFFECTS.iter().copied().find(|x| *x == e.trim()).ok_or_else(|| {
+/// The library effect a command-line name means.
+pub fn check_effect(e: &str, flag: &str) -> anyhow::Result<EffectId> {
+    EffectId::parse(e.trim()).ok_or_else(|| {
         let hint = suggest(e.trim(), &EFFECTS).map_or(String::new(), |s| format!(" (did you mean `{s}`?)"));
         BadInput(format!("{flag} {e:?}: unknown effect{hint}; the library has {}", EFFECTS.join(", "))).into()
     })

@@ -2,7 +2,7 @@
 //! run, refusing missing, duplicate or mismatched shards.
 
 use super::cli::MergeArgs;
-use super::run_cmd::{completion, incomplete, COMPLETE_KEY, ROWS_DONE_KEY, ROWS_TOTAL_KEY, SHARD_KEYS};
+use super::meta::{self, Key, SHARD_KEYS};
 use super::tables::{self, ParquetStream};
 use super::BadInput;
 use anyhow::Context;
@@ -11,12 +11,12 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 /// What must agree between the shards of one run: metadata key and what to call it.
-const SAME: [(&str, &str); 5] = [
-    ("vshake.seed", "seed"),
-    ("vshake.version", "vshake version"),
-    ("vshake.schema_version", "results schema version"),
-    ("vshake.shard_count", "shard count"),
-    ("vshake.study", "study (the resolved study file)"),
+const SAME: [(Key, &str); 5] = [
+    (Key::Seed, "seed"),
+    (Key::Version, "vshake version"),
+    (Key::SchemaVersion, "results schema version"),
+    (Key::ShardCount, "shard count"),
+    (Key::Study, "study (the resolved study file)"),
 ];
 
 struct ShardFile {
@@ -25,9 +25,9 @@ struct ShardFile {
     index: usize,
 }
 
-fn get<'a>(f: &'a ShardFile, key: &str) -> anyhow::Result<&'a str> {
+fn get(f: &ShardFile, key: Key) -> anyhow::Result<&str> {
     f.meta
-        .get(key)
+        .get(key.as_str())
         .map(String::as_str)
         .ok_or_else(|| BadInput(format!("{}: not a shard of `study run --shard I/N` (no {key} in its metadata)", f.path.display())).into())
 }
@@ -46,11 +46,11 @@ fn shards(dir: &Path, skip: &Path) -> anyhow::Result<Vec<ShardFile>> {
     let mut list = Vec::new();
     let mut unfinished = Vec::new();
     for path in files {
-        let pairs = tables::parquet_metadata(&path).map_err(super::sim_cmd::input_if_user)?;
-        let done = incomplete(&pairs);
+        let pairs = tables::parquet_metadata(&path).map_err(tables::input_if_user)?;
+        let done = meta::incomplete(&pairs);
         let meta: BTreeMap<String, String> = pairs.into_iter().collect();
         let mut f = ShardFile { path, meta, index: 0 };
-        f.index = get(&f, SHARD_KEYS[0])?.parse().map_err(|_| BadInput(format!("{}: bad {}", f.path.display(), SHARD_KEYS[0])))?;
+        f.index = get(&f, Key::ShardIndex)?.parse().map_err(|_| BadInput(format!("{}: bad {}", f.path.display(), Key::ShardIndex)))?;
         match done {
             // A stopped shard counts as missing: its rows are not all there.
             Some((rows, total)) => unfinished.push(format!(
@@ -82,7 +82,7 @@ fn shards(dir: &Path, skip: &Path) -> anyhow::Result<Vec<ShardFile>> {
             }
         }
     }
-    let count: usize = get(first, SHARD_KEYS[1])?.parse().map_err(|_| BadInput(format!("{}: bad {}", first.path.display(), SHARD_KEYS[1])))?;
+    let count: usize = get(first, Key::ShardCount)?.parse().map_err(|_| BadInput(format!("{}: bad {}", first.path.display(), Key::ShardCount)))?;
     let mut by_index: BTreeMap<usize, &ShardFile> = BTreeMap::new();
     for f in &list {
         if f.index >= count {
@@ -108,8 +108,8 @@ fn shards(dir: &Path, skip: &Path) -> anyhow::Result<Vec<ShardFile>> {
     // The slices must tile the design in order.
     let mut at = 0usize;
     for f in by_index.values() {
-        let s = get(f, SHARD_KEYS[2])?;
-        let (a, b) = s.split_once("..").and_then(|(a, b)| Some((a.parse::<usize>().ok()?, b.parse::<usize>().ok()?))).ok_or_else(|| BadInput(format!("{}: bad {}", f.path.display(), SHARD_KEYS[2])))?;
+        let s = get(f, Key::ShardSamples)?;
+        let (a, b) = s.split_once("..").and_then(|(a, b)| Some((a.parse::<usize>().ok()?, b.parse::<usize>().ok()?))).ok_or_else(|| BadInput(format!("{}: bad {}", f.path.display(), Key::ShardSamples)))?;
         if a != at {
             return Err(BadInput(format!("{}: shard {}/{count} holds samples {a}..{b}, expected to start at {at}", f.path.display(), f.index)).into());
         }
@@ -127,14 +127,12 @@ pub fn run(args: &MergeArgs) -> anyhow::Result<()> {
     let list = shards(&args.dir, &out)?;
     let first = &list[0];
     // The merged file says what the unsharded run says: the shard keys go.
-    let dropped = [COMPLETE_KEY, ROWS_DONE_KEY, ROWS_TOTAL_KEY, "ARROW:schema"];
-    let meta: Vec<(String, String)> =
-        first.meta.iter().filter(|(k, _)| !SHARD_KEYS.contains(&k.as_str()) && !dropped.contains(&k.as_str())).map(|(k, v)| (k.clone(), v.clone())).collect();
-    let (fields, _) = tables::parquet_batches(&first.path).map_err(super::sim_cmd::input_if_user)?;
+    let meta = meta::carried(&first.meta, &SHARD_KEYS);
+    let (fields, _) = tables::parquet_batches(&first.path).map_err(tables::input_if_user)?;
     let mut stream = ParquetStream::create_with_fields(&out, fields.clone(), &meta)?;
     let mut rows = 0usize;
     for f in &list {
-        let (theirs, reader) = tables::parquet_batches(&f.path).map_err(super::sim_cmd::input_if_user)?;
+        let (theirs, reader) = tables::parquet_batches(&f.path).map_err(tables::input_if_user)?;
         let shape = |v: &[arrow_schema::Field]| v.iter().map(|x| (x.name().clone(), x.data_type().clone())).collect::<Vec<_>>();
         if shape(&theirs) != shape(&fields) {
             return Err(BadInput(format!("{}: its columns differ from {}'s", f.path.display(), first.path.display())).into());
@@ -146,14 +144,14 @@ pub fn run(args: &MergeArgs) -> anyhow::Result<()> {
         }
     }
     let expected: Option<usize> = (|| {
-        let samples: usize = first.meta.get("vshake.samples")?.parse().ok()?;
-        let exc = first.meta.get("vshake.excitations")?.split(',').count();
+        let samples: usize = first.meta.get(Key::Samples.as_str())?.parse().ok()?;
+        let exc = meta::items(first.meta.get(Key::Excitations.as_str())?).len();
         Some(samples * exc)
     })();
     if let Some(e) = expected.filter(|e| *e != rows) {
         return Err(BadInput(format!("{}: the shards hold {rows} rows, the study has {e}", args.dir.display())).into());
     }
-    stream.finish_with(&completion(rows, rows)).with_context(|| format!("writing {}", out.display()))?;
+    stream.finish_with(&meta::completion(rows, rows)).with_context(|| format!("writing {}", out.display()))?;
     let mut o = std::io::stdout().lock();
     writeln!(o, "study merge {}: {} shards, {rows} rows -> {}", args.dir.display(), list.len(), out.display())?;
     Ok(())

@@ -10,6 +10,7 @@ pub mod diagnose_cmd;
 pub mod fit_cmd;
 pub mod interrupt;
 pub mod merge_cmd;
+pub mod meta;
 pub mod params_cmd;
 pub mod progress;
 pub mod report;
@@ -19,6 +20,7 @@ pub mod sensitivity_cmd;
 pub mod sim_cmd;
 pub mod sizing;
 pub mod slurm_cmd;
+pub mod state_map;
 pub mod synth_cmd;
 pub mod tables;
 

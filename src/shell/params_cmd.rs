@@ -3,7 +3,7 @@
 use super::cli::ParamsArgs;
 use super::BadInput;
 use crate::kernel::effects::LIBRARY;
-use crate::kernel::params::ModelParams;
+use crate::kernel::params::{Component, ModelParams};
 use std::io::Write;
 
 pub fn run(args: &ParamsArgs) -> anyhow::Result<()> {
@@ -16,17 +16,19 @@ pub fn run(args: &ParamsArgs) -> anyhow::Result<()> {
         writeln!(out, "\nSwitch one on with its table [model.NAME] in a model, run or study file; its parameters: study params NAME.")?;
         return Ok(());
     }
-    if let Some(c) = &args.component {
-        if !ModelParams::components().contains(&c.as_str()) {
-            return Err(BadInput(format!("unknown component `{c}`; expected one of: {}", ModelParams::components().join(", "))).into());
-        }
-    }
+    let component = match &args.component {
+        Some(c) => Some(Component::parse(c).ok_or_else(|| {
+            let all: Vec<&str> = ModelParams::components().map(Component::name).collect();
+            BadInput(format!("unknown component `{c}`; expected one of: {}", all.join(", ")))
+        })?),
+        None => None,
+    };
     let mut out = std::io::stdout().lock();
     writeln!(out, "{:<30} {:<12} {:>14} {:<16} {:<7} meaning", "parameter", "unit", "default", "range", "source")?;
-    for p in ModelParams::registry().filter(|p| args.component.as_deref().is_none_or(|c| c == p.component)) {
+    for p in ModelParams::registry().filter(|p| component.is_none_or(|c| c == p.component)) {
         writeln!(out, "{:<30} {:<12} {:>14} {:<16} {:<7} {}", p.path(), p.unit, format!("{}", p.default), p.range.to_string(), p.source.to_string(), p.doc)?;
     }
-    if args.component.as_deref().is_none_or(|c| c == "servovalve") {
+    if component.is_none_or(|c| c == Component::Servovalve) {
         writeln!(out, "{:<30} {:<12} {:>14} {:<16} {:<7} Valve flow law: square-root orifice, or the linear counter-example.", "servovalve.law", "-", "orifice", "orifice|linear", "paper")?;
     }
     Ok(())

@@ -5,8 +5,9 @@
 //! computes exactly what the first one would have; every sample depends only on (seed, sample
 //! id), so the finished file equals an uninterrupted run's row for row, bit for bit.
 
-use super::run_cmd::{incomplete, plan_for, Job, ResultsSink, Shard, COMPLETE_KEY, ROWS_DONE_KEY, ROWS_TOTAL_KEY, SHARD_KEYS, STUDY_FILE_KEY};
-use super::sim_cmd::input_if_user;
+use super::meta::{self, Key, Kind};
+use super::run_cmd::{plan_for, Job, ResultsSink, Shard};
+use super::tables::input_if_user;
 use super::tables::{self, Recovered};
 use super::BadInput;
 use crate::orchestration::study::StudySpec;
@@ -81,28 +82,27 @@ pub fn job(file: &Path) -> anyhow::Result<Option<Job>> {
         return Err(BadInput(format!("{}: not found (nothing to resume)", file.display())).into());
     }
     let meta = tables::parquet_metadata(&source).map_err(input_if_user)?;
-    let get = |k: &str| meta.iter().find(|(key, _)| key == k).map(|(_, v)| v.as_str());
-    if get("vshake.kind") != Some("study_results") {
+    let get = |k: Key| meta::get(&meta, k);
+    if !meta::is(&meta, Kind::StudyResults) {
         return Err(BadInput(format!("{}: not a results file of `study run` (no vshake.kind = study_results in its metadata)", file.display())).into());
     }
     let rows = tables::parquet_rows(&source).map_err(input_if_user)?;
-    if !temporary && incomplete(&meta).is_none() {
+    if !temporary && meta::incomplete(&meta).is_none() {
         writeln!(std::io::stdout(), "study run --resume {}: the file is complete ({rows} rows); nothing to do", file.display())?;
         return Ok(None);
     }
-    let need = |k: &str| get(k).ok_or_else(|| BadInput(format!("{}: no {k} in its metadata; it cannot be resumed", file.display())));
+    let need = |k: Key| get(k).ok_or_else(|| BadInput(format!("{}: no {k} in its metadata; it cannot be resumed", file.display())));
     let what = format!("{} (the study in its metadata)", source.display());
-    let spec = StudySpec::from_toml(need("vshake.study")?, &what)?;
-    let plan = plan_for(&spec, Path::new(need(STUDY_FILE_KEY)?).parent().unwrap_or(Path::new(".")))?;
-    let shard = match (get(SHARD_KEYS[0]), get(SHARD_KEYS[1])) {
+    let spec = StudySpec::from_toml(need(Key::Study)?, &what)?;
+    let plan = plan_for(&spec, Path::new(need(Key::StudyFile)?).parent().unwrap_or(Path::new(".")))?;
+    let shard = match (get(Key::ShardIndex), get(Key::ShardCount)) {
         (Some(i), Some(n)) => Some(Shard::parse(&format!("{i}/{n}"), plan.samples())?),
         _ => None,
     };
     let range = shard.as_ref().map_or(0..plan.samples(), |s| s.range.clone());
     // A row group may end inside a sample's excitations: only whole samples are kept.
     let samples = (rows / plan.references.len()).min(range.len());
-    let dropped = [COMPLETE_KEY, ROWS_DONE_KEY, ROWS_TOTAL_KEY, "ARROW:schema"];
-    let meta: Vec<(String, String)> = meta.into_iter().filter(|(k, _)| !dropped.contains(&k.as_str())).collect();
+    let meta = meta::carried(meta.iter().map(|(k, v)| (k, v)), &[]);
     let kept = Some(Kept { source, samples, temporary });
     Ok(Some(Job { spec, plan, shard, range, out: file.to_path_buf(), meta, kept }))
 }

@@ -2,7 +2,8 @@
 
 use super::cli::RunArgs;
 use super::progress::Progress;
-use super::sim_cmd::{input_if_user, reference_for};
+use super::tables::{input_if_user, load_reference};
+use super::meta::{self, Key, Kind};
 use super::tables::{self, Column, ParquetStream};
 use super::{interrupt, BadInput};
 use crate::kernel::params::{ModelParams, ParamInfo};
@@ -29,7 +30,7 @@ pub fn load_study(file: &Path) -> anyhow::Result<StudySpec> {
 
 /// Builds the plan of a study: references of its excitations and its design.
 pub fn plan_for(spec: &StudySpec, base: &Path) -> anyhow::Result<Plan> {
-    let references = spec.excitations.iter().map(|e| reference_for(&e.spec, &spec.model, base)).collect::<anyhow::Result<Vec<_>>>()?;
+    let references = spec.excitations.iter().map(|e| load_reference(&e.spec, &spec.model, base)).collect::<anyhow::Result<Vec<_>>>()?;
     match &spec.method {
         Method::File { path } => {
             let path = base.join(path);
@@ -160,22 +161,19 @@ impl RowSink for ResultsSink {
 
 /// The metadata every results file carries.
 pub fn results_metadata(spec: &StudySpec, plan: &Plan, extra: &[(String, String)]) -> Vec<(String, String)> {
-    let mut m = vec![
-        ("vshake.kind".to_string(), "study_results".to_string()),
-        ("vshake.study".to_string(), spec.resolved_toml()),
-        ("vshake.seed".to_string(), spec.seed.to_string()),
-        ("vshake.version".to_string(), env!("CARGO_PKG_VERSION").to_string()),
-        ("vshake.schema_version".to_string(), SCHEMA_VERSION.to_string()),
-        ("vshake.design".to_string(), spec.method.name().to_string()),
-        ("vshake.samples".to_string(), plan.samples().to_string()),
-        ("vshake.excitations".to_string(), spec.excitations.iter().map(|e| e.name.as_str()).collect::<Vec<_>>().join(",")),
-        ("vshake.parameters".to_string(), plan.columns.iter().map(|c| c.path()).collect::<Vec<_>>().join(",")),
-        ("vshake.parameter_columns".to_string(), plan.columns.iter().map(|c| c.column_name()).collect::<Vec<_>>().join(",")),
-        ("vshake.metrics".to_string(), spec.metrics.join(",")),
-        // The design's dimensions in order (the varied variables; a design file's columns): for a
-        // Saltelli design, block 2 + i of a base point swaps dimension i.
-        ("vshake.design_parameters".to_string(), design_parameters(spec, plan).join(",")),
-    ];
+    let mut m = meta::header(Kind::StudyResults);
+    m.extend([
+        meta::pair(Key::Study, spec.resolved_toml()),
+        meta::pair(Key::Seed, spec.seed),
+        meta::pair(Key::SchemaVersion, SCHEMA_VERSION),
+        meta::pair(Key::Design, spec.method.name()),
+        meta::pair(Key::Samples, plan.samples()),
+        meta::pair(Key::Excitations, meta::list(spec.excitations.iter().map(|e| &e.name))),
+        meta::pair(Key::Parameters, meta::list(plan.columns.iter().map(|c| c.path()))),
+        meta::pair(Key::ParameterColumns, meta::list(plan.columns.iter().map(|c| c.column_name()))),
+        meta::pair(Key::Metrics, meta::list(&spec.metrics)),
+        meta::pair(Key::DesignParameters, meta::list(design_parameters(spec, plan))),
+    ]);
     m.extend_from_slice(extra);
     m
 }
@@ -194,30 +192,6 @@ pub fn pool(threads: usize) -> anyhow::Result<rayon::ThreadPool> {
         b = b.num_threads(threads);
     }
     Ok(b.build()?)
-}
-
-/// Metadata keys set when a results file is closed: whether it holds every row of its study (or
-/// shard), and how many it holds of how many. A file without them (older versions) is complete.
-pub const COMPLETE_KEY: &str = "vshake.complete";
-pub const ROWS_DONE_KEY: &str = "vshake.rows_done";
-pub const ROWS_TOTAL_KEY: &str = "vshake.rows_total";
-/// The study file a results file was made from (absolute), whose folder relative paths in the
-/// study are read from when the run is resumed.
-pub const STUDY_FILE_KEY: &str = "vshake.study_file";
-
-/// The completion keys of a file holding `done` of `total` rows.
-pub fn completion(done: usize, total: usize) -> Vec<(String, String)> {
-    vec![
-        (COMPLETE_KEY.to_string(), (done == total).to_string()),
-        (ROWS_DONE_KEY.to_string(), done.to_string()),
-        (ROWS_TOTAL_KEY.to_string(), total.to_string()),
-    ]
-}
-
-/// `Some((done, total))` when a results file's metadata marks it incomplete.
-pub fn incomplete(meta: &[(String, String)]) -> Option<(String, String)> {
-    let get = |k: &str| meta.iter().find(|(key, _)| key == k).map(|(_, v)| v.clone());
-    (get(COMPLETE_KEY).as_deref() == Some("false")).then(|| (get(ROWS_DONE_KEY).unwrap_or_else(|| "?".into()), get(ROWS_TOTAL_KEY).unwrap_or_else(|| "?".into())))
 }
 
 /// A run to do: the study, its plan, the slice of samples the file covers, the output file and
@@ -253,7 +227,7 @@ impl Job {
         }
         let out = output_path(args.out.as_deref(), &spec, shard.as_ref())?;
         let study_file = std::fs::canonicalize(file).unwrap_or_else(|_| file.to_path_buf());
-        let mut extra = vec![(STUDY_FILE_KEY.to_string(), study_file.display().to_string())];
+        let mut extra = vec![meta::pair(Key::StudyFile, study_file.display())];
         extra.extend(shard.as_ref().map_or_else(Vec::new, |s| s.metadata()));
         let meta = results_metadata(&spec, &plan, &extra);
         Ok(Job { spec, plan, shard, range, out, meta, kept: None })
@@ -349,7 +323,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
     let summary = batch::run_plan(&job.plan, todo.clone(), &pool, chunk, &mut sink, &|n| progress.inc(n), &|| interrupt::requested().is_some())?;
     progress.finish();
     let (done, total) = (sink.rows(), job.rows_total());
-    sink.finish(&completion(done, total)).with_context(|| format!("writing {}", job.out.display()))?;
+    sink.finish(&meta::completion(done, total)).with_context(|| format!("writing {}", job.out.display()))?;
     if let Some(k) = &job.kept {
         k.discard();
     }
@@ -440,13 +414,8 @@ fn write_histories(job: &Job) -> anyhow::Result<()> {
             let outcome = sim::run_sim(&sim_spec, &plan.references[e])?;
             let path = dir.join(format!("sample{id}_{}.parquet", exc.name));
             let cols: Vec<(&str, &[f64])> = sim::CHANNELS.iter().map(|(n, _)| *n).zip(outcome.history.columns.iter().map(Vec::as_slice)).collect();
-            let meta = vec![
-                ("vshake.kind".to_string(), "time_history".to_string()),
-                ("vshake.spec".to_string(), sim_spec.resolved_toml()),
-                ("vshake.sample_id".to_string(), id.to_string()),
-                ("vshake.version".to_string(), env!("CARGO_PKG_VERSION").to_string()),
-                ("vshake.schema_version".to_string(), SCHEMA_VERSION.to_string()),
-            ];
+            let mut meta = meta::header(Kind::TimeHistory);
+            meta.extend([meta::pair(Key::Spec, sim_spec.resolved_toml()), meta::pair(Key::SampleId, id), meta::pair(Key::SchemaVersion, SCHEMA_VERSION)]);
             tables::write_parquet(&path, &cols, &meta)?;
             writeln!(o, "  history     {}", path.display())?;
         }
@@ -462,9 +431,6 @@ pub struct Shard {
     pub count: usize,
     pub range: std::ops::Range<usize>,
 }
-
-/// Metadata keys a shard adds to its results (`study merge` checks and removes them).
-pub const SHARD_KEYS: [&str; 3] = ["vshake.shard_index", "vshake.shard_count", "vshake.shard_samples"];
 
 impl Shard {
     /// Parses `I/N` for a design of `samples` samples.
@@ -484,9 +450,9 @@ impl Shard {
 
     pub fn metadata(&self) -> Vec<(String, String)> {
         vec![
-            (SHARD_KEYS[0].to_string(), self.index.to_string()),
-            (SHARD_KEYS[1].to_string(), self.count.to_string()),
-            (SHARD_KEYS[2].to_string(), format!("{}..{}", self.range.start, self.range.end)),
+            meta::pair(Key::ShardIndex, self.index),
+            meta::pair(Key::ShardCount, self.count),
+            meta::pair(Key::ShardSamples, format!("{}..{}", self.range.start, self.range.end)),
         ]
     }
 }

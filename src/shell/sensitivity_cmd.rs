@@ -1,76 +1,84 @@
 //! `study sensitivity results.parquet`: Sobol' indices (Saltelli designs), SRC and PRCC (any
-//! design), per excitation and metric; a Parquet table and a ranked printout.
+//! design), per excitation and metric; a Parquet table and a ranked printout. The analysis is
+//! `orchestration::sensitivity`; this reads the results table, prints and writes.
 
 use super::cli::SensitivityArgs;
-use super::sim_cmd::input_if_user;
-use super::tables::{self, Column};
+use super::meta::{self, Key, Kind};
+use super::tables::{self, input_if_user, Column, NumTable};
 use super::BadInput;
-use crate::orchestration::sensitivity::{self, SobolIndex};
+use crate::orchestration::sensitivity::{self, Indices, Results, SobolIndex};
 use rayon::prelude::*;
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-/// Indices of one (excitation, metric, parameter).
-struct Line {
-    excitation: String,
-    metric: String,
-    parameter: String,
-    sobol: Option<SobolIndex>,
-    src: f64,
-    prcc: f64,
-    r2: f64,
-    n: usize,
-    dropped: usize,
+/// A results file as the analysis needs it.
+struct Loaded {
+    design: String,
+    /// The varied parameters' paths and columns, in design order.
+    paths: Vec<String>,
+    columns: Vec<String>,
+    metrics: Vec<String>,
+    excitations: Vec<String>,
+    table: NumTable,
 }
 
-pub fn run(args: &SensitivityArgs) -> anyhow::Result<()> {
-    let file = &args.file;
-    let meta: std::collections::HashMap<String, String> = tables::parquet_metadata(file).map_err(input_if_user)?.into_iter().collect();
-    let get = |k: &str| meta.get(k).cloned().ok_or_else(|| BadInput(format!("{}: not a vshake results file (no `{k}` in its metadata)", file.display())));
-    if get("vshake.kind")? != "study_results" {
+impl Loaded {
+    fn saltelli(&self) -> bool {
+        self.design == "saltelli"
+    }
+
+    fn col(&self, name: &str) -> &[f64] {
+        self.table.column(name).expect("column read")
+    }
+
+    fn results(&self) -> Results<'_> {
+        Results {
+            excitation: self.col("excitation_id"),
+            saltelli: self.saltelli().then(|| (self.col("design_base"), self.col("design_block"))),
+            inputs: self.columns.iter().map(|c| self.col(c)).collect(),
+        }
+    }
+}
+
+/// Reads the metadata and the columns the analysis needs; refuses a file that is not a complete
+/// results file, unknown `--metrics`, and a design where nothing varies.
+fn load(file: &Path, wanted_metrics: Option<&[String]>) -> anyhow::Result<Loaded> {
+    let pairs = tables::parquet_metadata(file).map_err(input_if_user)?;
+    let get = |k: Key| meta::get(&pairs, k).ok_or_else(|| BadInput(format!("{}: not a vshake results file (no `{k}` in its metadata)", file.display())));
+    if get(Key::Kind)? != Kind::StudyResults.as_str() {
         return Err(BadInput(format!("{}: not a study results file", file.display())).into());
     }
-    let pairs: Vec<(String, String)> = meta.iter().map(|(k, v)| (k.clone(), v.clone())).collect();
-    if let Some((done, total)) = super::run_cmd::incomplete(&pairs) {
-        return Err(BadInput(format!(
-            "{}: incomplete ({done} of {total} rows; the run was stopped): finish it first with `study run --resume {}`",
-            file.display(),
-            file.display()
-        ))
-        .into());
+    if let Some((done, total)) = meta::incomplete(&pairs) {
+        let f = file.display();
+        return Err(BadInput(format!("{f}: incomplete ({done} of {total} rows; the run was stopped): finish it first with `study run --resume {f}`")).into());
     }
-    let design = get("vshake.design")?;
-    let paths: Vec<String> = get("vshake.parameters")?.split(',').filter(|s| !s.is_empty()).map(str::to_string).collect();
-    let pcols: Vec<String> = get("vshake.parameter_columns")?.split(',').filter(|s| !s.is_empty()).map(str::to_string).collect();
-    let all_metrics: Vec<String> = get("vshake.metrics")?.split(',').map(str::to_string).collect();
-    let exc_names: Vec<String> = get("vshake.excitations")?.split(',').map(str::to_string).collect();
-    let metrics: Vec<String> = match &args.metrics {
+    let design = get(Key::Design)?.to_string();
+    let all_paths = meta::items(get(Key::Parameters)?);
+    let all_columns = meta::items(get(Key::ParameterColumns)?);
+    let all_metrics = meta::items(get(Key::Metrics)?);
+    let excitations = meta::items(get(Key::Excitations)?);
+    let metrics: Vec<String> = match wanted_metrics {
         Some(list) => {
-            for m in list {
-                if !all_metrics.contains(m) {
-                    return Err(BadInput(format!("--metrics: {m:?} is not in {} (it has: {})", file.display(), all_metrics.join(", "))).into());
-                }
+            if let Some(m) = list.iter().find(|m| !all_metrics.contains(m)) {
+                return Err(BadInput(format!("--metrics: {m:?} is not in {} (it has: {})", file.display(), all_metrics.join(", "))).into());
             }
-            list.clone()
+            list.to_vec()
         }
-        None => all_metrics.clone(),
+        None => all_metrics,
     };
-    let saltelli = design == "saltelli";
     let mut wanted: Vec<&str> = vec!["excitation_id"];
-    if saltelli {
+    if design == "saltelli" {
         wanted.extend(["design_base", "design_block"]);
     }
-    wanted.extend(pcols.iter().map(String::as_str));
-    wanted.extend(metrics.iter().map(String::as_str));
-    let t = tables::read_columns_allow_nan(file, &wanted).map_err(input_if_user)?;
-    let col = |n: &str| t.column(n).expect("column read");
+    wanted.extend(all_columns.iter().chain(&metrics).map(String::as_str));
+    let table = tables::read_columns_allow_nan(file, &wanted).map_err(input_if_user)?;
     // The design's parameters, in design order (recorded by `study run`); older files: the
     // parameter columns that vary.
-    let varied: Vec<usize> = match meta.get("vshake.design_parameters") {
-        Some(list) => list.split(',').filter(|s| !s.is_empty()).filter_map(|p| paths.iter().position(|x| x == p)).collect(),
-        None => (0..pcols.len())
+    let varied: Vec<usize> = match meta::get(&pairs, Key::DesignParameters) {
+        Some(list) => meta::items(list).iter().filter_map(|p| all_paths.iter().position(|x| x == p)).collect(),
+        None => (0..all_columns.len())
             .filter(|&i| {
-                let c = col(&pcols[i]);
+                let c = table.column(&all_columns[i]).expect("column read");
                 c.iter().any(|v| *v != c[0])
             })
             .collect(),
@@ -78,131 +86,89 @@ pub fn run(args: &SensitivityArgs) -> anyhow::Result<()> {
     if varied.is_empty() {
         return Err(BadInput(format!("{}: no parameter varies; nothing to analyse", file.display())).into());
     }
-    let d = varied.len();
-    let exc = col("excitation_id");
-    let jobs: Vec<(usize, &String)> = (0..exc_names.len()).flat_map(|e| metrics.iter().map(move |m| (e, m))).collect();
-    let bootstrap = args.bootstrap;
-    let lines: Vec<Vec<Line>> = jobs
-        .par_iter()
-        .map(|&(e, m)| {
-            let y = col(m);
-            let rows: Vec<usize> = (0..t.rows()).filter(|&r| exc[r] as usize == e).collect();
-            let mut sobol_idx: Option<Vec<SobolIndex>> = None;
-            let dropped;
-            let regression_rows: Vec<usize>;
-            if saltelli {
-                let (base, block) = (col("design_base"), col("design_block"));
-                let n_base = rows.iter().map(|&r| base[r] as usize + 1).max().unwrap_or(0);
-                let mut table = vec![vec![f64::NAN; d + 2]; n_base];
-                for &r in &rows {
-                    let (b, k) = (base[r] as usize, block[r] as usize);
-                    if k < d + 2 {
-                        table[b][k] = y[r];
-                    }
-                }
-                let complete: Vec<&Vec<f64>> = table.iter().filter(|v| v.iter().all(|x| x.is_finite())).collect();
-                dropped = n_base - complete.len();
-                if complete.len() >= 2 {
-                    let fa: Vec<f64> = complete.iter().map(|v| v[0]).collect();
-                    let fb: Vec<f64> = complete.iter().map(|v| v[1]).collect();
-                    let fab: Vec<Vec<f64>> = (0..d).map(|i| complete.iter().map(|v| v[2 + i]).collect()).collect();
-                    sobol_idx = Some(sensitivity::sobol(&fa, &fb, &fab, bootstrap, 0x5eed ^ (e as u64) << 8));
-                }
-                regression_rows = rows.iter().copied().filter(|&r| block[r] < 2.0 && y[r].is_finite()).collect();
-            } else {
-                regression_rows = rows.iter().copied().filter(|&r| y[r].is_finite()).collect();
-                dropped = rows.len() - regression_rows.len();
-            }
-            let n = regression_rows.len();
-            let (src, r2, prcc) = if n > d + 2 && regression_rows.iter().any(|&r| y[r] != y[regression_rows[0]]) {
-                let x: Vec<Vec<f64>> = varied
-                    .iter()
-                    .map(|&i| {
-                        let c = col(&pcols[i]);
-                        regression_rows.iter().map(|&r| c[r]).collect()
-                    })
-                    .collect();
-                let yy: Vec<f64> = regression_rows.iter().map(|&r| y[r]).collect();
-                let (src, r2) = sensitivity::src(&x, &yy);
-                (src, r2, sensitivity::prcc(&x, &yy))
-            } else {
-                (vec![f64::NAN; d], f64::NAN, vec![f64::NAN; d])
-            };
-            varied
-                .iter()
-                .enumerate()
-                .map(|(k, &i)| Line {
-                    excitation: exc_names[e].clone(),
-                    metric: m.clone(),
-                    parameter: paths[i].clone(),
-                    sobol: sobol_idx.as_ref().map(|s| s[k]),
-                    src: src[k],
-                    prcc: prcc[k],
-                    r2,
-                    n,
-                    dropped,
-                })
-                .collect()
-        })
-        .collect();
+    let paths = varied.iter().map(|&i| all_paths[i].clone()).collect();
+    let columns = varied.iter().map(|&i| all_columns[i].clone()).collect();
+    Ok(Loaded { design, paths, columns, metrics, excitations, table })
+}
 
+/// The indices of every (excitation, metric), in parallel on `threads` workers.
+fn analyse(l: &Loaded, bootstrap: usize, threads: usize) -> anyhow::Result<Vec<(usize, &String, Indices)>> {
+    let results = l.results();
+    let jobs: Vec<(usize, &String)> = (0..l.excitations.len()).flat_map(|e| l.metrics.iter().map(move |m| (e, m))).collect();
+    let pool = super::run_cmd::pool(threads)?;
+    Ok(pool.install(|| jobs.par_iter().map(|&(e, m)| (e, m, sensitivity::analyse(&results, e, l.col(m), bootstrap))).collect()))
+}
+
+pub fn run(args: &SensitivityArgs) -> anyhow::Result<()> {
+    let file = &args.file;
+    let loaded = load(file, args.metrics.as_deref())?;
+    let lines = analyse(&loaded, args.bootstrap, args.threads)?;
     let mut out = std::io::stdout().lock();
-    writeln!(out, "study sensitivity {} ({} design, {} varied parameters)", file.display(), design, d)?;
-    for group in &lines {
-        let Some(first) = group.first() else { continue };
-        let mut ranked: Vec<&Line> = group.iter().collect();
-        if saltelli {
-            ranked.sort_by(|a, b| b.sobol.map_or(f64::NAN, |s| s.total.value).total_cmp(&a.sobol.map_or(f64::NAN, |s| s.total.value)));
-        } else {
-            ranked.sort_by(|a, b| b.src.abs().total_cmp(&a.src.abs()));
-        }
-        writeln!(out)?;
-        let dropped = if first.dropped > 0 { format!(", {} dropped (failed runs)", first.dropped) } else { String::new() };
-        writeln!(out, "{} @ {}  (n = {}{dropped}; R² of the linear fit {:.3})", first.metric, first.excitation, first.n, first.r2)?;
-        if saltelli {
-            writeln!(out, "  {:<4} {:<26} {:>24} {:>24} {:>8} {:>8}", "rank", "parameter", "S1 [95% CI]", "ST [95% CI]", "SRC", "PRCC")?;
-        } else {
-            writeln!(out, "  {:<4} {:<26} {:>8} {:>8}", "rank", "parameter", "SRC", "PRCC")?;
-        }
-        for (k, l) in ranked.iter().enumerate() {
-            if let Some(s) = l.sobol {
-                let fmt = |e: sensitivity::Estimate| format!("{:.3} [{:.3}, {:.3}]", e.value, e.ci_low, e.ci_high);
-                writeln!(out, "  {:<4} {:<26} {:>24} {:>24} {:>+8.3} {:>+8.3}", k + 1, l.parameter, fmt(s.first), fmt(s.total), l.src, l.prcc)?;
-            } else {
-                writeln!(out, "  {:<4} {:<26} {:>+8.3} {:>+8.3}", k + 1, l.parameter, l.src, l.prcc)?;
-            }
-        }
-    }
+    print(&mut out, &loaded, file, &lines)?;
     let out_path: PathBuf = args.out.clone().unwrap_or_else(|| {
         let stem = file.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
         file.with_file_name(format!("{stem}_sensitivity.parquet"))
     });
-    let all: Vec<&Line> = lines.iter().flatten().collect();
-    let s = |f: &dyn Fn(&SobolIndex) -> f64| Column::F64(all.iter().map(|l| l.sobol.as_ref().map_or(f64::NAN, f)).collect());
+    write(&out_path, &loaded, file, &lines, args.bootstrap)?;
+    writeln!(out, "\nwrote {}", out_path.display())?;
+    Ok(())
+}
+
+/// Per output, the parameters ranked (by total Sobol' index for a Saltelli design, else by |SRC|).
+fn print(out: &mut dyn Write, l: &Loaded, file: &Path, lines: &[(usize, &String, Indices)]) -> std::io::Result<()> {
+    writeln!(out, "study sensitivity {} ({} design, {} varied parameters)", file.display(), l.design, l.paths.len())?;
+    for (e, metric, ix) in lines {
+        let total = |k: usize| ix.sobol.as_ref().map_or(f64::NAN, |s| s[k].total.value);
+        let mut ranked: Vec<usize> = (0..l.paths.len()).collect();
+        if l.saltelli() {
+            ranked.sort_by(|&a, &b| total(b).total_cmp(&total(a)));
+        } else {
+            ranked.sort_by(|&a, &b| ix.src[b].abs().total_cmp(&ix.src[a].abs()));
+        }
+        writeln!(out)?;
+        let dropped = if ix.dropped > 0 { format!(", {} dropped (failed runs)", ix.dropped) } else { String::new() };
+        writeln!(out, "{metric} @ {}  (n = {}{dropped}; R² of the linear fit {:.3})", l.excitations[*e], ix.n, ix.r2)?;
+        if l.saltelli() {
+            writeln!(out, "  {:<4} {:<26} {:>24} {:>24} {:>8} {:>8}", "rank", "parameter", "S1 [95% CI]", "ST [95% CI]", "SRC", "PRCC")?;
+        } else {
+            writeln!(out, "  {:<4} {:<26} {:>8} {:>8}", "rank", "parameter", "SRC", "PRCC")?;
+        }
+        for (rank, &k) in ranked.iter().enumerate() {
+            let p = &l.paths[k];
+            match &ix.sobol {
+                Some(s) => {
+                    let fmt = |e: sensitivity::Estimate| format!("{:.3} [{:.3}, {:.3}]", e.value, e.ci_low, e.ci_high);
+                    writeln!(out, "  {:<4} {:<26} {:>24} {:>24} {:>+8.3} {:>+8.3}", rank + 1, p, fmt(s[k].first), fmt(s[k].total), ix.src[k], ix.prcc[k])?;
+                }
+                None => writeln!(out, "  {:<4} {:<26} {:>+8.3} {:>+8.3}", rank + 1, p, ix.src[k], ix.prcc[k])?,
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The table: one row per (excitation, metric, parameter).
+fn write(path: &Path, l: &Loaded, file: &Path, lines: &[(usize, &String, Indices)], bootstrap: usize) -> anyhow::Result<()> {
+    let rows: Vec<(&(usize, &String, Indices), usize)> = lines.iter().flat_map(|x| (0..l.paths.len()).map(move |k| (x, k))).collect();
+    let s = |f: &dyn Fn(&SobolIndex) -> f64| Column::F64(rows.iter().map(|((_, _, ix), k)| ix.sobol.as_ref().map_or(f64::NAN, |s| f(&s[*k]))).collect());
+    let x = |f: &dyn Fn(&Indices, usize) -> f64| Column::F64(rows.iter().map(|((_, _, ix), k)| f(ix, *k)).collect());
     let cols = vec![
-        ("excitation".to_string(), Column::Str(all.iter().map(|l| l.excitation.clone()).collect())),
-        ("metric".to_string(), Column::Str(all.iter().map(|l| l.metric.clone()).collect())),
-        ("parameter".to_string(), Column::Str(all.iter().map(|l| l.parameter.clone()).collect())),
+        ("excitation".to_string(), Column::Str(rows.iter().map(|((e, _, _), _)| l.excitations[*e].clone()).collect())),
+        ("metric".to_string(), Column::Str(rows.iter().map(|((_, m, _), _)| m.to_string()).collect())),
+        ("parameter".to_string(), Column::Str(rows.iter().map(|(_, k)| l.paths[*k].clone()).collect())),
         ("s1".to_string(), s(&|x| x.first.value)),
         ("s1_ci_low".to_string(), s(&|x| x.first.ci_low)),
         ("s1_ci_high".to_string(), s(&|x| x.first.ci_high)),
         ("st".to_string(), s(&|x| x.total.value)),
         ("st_ci_low".to_string(), s(&|x| x.total.ci_low)),
         ("st_ci_high".to_string(), s(&|x| x.total.ci_high)),
-        ("src".to_string(), Column::F64(all.iter().map(|l| l.src).collect())),
-        ("prcc".to_string(), Column::F64(all.iter().map(|l| l.prcc).collect())),
-        ("r2_linear".to_string(), Column::F64(all.iter().map(|l| l.r2).collect())),
-        ("n".to_string(), Column::U64(all.iter().map(|l| l.n as u64).collect())),
-        ("dropped".to_string(), Column::U64(all.iter().map(|l| l.dropped as u64).collect())),
+        ("src".to_string(), x(&|ix, k| ix.src[k])),
+        ("prcc".to_string(), x(&|ix, k| ix.prcc[k])),
+        ("r2_linear".to_string(), x(&|ix, _| ix.r2)),
+        ("n".to_string(), Column::U64(rows.iter().map(|((_, _, ix), _)| ix.n as u64).collect())),
+        ("dropped".to_string(), Column::U64(rows.iter().map(|((_, _, ix), _)| ix.dropped as u64).collect())),
     ];
-    let meta = vec![
-        ("vshake.kind".to_string(), "sensitivity".to_string()),
-        ("vshake.source".to_string(), file.display().to_string()),
-        ("vshake.bootstrap".to_string(), bootstrap.to_string()),
-        ("vshake.version".to_string(), env!("CARGO_PKG_VERSION").to_string()),
-        ("vshake.schema_version".to_string(), super::run_cmd::SCHEMA_VERSION.to_string()),
-    ];
-    tables::write_table(&out_path, cols, &meta)?;
-    writeln!(out, "\nwrote {}", out_path.display())?;
-    Ok(())
+    let mut m = meta::header(Kind::Sensitivity);
+    m.extend([meta::pair(Key::Source, file.display()), meta::pair(Key::Bootstrap, bootstrap), meta::pair(Key::SchemaVersion, super::run_cmd::SCHEMA_VERSION)]);
+    tables::write_table(path, cols, &m)
 }

@@ -3,8 +3,9 @@
 
 use super::campaign_io::{load_campaign, load_model};
 use super::cli::SynthArgs;
-use super::sim_cmd::reference_for;
+use super::tables::load_reference;
 use super::tables::{self, Column};
+use super::meta::{self, Key, Kind};
 use super::{BadInput, RunFailed};
 use crate::kernel::excitation::Reference;
 use crate::kernel::params::ModelParams;
@@ -25,10 +26,7 @@ const NOISY: [(&str, &str); 5] = [("accel", "accel_mps2"), ("disp", "disp_m"), (
 /// Switches on the named effects.
 pub fn apply_effects(model: &mut ModelParams, effects: &[String]) -> anyhow::Result<()> {
     for e in effects {
-        let switch = model.effects.get_mut(e.trim()).ok_or_else(|| {
-            BadInput(format!("--effect {e:?}: unknown effect; the library has {}", crate::kernel::params::EFFECTS.join(", ")))
-        })?;
-        *switch = true;
+        *model.effects.get_mut(super::fit_cmd::check_effect(e, "--effect")?) = true;
     }
     Ok(())
 }
@@ -140,7 +138,7 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
         let mut test_model = test.model.clone();
         apply_effects(&mut test_model, &args.effect)?;
         apply_sets(&mut test_model, &args.set)?;
-        let mut reference = reference_for(&test.excitation, &test_model, &lc.base)?;
+        let mut reference = load_reference(&test.excitation, &test_model, &lc.base)?;
         let spec = SimSpec { model: test_model, excitation: test.excitation.clone(), solver: Default::default() };
         let cols = sample_test(&spec, &mut reference, rate, pre_rows)?.map_err(|e| RunFailed(format!("test {:?}: {e}", test.name)))?;
         let mut cols: Vec<(&str, Vec<f64>)> = cols;
@@ -159,16 +157,11 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
         if let Some(dir) = path.parent() {
             std::fs::create_dir_all(dir)?;
         }
-        let mut meta = vec![
-            ("vshake.kind".to_string(), "synthetic_measurement".to_string()),
-            ("vshake.spec".to_string(), spec.resolved_toml()),
-            ("vshake.noise".to_string(), args.noise.clone().unwrap_or_default()),
-            ("vshake.seed".to_string(), args.seed.to_string()),
-            ("vshake.version".to_string(), env!("CARGO_PKG_VERSION").to_string()),
-        ];
-        if args.blind {
-            meta.retain(|(k, _)| k != "vshake.spec");
+        let mut meta = meta::header(Kind::SyntheticMeasurement);
+        if !args.blind {
+            meta.push(meta::pair(Key::Spec, spec.resolved_toml()));
         }
+        meta.extend([meta::pair(Key::Noise, args.noise.clone().unwrap_or_default()), meta::pair(Key::Seed, args.seed)]);
         write_measured(&path, &cols, &meta)?;
         // A record that lives in its own file is copied along, so the folder is a whole campaign.
         if let ExcitationSpec::Record { file, .. } = &test.excitation {

@@ -5,6 +5,7 @@
 //! write leaves no file that looks complete). The time base and the values are checked one floor
 //! down ([`crate::orchestration::measured`]).
 
+use arrow_array::builder::{Float64Builder, ListBuilder, StringBuilder};
 use arrow_array::{Array, ArrayRef, Float32Array, Float64Array, Int32Array, Int64Array, RecordBatch};
 use arrow_schema::{DataType, Field, Schema};
 use parquet::arrow::ArrowWriter;
@@ -12,6 +13,10 @@ use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 use parquet::basic::{Compression, ZstdLevel};
 use parquet::file::metadata::KeyValue;
 use parquet::file::properties::WriterProperties;
+use crate::kernel::excitation::Reference;
+use crate::kernel::params::ModelParams;
+use crate::orchestration::sim;
+use crate::orchestration::spec::ExcitationSpec;
 use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -152,6 +157,20 @@ fn column_names_unguarded(path: &Path) -> Result<Vec<String>, TableError> {
         let h = rdr.headers().map_err(|e| TableError::Format { file, kind: "CSV", message: e.to_string() })?;
         Ok(h.iter().map(str::to_string).collect())
     }
+}
+
+/// Marks a table error as bad input (exit 2) when it is the user's.
+pub fn input_if_user(e: TableError) -> anyhow::Error {
+    if e.is_input() { super::BadInput(e.to_string()).into() } else { e.into() }
+}
+
+/// The reference of one excitation for `model`, reading a record's file relative to `base`.
+pub fn load_reference(excitation: &ExcitationSpec, model: &ModelParams, base: &Path) -> anyhow::Result<Reference> {
+    let record = match excitation {
+        ExcitationSpec::Sine { .. } => None,
+        ExcitationSpec::Record { file, column, time_column, .. } => Some(read_columns(&base.join(file), &[time_column, column], &[]).map_err(input_if_user)?),
+    };
+    sim::reference_for(excitation, model, record.as_ref()).map_err(|p| super::BadInput(p.to_string()).into())
 }
 
 /// Reads the `wanted` columns (all required) plus any of `optional` that are present. Every
@@ -369,6 +388,10 @@ pub enum Column {
     /// Nullable string.
     OptStr(Vec<Option<String>>),
     Bool(Vec<bool>),
+    /// A list of strings per row (Arrow `List<Utf8>`).
+    StrList(Vec<Vec<String>>),
+    /// A list of numbers per row (Arrow `List<Float64>`).
+    F64List(Vec<Vec<f64>>),
 }
 
 impl Column {
@@ -381,6 +404,8 @@ impl Column {
             Column::Str(_) => Field::new(name, DataType::Utf8, false),
             Column::OptStr(_) => Field::new(name, DataType::Utf8, true),
             Column::Bool(_) => Field::new(name, DataType::Boolean, false),
+            Column::StrList(_) => Field::new(name, DataType::List(Arc::new(Field::new("item", DataType::Utf8, true))), false),
+            Column::F64List(_) => Field::new(name, DataType::List(Arc::new(Field::new("item", DataType::Float64, true))), false),
         }
     }
     fn array(self) -> ArrayRef {
@@ -392,6 +417,22 @@ impl Column {
             Column::Str(v) => Arc::new(arrow_array::StringArray::from(v)),
             Column::OptStr(v) => Arc::new(arrow_array::StringArray::from(v)),
             Column::Bool(v) => Arc::new(arrow_array::BooleanArray::from(v)),
+            Column::StrList(v) => {
+                let mut b = ListBuilder::new(StringBuilder::new());
+                for row in v {
+                    b.values().extend(row.into_iter().map(Some));
+                    b.append(true);
+                }
+                Arc::new(b.finish())
+            }
+            Column::F64List(v) => {
+                let mut b = ListBuilder::new(Float64Builder::new());
+                for row in v {
+                    b.values().append_slice(&row);
+                    b.append(true);
+                }
+                Arc::new(b.finish())
+            }
         }
     }
 }
@@ -737,6 +778,32 @@ pub fn read_bools(path: &Path, column: &str) -> Result<Vec<bool>, TableError> {
     read_values(path, column, "Boolean", |arr, out| {
         let b = arr.as_any().downcast_ref::<arrow_array::BooleanArray>()?;
         out.extend((0..b.len()).map(|i| !b.is_null(i) && b.value(i)));
+        Some(())
+    })
+}
+
+/// A list-of-strings column of a Parquet file (a null row reads as an empty list).
+pub fn read_string_lists(path: &Path, column: &str) -> Result<Vec<Vec<String>>, TableError> {
+    read_values(path, column, "a list of strings", |arr, out| {
+        let l = arr.as_any().downcast_ref::<arrow_array::ListArray>()?;
+        for i in 0..l.len() {
+            let v = l.value(i);
+            let s = v.as_any().downcast_ref::<arrow_array::StringArray>()?;
+            out.push(if l.is_null(i) { Vec::new() } else { (0..s.len()).map(|j| s.value(j).to_string()).collect() });
+        }
+        Some(())
+    })
+}
+
+/// A list-of-numbers column of a Parquet file (a null row reads as an empty list).
+pub fn read_f64_lists(path: &Path, column: &str) -> Result<Vec<Vec<f64>>, TableError> {
+    read_values(path, column, "a list of numbers", |arr, out| {
+        let l = arr.as_any().downcast_ref::<arrow_array::ListArray>()?;
+        for i in 0..l.len() {
+            let v = l.value(i);
+            let x = v.as_any().downcast_ref::<Float64Array>()?;
+            out.push(if l.is_null(i) { Vec::new() } else { x.values().to_vec() });
+        }
         Some(())
     })
 }

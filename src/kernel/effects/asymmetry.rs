@@ -4,7 +4,7 @@
 //! displacement, from a table that extends and retracts differently.
 
 use super::{Effect, EffectInfo, LibraryEffect};
-use crate::kernel::params::{params, ModelParams, Range};
+use crate::kernel::params::{params, ModelParams, Range, Component};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
@@ -19,7 +19,7 @@ pub const INFO: EffectInfo = EffectInfo {
 params! {
     /// Effect `asymmetry`: port/valve asymmetry. The flow gain for extension (x > 0) differs from
     /// that for retraction, and actuator 2's valves differ from actuator 1's.
-    pub struct Params in effect_params.asymmetry as "asymmetry" {
+    pub struct Params in effect_params.asymmetry as (Component::Effect(super::EffectId::Asymmetry)) {
         extend_gain: "-", "", 1.05, Range::gt(0.0), Chosen,
             "Flow gain for x > 0 relative to x < 0 [chosen: a 5 % port mismatch].";
         act2_gain: "-", "", 1.0, Range::gt(0.0), Chosen,
@@ -34,7 +34,7 @@ pub struct Asymmetry<const N: usize> {
 
 impl<const N: usize> LibraryEffect<N> for Asymmetry<N> {
     fn new(p: [&ModelParams; N]) -> Self {
-        let on = super::lane_mask(&p, INFO.name);
+        let on = super::lane_mask::<N, Self>(&p);
         // Off: both gains exactly 1.
         Asymmetry {
             extend: std::array::from_fn(|l| 1.0 + on[l] * (Params::of(p[l]).extend_gain - 1.0)),

@@ -17,7 +17,7 @@
 //! parameters also keep a diagnosis's fit of it cheap. b ≡ 1 is the baseline.]
 
 use super::{Effect, EffectInfo, LibraryEffect};
-use crate::kernel::params::{params, ModelParams, Range};
+use crate::kernel::params::{params, ModelParams, Range, Component};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
@@ -34,7 +34,7 @@ pub const KNOTS: [f64; 3] = [0.0, 0.5, 1.0];
 
 params! {
     /// Effect `bulk_curve`: β_e(p) = β·b(p/P_S), b piecewise linear through three knots.
-    pub struct Params in effect_params.bulk_curve as "bulk_curve" {
+    pub struct Params in effect_params.bulk_curve as (Component::Effect(super::EffectId::BulkCurve)) {
         b0: "-", "", 1.0, Range::closed(0.01, 10.0), Chosen,
             "Bulk-modulus gain at p = 0 (gauge) relative to the oil's [chosen: 1 = the baseline].";
         b1: "-", "", 1.0, Range::closed(0.01, 10.0), Chosen,
@@ -52,7 +52,7 @@ pub struct BulkCurve<const N: usize> {
 
 impl<const N: usize> LibraryEffect<N> for BulkCurve<N> {
     fn new(p: [&ModelParams; N]) -> Self {
-        let on = super::lane_mask(&p, INFO.name);
+        let on = super::lane_mask::<N, Self>(&p);
         let q = p.map(Params::of);
         let knot = |l: usize, k: usize| [q[l].b0, q[l].b1, q[l].b2][k];
         BulkCurve {

@@ -14,7 +14,7 @@
 //! it avoids a `powf` in the step.
 
 use super::{Effect, EffectInfo, LibraryEffect};
-use crate::kernel::params::{params, ModelParams, Range};
+use crate::kernel::params::{params, ModelParams, Range, Component};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
@@ -30,7 +30,7 @@ params! {
     /// Effect `compressibility`: effective bulk modulus and dead volume. Each chamber gains a dead
     /// volume (hoses, manifold) and its oil an entrained-air fraction and a wall compliance:
     /// 1/β_e = 1/(beta_ratio·β) + air_fraction·p_atm/p², with p the absolute chamber pressure.
-    pub struct Params in effect_params.compressibility as "compressibility" {
+    pub struct Params in effect_params.compressibility as (Component::Effect(super::EffectId::Compressibility)) {
         dead_volume: "m³", "m3", 0.02, Range::closed(0.0, 1.0), Chosen,
             "Dead volume added to every chamber (hoses, manifold, valve block) [chosen: 20 L].";
         beta_ratio: "-", "", 1.0, Range::closed(0.05, 1.0), Chosen,
@@ -58,7 +58,7 @@ pub struct Compressibility<const N: usize> {
 impl<const N: usize> LibraryEffect<N> for Compressibility<N> {
     fn new(p: [&ModelParams; N]) -> Self {
         Compressibility {
-            on: super::lane_mask(&p, INFO.name),
+            on: super::lane_mask::<N, Self>(&p),
             beta: p.map(|m| m.actuator.beta),
             inv_beta_e: p.map(|m| 1.0 / (Params::of(m).beta_ratio * m.actuator.beta)),
             air: p.map(|m| Params::of(m).air_fraction * P_ATM),

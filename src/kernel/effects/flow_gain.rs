@@ -16,7 +16,7 @@
 //! of eight tests to determine; g ≡ 1 is the baseline.]
 
 use super::{Effect, EffectInfo, LibraryEffect};
-use crate::kernel::params::{params, ModelParams, Range};
+use crate::kernel::params::{params, ModelParams, Range, Component};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
@@ -33,7 +33,7 @@ pub const KNOTS: [f64; 5] = [0.0, 0.05, 0.15, 0.35, 0.7];
 
 params! {
     /// Effect `flow_gain`: x_eff = x·g(|x|/x_ref), g piecewise linear through the knots.
-    pub struct Params in effect_params.flow_gain as "flow_gain" {
+    pub struct Params in effect_params.flow_gain as (Component::Effect(super::EffectId::FlowGain)) {
         g0: "-", "", 1.0, Range::closed(0.0, 10.0), Chosen,
             "Flow gain at null (|x| = 0) relative to the baseline [chosen: 1 = the baseline].";
         g1: "-", "", 1.0, Range::closed(0.0, 10.0), Chosen,
@@ -57,7 +57,7 @@ pub struct FlowGain<const N: usize> {
 
 impl<const N: usize> LibraryEffect<N> for FlowGain<N> {
     fn new(p: [&ModelParams; N]) -> Self {
-        let on = super::lane_mask(&p, INFO.name);
+        let on = super::lane_mask::<N, Self>(&p);
         let q = p.map(Params::of);
         let knot = |l: usize, k: usize| [q[l].g0, q[l].g1, q[l].g2, q[l].g3, q[l].g4][k];
         FlowGain {

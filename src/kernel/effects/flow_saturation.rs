@@ -4,7 +4,7 @@
 //! small amplitude.
 
 use super::{Effect, EffectInfo, LibraryEffect};
-use crate::kernel::params::{params, ModelParams, Range};
+use crate::kernel::params::{params, ModelParams, Range, Component};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
@@ -19,7 +19,7 @@ pub const INFO: EffectInfo = EffectInfo {
 params! {
     /// Effect `flow_saturation`: spool-to-flow nonlinearity; the metering area saturates,
     /// x_eff = x_sat·tanh(x/x_sat).
-    pub struct Params in effect_params.flow_saturation as "flow_saturation" {
+    pub struct Params in effect_params.flow_saturation as (Component::Effect(super::EffectId::FlowSaturation)) {
         x_sat: "m", "m", 0.012, Range::gt(0.0), Chosen,
             "Spool opening scale of the saturation x_eff = x_sat·tanh(x/x_sat) [chosen: 12 mm of the 19.05 mm stroke].";
     }
@@ -34,7 +34,7 @@ pub struct FlowSaturation<const N: usize> {
 impl<const N: usize> LibraryEffect<N> for FlowSaturation<N> {
     fn new(p: [&ModelParams; N]) -> Self {
         FlowSaturation {
-            on: super::lane_mask(&p, INFO.name),
+            on: super::lane_mask::<N, Self>(&p),
             x_sat: p.map(|m| Params::of(m).x_sat),
             inv_x_sat: p.map(|m| 1.0 / Params::of(m).x_sat),
         }

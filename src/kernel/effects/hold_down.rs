@@ -3,7 +3,7 @@
 //! displacement is large (low frequency, large amplitude), nothing at small displacement.
 
 use super::{Effect, EffectInfo, LibraryEffect};
-use crate::kernel::params::{params, ModelParams, Range};
+use crate::kernel::params::{params, ModelParams, Range, Component};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
@@ -17,7 +17,7 @@ pub const INFO: EffectInfo = EffectInfo {
 
 params! {
     /// Effect `hold_down`: hold-down strut stiffness nonlinearity, F = −k3·y³ on top of −K·y.
-    pub struct Params in effect_params.hold_down as "hold_down" {
+    pub struct Params in effect_params.hold_down as (Component::Effect(super::EffectId::HoldDown)) {
         k3: "N/m³", "n_per_m3", 1.0e8, Range::any(), Chosen,
             "Cubic stiffness of the hold-down struts, positive = hardening [chosen: k3·y³ equals K·y at y = 11 cm].";
     }
@@ -29,7 +29,7 @@ pub struct HoldDown<const N: usize> {
 
 impl<const N: usize> LibraryEffect<N> for HoldDown<N> {
     fn new(p: [&ModelParams; N]) -> Self {
-        let on = super::lane_mask(&p, INFO.name);
+        let on = super::lane_mask::<N, Self>(&p);
         HoldDown { k3: std::array::from_fn(|l| if on[l] > 0.0 { Params::of(p[l]).k3 } else { 0.0 }) }
     }
 }

@@ -5,7 +5,7 @@
 //! (both coefficients 0).
 
 use super::{Effect, EffectInfo, LibraryEffect};
-use crate::kernel::params::{params, ModelParams, Range};
+use crate::kernel::params::{params, ModelParams, Range, Component};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
@@ -20,7 +20,7 @@ pub const INFO: EffectInfo = EffectInfo {
 params! {
     /// Effect `leakage`: internal leakage across the piston, q = c_int (P1 − P2), and external
     /// leakage from each chamber to drain, q = c_ext·P.
-    pub struct Params in effect_params.leakage as "leakage" {
+    pub struct Params in effect_params.leakage as (Component::Effect(super::EffectId::Leakage)) {
         c_int: "m³/(s·Pa)", "m3_per_s_pa", 2.0e-11, Range::ge(0.0), Chosen,
             "Internal (cross-piston) leakage coefficient [chosen: 12 L/min at 10 MPa across the piston].";
         c_ext: "m³/(s·Pa)", "m3_per_s_pa", 0.0, Range::ge(0.0), Chosen,
@@ -35,7 +35,7 @@ pub struct Leakage<const N: usize> {
 
 impl<const N: usize> LibraryEffect<N> for Leakage<N> {
     fn new(p: [&ModelParams; N]) -> Self {
-        let on = super::lane_mask(&p, INFO.name);
+        let on = super::lane_mask::<N, Self>(&p);
         Leakage {
             c_int: std::array::from_fn(|l| on[l] * Params::of(p[l]).c_int),
             c_ext: std::array::from_fn(|l| on[l] * Params::of(p[l]).c_ext),

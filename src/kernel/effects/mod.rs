@@ -31,14 +31,15 @@
 //! # Writing a new effect
 //!
 //! Copy the smallest file here (`hold_down.rs`) to `my_effect.rs`, change its `INFO`, its `Params`
-//! table and its hooks, and add the line `my_effect::MyEffect,` to the registry. `study params`,
+//! table and its hooks, add the line `my_effect::MyEffect,` to the registry, and name its variant in its `params!` line
+//! (`as Component::Effect(super::EffectId::MyEffect)`). `study params`,
 //! model files (`[model.my_effect]`), `synth --effect`, `fit --effect` and `diagnose` then know
 //! it; the registry's test checks it is complete. For example, a cubic hardening of the hold-down
 //! struts, F = −k3·y³:
 //!
 //! ```ignore
 //! use super::{Effect, EffectInfo, LibraryEffect};
-//! use crate::kernel::params::{params, ModelParams, Range};
+//! use crate::kernel::params::{params, Component, ModelParams, Range};
 //!
 //! pub const INFO: EffectInfo = EffectInfo {
 //!     name: "hold_down",
@@ -50,7 +51,7 @@
 //! };
 //!
 //! params! {
-//!     pub struct Params in effect_params.hold_down as "hold_down" {
+//!     pub struct Params in effect_params.hold_down as (Component::Effect(super::EffectId::HoldDown)) {
 //!         k3: "N/m³", "n_per_m3", 1.0e8, Range::any(), Chosen, "Cubic stiffness [chosen].";
 //!     }
 //! }
@@ -61,7 +62,7 @@
 //!
 //! impl<const N: usize> LibraryEffect<N> for HoldDown<N> {
 //!     fn new(p: [&ModelParams; N]) -> Self {
-//!         let on = super::lane_mask(&p, INFO.name);
+//!         let on = super::lane_mask::<N, Self>(&p);
 //!         HoldDown { k3: std::array::from_fn(|l| on[l] * Params::of(p[l]).k3) }
 //!     }
 //! }
@@ -133,6 +134,34 @@ macro_rules! library {
         /// Names of the library's effects, in registry order.
         pub const EFFECTS: [&str; [$($module::INFO.name),*].len()] = [$($module::INFO.name),*];
 
+        /// A library effect, by identity: one variant per registry line. A name becomes an
+        /// `EffectId` once, where it is read ([`EffectId::parse`]); everything after matches the
+        /// enum, so adding an effect is a compile error wherever it must be handled.
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+        pub enum EffectId {
+            $($Type,)*
+        }
+
+        impl EffectId {
+            /// Every library effect, in registry order.
+            pub const ALL: [EffectId; [$($module::INFO.name),*].len()] = [$(EffectId::$Type),*];
+
+            /// The effect's [`EffectInfo`] (its file's `INFO`).
+            pub fn info(self) -> &'static EffectInfo {
+                match self {
+                    $(EffectId::$Type => &$module::INFO,)*
+                }
+            }
+
+            /// The name of the effect's module (its registry line); equal to its `INFO.name`
+            /// (the registry's test checks it).
+            pub fn module(self) -> &'static str {
+                match self {
+                    $(EffectId::$Type => stringify!($module),)*
+                }
+            }
+        }
+
         /// Which library effects a parameter set switches on (all off by default).
         #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
         pub struct EffectSwitches {
@@ -140,23 +169,25 @@ macro_rules! library {
         }
 
         impl EffectSwitches {
-            /// The switch of effect `name`; `None` for a name the library does not have.
-            pub fn get_mut(&mut self, name: &str) -> Option<&mut bool> {
-                match name {
-                    $(stringify!($module) => Some(&mut self.$module),)*
-                    _ => None,
+            /// The switch of effect `id`.
+            pub fn get_mut(&mut self, id: EffectId) -> &mut bool {
+                match id {
+                    $(EffectId::$Type => &mut self.$module,)*
                 }
             }
-            /// Whether effect `name` is on; `None` for a name the library does not have.
-            pub fn get(&self, name: &str) -> Option<bool> {
-                match name {
-                    $(stringify!($module) => Some(self.$module),)*
-                    _ => None,
+            /// Whether effect `id` is on.
+            pub fn get(&self, id: EffectId) -> bool {
+                match id {
+                    $(EffectId::$Type => self.$module,)*
                 }
             }
             /// Whether any effect is on.
             pub fn any(&self) -> bool {
                 false $(|| self.$module)*
+            }
+            /// The effects that are on, in registry order.
+            pub fn on(&self) -> impl Iterator<Item = EffectId> + '_ {
+                EffectId::ALL.into_iter().filter(|&e| self.get(e))
             }
         }
 
@@ -167,18 +198,16 @@ macro_rules! library {
         }
 
         $(impl<const N: usize> Named for $module::$Type<N> {
-            const NAME: &'static str = $module::INFO.name;
+            const ID: EffectId = EffectId::$Type;
         })*
 
         /// Every library effect composed, per lane; what is off in a lane is neutral there.
         pub type EffectSet<const N: usize> = library!(@nest N; $($module::$Type),*);
 
-        /// Calls `f` with library effect `name` alone, built for `lanes` (see [`EffectFn`]);
-        /// `None` for a name the library does not have.
-        pub fn with_single<const N: usize, F: EffectFn<N>>(name: &str, lanes: [&ModelParams; N], f: F) -> Option<F::Output> {
-            match name {
-                $(stringify!($module) => Some(f.call(&<$module::$Type<N> as LibraryEffect<N>>::new(lanes))),)*
-                _ => None,
+        /// Calls `f` with library effect `id` alone, built for `lanes` (see [`EffectFn`]).
+        pub fn with_single<const N: usize, F: EffectFn<N>>(id: EffectId, lanes: [&ModelParams; N], f: F) -> F::Output {
+            match id {
+                $(EffectId::$Type => f.call(&<$module::$Type<N> as LibraryEffect<N>>::new(lanes)),)*
             }
         }
     };
@@ -203,9 +232,23 @@ library! {
     hold_down::HoldDown,
 }
 
-/// The library's info of effect `name`, if it has one.
-pub fn info(name: &str) -> Option<&'static EffectInfo> {
-    LIBRARY.iter().copied().find(|e| e.name == name)
+impl EffectId {
+    /// The effect called `name` (its model-file table, `--effect` name and parameter prefix);
+    /// `None` for a name the library does not have. The one place a name becomes an effect.
+    pub fn parse(name: &str) -> Option<EffectId> {
+        Self::ALL.into_iter().find(|e| e.name() == name)
+    }
+
+    /// The effect's name.
+    pub fn name(self) -> &'static str {
+        self.info().name
+    }
+}
+
+impl std::fmt::Display for EffectId {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
 }
 
 /// The library's effects for up to N lanes (missing lanes repeat the last parameter set).
@@ -213,22 +256,15 @@ pub fn effect_set<const N: usize>(sets: &[&ModelParams]) -> EffectSet<N> {
     EffectSet::<N>::new(std::array::from_fn(|l| sets[l.min(sets.len() - 1)]))
 }
 
-/// 1.0 where effect `name` is switched on in `m`, 0.0 where it is off: the factor an effect's
+/// 1.0 where effect `id` is switched on in `m`, 0.0 where it is off: the factor an effect's
 /// coefficients are multiplied by, so an off lane is neutral without a branch in the step.
-///
-/// # Panics
-/// When the library has no effect `name` (an effect passes its own `INFO.name`).
-pub fn switch(m: &ModelParams, name: &str) -> f64 {
-    match m.effects.get(name) {
-        Some(true) => 1.0,
-        Some(false) => 0.0,
-        None => panic!("effect `{name}` is not in the registry of kernel/effects/mod.rs"),
-    }
+pub fn switch(m: &ModelParams, id: EffectId) -> f64 {
+    if m.effects.get(id) { 1.0 } else { 0.0 }
 }
 
-/// [`switch`] for every lane.
-pub fn lane_mask<const N: usize>(p: &[&ModelParams; N], name: &str) -> [f64; N] {
-    std::array::from_fn(|l| switch(p[l], name))
+/// [`switch`] of effect `E` for every lane (an effect's constructor calls it with `Self`).
+pub fn lane_mask<const N: usize, E: Named>(p: &[&ModelParams; N]) -> [f64; N] {
+    std::array::from_fn(|l| switch(p[l], E::ID))
 }
 
 /// Per-lane states of an effect: `[[f64; N]; M]`, or a [`Pair`] of such.
@@ -447,9 +483,9 @@ pub trait EffectFn<const N: usize> {
     fn call<E: Effect<N>>(self, effect: &E) -> Self::Output;
 }
 
-/// A library effect's registry name, known to its type (the registry implements it).
+/// A library effect's identity, known to its type (the registry implements it).
 pub trait Named {
-    const NAME: &'static str;
+    const ID: EffectId;
 }
 
 /// A library effect that is skipped when no lane of the batch switches it on: every hook passes
@@ -464,7 +500,7 @@ pub struct Gated<E> {
 
 impl<const N: usize, E: LibraryEffect<N> + Named> LibraryEffect<N> for Gated<E> {
     fn new(lanes: [&ModelParams; N]) -> Self {
-        Gated { on: lanes.iter().any(|p| switch(p, E::NAME) != 0.0), effect: E::new(lanes) }
+        Gated { on: lanes.iter().any(|p| p.effects.get(E::ID)), effect: E::new(lanes) }
     }
 }
 
@@ -520,6 +556,7 @@ impl<const N: usize, E: Effect<N>> Effect<N> for Gated<E> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::kernel::params::Component;
 
     /// Every registered effect is complete: a family, free parameters that it has, a name that is
     /// its switch, its parameter table and its module (so a misspelt or half-registered effect
@@ -527,8 +564,10 @@ mod tests {
     #[test]
     fn every_registered_effect_is_complete() {
         assert_eq!(LIBRARY.len(), EFFECTS.len());
+        assert_eq!(EffectId::ALL.len(), LIBRARY.len());
         let mut sw = EffectSwitches::default();
-        for e in LIBRARY {
+        for (id, e) in EffectId::ALL.into_iter().zip(LIBRARY) {
+            assert!(std::ptr::eq(id.info(), *e), "{}: registry order", e.name);
             assert!(!e.family.trim().is_empty(), "{}: no family", e.name);
             assert!(!e.summary.trim().is_empty(), "{}: no summary", e.name);
             assert!(!e.free.is_empty(), "{}: no parameter a diagnosis frees", e.name);
@@ -536,15 +575,17 @@ mod tests {
             for f in e.free {
                 assert!(e.params.iter().any(|p| p.name == *f), "{}: frees `{f}`, which it does not have", e.name);
             }
-            assert!(e.params.iter().all(|p| p.component == e.name), "{}: its parameters belong to another component", e.name);
-            assert_eq!(sw.get(e.name), Some(false), "{}: no switch of that name", e.name);
-            *sw.get_mut(e.name).unwrap() = true;
-            assert_eq!(sw.get(e.name), Some(true));
-            assert!(info(e.name).is_some_and(|i| std::ptr::eq(i, *e)));
+            assert!(e.params.iter().all(|p| p.component == Component::Effect(id)), "{}: its parameters belong to another component", e.name);
+            assert_eq!(id.module(), e.name, "{}: its module (and so its switch and model-file field) has another name", e.name);
+            assert!(!sw.get(id));
+            *sw.get_mut(id) = true;
+            assert!(sw.get(id));
+            assert_eq!(sw.on().last(), Some(id));
+            assert_eq!(EffectId::parse(e.name), Some(id));
         }
         assert!(sw.any());
-        assert_eq!(sw.get("seal_fricton"), None, "a misspelt name is not silently off");
-        assert!(info("seal_fricton").is_none());
+        assert_eq!(sw.on().count(), LIBRARY.len());
+        assert_eq!(EffectId::parse("seal_fricton"), None, "a misspelt name is not an effect");
     }
 
     /// The composed states are the effects' states side by side: the layout follows the types.

@@ -12,7 +12,7 @@
 //! stop being one body's (a₁ ≠ −ω²·x₁), increasingly with frequency, as (m/m_r)·(f/f_r)²/(1 − (f/f_r)²).
 
 use super::{Effect, EffectInfo, LibraryEffect, PlantView};
-use crate::kernel::params::{params, ModelParams, Range};
+use crate::kernel::params::{params, ModelParams, Range, Component};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
@@ -28,7 +28,7 @@ params! {
     /// Effect `reaction_mass`: the actuators push against a reaction mass on a compliant
     /// foundation, m_r ÿ_r = −F − k_r y_r − c_r ẏ_r. The actuator stroke (and the LVDT) is y − y_r;
     /// the accelerometer sees the platen's absolute acceleration.
-    pub struct Params in effect_params.reaction_mass as "reaction_mass" {
+    pub struct Params in effect_params.reaction_mass as (Component::Effect(super::EffectId::ReactionMass)) {
         m_r: "kg", "kg", 2.0e6, Range::gt(0.0), Chosen,
             "Reaction mass [chosen: order of a large table's foundation block].";
         f_r: "Hz", "hz", 12.0, Range::closed(0.5, 200.0), Chosen,
@@ -51,7 +51,7 @@ pub struct ReactionMass<const N: usize> {
 
 impl<const N: usize> LibraryEffect<N> for ReactionMass<N> {
     fn new(p: [&ModelParams; N]) -> Self {
-        let on = super::lane_mask(&p, INFO.name);
+        let on = super::lane_mask::<N, Self>(&p);
         let q = p.map(Params::of);
         let w = q.map(|q| 2.0 * std::f64::consts::PI * q.f_r);
         ReactionMass {

@@ -4,7 +4,7 @@
 //! and a residual concentrated near velocity reversal; neutral when off (forces 0).
 
 use super::{Effect, EffectInfo, LibraryEffect};
-use crate::kernel::params::{params, ModelParams, Range};
+use crate::kernel::params::{params, ModelParams, Range, Component};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
@@ -19,7 +19,7 @@ pub const INFO: EffectInfo = EffectInfo {
 params! {
     /// Effect `seal_friction`: actuator seal friction with a Stribeck term,
     /// F = −tanh(v/v_eps)·(f_c + (f_s − f_c)·exp(−(v/v_s)²)) − sigma·v.
-    pub struct Params in effect_params.seal_friction as "seal_friction" {
+    pub struct Params in effect_params.seal_friction as (Component::Effect(super::EffectId::SealFriction)) {
         f_c: "N", "n", 5000.0, Range::ge(0.0), Chosen,
             "Coulomb seal friction, all actuators together [chosen].";
         f_s: "N", "n", 8000.0, Range::ge(0.0), Chosen,
@@ -43,7 +43,7 @@ pub struct SealFriction<const N: usize> {
 
 impl<const N: usize> LibraryEffect<N> for SealFriction<N> {
     fn new(p: [&ModelParams; N]) -> Self {
-        let on = super::lane_mask(&p, INFO.name);
+        let on = super::lane_mask::<N, Self>(&p);
         let q = p.map(Params::of);
         SealFriction {
             f_c: std::array::from_fn(|l| on[l] * q[l].f_c),

@@ -3,7 +3,7 @@
 //! frequency, and a smaller amplitude ratio at higher frequencies.
 
 use super::{Effect, EffectInfo, LibraryEffect, PlantView};
-use crate::kernel::params::{params, ModelParams, Range};
+use crate::kernel::params::{params, ModelParams, Range, Component};
 use crate::kernel::N_ACT;
 
 /// The effect's entry in the library.
@@ -19,7 +19,7 @@ pub const INFO: EffectInfo = EffectInfo {
 params! {
     /// Effect `spool_dynamics`: the servo-valve spool follows its command through a second-order
     /// lag, ẍ = ω²(x_c − x) − 2ζω ẋ (the baseline has x = x_c).
-    pub struct Params in effect_params.spool_dynamics as "spool_dynamics" {
+    pub struct Params in effect_params.spool_dynamics as (Component::Effect(super::EffectId::SpoolDynamics)) {
         freq_hz: "Hz", "hz", 80.0, Range::closed(1.0, 1000.0), Chosen,
             "Spool natural frequency [chosen: 80 Hz; with 40 Hz the published TVC loop oscillates at small amplitude].";
         zeta: "-", "", 0.7, Range::closed(0.05, 5.0), Chosen,
@@ -42,7 +42,7 @@ impl<const N: usize> LibraryEffect<N> for SpoolDynamics<N> {
     fn new(p: [&ModelParams; N]) -> Self {
         let w = p.map(|m| 2.0 * std::f64::consts::PI * Params::of(m).freq_hz);
         SpoolDynamics {
-            on: super::lane_mask(&p, INFO.name),
+            on: super::lane_mask::<N, Self>(&p),
             w2: w.map(|w| w * w),
             two_zw: std::array::from_fn(|l| 2.0 * Params::of(p[l]).zeta * w[l]),
         }

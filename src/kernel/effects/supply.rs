@@ -5,7 +5,7 @@
 //! of the acceleration sinks from cycle to cycle.
 
 use super::{Effect, EffectInfo, LibraryEffect, PlantView};
-use crate::kernel::params::{params, ModelParams, Range};
+use crate::kernel::params::{params, ModelParams, Range, Component};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
@@ -21,7 +21,7 @@ params! {
     /// Effect `supply`: supply pressure dynamics. A pressure-compensated pump delivers
     /// Q_p = q_pump·clamp((P_S − P_s)/dp_band, 0, 1) into an accumulator of capacitance c_acc;
     /// the valves draw Q from it: c_acc dP_s/dt = Q_p − Q. The valves see P_s instead of P_S.
-    pub struct Params in effect_params.supply as "supply" {
+    pub struct Params in effect_params.supply as (Component::Effect(super::EffectId::Supply)) {
         q_pump: "m³/s", "m3_per_s", 0.2, Range::gt(0.0), Chosen,
             "Pump flow at full stroke [chosen: below the peak draw of large tests, so accumulators carry the peaks].";
         c_acc: "m³/Pa", "m3_per_pa", 3.5e-8, Range::gt(0.0), Chosen,
@@ -43,7 +43,7 @@ pub struct Supply<const N: usize> {
 impl<const N: usize> LibraryEffect<N> for Supply<N> {
     fn new(p: [&ModelParams; N]) -> Self {
         Supply {
-            on: super::lane_mask(&p, INFO.name),
+            on: super::lane_mask::<N, Self>(&p),
             p_s0: p.map(|m| m.servovalve.p_s),
             q_pump: p.map(|m| Params::of(m).q_pump),
             inv_c: p.map(|m| 1.0 / Params::of(m).c_acc),

@@ -12,7 +12,7 @@
 //! README's effects table).
 
 use super::{Effect, EffectInfo, LibraryEffect, PlantView};
-use crate::kernel::params::{params, ModelParams, Range};
+use crate::kernel::params::{params, ModelParams, Range, Component};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
@@ -27,7 +27,7 @@ pub const INFO: EffectInfo = EffectInfo {
 params! {
     /// Effect `transport_delay`: a pure delay τ between the controller's command and the spool
     /// (pilot stages, driver electronics, digital I/O), before the spool dynamics if those are on.
-    pub struct Params in effect_params.transport_delay as "transport_delay" {
+    pub struct Params in effect_params.transport_delay as (Component::Effect(super::EffectId::TransportDelay)) {
         tau: "s", "s", 2.0e-3, Range::closed(0.5e-3, 20.0e-3), Chosen,
             "Delay between the valve command and the spool [chosen: 2 ms; realised as 4 equal first-order lags, see the effect's doc].";
     }
@@ -44,7 +44,7 @@ pub struct TransportDelay<const N: usize> {
 
 impl<const N: usize> LibraryEffect<N> for TransportDelay<N> {
     fn new(p: [&ModelParams; N]) -> Self {
-        let on = super::lane_mask(&p, INFO.name);
+        let on = super::lane_mask::<N, Self>(&p);
         let default_tau = Params::default().tau;
         TransportDelay { on, rate: std::array::from_fn(|l| STAGES as f64 / if on[l] > 0.0 { Params::of(p[l]).tau } else { default_tau }) }
     }
