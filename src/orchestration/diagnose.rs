@@ -31,6 +31,8 @@
 //! leaves more than [`NOISE_FACTOR`] times the noise floor is said to, with the state and term of
 //! what it leaves.
 
+use super::measured::AlignedTest;
+use super::statemap::StateMap;
 use super::fit::{self, FeatureInfo, Free, Problem};
 use crate::kernel::params::{EffectId, ModelParams};
 use rayon::prelude::*;
@@ -63,7 +65,7 @@ pub struct Candidate {
     pub effect: EffectId,
     pub family: &'static str,
     pub free: Vec<Free>,
-    pub fit: Result<fit::FitResult, String>,
+    pub fit: Result<fit::FitResult, fit::FitError>,
     pub delta_bic: f64,
     pub explained: f64,
     /// Whether the fit leaves a campaign residual rms no larger than the baseline's.
@@ -259,6 +261,26 @@ impl Diagnosis {
     }
 }
 
+impl Diagnosis {
+    /// Maps the starting model's residual onto the plant's states, and the residual the named
+    /// effects leave (both stay None when a test's model run fails: the diagnosis reports that
+    /// itself).
+    pub fn map_states(&mut self, aligned: &[AlignedTest]) {
+        self.state_map = state_map(aligned);
+        if let Some((free, fit)) = self.named_fit() {
+            let fitted: Vec<AlignedTest> = aligned.iter().map(|t| AlignedTest { model: fit::apply(&t.model, free, &fit.u), ..t.clone() }).collect();
+            self.state_map_after = state_map(&fitted);
+        }
+    }
+}
+
+/// The residual of `aligned` mapped onto the plant's states (None when a model run fails).
+fn state_map(aligned: &[AlignedTest]) -> Option<StateMap> {
+    let solver = Default::default();
+    let compared: Result<Vec<_>, String> = aligned.par_iter().map(|t| super::compare::compare_test(t, &solver)).collect();
+    compared.ok().map(|c| super::statemap::map(&c))
+}
+
 /// The free parameters of `effect` at their values in `model`.
 pub fn free_of(effect: EffectId, model: &ModelParams) -> Vec<Free> {
     effect
@@ -328,7 +350,7 @@ fn forward_selection(problem: &Problem, ranked: &[Candidate], n: usize, baseline
             break;
         }
         let rest: Vec<&Candidate> = ranked.iter().filter(|c| !chosen.contains(&c.effect) && c.fit.is_ok()).collect();
-        let tried: Vec<(EffectId, Vec<Free>, Result<fit::FitResult, String>)> = rest
+        let tried: Vec<(EffectId, Vec<Free>, Result<fit::FitResult, fit::FitError>)> = rest
             .par_iter()
             .map(|c| {
                 let mut f = free.clone();

@@ -279,6 +279,40 @@ pub struct Problem {
     pub solver: Solver,
 }
 
+impl TestData {
+    /// The weighted residual features of lane `l` of a run resampled at the test's samples, and
+    /// the rms residual / rms measured of each channel (acceleration, displacement, force).
+    fn lane_features(&self, rs: &Resampler<LANES>, l: usize) -> (Vec<f64>, [f64; 3]) {
+        let model_ch: [Vec<f64>; 3] = [rs.channel(ch::ACCEL, l), rs.channel(ch::DISP, l), rs.channel(ch::FORCE, l)];
+        let mut r = Vec::with_capacity(self.len());
+        let mut at = 0;
+        for c in 0..3 {
+            // The channels with features: measured and weighted (σ set).
+            if self.measured[c].is_none() || !(self.sigma[c] > 0.0) {
+                continue;
+            }
+            for v in channel_features(&self.samples, self.proj.as_ref(), c, &model_ch[c]) {
+                r.push((v - self.meas[at]) / self.scale[at]);
+                at += 1;
+            }
+            if let (Some(p), Some(x)) = (&self.proj, &self.measured[c]) {
+                let e: Vec<f64> = model_ch[c].iter().zip(x).map(|(a, b)| a - b).collect();
+                r.push(p.remainder_sq(&e).sqrt() / self.scale[at]);
+                at += 1;
+            }
+        }
+        let rms: [f64; 3] = std::array::from_fn(|c| match &self.measured[c] {
+            Some(x) => {
+                let num: f64 = x.iter().zip(&model_ch[c]).map(|(a, b)| (b - a).powi(2)).sum();
+                let den: f64 = x.iter().map(|a| a * a).sum();
+                (num / den).sqrt()
+            }
+            None => f64::NAN,
+        });
+        (r, rms)
+    }
+}
+
 impl Problem {
     pub fn new(mut tests: Vec<TestData>) -> Self {
         for (i, t) in tests.iter_mut().enumerate() {
@@ -356,37 +390,9 @@ impl Problem {
                     Err(e) => return vec![Err(format!("test {:?}: {e}", t.name)); hi - lo],
                 };
                 (0..hi - lo)
-                    .map(|l| {
-                        if let LaneStatus::Failed { time_s, reason } = res[l].status {
-                            return Err(format!("test {:?}: the model failed at t = {time_s:.4} s: {reason}", t.name));
-                        }
-                        let model_ch: [Vec<f64>; 3] = [rs.channel(ch::ACCEL, l), rs.channel(ch::DISP, l), rs.channel(ch::FORCE, l)];
-                        let mut r = Vec::with_capacity(t.len());
-                        let mut at = 0;
-                        for c in 0..3 {
-                            // The channels with features: measured and weighted (σ set).
-                            if t.measured[c].is_none() || !(t.sigma[c] > 0.0) {
-                                continue;
-                            }
-                            for v in channel_features(&t.samples, t.proj.as_ref(), c, &model_ch[c]) {
-                                r.push((v - t.meas[at]) / t.scale[at]);
-                                at += 1;
-                            }
-                            if let (Some(p), Some(x)) = (&t.proj, &t.measured[c]) {
-                                let e: Vec<f64> = model_ch[c].iter().zip(x).map(|(a, b)| a - b).collect();
-                                r.push(p.remainder_sq(&e).sqrt() / t.scale[at]);
-                                at += 1;
-                            }
-                        }
-                        let rms: [f64; 3] = std::array::from_fn(|c| match &t.measured[c] {
-                            Some(x) => {
-                                let num: f64 = x.iter().zip(&model_ch[c]).map(|(a, b)| (b - a).powi(2)).sum();
-                                let den: f64 = x.iter().map(|a| a * a).sum();
-                                (num / den).sqrt()
-                            }
-                            None => f64::NAN,
-                        });
-                        Ok((r, rms))
+                    .map(|l| match res[l].status {
+                        LaneStatus::Failed { time_s, reason } => Err(format!("test {:?}: the model failed at t = {time_s:.4} s: {reason}", t.name)),
+                        LaneStatus::Ok => Ok(t.lane_features(&rs, l)),
                     })
                     .collect()
             })
@@ -552,20 +558,42 @@ fn lambdas(lambda: f64, p: usize) -> Vec<f64> {
 /// forward-difference neighbours, so the Jacobian at the accepted step comes with it. It stops
 /// when χ² falls by less than 1e-3 + 1e-4·χ² (a thousandth of a standard deviation squared at the
 /// noise level; a ten-thousandth of a misfit's χ²), or no step lowers χ².
-pub fn fit(problem: &Problem, free: &[Free], max_iter: usize) -> Result<FitResult, String> {
+/// Why a fit could not be made.
+#[derive(Debug, Clone, PartialEq)]
+pub enum FitError {
+    /// The model fails (or its parameters are invalid) at the starting point: the reason, with
+    /// its test.
+    Start(String),
+    /// A parameter step of 1e-3 from the start makes the model fail, so there is no Jacobian.
+    NoJacobian,
+}
+
+impl std::fmt::Display for FitError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            FitError::Start(why) => f.write_str(why),
+            FitError::NoJacobian => f.write_str("a parameter step of 1e-3 from the start makes the model fail"),
+        }
+    }
+}
+
+impl std::error::Error for FitError {}
+
+pub fn fit(problem: &Problem, free: &[Free], max_iter: usize) -> Result<FitResult, FitError> {
     fit_from(problem, free, max_iter, problem.evaluate(1, &|_, m| m.clone()).remove(0))
 }
 
 /// [`fit`], given the evaluation of the models as given (a diagnosis evaluates it once for every
-/// candidate).
-pub fn fit_from(problem: &Problem, free: &[Free], max_iter: usize, before: Eval) -> Result<FitResult, String> {
+/// candidate). Levenberg–Marquardt: each iteration tries several damping factors at once
+/// ([`lambdas`]) and keeps the best step that lowers χ².
+pub fn fit_from(problem: &Problem, free: &[Free], max_iter: usize, before: Eval) -> Result<FitResult, FitError> {
     let p = free.len();
     let mut u = vec![0.0; p];
     let (mut at, j0) = with_jacobian(problem, free, std::slice::from_ref(&u)).remove(0);
     if let Some(f) = &at.failure {
-        return Err(f.clone());
+        return Err(FitError::Start(f.clone()));
     }
-    let mut j = j0.ok_or_else(|| "a parameter step of 1e-3 from the start makes the model fail".to_string())?;
+    let mut j = j0.ok_or(FitError::NoJacobian)?;
     let mut lambda = 1e-3;
     let mut iterations = 0;
     let mut converged = false;
@@ -574,33 +602,7 @@ pub fn fit_from(problem: &Problem, free: &[Free], max_iter: usize, before: Eval)
         let chi2 = at.chi2();
         let (a, g) = normal(&j, &at.r);
         let lams = lambdas(lambda, p);
-        let dmax = (0..p).map(|i| a[i][i]).fold(0.0, f64::max);
-        let trials: Vec<Vec<f64>> = lams
-            .iter()
-            .map(|&l| {
-                let mut al = a.clone();
-                for i in 0..p {
-                    al[i][i] += l * a[i][i].max(1e-12 * dmax) + f64::MIN_POSITIVE;
-                }
-                let d = solve(&al, &g.iter().map(|x| -x).collect::<Vec<_>>());
-                u.iter()
-                    .zip(&d)
-                    .zip(free)
-                    .enumerate()
-                    .map(|(i, ((x, dx), f))| {
-                        // A parameter the features do not see (zero column) does not move.
-                        let dx = if dx.is_finite() && a[i][i] > 0.0 { dx.clamp(-2.0, 2.0) } else { 0.0 };
-                        // Keep u where the clamp to the valid range puts the value.
-                        let v = f.value(x + dx);
-                        if f.log {
-                            (v / f.start).ln()
-                        } else {
-                            (v - f.start) / f.start.abs().max(1.0)
-                        }
-                    })
-                    .collect()
-            })
-            .collect();
+        let trials: Vec<Vec<f64>> = lams.iter().map(|&l| damped_step(&a, &g, l, &u, free)).collect();
         let ev = with_jacobian(problem, free, &trials);
         let best = (0..ev.len()).filter(|&k| ev[k].1.is_some()).min_by(|&x, &y| ev[x].0.chi2().total_cmp(&ev[y].0.chi2()));
         match best {
@@ -627,19 +629,7 @@ pub fn fit_from(problem: &Problem, free: &[Free], max_iter: usize, before: Eval)
     }
     let after = at;
     let n = problem.dof().round() as usize;
-    let chi2 = after.chi2();
-    let (a, _) = normal(&j, &after.r);
-    let s2 = if n > p { (chi2 / (n - p) as f64).max(1.0) } else { 1.0 };
-    // Columns of (JᵀJ)⁻¹ (symmetric).
-    let inv: Vec<Vec<f64>> = (0..p)
-        .map(|k| {
-            let e: Vec<f64> = (0..p).map(|i| if i == k { 1.0 } else { 0.0 }).collect();
-            solve(&a, &e)
-        })
-        .collect();
-    let cov = |i: usize, k: usize| s2 * inv[k][i];
-    let se_u: Vec<f64> = (0..p).map(|i| cov(i, i).max(0.0).sqrt()).collect();
-    let corr = (0..p).map(|i| (0..p).map(|k| cov(i, k) / (se_u[i] * se_u[k])).collect()).collect();
+    let (se_u, corr) = uncertainty(&j, &after, n);
     Ok(FitResult {
         estimate: free.iter().zip(&u).map(|(f, &x)| f.value(x)).collect(),
         se: free.iter().zip(&u).zip(&se_u).map(|((f, &x), s)| f.slope(x) * s).collect(),
@@ -651,6 +641,53 @@ pub fn fit_from(problem: &Problem, free: &[Free], max_iter: usize, before: Eval)
         iterations,
         converged,
     })
+}
+
+/// The point a damped Gauss–Newton step with factor `l` reaches from `u`, on the normal
+/// equations `a`·d = −`g`.
+fn damped_step(a: &[Vec<f64>], g: &[f64], l: f64, u: &[f64], free: &[Free]) -> Vec<f64> {
+    let p = u.len();
+    let dmax = (0..p).map(|i| a[i][i]).fold(0.0, f64::max);
+    let mut al = a.to_vec();
+    for i in 0..p {
+        al[i][i] += l * a[i][i].max(1e-12 * dmax) + f64::MIN_POSITIVE;
+    }
+    let d = solve(&al, &g.iter().map(|x| -x).collect::<Vec<_>>());
+    u.iter()
+        .zip(&d)
+        .zip(free)
+        .enumerate()
+        .map(|(i, ((x, dx), f))| {
+            // A parameter the features do not see (zero column) does not move.
+            let dx = if dx.is_finite() && a[i][i] > 0.0 { dx.clamp(-2.0, 2.0) } else { 0.0 };
+            // Keep u where the clamp to the valid range puts the value.
+            let v = f.value(x + dx);
+            if f.log {
+                (v / f.start).ln()
+            } else {
+                (v - f.start) / f.start.abs().max(1.0)
+            }
+        })
+        .collect()
+}
+
+/// The standard errors of u and their correlations at the fit: (JᵀJ)⁻¹ scaled by the reduced
+/// χ² (at least 1), for `n` features.
+fn uncertainty(j: &[Vec<f64>], after: &Eval, n: usize) -> (Vec<f64>, Vec<Vec<f64>>) {
+    let (a, _) = normal(j, &after.r);
+    let p = a.len();
+    let s2 = if n > p { (after.chi2() / (n - p) as f64).max(1.0) } else { 1.0 };
+    // Columns of (JᵀJ)⁻¹ (symmetric).
+    let inv: Vec<Vec<f64>> = (0..p)
+        .map(|k| {
+            let e: Vec<f64> = (0..p).map(|i| if i == k { 1.0 } else { 0.0 }).collect();
+            solve(&a, &e)
+        })
+        .collect();
+    let cov = |i: usize, k: usize| s2 * inv[k][i];
+    let se_u: Vec<f64> = (0..p).map(|i| cov(i, i).max(0.0).sqrt()).collect();
+    let corr = (0..p).map(|i| (0..p).map(|k| cov(i, k) / (se_u[i] * se_u[k])).collect()).collect();
+    (se_u, corr)
 }
 
 /// χ² contributions grouped by (test, harmonic) — what a candidate explains.

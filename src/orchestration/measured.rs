@@ -268,190 +268,43 @@ pub struct AlignedTest {
     pub warnings: Vec<String>,
 }
 
+/// Where the excitation sits in a file: its start (a fractional row), how the start was found,
+/// its end, the whole cycles of a sine's window, and a record's reference.
+struct Located {
+    start_row: f64,
+    start: Start,
+    end_row: usize,
+    cycles: Option<u32>,
+    record: Option<Reference>,
+}
+
 /// Aligns a measured test to the model; `record` is the table holding a record excitation's
 /// column when it is another file than the test's data. Every problem of the file is returned.
 pub fn align(test: &TestSpec, data: &NumTable, record: Option<&NumTable>, open_loop: Option<OpenLoop>) -> Result<AlignedTest, Vec<DataProblem>> {
-    let mut problems = data.check_limits();
-    let time = match data.time_base("time_s") {
-        Ok(t) => Some(t),
-        Err(p) => {
-            problems.push(p);
-            None
-        }
-    };
-    if let Some(mode) = open_loop {
-        if data.column(mode.column()).is_none() {
-            let word = match mode {
-                OpenLoop::Valve => "valve",
-                OpenLoop::Spool => "spool",
-            };
-            problems.push(data.problem(Some(mode.column()), None, format!("missing; `--open-loop {word}` drives the model with it")));
-        }
-    }
-    let Some(time) = time else { return Err(problems) };
-    if !problems.is_empty() {
-        return Err(problems);
-    }
-    let mut model = test.model.clone();
-    if open_loop == Some(OpenLoop::Spool) {
-        // A measured spool already holds the valve's delay and dynamics.
-        for e in crate::kernel::effects::EffectId::ALL.into_iter().filter(|e| e.info().moves_spool) {
-            *model.effects.get_mut(e) = false;
-        }
-    }
+    let time = check_file(data, open_loop)?;
     let mut notes = data.notes.clone();
     notes.extend(time.note());
     let mut warnings = Vec::new();
-    let col = |n: &str| data.column(n).expect("required column");
-    let f_s = test.model.controller.f_s;
-    let rate = time.rate_hz;
-    let rows = time.rows;
-
-    // Where the excitation sits in the file, and the model's drive.
-    let (start_row, start, end_row, cycles, mut drive) = match &test.excitation {
-        ExcitationSpec::Sine { sine, .. } => {
-            let given = test.t0_s.map(|t| (t - time.t0_s) * rate);
-            let fit = align_sine(sine, col("ref_disp_m"), rate, given, test.duration_given.then_some(sine.duration_s));
-            warnings.extend(fit.warnings.iter().map(|w| format!("test {:?}: {w}", test.name)));
-            if let Some(e) = fit.error {
-                return Err(vec![data.problem(None, None, format!("test {:?}: {e}", test.name))]);
-            }
-            let motion_s = (fit.end_row as f64 - fit.start_row) / rate;
-            let mut s = *sine;
-            s.duration_s = motion_s;
-            // The default window counts the cycles in the motion as found, give or take the
-            // sample at each end (the end is found to a sample).
-            let n = if test.window_given {
-                sine.window_cycles.unwrap_or(0)
-            } else {
-                Sine { duration_s: motion_s + 1.0 / rate, ..s }.default_cycles()
-            };
-            if n == 0 {
-                return Err(vec![data.problem(None, None, format!(
-                    "test {:?}: the excitation lasts {motion_s:.3} s in the file (from t = {:.4} s): too short for a whole cycle after taper_s + 1 s",
-                    test.name,
-                    time.time(fit.start_row)
-                ))]);
-            }
-            let (start, src) = (fit.start_row, if given.is_some() { Start::Given } else { Start::Detected });
-            (start, src, fit.end_row, Some(n), None)
-        }
-        ExcitationSpec::Record { column, time_column, f_ref_hz, scale, .. } => {
-            let source = record.unwrap_or(data);
-            let Some(values) = source.column(column) else {
-                return Err(vec![source.problem(Some(column), None, format!("missing: the record of test {:?}", test.name))]);
-            };
-            let rec_time = if record.is_some() {
-                match source.time_base(time_column) {
-                    Ok(t) => t,
-                    Err(p) => return Err(vec![p]),
-                }
-            } else {
-                time.clone()
-            };
-            // Model time 0: `t0_s`, else the record's first sample (same clock as the data).
-            let t0 = test.t0_s.unwrap_or(rec_time.t0_s);
-            let first = ((t0 - rec_time.t0_s) * rec_time.rate_hz).ceil().max(0.0) as usize;
-            let rec_t: Vec<f64> = (first..values.len()).map(|i| rec_time.time(i as f64) - t0).collect();
-            let rec_x: Vec<f64> = values[first..].iter().map(|v| v * scale).collect();
-            if rec_t.len() < 2 {
-                return Err(vec![source.problem(Some(column), None, format!("test {:?}: fewer than two record samples after t0_s", test.name))]);
-            }
-            let l = test.model.actuator.l;
-            if let Some((i, v)) = rec_x.iter().enumerate().find(|(_, v)| v.abs() >= l) {
-                return Err(vec![source.problem(Some(column), Some(first + i + 1), format!("displacement {v} m (after scale {scale}) exceeds the stroke (half stroke actuator.l = {l} m)"))]);
-            }
-            let span = rec_t[rec_t.len() - 1];
-            let r = Record { time_s: rec_t, disp_m: rec_x, f_ref_hz: *f_ref_hz }.reference(f_s);
-            let start_row = ((t0 - time.t0_s) * rate).max(0.0);
-            let end_row = (((span + t0 - time.t0_s) * rate + 1e-6).floor() as usize + 1).min(rows);
-            let src = if test.t0_s.is_some() { Start::Given } else { Start::FirstRow };
-            (start_row, src, end_row, None, Some(r))
-        }
+    let (rate, rows, f_s) = (time.rate_hz, time.rows, test.model.controller.f_s);
+    let located = match &test.excitation {
+        ExcitationSpec::Sine { sine, .. } => locate_sine(test, sine, data, &time, &mut warnings)?,
+        ExcitationSpec::Record { column, time_column, f_ref_hz, scale, .. } => locate_record(test, (column, time_column, *f_ref_hz, *scale), data, record, &time)?,
     };
-
-    // The analysis window, in the file's rows.
-    let w_first = start_row.ceil().max(0.0) as usize;
-    let window = match (&test.excitation, cycles) {
-        (ExcitationSpec::Sine { sine, .. }, Some(n)) => {
-            let len = (n as f64 * rate / sine.freq_hz).round() as usize;
-            if len > end_row.saturating_sub(w_first) {
-                return Err(vec![data.problem(None, None, format!(
-                    "test {:?}: {n} whole cycles ({:.3} s) do not fit in the excitation's {:.3} s in the file",
-                    test.name,
-                    n as f64 / sine.freq_hz,
-                    (end_row as f64 - start_row) / rate
-                ))]);
-            }
-            (end_row - len, end_row)
-        }
-        _ => (w_first, end_row),
-    };
-    if window.1 <= window.0 + 1 {
-        return Err(vec![data.problem(None, None, format!("test {:?}: no samples to compare after the excitation's start", test.name))]);
-    }
+    let (start_row, start, end_row, cycles) = (located.start_row, located.start, located.end_row, located.cycles);
+    let window = analysis_window(test, data, &located, rate)?;
     let tau: Vec<f64> = (window.0..window.1).map(|n| (n as f64 - start_row) / rate).collect();
-    let tau_last = tau[tau.len() - 1];
-    let n_ticks = (tau_last * f_s).floor() as usize + 2;
-    let mut drive = match (&test.excitation, drive.take()) {
-        (ExcitationSpec::Sine { sine, .. }, _) => {
-            let mut s = *sine;
-            s.duration_s = n_ticks as f64 / f_s;
-            s.window_cycles = None;
-            s.reference(f_s)
-        }
+    let n_ticks = (tau[tau.len() - 1] * f_s).floor() as usize + 2;
+    let mut drive = match (&test.excitation, located.record) {
+        (ExcitationSpec::Sine { sine, .. }, _) => Sine { duration_s: n_ticks as f64 / f_s, window_cycles: None, ..*sine }.reference(f_s),
         (_, Some(r)) => r,
-        _ => unreachable!("a record has its reference"),
+        (ExcitationSpec::Record { .. }, None) => unreachable!("a record has its reference"),
     };
     drive.hold_to(n_ticks);
-    // Open loop: the measured column at the ticks (linear between the file's samples).
     if let Some(mode) = open_loop {
-        let c = col(mode.column());
-        let at = |k: usize| {
-            let q = start_row + k as f64 * rate / f_s;
-            let i = q.floor().clamp(0.0, (rows - 1) as f64) as usize;
-            let w = (q - i as f64).clamp(0.0, 1.0);
-            if w == 0.0 || i + 1 >= rows { c[i.min(rows - 1)] } else { c[i] + w * (c[i + 1] - c[i]) }
-        };
-        let v: Vec<f64> = (0..drive.len()).map(at).collect();
-        drive.drive = match mode {
-            OpenLoop::Valve => Drive::ValveCommand(v),
-            OpenLoop::Spool => Drive::Spool(v),
-        };
+        drive.drive = measured_drive(mode, data.column(mode.column()).expect("checked"), start_row, rate, f_s, drive.len());
     }
-
-    // Reference states at the samples: analytic for a sine, from the ticks for a record.
-    let (ref_x, ref_v, ref_a): (Vec<f64>, Vec<f64>, Vec<f64>) = match &test.excitation {
-        ExcitationSpec::Sine { sine, .. } => {
-            let st: Vec<[f64; 4]> = tau.iter().map(|&t| sine.states(t)).collect();
-            (st.iter().map(|s| s[0]).collect(), st.iter().map(|s| s[1]).collect(), st.iter().map(|s| s[2]).collect())
-        }
-        ExcitationSpec::Record { .. } => (
-            tau.iter().map(|&t| drive.at_time(&drive.x, t)).collect(),
-            tau.iter().map(|&t| drive.at_time(&drive.v, t)).collect(),
-            tau.iter().map(|&t| drive.at_time(&drive.a, t)).collect(),
-        ),
-    };
-    let fundamental_hz = match &test.excitation {
-        ExcitationSpec::Sine { sine, .. } => Some(sine.freq_hz),
-        ExcitationSpec::Record { .. } => None,
-    };
-    let n_harm = fundamental_hz.map_or(0, |f| (1..=N_HARM).take_while(|&k| (k as f64) * f < 0.5 * rate).count());
-    if let Some(f) = fundamental_hz {
-        if n_harm == 0 {
-            return Err(vec![data.problem(Some("time_s"), None, format!("test {:?}: its {f} Hz excitation is at or above the file's Nyquist frequency ({} Hz)", test.name, 0.5 * rate))]);
-        }
-        if n_harm < N_HARM {
-            notes.push(format!(
-                "h{}{} ({} Hz and up) at or above the Nyquist frequency of a {} Hz file ({} Hz): left out",
-                n_harm + 1,
-                if n_harm + 1 < N_HARM { format!("…h{N_HARM}") } else { String::new() },
-                (n_harm + 1) as f64 * f,
-                timebase::fmt_rate(rate),
-                0.5 * rate
-            ));
-        }
-    }
+    let (ref_x, ref_v, ref_a) = reference_states(&test.excitation, &drive, &tau);
+    let (fundamental_hz, n_harm) = harmonics_in(test, data, rate, &mut notes)?;
     let slice = |n: &str| data.column(n).map(|c| c[window.0..window.1].to_vec());
     let measured = Measured {
         accel: slice("accel_mps2").expect("required"),
@@ -463,25 +316,14 @@ pub fn align(test: &TestSpec, data: &NumTable, record: Option<&NumTable>, open_l
         spool: slice("spool_m"),
     };
     let alignment = Alignment { time, start_row, start, end_row, window, cycles };
-    if alignment.start_row >= 1.0 && start != Start::FirstRow {
-        notes.push(format!(
-            "the excitation starts at t = {:.4} s (row {}; {}): {:.3} s of recording before it are not compared",
-            alignment.start_s(),
-            fmt_row(alignment.start_row),
-            if start == Start::Given { "t0_s" } else { "found from ref_disp_m" },
-            alignment.pre_trigger_s()
-        ));
-    }
-    if alignment.end_row < rows {
-        notes.push(format!("the excitation ends at t = {:.4} s: the {:.3} s recorded after it are not compared", alignment.end_s(), alignment.after_s()));
-    }
+    notes.extend(alignment.notes(rows));
     let samples = Samples { rate_hz: rate, time: (window.0..window.1).map(|n| alignment.time.time(n as f64)).collect(), tau, ref_x, ref_v, ref_a, fundamental_hz, n_harm };
     warnings.extend(channel_checks(&samples, &measured).into_iter().map(|w| format!("test {:?}: {w}", test.name)));
     Ok(AlignedTest {
         name: test.name.clone(),
         file: data.file.clone(),
         excitation: test.excitation.clone(),
-        model,
+        model: model_for(test, open_loop),
         weights: test.weights,
         alignment,
         drive,
@@ -490,6 +332,189 @@ pub fn align(test: &TestSpec, data: &NumTable, record: Option<&NumTable>, open_l
         notes,
         warnings,
     })
+}
+
+/// The file's magnitudes, its time base and the column an open loop needs.
+fn check_file(data: &NumTable, open_loop: Option<OpenLoop>) -> Result<TimeBase, Vec<DataProblem>> {
+    let mut problems = data.check_limits();
+    let time = data.time_base("time_s").map_err(|p| problems.push(p)).ok();
+    if let Some(mode) = open_loop {
+        if data.column(mode.column()).is_none() {
+            let word = match mode {
+                OpenLoop::Valve => "valve",
+                OpenLoop::Spool => "spool",
+            };
+            problems.push(data.problem(Some(mode.column()), None, format!("missing; `--open-loop {word}` drives the model with it")));
+        }
+    }
+    match time {
+        Some(t) if problems.is_empty() => Ok(t),
+        _ => Err(problems),
+    }
+}
+
+/// The test's model as driven: a measured spool already holds the valve's delay and dynamics,
+/// so the effects that move the spool are off.
+fn model_for(test: &TestSpec, open_loop: Option<OpenLoop>) -> ModelParams {
+    let mut model = test.model.clone();
+    if open_loop == Some(OpenLoop::Spool) {
+        for e in crate::kernel::effects::EffectId::ALL.into_iter().filter(|e| e.info().moves_spool) {
+            *model.effects.get_mut(e) = false;
+        }
+    }
+    model
+}
+
+/// A sine's start and end in the file (given by `t0_s` or found from `ref_disp_m`) and its
+/// window's whole cycles.
+fn locate_sine(test: &TestSpec, sine: &Sine, data: &NumTable, time: &TimeBase, warnings: &mut Vec<String>) -> Result<Located, Vec<DataProblem>> {
+    let rate = time.rate_hz;
+    let given = test.t0_s.map(|t| (t - time.t0_s) * rate);
+    let fit = align_sine(sine, data.column("ref_disp_m").expect("required column"), rate, given, test.duration_given.then_some(sine.duration_s));
+    warnings.extend(fit.warnings.iter().map(|w| format!("test {:?}: {w}", test.name)));
+    if let Some(e) = fit.error {
+        return Err(vec![data.problem(None, None, format!("test {:?}: {e}", test.name))]);
+    }
+    let motion_s = (fit.end_row as f64 - fit.start_row) / rate;
+    // The default window counts the cycles in the motion as found, give or take the sample at
+    // each end (the end is found to a sample).
+    let n = if test.window_given { sine.window_cycles.unwrap_or(0) } else { Sine { duration_s: motion_s + 1.0 / rate, ..*sine }.default_cycles() };
+    if n == 0 {
+        return Err(vec![data.problem(None, None, format!(
+            "test {:?}: the excitation lasts {motion_s:.3} s in the file (from t = {:.4} s): too short for a whole cycle after taper_s + 1 s",
+            test.name,
+            time.time(fit.start_row)
+        ))]);
+    }
+    let start = if given.is_some() { Start::Given } else { Start::Detected };
+    Ok(Located { start_row: fit.start_row, start, end_row: fit.end_row, cycles: Some(n), record: None })
+}
+
+/// A record's reference (from `t0_s`, else its first sample, on the data's clock) and the rows
+/// it spans in the file; a displacement beyond the stroke is refused at its row.
+fn locate_record(test: &TestSpec, (column, time_column, f_ref_hz, scale): (&str, &str, f64, f64), data: &NumTable, record: Option<&NumTable>, time: &TimeBase) -> Result<Located, Vec<DataProblem>> {
+    let source = record.unwrap_or(data);
+    let Some(values) = source.column(column) else {
+        return Err(vec![source.problem(Some(column), None, format!("missing: the record of test {:?}", test.name))]);
+    };
+    let rec_time = if record.is_some() { source.time_base(time_column).map_err(|p| vec![p])? } else { time.clone() };
+    let t0 = test.t0_s.unwrap_or(rec_time.t0_s);
+    let first = ((t0 - rec_time.t0_s) * rec_time.rate_hz).ceil().max(0.0) as usize;
+    let rec_t: Vec<f64> = (first..values.len()).map(|i| rec_time.time(i as f64) - t0).collect();
+    let rec_x: Vec<f64> = values[first..].iter().map(|v| v * scale).collect();
+    if rec_t.len() < 2 {
+        return Err(vec![source.problem(Some(column), None, format!("test {:?}: fewer than two record samples after t0_s", test.name))]);
+    }
+    let l = test.model.actuator.l;
+    if let Some((i, v)) = rec_x.iter().enumerate().find(|(_, v)| v.abs() >= l) {
+        return Err(vec![source.problem(Some(column), Some(first + i + 1), format!("displacement {v} m (after scale {scale}) exceeds the stroke (half stroke actuator.l = {l} m)"))]);
+    }
+    let span = rec_t[rec_t.len() - 1];
+    let r = Record { time_s: rec_t, disp_m: rec_x, f_ref_hz }.reference(test.model.controller.f_s);
+    let rate = time.rate_hz;
+    let start_row = ((t0 - time.t0_s) * rate).max(0.0);
+    let end_row = (((span + t0 - time.t0_s) * rate + 1e-6).floor() as usize + 1).min(time.rows);
+    let start = if test.t0_s.is_some() { Start::Given } else { Start::FirstRow };
+    Ok(Located { start_row, start, end_row, cycles: None, record: Some(r) })
+}
+
+/// The analysis window, in the file's rows: a sine's last whole cycles, a record's span.
+fn analysis_window(test: &TestSpec, data: &NumTable, at: &Located, rate: f64) -> Result<(usize, usize), Vec<DataProblem>> {
+    let w_first = at.start_row.ceil().max(0.0) as usize;
+    let window = match (&test.excitation, at.cycles) {
+        (ExcitationSpec::Sine { sine, .. }, Some(n)) => {
+            let len = (n as f64 * rate / sine.freq_hz).round() as usize;
+            if len > at.end_row.saturating_sub(w_first) {
+                return Err(vec![data.problem(None, None, format!(
+                    "test {:?}: {n} whole cycles ({:.3} s) do not fit in the excitation's {:.3} s in the file",
+                    test.name,
+                    n as f64 / sine.freq_hz,
+                    (at.end_row as f64 - at.start_row) / rate
+                ))]);
+            }
+            (at.end_row - len, at.end_row)
+        }
+        _ => (w_first, at.end_row),
+    };
+    if window.1 <= window.0 + 1 {
+        return Err(vec![data.problem(None, None, format!("test {:?}: no samples to compare after the excitation's start", test.name))]);
+    }
+    Ok(window)
+}
+
+/// Open loop: the measured column `c` at the model's `n` ticks (linear between the file's
+/// samples).
+fn measured_drive(mode: OpenLoop, c: &[f64], start_row: f64, rate: f64, f_s: f64, n: usize) -> Drive {
+    let rows = c.len();
+    let at = |k: usize| {
+        let q = start_row + k as f64 * rate / f_s;
+        let i = q.floor().clamp(0.0, (rows - 1) as f64) as usize;
+        let w = (q - i as f64).clamp(0.0, 1.0);
+        if w == 0.0 || i + 1 >= rows { c[i.min(rows - 1)] } else { c[i] + w * (c[i + 1] - c[i]) }
+    };
+    let v: Vec<f64> = (0..n).map(at).collect();
+    match mode {
+        OpenLoop::Valve => Drive::ValveCommand(v),
+        OpenLoop::Spool => Drive::Spool(v),
+    }
+}
+
+/// Reference states at the samples' model times: analytic for a sine, from the ticks for a record.
+fn reference_states(excitation: &ExcitationSpec, drive: &Reference, tau: &[f64]) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    match excitation {
+        ExcitationSpec::Sine { sine, .. } => {
+            let st: Vec<[f64; 4]> = tau.iter().map(|&t| sine.states(t)).collect();
+            (st.iter().map(|s| s[0]).collect(), st.iter().map(|s| s[1]).collect(), st.iter().map(|s| s[2]).collect())
+        }
+        ExcitationSpec::Record { .. } => (
+            tau.iter().map(|&t| drive.at_time(&drive.x, t)).collect(),
+            tau.iter().map(|&t| drive.at_time(&drive.v, t)).collect(),
+            tau.iter().map(|&t| drive.at_time(&drive.a, t)).collect(),
+        ),
+    }
+}
+
+/// A sine's fundamental and the harmonics below the file's Nyquist frequency (a note names
+/// those left out; a fundamental at or above it is refused).
+fn harmonics_in(test: &TestSpec, data: &NumTable, rate: f64, notes: &mut Vec<String>) -> Result<(Option<f64>, usize), Vec<DataProblem>> {
+    let ExcitationSpec::Sine { sine, .. } = &test.excitation else { return Ok((None, 0)) };
+    let f = sine.freq_hz;
+    let n_harm = (1..=N_HARM).take_while(|&k| (k as f64) * f < 0.5 * rate).count();
+    if n_harm == 0 {
+        return Err(vec![data.problem(Some("time_s"), None, format!("test {:?}: its {f} Hz excitation is at or above the file's Nyquist frequency ({} Hz)", test.name, 0.5 * rate))]);
+    }
+    if n_harm < N_HARM {
+        notes.push(format!(
+            "h{}{} ({} Hz and up) at or above the Nyquist frequency of a {} Hz file ({} Hz): left out",
+            n_harm + 1,
+            if n_harm + 1 < N_HARM { format!("…h{N_HARM}") } else { String::new() },
+            (n_harm + 1) as f64 * f,
+            timebase::fmt_rate(rate),
+            0.5 * rate
+        ));
+    }
+    Ok((Some(f), n_harm))
+}
+
+impl Alignment {
+    /// What the comparison leaves out of a file of `rows` rows: the recording before the
+    /// excitation (a pre-trigger) and after it.
+    fn notes(&self, rows: usize) -> Vec<String> {
+        let mut notes = Vec::new();
+        if self.start_row >= 1.0 && self.start != Start::FirstRow {
+            notes.push(format!(
+                "the excitation starts at t = {:.4} s (row {}; {}): {:.3} s of recording before it are not compared",
+                self.start_s(),
+                fmt_row(self.start_row),
+                if self.start == Start::Given { "t0_s" } else { "found from ref_disp_m" },
+                self.pre_trigger_s()
+            ));
+        }
+        if self.end_row < rows {
+            notes.push(format!("the excitation ends at t = {:.4} s: the {:.3} s recorded after it are not compared", self.end_s(), self.after_s()));
+        }
+        notes
+    }
 }
 
 /// The outcome of aligning a sine to `ref_disp_m`.
@@ -549,8 +574,7 @@ fn crossing_freq(r: &[f64], rate: f64, lo: usize, hi: usize) -> Option<f64> {
 /// Finds the start and end of `sine` in `r` (see the module docs).
 fn align_sine(sine: &Sine, r: &[f64], rate: f64, given_row: Option<f64>, duration: Option<f64>) -> SineFit {
     let n = r.len();
-    let (x, f) = (sine.amp_m, sine.freq_hz);
-    let p = rate / f;
+    let p = rate / sine.freq_hz;
     let mut out = SineFit { start_row: 0.0, end_row: n, warnings: Vec::new(), error: None };
     let peak = r.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let onset = r.iter().position(|v| v.abs() > 0.01 * peak);
@@ -560,40 +584,7 @@ fn align_sine(sine: &Sine, r: &[f64], rate: f64, given_row: Option<f64>, duratio
             out.warnings.push("ref_disp_m is zero throughout: the file holds no excitation (is it the right file?); the excitation is taken to start at the first row".into());
             0.0
         }
-        (None, Some(on)) => {
-            let on = on as f64;
-            // The start modulo a period, from the phase of the steady sine after the taper.
-            let s0 = (on + sine.taper_s * rate).ceil() as usize;
-            let cyc = ((n.saturating_sub(s0)) as f64 / p).floor().min(4.0);
-            let s_phase = if cyc >= 1.0 {
-                let (mut a, mut b) = (0.0, 0.0);
-                for k in s0..(s0 + (cyc * p).round() as usize).min(n) {
-                    let th = 2.0 * PI * f * k as f64 / rate;
-                    a += r[k] * th.sin();
-                    b += r[k] * th.cos();
-                }
-                ((-b).atan2(a) / (2.0 * PI)).rem_euclid(1.0) * p
-            } else {
-                on
-            };
-            let region = ((on + sine.taper_s * rate + 2.0 * p).ceil() as usize).min(n);
-            let lo = on - 0.2 * sine.taper_s * rate - 1.5 * p;
-            let m0 = ((lo - s_phase) / p).floor() as i64;
-            let m1 = ((on + 0.5 * p - s_phase) / p).ceil() as i64;
-            let best = (m0..=m1)
-                .map(|m| s_phase + m as f64 * p)
-                .filter(|s| *s >= lo && *s <= on + 0.5 * p)
-                .min_by(|a, b| misfit(sine, r, rate, *a, 0, region).total_cmp(&misfit(sine, r, rate, *b, 0, region)))
-                .unwrap_or(on);
-            let s1 = golden(|s| misfit(sine, r, rate, s, 0, region), best - 0.25 * p, best + 0.25 * p, 1e-9);
-            // Where the column leaves the sine, then the start again over the whole excitation.
-            let end = end_of_sine(sine, r, rate, s1, region);
-            let s2 = golden(|s| misfit(sine, r, rate, s, 0, end), s1 - 1.0, s1 + 1.0, 1e-9);
-            // [chosen] A start within 0.01 row of a row is that row (0.01 row is 5 µs at
-            // 2 kHz, 0.02° of a 10 Hz fundamental): a reference column interpolated between
-            // controller ticks moves the fitted start by that much.
-            if (s2 - s2.round()).abs() < 0.01 { s2.round() } else { s2 }
-        }
+        (None, Some(on)) => detect_start(sine, r, rate, on as f64),
     };
     out.start_row = start;
     let first = start.ceil().max(0.0) as usize;
@@ -620,11 +611,54 @@ fn align_sine(sine: &Sine, r: &[f64], rate: f64, given_row: Option<f64>, duratio
         }
         None => detected_end,
     };
-    if onset.is_none() {
-        return out;
+    if onset.is_some() {
+        out.warnings.extend(mismatch(sine, r, rate, start, out.end_row));
     }
-    // The column against the campaign's excitation.
-    let (lo, hi) = (first, out.end_row);
+    out
+}
+
+/// The excitation's start (a fractional row) from the reference column, given its onset `on`
+/// (the first row above 1 % of its peak).
+fn detect_start(sine: &Sine, r: &[f64], rate: f64, on: f64) -> f64 {
+    let (n, f, p) = (r.len(), sine.freq_hz, rate / sine.freq_hz);
+    // The start modulo a period, from the phase of the steady sine after the taper.
+    let s0 = (on + sine.taper_s * rate).ceil() as usize;
+    let cyc = ((n.saturating_sub(s0)) as f64 / p).floor().min(4.0);
+    let s_phase = if cyc >= 1.0 {
+        let (mut a, mut b) = (0.0, 0.0);
+        for k in s0..(s0 + (cyc * p).round() as usize).min(n) {
+            let th = 2.0 * PI * f * k as f64 / rate;
+            a += r[k] * th.sin();
+            b += r[k] * th.cos();
+        }
+        ((-b).atan2(a) / (2.0 * PI)).rem_euclid(1.0) * p
+    } else {
+        on
+    };
+    let region = ((on + sine.taper_s * rate + 2.0 * p).ceil() as usize).min(n);
+    let lo = on - 0.2 * sine.taper_s * rate - 1.5 * p;
+    let m0 = ((lo - s_phase) / p).floor() as i64;
+    let m1 = ((on + 0.5 * p - s_phase) / p).ceil() as i64;
+    let best = (m0..=m1)
+        .map(|m| s_phase + m as f64 * p)
+        .filter(|s| *s >= lo && *s <= on + 0.5 * p)
+        .min_by(|a, b| misfit(sine, r, rate, *a, 0, region).total_cmp(&misfit(sine, r, rate, *b, 0, region)))
+        .unwrap_or(on);
+    let s1 = golden(|s| misfit(sine, r, rate, s, 0, region), best - 0.25 * p, best + 0.25 * p, 1e-9);
+    // Where the column leaves the sine, then the start again over the whole excitation.
+    let end = end_of_sine(sine, r, rate, s1, region);
+    let s2 = golden(|s| misfit(sine, r, rate, s, 0, end), s1 - 1.0, s1 + 1.0, 1e-9);
+    // [chosen] A start within 0.01 row of a row is that row (0.01 row is 5 µs at 2 kHz, 0.02°
+    // of a 10 Hz fundamental): a reference column interpolated between controller ticks moves
+    // the fitted start by that much.
+    if (s2 - s2.round()).abs() < 0.01 { s2.round() } else { s2 }
+}
+
+/// A warning when the reference column between `start` and `end` is not the campaign's sine
+/// (another frequency, amplitude or shape), with the likely cause.
+fn mismatch(sine: &Sine, r: &[f64], rate: f64, start: f64, end: usize) -> Option<String> {
+    let (x, f) = (sine.amp_m, sine.freq_hz);
+    let (lo, hi) = (start.ceil().max(0.0) as usize, end);
     let rms_ref = (misfit(sine, r, rate, start, lo, hi) / (hi - lo).max(1) as f64).sqrt();
     let shape = rms_ref / (x / 2f64.sqrt());
     let steady = ((start + sine.taper_s * rate).ceil().max(0.0) as usize).min(hi);
@@ -632,22 +666,22 @@ fn align_sine(sine: &Sine, r: &[f64], rate: f64, given_row: Option<f64>, duratio
     let a_hat = r[steady..hi].iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let f_off = f_hat.is_some_and(|fh| (fh / f - 1.0).abs() > 0.02);
     let a_off = steady < hi && (a_hat / x - 1.0).abs() > 0.05;
-    if f_off || a_off || shape > 0.05 {
-        let mut w = format!(
-            "ref_disp_m does not match the campaign's excitation (sine {f} Hz, {x:.4} m): it oscillates at {} with amplitude {a_hat:.4} m, an rms mismatch of {:.0} % after alignment",
-            f_hat.map_or("no clear frequency".to_string(), |v| format!("{v:.3} Hz")),
-            100.0 * shape
-        );
-        if a_off && (a_hat / x / 1000.0 - 1.0).abs() < 0.05 {
-            w.push_str(": ref_disp_m in mm?");
-        } else if f_off {
-            w.push_str(": the file of another test?");
-        } else {
-            w.push_str(": the file of another test, or another unit?");
-        }
-        out.warnings.push(w);
+    if !(f_off || a_off || shape > 0.05) {
+        return None;
     }
-    out
+    let mut w = format!(
+        "ref_disp_m does not match the campaign's excitation (sine {f} Hz, {x:.4} m): it oscillates at {} with amplitude {a_hat:.4} m, an rms mismatch of {:.0} % after alignment",
+        f_hat.map_or("no clear frequency".to_string(), |v| format!("{v:.3} Hz")),
+        100.0 * shape
+    );
+    if a_off && (a_hat / x / 1000.0 - 1.0).abs() < 0.05 {
+        w.push_str(": ref_disp_m in mm?");
+    } else if f_off {
+        w.push_str(": the file of another test?");
+    } else {
+        w.push_str(": the file of another test, or another unit?");
+    }
+    Some(w)
 }
 
 /// The first row, after `from`, where `r` leaves the sine started at row `s` for at least a

@@ -153,8 +153,46 @@ pub fn rebuild(t: &[f64]) -> Result<TimeBase, TimeProblem> {
     if n < 2 {
         return Err(TimeProblem::TooFew { rows: n });
     }
+    let quanta = quanta_of(t);
+    let q = |i: usize| quanta[i].0;
+    let d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+    let step = nominal_step(t, &d)?;
+    let (jittery, unreliable) = check_steps(t, &d, step, &q)?;
+    let line = Line::fit(t);
+    let (a, rate_hz, b, whole_hz) = (line.a, line.rate_hz, line.b, line.whole_hz);
+    let grid = |i: usize| a + i as f64 / rate_hz;
+    // The grid itself is uncertain by the fit's standard errors (rounding averages out).
+    let nf = n as f64;
+    let fit_err = 4.0 * line.s_e * (1.0 / nf + (nf / 2.0).powi(2) / line.sxx).sqrt();
+    let mut max_jitter: f64 = 0.0;
+    for i in 0..n {
+        let e = t[i] - grid(i);
+        let allowed = (0.5 * q(i) * (1.0 + 1e-9)).max(STEP_TOLERANCE * b) + fit_err + 4.0 * f64::EPSILON * t[i].abs();
+        if e.abs() > allowed {
+            return Err(TimeProblem::OffGrid { row: i + 1, t: t[i], grid: grid(i), allowed, rate_hz });
+        }
+        max_jitter = max_jitter.max(e.abs());
+    }
+    // On the grid to the last bit of each value: the column was exact, nothing was rebuilt.
+    let exact = (0..n).all(|i| (t[i] - grid(i)).abs() <= 4.0 * f64::EPSILON * t[i].abs().max(b));
+    let resolution_s = if jittery { quanta.iter().map(|x| x.0).fold(0.0, f64::max) } else { 0.0 };
+    let digits = quanta.iter().map(|x| x.1).max().unwrap_or(17);
+    Ok(TimeBase {
+        rate_hz,
+        t0_s: if exact { t[0] } else { a },
+        rows: n,
+        max_jitter_s: if exact { 0.0 } else { max_jitter },
+        resolution_s,
+        digits,
+        whole_hz,
+        unresolved: jittery && unreliable * 2 > n,
+    })
+}
+
+/// Each time's printed quantum and digits; a zero tells nothing of the digits it was printed
+/// with, so it gets the column's typical quantum.
+fn quanta_of(t: &[f64]) -> Vec<(f64, u32)> {
     let mut quanta: Vec<(f64, u32)> = t.iter().map(|&x| printed_quantum(x)).collect();
-    // A zero tells nothing of the digits it was printed with: give it the column's typical ones.
     let mut nonzero: Vec<f64> = quanta.iter().map(|x| x.0).filter(|q| *q > 0.0).collect();
     if !nonzero.is_empty() {
         let typical = median(&mut nonzero);
@@ -164,26 +202,35 @@ pub fn rebuild(t: &[f64]) -> Result<TimeBase, TimeProblem> {
             }
         }
     }
-    let q = |i: usize| quanta[i].0;
-    let d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-    let step_med = median(&mut d.clone());
+    quanta
+}
+
+/// The step between rows: the median difference `d` (it resists gaps), or the mean where
+/// printing is so coarse that steps repeat; time that does not advance is refused.
+fn nominal_step(t: &[f64], d: &[f64]) -> Result<f64, TimeProblem> {
+    let n = t.len();
+    let step_med = median(&mut d.to_vec());
     let step_mean = (t[n - 1] - t[0]) / (n - 1) as f64;
-    // The median resists gaps; where printing is so coarse that steps repeat, the mean.
     let step = if step_med > 0.0 && (step_med / step_mean - 1.0).abs() < 0.5 { step_med } else { step_mean };
     if !(step > 0.0) {
         let i = (1..n).find(|&i| t[i] <= t[i - 1]).unwrap_or(1);
         return Err(TimeProblem::GoesBack { row: i + 1, t: t[i], prev: t[i - 1] });
     }
-    // Whole steps between rows. An exact column (every difference a multiple of the step) tells
-    // gaps whatever its digits; a rounded one where its rows' digits resolve a step.
+    Ok(step)
+}
+
+/// Whole steps between rows. An exact column (every difference a multiple of the step) tells
+/// gaps whatever its digits; a rounded one where its rows' digits resolve a step. Returns
+/// whether the column jitters and how many differences its digits cannot resolve; the first
+/// problem in row order is refused (after a gap, only further gaps are counted).
+fn check_steps(t: &[f64], d: &[f64], step: f64, q: &dyn Fn(usize) -> f64) -> Result<(bool, usize), TimeProblem> {
     let steps: Vec<f64> = d.iter().map(|di| (di / step).round()).collect();
     let jittery = d.iter().zip(&steps).any(|(di, m)| (di - m * step).abs() > 1e-6 * step);
     let reliable = |i: usize| !jittery || 0.5 * (q(i) + q(i - 1)) < 0.5 * step;
-    // The first problem in row order (after a gap, only further gaps are counted).
     let mut first: Option<TimeProblem> = None;
     let mut gaps = 0;
     let mut unreliable = 0;
-    for i in 1..n {
+    for i in 1..t.len() {
         if !reliable(i) {
             unreliable += 1;
             continue;
@@ -214,59 +261,50 @@ pub fn rebuild(t: &[f64]) -> Result<TimeBase, TimeProblem> {
     if let Some(TimeProblem::Gap { row, t, prev, missing, step, .. }) = first {
         return Err(TimeProblem::Gap { row, t, prev, missing, step, more: gaps - 1 });
     }
-    // Least squares t_i = a + b·i, centred.
-    let nf = n as f64;
-    let im = (nf - 1.0) / 2.0;
-    let tm = t.iter().sum::<f64>() / nf;
-    let (mut sxy, mut sxx) = (0.0, 0.0);
-    for (i, &ti) in t.iter().enumerate() {
-        let x = i as f64 - im;
-        sxy += x * (ti - tm);
-        sxx += x * x;
-    }
-    let mut b = sxy / sxx;
-    let mut a = tm - b * im;
-    let s_e = (t.iter().enumerate().map(|(i, &ti)| (ti - a - b * i as f64).powi(2)).sum::<f64>() / (nf - 2.0).max(1.0)).sqrt();
-    let se_b = s_e / sxx.sqrt();
-    let whole = (1.0 / b).round();
-    let mut whole_hz = false;
-    if whole >= 1.0 && (1.0 / whole - b).abs() <= (4.0 * se_b).max(1e-12 * b) {
-        b = 1.0 / whole;
-        a = t.iter().enumerate().map(|(i, &ti)| ti - i as f64 * b).sum::<f64>() / nf;
-        whole_hz = true;
-    }
-    let rate_hz = if whole_hz { whole } else { 1.0 / b };
-    // An intercept within a millionth of a step of the first printed time is that time (0 stays
-    // 0, not -1e-13).
-    if (a - t[0]).abs() < 1e-6 * b {
-        a = t[0];
-    }
-    let grid = |i: usize| a + i as f64 / rate_hz;
-    // The grid itself is uncertain by the fit's standard errors (rounding averages out).
-    let fit_err = 4.0 * s_e * (1.0 / nf + (nf / 2.0).powi(2) / sxx).sqrt();
-    let mut max_jitter: f64 = 0.0;
-    for i in 0..n {
-        let e = t[i] - grid(i);
-        let allowed = (0.5 * q(i) * (1.0 + 1e-9)).max(STEP_TOLERANCE * b) + fit_err + 4.0 * f64::EPSILON * t[i].abs();
-        if e.abs() > allowed {
-            return Err(TimeProblem::OffGrid { row: i + 1, t: t[i], grid: grid(i), allowed, rate_hz });
+    Ok((jittery, unreliable))
+}
+
+/// The least-squares line t_i = a + b·i through the times, snapped to a whole rate in Hz when
+/// that is within its standard error.
+struct Line {
+    a: f64,
+    b: f64,
+    rate_hz: f64,
+    whole_hz: bool,
+    /// The residual standard error and Σ(i − ī)², for the grid's own uncertainty.
+    s_e: f64,
+    sxx: f64,
+}
+
+impl Line {
+    fn fit(t: &[f64]) -> Line {
+        let nf = t.len() as f64;
+        let im = (nf - 1.0) / 2.0;
+        let tm = t.iter().sum::<f64>() / nf;
+        let (mut sxy, mut sxx) = (0.0, 0.0);
+        for (i, &ti) in t.iter().enumerate() {
+            let x = i as f64 - im;
+            sxy += x * (ti - tm);
+            sxx += x * x;
         }
-        max_jitter = max_jitter.max(e.abs());
+        let mut b = sxy / sxx;
+        let mut a = tm - b * im;
+        let s_e = (t.iter().enumerate().map(|(i, &ti)| (ti - a - b * i as f64).powi(2)).sum::<f64>() / (nf - 2.0).max(1.0)).sqrt();
+        let se_b = s_e / sxx.sqrt();
+        let whole = (1.0 / b).round();
+        let mut whole_hz = false;
+        if whole >= 1.0 && (1.0 / whole - b).abs() <= (4.0 * se_b).max(1e-12 * b) {
+            b = 1.0 / whole;
+            a = t.iter().enumerate().map(|(i, &ti)| ti - i as f64 * b).sum::<f64>() / nf;
+            whole_hz = true;
+        }
+        // An intercept within a millionth of a step of the first printed time is that time (0
+        // stays 0, not -1e-13).
+        if (a - t[0]).abs() < 1e-6 * b {
+            a = t[0];
+        }
+        Line { a, b, rate_hz: if whole_hz { whole } else { 1.0 / b }, whole_hz, s_e, sxx }
     }
-    // On the grid to the last bit of each value: the column was exact, nothing was rebuilt.
-    let exact = (0..n).all(|i| (t[i] - grid(i)).abs() <= 4.0 * f64::EPSILON * t[i].abs().max(b));
-    let resolution_s = if jittery { quanta.iter().map(|x| x.0).fold(0.0, f64::max) } else { 0.0 };
-    let digits = quanta.iter().map(|x| x.1).max().unwrap_or(17);
-    Ok(TimeBase {
-        rate_hz,
-        t0_s: if exact { t[0] } else { a },
-        rows: n,
-        max_jitter_s: if exact { 0.0 } else { max_jitter },
-        resolution_s,
-        digits,
-        whole_hz,
-        unresolved: jittery && unreliable * 2 > n,
-    })
 }
 
 #[cfg(test)]

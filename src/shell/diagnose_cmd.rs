@@ -8,9 +8,7 @@ use super::tables::{self, Column};
 use super::{campaign_io::load_model, RunFailed};
 use crate::kernel::params::EffectId;
 use crate::orchestration::diagnose::{self, Diagnosis};
-use crate::orchestration::fit::{self, Problem};
-use crate::orchestration::measured::AlignedTest;
-use crate::orchestration::{compare, statemap::{self, StateMap}};
+use crate::orchestration::fit::Problem;
 use plotters::prelude::*;
 use std::fmt::Write as _;
 use std::io::Write;
@@ -34,12 +32,11 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
     let loaded = load_problem(&args.campaign, &model, args.strict)?;
     let problem = loaded.problem;
     let t0 = std::time::Instant::now();
-    let mut d = diagnose::diagnose(&problem, &candidates);
-    d.state_map = state_map(&loaded.aligned);
-    if let Some((free, fit)) = d.named_fit() {
-        let fitted: Vec<_> = loaded.aligned.iter().map(|t| AlignedTest { model: fit::apply(&t.model, free, &fit.u), ..t.clone() }).collect();
-        d.state_map_after = state_map(&fitted);
-    }
+    let d = super::run_cmd::pool(args.threads)?.install(|| {
+        let mut d = diagnose::diagnose(&problem, &candidates);
+        d.map_states(&loaded.aligned);
+        d
+    });
     let secs = t0.elapsed().as_secs_f64();
     if let Some(f) = &d.baseline.failure {
         return Err(RunFailed(format!("the starting model fails: {f}")).into());
@@ -49,71 +46,10 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
         return Err(BadInput(format!("{} (--strict)", implausible.join("\n"))).into());
     }
     let mut o = std::io::stdout().lock();
-    let chi2_b = d.baseline.chi2();
     writeln!(o, "study diagnose {} ({} tests, {} features, {} candidates, {:.1} s)", args.campaign.display(), problem.tests.len(), d.features.len(), d.candidates.len(), secs)?;
-    writeln!(
-        o,
-        "\n  baseline: chi2 = {chi2_b:.4e} (about {} for a model right to the noise), residual rms {:.3e} (residual / measured, rms over tests and channels: acceleration, displacement, force; noise floor {:.3e})",
-        d.n,
-        d.baseline.residual_rms(),
-        d.noise_rms
-    )?;
-    writeln!(o, "\n  {:<4} {:<17} {:<24} {:>3} {:>4} {:>11} {:>11} {:>9} {:>11}  significant", "rank", "candidate", "family", "p", "iter", "chi2", "dBIC", "explains", "rms resid.")?;
-    for (i, c) in d.candidates.iter().enumerate() {
-        let rms = c.fit.as_ref().map_or(f64::NAN, |f| f.after.residual_rms());
-        writeln!(
-            o,
-            "  {:<4} {:<17} {:<24} {:>3} {:>4} {:>11.4e} {:>11.4e} {:>8.1}% {:>11.3e}  {}",
-            i + 1,
-            c.effect,
-            c.family,
-            c.free.len(),
-            c.fit.as_ref().map_or("-".to_string(), |f| format!("{}{}", f.iterations, if f.converged { "" } else { "!" })),
-            c.chi2(),
-            c.delta_bic,
-            100.0 * c.explained,
-            rms,
-            match &c.fit {
-                Err(e) => format!("fit failed: {e}"),
-                Ok(_) if c.significant() => "yes".into(),
-                Ok(_) => "no".into(),
-            }
-        )?;
-    }
-    writeln!(o, "\n  evidence for the top candidates (the residual features each explains; chi2 baseline -> candidate):")?;
-    for c in d.candidates.iter().take(3) {
-        let Ok(f) = &c.fit else { continue };
-        let params: Vec<String> = c.free.iter().zip(&f.estimate).zip(&f.se).map(|((p, e), s)| format!("{} = {e:.3e} ± {s:.1e} {}", p.info.name, p.info.unit)).collect();
-        writeln!(o, "  {} ({})", c.effect, params.join(", "))?;
-        for (t, k, b, a) in diagnose::evidence(&d, c, 3) {
-            writeln!(o, "      {} of {:<16} {:>11.4e} -> {:.4e}", harmonic_label(k), problem.tests[t].name, b, a)?;
-        }
-        let per: Vec<String> = (0..problem.tests.len()).map(|t| format!("{:.1e}->{:.1e}", d.baseline.test_rms(t), f.after.test_rms(t))).collect();
-        writeln!(o, "      residual rms per test: {}", per.join("  "))?;
-        let (pb, pa) = (problem.fundamental_phase_error(&d.baseline), problem.fundamental_phase_error(&f.after));
-        let ph: Vec<String> = (0..problem.tests.len()).filter(|&t| pb[t].is_finite()).map(|t| format!("{:+.2}->{:+.2}", pb[t], pa[t])).collect();
-        if !ph.is_empty() {
-            writeln!(o, "      phase error of the fundamental per test (model - measured, deg): {}", ph.join("  "))?;
-        }
-    }
-    if !d.more.is_empty() {
-        writeln!(o, "\n  forward selection (each effect fitted on top of those before it, their parameters refitted with it):")?;
-        writeln!(o, "  {:<22} {:>4} {:>11} {:>11} {:>9} {:>11}  parameters (joint fit)", "effect", "iter", "chi2", "dBIC", "explains", "rms resid.")?;
-        for s in &d.more {
-            let params: Vec<String> = s.free.iter().zip(&s.fit.estimate).zip(&s.fit.se).map(|((p, e), se)| format!("{} = {e:.3e} ± {se:.1e} {}", p.info.path(), p.info.unit)).collect();
-            writeln!(
-                o,
-                "  + {:<20} {:>4} {:>11.4e} {:>11.4e} {:>8.1}% {:>11.3e}  {}",
-                s.effect,
-                format!("{}{}", s.fit.iterations, if s.fit.converged { "" } else { "!" }),
-                s.fit.chi2_after(),
-                s.delta_bic,
-                100.0 * s.explained,
-                s.fit.after.residual_rms(),
-                params.join(", ")
-            )?;
-        }
-    }
+    print_candidates(&mut o, &d)?;
+    print_evidence(&mut o, &problem, &d)?;
+    print_selection(&mut o, &d)?;
     if let Some(map) = &d.state_map {
         writeln!(o, "\n  the starting model's residual:")?;
         super::state_map::print(&mut o, map)?;
@@ -131,13 +67,84 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The starting model's residual mapped onto the plant's states (None when a test's model run
-/// fails: the diagnosis reports that itself).
-fn state_map(aligned: &[AlignedTest]) -> Option<StateMap> {
-    use rayon::prelude::*;
-    let solver = Default::default();
-    let compared: Result<Vec<_>, String> = aligned.par_iter().map(|t| compare::compare_test(t, &solver)).collect();
-    compared.ok().map(|c| statemap::map(&c))
+/// The baseline, then the candidates ranked.
+fn print_candidates(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
+    writeln!(
+        o,
+        "\n  baseline: chi2 = {:.4e} (about {} for a model right to the noise), residual rms {:.3e} (residual / measured, rms over tests and channels: acceleration, displacement, force; noise floor {:.3e})",
+        d.baseline.chi2(),
+        d.n,
+        d.baseline.residual_rms(),
+        d.noise_rms
+    )?;
+    writeln!(o, "\n  {:<4} {:<17} {:<24} {:>3} {:>4} {:>11} {:>11} {:>9} {:>11}  significant", "rank", "candidate", "family", "p", "iter", "chi2", "dBIC", "explains", "rms resid.")?;
+    for (i, c) in d.candidates.iter().enumerate() {
+        let rms = c.fit.as_ref().map_or(f64::NAN, |f| f.after.residual_rms());
+        writeln!(
+            o,
+            "  {:<4} {:<17} {:<24} {:>3} {:>4} {:>11.4e} {:>11.4e} {:>8.1}% {:>11.3e}  {}",
+            i + 1,
+            c.effect.name(),
+            c.family,
+            c.free.len(),
+            c.fit.as_ref().map_or("-".to_string(), |f| format!("{}{}", f.iterations, if f.converged { "" } else { "!" })),
+            c.chi2(),
+            c.delta_bic,
+            100.0 * c.explained,
+            rms,
+            match &c.fit {
+                Err(e) => format!("fit failed: {e}"),
+                Ok(_) if c.significant() => "yes".into(),
+                Ok(_) => "no".into(),
+            }
+        )?;
+    }
+    Ok(())
+}
+
+/// For the top three candidates: their estimates and the residual features each explains.
+fn print_evidence(o: &mut dyn Write, problem: &Problem, d: &Diagnosis) -> std::io::Result<()> {
+    writeln!(o, "\n  evidence for the top candidates (the residual features each explains; chi2 baseline -> candidate):")?;
+    for c in d.candidates.iter().take(3) {
+        let Ok(f) = &c.fit else { continue };
+        let params: Vec<String> = c.free.iter().zip(&f.estimate).zip(&f.se).map(|((p, e), s)| format!("{} = {e:.3e} ± {s:.1e} {}", p.info.name, p.info.unit)).collect();
+        writeln!(o, "  {} ({})", c.effect, params.join(", "))?;
+        for (t, k, b, a) in diagnose::evidence(d, c, 3) {
+            writeln!(o, "      {} of {:<16} {:>11.4e} -> {:.4e}", harmonic_label(k), problem.tests[t].name, b, a)?;
+        }
+        let per: Vec<String> = (0..problem.tests.len()).map(|t| format!("{:.1e}->{:.1e}", d.baseline.test_rms(t), f.after.test_rms(t))).collect();
+        writeln!(o, "      residual rms per test: {}", per.join("  "))?;
+        let (pb, pa) = (problem.fundamental_phase_error(&d.baseline), problem.fundamental_phase_error(&f.after));
+        let ph: Vec<String> = (0..problem.tests.len()).filter(|&t| pb[t].is_finite()).map(|t| format!("{:+.2}->{:+.2}", pb[t], pa[t])).collect();
+        if !ph.is_empty() {
+            writeln!(o, "      phase error of the fundamental per test (model - measured, deg): {}", ph.join("  "))?;
+        }
+    }
+    Ok(())
+}
+
+/// The forward selection's steps, each with its joint fit.
+fn print_selection(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
+    if d.more.is_empty() {
+        return Ok(());
+    }
+    writeln!(o, "\n  forward selection (each effect fitted on top of those before it, their parameters refitted with it):")?;
+    writeln!(o, "  {:<22} {:>4} {:>11} {:>11} {:>9} {:>11}  parameters (joint fit)", "effect", "iter", "chi2", "dBIC", "explains", "rms resid.")?;
+    for s in &d.more {
+        let params: Vec<String> = s.free.iter().zip(&s.fit.estimate).zip(&s.fit.se).map(|((p, e), se)| format!("{} = {e:.3e} ± {se:.1e} {}", p.info.path(), p.info.unit)).collect();
+        writeln!(
+            o,
+            "  + {:<20} {:>4} {:>11.4e} {:>11.4e} {:>8.1}% {:>11.3e}  {}",
+            s.effect.name(),
+            format!("{}{}", s.fit.iterations, if s.fit.converged { "" } else { "!" }),
+            s.fit.chi2_after(),
+            s.delta_bic,
+            100.0 * s.explained,
+            s.fit.after.residual_rms(),
+            params.join(", ")
+        )?;
+    }
+    Ok(())
 }
 
 /// The Parquet tables and the HTML page of a diagnosis.
@@ -148,10 +155,23 @@ pub fn write_report(dir: &std::path::Path, campaign: &str, problem: &Problem, d:
     if let Some(map) = &d.state_map {
         super::state_map::write(dir, map, &meta)?;
     }
+    tables::write_table(&dir.join("candidates.parquet"), candidates_columns(d), &meta)?;
+    tables::write_table(&dir.join("selection.parquet"), selection_columns(d), &meta)?;
+    tables::write_table(&dir.join("tests.parquet"), tests_columns(problem, d), &meta)?;
+    tables::write_table(&dir.join("evidence.parquet"), evidence_columns(problem, d), &meta)?;
+    let page = html(campaign, problem, d)?;
+    let path = dir.join("report.html");
+    let out = tables::AtomicFile::new(&path);
+    std::fs::write(&out.tmp, page)?;
+    out.commit()?;
+    Ok(())
+}
+
+
+/// `candidates.parquet`: one row per candidate, ranked.
+fn candidates_columns(d: &Diagnosis) -> Vec<(String, Column)> {
     let cs = &d.candidates;
-    tables::write_table(
-        &dir.join("candidates.parquet"),
-        vec![
+    vec![
             ("rank".into(), Column::U32((1..=cs.len() as u32).collect())),
             ("effect".into(), Column::Str(cs.iter().map(|c| c.effect.to_string()).collect())),
             ("family".into(), Column::Str(cs.iter().map(|c| c.family.to_string()).collect())),
@@ -165,11 +185,14 @@ pub fn write_report(dir: &std::path::Path, campaign: &str, problem: &Problem, d:
             ("delta_bic".into(), Column::F64(cs.iter().map(|c| c.delta_bic).collect())),
             ("explained".into(), Column::F64(cs.iter().map(|c| c.explained).collect())),
             ("significant".into(), Column::Bool(cs.iter().map(|c| c.significant()).collect())),
-            ("failure".into(), Column::Str(cs.iter().map(|c| c.fit.as_ref().err().cloned().unwrap_or_default()).collect())),
-        ],
-        &meta,
-    )?;
-    // The chosen effects: the best candidate, then each forward-selection step (its joint fit).
+            ("failure".into(), Column::Str(cs.iter().map(|c| c.fit.as_ref().err().map(ToString::to_string).unwrap_or_default()).collect())),
+        ]
+}
+
+/// `selection.parquet`: the chosen effects, the best candidate then each forward-selection step
+/// (its joint fit).
+fn selection_columns(d: &Diagnosis) -> Vec<(String, Column)> {
+    let cs = &d.candidates;
     let mut steps: Vec<(&str, &[crate::orchestration::fit::Free], &crate::orchestration::fit::FitResult, f64, f64)> = Vec::new();
     if let Some(c) = cs.first().filter(|c| c.significant()) {
         if let Ok(f) = &c.fit {
@@ -179,9 +202,7 @@ pub fn write_report(dir: &std::path::Path, campaign: &str, problem: &Problem, d:
     for st in &d.more {
         steps.push((st.effect.name(), &st.free, &st.fit, st.delta_bic, st.explained));
     }
-    tables::write_table(
-        &dir.join("selection.parquet"),
-        vec![
+    vec![
             ("step".into(), Column::U32((1..=steps.len() as u32).collect())),
             ("effect".into(), Column::Str(steps.iter().map(|s| s.0.to_string()).collect())),
             ("params".into(), Column::StrList(steps.iter().map(|s| s.1.iter().map(|f| f.info.path()).collect()).collect())),
@@ -192,10 +213,12 @@ pub fn write_report(dir: &std::path::Path, campaign: &str, problem: &Problem, d:
             ("explained".into(), Column::F64(steps.iter().map(|s| s.4).collect())),
             ("residual_rms".into(), Column::F64(steps.iter().map(|s| s.2.after.residual_rms()).collect())),
             ("noise_rms".into(), Column::F64(vec![d.noise_rms; steps.len()])),
-        ],
-        &meta,
-    )?;
-    // Residual per test, baseline and each candidate: the "error falls" table.
+        ]
+}
+
+/// `tests.parquet`: the residual per test, baseline and each candidate (the "error falls" table).
+fn tests_columns(problem: &Problem, d: &Diagnosis) -> Vec<(String, Column)> {
+    let cs = &d.candidates;
     let mut rows: Vec<(String, &str, f64, f64)> = Vec::new();
     let phase_b = problem.fundamental_phase_error(&d.baseline);
     let phase_c: Vec<Vec<f64>> = cs.iter().map(|c| c.fit.as_ref().map_or(vec![f64::NAN; problem.tests.len()], |f| problem.fundamental_phase_error(&f.after))).collect();
@@ -205,39 +228,29 @@ pub fn write_report(dir: &std::path::Path, campaign: &str, problem: &Problem, d:
             rows.push((test.name.clone(), c.effect.name(), c.fit.as_ref().map_or(f64::NAN, |f| f.after.test_rms(t)), phase_c[i][t]));
         }
     }
-    tables::write_table(
-        &dir.join("tests.parquet"),
-        vec![
+    vec![
             ("test".into(), Column::Str(rows.iter().map(|r| r.0.clone()).collect())),
             ("model".into(), Column::Str(rows.iter().map(|r| r.1.to_string()).collect())),
             ("rms_residual_ratio".into(), Column::F64(rows.iter().map(|r| r.2).collect())),
             ("phase_err_fundamental_deg".into(), Column::F64(rows.iter().map(|r| r.3).collect())),
-        ],
-        &meta,
-    )?;
+        ]
+}
+
+/// `evidence.parquet`: per candidate, the residual features it explains.
+fn evidence_columns(problem: &Problem, d: &Diagnosis) -> Vec<(String, Column)> {
     let mut ev: Vec<(&str, usize, usize, f64, f64)> = Vec::new();
-    for c in cs {
+    for c in &d.candidates {
         for (t, k, b, a) in diagnose::evidence(d, c, usize::MAX) {
             ev.push((c.effect.name(), t, k, b, a));
         }
     }
-    tables::write_table(
-        &dir.join("evidence.parquet"),
-        vec![
+    vec![
             ("effect".into(), Column::Str(ev.iter().map(|e| e.0.to_string()).collect())),
             ("test".into(), Column::Str(ev.iter().map(|e| problem.tests[e.1].name.clone()).collect())),
             ("harmonic".into(), Column::U32(ev.iter().map(|e| e.2 as u32).collect())),
             ("chi2_baseline".into(), Column::F64(ev.iter().map(|e| e.3).collect())),
             ("chi2_candidate".into(), Column::F64(ev.iter().map(|e| e.4).collect())),
-        ],
-        &meta,
-    )?;
-    let page = html(campaign, problem, d)?;
-    let path = dir.join("report.html");
-    let out = tables::AtomicFile::new(&path);
-    std::fs::write(&out.tmp, page)?;
-    out.commit()?;
-    Ok(())
+        ]
 }
 
 /// "The error falls": rms acceleration residual per test, baseline and the top candidates.

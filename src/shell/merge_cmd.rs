@@ -32,6 +32,18 @@ fn get(f: &ShardFile, key: Key) -> anyhow::Result<&str> {
         .ok_or_else(|| BadInput(format!("{}: not a shard of `study run --shard I/N` (no {key} in its metadata)", f.path.display())).into())
 }
 
+/// Refuses `f` when it is a shard of another run than `first` ([`SAME`]).
+fn same_run(first: &ShardFile, f: &ShardFile) -> anyhow::Result<()> {
+    for (key, what) in SAME {
+        let (a, b) = (get(first, key)?, get(f, key)?);
+        if a != b {
+            let show = |v: &str| if v.len() > 40 { format!("{}…", &v[..v.char_indices().nth(40).map_or(v.len(), |(i, _)| i)]) } else { v.to_string() };
+            return Err(BadInput(format!("{}: a shard of another run: its {what} ({}) differs from {}'s ({})", f.path.display(), show(b), first.path.display(), show(a))).into());
+        }
+    }
+    Ok(())
+}
+
 /// Reads and checks the shards of `dir` (every .parquet file but `skip`), in shard order.
 fn shards(dir: &Path, skip: &Path) -> anyhow::Result<Vec<ShardFile>> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
@@ -67,20 +79,7 @@ fn shards(dir: &Path, skip: &Path) -> anyhow::Result<Vec<ShardFile>> {
     }
     let first = &list[0];
     for f in &list[1..] {
-        for (key, what) in SAME {
-            let (a, b) = (get(first, key)?, get(f, key)?);
-            if a != b {
-                let show = |v: &str| if v.len() > 40 { format!("{}…", &v[..v.char_indices().nth(40).map_or(v.len(), |(i, _)| i)]) } else { v.to_string() };
-                return Err(BadInput(format!(
-                    "{}: a shard of another run: its {what} ({}) differs from {}'s ({})",
-                    f.path.display(),
-                    show(b),
-                    first.path.display(),
-                    show(a)
-                ))
-                .into());
-            }
-        }
+        same_run(first, f)?;
     }
     let count: usize = get(first, Key::ShardCount)?.parse().map_err(|_| BadInput(format!("{}: bad {}", first.path.display(), Key::ShardCount)))?;
     let mut by_index: BTreeMap<usize, &ShardFile> = BTreeMap::new();

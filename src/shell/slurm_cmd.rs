@@ -25,7 +25,46 @@ fn slurm_value(flag: &str, v: &str) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// What the job scripts need: the study's name and size, the absolute paths, the shared
+/// `#SBATCH` lines.
+struct Job<'a> {
+    args: &'a SlurmArgs,
+    name: String,
+    samples: usize,
+    excitations: usize,
+    dir: PathBuf,
+    study: PathBuf,
+    bin: PathBuf,
+    /// `#SBATCH` lines every script carries (partition, account).
+    common: String,
+}
+
 pub fn run(args: &SlurmArgs) -> anyhow::Result<()> {
+    let job = prepare(args)?;
+    let (array, merge, submit) = (array_script(&job), merge_script(&job), submit_script(&job));
+    let dir = &job.dir;
+    for (file, text) in [("array.sbatch", &array), ("merge.sbatch", &merge), ("submit.sh", &submit)] {
+        let path = dir.join(file);
+        std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))?;
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755))?;
+        }
+    }
+    let n = args.shards;
+    let mut o = std::io::stdout().lock();
+    writeln!(o, "study slurm {}: {} samples x {} excitations in {n} shards", args.file.display(), job.samples, job.excitations)?;
+    writeln!(o, "  {}  the job array (task I = shard I/{n}, {} CPUs, {} each)", dir.join("array.sbatch").display(), args.cpus, args.time)?;
+    writeln!(o, "  {}  the merge job", dir.join("merge.sbatch").display())?;
+    writeln!(o, "  {}  submits both (merge afterok the array)", dir.join("submit.sh").display())?;
+    writeln!(o, "  submit: bash {}", dir.join("submit.sh").display())?;
+    writeln!(o, "  result: {}", job.merged().display())?;
+    Ok(())
+}
+
+/// Checks the study and the options, and makes the job's folders.
+fn prepare(args: &SlurmArgs) -> anyhow::Result<Job<'_>> {
     let spec = load_study(&args.file)?;
     let base = args.file.parent().unwrap_or(Path::new("."));
     let plan = plan_for(&spec, base)?;
@@ -38,9 +77,11 @@ pub fn run(args: &SlurmArgs) -> anyhow::Result<()> {
         return Err(BadInput("--cpus must be at least 1".into()).into());
     }
     slurm_value("time", &args.time)?;
+    let mut common = String::new();
     for (flag, v) in [("partition", &args.partition), ("account", &args.account)] {
         if let Some(v) = v {
             slurm_value(flag, v)?;
+            common += &format!("#SBATCH --{flag}={v}\n");
         }
     }
     let name: String = spec.name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '_' || c == '-' { c } else { '_' }).collect();
@@ -52,25 +93,28 @@ pub fn run(args: &SlurmArgs) -> anyhow::Result<()> {
     if dir.to_string_lossy().chars().any(|c| "\"$`\\".contains(c)) {
         return Err(BadInput(format!("--dir {}: the path may not contain \" $ ` or \\ (it goes into the job scripts)", dir.display())).into());
     }
-    let study = absolute(&args.file)?;
     let bin = match &args.bin {
         Some(b) => absolute(b)?,
         None => std::env::current_exe().context("locating the study executable")?,
     };
-    let n = args.shards;
-    let mut common = String::new();
-    if let Some(p) = &args.partition {
-        common += &format!("#SBATCH --partition={p}\n");
+    Ok(Job { args, name, samples: plan.samples(), excitations: plan.references.len(), dir, study: absolute(&args.file)?, bin, common })
+}
+
+impl Job<'_> {
+    fn merged(&self) -> PathBuf {
+        self.dir.join(format!("{}.parquet", self.name))
     }
-    if let Some(a) = &args.account {
-        common += &format!("#SBATCH --account={a}\n");
-    }
+}
+
+/// The job array: task I runs shard I/N, stops before the time limit, requeues and resumes.
+fn array_script(job: &Job<'_>) -> String {
+    let (args, name, dir, common, n) = (job.args, &job.name, &job.dir, &job.common, job.args.shards);
     let shard_out = dir.join("shards").join(format!("{name}.shard-${{SLURM_ARRAY_TASK_ID}}-of-{n}.parquet"));
     // Slurm sends SIGTERM to the batch shell 5 minutes before the time limit (--signal=B:TERM@300);
     // the shell passes it on to `study`, which finishes the chunks in flight, closes its file
     // marked incomplete and exits with 143; the task then requeues itself, and the requeued task
     // (or one requeued after preemption or a node failure) continues with --resume.
-    let array = format!(
+    format!(
         "#!/bin/bash\n\
 # Written by `study slurm` (vshake {ver}): {samples} samples x {exc} excitations of {study} in {n} shards.\n\
 # Task I runs `study run --shard I/{n}`, a contiguous slice of the design; the merge job joins them.\n\
@@ -103,19 +147,24 @@ if [ \"$status\" -eq 143 ]; then\n\
 fi\n\
 exit \"$status\"\n",
         ver = env!("CARGO_PKG_VERSION"),
-        samples = plan.samples(),
-        exc = plan.references.len(),
-        study = study.display(),
+        samples = job.samples,
+        exc = job.excitations,
+        study = job.study.display(),
         last = n - 1,
         cpus = args.cpus,
         time = args.time,
         logs = dir.join("logs").display(),
-        bin = q(&bin),
-        study_q = q(&study),
+        bin = q(&job.bin),
+        study_q = q(&job.study),
         shard_out = shard_out.display(),
-    );
-    let merged = dir.join(format!("{name}.parquet"));
-    let merge = format!(
+    )
+}
+
+/// The merge job: joins the shards once every array task has succeeded.
+fn merge_script(job: &Job<'_>) -> String {
+    let (name, dir, common, n) = (&job.name, &job.dir, &job.common, job.args.shards);
+    let merged = job.merged();
+    format!(
         "#!/bin/bash\n\
 # Written by `study slurm`: joins the {n} shards once every array task has succeeded.\n\
 #SBATCH --job-name=vshake-{name}-merge\n\
@@ -126,11 +175,16 @@ exit \"$status\"\n",
 set -euo pipefail\n\
 exec {bin} merge {shards} --out {merged}\n",
         logs = dir.join("logs").display(),
-        bin = q(&bin),
+        bin = q(&job.bin),
         shards = q(&dir.join("shards")),
         merged = q(&merged),
-    );
-    let submit = format!(
+    )
+}
+
+/// The submit script: the array, then the merge job after it (afterok).
+fn submit_script(job: &Job<'_>) -> String {
+    let (dir, n, merged) = (&job.dir, job.args.shards, job.merged());
+    format!(
         "#!/bin/bash\n\
 # Submits the array, then the merge job to run after all of its tasks succeed (afterok).\n\
 set -euo pipefail\n\
@@ -143,22 +197,5 @@ echo \"merged table when done: {merged}\"\n",
         array_q = q(&dir.join("array.sbatch")),
         merge_q = q(&dir.join("merge.sbatch")),
         merged = merged.display(),
-    );
-    for (file, text) in [("array.sbatch", &array), ("merge.sbatch", &merge), ("submit.sh", &submit)] {
-        let path = dir.join(file);
-        std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))?;
-        #[cfg(unix)]
-        {
-            use std::os::unix::fs::PermissionsExt;
-            std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755))?;
-        }
-    }
-    let mut o = std::io::stdout().lock();
-    writeln!(o, "study slurm {}: {} samples x {} excitations in {n} shards", args.file.display(), plan.samples(), plan.references.len())?;
-    writeln!(o, "  {}  the job array (task I = shard I/{n}, {} CPUs, {} each)", dir.join("array.sbatch").display(), args.cpus, args.time)?;
-    writeln!(o, "  {}  the merge job", dir.join("merge.sbatch").display())?;
-    writeln!(o, "  {}  submits both (merge afterok the array)", dir.join("submit.sh").display())?;
-    writeln!(o, "  submit: bash {}", dir.join("submit.sh").display())?;
-    writeln!(o, "  result: {}", merged.display())?;
-    Ok(())
+    )
 }
