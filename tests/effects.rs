@@ -264,13 +264,20 @@ fn port_asymmetry_shows_as_even_harmonics() {
 fn a_switched_off_effect_is_neutral() {
     let d = tempfile::tempdir().unwrap();
     let base = "[excitation]\nkind = \"sine\"\nfreq_hz = 3.0\namp_g = 1.73\nwindow_cycles = 4\n";
-    std::fs::write(d.path().join("a.toml"), base).unwrap();
-    std::fs::write(d.path().join("b.toml"), format!("[model.seal_friction]\nenabled = false\nf_c = 9000.0\n[model.spool_dynamics]\nenabled = false\n{base}")).unwrap();
-    let (_, a, _) = study(&["sim", d.path().join("a.toml").to_str().unwrap(), "-q"]);
-    let (_, b, _) = study(&["sim", d.path().join("b.toml").to_str().unwrap(), "-q"]);
-    assert_eq!(a, b);
-    std::fs::write(d.path().join("c.toml"), format!("[model.seal_friction]\n{base}")).unwrap();
-    let (_, c, _) = study(&["sim", d.path().join("c.toml").to_str().unwrap(), "-q"]);
+    // Each run's full history, every channel, as bits.
+    let history = |name: &str, model: &str| -> Vec<Vec<u64>> {
+        let (file, out) = (d.path().join(format!("{name}.toml")), d.path().join(format!("{name}.parquet")));
+        std::fs::write(&file, format!("{model}{base}")).unwrap();
+        let (code, stdout, stderr) = study(&["sim", file.to_str().unwrap(), "-q", "--out", out.to_str().unwrap()]);
+        assert_eq!(code, 0, "{name}: {stdout}{stderr}");
+        let names: Vec<&str> = vshake::orchestration::sim::CHANNELS.iter().map(|c| c.name).collect();
+        let t = vshake::shell::tables::read_columns_allow_nan(&out, &names).unwrap();
+        names.iter().map(|n| t.column(n).unwrap().iter().map(|v| v.to_bits()).collect()).collect()
+    };
+    let a = history("a", "");
+    let b = history("b", "[model.seal_friction]\nenabled = false\nf_c = 9000.0\n[model.spool_dynamics]\nenabled = false\n");
+    assert_eq!(a, b, "switched off, the effects leave every channel bit for bit");
+    let c = history("c", "[model.seal_friction]\n");
     assert_ne!(a, c, "switched on, it changes the run");
 }
 

@@ -11,8 +11,9 @@
 //!
 //! with F[−1] = F[0] and F_hp[−1] = 0. Notch i is N(s) = (s² + 2ζ_z ω0 s + ω0²)/(s² + 2ζ_p ω0 s + ω0²),
 //! ζ_p = B/(2 f0), ζ_z = ζ_p·10^(−depth/20), discretised by Tustin with pre-warping at f0. A notch
-//! of depth 0 dB has b = a exactly, so it passes its input through bit for bit; all five always run,
-//! so the tick has no branch on configuration.
+//! of depth 0 dB is given the identity coefficients [1, 0, 0, 0, 0] (its Tustin form would equal
+//! them only up to rounding), so it passes its input through bit for bit; all five always run, so
+//! the tick has no branch on configuration.
 
 use super::params::ControllerParams;
 

@@ -544,7 +544,8 @@ mod tests {
             assert_eq!((info.get)(&p), info.default);
             (info.set)(&mut p, 1.25);
             assert_eq!((info.get)(&p), 1.25);
-            assert!(std::ptr::eq(ModelParams::lookup(&info.path()).unwrap(), info) || ModelParams::lookup(&info.path()).unwrap().name == info.name);
+            let found = ModelParams::lookup(&info.path()).expect("its own path");
+            assert_eq!((found.component, found.name), (info.component, info.name), "{} looks up another row", info.path());
         }
     }
 

@@ -57,11 +57,19 @@ mod tests {
 
     #[test]
     fn accel_balances_forces() {
+        // Worked by hand: F − k·y − (c·|v|^α + μ)·z over m, with y = 0.01 m, v = 0.25 m/s, z = 1:
+        // (1e6 − 12 660 − (41 000·0.5 + 7 597)) / 144 000 = 959 243 / 144 000.
         let c = PlatenLane { inv_m: 1.0 / 144e3, k: 1.266e6, c: 0.041e6, alpha: 0.5, mu: 7597.0 };
         let a = accel::<SqrtDamping>(&c, 1e6, 0.0, 0.01, 0.25, 1.0);
-        let expected = (1e6 - 1.266e4 - (0.041e6 * 0.5 + 7597.0)) / 144e3;
-        assert!((a - expected).abs() < 1e-12);
-        let b = accel::<PowDamping>(&c, 1e6, 0.0, 0.01, 0.25, 1.0);
-        assert!((a - b).abs() < 1e-12);
+        assert!((a - 959_243.0 / 144e3).abs() < 1e-12, "{a}");
+        // The general law at α = ½ is the square root.
+        assert_eq!(accel::<PowDamping>(&c, 1e6, 0.0, 0.01, 0.25, 1.0), a);
+        // α = 0.6, moving back (v < 0, z = −½), an external force: 0.36^0.6 = 0.541728270868…
+        // (e^(0.6·ln 0.36)), so (1 020 000 + 25 320 + (41 000·0.5417282709 + 7 597)·0.5) / 144 000
+        // = 1 060 224.03 / 144 000 = 7.36267 m/s².
+        let c = PlatenLane { alpha: 0.6, ..c };
+        let b = accel::<PowDamping>(&c, 1e6, 2e4, -0.02, -0.36, -0.5);
+        assert!((b - 7.362_666_177_450_024).abs() < 1e-12, "{b}");
     }
+
 }

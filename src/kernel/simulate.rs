@@ -279,23 +279,37 @@ impl<const N: usize> Observer<N> for NoObserver {
     fn tick(&mut self, _view: &TickView<'_, N>) {}
 }
 
-/// Instruction set used for a batch.
+/// The instruction set a batch's kernel is built for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Isa {
-    /// AVX2 when the CPU has it (runtime detection), else the portable build.
-    Auto,
     /// The portable build (x86-64 baseline: SSE2).
     Portable,
+    /// The same code compiled with AVX2 and FMA enabled (x86-64 CPUs that report both).
+    Avx2,
 }
 
 impl Isa {
-    /// What `Auto` resolves to on this machine.
-    pub fn detected() -> &'static str {
+    /// The widest instruction set this CPU runs (runtime detection).
+    pub fn detected() -> Isa {
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
-            return "avx2";
+            return Isa::Avx2;
         }
-        "portable"
+        Isa::Portable
+    }
+
+    /// Its name, as `study bench` and the run banner print it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Isa::Portable => "portable",
+            Isa::Avx2 => "avx2",
+        }
+    }
+}
+
+impl std::fmt::Display for Isa {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
     }
 }
 
@@ -312,7 +326,7 @@ pub fn run<const N: usize, E: Effect<N>, O: Observer<N>>(
     solver: &Solver,
     obs: &mut O,
 ) -> Result<[LaneResult; N], SetupError> {
-    run_on(Isa::Auto, lp, effect, reference, solver, obs)
+    run_on(Isa::detected(), lp, effect, reference, solver, obs)
 }
 
 /// [`run`] on a chosen instruction set.
@@ -325,7 +339,8 @@ pub fn run_on<const N: usize, E: Effect<N>, O: Observer<N>>(
     obs: &mut O,
 ) -> Result<[LaneResult; N], SetupError> {
     check(lp, reference, solver)?;
-    let wide = isa == Isa::Auto && Isa::detected() == "avx2";
+    // AVX2 only where the CPU has it: asking for it elsewhere runs the portable build.
+    let wide = isa == Isa::Avx2 && Isa::detected() == Isa::Avx2;
     Ok(match (lp.valve_law, lp.alpha_half) {
         (ValveLaw::Orifice, true) => actuators::<N, Orifice, SqrtDamping, E, O>(wide, lp, effect, reference, solver, obs),
         (ValveLaw::Orifice, false) => actuators::<N, Orifice, PowDamping, E, O>(wide, lp, effect, reference, solver, obs),
@@ -346,7 +361,7 @@ pub fn run_usual<const N: usize, E: Effect<N>, O: Observer<N>>(
     obs: &mut O,
 ) -> Option<Result<[LaneResult; N], SetupError>> {
     #[cfg(target_arch = "x86_64")]
-    if matches!(lp.valve_law, ValveLaw::Orifice) && lp.alpha_half && Isa::detected() == "avx2" {
+    if matches!(lp.valve_law, ValveLaw::Orifice) && lp.alpha_half && Isa::detected() == Isa::Avx2 {
         if let Err(e) = check(lp, reference, solver) {
             return Some(Err(e));
         }
@@ -795,7 +810,7 @@ mod tests {
         let elp = LaneParams::<8>::new(&erefs).unwrap();
         let set = crate::kernel::effects::effect_set::<8>(&erefs);
         assert!(set.symmetric());
-        for wide in [false, Isa::detected() == "avx2"] {
+        for wide in [false, Isa::detected() == Isa::Avx2] {
             let one = dispatch::<8, 1, Orifice, SqrtDamping, _, NoObserver>(wide, &elp, &set, &r, &solver, &mut NoObserver);
             let two = dispatch::<8, 2, Orifice, SqrtDamping, _, NoObserver>(wide, &elp, &set, &r, &solver, &mut NoObserver);
             assert!(one.iter().any(|x| x.status == LaneStatus::Ok));
@@ -806,7 +821,7 @@ mod tests {
                 }
             }
         }
-        for wide in [false, Isa::detected() == "avx2"] {
+        for wide in [false, Isa::detected() == Isa::Avx2] {
             let one = dispatch::<8, 1, Orifice, SqrtDamping, Baseline, NoObserver>(wide, &lp, &Baseline, &r, &solver, &mut NoObserver);
             let two = dispatch::<8, 2, Orifice, SqrtDamping, Baseline, NoObserver>(wide, &lp, &Baseline, &r, &solver, &mut NoObserver);
             assert!(one.iter().any(|x| x.status == LaneStatus::Ok) && one.iter().any(|x| x.status != LaneStatus::Ok), "wants ok and failed lanes: {:?}", one.map(|x| x.status));

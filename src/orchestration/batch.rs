@@ -12,11 +12,10 @@
 
 use super::sampling::{saltelli_block, Design, UnitDesign};
 use super::study::{Method, StudySpec};
-use crate::kernel::effects::{effect_set, Baseline};
 use crate::kernel::excitation::Reference;
 use crate::kernel::metrics::Metrics;
 use crate::kernel::params::{ModelParams, ParamInfo};
-use crate::kernel::simulate::{self, LaneParams, LaneStatus, NoObserver};
+use crate::kernel::simulate::{self, LaneStatus, NoObserver};
 use crate::kernel::LANES;
 use rayon::prelude::*;
 use std::ops::Range;
@@ -193,14 +192,9 @@ impl Plan {
             for group in valid.chunks(LANES) {
                 let models: Vec<&ModelParams> = group.iter().map(|&i| samples[i].model.as_ref().expect("valid")).collect();
                 // Lanes without effects give the same bits in the effect set (it is neutral
-                // there), so the choice per group does not make a row depend on its neighbours.
-                let results = match LaneParams::<LANES>::new(&models) {
-                    Ok(lp) if models.iter().any(|m| m.effects.any()) => {
-                        simulate::run(&lp, &effect_set::<LANES>(&models), reference, &self.solver, &mut NoObserver)
-                    }
-                    Ok(lp) => simulate::run(&lp, &Baseline, reference, &self.solver, &mut NoObserver),
-                    Err(e) => Err(e),
-                };
+                // there), so the kernel `run_lanes` chooses per group does not make a row
+                // depend on its neighbours.
+                let results = super::sim::run_lanes::<LANES, _>(&models, reference, &self.solver, &mut NoObserver);
                 for (lane, &i) in group.iter().enumerate() {
                     let (status, metrics) = match &results {
                         Ok(r) => match r[lane].status {

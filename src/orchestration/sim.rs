@@ -9,22 +9,30 @@ use crate::kernel::params::ModelParams;
 use crate::kernel::resample::Resampler;
 use crate::kernel::simulate::{self, LaneParams, LaneResult, Observer, SetupError, Solver, TickView, idx};
 
-/// Channel names (docs/formats.md measured-test names where one exists, so a history can be read back
-/// as a measured test) and what each holds.
-pub const CHANNELS: [(&str, &str); 13] = [
-    ("time_s", "time t_k"),
-    ("ref_disp_m", "reference displacement x_r"),
-    ("ref_accel_mps2", "reference acceleration a_r"),
-    ("disp_m", "platen displacement feedback x"),
-    ("accel_mps2", "platen acceleration dv/dt at t_k"),
-    ("valve_cmd_v", "valve command u after the clamp"),
-    ("force_n", "total actuator force F"),
-    ("p1_pa", "cap-side pressure P1, actuator 1"),
-    ("p2_pa", "rod-side pressure P2, actuator 1"),
-    ("p1_act2_pa", "cap-side pressure P1, actuator 2"),
-    ("p2_act2_pa", "rod-side pressure P2, actuator 2"),
-    ("spool_m", "spool position of actuator 1 (the command x_c unless a valve effect is on)"),
-    ("ref_vel_mps", "reference velocity v_r"),
+/// A channel of a time history: its column name (the docs/formats.md measured-test name where
+/// one exists, so a history can be read back as a measured test), what it holds, and how a tick
+/// gives it. A history's rows are made from this list, so the two cannot drift apart.
+pub struct Channel {
+    pub name: &'static str,
+    pub meaning: &'static str,
+    pub at: fn(&TickView<'_, 1>) -> f64,
+}
+
+/// The channels of a time history, in column order.
+pub const CHANNELS: [Channel; 13] = [
+    Channel { name: "time_s", meaning: "time t_k", at: |v| v.t },
+    Channel { name: "ref_disp_m", meaning: "reference displacement x_r", at: |v| v.r.x },
+    Channel { name: "ref_accel_mps2", meaning: "reference acceleration a_r", at: |v| v.r.a },
+    Channel { name: "disp_m", meaning: "platen displacement feedback x", at: |v| v.x[0] },
+    Channel { name: "accel_mps2", meaning: "platen acceleration dv/dt at t_k", at: |v| v.a[0] },
+    Channel { name: "valve_cmd_v", meaning: "valve command u after the clamp", at: |v| v.u[0] },
+    Channel { name: "force_n", meaning: "total actuator force F", at: |v| v.f[0] },
+    Channel { name: "p1_pa", meaning: "cap-side pressure P1, actuator 1", at: |v| v.state[idx::P1[0]][0] },
+    Channel { name: "p2_pa", meaning: "rod-side pressure P2, actuator 1", at: |v| v.state[idx::P2[0]][0] },
+    Channel { name: "p1_act2_pa", meaning: "cap-side pressure P1, actuator 2", at: |v| v.state[idx::P1[1]][0] },
+    Channel { name: "p2_act2_pa", meaning: "rod-side pressure P2, actuator 2", at: |v| v.state[idx::P2[1]][0] },
+    Channel { name: "spool_m", meaning: "spool position of actuator 1 (the command x_c unless a valve effect is on)", at: |v| v.spool[0] },
+    Channel { name: "ref_vel_mps", meaning: "reference velocity v_r", at: |v| v.r.v },
 ];
 
 /// Time history of lane 0, one vector per channel of [`CHANNELS`].
@@ -45,30 +53,18 @@ impl History {
     }
     /// The channel called `name`.
     pub fn channel(&self, name: &str) -> Option<&[f64]> {
-        CHANNELS.iter().position(|(n, _)| *n == name).map(|i| self.columns[i].as_slice())
+        CHANNELS.iter().position(|c| c.name == name).map(|i| self.columns[i].as_slice())
+    }
+    /// The columns with their names, for a table.
+    pub fn named_columns(&self) -> Vec<(&'static str, &[f64])> {
+        CHANNELS.iter().map(|c| c.name).zip(self.columns.iter().map(Vec::as_slice)).collect()
     }
 }
 
 impl Observer<1> for History {
     fn tick(&mut self, v: &TickView<'_, 1>) {
-        let s = v.state;
-        let row = [
-            v.t,
-            v.r.x,
-            v.r.a,
-            v.x[0],
-            v.a[0],
-            v.u[0],
-            v.f[0],
-            s[idx::P1[0]][0],
-            s[idx::P2[0]][0],
-            s[idx::P1[1]][0],
-            s[idx::P2[1]][0],
-            v.spool[0],
-            v.r.v,
-        ];
-        for (c, x) in self.columns.iter_mut().zip(row) {
-            c.push(x);
+        for (c, ch) in self.columns.iter_mut().zip(&CHANNELS) {
+            c.push((ch.at)(v));
         }
     }
 }

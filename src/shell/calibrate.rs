@@ -166,7 +166,7 @@ unsafe fn div_avx2(iters: usize, c: f64) -> f64 {
 }
 
 fn wide() -> bool {
-    crate::kernel::simulate::Isa::detected() == "avx2"
+    crate::kernel::simulate::Isa::detected() == crate::kernel::simulate::Isa::Avx2
 }
 
 /// Lane-operations per second of `f`, which does `ops_per_iter` of them per iteration, run for

@@ -413,7 +413,7 @@ fn write_histories(job: &Job) -> anyhow::Result<()> {
             let sim_spec = SimSpec { model: model.clone(), excitation: exc.spec.clone(), solver: spec.solver };
             let outcome = sim::run_sim(&sim_spec, &plan.references[e])?;
             let path = dir.join(format!("sample{id}_{}.parquet", exc.name));
-            let cols: Vec<(&str, &[f64])> = sim::CHANNELS.iter().map(|(n, _)| *n).zip(outcome.history.columns.iter().map(Vec::as_slice)).collect();
+            let cols = outcome.history.named_columns();
             let mut meta = meta::header(Kind::TimeHistory);
             meta.extend([meta::pair(Key::Spec, sim_spec.resolved_toml()), meta::pair(Key::SampleId, id), meta::pair(Key::SchemaVersion, SCHEMA_VERSION)]);
             tables::write_parquet(&path, &cols, &meta)?;

@@ -53,7 +53,7 @@ pub fn run(args: &SimArgs) -> anyhow::Result<()> {
         writeln!(stdout, "  {name:<22} {:>12}", fmt_value(v))?;
     }
     if let Some(path) = &args.out {
-        let cols: Vec<(&str, &[f64])> = CHANNELS.iter().map(|(n, _)| *n).zip(out.history.columns.iter().map(Vec::as_slice)).collect();
+        let cols = out.history.named_columns();
         let meta = {
             let mut m = meta::header(Kind::TimeHistory);
             m.extend([meta::pair(Key::Spec, spec.resolved_toml()), meta::pair(Key::SchemaVersion, super::run_cmd::SCHEMA_VERSION), meta::pair(Key::Status, &status)]);

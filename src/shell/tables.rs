@@ -773,6 +773,15 @@ pub fn read_strings(path: &Path, column: &str) -> Result<Vec<String>, TableError
     })
 }
 
+/// A nullable number column of a Parquet file (a null reads as None).
+pub fn read_opt_f64(path: &Path, column: &str) -> Result<Vec<Option<f64>>, TableError> {
+    read_values(path, column, "a number", |arr, out| {
+        let x = arr.as_any().downcast_ref::<Float64Array>()?;
+        out.extend((0..x.len()).map(|i| (!x.is_null(i)).then(|| x.value(i))));
+        Some(())
+    })
+}
+
 /// A Boolean column of a Parquet file (a null reads as false).
 pub fn read_bools(path: &Path, column: &str) -> Result<Vec<bool>, TableError> {
     read_values(path, column, "Boolean", |arr, out| {
