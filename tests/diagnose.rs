@@ -263,7 +263,7 @@ impl vshake::kernel::effects::Effect<1> for Specimen {
         self.k * (s[0][0] - y) + self.c * (s[1][0] - v)
     }
     fn derivs(&self, plant: &vshake::kernel::effects::PlantView<'_, 1>, s: &Self::State, ds: &mut Self::State) {
-        use vshake::kernel::simulate::idx::{V, Y};
+        use vshake::kernel::state::idx::{VEL as V, Y};
         let (y, v) = (plant.state[Y][0], plant.state[V][0]);
         ds[0][0] = s[1][0];
         ds[1][0] = -(self.k * (s[0][0] - y) + self.c * (s[1][0] - v)) / self.m;
@@ -363,7 +363,7 @@ impl vshake::kernel::effects::Effect<1> for Expansion {
     fn initial_state(&self) -> Self::State {
         []
     }
-    fn spool(&self, _l: usize, _act: usize, x: f64, _s: &Self::State) -> f64 {
+    fn opening(&self, _l: usize, _act: usize, x: f64, _s: &Self::State) -> f64 {
         x * (1.0 + self.a * x.abs() * self.inv_ref)
     }
     fn spool_position(&self, _l: usize, _act: usize, x: f64, _s: &Self::State) -> f64 {

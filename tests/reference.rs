@@ -5,7 +5,8 @@ use vshake::kernel::effects::Baseline;
 use vshake::kernel::excitation::{Reference, Sine};
 use vshake::kernel::metrics::Metrics;
 use vshake::kernel::params::{ModelParams, ValveLaw};
-use vshake::kernel::simulate::{self, idx, LaneParams, LaneStatus, NoObserver, Observer, Solver, TickView};
+use vshake::kernel::simulate::{self, LaneParams, LaneStatus, NoObserver, Observer, Solver, TickView};
+use vshake::kernel::state::idx;
 
 fn reference_sine(amp_g: f64) -> Reference {
     Sine { freq_hz: 3.0, amp_m: Sine::amp_from_g(amp_g, 3.0), taper_s: 1.0, duration_s: 3.0, window_cycles: Some(4) }.reference(1024.0)

@@ -1,7 +1,7 @@
 //! Effect `spool_overlap`: lands that overlap their ports by δ, a dead band around null:
 //! no flow while |x| ≤ δ, then x_eff = sign(x)·(|x| − δ).
 use super::{Effect, EffectInfo, LibraryEffect};
-use crate::kernel::params::{params, ModelParams, Range};
+use crate::kernel::params::{params, Component, ModelParams, Range};
 
 pub const INFO: EffectInfo = EffectInfo {
     name: "spool_overlap",
@@ -12,7 +12,7 @@ pub const INFO: EffectInfo = EffectInfo {
     moves_spool: false,
 };
 params! {
-    pub struct Params in effect_params.spool_overlap as "spool_overlap" {
+    pub struct Params in effect_params.spool_overlap as (Component::Effect(super::EffectId::SpoolOverlap)) {
         delta: "m", "m", 0.2e-3, Range::closed(0.0, 5e-3), Chosen, "Overlap δ [chosen: 0.2 mm].";
     }
 }
@@ -22,7 +22,7 @@ pub struct SpoolOverlap<const N: usize> {
 }
 impl<const N: usize> LibraryEffect<N> for SpoolOverlap<N> {
     fn new(p: [&ModelParams; N]) -> Self {
-        let on = super::lane_mask(&p, INFO.name);
+        let on = super::lane_mask::<N, Self>(&p);
         SpoolOverlap { delta: std::array::from_fn(|l| on[l] * Params::of(p[l]).delta) }
     }
 }
@@ -31,7 +31,7 @@ impl<const N: usize> Effect<N> for SpoolOverlap<N> {
     fn initial_state(&self) -> Self::State {
         []
     }
-    fn spool(&self, l: usize, _act: usize, x: f64, _s: &Self::State) -> f64 {
+    fn opening(&self, l: usize, _act: usize, x: f64, _s: &Self::State) -> f64 {
         x.signum() * (x.abs() - self.delta[l]).max(0.0)
     }
     fn spool_position(&self, _l: usize, _act: usize, x: f64, _s: &Self::State) -> f64 {

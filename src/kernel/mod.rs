@@ -21,6 +21,7 @@ pub mod platen;
 pub mod servovalve;
 pub mod resample;
 pub mod simulate;
+pub mod state;
 
 /// Actuators driving the platen [paper: two horizontal actuators]. Kept separate in the state so
 /// effects may break their symmetry.

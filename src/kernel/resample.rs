@@ -16,7 +16,8 @@
 //! no samples are needed beyond the run's ends, it is exact at the ticks, and it is as accurate
 //! as the run.]
 
-use super::simulate::{idx, Observer, TickView};
+use super::simulate::{Observer, TickView};
+use super::state::idx;
 
 /// The channels a [`Resampler`] keeps, in the order of [`Resampler::channel`].
 pub const CHANNELS: [&str; 8] = ["accel_mps2", "disp_m", "force_n", "p1_pa", "p2_pa", "valve_cmd_v", "spool_m", "vel_mps"];
@@ -81,7 +82,7 @@ impl<const N: usize> Observer<N> for Resampler<N> {
         row[ch::P2] = v.state[idx::P2[0]];
         row[ch::VALVE_CMD] = *v.u;
         row[ch::SPOOL] = *v.spool;
-        row[ch::VEL] = v.state[idx::V];
+        row[ch::VEL] = v.state[idx::VEL];
         self.out.push(row);
     }
 }

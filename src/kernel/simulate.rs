@@ -15,7 +15,7 @@
 //!    pressure leaves [−1 MPa, 2·P_S] is marked failed with time and reason, reset to rest and
 //!    carried along (its metrics become NaN); it never aborts the batch.
 //!
-//! The valve law (`V`), the damping law (`D`) and the effect (`E`) are type parameters, so the
+//! The valve law (`Q`), the damping law (`D`) and the effect (`E`) are type parameters, so the
 //! step has no branch on configuration. N = 1 is the scalar path: the same code, one lane.
 
 use super::actuator::{self, ActuatorLane};
@@ -30,23 +30,8 @@ use super::servovalve::{FlowLaw, Linear, Orifice, ValveLane};
 use super::N_ACT;
 use std::fmt;
 
-/// Number of plant states per lane.
-pub const NP: usize = 7;
-
-/// Indices of the plant states.
-pub mod idx {
-    /// Cap-side pressure of actuator i, Pa.
-    pub const P1: [usize; 2] = [0, 2];
-    /// Rod-side pressure of actuator i, Pa.
-    pub const P2: [usize; 2] = [1, 3];
-    /// Platen displacement, m.
-    pub const Y: usize = 4;
-    /// Platen velocity, m/s.
-    pub const V: usize = 5;
-    /// Friction law variable z, −.
-    pub const Z: usize = 6;
-}
-use idx::*;
+use super::state::idx::*;
+use super::state::NP;
 
 /// Generates a structure-of-arrays twin of a per-lane coefficient struct.
 macro_rules! soa {
@@ -397,7 +382,7 @@ fn check<const N: usize>(lp: &LaneParams<N>, reference: &Reference, solver: &Sol
 
 /// One equivalent actuator when the effect keeps the two identical ([`Effect::symmetric`]: every
 /// lane's actuators share their parameters, so only an effect can tell them apart), else both.
-fn actuators<const N: usize, V: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N>>(
+fn actuators<const N: usize, Q: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N>>(
     wide: bool,
     lp: &LaneParams<N>,
     effect: &E,
@@ -406,13 +391,13 @@ fn actuators<const N: usize, V: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N
     obs: &mut O,
 ) -> [LaneResult; N] {
     if effect.symmetric() {
-        dispatch::<N, 1, V, D, E, O>(wide, lp, effect, reference, solver, obs)
+        dispatch::<N, 1, Q, D, E, O>(wide, lp, effect, reference, solver, obs)
     } else {
-        dispatch::<N, N_ACT, V, D, E, O>(wide, lp, effect, reference, solver, obs)
+        dispatch::<N, N_ACT, Q, D, E, O>(wide, lp, effect, reference, solver, obs)
     }
 }
 
-fn dispatch<const N: usize, const A: usize, V: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N>>(
+fn dispatch<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N>>(
     wide: bool,
     lp: &LaneParams<N>,
     effect: &E,
@@ -423,22 +408,22 @@ fn dispatch<const N: usize, const A: usize, V: FlowLaw, D: Damping, E: Effect<N>
     #[cfg(target_arch = "x86_64")]
     if wide {
         // SAFETY: `wide` is only true when the CPU reports AVX2 and FMA (`Isa::detected`).
-        return unsafe { integrate_avx2::<N, A, V, D, E, O>(lp, effect, reference, solver, obs) };
+        return unsafe { integrate_avx2::<N, A, Q, D, E, O>(lp, effect, reference, solver, obs) };
     }
     let _ = wide;
-    integrate::<N, A, V, D, E, O>(lp, effect, reference, solver, obs)
+    integrate::<N, A, Q, D, E, O>(lp, effect, reference, solver, obs)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn integrate_avx2<const N: usize, const A: usize, V: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N>>(
+unsafe fn integrate_avx2<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N>>(
     lp: &LaneParams<N>,
     effect: &E,
     reference: &Reference,
     solver: &Solver,
     obs: &mut O,
 ) -> [LaneResult; N] {
-    integrate::<N, A, V, D, E, O>(lp, effect, reference, solver, obs)
+    integrate::<N, A, Q, D, E, O>(lp, effect, reference, solver, obs)
 }
 
 /// Plant right-hand side for every lane, computing `A` actuators: both, or (A = 1) the first
@@ -446,7 +431,7 @@ unsafe fn integrate_avx2<const N: usize, const A: usize, V: FlowLaw, D: Damping,
 /// (x + x is exact, so this equals computing the identical second actuator, bit for bit).
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn rhs<const N: usize, const A: usize, V: FlowLaw, D: Damping, E: Effect<N>>(
+fn rhs<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N>>(
     lp: &LaneParams<N>,
     effect: &E,
     x_c: &[f64; N],
@@ -464,7 +449,7 @@ fn rhs<const N: usize, const A: usize, V: FlowLaw, D: Damping, E: Effect<N>>(
     for l in 0..N {
         let valve = lp.valve.lane(l);
         let act = lp.act.lane(l);
-        let (y, v, z) = (s[Y][l], s[V][l], s[Z][l]);
+        let (y, v, z) = (s[Y][l], s[VEL][l], s[Z][l]);
         let ps = effect.supply(l, lp.p_s[l], es);
         p_s[l] = ps;
         // The chambers follow the actuator stroke (the platen's motion unless an effect says so).
@@ -474,9 +459,9 @@ fn rhs<const N: usize, const A: usize, V: FlowLaw, D: Damping, E: Effect<N>>(
         let mut qs = 0.0;
         for i in 0..A {
             let (p1, p2) = (s[P1[i]][l], s[P2[i]][l]);
-            let x = effect.spool(l, i, x_c[l], es);
+            let x = effect.opening(l, i, x_c[l], es);
             xs[i][l] = x;
-            let (q1, q2) = V::flows(&valve, x, p1, p2, ps);
+            let (q1, q2) = Q::flows(&valve, x, p1, p2, ps);
             // Supply → chamber 1 when x > 0, supply → chamber 2 (q2 < 0) otherwise.
             qs += if x > 0.0 { q1 } else { -q2 };
             let (q1, q2) = effect.flows(l, i, (q1, q2), p1, p2, ps, es);
@@ -501,11 +486,11 @@ fn rhs<const N: usize, const A: usize, V: FlowLaw, D: Damping, E: Effect<N>>(
         q_supply[l] = qs;
         f_act[l] = f;
         let fe = effect.extra_force(l, y, v, es);
-        ds[V][l] = platen::accel::<D>(&lp.platen.lane(l), f, fe, y, v, z);
+        ds[VEL][l] = platen::accel::<D>(&lp.platen.lane(l), f, fe, y, v, z);
         ds[Y][l] = v;
         ds[Z][l] = friction::dz_dt(&lp.friction.lane(l), v, z);
     }
-    let view = PlantView { x_c, x: &xs, q_supply: &q_supply, state: s, q_in1: &q_in1, q_out2: &q_out2, p_s: &p_s, f_act: &f_act };
+    let view = PlantView { x_c, opening: &xs, q_supply: &q_supply, state: s, q_in1: &q_in1, q_out2: &q_out2, p_s: &p_s, f_act: &f_act };
     effect.derivs(&view, es, des);
 }
 
@@ -538,7 +523,7 @@ impl<const N: usize, E: Effect<N>> Probe<N, E> {
     /// with the command held; its channels go to `obs.sample`.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
-    fn sample<const A: usize, V: FlowLaw, D: Damping, O: Observer<N>>(
+    fn sample<const A: usize, Q: FlowLaw, D: Damping, O: Observer<N>>(
         &mut self,
         lp: &LaneParams<N>,
         effect: &E,
@@ -556,18 +541,18 @@ impl<const N: usize, E: Effect<N>> Probe<N, E> {
             let [ek2, ek3, ek4, eka] = &mut self.ek;
             axpy(&mut self.tmp, s, 0.5 * delta, k1);
             axpy(self.etmp.as_mut(), es.as_ref(), 0.5 * delta, ek1.as_ref());
-            rhs::<N, A, V, D, E>(lp, effect, x_c, &self.tmp, &self.etmp, k2, ek2);
+            rhs::<N, A, Q, D, E>(lp, effect, x_c, &self.tmp, &self.etmp, k2, ek2);
             axpy(&mut self.tmp, s, 0.5 * delta, k2);
             axpy(self.etmp.as_mut(), es.as_ref(), 0.5 * delta, ek2.as_ref());
-            rhs::<N, A, V, D, E>(lp, effect, x_c, &self.tmp, &self.etmp, k3, ek3);
+            rhs::<N, A, Q, D, E>(lp, effect, x_c, &self.tmp, &self.etmp, k3, ek3);
             axpy(&mut self.tmp, s, delta, k3);
             axpy(self.etmp.as_mut(), es.as_ref(), delta, ek3.as_ref());
-            rhs::<N, A, V, D, E>(lp, effect, x_c, &self.tmp, &self.etmp, k4, ek4);
+            rhs::<N, A, Q, D, E>(lp, effect, x_c, &self.tmp, &self.etmp, k4, ek4);
             self.s = *s;
             self.es = *es;
             rk4_combine(&mut self.s, delta / 6.0, k1, k2, k3, k4);
             rk4_combine(self.es.as_mut(), delta / 6.0, ek1.as_ref(), ek2.as_ref(), ek3.as_ref(), ek4.as_ref());
-            rhs::<N, A, V, D, E>(lp, effect, x_c, &self.s, &self.es, ka, eka);
+            rhs::<N, A, Q, D, E>(lp, effect, x_c, &self.s, &self.es, ka, eka);
         } else {
             self.s = *s;
             self.es = *es;
@@ -576,10 +561,10 @@ impl<const N: usize, E: Effect<N>> Probe<N, E> {
         let (mut f, mut x, mut spool) = ([0.0; N], [0.0; N], [0.0; N]);
         total_force(lp, &self.s, &mut f);
         for l in 0..N {
-            x[l] = effect.stroke(l, self.s[Y][l], self.s[V][l], &self.es).0;
+            x[l] = effect.stroke(l, self.s[Y][l], self.s[VEL][l], &self.es).0;
             spool[l] = effect.spool_position(l, 0, x_c[l], &self.es);
         }
-        let a = self.k[3][V];
+        let a = self.k[3][VEL];
         obs.sample(&TickView { k: held.k, sub: held.sub, t: held.t, r: held.r, x: &x, a: &a, u: held.u, x_c, spool: &spool, f: &f, state: &self.s });
     }
 }
@@ -640,7 +625,7 @@ fn check_lane<const N: usize>(lp: &LaneParams<N>, s: &[[f64; N]; NP], l: usize) 
 }
 
 #[inline(always)]
-fn integrate<const N: usize, const A: usize, V: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N>>(
+fn integrate<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N>>(
     lp: &LaneParams<N>,
     effect: &E,
     reference: &Reference,
@@ -679,7 +664,7 @@ fn integrate<const N: usize, const A: usize, V: FlowLaw, D: Damping, E: Effect<N
         total_force(lp, &s, &mut f);
         for l in 0..N {
             // The displacement feedback (LVDT) reads the actuator stroke.
-            x[l] = effect.stroke(l, s[Y][l], s[V][l], &es).0;
+            x[l] = effect.stroke(l, s[Y][l], s[VEL][l], &es).0;
             match &reference.drive {
                 Drive::ClosedLoop => {
                     u[l] = controller::tick(&lp.ctrl[l], &mut mem[l], &r, x[l], f[l]);
@@ -698,8 +683,8 @@ fn integrate<const N: usize, const A: usize, V: FlowLaw, D: Damping, E: Effect<N
                 }
             }
         }
-        rhs::<N, A, V, D, E>(lp, effect, &x_c, &s, &es, &mut k1, &mut ek1);
-        a.copy_from_slice(&k1[V]);
+        rhs::<N, A, Q, D, E>(lp, effect, &x_c, &s, &es, &mut k1, &mut ek1);
+        a.copy_from_slice(&k1[VEL]);
         for l in 0..N {
             spool[l] = effect.spool_position(l, 0, x_c[l], &es);
         }
@@ -712,7 +697,7 @@ fn integrate<const N: usize, const A: usize, V: FlowLaw, D: Damping, E: Effect<N
 
         for sub in 0..solver.substeps {
             if sub > 0 {
-                rhs::<N, A, V, D, E>(lp, effect, &x_c, &s, &es, &mut k1, &mut ek1);
+                rhs::<N, A, Q, D, E>(lp, effect, &x_c, &s, &es, &mut k1, &mut ek1);
             }
             // Samples in [t_k + sub·h, t_k + (sub + 1)·h): a partial step from this node.
             while let Some((tk, pos)) = pending {
@@ -720,19 +705,19 @@ fn integrate<const N: usize, const A: usize, V: FlowLaw, D: Damping, E: Effect<N
                     break;
                 }
                 let delta = (pos - sub as f64) * h;
-                probe.sample::<A, V, D, O>(lp, effect, &x_c, &s, &es, &k1, &ek1, delta, &Held { k, sub, t: t + pos * h, r: &r, u: &u }, obs);
+                probe.sample::<A, Q, D, O>(lp, effect, &x_c, &s, &es, &k1, &ek1, delta, &Held { k, sub, t: t + pos * h, r: &r, u: &u }, obs);
                 next_sample += 1;
                 pending = sample_slot(obs, next_sample);
             }
             axpy(&mut tmp, &s, 0.5 * h, &k1);
             axpy(etmp.as_mut(), es.as_ref(), 0.5 * h, ek1.as_ref());
-            rhs::<N, A, V, D, E>(lp, effect, &x_c, &tmp, &etmp, &mut k2, &mut ek2);
+            rhs::<N, A, Q, D, E>(lp, effect, &x_c, &tmp, &etmp, &mut k2, &mut ek2);
             axpy(&mut tmp, &s, 0.5 * h, &k2);
             axpy(etmp.as_mut(), es.as_ref(), 0.5 * h, ek2.as_ref());
-            rhs::<N, A, V, D, E>(lp, effect, &x_c, &tmp, &etmp, &mut k3, &mut ek3);
+            rhs::<N, A, Q, D, E>(lp, effect, &x_c, &tmp, &etmp, &mut k3, &mut ek3);
             axpy(&mut tmp, &s, h, &k3);
             axpy(etmp.as_mut(), es.as_ref(), h, ek3.as_ref());
-            rhs::<N, A, V, D, E>(lp, effect, &x_c, &tmp, &etmp, &mut k4, &mut ek4);
+            rhs::<N, A, Q, D, E>(lp, effect, &x_c, &tmp, &etmp, &mut k4, &mut ek4);
             rk4_combine(&mut s, h / 6.0, &k1, &k2, &k3, &k4);
             rk4_combine(es.as_mut(), h / 6.0, ek1.as_ref(), ek2.as_ref(), ek3.as_ref(), ek4.as_ref());
         }

@@ -7,7 +7,8 @@ use crate::kernel::effects::{effect_set, with_single, Baseline, Effect, EffectFn
 use crate::kernel::excitation::{Record, Reference};
 use crate::kernel::params::ModelParams;
 use crate::kernel::resample::Resampler;
-use crate::kernel::simulate::{self, LaneParams, LaneResult, Observer, SetupError, Solver, TickView, idx};
+use crate::kernel::simulate::{self, LaneParams, LaneResult, Observer, SetupError, Solver, TickView};
+use crate::kernel::state::idx;
 
 /// A channel of a time history: its column name (the docs/formats.md measured-test name where
 /// one exists, so a history can be read back as a measured test), what it holds, and how a tick

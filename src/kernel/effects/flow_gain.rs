@@ -76,7 +76,7 @@ impl<const N: usize> Effect<N> for FlowGain<N> {
 
     /// Effective opening of spool position `x`.
     #[inline(always)]
-    fn spool(&self, l: usize, _act: usize, x: f64, _s: &Self::State) -> f64 {
+    fn opening(&self, l: usize, _act: usize, x: f64, _s: &Self::State) -> f64 {
         let r = x.abs() * self.inv_x_ref[l];
         let mut g = self.g[4][l];
         for k in (0..4).rev() {

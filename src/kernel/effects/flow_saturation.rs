@@ -50,7 +50,7 @@ impl<const N: usize> Effect<N> for FlowSaturation<N> {
 
     /// Effective opening of spool position `x`.
     #[inline(always)]
-    fn spool(&self, l: usize, _act: usize, x: f64, _s: &Self::State) -> f64 {
+    fn opening(&self, l: usize, _act: usize, x: f64, _s: &Self::State) -> f64 {
         x + self.on[l] * (self.x_sat[l] * (x * self.inv_x_sat[l]).tanh() - x)
     }
 

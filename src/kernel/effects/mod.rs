@@ -4,7 +4,7 @@
 //! contributes through hooks that the plant right-hand side calls at fixed places:
 //!
 //! 1. [`Effect::supply`]: the supply pressure the valves see (supply droop);
-//! 2. [`Effect::spool`]: the valve opening from the held command x_c (spool dynamics, delay,
+//! 2. [`Effect::opening`]: the valve opening from the held command x_c (spool dynamics, delay,
 //!    saturation);
 //! 3. [`Effect::flows`]: the valve flows of an actuator, changed (leakage, asymmetry);
 //! 4. [`Effect::stroke`]: the actuator stroke from the platen's motion (reaction-mass compliance);
@@ -308,13 +308,13 @@ impl<const N: usize, A: LaneStates<N>, B: LaneStates<N>> AsMut<[[f64; N]]> for P
 pub struct PlantView<'a, const N: usize> {
     /// Held spool command per lane, m.
     pub x_c: &'a [f64; N],
-    /// Spool position per actuator (after [`Effect::spool`]), m.
-    pub x: &'a [[f64; N]; super::N_ACT],
+    /// Valve opening (effective spool position) per actuator, after [`Effect::opening`], m.
+    pub opening: &'a [[f64; N]; super::N_ACT],
     /// Flow drawn from the supply by all valves of a lane (supply → chamber 1 for x > 0,
     /// supply → chamber 2 for x < 0), m³/s.
     pub q_supply: &'a [f64; N],
-    /// Plant states (see [`crate::kernel::simulate::idx`]).
-    pub state: &'a [[f64; N]; super::simulate::NP],
+    /// Plant states (see [`crate::kernel::state::idx`]).
+    pub state: &'a [[f64; N]; super::state::NP],
     /// Valve flow into chamber 1 and out of chamber 2 per actuator (all valves), m³/s.
     pub q_in1: &'a [[f64; N]; super::N_ACT],
     pub q_out2: &'a [[f64; N]; super::N_ACT],
@@ -350,15 +350,15 @@ pub trait Effect<const N: usize>: Sync {
     /// Valve opening (effective spool position) of actuator `act` in lane `l`, from the held
     /// command x_c.
     #[inline(always)]
-    fn spool(&self, _l: usize, _act: usize, x_c: f64, _s: &Self::State) -> f64 {
+    fn opening(&self, _l: usize, _act: usize, x_c: f64, _s: &Self::State) -> f64 {
         x_c
     }
 
     /// Spool position as a spool LVDT reads it (before any metering nonlinearity); recorded as
-    /// the `spool_m` channel. The same as [`Effect::spool`] unless an effect says otherwise.
+    /// the `spool_m` channel. The same as [`Effect::opening`] unless an effect says otherwise.
     #[inline(always)]
     fn spool_position(&self, l: usize, act: usize, x_c: f64, s: &Self::State) -> f64 {
-        self.spool(l, act, x_c, s)
+        self.opening(l, act, x_c, s)
     }
 
     /// Actuator stroke and stroke rate of lane `l` from the platen's displacement `y` and
@@ -438,8 +438,8 @@ impl<const N: usize, A: Effect<N>, B: Effect<N>> Effect<N> for Both<A, B> {
         self.1.supply(l, self.0.supply(l, p_s, &s.0), &s.1)
     }
     #[inline(always)]
-    fn spool(&self, l: usize, act: usize, x_c: f64, s: &Self::State) -> f64 {
-        self.1.spool(l, act, self.0.spool(l, act, x_c, &s.0), &s.1)
+    fn opening(&self, l: usize, act: usize, x_c: f64, s: &Self::State) -> f64 {
+        self.1.opening(l, act, self.0.opening(l, act, x_c, &s.0), &s.1)
     }
     #[inline(always)]
     fn spool_position(&self, l: usize, act: usize, x_c: f64, s: &Self::State) -> f64 {
@@ -518,8 +518,8 @@ impl<const N: usize, E: Effect<N>> Effect<N> for Gated<E> {
         if self.on { self.effect.supply(l, p_s, s) } else { p_s }
     }
     #[inline(always)]
-    fn spool(&self, l: usize, act: usize, x_c: f64, s: &Self::State) -> f64 {
-        if self.on { self.effect.spool(l, act, x_c, s) } else { x_c }
+    fn opening(&self, l: usize, act: usize, x_c: f64, s: &Self::State) -> f64 {
+        if self.on { self.effect.opening(l, act, x_c, s) } else { x_c }
     }
     #[inline(always)]
     fn spool_position(&self, l: usize, act: usize, x_c: f64, s: &Self::State) -> f64 {

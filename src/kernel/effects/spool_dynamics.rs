@@ -57,7 +57,7 @@ impl<const N: usize> Effect<N> for SpoolDynamics<N> {
     }
 
     #[inline(always)]
-    fn spool(&self, l: usize, act: usize, x_c: f64, s: &Self::State) -> f64 {
+    fn opening(&self, l: usize, act: usize, x_c: f64, s: &Self::State) -> f64 {
         x_c + self.on[l] * (s[X[act]][l] - x_c)
     }
 

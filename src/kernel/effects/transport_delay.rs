@@ -60,7 +60,7 @@ impl<const N: usize> Effect<N> for TransportDelay<N> {
 
     /// The delayed command of lane `l` (the command itself where the effect is off).
     #[inline(always)]
-    fn spool(&self, l: usize, _act: usize, x_c: f64, s: &Self::State) -> f64 {
+    fn opening(&self, l: usize, _act: usize, x_c: f64, s: &Self::State) -> f64 {
         x_c + self.on[l] * (s[STAGES - 1][l] - x_c)
     }
 
