@@ -270,19 +270,16 @@ impl vshake::kernel::effects::Effect<1> for Specimen {
     }
 }
 
-/// Gaussian noise from a fixed-seed generator (splitmix64 + Box–Muller), so the test needs no RNG crate.
-struct Noise(u64);
+/// Gaussian sensor noise from a fixed-seed generator (the ChaCha8 stream `study synth` uses).
+struct Noise(chacha20::ChaCha8Rng);
 impl Noise {
-    fn uniform(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+    fn new(seed: u64) -> Self {
+        use rand::SeedableRng;
+        Noise(chacha20::ChaCha8Rng::seed_from_u64(seed))
     }
     fn normal(&mut self, sd: f64) -> f64 {
-        let (u1, u2) = (self.uniform().max(1e-300), self.uniform());
-        sd * (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
+        use rand_distr::Distribution;
+        rand_distr::Normal::new(0.0, sd).expect("a standard deviation >= 0").sample(&mut self.0)
     }
 }
 
@@ -296,7 +293,7 @@ fn write_hidden<E: vshake::kernel::effects::Effect<1>>(dir: &Path, effect: &E) {
     synth(dir, &[]);
     let model = ModelParams::default();
     let lc = vshake::shell::campaign_io::load_campaign(&dir.join("diagnosis.toml"), &model).unwrap();
-    let mut noise = Noise(11);
+    let mut noise = Noise::new(11);
     let aligned = vshake::shell::campaign_io::load_tests(&lc, None).unwrap();
     for (test, at) in lc.campaign.tests.iter().zip(&aligned) {
         let path = lc.base.join(&test.data);

@@ -413,19 +413,17 @@ fn diagnosis_of_a_re_exported_campaign_is_the_clean_ones() {
     let re = synth(&d.path().join("re_raw"), &["--effect", "seal_friction", "--noise", noise, "--rate", "256", "--pre-trigger", "0.5"]);
     let re = transform(re.parent().unwrap(), &d.path().join("re"), |csv| csv.map("time_s", |t| sig(t, 6)));
     let run = |c: &Path| {
-        let (code, stdout, stderr) = study(&["diagnose", c.to_str().unwrap()]);
+        let report = c.parent().unwrap().join("report");
+        let (code, stdout, stderr) = study(&["diagnose", c.to_str().unwrap(), "--report", report.to_str().unwrap()]);
         assert_eq!(code, 0, "{stderr}");
-        let verdict = stdout.lines().find(|l| l.contains("verdict:")).unwrap_or_else(|| panic!("{stdout}")).to_string();
-        // "  seal_friction (f_c = 5.000e3 ± 5.8e-1 N, f_s = 8.043e3 ± 9.2e2 N)"
-        let line = stdout.lines().find(|l| l.trim_start().starts_with("seal_friction (")).unwrap_or_else(|| panic!("{stdout}")).to_string();
-        let fitted: Vec<(f64, f64)> = line
-            .split(['(', ','])
-            .skip(1)
-            .map(|p| {
-                let v: Vec<&str> = p.split_whitespace().collect();
-                (v[2].parse().unwrap(), v[4].parse().unwrap())
-            })
-            .collect();
+        // The verdict and the candidate's estimates from the report's tables.
+        use vshake::shell::{meta, tables};
+        let verdict = meta::get(&tables::parquet_metadata(&report.join("candidates.parquet")).unwrap(), meta::Key::Verdict).unwrap().to_string();
+        let cands = report.join("candidates.parquet");
+        let effects = tables::read_strings(&cands, "effect").unwrap();
+        let i = effects.iter().position(|e| e == "seal_friction").unwrap_or_else(|| panic!("{effects:?}"));
+        let (est, se) = (tables::read_f64_lists(&cands, "estimates").unwrap(), tables::read_f64_lists(&cands, "std_errors").unwrap());
+        let fitted: Vec<(f64, f64)> = est[i].iter().copied().zip(se[i].iter().copied()).collect();
         (verdict, fitted, stdout)
     };
     let (v0, f0, out0) = run(&clean);

@@ -143,6 +143,13 @@ fn sigkill_then_resume_from_the_last_checkpoint() {
     signal(&child, "-KILL");
     child.wait().unwrap();
     assert!(!out.exists() && with_suffix(&out, ".tmp").exists());
+    // A resume killed before its own first checkpoint: the rows recovered into FILE.killed stay,
+    // and the next resume starts from them.
+    let mut again = bin().args(["run", "--resume", s(&out), "--threads", "1", "--checkpoint-secs", "1000", "-q"]).spawn().unwrap();
+    wait_for(&with_suffix(&out, ".tmp"), Duration::from_millis(300));
+    signal(&again, "-KILL");
+    again.wait().unwrap();
+    assert!(!out.exists() && with_suffix(&out, ".killed").exists() && !with_suffix(&out, ".tmp.checkpoint").exists());
     let (code, stdout, err) = study(&["run", "--resume", s(&out), "-q"]);
     assert_eq!(code, 0, "{stdout}{err}");
     assert!(stdout.contains("kept from") && stdout.contains(".killed"), "{stdout}");

@@ -103,7 +103,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     let loaded = load_problem(&args.campaign, &model, args.strict)?;
     let problem = &loaded.problem;
     let t0 = std::time::Instant::now();
-    let r = fit::fit(problem, &free, args.max_iter).map_err(|e| RunFailed(format!("the fit failed: {e}")))?;
+    let r = super::run_cmd::pool(args.threads)?.install(|| fit::fit(problem, &free, args.max_iter)).map_err(|e| RunFailed(format!("the fit failed: {e}")))?;
     if let Some(f) = &r.before.failure {
         return Err(RunFailed(format!("the starting model fails: {f}")).into());
     }

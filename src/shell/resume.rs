@@ -65,8 +65,12 @@ impl Kept {
 
 /// The job that continues `file`, or None when it is already complete (said on stdout).
 pub fn job(file: &Path) -> anyhow::Result<Option<Job>> {
+    let killed = tables::killed_path(file);
     let (source, temporary) = match tables::recover_killed(file)? {
         Recovered::File(p) => (p, true),
+        // A resume of a killed run, itself killed before its first checkpoint: the rows recovered
+        // the first time are still in FILE.killed.
+        Recovered::NoCheckpoint(_) | Recovered::Nothing if !file.exists() && killed.exists() => (killed, true),
         Recovered::NoCheckpoint(tmp) if !file.exists() => {
             return Err(BadInput(format!(
                 "{}: the run was killed before its first checkpoint (no rows were safely written), so there is nothing to resume; start it again",

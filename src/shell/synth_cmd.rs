@@ -69,11 +69,12 @@ pub fn write_measured(path: &Path, cols: &[(&str, Vec<f64>)], meta: &[(String, S
         return tables::write_table(path, cols.iter().map(|(n, v)| (n.to_string(), Column::F64(v.clone()))).collect(), meta);
     }
     let out = tables::AtomicFile::new(path);
-    let mut w = std::io::BufWriter::new(std::fs::File::create(&out.tmp).with_context(|| format!("cannot create {}", out.tmp.display()))?);
-    writeln!(w, "{}", cols.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(","))?;
+    let file = std::fs::File::create(&out.tmp).with_context(|| format!("cannot create {}", out.tmp.display()))?;
+    let mut w = csv::Writer::from_writer(file);
+    w.write_record(cols.iter().map(|(n, _)| *n))?;
     for r in 0..cols[0].1.len() {
-        let line: Vec<String> = cols.iter().map(|(_, v)| format!("{:?}", v[r])).collect();
-        writeln!(w, "{}", line.join(","))?;
+        // `{:?}` of an f64 is its shortest round-trip decimal form.
+        w.write_record(cols.iter().map(|(_, v)| format!("{:?}", v[r])))?;
     }
     w.into_inner().map_err(|e| e.into_error())?.sync_all()?;
     out.commit()?;

@@ -615,6 +615,13 @@ pub enum Recovered {
     File(PathBuf),
 }
 
+/// Where a killed run's rows go when they are recovered: `FILE.killed`.
+pub fn killed_path(path: &Path) -> PathBuf {
+    let mut killed = path.as_os_str().to_owned();
+    killed.push(".killed");
+    PathBuf::from(killed)
+}
+
 /// Turns the temp file of a killed stream and its checkpoint into a readable Parquet file
 /// `path.killed` holding every checkpointed row group (the bytes after the checkpoint are
 /// dropped). The temp file and the checkpoint are consumed.
@@ -635,9 +642,7 @@ pub fn recover_killed(path: &Path) -> anyhow::Result<Recovered> {
     if have < len {
         return Err(BadCheckpoint(side).into());
     }
-    let mut killed = path.as_os_str().to_owned();
-    killed.push(".killed");
-    let killed = PathBuf::from(killed);
+    let killed = killed_path(path);
     std::fs::rename(&tmp, &killed).with_context(|| format!("cannot move {} to {}", tmp.display(), killed.display()))?;
     let mut f = std::fs::OpenOptions::new().write(true).open(&killed).with_context(|| format!("cannot open {}", killed.display()))?;
     f.set_len(len)?;
