@@ -7,8 +7,7 @@
 
 use super::meta::{self, Key, Kind};
 use super::run_cmd::{plan_for, Job, ResultsSink, Shard};
-use super::tables::input_if_user;
-use super::tables::{self, Recovered};
+use super::tables::{self, input_if_user, Recovered};
 use super::BadInput;
 use crate::orchestration::study::StudySpec;
 use anyhow::Context;

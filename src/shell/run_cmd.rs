@@ -2,9 +2,8 @@
 
 use super::cli::RunArgs;
 use super::progress::Progress;
-use super::tables::{input_if_user, load_reference};
 use super::meta::{self, Key, Kind};
-use super::tables::{self, Column, ParquetStream};
+use super::tables::{self, input_if_user, load_reference, Column, ParquetStream};
 use super::{interrupt, BadInput};
 use crate::kernel::params::{ModelParams, ParamInfo};
 use crate::kernel::simulate::Isa;

@@ -3,8 +3,7 @@
 
 use super::campaign_io::{load_campaign, load_model};
 use super::cli::SynthArgs;
-use super::tables::load_reference;
-use super::tables::{self, Column};
+use super::tables::{self, load_reference, Column};
 use super::meta::{self, Key, Kind};
 use super::{BadInput, RunFailed};
 use crate::kernel::excitation::Reference;
