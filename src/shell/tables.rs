@@ -798,25 +798,24 @@ pub fn read_bools(path: &Path, column: &str) -> Result<Vec<bool>, TableError> {
 
 /// A list-of-strings column of a Parquet file (a null row reads as an empty list).
 pub fn read_string_lists(path: &Path, column: &str) -> Result<Vec<Vec<String>>, TableError> {
-    read_values(path, column, "a list of strings", |arr, out| {
-        let l = arr.as_any().downcast_ref::<arrow_array::ListArray>()?;
-        for i in 0..l.len() {
-            let v = l.value(i);
-            let s = v.as_any().downcast_ref::<arrow_array::StringArray>()?;
-            out.push(if l.is_null(i) { Vec::new() } else { (0..s.len()).map(|j| s.value(j).to_string()).collect() });
-        }
-        Some(())
+    read_lists(path, column, "a list of strings", |v| {
+        let s = v.as_any().downcast_ref::<arrow_array::StringArray>()?;
+        Some((0..s.len()).map(|j| s.value(j).to_string()).collect())
     })
 }
 
 /// A list-of-numbers column of a Parquet file (a null row reads as an empty list).
 pub fn read_f64_lists(path: &Path, column: &str) -> Result<Vec<Vec<f64>>, TableError> {
-    read_values(path, column, "a list of numbers", |arr, out| {
+    read_lists(path, column, "a list of numbers", |v| Some(v.as_any().downcast_ref::<Float64Array>()?.values().to_vec()))
+}
+
+/// A list column of a Parquet file, each row's items read by `items` (None: not of the type
+/// `kind` names); a null row reads as an empty list.
+fn read_lists<T>(path: &Path, column: &str, kind: &str, items: impl Fn(&ArrayRef) -> Option<Vec<T>>) -> Result<Vec<Vec<T>>, TableError> {
+    read_values(path, column, kind, |arr, out| {
         let l = arr.as_any().downcast_ref::<arrow_array::ListArray>()?;
         for i in 0..l.len() {
-            let v = l.value(i);
-            let x = v.as_any().downcast_ref::<Float64Array>()?;
-            out.push(if l.is_null(i) { Vec::new() } else { x.values().to_vec() });
+            out.push(if l.is_null(i) { Vec::new() } else { items(&l.value(i))? });
         }
         Some(())
     })
