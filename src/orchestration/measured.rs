@@ -688,7 +688,8 @@ fn mismatch(sine: &Sine, r: &[f64], rate: f64, start: f64, end: usize) -> Option
 /// quarter cycle (the file's end when it never does).
 fn end_of_sine(sine: &Sine, r: &[f64], rate: f64, s: f64, from: usize) -> usize {
     let n = r.len();
-    let first = s.ceil().max(0.0) as usize;
+    // A start fitted past the file's end (a column that is a few rows long) leaves nothing.
+    let first = (s.ceil().max(0.0) as usize).min(n);
     let from = from.clamp(first, n);
     let e = |k: usize| r[k] - sine.displacement((k as f64 - s) / rate);
     // The column's own mismatch where it surely follows the sine (noise, rounding).
@@ -831,6 +832,25 @@ mod tests {
         let fit = align_sine(&s, &column(&s, 256.0, 0.5, 0.0), 256.0, None, None);
         assert_eq!(fit.start_row, 128.0);
         assert_eq!(fit.end_row, 256 * 35 / 10);
+    }
+
+    #[test]
+    fn a_column_of_a_few_rows_is_an_error_or_a_warning_not_a_panic() {
+        // Found by tests/parsers.rs (mutated bytes): an onset in the last rows made the fitted
+        // start land past the column's end, and end_of_sine clamped to an empty range.
+        use rand::{RngExt, SeedableRng};
+        let s = sine();
+        let mut g = chacha20::ChaCha8Rng::seed_from_u64(1);
+        // Short columns of zeros and random values at several rates (the 9th draw of this
+        // stream panicked before the fix).
+        for _ in 0..20_000 {
+            let n = g.random_range(1..40usize);
+            let rate = [1.0, 2.0, 10.0, 100.0, 1024.0][g.random_range(0..5usize)];
+            let r: Vec<f64> = (0..n).map(|_| if g.random_bool(0.5) { 0.0 } else { g.random_range(-0.03..0.03) }).collect();
+            let fit = align_sine(&s, &r, rate, None, None);
+            assert!(fit.start_row.is_finite(), "{r:?} at {rate} Hz");
+            assert!(fit.end_row <= r.len(), "{r:?} at {rate} Hz: end {}", fit.end_row);
+        }
     }
 
     #[test]
