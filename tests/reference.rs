@@ -84,7 +84,11 @@ fn default_step_is_converged() {
             }
             assert_eq!(a.status, LaneStatus::Ok, "corner {c} at {g} g: the 32-substep run finished, the default step's did not");
             for ((name, x), (_, y)) in a.metrics.columns().into_iter().zip(b.metrics.columns()) {
-                if (x - y).abs() > worst.0 {
+                // The spectral metrics do not apply to a sine: NaN in both runs.
+                if x.is_nan() && y.is_nan() && name.starts_with("spectral_err") {
+                    continue;
+                }
+                if !((x - y).abs() <= worst.0) {
                     worst = ((x - y).abs(), format!("corner {c}, {g} g, {name}: {x} against {y}"));
                 }
             }
@@ -96,6 +100,9 @@ fn default_step_is_converged() {
         let a = metrics(&p, g, n);
         let b = metrics(&p, g, 4 * n);
         for ((name, x), (_, y)) in a.columns().into_iter().zip(b.columns()) {
+            if x.is_nan() && y.is_nan() && name.starts_with("spectral_err") {
+                continue;
+            }
             assert_rel(&format!("{g} g {name} (h vs h/4)"), x, y, 1e-3);
         }
     }
@@ -124,7 +131,7 @@ fn zero_command_stays_at_rest() {
     let p = ModelParams::default();
     let n = 10 * 1024;
     let zero = vec![0.0; n];
-    let reference = Reference { f_s: 1024.0, x: zero.clone(), v: zero.clone(), a: zero.clone(), j: zero.clone(), command: zero, window: (0, n), fundamental_hz: None, drive: Default::default() };
+    let reference = Reference { f_s: 1024.0, x: zero.clone(), v: zero.clone(), a: zero.clone(), j: zero.clone(), command: zero, window: (0, n), fundamental_hz: None, drive: Default::default(), spectrum: None };
     let (p1, p2) = p.no_load_pressures();
     assert!((p1 - 8.2136e6).abs() < 100.0 && (p2 - 12.8364e6).abs() < 100.0);
     let mut probe = RestProbe { max_y: 0.0, max_dp: 0.0, p0: (p1, p2), ticks: 0 };

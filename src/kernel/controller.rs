@@ -101,7 +101,7 @@ impl ControllerMemory {
     }
 }
 
-/// Reference states at one tick (shared by every lane of a batch).
+/// Reference states at one tick (of one lane; usually every lane shares them).
 #[derive(Debug, Clone, Copy, Default)]
 pub struct RefState {
     pub x: f64,

@@ -11,6 +11,7 @@
 //!   they are mutually consistent; the filter is discretised exactly for a zero-order-held input
 //!   (matrix exponential), and starts at rest at the first record value].
 
+use super::spectrum::SpectrumSpec;
 use std::f64::consts::PI;
 
 /// Reference states at every tick, plus what the metrics need to know about them.
@@ -31,6 +32,9 @@ pub struct Reference {
     pub fundamental_hz: Option<f64>,
     /// What moves the spool: the controller (the default) or a measured column (open loop).
     pub drive: Drive,
+    /// The response spectrum the metrics take, with the target's PSA (of `a` over the window),
+    /// m/s² ([`Reference::with_spectrum`]); `None`: no spectral metrics.
+    pub spectrum: Option<(SpectrumSpec, Vec<f64>)>,
 }
 
 /// What moves the spool.
@@ -66,7 +70,16 @@ impl Reference {
             window: (0, n),
             fundamental_hz,
             drive: Drive::ClosedLoop,
+            spectrum: None,
         }
+    }
+
+    /// A reference from its states (x, v, a, j) at every tick (the command is x); the window is
+    /// every tick, no fundamental.
+    pub fn from_states(f_s: f64, states: &[[f64; 4]]) -> Self {
+        let mut r = Reference::with_capacity(f_s, states.len(), None);
+        states.iter().for_each(|s| r.push(*s, s[0]));
+        r
     }
 
     /// Appends one tick: the states (x, v, a, j) and the command.
@@ -87,6 +100,29 @@ impl Reference {
     /// Time of tick k, s.
     pub fn time(&self, k: usize) -> f64 {
         k as f64 / self.f_s
+    }
+
+    /// The same reference with a response spectrum: the target's PSA is the spectrum of `a` over
+    /// the window.
+    pub fn with_spectrum(mut self, spec: SpectrumSpec) -> Self {
+        let (w0, w1) = self.window;
+        let target = super::spectrum::psa(&self.a[w0..w1], 1.0 / self.f_s, &spec);
+        self.spectrum = Some((spec, target));
+        self
+    }
+
+    /// Peaks over the window: (max |x_r|, max |v_r|, max |a_r|).
+    pub fn peaks(&self) -> (f64, f64, f64) {
+        let (w0, w1) = self.window;
+        let peak = |v: &[f64]| v[w0..w1].iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        (peak(&self.x), peak(&self.v), peak(&self.a))
+    }
+
+    /// Multiplies the states and the command by `factor` (a linear reference scales exactly).
+    pub fn scale(&mut self, factor: f64) {
+        for v in [&mut self.x, &mut self.v, &mut self.a, &mut self.j, &mut self.command] {
+            v.iter_mut().for_each(|x| *x *= factor);
+        }
     }
 
     /// Keeps the first `n` ticks (the window is clipped to them).
@@ -290,7 +326,8 @@ fn matmul5(a: &[[f64; 5]; 5], b: &[[f64; 5]; 5]) -> [[f64; 5]; 5] {
     c
 }
 
-fn expm5(m: &[[f64; 5]; 5]) -> [[f64; 5]; 5] {
+/// exp(m) by a 20-term Taylor series after scaling m to norm ≤ ¼, then squaring back.
+pub(crate) fn expm5(m: &[[f64; 5]; 5]) -> [[f64; 5]; 5] {
     let norm = m.iter().map(|r| r.iter().map(|v| v.abs()).sum::<f64>()).fold(0.0, f64::max);
     let squarings = if norm > 0.25 { (norm / 0.25).log2().ceil() as i32 } else { 0 };
     let scale = 0.5f64.powi(squarings);

@@ -6,9 +6,18 @@
 //! - amplitude ratio |H_1(a)|/|H_1(a_r)| and phase error ∠H_1(a) − ∠H_1(a_r) (degrees);
 //! - h_k = |H_k(a)|/|H_1(a)|, k = 2…9; THD_odd = √(Σ_{k=3,5,7,9} h_k²), THD_even = √(Σ_{k=2,4,6,8} h_k²);
 //! - tracking errors rms(a − a_r)/rms(a_r), rms(x − x_r)/rms(x_r) and peak |a − a_r| over the window;
-//! - max |u| over the whole run; the displacement amplitude ratio and phase (same projection on x).
+//! - max |u| over the whole run; the displacement amplitude ratio and phase (same projection on x);
+//! - peak ratios over the window: PGA = max|a|/max|a_r|, PGV = max|v|/max|v_r| (v the platen
+//!   velocity), PGD = max|x|/max|x_r|, and the peak displacement error max|x − x_r|;
+//! - where the reference carries a response spectrum ([`super::spectrum`]): the spectrum of the
+//!   achieved acceleration over the window, online, and the spectral error against the target's,
+//!   mean and max |ln(PSA/PSA_target)| over the period band.
 //!
 //! For a record (no fundamental) the harmonic metrics are NaN and the window is the whole record.
+//! Every lane has its own reference sums, so lanes may follow different references (stochastic
+//! ground motions, one realisation per sample) with the same bits as a shared one.
+
+use super::spectrum::{SpectrumAcc, SpectrumSpec};
 
 /// Highest harmonic computed.
 pub const N_HARM: usize = 9;
@@ -28,6 +37,12 @@ pub struct Metrics {
     pub max_abs_u_v: f64,
     pub disp_amp_ratio: f64,
     pub disp_phase_err_deg: f64,
+    pub peak_err_disp_m: f64,
+    pub pga_ratio: f64,
+    pub pgv_ratio: f64,
+    pub pgd_ratio: f64,
+    pub spectral_err_mean: f64,
+    pub spectral_err_max: f64,
 }
 
 impl Metrics {
@@ -49,7 +64,19 @@ impl Metrics {
         max_abs_u_v: f64::NAN,
         disp_amp_ratio: f64::NAN,
         disp_phase_err_deg: f64::NAN,
+        peak_err_disp_m: f64::NAN,
+        pga_ratio: f64::NAN,
+        pgv_ratio: f64::NAN,
+        pgd_ratio: f64::NAN,
+        spectral_err_mean: f64::NAN,
+        spectral_err_max: f64::NAN,
     };
+
+    /// Every metric's bit pattern, in [`Metrics::columns`] order: to compare two runs bit for
+    /// bit (`==` on the struct fails on the NaN of a metric that does not apply).
+    pub fn bits(&self) -> Vec<u64> {
+        self.columns().into_iter().map(|(_, v)| v.to_bits()).collect()
+    }
 
     /// h_k for k = 2…9.
     pub fn h(&self, k: usize) -> f64 {
@@ -70,6 +97,12 @@ impl Metrics {
             ("max_abs_valve_cmd_v", self.max_abs_u_v),
             ("disp_amp_ratio", self.disp_amp_ratio),
             ("disp_phase_err_deg", self.disp_phase_err_deg),
+            ("peak_err_disp_m", self.peak_err_disp_m),
+            ("pga_ratio", self.pga_ratio),
+            ("pgv_ratio", self.pgv_ratio),
+            ("pgd_ratio", self.pgd_ratio),
+            ("spectral_err_mean", self.spectral_err_mean),
+            ("spectral_err_max", self.spectral_err_max),
         ]);
         v
     }
@@ -115,7 +148,7 @@ impl Basis {
 }
 
 /// Running sums of one batch.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct MetricsAcc<const N: usize> {
     n: usize,
     /// Σ a cos, Σ a sin for k = 1…9.
@@ -126,18 +159,40 @@ pub struct MetricsAcc<const N: usize> {
     err_a2: [f64; N],
     err_x2: [f64; N],
     peak_err_a: [f64; N],
+    peak_err_x: [f64; N],
     max_u: [f64; N],
-    // Reference channels are shared by every lane.
-    ar_re: f64,
-    ar_im: f64,
-    xr_re: f64,
-    xr_im: f64,
-    ar2: f64,
-    xr2: f64,
+    /// Peaks of |a|, |v|, |x| and of |a_r|, |v_r|, |x_r| over the window.
+    peak: [[f64; N]; 3],
+    peak_r: [[f64; N]; 3],
+    // Each lane's reference sums.
+    ar_re: [f64; N],
+    ar_im: [f64; N],
+    xr_re: [f64; N],
+    xr_im: [f64; N],
+    ar2: [f64; N],
+    xr2: [f64; N],
+    spectrum: Option<SpectrumAcc<N>>,
+}
+
+/// One tick of the window: each lane's reference (a_r, v_r, x_r) and achieved (a, v, x).
+pub struct WindowTick<'a, const N: usize> {
+    pub a_r: &'a [f64; N],
+    pub v_r: &'a [f64; N],
+    pub x_r: &'a [f64; N],
+    pub a: &'a [f64; N],
+    pub v: &'a [f64; N],
+    pub x: &'a [f64; N],
 }
 
 impl<const N: usize> Default for MetricsAcc<N> {
     fn default() -> Self {
+        Self::new(None)
+    }
+}
+
+impl<const N: usize> MetricsAcc<N> {
+    /// Sums at zero; with a spectrum, its oscillators at tick `dt` s.
+    pub fn new(spectrum: Option<(&SpectrumSpec, f64)>) -> Self {
         MetricsAcc {
             n: 0,
             a_re: [[0.0; N]; N_HARM],
@@ -147,18 +202,20 @@ impl<const N: usize> Default for MetricsAcc<N> {
             err_a2: [0.0; N],
             err_x2: [0.0; N],
             peak_err_a: [0.0; N],
+            peak_err_x: [0.0; N],
             max_u: [0.0; N],
-            ar_re: 0.0,
-            ar_im: 0.0,
-            xr_re: 0.0,
-            xr_im: 0.0,
-            ar2: 0.0,
-            xr2: 0.0,
+            peak: [[0.0; N]; 3],
+            peak_r: [[0.0; N]; 3],
+            ar_re: [0.0; N],
+            ar_im: [0.0; N],
+            xr_re: [0.0; N],
+            xr_im: [0.0; N],
+            ar2: [0.0; N],
+            xr2: [0.0; N],
+            spectrum: spectrum.map(|(s, dt)| SpectrumAcc::new(s, dt)),
         }
     }
-}
 
-impl<const N: usize> MetricsAcc<N> {
     /// Every tick: max |u|.
     #[inline(always)]
     pub fn every_tick(&mut self, u: &[f64; N]) {
@@ -169,41 +226,58 @@ impl<const N: usize> MetricsAcc<N> {
 
     /// A tick inside the analysis window.
     #[inline(always)]
-    pub fn window_tick(&mut self, basis: Option<&Basis>, a_r: f64, x_r: f64, a: &[f64; N], x: &[f64; N]) {
+    pub fn window_tick(&mut self, basis: Option<&Basis>, w: &WindowTick<'_, N>) {
         self.n += 1;
-        self.ar2 += a_r * a_r;
-        self.xr2 += x_r * x_r;
         for l in 0..N {
-            let ea = a[l] - a_r;
-            let ex = x[l] - x_r;
+            let (a_r, x_r) = (w.a_r[l], w.x_r[l]);
+            self.ar2[l] += a_r * a_r;
+            self.xr2[l] += x_r * x_r;
+            let ea = w.a[l] - a_r;
+            let ex = w.x[l] - x_r;
             self.err_a2[l] += ea * ea;
             self.err_x2[l] += ex * ex;
             self.peak_err_a[l] = self.peak_err_a[l].max(ea.abs());
+            self.peak_err_x[l] = self.peak_err_x[l].max(ex.abs());
+            for (c, (got, want)) in [(w.a, w.a_r), (w.v, w.v_r), (w.x, w.x_r)].into_iter().enumerate() {
+                self.peak[c][l] = self.peak[c][l].max(got[l].abs());
+                self.peak_r[c][l] = self.peak_r[c][l].max(want[l].abs());
+            }
+        }
+        if let Some(s) = &mut self.spectrum {
+            s.tick(w.a);
         }
         if let Some(b) = basis {
-            self.ar_re += a_r * b.cos[0];
-            self.ar_im += a_r * b.sin[0];
-            self.xr_re += x_r * b.cos[0];
-            self.xr_im += x_r * b.sin[0];
+            for l in 0..N {
+                self.ar_re[l] += w.a_r[l] * b.cos[0];
+                self.ar_im[l] += w.a_r[l] * b.sin[0];
+                self.xr_re[l] += w.x_r[l] * b.cos[0];
+                self.xr_im[l] += w.x_r[l] * b.sin[0];
+            }
             for h in 0..N_HARM {
                 let (c, s) = (b.cos[h], b.sin[h]);
                 for l in 0..N {
-                    self.a_re[h][l] += a[l] * c;
-                    self.a_im[h][l] += a[l] * s;
+                    self.a_re[h][l] += w.a[l] * c;
+                    self.a_im[h][l] += w.a[l] * s;
                 }
             }
             for l in 0..N {
-                self.x_re[l] += x[l] * b.cos[0];
-                self.x_im[l] += x[l] * b.sin[0];
+                self.x_re[l] += w.x[l] * b.cos[0];
+                self.x_im[l] += w.x[l] * b.sin[0];
             }
         }
+    }
+
+    /// Lane `l`'s spectrum of the achieved acceleration (None without a spectrum).
+    pub fn psa(&self, l: usize) -> Option<Vec<f64>> {
+        self.spectrum.as_ref().map(|s| s.psa(l))
     }
 
     /// Final metrics of lane `l`. `harmonics` is the highest harmonic below the Nyquist
     /// frequency (None: no fundamental, no harmonic metrics). A harmonic at or above Nyquist
     /// would be an alias of a lower frequency, so its ratio is NaN and it is left out of the
-    /// THD sums ([`Metrics::highest_harmonic`]).
-    pub fn finish(&self, l: usize, harmonics: Option<usize>) -> Metrics {
+    /// THD sums ([`Metrics::highest_harmonic`]). `target` is the lane's spectrum and its target
+    /// PSA, when the reference has one.
+    pub fn finish(&self, l: usize, harmonics: Option<usize>, target: Option<(&SpectrumSpec, &[f64])>) -> Metrics {
         // H_k = (2/n)(Σ s cos − j Σ s sin): magnitude and angle; the 2/n cancels in every ratio.
         let mag = |re: f64, im: f64| re.hypot(im);
         let ang = |re: f64, im: f64| (-im).atan2(re);
@@ -211,14 +285,21 @@ impl<const N: usize> MetricsAcc<N> {
         let mut m = Metrics::NAN;
         m.max_abs_u_v = self.max_u[l];
         if self.n > 0 {
-            m.rms_err_accel_ratio = (self.err_a2[l] / self.ar2).sqrt();
-            m.rms_err_disp_ratio = (self.err_x2[l] / self.xr2).sqrt();
+            m.rms_err_accel_ratio = (self.err_a2[l] / self.ar2[l]).sqrt();
+            m.rms_err_disp_ratio = (self.err_x2[l] / self.xr2[l]).sqrt();
             m.peak_err_accel_mps2 = self.peak_err_a[l];
+            m.peak_err_disp_m = self.peak_err_x[l];
+            m.pga_ratio = self.peak[0][l] / self.peak_r[0][l];
+            m.pgv_ratio = self.peak[1][l] / self.peak_r[1][l];
+            m.pgd_ratio = self.peak[2][l] / self.peak_r[2][l];
+            if let (Some((spec, want)), Some(got)) = (target, self.psa(l)) {
+                (m.spectral_err_mean, m.spectral_err_max) = spec.error(&got, want);
+            }
         }
         if let (Some(top), true) = (harmonics, self.n > 0) {
             let h1 = mag(self.a_re[0][l], self.a_im[0][l]);
-            m.amp_ratio = h1 / mag(self.ar_re, self.ar_im);
-            m.phase_err_deg = wrap(ang(self.a_re[0][l], self.a_im[0][l]) - ang(self.ar_re, self.ar_im));
+            m.amp_ratio = h1 / mag(self.ar_re[l], self.ar_im[l]);
+            m.phase_err_deg = wrap(ang(self.a_re[0][l], self.a_im[0][l]) - ang(self.ar_re[l], self.ar_im[l]));
             for k in 2..=top.min(N_HARM) {
                 m.h[k - 2] = mag(self.a_re[k - 1][l], self.a_im[k - 1][l]) / h1;
             }
@@ -226,8 +307,8 @@ impl<const N: usize> MetricsAcc<N> {
             let thd = |ks: [usize; 4]| ks.into_iter().filter(|&k| k <= top).map(|k| h[k - 2].powi(2)).sum::<f64>().sqrt();
             m.thd_odd = thd([3, 5, 7, 9]);
             m.thd_even = thd([2, 4, 6, 8]);
-            m.disp_amp_ratio = mag(self.x_re[l], self.x_im[l]) / mag(self.xr_re, self.xr_im);
-            m.disp_phase_err_deg = wrap(ang(self.x_re[l], self.x_im[l]) - ang(self.xr_re, self.xr_im));
+            m.disp_amp_ratio = mag(self.x_re[l], self.x_im[l]) / mag(self.xr_re[l], self.xr_im[l]);
+            m.disp_phase_err_deg = wrap(ang(self.x_re[l], self.x_im[l]) - ang(self.xr_re[l], self.xr_im[l]));
         }
         m
     }
@@ -247,9 +328,9 @@ mod tests {
             let t = k as f64 / f_s;
             let ar = (w * t).sin();
             let a = 2.0 * (w * t + 0.1).sin() + 0.1 * (3.0 * w * t).sin() + 0.04 * (2.0 * w * t).cos();
-            acc.window_tick(Some(&Basis::at(k, f_s, f)), ar, ar, &[a], &[ar]);
+            acc.window_tick(Some(&Basis::at(k, f_s, f)), &WindowTick { a_r: &[ar], v_r: &[ar], x_r: &[ar], a: &[a], v: &[ar], x: &[ar] });
         }
-        let m = acc.finish(0, Some(N_HARM));
+        let m = acc.finish(0, Some(N_HARM), None);
         assert!((m.amp_ratio - 2.0).abs() < 1e-12);
         assert!((m.phase_err_deg - 0.1f64.to_degrees()).abs() < 1e-9);
         assert!((m.h(3) - 0.05).abs() < 1e-12);
@@ -273,9 +354,9 @@ mod tests {
             let t = k as f64 / f_s;
             let ar = (w * t).sin();
             let a = ar + 0.1 * (3.0 * w * t).sin() + 0.05 * (2.0 * w * t).sin();
-            acc.window_tick(Some(&Basis::at(k, f_s, f)), ar, ar, &[a], &[ar]);
+            acc.window_tick(Some(&Basis::at(k, f_s, f)), &WindowTick { a_r: &[ar], v_r: &[ar], x_r: &[ar], a: &[a], v: &[ar], x: &[ar] });
         }
-        let m = acc.finish(0, Some(Metrics::highest_harmonic(f, f_s)));
+        let m = acc.finish(0, Some(Metrics::highest_harmonic(f, f_s)), None);
         assert!((m.h(2) - 0.05).abs() < 1e-9, "{}", m.h(2));
         assert!((3..=9).all(|k| m.h(k).is_nan()));
         assert_eq!(m.thd_odd, 0.0);

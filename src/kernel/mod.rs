@@ -15,12 +15,14 @@ pub mod controller;
 pub mod effects;
 pub mod excitation;
 pub mod friction;
+pub mod ground;
 pub mod metrics;
 pub mod params;
 pub mod platen;
 pub mod servovalve;
 pub mod resample;
 pub mod simulate;
+pub mod spectrum;
 pub mod state;
 
 /// Actuators driving the platen [paper: two horizontal actuators]. Kept separate in the state so

@@ -16,6 +16,8 @@ pub enum Source {
     Paper,
     /// Not published; chosen by this project (the reason is in the parameter's description).
     Chosen,
+    /// From the publication cited in the parameter's description (not the LHPOST paper).
+    Literature,
 }
 
 impl fmt::Display for Source {
@@ -23,6 +25,7 @@ impl fmt::Display for Source {
         f.write_str(match self {
             Source::Paper => "paper",
             Source::Chosen => "chosen",
+            Source::Literature => "literature",
         })
     }
 }
@@ -338,6 +341,9 @@ pub enum Component {
     Platen,
     Friction,
     Controller,
+    /// The stochastic ground motion's parameters (`ground.*`, kernel::ground): not physics of
+    /// the table, kept with the model so that studies sample them like any other parameter.
+    Ground,
     Effect(EffectId),
 }
 
@@ -353,6 +359,7 @@ impl Component {
             Component::Platen => "platen",
             Component::Friction => "friction",
             Component::Controller => "controller",
+            Component::Ground => "ground",
             Component::Effect(e) => e.name(),
         }
     }
@@ -361,7 +368,7 @@ impl Component {
     pub fn effect(self) -> Option<EffectId> {
         match self {
             Component::Effect(e) => Some(e),
-            Component::Servovalve | Component::Actuator | Component::Platen | Component::Friction | Component::Controller => None,
+            Component::Servovalve | Component::Actuator | Component::Platen | Component::Friction | Component::Controller | Component::Ground => None,
         }
     }
 
@@ -402,6 +409,8 @@ pub struct ModelParams {
     /// The library effects' parameters (`effect_params.<effect>.<name>`), used where the effect
     /// is switched on.
     pub effect_params: EffectParams,
+    /// The stochastic ground motion's parameters (read only by the excitation, never the plant).
+    pub ground: super::ground::GroundParams,
 }
 
 /// One problem found by [`ModelParams::validate`].
@@ -428,6 +437,7 @@ impl ModelParams {
             .chain(PlatenParams::PARAMS)
             .chain(FrictionParams::PARAMS)
             .chain(ControllerParams::PARAMS)
+            .chain(super::ground::GroundParams::PARAMS)
             .chain(super::effects::LIBRARY.iter().flat_map(|e| e.params))
     }
 
@@ -440,7 +450,7 @@ impl ModelParams {
 
     /// The components (in registry order): the baseline's parts, then the library effects.
     pub fn components() -> impl Iterator<Item = Component> {
-        Component::BASELINE.into_iter().chain(EffectId::ALL.map(Component::Effect))
+        Component::BASELINE.into_iter().chain([Component::Ground]).chain(EffectId::ALL.map(Component::Effect))
     }
 
     /// Checks every range and every relation between parameters; returns all problems at once.

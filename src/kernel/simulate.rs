@@ -23,7 +23,7 @@ use super::controller::{self, ControllerLane, ControllerMemory, RefState};
 use super::effects::{Effect, PlantView};
 use super::excitation::{Drive, Reference};
 use super::friction::{self, FrictionLane};
-use super::metrics::{Basis, Metrics, MetricsAcc};
+use super::metrics::{Basis, Metrics, MetricsAcc, WindowTick};
 use super::params::{ModelParams, ValveLaw};
 use super::platen::{self, Damping, PlatenLane, PowDamping, SqrtDamping};
 use super::servovalve::{FlowLaw, Linear, Orifice, ValveLane};
@@ -90,6 +90,8 @@ pub enum SetupError {
     NotUniform { lane: usize },
     #[error("the reference was made at {reference} Hz but the controller runs at {controller} Hz")]
     RateMismatch { reference: f64, controller: f64 },
+    #[error("the lanes' references differ in rate, length, window, fundamental, spectrum or drive")]
+    LaneReferences,
     #[error("substeps must be at least 1")]
     Substeps,
     #[error("the open-loop drive has {got} samples but the run has {expected} ticks")]
@@ -314,6 +316,20 @@ pub fn run<const N: usize, E: Effect<N>, O: Observer<N>>(
     run_on(Isa::detected(), lp, effect, reference, solver, obs)
 }
 
+/// [`run`] with a reference per lane (a stochastic ground motion: one realisation per sample).
+/// The references must agree in rate, length, window, fundamental and spectrum, and drive the
+/// spool by the controller unless they are one reference; lane l follows `refs[l]` with the same
+/// bits as when every lane shares it.
+pub fn run_each<const N: usize, E: Effect<N>, O: Observer<N>>(
+    lp: &LaneParams<N>,
+    effect: &E,
+    refs: &[&Reference; N],
+    solver: &Solver,
+    obs: &mut O,
+) -> Result<[LaneResult; N], SetupError> {
+    run_each_on(Isa::detected(), lp, effect, refs, solver, obs)
+}
+
 /// [`run`] on a chosen instruction set.
 pub fn run_on<const N: usize, E: Effect<N>, O: Observer<N>>(
     isa: Isa,
@@ -323,14 +339,26 @@ pub fn run_on<const N: usize, E: Effect<N>, O: Observer<N>>(
     solver: &Solver,
     obs: &mut O,
 ) -> Result<[LaneResult; N], SetupError> {
-    check(lp, reference, solver)?;
+    run_each_on(isa, lp, effect, &[reference; N], solver, obs)
+}
+
+/// [`run_each`] on a chosen instruction set.
+pub fn run_each_on<const N: usize, E: Effect<N>, O: Observer<N>>(
+    isa: Isa,
+    lp: &LaneParams<N>,
+    effect: &E,
+    refs: &[&Reference; N],
+    solver: &Solver,
+    obs: &mut O,
+) -> Result<[LaneResult; N], SetupError> {
+    check(lp, refs, solver)?;
     // AVX2 only where the CPU has it: asking for it elsewhere runs the portable build.
     let wide = isa == Isa::Avx2 && Isa::detected() == Isa::Avx2;
     Ok(match (lp.valve_law, lp.alpha_half) {
-        (ValveLaw::Orifice, true) => actuators::<N, Orifice, SqrtDamping, E, O>(wide, lp, effect, reference, solver, obs),
-        (ValveLaw::Orifice, false) => actuators::<N, Orifice, PowDamping, E, O>(wide, lp, effect, reference, solver, obs),
-        (ValveLaw::Linear, true) => actuators::<N, Linear, SqrtDamping, E, O>(wide, lp, effect, reference, solver, obs),
-        (ValveLaw::Linear, false) => actuators::<N, Linear, PowDamping, E, O>(wide, lp, effect, reference, solver, obs),
+        (ValveLaw::Orifice, true) => actuators::<N, Orifice, SqrtDamping, E, O>(wide, lp, effect, refs, solver, obs),
+        (ValveLaw::Orifice, false) => actuators::<N, Orifice, PowDamping, E, O>(wide, lp, effect, refs, solver, obs),
+        (ValveLaw::Linear, true) => actuators::<N, Linear, SqrtDamping, E, O>(wide, lp, effect, refs, solver, obs),
+        (ValveLaw::Linear, false) => actuators::<N, Linear, PowDamping, E, O>(wide, lp, effect, refs, solver, obs),
     })
 }
 
@@ -347,15 +375,16 @@ pub fn run_usual<const N: usize, E: Effect<N>, O: Observer<N>>(
 ) -> Option<Result<[LaneResult; N], SetupError>> {
     #[cfg(target_arch = "x86_64")]
     if matches!(lp.valve_law, ValveLaw::Orifice) && lp.alpha_half && Isa::detected() == Isa::Avx2 {
-        if let Err(e) = check(lp, reference, solver) {
+        let refs = &[reference; N];
+        if let Err(e) = check(lp, refs, solver) {
             return Some(Err(e));
         }
         // SAFETY: the CPU reports AVX2 and FMA (`Isa::detected`).
         return Some(Ok(unsafe {
             if effect.symmetric() {
-                integrate_avx2::<N, 1, Orifice, SqrtDamping, E, O>(lp, effect, reference, solver, obs)
+                integrate_avx2::<N, 1, Orifice, SqrtDamping, E, O>(lp, effect, refs, solver, obs)
             } else {
-                integrate_avx2::<N, N_ACT, Orifice, SqrtDamping, E, O>(lp, effect, reference, solver, obs)
+                integrate_avx2::<N, N_ACT, Orifice, SqrtDamping, E, O>(lp, effect, refs, solver, obs)
             }
         }));
     }
@@ -365,7 +394,21 @@ pub fn run_usual<const N: usize, E: Effect<N>, O: Observer<N>>(
 
 /// The checks before a run: the reference's rate is the controller's, substeps ≥ 1, a drive as
 /// long as the reference.
-fn check<const N: usize>(lp: &LaneParams<N>, reference: &Reference, solver: &Solver) -> Result<(), SetupError> {
+fn check<const N: usize>(lp: &LaneParams<N>, refs: &[&Reference; N], solver: &Solver) -> Result<(), SetupError> {
+    let reference = refs[0];
+    for r in &refs[1..] {
+        let same = std::ptr::eq(*r, reference)
+            || (r.f_s == reference.f_s
+                && r.len() == reference.len()
+                && r.window == reference.window
+                && r.fundamental_hz == reference.fundamental_hz
+                && r.spectrum.as_ref().map(|s| &s.0) == reference.spectrum.as_ref().map(|s| &s.0)
+                && r.drive == Drive::ClosedLoop
+                && reference.drive == Drive::ClosedLoop);
+        if !same {
+            return Err(SetupError::LaneReferences);
+        }
+    }
     if reference.f_s != lp.f_s {
         return Err(SetupError::RateMismatch { reference: reference.f_s, controller: lp.f_s });
     }
@@ -386,14 +429,14 @@ fn actuators<const N: usize, Q: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N
     wide: bool,
     lp: &LaneParams<N>,
     effect: &E,
-    reference: &Reference,
+    refs: &[&Reference; N],
     solver: &Solver,
     obs: &mut O,
 ) -> [LaneResult; N] {
     if effect.symmetric() {
-        dispatch::<N, 1, Q, D, E, O>(wide, lp, effect, reference, solver, obs)
+        dispatch::<N, 1, Q, D, E, O>(wide, lp, effect, refs, solver, obs)
     } else {
-        dispatch::<N, N_ACT, Q, D, E, O>(wide, lp, effect, reference, solver, obs)
+        dispatch::<N, N_ACT, Q, D, E, O>(wide, lp, effect, refs, solver, obs)
     }
 }
 
@@ -401,17 +444,17 @@ fn dispatch<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N>
     wide: bool,
     lp: &LaneParams<N>,
     effect: &E,
-    reference: &Reference,
+    refs: &[&Reference; N],
     solver: &Solver,
     obs: &mut O,
 ) -> [LaneResult; N] {
     #[cfg(target_arch = "x86_64")]
     if wide {
         // SAFETY: `wide` is only true when the CPU reports AVX2 and FMA (`Isa::detected`).
-        return unsafe { integrate_avx2::<N, A, Q, D, E, O>(lp, effect, reference, solver, obs) };
+        return unsafe { integrate_avx2::<N, A, Q, D, E, O>(lp, effect, refs, solver, obs) };
     }
     let _ = wide;
-    integrate::<N, A, Q, D, E, O>(lp, effect, reference, solver, obs)
+    integrate::<N, A, Q, D, E, O>(lp, effect, refs, solver, obs)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -419,11 +462,11 @@ fn dispatch<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N>
 unsafe fn integrate_avx2<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N>>(
     lp: &LaneParams<N>,
     effect: &E,
-    reference: &Reference,
+    refs: &[&Reference; N],
     solver: &Solver,
     obs: &mut O,
 ) -> [LaneResult; N] {
-    integrate::<N, A, Q, D, E, O>(lp, effect, reference, solver, obs)
+    integrate::<N, A, Q, D, E, O>(lp, effect, refs, solver, obs)
 }
 
 /// Plant right-hand side for every lane, computing `A` actuators: both, or (A = 1) the first
@@ -628,7 +671,7 @@ fn check_lane<const N: usize>(lp: &LaneParams<N>, s: &[[f64; N]; NP], l: usize) 
 fn integrate<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N>>(
     lp: &LaneParams<N>,
     effect: &E,
-    reference: &Reference,
+    refs: &[&Reference; N],
     solver: &Solver,
     obs: &mut O,
 ) -> [LaneResult; N] {
@@ -640,7 +683,8 @@ fn integrate<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N
     total_force(lp, &s, &mut f);
     let mut mem: [ControllerMemory; N] = std::array::from_fn(|l| ControllerMemory::new(f[l]));
     let mut status = [LaneStatus::Ok; N];
-    let mut acc = MetricsAcc::<N>::default();
+    let reference = refs[0];
+    let mut acc = MetricsAcc::<N>::new(reference.spectrum.as_ref().map(|(spec, _)| (spec, 1.0 / lp.f_s)));
 
     let (mut k1, mut k2, mut k3, mut k4, mut tmp) = ([[0.0; N]; NP], [[0.0; N]; NP], [[0.0; N]; NP], [[0.0; N]; NP], [[0.0; N]; NP]);
     let (mut ek1, mut ek2, mut ek3, mut ek4, mut etmp) = (es, es, es, es, es);
@@ -658,16 +702,19 @@ fn integrate<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N
     let (w0, w1) = reference.window;
     let fundamental = reference.fundamental_hz;
 
+    let (mut a_r, mut v_r, mut x_r, mut v) = ([0.0; N], [0.0; N], [0.0; N], [0.0; N]);
     for k in 0..reference.len() {
         let t = reference.time(k);
-        let r = RefState { x: reference.x[k], v: reference.v[k], a: reference.a[k], j: reference.j[k] };
+        let rl: [RefState; N] = std::array::from_fn(|l| RefState { x: refs[l].x[k], v: refs[l].v[k], a: refs[l].a[k], j: refs[l].j[k] });
+        // Observers (single-lane histories) see lane 0's reference.
+        let r = rl[0];
         total_force(lp, &s, &mut f);
         for l in 0..N {
             // The displacement feedback (LVDT) reads the actuator stroke.
             x[l] = effect.stroke(l, s[Y][l], s[VEL][l], &es).0;
             match &reference.drive {
                 Drive::ClosedLoop => {
-                    u[l] = controller::tick(&lp.ctrl[l], &mut mem[l], &r, x[l], f[l]);
+                    u[l] = controller::tick(&lp.ctrl[l], &mut mem[l], &rl[l], x[l], f[l]);
                     x_c[l] = lp.ctrl[l].k_sp * u[l];
                 }
                 Drive::ValveCommand(cmd) => {
@@ -692,7 +739,10 @@ fn integrate<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N
         acc.every_tick(&u);
         if (w0..w1).contains(&k) {
             let basis = fundamental.map(|f0| Basis::at(k, lp.f_s, f0));
-            acc.window_tick(basis.as_ref(), r.a, r.x, &a, &x);
+            for l in 0..N {
+                (a_r[l], v_r[l], x_r[l], v[l]) = (rl[l].a, rl[l].v, rl[l].x, s[VEL][l]);
+            }
+            acc.window_tick(basis.as_ref(), &WindowTick { a_r: &a_r, v_r: &v_r, x_r: &x_r, a: &a, v: &v, x: &x });
         }
 
         for sub in 0..solver.substeps {
@@ -747,7 +797,10 @@ fn integrate<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N
     }
 
     std::array::from_fn(|l| match status[l] {
-        LaneStatus::Ok => LaneResult { status: status[l], metrics: acc.finish(l, fundamental.map(|f0| Metrics::highest_harmonic(f0, lp.f_s))) },
+        LaneStatus::Ok => LaneResult {
+            status: status[l],
+            metrics: acc.finish(l, fundamental.map(|f0| Metrics::highest_harmonic(f0, lp.f_s)), refs[l].spectrum.as_ref().map(|(spec, psa)| (spec, psa.as_slice()))),
+        },
         failed => LaneResult { status: failed, metrics: Metrics::NAN },
     })
 }
@@ -796,8 +849,8 @@ mod tests {
         let set = crate::kernel::effects::effect_set::<8>(&erefs);
         assert!(set.symmetric());
         for wide in [false, Isa::detected() == Isa::Avx2] {
-            let one = dispatch::<8, 1, Orifice, SqrtDamping, _, NoObserver>(wide, &elp, &set, &r, &solver, &mut NoObserver);
-            let two = dispatch::<8, 2, Orifice, SqrtDamping, _, NoObserver>(wide, &elp, &set, &r, &solver, &mut NoObserver);
+            let one = dispatch::<8, 1, Orifice, SqrtDamping, _, NoObserver>(wide, &elp, &set, &[&r; 8], &solver, &mut NoObserver);
+            let two = dispatch::<8, 2, Orifice, SqrtDamping, _, NoObserver>(wide, &elp, &set, &[&r; 8], &solver, &mut NoObserver);
             assert!(one.iter().any(|x| x.status == LaneStatus::Ok));
             for (l, (a, b)) in one.iter().zip(&two).enumerate() {
                 assert_eq!(a.status, b.status, "effects, lane {l}");
@@ -807,8 +860,8 @@ mod tests {
             }
         }
         for wide in [false, Isa::detected() == Isa::Avx2] {
-            let one = dispatch::<8, 1, Orifice, SqrtDamping, Baseline, NoObserver>(wide, &lp, &Baseline, &r, &solver, &mut NoObserver);
-            let two = dispatch::<8, 2, Orifice, SqrtDamping, Baseline, NoObserver>(wide, &lp, &Baseline, &r, &solver, &mut NoObserver);
+            let one = dispatch::<8, 1, Orifice, SqrtDamping, Baseline, NoObserver>(wide, &lp, &Baseline, &[&r; 8], &solver, &mut NoObserver);
+            let two = dispatch::<8, 2, Orifice, SqrtDamping, Baseline, NoObserver>(wide, &lp, &Baseline, &[&r; 8], &solver, &mut NoObserver);
             assert!(one.iter().any(|x| x.status == LaneStatus::Ok) && one.iter().any(|x| x.status != LaneStatus::Ok), "wants ok and failed lanes: {:?}", one.map(|x| x.status));
             for (l, (a, b)) in one.iter().zip(&two).enumerate() {
                 assert_eq!(a.status, b.status, "lane {l}");

@@ -12,7 +12,9 @@
 
 use super::sampling::{saltelli_block, Design, UnitDesign};
 use super::study::{Method, StudySpec};
+use super::spec::ExcitationSpec;
 use crate::kernel::excitation::Reference;
+use crate::kernel::spectrum::SpectrumSpec;
 use crate::kernel::metrics::Metrics;
 use crate::kernel::params::{ModelParams, ParamInfo};
 use crate::kernel::simulate::{self, LaneStatus, NoObserver};
@@ -40,8 +42,20 @@ pub struct Plan {
     dists: Vec<super::sampling::Distribution>,
     pub design: DesignSource,
     pub references: Vec<Reference>,
+    /// Per excitation: its spec when its reference depends on the sample (a stochastic motion
+    /// with a realisation per sample or sampled `ground.*`), made for each sample by
+    /// [`super::quake::generated`] from (seed, sample id); `references[e]` is then unused.
+    pub per_sample: Vec<Option<ExcitationSpec>>,
+    /// The study's seed (the excitation noise's, [`super::quake`]) and response spectrum.
+    pub seed: u64,
+    pub spectrum: SpectrumSpec,
     pub solver: simulate::Solver,
     pub saltelli_dims: Option<usize>,
+}
+
+/// Which excitations of `spec` need a reference per sample, given the varied parameter paths.
+fn per_sample(spec: &StudySpec, varied: &[String]) -> Vec<Option<ExcitationSpec>> {
+    spec.excitations.iter().map(|e| e.spec.per_sample(|p| varied.iter().any(|v| v == p)).then(|| e.spec.clone())).collect()
 }
 
 /// Status of one row.
@@ -107,6 +121,9 @@ impl Plan {
             saltelli_dims: matches!(spec.method, Method::Saltelli).then_some(varied.len()),
             design: DesignSource::Generated(design),
             references,
+            per_sample: per_sample(spec, &spec.varied().iter().map(|v| v.info.path()).collect::<Vec<_>>()),
+            seed: spec.seed,
+            spectrum: spec.spectrum.clone(),
             solver: spec.solver,
         }
     }
@@ -118,6 +135,9 @@ impl Plan {
             dims: (0..columns.len()).map(Some).collect(),
             fixed: vec![f64::NAN; columns.len()],
             dists: Vec::new(),
+            per_sample: per_sample(spec, &columns.iter().map(|c| c.path()).collect::<Vec<_>>()),
+            seed: spec.seed,
+            spectrum: spec.spectrum.clone(),
             columns,
             design: DesignSource::Table(rows),
             references,
@@ -189,12 +209,33 @@ impl Plan {
             (b as u32, k as u32)
         });
         for (e, reference) in self.references.iter().enumerate() {
-            for group in valid.chunks(LANES) {
+            // The lanes' references: the excitation's, or each sample's own (a sample whose
+            // motion cannot run is a row that says why).
+            let mut own: Vec<Option<Reference>> = vec![None; samples.len()];
+            let mut runnable = valid.clone();
+            if let Some(exc) = &self.per_sample[e] {
+                runnable.clear();
+                for &i in &valid {
+                    let s = &samples[i];
+                    match super::quake::generated(exc, s.model.as_ref().expect("valid"), self.seed, s.id) {
+                        Ok(r) => {
+                            own[i] = Some(r.with_spectrum(self.spectrum.clone()));
+                            runnable.push(i);
+                        }
+                        Err(reason) => {
+                            let status = RowStatus::Invalid { reason };
+                            rows[i * n_exc + e] = Some(Row { sample_id: s.id, excitation: e as u32, saltelli: saltelli(s.id), values: s.values.clone(), status, metrics: Metrics::NAN });
+                        }
+                    }
+                }
+            }
+            for group in runnable.chunks(LANES) {
                 let models: Vec<&ModelParams> = group.iter().map(|&i| samples[i].model.as_ref().expect("valid")).collect();
+                let refs: Vec<&Reference> = group.iter().map(|&i| own[i].as_ref().unwrap_or(reference)).collect();
                 // Lanes without effects give the same bits in the effect set (it is neutral
-                // there), so the kernel `run_lanes` chooses per group does not make a row
-                // depend on its neighbours.
-                let results = super::sim::run_lanes::<LANES, _>(&models, reference, &self.solver, &mut NoObserver);
+                // there), and a lane's reference is its own, so the kernel `run_lanes_each`
+                // chooses per group does not make a row depend on its neighbours.
+                let results = super::sim::run_lanes_each::<LANES, _>(&models, &refs, &self.solver, &mut NoObserver);
                 for (lane, &i) in group.iter().enumerate() {
                     let (status, metrics) = match &results {
                         Ok(r) => match r[lane].status {

@@ -288,7 +288,8 @@ pub fn align(test: &TestSpec, data: &NumTable, record: Option<&NumTable>, open_l
     let (rate, rows, f_s) = (time.rate_hz, time.rows, test.model.controller.f_s);
     let located = match &test.excitation {
         ExcitationSpec::Sine { sine, .. } => locate_sine(test, sine, data, &time, &mut warnings)?,
-        ExcitationSpec::Record { column, time_column, f_ref_hz, scale, .. } => locate_record(test, (column, time_column, *f_ref_hz, *scale), data, record, &time)?,
+        ExcitationSpec::Record { column, time_column, .. } => locate_record(test, (column, time_column), data, record, &time)?,
+        generated => locate_generated(test, generated, data, &time)?,
     };
     let (start_row, start, end_row, cycles) = (located.start_row, located.start, located.end_row, located.cycles);
     let window = analysis_window(test, data, &located, rate)?;
@@ -297,7 +298,7 @@ pub fn align(test: &TestSpec, data: &NumTable, record: Option<&NumTable>, open_l
     let mut drive = match (&test.excitation, located.record) {
         (ExcitationSpec::Sine { sine, .. }, _) => Sine { duration_s: n_ticks as f64 / f_s, window_cycles: None, ..*sine }.reference(f_s),
         (_, Some(r)) => r,
-        (ExcitationSpec::Record { .. }, None) => unreachable!("a record has its reference"),
+        (_, None) => unreachable!("a record or a generated motion has its reference"),
     };
     drive.hold_to(n_ticks);
     if let Some(mode) = open_loop {
@@ -392,7 +393,8 @@ fn locate_sine(test: &TestSpec, sine: &Sine, data: &NumTable, time: &TimeBase, w
 
 /// A record's reference (from `t0_s`, else its first sample, on the data's clock) and the rows
 /// it spans in the file; a displacement beyond the stroke is refused at its row.
-fn locate_record(test: &TestSpec, (column, time_column, f_ref_hz, scale): (&str, &str, f64, f64), data: &NumTable, record: Option<&NumTable>, time: &TimeBase) -> Result<Located, Vec<DataProblem>> {
+fn locate_record(test: &TestSpec, (column, time_column): (&str, &str), data: &NumTable, record: Option<&NumTable>, time: &TimeBase) -> Result<Located, Vec<DataProblem>> {
+    let ExcitationSpec::Record { f_ref_hz, scale, unit, pga_g, processing, .. } = &test.excitation else { unreachable!("a record") };
     let source = record.unwrap_or(data);
     let Some(values) = source.column(column) else {
         return Err(vec![source.problem(Some(column), None, format!("missing: the record of test {:?}", test.name))]);
@@ -401,19 +403,37 @@ fn locate_record(test: &TestSpec, (column, time_column, f_ref_hz, scale): (&str,
     let t0 = test.t0_s.unwrap_or(rec_time.t0_s);
     let first = ((t0 - rec_time.t0_s) * rec_time.rate_hz).ceil().max(0.0) as usize;
     let rec_t: Vec<f64> = (first..values.len()).map(|i| rec_time.time(i as f64) - t0).collect();
-    let rec_x: Vec<f64> = values[first..].iter().map(|v| v * scale).collect();
+    let rec_x = super::quake::scaled(&values[first..], *unit, *scale, *pga_g);
     if rec_t.len() < 2 {
         return Err(vec![source.problem(Some(column), None, format!("test {:?}: fewer than two record samples after t0_s", test.name))]);
     }
-    let l = test.model.actuator.l;
-    if let Some((i, v)) = rec_x.iter().enumerate().find(|(_, v)| v.abs() >= l) {
-        return Err(vec![source.problem(Some(column), Some(first + i + 1), format!("displacement {v} m (after scale {scale}) exceeds the stroke (half stroke actuator.l = {l} m)"))]);
-    }
-    let span = rec_t[rec_t.len() - 1];
-    let r = Record { time_s: rec_t, disp_m: rec_x, f_ref_hz }.reference(test.model.controller.f_s);
+    let f_s = test.model.controller.f_s;
+    let r = if unit.is_acceleration() {
+        super::quake::from_acceleration(&rec_x, 0.0, 1.0 / rec_time.rate_hz, processing, *f_ref_hz, f_s)
+    } else {
+        let l = test.model.actuator.l;
+        if let Some((i, v)) = rec_x.iter().enumerate().find(|(_, v)| v.abs() >= l) {
+            return Err(vec![source.problem(Some(column), Some(first + i + 1), format!("displacement {v} m (after unit {} and scale {scale}) exceeds the stroke (half stroke actuator.l = {l} m)", unit.name()))]);
+        }
+        Record { time_s: rec_t, disp_m: rec_x, f_ref_hz: *f_ref_hz }.reference(f_s)
+    };
+    super::quake::check_limits(&r, &test.model).map_err(|m| vec![source.problem(Some(column), None, format!("test {:?}: {m}", test.name))])?;
+    let span = (r.len() - 1) as f64 / f_s;
     let rate = time.rate_hz;
     let start_row = ((t0 - time.t0_s) * rate).max(0.0);
     let end_row = (((span + t0 - time.t0_s) * rate + 1e-6).floor() as usize + 1).min(time.rows);
+    let start = if test.t0_s.is_some() { Start::Given } else { Start::FirstRow };
+    Ok(Located { start_row, start, end_row, cycles: None, record: Some(r) })
+}
+
+/// A generated motion (stochastic, sweep, random) in a measured test: its reference from the
+/// campaign (its own `seed`, else 0), starting at `t0_s` or the file's first row.
+fn locate_generated(test: &TestSpec, excitation: &ExcitationSpec, data: &NumTable, time: &TimeBase) -> Result<Located, Vec<DataProblem>> {
+    let r = super::quake::generated(excitation, &test.model, 0, 0).map_err(|m| vec![data.problem(None, None, format!("test {:?}: {m}", test.name))])?;
+    let t0 = test.t0_s.unwrap_or(time.t0_s);
+    let span = (r.len() - 1) as f64 / test.model.controller.f_s;
+    let start_row = ((t0 - time.t0_s) * time.rate_hz).max(0.0);
+    let end_row = (((span + t0 - time.t0_s) * time.rate_hz + 1e-6).floor() as usize + 1).min(time.rows);
     let start = if test.t0_s.is_some() { Start::Given } else { Start::FirstRow };
     Ok(Located { start_row, start, end_row, cycles: None, record: Some(r) })
 }
@@ -466,7 +486,7 @@ fn reference_states(excitation: &ExcitationSpec, drive: &Reference, tau: &[f64])
             let st: Vec<[f64; 4]> = tau.iter().map(|&t| sine.states(t)).collect();
             (st.iter().map(|s| s[0]).collect(), st.iter().map(|s| s[1]).collect(), st.iter().map(|s| s[2]).collect())
         }
-        ExcitationSpec::Record { .. } => (
+        _ => (
             tau.iter().map(|&t| drive.at_time(&drive.x, t)).collect(),
             tau.iter().map(|&t| drive.at_time(&drive.v, t)).collect(),
             tau.iter().map(|&t| drive.at_time(&drive.a, t)).collect(),

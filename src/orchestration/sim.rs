@@ -2,6 +2,7 @@
 //! engine uses, with an [`Observer`] that keeps the time history of every channel of docs/model.md §5.
 
 use super::measured::{DataProblem, NumTable};
+use super::quake;
 use super::spec::{ExcitationSpec, SimSpec};
 use crate::kernel::effects::{effect_set, with_single, Baseline, Effect, EffectFn, EffectId};
 use crate::kernel::excitation::{Record, Reference};
@@ -80,11 +81,18 @@ pub struct SimOutcome {
 /// Runs up to N models as the lanes of one batch against `reference`: through the effect set
 /// when any lane switches an effect on, else through the bare baseline kernel.
 pub fn run_lanes<const N: usize, O: Observer<N>>(models: &[&ModelParams], reference: &Reference, solver: &Solver, obs: &mut O) -> Result<[LaneResult; N], SetupError> {
+    run_lanes_each(models, &[reference], solver, obs)
+}
+
+/// [`run_lanes`] with a reference per model (`refs[i]` for `models[i]`; one reference is every
+/// lane's); the lanes beyond the models repeat the last, as [`LaneParams::new`] does.
+pub fn run_lanes_each<const N: usize, O: Observer<N>>(models: &[&ModelParams], refs: &[&Reference], solver: &Solver, obs: &mut O) -> Result<[LaneResult; N], SetupError> {
     let lp = LaneParams::<N>::new(models)?;
+    let refs: [&Reference; N] = std::array::from_fn(|l| refs[l.min(refs.len() - 1)]);
     if models.iter().any(|m| m.effects.any()) {
-        simulate::run(&lp, &effect_set::<N>(models), reference, solver, obs)
+        simulate::run_each(&lp, &effect_set::<N>(models), &refs, solver, obs)
     } else {
-        simulate::run(&lp, &Baseline, reference, solver, obs)
+        simulate::run_each(&lp, &Baseline, &refs, solver, obs)
     }
 }
 
@@ -121,25 +129,35 @@ impl<const N: usize, O: Observer<N>> EffectFn<N> for Single<'_, N, O> {
     }
 }
 
-/// The reference of one excitation for `model`. A record's columns (its time and displacement)
-/// come in `record`, read by the caller; rounded time is rebuilt into its uniform grid (a gap or
-/// a drift is refused), and a displacement beyond the stroke is refused at its row.
-pub fn reference_for(excitation: &ExcitationSpec, model: &ModelParams, record: Option<&NumTable>) -> Result<Reference, DataProblem> {
+/// The reference of one excitation for `model`. A record's columns (its time and displacement
+/// or acceleration) come in `record`, read by the caller; rounded time is rebuilt into its
+/// uniform grid (a gap or a drift is refused), and a displacement beyond the stroke is refused
+/// at its row. A generated motion's noise is stream 0 of `seed` unless it names its own
+/// realisation ([`super::quake`]). Every reference but a sine carries the default response
+/// spectrum, and is checked against the table's limits.
+pub fn reference_for(excitation: &ExcitationSpec, model: &ModelParams, record: Option<&NumTable>, seed: u64) -> Result<Reference, DataProblem> {
     let f_s = model.controller.f_s;
-    match (excitation, record) {
-        (ExcitationSpec::Sine { sine, .. }, _) => Ok(sine.reference(f_s)),
-        (ExcitationSpec::Record { column, time_column, f_ref_hz, scale, .. }, Some(t)) => {
+    let r = match (excitation, record) {
+        (ExcitationSpec::Sine { sine, .. }, _) => return Ok(sine.reference(f_s)),
+        (ExcitationSpec::Record { column, time_column, f_ref_hz, scale, unit, pga_g, processing, .. }, Some(t)) => {
             let grid = t.time_base(time_column)?;
-            let disp: Vec<f64> = t.column(column).expect("the record's column was read").iter().map(|d| d * scale).collect();
-            let l = model.actuator.l;
-            if let Some((row, d)) = disp.iter().enumerate().find(|(_, d)| d.abs() >= l) {
-                return Err(t.problem(Some(column), Some(row + 1), format!("displacement {d} m (after scale {scale}) exceeds the stroke (half stroke actuator.l = {l} m)")));
-            }
-            let rec = Record { time_s: (0..t.rows()).map(|i| grid.time(i as f64)).collect(), disp_m: disp, f_ref_hz: *f_ref_hz };
-            Ok(rec.reference(f_s))
+            let values = quake::scaled(t.column(column).expect("the record's column was read"), *unit, *scale, *pga_g);
+            let r = if unit.is_acceleration() {
+                quake::from_acceleration(&values, grid.time(0.0), 1.0 / grid.rate_hz, processing, *f_ref_hz, f_s)
+            } else {
+                let l = model.actuator.l;
+                if let Some((row, d)) = values.iter().enumerate().find(|(_, d)| d.abs() >= l) {
+                    return Err(t.problem(Some(column), Some(row + 1), format!("displacement {d} m (after unit {} and scale {scale}) exceeds the stroke (half stroke actuator.l = {l} m)", unit.name())));
+                }
+                Record { time_s: (0..t.rows()).map(|i| grid.time(i as f64)).collect(), disp_m: values, f_ref_hz: *f_ref_hz }.reference(f_s)
+            };
+            quake::check_limits(&r, model).map_err(|m| t.problem(Some(column), None, m))?;
+            r
         }
         (ExcitationSpec::Record { file, .. }, None) => panic!("the record {} was not read before its reference was built", file.display()),
-    }
+        (generated, _) => quake::generated(generated, model, seed, 0).map_err(|message| DataProblem { file: format!("excitation ({})", generated.describe()), place: String::new(), message })?,
+    };
+    Ok(r.with_spectrum(quake::default_spectrum()))
 }
 
 /// Runs `spec` against a prepared reference (sine or record).

@@ -19,10 +19,19 @@
 //!
 //! A record excitation names a file and its columns instead:
 //! `{ kind = "record", file = "quake.csv", column = "ref_disp_m", time_column = "time_s", f_ref_hz = 50.0, scale = 1.0 }`
-//! (the path is relative to the spec file). Every problem is reported at once with its key path.
+//! (the path is relative to the spec file); `unit = "g"` or `"m/s2"` makes the column a ground
+//! acceleration, and a PEER `.AT2` file is one by itself (`pga_g` scales it to a peak,
+//! `highpass_hz` sets its processing into a displacement, kernel::ground). The earthquake-type
+//! kinds (docs/formats.md "Excitations"):
+//! - `{ kind = "stochastic", duration_s = 20, realisation = 0 }` (or `"per_sample"`), with any
+//!   `ground.*` parameter as a key (`f_g_hz = 3.0`);
+//! - `{ kind = "sweep", f0_hz = 0.5, f1_hz = 20, duration_s = 40, amp_g = 0.2, law = "log" }`;
+//! - `{ kind = "random", f_lo_hz = 0.5, f_hi_hz = 15, rms_g = 0.1, duration_s = 20 }`.
+//! Every problem is reported at once with its key path.
 
 use super::toml_fields::{Fields, InputError, Issues};
 use crate::kernel::excitation::Sine;
+use crate::kernel::ground::{Processing, Sweep};
 use crate::kernel::params::{Component, ModelParams, ValveLaw};
 use crate::kernel::simulate::Solver;
 use std::path::PathBuf;
@@ -41,7 +50,85 @@ pub enum ExcitationSpec {
         time_column: String,
         f_ref_hz: f64,
         scale: f64,
+        /// What the column holds (a `.AT2` file: acceleration in g).
+        unit: RecordUnit,
+        /// Scale an acceleration record to this peak, g (instead of `scale`).
+        pga_g: Option<f64>,
+        /// How an acceleration becomes a displacement.
+        processing: Processing,
     },
+    /// A Kanai–Tajimi / Clough–Penzien ground motion (kernel::ground), its parameters the
+    /// model's `ground.*` with `ground` overriding them.
+    Stochastic { duration_s: f64, realisation: Realisation, seed: Option<u64>, ground: Vec<(&'static str, f64)>, processing: Processing, f_ref_hz: f64 },
+    /// A sine sweep (kernel::ground::Sweep); `amp_g` as given, if it was.
+    Sweep { sweep: Sweep, amp_g: Option<f64> },
+    /// Band-limited random: a random-phase multisine (kernel::ground::Multisine).
+    Random { f_lo_hz: f64, f_hi_hz: f64, rms_g: f64, duration_s: f64, taper_s: f64, realisation: Realisation, seed: Option<u64> },
+}
+
+/// What a record column holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RecordUnit {
+    /// Displacement, m (the default).
+    M,
+    /// Displacement, mm.
+    Mm,
+    /// Ground acceleration, g (9.80665 m/s²).
+    G,
+    /// Ground acceleration, m/s².
+    Mps2,
+}
+
+impl RecordUnit {
+    pub const NAMES: [&'static str; 4] = ["m", "mm", "g", "m/s2"];
+
+    pub fn parse(s: &str) -> Option<RecordUnit> {
+        Some(match s {
+            "m" => RecordUnit::M,
+            "mm" => RecordUnit::Mm,
+            "g" => RecordUnit::G,
+            "m/s2" | "m/s^2" | "m/s²" => RecordUnit::Mps2,
+            _ => return None,
+        })
+    }
+    pub fn name(self) -> &'static str {
+        match self {
+            RecordUnit::M => "m",
+            RecordUnit::Mm => "mm",
+            RecordUnit::G => "g",
+            RecordUnit::Mps2 => "m/s2",
+        }
+    }
+    /// The factor to SI (m or m/s²).
+    pub fn to_si(self) -> f64 {
+        match self {
+            RecordUnit::M | RecordUnit::Mps2 => 1.0,
+            RecordUnit::Mm => 1e-3,
+            RecordUnit::G => crate::kernel::params::G,
+        }
+    }
+    pub fn is_acceleration(self) -> bool {
+        matches!(self, RecordUnit::G | RecordUnit::Mps2)
+    }
+}
+
+/// Which noise realisation a random excitation uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Realisation {
+    /// The same realisation for every sample: stream k of the excitation's seed.
+    Fixed(u64),
+    /// One per sample of a study: stream = the sample id (a run outside a study uses stream 0).
+    PerSample,
+}
+
+impl Realisation {
+    /// The noise stream of sample `sample`.
+    pub fn stream(self, sample: u64) -> u64 {
+        match self {
+            Realisation::Fixed(k) => k,
+            Realisation::PerSample => sample,
+        }
+    }
 }
 
 impl ExcitationSpec {
@@ -54,6 +141,27 @@ impl ExcitationSpec {
                 (format!("sine {} Hz {:.2} g", sine.freq_hz, g), sine.freq_hz, g)
             }
             ExcitationSpec::Record { column, .. } => (format!("record {column}"), f64::NAN, f64::NAN),
+            ExcitationSpec::Stochastic { .. } => ("stochastic ground motion".into(), f64::NAN, f64::NAN),
+            ExcitationSpec::Sweep { sweep, .. } => (format!("sweep {}-{} Hz", sweep.f0_hz, sweep.f1_hz), f64::NAN, f64::NAN),
+            ExcitationSpec::Random { f_lo_hz, f_hi_hz, .. } => (format!("random {f_lo_hz}-{f_hi_hz} Hz"), f64::NAN, f64::NAN),
+        }
+    }
+
+    /// Whether it is a sine (the harmonic metrics) rather than an earthquake-type motion (the
+    /// spectral ones).
+    pub fn is_sine(&self) -> bool {
+        matches!(self, ExcitationSpec::Sine { .. })
+    }
+
+    /// Whether its reference depends on the sample: a realisation per sample, or a stochastic
+    /// motion whose `ground.*` parameters the study varies (`varied` says which paths vary).
+    pub fn per_sample(&self, varied: impl Fn(&str) -> bool) -> bool {
+        match self {
+            ExcitationSpec::Stochastic { realisation, ground, .. } => {
+                *realisation == Realisation::PerSample || crate::kernel::ground::GroundParams::PARAMS.iter().any(|p| varied(&p.path()) && !ground.iter().any(|(n, _)| *n == p.name))
+            }
+            ExcitationSpec::Random { realisation, .. } => *realisation == Realisation::PerSample,
+            _ => false,
         }
     }
 
@@ -72,9 +180,30 @@ impl ExcitationSpec {
                     sine.window_cycles.unwrap_or_else(|| sine.default_cycles())
                 )
             }
-            ExcitationSpec::Record { file, column, f_ref_hz, .. } => {
+            ExcitationSpec::Record { file, column, f_ref_hz, unit, .. } if !unit.is_acceleration() => {
                 format!("record {}:{column}, state-variable filter {f_ref_hz} Hz", file.display())
             }
+            ExcitationSpec::Record { file, column, f_ref_hz, unit, pga_g, processing, .. } => format!(
+                "acceleration record {}:{column} ({}){}, high-pass {} Hz, state-variable filter {f_ref_hz} Hz",
+                file.display(),
+                unit.name(),
+                pga_g.map_or(String::new(), |g| format!(" scaled to {g} g")),
+                processing.highpass_hz
+            ),
+            ExcitationSpec::Stochastic { duration_s, realisation, .. } => format!("stochastic ground motion, {duration_s} s, realisation {realisation:?}"),
+            ExcitationSpec::Sweep { sweep, amp_g } => format!(
+                "{:?} sweep {}-{} Hz over {} s, {}",
+                sweep.law,
+                sweep.f0_hz,
+                sweep.f1_hz,
+                sweep.duration_s,
+                match (sweep.amp_m, amp_g) {
+                    (Some(x), _) => format!("{x} m"),
+                    (None, Some(g)) => format!("{g} g"),
+                    (None, None) => format!("{} m/s²", sweep.accel_mps2),
+                }
+            ),
+            ExcitationSpec::Random { f_lo_hz, f_hi_hz, rms_g, duration_s, .. } => format!("band-limited random {f_lo_hz}-{f_hi_hz} Hz, {rms_g} g rms, {duration_s} s"),
         }
     }
 }
@@ -152,18 +281,24 @@ pub fn read_excitation_in(
     let (out, expected): (_, &[&str]) = match kind {
         Some("sine") => (read_sine(&mut f, model, issues), &SINE_KEYS),
         Some("record") => (read_record(&mut f, model, issues, default_file), &RECORD_KEYS),
+        Some("stochastic") => (super::spec_quake::read_stochastic(&mut f, model, issues), &super::spec_quake::STOCHASTIC_KEYS[..]),
+        Some("sweep") => (super::spec_quake::read_sweep(&mut f, model, issues), &super::spec_quake::SWEEP_KEYS[..]),
+        Some("random") => (super::spec_quake::read_random(&mut f, model, issues), &super::spec_quake::RANDOM_KEYS[..]),
         Some(other) => {
-            issues.push(f.path_of("kind"), format!("unknown excitation kind {other:?}; expected \"sine\" or \"record\""));
+            issues.push(f.path_of("kind"), format!("unknown excitation kind {other:?}; expected one of {}", KINDS.join(", ")));
             (None, &SINE_KEYS)
         }
         None => {
-            issues.push(f.path_of("kind"), "missing (\"sine\" or \"record\")");
+            issues.push(f.path_of("kind"), format!("missing (one of {})", KINDS.join(", ")));
             (None, &SINE_KEYS)
         }
     };
     f.finish(&[expected, extra].concat(), issues);
     out
 }
+
+/// The excitation kinds.
+pub const KINDS: [&str; 5] = ["\"sine\"", "\"record\"", "\"stochastic\"", "\"sweep\"", "\"random\""];
 
 /// A sine: its frequency below Nyquist, its amplitude (in g or in metres) within the stroke,
 /// a taper shorter than the run, and an analysis window that fits.
@@ -249,22 +384,51 @@ fn read_record(f: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues, def
     let file = f.str("file", issues);
     let column = f.str("column", issues).unwrap_or("ref_disp_m");
     let time_column = f.str("time_column", issues).unwrap_or("time_s");
-    let f_ref = f.f64("f_ref_hz", issues).unwrap_or(50.0);
-    let scale = f.f64("scale", issues).unwrap_or(1.0);
-    if !(f_ref > 0.0 && f_ref < 0.5 * model.controller.f_s) {
-        issues.push(f.path_of("f_ref_hz"), format!("{f_ref} Hz must be in (0, f_s/2)"));
-    }
+    let f_ref = super::spec_quake::read_f_ref(f, model, issues);
+    let scale = f.f64("scale", issues);
+    let pga_g = f.f64("pga_g", issues);
+    let unit_key = f.str("unit", issues);
+    let processing = super::spec_quake::read_processing(f, issues);
     let Some(file) = file.map(PathBuf::from).or_else(|| default_file.map(PathBuf::from)) else {
-        issues.push(f.path_of("file"), "missing (the CSV or Parquet file holding the record)");
+        issues.push(f.path_of("file"), "missing (the CSV, Parquet or .AT2 file holding the record)");
         return None;
     };
-    Some(ExcitationSpec::Record { file, column: column.to_string(), time_column: time_column.to_string(), f_ref_hz: f_ref, scale })
+    let at2 = is_at2(&file);
+    let unit = match (unit_key, at2) {
+        (None, true) | (Some("g"), true) => RecordUnit::G,
+        (Some(u), true) => {
+            issues.push(f.path_of("unit"), format!("{u:?}: a PEER .AT2 file holds acceleration in g"));
+            RecordUnit::G
+        }
+        (None, false) => RecordUnit::M,
+        (Some(u), false) => RecordUnit::parse(u).unwrap_or_else(|| {
+            issues.push(f.path_of("unit"), format!("unknown unit {u:?}; expected one of {:?}", RecordUnit::NAMES));
+            RecordUnit::M
+        }),
+    };
+    if let Some(g) = pga_g {
+        if !unit.is_acceleration() {
+            issues.push(f.path_of("pga_g"), "scaling to a peak acceleration needs an acceleration record (unit = \"g\" or \"m/s2\", or a .AT2 file); use scale");
+        } else if scale.is_some() {
+            issues.push(f.path_of("pga_g"), "give scale or pga_g, not both");
+        } else if !(g > 0.0 && g.is_finite()) {
+            issues.push(f.path_of("pga_g"), format!("{g} g must be positive"));
+        }
+    }
+    let column = if at2 { super::spec_quake::AT2_COLUMN } else { column };
+    let time_column = if at2 { super::spec_quake::AT2_TIME } else { time_column };
+    Some(ExcitationSpec::Record { file, column: column.to_string(), time_column: time_column.to_string(), f_ref_hz: f_ref, scale: scale.unwrap_or(1.0), unit, pga_g, processing })
+}
+
+/// Whether `file` is a PEER NGA acceleration file (extension `.AT2`, any case).
+pub fn is_at2(file: &std::path::Path) -> bool {
+    file.extension().is_some_and(|e| e.eq_ignore_ascii_case("at2"))
 }
 
 /// The keys of a sine excitation (campaign tests, study excitations); docs/formats.md lists each.
 pub const SINE_KEYS: [&str; 7] = ["kind", "freq_hz", "amp_g", "amp_m", "taper_s", "duration_s", "window_cycles"];
 /// The keys of a record excitation; docs/formats.md lists each.
-pub const RECORD_KEYS: [&str; 6] = ["kind", "file", "column", "time_column", "f_ref_hz", "scale"];
+pub const RECORD_KEYS: [&str; 10] = ["kind", "file", "column", "time_column", "f_ref_hz", "scale", "unit", "pga_g", "highpass_hz", "taper_s"];
 
 /// Reads `[solver]`; `extra` names keys of the same table read by the caller.
 pub fn read_solver(mut f: Fields<'_>, issues: &mut Issues, extra: &[&str]) -> Solver {
@@ -294,7 +458,7 @@ impl SimSpec {
         let excitation = match root.table("excitation", &mut issues) {
             Some(e) => read_excitation(e, &model, &mut issues),
             None => {
-                issues.push("excitation", "missing table (kind = \"sine\" or \"record\")");
+                issues.push("excitation", format!("missing table (kind = one of {})", KINDS.join(", ")));
                 None
             }
         };
@@ -325,14 +489,7 @@ impl SimSpec {
                 e.insert("duration_s".into(), sine.duration_s.into());
                 e.insert("window_cycles".into(), (sine.window_cycles.unwrap_or_else(|| sine.default_cycles()) as i64).into());
             }
-            ExcitationSpec::Record { file, column, time_column, f_ref_hz, scale } => {
-                e.insert("kind".into(), "record".into());
-                e.insert("file".into(), file.display().to_string().into());
-                e.insert("column".into(), column.clone().into());
-                e.insert("time_column".into(), time_column.clone().into());
-                e.insert("f_ref_hz".into(), (*f_ref_hz).into());
-                e.insert("scale".into(), (*scale).into());
-            }
+            other => e = super::spec_quake::excitation_table(other),
         }
         root.insert("excitation".into(), toml::Value::Table(e));
         let mut s = toml::Table::new();

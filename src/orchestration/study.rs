@@ -24,7 +24,10 @@
 //! name = "3hz_1p73g"
 //! kind = "sine"
 //! freq_hz = 3.0
-//! amp_g = 1.73
+//! amp_g = 1.73                  # kinds: sine | record | stochastic | sweep | random (spec)
+//!
+//! [spectrum]                    # the response spectrum of the non-sine excitations' metrics
+//! damping = 0.05                # default 0.05; periods 0.05–4 s, 20 log-spaced; band: all
 //!
 //! [responses]
 //! metrics = ["amp_ratio", "thd_odd_ratio"]    # default: all
@@ -46,6 +49,7 @@ use super::sampling::{Design, Distribution, SOBOL_MAX_DIMS, SOBOL_MAX_POINTS};
 use super::spec::{self, ExcitationSpec};
 use super::toml_fields::{Fields, InputError, Issues};
 use crate::kernel::metrics::Metrics;
+use crate::kernel::spectrum::SpectrumSpec;
 use crate::kernel::params::{ModelParams, ParamInfo};
 use crate::kernel::simulate::Solver;
 use std::path::PathBuf;
@@ -109,6 +113,8 @@ pub struct StudySpec {
     pub excitations: Vec<NamedExcitation>,
     /// Metric column names to write.
     pub metrics: Vec<&'static str>,
+    /// The response spectrum of the earthquake-type excitations' metrics (`[spectrum]`).
+    pub spectrum: SpectrumSpec,
     pub output: PathBuf,
     pub histories: Vec<u64>,
     pub solver: Solver,
@@ -268,9 +274,70 @@ fn read_excitations(root: &mut Fields<'_>, model: &ModelParams, issues: &mut Iss
                 }
             }
         }
-        None => issues.push("excitations", "missing ([[excitations]] with kind = \"sine\" or \"record\")"),
+        None => issues.push("excitations", format!("missing ([[excitations]] with kind = one of {})", spec::KINDS.join(", "))),
     }
     excitations
+}
+
+/// `[spectrum]`: the response spectrum of the earthquake-type metrics — `damping` (default 0.05),
+/// the periods (`periods_s = [...]`, or `t_min_s`, `t_max_s`, `count`: log-spaced, default
+/// 0.05–4 s, 20) and the error band `band_s = [low, high]` (default every period).
+fn read_spectrum(root: &mut Fields<'_>, issues: &mut Issues) -> SpectrumSpec {
+    let mut spec = super::quake::default_spectrum();
+    let Some(mut t) = root.table("spectrum", issues) else { return spec };
+    let damping = t.f64("damping", issues).unwrap_or(spec.damping);
+    if !(damping > 0.0 && damping < 1.0) {
+        issues.push(t.path_of("damping"), format!("{damping} must be in (0, 1) (a damping ratio)"));
+    }
+    let (t_min, t_max, count) = (t.f64("t_min_s", issues), t.f64("t_max_s", issues), t.int("count", issues));
+    let periods = match t.f64_array("periods_s", issues) {
+        Some(p) => {
+            if t_min.or(t_max).is_some() || count.is_some() {
+                issues.push(t.path_of("periods_s"), "give periods_s or t_min_s/t_max_s/count, not both");
+            }
+            p
+        }
+        None => {
+            let (lo, hi, n) = (t_min.unwrap_or(0.05), t_max.unwrap_or(4.0), count.unwrap_or(20));
+            if !(lo > 0.0 && hi > lo) || !(1..=200).contains(&n) {
+                issues.push(t.path_of("count"), format!("t_min_s = {lo}, t_max_s = {hi}, count = {n}: need 0 < t_min_s < t_max_s and 1 ≤ count ≤ 200"));
+                Vec::new()
+            } else {
+                SpectrumSpec::log_spaced(lo, hi, n as usize, damping).periods
+            }
+        }
+    };
+    if periods.is_empty() || periods.iter().any(|p| !(*p > 0.0)) || periods.windows(2).any(|w| w[1] <= w[0]) {
+        issues.push(t.path_of("periods_s"), "the periods must be positive and increasing (at least one)");
+    }
+    let band = match t.f64_array("band_s", issues) {
+        Some(b) if b.len() == 2 && b[0] <= b[1] => (b[0], b[1]),
+        Some(b) => {
+            issues.push(t.path_of("band_s"), format!("{b:?}: expected [low, high] periods in s, low ≤ high"));
+            (0.0, f64::INFINITY)
+        }
+        None => (periods.first().copied().unwrap_or(0.0), periods.last().copied().unwrap_or(0.0)),
+    };
+    t.finish(&["damping", "periods_s", "t_min_s", "t_max_s", "count", "band_s"], issues);
+    spec = SpectrumSpec { periods, damping, band };
+    if spec.in_band().next().is_none() {
+        issues.push("spectrum.band_s", "no period of the spectrum lies in the band");
+    }
+    spec
+}
+
+/// A `ground.*` variable that a stochastic excitation also sets: the excitation's value would
+/// win, so the variable would vary nothing there.
+fn ground_overlap(variables: &[Variable], excitations: &[NamedExcitation], issues: &mut Issues) {
+    for v in variables.iter().filter(|v| v.info.component == crate::kernel::params::Component::Ground && v.dist.varies()) {
+        for e in excitations {
+            if let ExcitationSpec::Stochastic { ground, .. } = &e.spec {
+                if ground.iter().any(|(n, _)| *n == v.info.name) {
+                    issues.push(format!("excitations.{}.{}", e.name, v.info.name), format!("is fixed here, but the study varies {}: remove one", v.info.path()));
+                }
+            }
+        }
+    }
 }
 
 /// `[responses] metrics`: the metrics written (every one when absent), and whether the list
@@ -549,7 +616,9 @@ impl StudySpec {
         let notes = aliased_harmonics(&excitations, &metrics, metrics_listed, model.controller.f_s, &mut issues);
         let (output, histories) = read_output(&mut root, &mut issues);
         let (solver, chunk) = read_study_solver(&mut root, &mut issues);
-        root.finish(&["study", "method", "model", "variables", "excitations", "responses", "output", "solver"], &mut issues);
+        let spectrum = read_spectrum(&mut root, &mut issues);
+        ground_overlap(&variables, &excitations, &mut issues);
+        root.finish(&["study", "method", "model", "variables", "excitations", "responses", "output", "solver", "spectrum"], &mut issues);
         check_design(&method, &header, &variables, &mut issues);
         issues.into_result(file)?;
         let name = header.name.expect("checked");
@@ -564,6 +633,7 @@ impl StudySpec {
             variables,
             excitations,
             metrics,
+            spectrum,
             histories,
             solver,
             chunk,
@@ -628,6 +698,12 @@ impl StudySpec {
         sv.insert("substeps".into(), (self.solver.substeps as i64).into());
         sv.insert("chunk".into(), (self.chunk as i64).into());
         root.insert("solver".into(), sv.into());
+        let sp = &self.spectrum;
+        let mut t = toml::Table::new();
+        t.insert("damping".into(), sp.damping.into());
+        t.insert("periods_s".into(), toml::Value::Array(sp.periods.iter().map(|p| (*p).into()).collect()));
+        t.insert("band_s".into(), toml::Value::Array(vec![sp.band.0.into(), sp.band.1.into()]));
+        root.insert("spectrum".into(), t.into());
         toml::to_string(&root).expect("TOML of plain values")
     }
 

@@ -146,6 +146,11 @@ impl<'a> Fields<'a> {
         self.typed(key, issues, "a string", toml::Value::as_str)
     }
 
+    /// A whole number (`Ok`) or a string (`Err`).
+    pub fn int_or_str(&mut self, key: &str, issues: &mut Issues) -> Option<Result<i64, &'a str>> {
+        self.typed(key, issues, "a whole number or a string", |v| v.as_integer().map(Ok).or_else(|| v.as_str().map(Err)))
+    }
+
     /// A boolean.
     pub fn bool(&mut self, key: &str, issues: &mut Issues) -> Option<bool> {
         self.typed(key, issues, "true or false", toml::Value::as_bool)

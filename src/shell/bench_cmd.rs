@@ -7,6 +7,9 @@ use super::calibrate::{self, Rates, MINIMAL, TICK_OPS, WINDOW_OPS};
 use super::cli::BenchArgs;
 use crate::kernel::effects::Baseline;
 use crate::kernel::excitation::{Reference, Sine};
+use crate::kernel::ground::Processing;
+use crate::orchestration::quake;
+use crate::orchestration::spec::{ExcitationSpec, Realisation};
 use crate::kernel::params::ModelParams;
 use crate::kernel::simulate::{self, Isa, LaneParams, NoObserver, Solver};
 use crate::kernel::LANES;
@@ -22,15 +25,22 @@ fn reference() -> Reference {
     Sine { freq_hz: 3.0, amp_m: Sine::amp_from_g(1.73, 3.0), taper_s: 1.0, duration_s: 3.0, window_cycles: Some(4) }.reference(1024.0)
 }
 
-/// Simulated seconds per wall second of `threads` workers each running N-lane batches for
+/// The record benchmark's motion: record_sweep.toml's first (firm ground, 0.5 g, 15 s between
+/// 7.5 s pads: 30 s), with the default response spectrum accumulated online.
+pub fn record_reference() -> anyhow::Result<Reference> {
+    let exc = ExcitationSpec::Stochastic { duration_s: 15.0, realisation: Realisation::Fixed(0), seed: None, ground: vec![("pga_g", 0.5)], processing: Processing::default(), f_ref_hz: 50.0 };
+    let r = quake::generated(&exc, &ModelParams::default(), 20261123, 0).map_err(anyhow::Error::msg)?;
+    Ok(r.with_spectrum(quake::default_spectrum()))
+}
+
+/// Simulated seconds per wall second of `threads` workers each running N-lane batches of `r` for
 /// about `secs` seconds.
-fn throughput<const N: usize>(threads: usize, secs: f64) -> anyhow::Result<f64> {
+fn throughput<const N: usize>(threads: usize, secs: f64, r: &Reference) -> anyhow::Result<f64> {
     let p = ModelParams::default();
     let sets: Vec<&ModelParams> = (0..N).map(|_| &p).collect();
     let lp = LaneParams::<N>::new(&sets)?;
-    let r = reference();
     let solver = Solver::default();
-    let run_once = || simulate::run(&lp, &Baseline, &r, &solver, &mut NoObserver).map(|x| x[0].metrics.amp_ratio);
+    let run_once = || simulate::run(&lp, &Baseline, r, &solver, &mut NoObserver).map(|x| x[0].metrics.rms_err_accel_ratio);
     // Calibrate the repetitions to the time budget with one run.
     let t = Instant::now();
     run_once()?;
@@ -51,6 +61,9 @@ pub struct Figures {
     pub scalar: f64,
     pub batch1: f64,
     pub batch2: f64,
+    /// Batch throughput on the record benchmark's motion ([`record_reference`]), 1 and 2 threads.
+    pub record1: f64,
+    pub record2: f64,
     /// The model's limit on one thread (see [`calibrate`]).
     pub limit: f64,
     pub rates: Rates,
@@ -76,8 +89,9 @@ impl Figures {
 /// stable on a busy machine.
 pub fn measure(secs: f64) -> anyhow::Result<Figures> {
     const ROUNDS: usize = 5;
-    let budget = secs / (5.0 * ROUNDS as f64);
+    let budget = secs / (7.0 * ROUNDS as f64);
     let r = reference();
+    let quake = record_reference()?;
     let substeps = Solver::default().substeps as f64;
     let rhs_per_tick = substeps * STAGES;
     let window_share = (r.window.1 - r.window.0) as f64 / r.len() as f64;
@@ -86,6 +100,8 @@ pub fn measure(secs: f64) -> anyhow::Result<Figures> {
         scalar: 0.0,
         batch1: 0.0,
         batch2: 0.0,
+        record1: 0.0,
+        record2: 0.0,
         limit: 0.0,
         rates: Rates { flops: 0.0, divs: 0.0, sqrts: 0.0 },
         rhs_per_sim_s: r.f_s * rhs_per_tick,
@@ -98,9 +114,11 @@ pub fn measure(secs: f64) -> anyhow::Result<Figures> {
         f.clock_hz = f.clock_hz.max(2.0 * chain_iters as f64 / t.elapsed().as_secs_f64());
         let m = calibrate::rates(budget / 3.0);
         f.rates = Rates { flops: f.rates.flops.max(m.flops), divs: f.rates.divs.max(m.divs), sqrts: f.rates.sqrts.max(m.sqrts) };
-        f.scalar = f.scalar.max(throughput::<1>(1, budget)?);
-        f.batch1 = f.batch1.max(throughput::<LANES>(1, budget)?);
-        f.batch2 = f.batch2.max(throughput::<LANES>(2, budget)?);
+        f.scalar = f.scalar.max(throughput::<1>(1, budget, &r)?);
+        f.batch1 = f.batch1.max(throughput::<LANES>(1, budget, &r)?);
+        f.batch2 = f.batch2.max(throughput::<LANES>(2, budget, &r)?);
+        f.record1 = f.record1.max(throughput::<LANES>(1, budget, &quake)?);
+        f.record2 = f.record2.max(throughput::<LANES>(2, budget, &quake)?);
     }
     f.limit = f.rates.limit(rhs_per_tick, window_share, r.f_s);
     Ok(f)
@@ -169,6 +187,15 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         f.rates.divs / 1e9,
         f.rates.sqrts / 1e9
     )?;
+    let spectrum = quake::default_spectrum();
+    writeln!(
+        out,
+        "  record: 30 s stochastic ground motion (record_sweep.toml's firm_0p5g; reference from the 4th-order filter), {}-period {:.0} %-damped spectrum online",
+        spectrum.periods.len(),
+        100.0 * spectrum.damping
+    )?;
+    writeln!(out, "  {:<34} {:>8.0} sim-s/wall-s  {:>6.1} cycles per lane per RHS", format!("record batch ({LANES} lanes, 1 thread)"), f.record1, f.cycles_per_rhs(f.record1))?;
+    writeln!(out, "  {:<34} {:>8.0} sim-s/wall-s  ({:.2}x one thread)", format!("record batch ({LANES} lanes, 2 threads)"), f.record2, f.record2 / f.record1)?;
     writeln!(out, "  ratios: batch/scalar {:.2}, batch/limit {:.2}, 2 threads/1 thread {:.2}", f.batch_over_scalar(), f.batch_over_limit(), f.batch2 / f.batch1)?;
     if let Some(path) = &args.write_baseline {
         let text = format!(

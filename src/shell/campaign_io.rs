@@ -57,7 +57,7 @@ fn load_test(lc: &LoadedCampaign, test: &TestSpec, open_loop: Option<OpenLoop>) 
     };
     // A record in another file than the test's data.
     let record = match &test.excitation {
-        ExcitationSpec::Record { file, column, time_column, .. } if file != &test.data => match tables::read_columns(&lc.base.join(file), &[time_column, column], &[]) {
+        ExcitationSpec::Record { file, column, time_column, .. } if file != &test.data => match tables::read_record(&lc.base.join(file), column, time_column) {
             Ok(t) => Some(t),
             Err(e) if e.is_input() => return Ok(Err(e.each())),
             Err(e) => return Err(e.into()),

@@ -286,6 +286,10 @@ pub struct SimArgs {
     /// Write the time history of every channel to this Parquet file.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// For an earthquake-type excitation: write the response spectra (period_s, psa_target_g,
+    /// psa_g, ratio) to this Parquet file.
+    #[arg(long)]
+    pub spectrum: Option<PathBuf>,
     /// Print only the metrics table (no header lines).
     #[arg(long, short)]
     pub quiet: bool,
@@ -357,9 +361,21 @@ The study file (TOML), SALib-style variables in Dakota-style blocks:
 
   [[excitations]]             # every sample runs every excitation
   name = \"3hz_1p73g\"
-  kind = \"sine\"
+  kind = \"sine\"             # sine | record (CSV, Parquet, PEER .AT2) | stochastic | sweep | random
   freq_hz = 3.0
   amp_g = 1.73
+
+  [[excitations]]             # a Kanai-Tajimi / Clough-Penzien ground motion (docs/model.md 4b)
+  name = \"firm_0p5g\"
+  kind = \"stochastic\"
+  duration_s = 15
+  pga_g = 0.5                 # any ground.* parameter; realisation = 0 (or \"per_sample\")
+
+  [spectrum]                  # response spectrum of non-sine runs (spectral_err_mean, _max)
+  damping = 0.05
+  t_min_s = 0.05
+  t_max_s = 4.0
+  count = 20
 
   [responses]
   metrics = [\"amp_ratio\", \"thd_odd_ratio\"]   # default: every metric

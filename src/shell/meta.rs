@@ -74,6 +74,8 @@ keys! {
     Status = "status",
     /// The noise a synthetic measurement was given.
     Noise = "noise",
+    /// A response spectrum's damping ratio.
+    Damping = "damping",
 }
 
 /// The keys of a shard's place.
@@ -97,6 +99,7 @@ pub enum Kind {
     Diagnose,
     Sensitivity,
     SyntheticMeasurement,
+    Spectrum,
 }
 
 impl Kind {
@@ -108,6 +111,7 @@ impl Kind {
             Kind::Diagnose => "diagnose",
             Kind::Sensitivity => "sensitivity",
             Kind::SyntheticMeasurement => "synthetic_measurement",
+            Kind::Spectrum => "response_spectrum",
         }
     }
 }

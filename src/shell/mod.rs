@@ -1,6 +1,7 @@
 //! The shell: command line, files, printing. Errors are `anyhow` chains here; [`exit_code`]
 //! maps them to the documented exit codes.
 
+pub mod at2;
 pub mod bench_cmd;
 pub mod calibrate;
 pub mod campaign_io;

@@ -24,9 +24,9 @@ pub fn run(args: &ParamsArgs) -> anyhow::Result<()> {
         None => None,
     };
     let mut out = std::io::stdout().lock();
-    writeln!(out, "{:<30} {:<12} {:>14} {:<16} {:<7} meaning", "parameter", "unit", "default", "range", "source")?;
+    writeln!(out, "{:<30} {:<12} {:>14} {:<16} {:<10} meaning", "parameter", "unit", "default", "range", "source")?;
     for p in ModelParams::registry().filter(|p| component.is_none_or(|c| c == p.component)) {
-        writeln!(out, "{:<30} {:<12} {:>14} {:<16} {:<7} {}", p.path(), p.unit, format!("{}", p.default), p.range.to_string(), p.source.to_string(), p.doc)?;
+        writeln!(out, "{:<30} {:<12} {:>14} {:<16} {:<10} {}", p.path(), p.unit, format!("{}", p.default), p.range.to_string(), p.source.to_string(), p.doc)?;
     }
     if component.is_none_or(|c| c == Component::Servovalve) {
         writeln!(out, "{:<30} {:<12} {:>14} {:<16} {:<7} Valve flow law: square-root orifice, or the linear counter-example.", "servovalve.law", "-", "orifice", "orifice|linear", "paper")?;

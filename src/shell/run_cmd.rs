@@ -29,33 +29,62 @@ pub fn load_study(file: &Path) -> anyhow::Result<StudySpec> {
 
 /// Builds the plan of a study: references of its excitations and its design.
 pub fn plan_for(spec: &StudySpec, base: &Path) -> anyhow::Result<Plan> {
-    let references = spec.excitations.iter().map(|e| load_reference(&e.spec, &spec.model, base)).collect::<anyhow::Result<Vec<_>>>()?;
     match &spec.method {
         Method::File { path } => {
             let path = base.join(path);
+            let infos = design_columns(&path)?;
+            let wanted: Vec<String> = infos.iter().map(|i| i.path()).collect();
+            let references = references(spec, base, &wanted)?;
             let names = tables::column_names(&path).map_err(input_if_user)?;
-            let mut infos: Vec<&'static ParamInfo> = Vec::new();
-            for n in &names {
-                let info = ModelParams::lookup(n).or_else(|| ModelParams::registry().find(|p| p.column_name() == *n || p.name == n));
-                match info.map(|i| (i, cannot_vary(i))) {
-                    Some((_, Some(why))) => return Err(BadInput(format!("{}: column `{n}`: {why}", path.display())).into()),
-                    Some((i, None)) => infos.push(i),
-                    None => {
-                        return Err(BadInput(format!(
-                            "{}: column `{n}` is not a model parameter (use a path such as controller.g_d, or a column name such as g_d; `study params` lists them)",
-                            path.display()
-                        ))
-                        .into())
-                    }
-                }
-            }
             let wanted: Vec<&str> = names.iter().map(String::as_str).collect();
             let t = tables::read_columns(&path, &wanted, &[]).map_err(input_if_user)?;
             let rows: Vec<Vec<f64>> = (0..t.rows()).map(|r| t.columns.iter().map(|c| c[r]).collect()).collect();
             Ok(Plan::from_table(spec, infos, rows, references))
         }
-        _ => Ok(Plan::generated(spec, references)),
+        _ => {
+            let varied: Vec<String> = spec.varied().iter().map(|v| v.info.path()).collect();
+            Ok(Plan::generated(spec, references(spec, base, &varied)?))
+        }
     }
+}
+
+/// The excitations' references: each made once, with the study's spectrum where it is not a
+/// sine; one that depends on the sample (`varied` paths) is made per sample by the plan, and
+/// gets an empty placeholder here.
+fn references(spec: &StudySpec, base: &Path, varied: &[String]) -> anyhow::Result<Vec<crate::kernel::excitation::Reference>> {
+    let f_s = spec.model.controller.f_s;
+    spec.excitations
+        .iter()
+        .map(|e| {
+            if e.spec.per_sample(|p| varied.iter().any(|v| v == p)) {
+                return Ok(crate::kernel::excitation::Reference::from_states(f_s, &[]));
+            }
+            let r = load_reference(&e.spec, &spec.model, base, spec.seed).with_context(|| format!("excitation {:?}", e.name))?;
+            Ok(if e.spec.is_sine() { r } else { r.with_spectrum(spec.spectrum.clone()) })
+        })
+        .collect()
+}
+
+/// The parameters of a design file's columns (each a path such as controller.g_d or a column
+/// name such as g_d), refused when unknown or not variable.
+fn design_columns(path: &Path) -> anyhow::Result<Vec<&'static ParamInfo>> {
+    let names = tables::column_names(path).map_err(input_if_user)?;
+    let mut infos: Vec<&'static ParamInfo> = Vec::new();
+    for n in &names {
+        let info = ModelParams::lookup(n).or_else(|| ModelParams::registry().find(|p| p.column_name() == *n || p.name == n));
+        match info.map(|i| (i, cannot_vary(i))) {
+            Some((_, Some(why))) => return Err(BadInput(format!("{}: column `{n}`: {why}", path.display())).into()),
+            Some((i, None)) => infos.push(i),
+            None => {
+                return Err(BadInput(format!(
+                    "{}: column `{n}` is not a model parameter (use a path such as controller.g_d, or a column name such as g_d; `study params` lists them)",
+                    path.display()
+                ))
+                .into())
+            }
+        }
+    }
+    Ok(infos)
 }
 
 /// Writes rows to a results file.
@@ -410,7 +439,15 @@ fn write_histories(job: &Job) -> anyhow::Result<()> {
         let Ok(model) = sample.model else { continue };
         for (e, exc) in spec.excitations.iter().enumerate() {
             let sim_spec = SimSpec { model: model.clone(), excitation: exc.spec.clone(), solver: spec.solver };
-            let outcome = sim::run_sim(&sim_spec, &plan.references[e])?;
+            // A per-sample motion is this sample's realisation; one that cannot run has no history.
+            let own = match &plan.per_sample[e] {
+                Some(x) => match crate::orchestration::quake::generated(x, &model, plan.seed, id) {
+                    Ok(r) => Some(r.with_spectrum(plan.spectrum.clone())),
+                    Err(_) => continue,
+                },
+                None => None,
+            };
+            let outcome = sim::run_sim(&sim_spec, own.as_ref().unwrap_or(&plan.references[e]))?;
             let path = dir.join(format!("sample{id}_{}.parquet", exc.name));
             let cols = outcome.history.named_columns();
             let mut meta = meta::header(Kind::TimeHistory);

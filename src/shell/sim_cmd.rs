@@ -5,7 +5,9 @@ use super::meta::{self, Key, Kind};
 use super::tables;
 use super::{BadInput, RunFailed};
 use crate::kernel::excitation::Reference;
+use crate::kernel::params::G;
 use crate::kernel::simulate::LaneStatus;
+use crate::kernel::spectrum::{psa, SpectrumSpec};
 use crate::orchestration::sim::{self, CHANNELS};
 use crate::orchestration::spec::SimSpec;
 use anyhow::Context;
@@ -14,7 +16,7 @@ use std::path::Path;
 
 /// Builds the reference of a spec, reading a record file relative to `base`.
 pub fn build_reference(spec: &SimSpec, base: &Path) -> anyhow::Result<Reference> {
-    tables::load_reference(&spec.excitation, &spec.model, base)
+    tables::load_reference(&spec.excitation, &spec.model, base, 0)
 }
 
 /// Reads and validates a run file.
@@ -52,6 +54,9 @@ pub fn run(args: &SimArgs) -> anyhow::Result<()> {
     for (name, v) in out.result.metrics.columns() {
         writeln!(stdout, "  {name:<22} {:>12}", fmt_value(v))?;
     }
+    if let Some((spectrum, target)) = &reference.spectrum {
+        write_spectrum(&mut stdout, args, &out.history, &reference, spectrum, target)?;
+    }
     if let Some(path) = &args.out {
         let cols = out.history.named_columns();
         let meta = {
@@ -66,6 +71,32 @@ pub fn run(args: &SimArgs) -> anyhow::Result<()> {
         LaneStatus::Ok => Ok(()),
         LaneStatus::Failed { .. } => Err(RunFailed(format!("{}: run {status}", args.file.display())).into()),
     }
+}
+
+/// The response spectra of the achieved and the target acceleration, printed and (with
+/// `--spectrum`) written: the achieved one from the history's `accel_mps2` over the window, as
+/// the kernel's online spectrum takes it.
+fn write_spectrum(o: &mut impl Write, args: &SimArgs, history: &sim::History, reference: &Reference, spectrum: &SpectrumSpec, target: &[f64]) -> anyhow::Result<()> {
+    let cols = history.named_columns();
+    let accel = cols.iter().find(|(n, _)| *n == "accel_mps2").expect("a history has accel_mps2").1;
+    let (w0, w1) = reference.window;
+    let got = psa(&accel[w0..w1.min(accel.len())], 1.0 / reference.f_s, spectrum);
+    writeln!(o, "
+  response spectrum ({:.0} % damping), PSA in g", 100.0 * spectrum.damping)?;
+    writeln!(o, "  {:>9} {:>10} {:>10} {:>8}", "period s", "target", "achieved", "ratio")?;
+    for ((t, want), have) in spectrum.periods.iter().zip(target).zip(&got) {
+        writeln!(o, "  {t:>9.3} {:>10.4} {:>10.4} {:>8.3}", want / G, have / G, have / want)?;
+    }
+    if let Some(path) = &args.spectrum {
+        let ratio: Vec<f64> = got.iter().zip(target).map(|(a, b)| a / b).collect();
+        let (t_g, a_g): (Vec<f64>, Vec<f64>) = (target.iter().map(|v| v / G).collect(), got.iter().map(|v| v / G).collect());
+        let cols: [(&str, &[f64]); 4] = [("period_s", &spectrum.periods), ("psa_target_g", &t_g), ("psa_g", &a_g), ("ratio", &ratio)];
+        let mut m = meta::header(Kind::Spectrum);
+        m.push(meta::pair(Key::Damping, spectrum.damping));
+        tables::write_parquet(path, &cols, &m).with_context(|| format!("writing {}", path.display()))?;
+        writeln!(o, "  wrote {}", path.display())?;
+    }
+    Ok(())
 }
 
 fn fmt_value(v: f64) -> String {

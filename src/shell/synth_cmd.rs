@@ -138,7 +138,7 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
         let mut test_model = test.model.clone();
         apply_effects(&mut test_model, &args.effect)?;
         apply_sets(&mut test_model, &args.set)?;
-        let mut reference = load_reference(&test.excitation, &test_model, &lc.base)?;
+        let mut reference = load_reference(&test.excitation, &test_model, &lc.base, 0)?;
         let spec = SimSpec { model: test_model, excitation: test.excitation.clone(), solver: Default::default() };
         let cols = sample_test(&spec, &mut reference, rate, pre_rows)?.map_err(|e| RunFailed(format!("test {:?}: {e}", test.name)))?;
         let mut cols: Vec<(&str, Vec<f64>)> = cols;

@@ -164,13 +164,23 @@ pub fn input_if_user(e: TableError) -> anyhow::Error {
     if e.is_input() { super::BadInput(e.to_string()).into() } else { e.into() }
 }
 
-/// The reference of one excitation for `model`, reading a record's file relative to `base`.
-pub fn load_reference(excitation: &ExcitationSpec, model: &ModelParams, base: &Path) -> anyhow::Result<Reference> {
+/// The reference of one excitation for `model`, reading a record's file relative to `base` (a
+/// PEER `.AT2` file by [`super::at2`]); a generated motion's noise from `seed`.
+pub fn load_reference(excitation: &ExcitationSpec, model: &ModelParams, base: &Path, seed: u64) -> anyhow::Result<Reference> {
     let record = match excitation {
-        ExcitationSpec::Sine { .. } => None,
-        ExcitationSpec::Record { file, column, time_column, .. } => Some(read_columns(&base.join(file), &[time_column, column], &[]).map_err(input_if_user)?),
+        ExcitationSpec::Record { file, column, time_column, .. } => Some(read_record(&base.join(file), column, time_column).map_err(input_if_user)?),
+        _ => None,
     };
-    sim::reference_for(excitation, model, record.as_ref()).map_err(|p| super::BadInput(p.to_string()).into())
+    sim::reference_for(excitation, model, record.as_ref(), seed).map_err(|p| super::BadInput(p.to_string()).into())
+}
+
+/// A record's time and value columns: from a CSV or Parquet file, or a PEER `.AT2` file.
+pub fn read_record(path: &Path, column: &str, time_column: &str) -> Result<NumTable, TableError> {
+    if crate::orchestration::spec::is_at2(path) {
+        super::at2::read(path)
+    } else {
+        read_columns(path, &[time_column, column], &[])
+    }
 }
 
 /// Reads the `wanted` columns (all required) plus any of `optional` that are present. Every
