@@ -3,11 +3,12 @@
 //!
 //! - **From acceleration to displacement** ([`to_displacement`]): a recorded or generated ground
 //!   acceleration becomes the table's displacement by (1) removing its mean, (2) a half-cosine
-//!   taper over the first and last `taper_s`, (3) zero pads of 1.5/f_hp at each end (Boore 2005:
-//!   an acausal filter needs pads of 1.5·n/f_c in all, n = 2 here per pass), (4) a 2nd-order
+//!   taper over the first and last `taper_s`, (3) zero pads of 2/f_hp at each end (Boore 2005
+//!   asks an acausal filter for pads of 1.5·n/f_c in all, 1.5/f_hp a side for n = 2 per pass;
+//!   [chosen] 2/f_hp keeps the filter's tail beyond the pads near 1e-4 of the peak), (4) a 2nd-order
 //!   Butterworth high-pass at f_hp run forward and backward (zero phase, 4th-order magnitude), and
 //!   (5) the trapezoid rule twice from rest. The pads stay: the table starts and ends at rest,
-//!   the motion itself starts 1.5/f_hp after the reference's start. A 4th-order zero-phase
+//!   the motion itself starts 2/f_hp after the reference's start. A 4th-order zero-phase
 //!   high-pass leaves no mean and no first moments, so the displacement returns to zero up to
 //!   the filter's tail beyond the pads: the residual drift |d_end| is reported, and bounded by
 //!   the tests (≤ 1e-3 of the peak displacement).
@@ -64,9 +65,9 @@ impl Default for Processing {
 }
 
 impl Processing {
-    /// Zero pad at each end, s: 1.5/f_hp.
+    /// Zero pad at each end, s: 2/f_hp (see the module docs).
     pub fn pad_s(&self) -> f64 {
-        1.5 / self.highpass_hz
+        2.0 / self.highpass_hz
     }
 }
 

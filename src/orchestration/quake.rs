@@ -146,6 +146,19 @@ mod tests {
     }
 
     #[test]
+    fn every_key_of_the_excitation_applies_over_the_model() {
+        // The excitation's keys, all of them, win over the model's ground.*; the others stay.
+        let keys = vec![("pga_g", 0.4), ("f_g_hz", 1.2), ("zeta_g", 0.35)];
+        let exc = |ground| ExcitationSpec::Stochastic { duration_s: 8.0, realisation: Realisation::Fixed(1), seed: None, ground, processing: Processing::default(), f_ref_hz: 50.0 };
+        let mut m = ModelParams::default();
+        m.ground.t_strong_s = 3.0;
+        let mut by_model = m.clone();
+        (by_model.ground.pga_g, by_model.ground.f_g_hz, by_model.ground.zeta_g) = (0.4, 1.2, 0.35);
+        assert_eq!(generated(&exc(keys), &m, 5, 0).unwrap(), generated(&exc(vec![]), &by_model, 5, 0).unwrap());
+        assert_ne!(generated(&exc(vec![("pga_g", 0.4)]), &m, 5, 0).unwrap(), generated(&exc(vec![]), &by_model, 5, 0).unwrap());
+    }
+
+    #[test]
     fn limits_are_named() {
         let m = ModelParams::default();
         // 20 g on the 144 t platen needs 28 MN, beyond the 6.8 MN of controller.f_max.
