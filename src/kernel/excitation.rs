@@ -118,13 +118,6 @@ impl Reference {
         (peak(&self.x), peak(&self.v), peak(&self.a))
     }
 
-    /// Multiplies the states and the command by `factor` (a linear reference scales exactly).
-    pub fn scale(&mut self, factor: f64) {
-        for v in [&mut self.x, &mut self.v, &mut self.a, &mut self.j, &mut self.command] {
-            v.iter_mut().for_each(|x| *x *= factor);
-        }
-    }
-
     /// Keeps the first `n` ticks (the window is clipped to them).
     pub fn truncate(&mut self, n: usize) {
         for v in [&mut self.x, &mut self.v, &mut self.a, &mut self.j, &mut self.command] {
