@@ -72,7 +72,11 @@ fn read_realisation(f: &mut Fields<'_>, issues: &mut Issues) -> (Realisation, Op
         Some(Ok(k)) if k >= 0 => Realisation::Fixed(k as u64),
         Some(Err("per_sample")) => Realisation::PerSample,
         Some(other) => {
-            issues.push(f.path_of("realisation"), format!("{other:?}: expected a whole number ≥ 0 (the same realisation for every sample) or \"per_sample\""));
+            let given = match other {
+                Ok(k) => k.to_string(),
+                Err(s) => format!("{s:?}"),
+            };
+            issues.push(f.path_of("realisation"), format!("{given}: expected a whole number ≥ 0 (the same realisation for every sample) or \"per_sample\""));
             Realisation::Fixed(0)
         }
     };
