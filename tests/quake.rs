@@ -10,7 +10,9 @@ use vshake::kernel::ground::{self, GroundParams, Processing};
 use vshake::kernel::params::G;
 use vshake::orchestration::quake;
 use vshake::orchestration::spec::RecordUnit;
-use vshake::shell::tables::{column_names, read_columns_allow_nan, read_strings};
+mod common;
+use common::content;
+use vshake::shell::tables::read_columns_allow_nan;
 
 fn study(args: &[&str]) -> (i32, String, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_study")).args(args).output().expect("run study");
@@ -93,19 +95,6 @@ fn an_at2_record_round_trips_read_scaled_integrated() {
     let (code, out, err) = study(&["sim", sim.to_str().unwrap()]);
     assert_eq!(code, 2, "{out}{err}");
     assert!(err.contains("RSN_TEST_090.AT2") && err.contains("table's limits"), "{err}");
-}
-
-/// Every column of a results file, comparable (numbers as bit patterns, strings as text).
-fn content(path: &Path) -> Vec<(String, Vec<String>)> {
-    let strings = ["excitation", "status", "fail_reason"];
-    let names: Vec<String> = column_names(path).unwrap().into_iter().filter(|n| !strings.contains(&n.as_str()) && n != "fail_time_s").collect();
-    let refs: Vec<&str> = names.iter().map(String::as_str).collect();
-    let t = read_columns_allow_nan(path, &refs).unwrap();
-    let mut out: Vec<(String, Vec<String>)> = names.iter().map(|n| (n.clone(), t.column(n).unwrap().iter().map(|v| v.to_bits().to_string()).collect())).collect();
-    for s in strings {
-        out.push((s.into(), read_strings(path, s).unwrap()));
-    }
-    out
 }
 
 const PER_SAMPLE: &str = r#"

@@ -3,7 +3,8 @@
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use vshake::shell::tables::{column_names, read_columns_allow_nan, read_strings};
+mod common;
+use common::content;
 
 fn study(args: &[&str]) -> (i32, String, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_study")).args(args).output().expect("run study");
@@ -17,28 +18,6 @@ fn smoke() -> PathBuf {
 fn ok(args: &[&str]) -> String {
     let (code, out, err) = study(args);
     assert_eq!(code, 0, "{args:?}: {out}{err}");
-    out
-}
-
-/// A column's cells, comparable: numbers as bit patterns (NaN compares too), strings as text,
-/// nulls as `-`.
-type Cells = Vec<String>;
-
-/// Every column: the numeric ones, the string ones (excitation, status, fail_reason) and the
-/// nullable fail_time_s.
-fn content(path: &Path) -> Vec<(String, Cells)> {
-    let strings = ["excitation", "status", "fail_reason"];
-    let nullable = ["fail_time_s"];
-    let names: Vec<String> = column_names(path).unwrap().into_iter().filter(|n| !strings.contains(&n.as_str()) && !nullable.contains(&n.as_str())).collect();
-    let refs: Vec<&str> = names.iter().map(String::as_str).collect();
-    let t = read_columns_allow_nan(path, &refs).unwrap();
-    let mut out: Vec<(String, Cells)> = names.iter().map(|n| (n.clone(), t.column(n).unwrap().iter().map(|v| v.to_bits().to_string()).collect())).collect();
-    for s in strings {
-        out.push((s.into(), read_strings(path, s).unwrap()));
-    }
-    for n in nullable {
-        out.push((n.into(), vshake::shell::tables::read_opt_f64(path, n).unwrap().iter().map(|v| v.map_or("-".into(), |x| x.to_bits().to_string())).collect()));
-    }
     out
 }
 

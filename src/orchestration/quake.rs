@@ -31,10 +31,16 @@ pub fn default_spectrum() -> SpectrumSpec {
     SpectrumSpec::log_spaced(0.05, 4.0, 20, 0.05)
 }
 
-/// `n` standard normal draws of stream `stream` of `seed` (see the module docs).
-pub fn noise(seed: u64, stream: u64, n: usize) -> Vec<f64> {
+/// The noise generator of stream `stream` of `seed` (see the module docs).
+fn noise_rng(seed: u64, stream: u64) -> ChaCha8Rng {
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ NOISE_SALT);
     rng.set_stream(stream);
+    rng
+}
+
+/// `n` standard normal draws of stream `stream` of `seed` (see the module docs).
+pub fn noise(seed: u64, stream: u64, n: usize) -> Vec<f64> {
+    let mut rng = noise_rng(seed, stream);
     (0..n).map(|_| rng.sample::<f64, _>(StandardNormal)).collect()
 }
 
@@ -61,11 +67,8 @@ pub fn generated(excitation: &ExcitationSpec, model: &ModelParams, seed: u64, sa
         ExcitationSpec::Random { f_lo_hz, f_hi_hz, rms_g, duration_s, taper_s, realisation, seed: own } => {
             let df = 1.0 / duration_s;
             let count = ((f_hi_hz / df).floor() - (f_lo_hz / df).ceil().max(1.0) + 1.0).max(1.0) as usize;
-            let phases: Vec<f64> = {
-                let mut rng = ChaCha8Rng::seed_from_u64(own.unwrap_or(seed) ^ NOISE_SALT);
-                rng.set_stream(realisation.stream(sample));
-                (0..count).map(|_| 2.0 * std::f64::consts::PI * rng.random::<f64>()).collect()
-            };
+            let mut rng = noise_rng(own.unwrap_or(seed), realisation.stream(sample));
+            let phases: Vec<f64> = (0..count).map(|_| 2.0 * std::f64::consts::PI * rng.random::<f64>()).collect();
             let m = Multisine::new(*f_lo_hz, *f_hi_hz, *duration_s, *taper_s, rms_g * G, |k| phases[k % phases.len()]);
             closed_form(f_s, *duration_s, |t| m.states(t))
         }

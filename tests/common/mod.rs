@@ -1,12 +1,13 @@
 //! Helpers shared by the integration tests.
 
 use std::path::Path;
-use vshake::shell::tables::{read_bools, read_columns_allow_nan, read_strings};
+use vshake::shell::tables::{column_names, read_bools, read_columns_allow_nan, read_strings};
 
 /// The state and term a report's residual follows, from its `stateterms.parquet`: the row the
 /// map's sentence names (`named`), else (nothing named) the per-state regression of largest R²
 /// over the platen's force balance and the chambers' flow balance, and its strongest term.
 /// Returns (residual, state, term, R²).
+#[allow(dead_code)] // used by compare and diagnose, not by every test crate
 pub fn followed_state(report: &Path) -> (String, String, String, f64) {
     let p = report.join("stateterms.parquet");
     let (res, states, terms) = (read_strings(&p, "residual").unwrap(), read_strings(&p, "states").unwrap(), read_strings(&p, "term").unwrap());
@@ -17,3 +18,27 @@ pub fn followed_state(report: &Path) -> (String, String, String, f64) {
     let best = (0..res.len()).find(|&i| named[i]).or_else(|| rows().find(|&i| r2[i] == top)).unwrap();
     (res[best].clone(), states[best].clone(), terms[best].clone(), r2[best])
 }
+
+/// A column's cells, comparable: numbers as bit patterns (NaN compares too), strings as text,
+/// nulls as `-`.
+pub type Cells = Vec<String>;
+
+/// Every column: the numeric ones, the string ones (excitation, status, fail_reason) and the
+/// nullable fail_time_s.
+#[allow(dead_code)] // not every test crate compares results files
+pub fn content(path: &Path) -> Vec<(String, Cells)> {
+    let strings = ["excitation", "status", "fail_reason"];
+    let nullable = ["fail_time_s"];
+    let names: Vec<String> = column_names(path).unwrap().into_iter().filter(|n| !strings.contains(&n.as_str()) && !nullable.contains(&n.as_str())).collect();
+    let refs: Vec<&str> = names.iter().map(String::as_str).collect();
+    let t = read_columns_allow_nan(path, &refs).unwrap();
+    let mut out: Vec<(String, Cells)> = names.iter().map(|n| (n.clone(), t.column(n).unwrap().iter().map(|v| v.to_bits().to_string()).collect())).collect();
+    for s in strings {
+        out.push((s.into(), read_strings(path, s).unwrap()));
+    }
+    for n in nullable {
+        out.push((n.into(), vshake::shell::tables::read_opt_f64(path, n).unwrap().iter().map(|v| v.map_or("-".into(), |x| x.to_bits().to_string())).collect()));
+    }
+    out
+}
+
