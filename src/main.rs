@@ -18,8 +18,16 @@ fn main() {
     let cli = vshake::shell::cli::Cli::parse();
     vshake::shell::interrupt::ignore_file_size_signal();
     std::panic::set_hook(Box::new(|info| {
-        let place = info.location().map(|l| format!(" at {}:{}", l.file(), l.line())).unwrap_or_default();
-        let what = info.payload().downcast_ref::<&str>().map(|s| s.to_string()).or_else(|| info.payload().downcast_ref::<String>().cloned()).unwrap_or_default();
+        let place = info
+            .location()
+            .map(|l| format!(" at {}:{}", l.file(), l.line()))
+            .unwrap_or_default();
+        let what = info
+            .payload()
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| info.payload().downcast_ref::<String>().cloned())
+            .unwrap_or_default();
         // The latest panic: one caught on the way (a corrupt Parquet file) is replaced by the
         // one that reaches the top.
         if let Ok(mut p) = PANIC.lock() {
@@ -34,13 +42,20 @@ fn main() {
         vshake::shell::dispatch(cli)
     });
     let Ok(result) = result else {
-        let what = PANIC.lock().ok().and_then(|p| p.clone()).unwrap_or_else(|| "a panic".into());
+        let what = PANIC
+            .lock()
+            .ok()
+            .and_then(|p| p.clone())
+            .unwrap_or_else(|| "a panic".into());
         eprintln!("internal error (a bug in vshake, please report it with the command that caused it): {what}");
         std::process::exit(INTERNAL_ERROR);
     };
     if let Err(e) = result {
         // A closed pipe (`study params | head`) is not an error worth a message.
-        if e.chain().any(|c| c.downcast_ref::<std::io::Error>().is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)) {
+        if e.chain().any(|c| {
+            c.downcast_ref::<std::io::Error>()
+                .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+        }) {
             std::process::exit(0);
         }
         if let Some(i) = e.downcast_ref::<vshake::shell::interrupt::Interrupted>() {

@@ -5,8 +5,15 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 fn study(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_study")).args(args).output().expect("run study");
-    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stdout).into(), String::from_utf8_lossy(&out.stderr).into())
+    let out = Command::new(env!("CARGO_BIN_EXE_study"))
+        .args(args)
+        .output()
+        .expect("run study");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into(),
+        String::from_utf8_lossy(&out.stderr).into(),
+    )
 }
 
 fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
@@ -15,13 +22,15 @@ fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
     p
 }
 
-const SINE: &str = "[excitation]\nkind = \"sine\"\nfreq_hz = 3.0\namp_g = 1.73\nwindow_cycles = 4\n";
+const SINE: &str =
+    "[excitation]\nkind = \"sine\"\nfreq_hz = 3.0\namp_g = 1.73\nwindow_cycles = 4\n";
 
 fn expect_input_error(toml: &str, needles: &[&str]) {
     let d = tempfile::tempdir().unwrap();
     let f = write(d.path(), "run.toml", toml);
     let out = d.path().join("out.parquet");
-    let (code, _stdout, stderr) = study(&["sim", f.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let (code, _stdout, stderr) =
+        study(&["sim", f.to_str().unwrap(), "--out", out.to_str().unwrap()]);
     assert_eq!(code, 2, "exit code for {toml:?}; stderr: {stderr}");
     assert!(stderr.contains("run.toml"), "names the file: {stderr}");
     for n in needles {
@@ -42,7 +51,22 @@ fn bundled_example_prints_the_reference_metrics_and_writes_the_history() {
     assert!((value("amp_ratio") - 0.9987).abs() < 0.005 * 0.9987);
     assert!((value("h3_ratio") - 0.0309).abs() < 0.02 * 0.0309);
     assert!((value("max_abs_valve_cmd_v") - 3.40).abs() < 0.02);
-    let t = vshake::shell::tables::read_columns(&out, &["time_s", "ref_disp_m", "disp_m", "accel_mps2", "valve_cmd_v", "force_n", "p1_pa", "p2_pa", "spool_m"], &[]).unwrap();
+    let t = vshake::shell::tables::read_columns(
+        &out,
+        &[
+            "time_s",
+            "ref_disp_m",
+            "disp_m",
+            "accel_mps2",
+            "valve_cmd_v",
+            "force_n",
+            "p1_pa",
+            "p2_pa",
+            "spool_m",
+        ],
+        &[],
+    )
+    .unwrap();
     assert_eq!(t.rows(), 3072);
     assert_eq!(t.time_base("time_s").unwrap().rate_hz, 1024.0);
     let p1 = t.column("p1_pa").unwrap()[0];
@@ -52,27 +76,51 @@ fn bundled_example_prints_the_reference_metrics_and_writes_the_history() {
 
 #[test]
 fn unknown_keys_and_parameter_names_are_errors_with_their_path() {
-    expect_input_error(&format!("{SINE}freq_hzz = 2.0\n"), &["excitation.freq_hzz", "unknown key", "did you mean `freq_hz`"]);
-    expect_input_error(&format!("[model.platen]\nmass = 1.0\n{SINE}"), &["model.platen.mass", "unknown key"]);
-    expect_input_error(&format!("[model.platten]\nm = 1.0\n{SINE}"), &["model.platten", "did you mean `platen`"]);
+    expect_input_error(
+        &format!("{SINE}freq_hzz = 2.0\n"),
+        &[
+            "excitation.freq_hzz",
+            "unknown key",
+            "did you mean `freq_hz`",
+        ],
+    );
+    expect_input_error(
+        &format!("[model.platen]\nmass = 1.0\n{SINE}"),
+        &["model.platen.mass", "unknown key"],
+    );
+    expect_input_error(
+        &format!("[model.platten]\nm = 1.0\n{SINE}"),
+        &["model.platten", "did you mean `platen`"],
+    );
 }
 
 #[test]
 fn negative_mass_and_zero_bulk_modulus_are_reported_together() {
     expect_input_error(
         &format!("[model.platen]\nm = -144000.0\n[model.actuator]\nbeta = 0.0\n{SINE}"),
-        &["2 problems", "model.platen.m", "model.actuator.beta", "outside the valid range"],
+        &[
+            "2 problems",
+            "model.platen.m",
+            "model.actuator.beta",
+            "outside the valid range",
+        ],
     );
 }
 
 #[test]
 fn a_sine_beyond_the_stroke_is_refused() {
-    expect_input_error("[excitation]\nkind = \"sine\"\nfreq_hz = 0.5\namp_g = 2.0\n", &["excitation.amp_g", "exceeds the stroke", "0.75"]);
+    expect_input_error(
+        "[excitation]\nkind = \"sine\"\nfreq_hz = 0.5\namp_g = 2.0\n",
+        &["excitation.amp_g", "exceeds the stroke", "0.75"],
+    );
 }
 
 #[test]
 fn malformed_toml_names_line_and_column() {
-    expect_input_error("[excitation\nkind = \"sine\"\n", &["TOML syntax error at line 1"]);
+    expect_input_error(
+        "[excitation\nkind = \"sine\"\n",
+        &["TOML syntax error at line 1"],
+    );
 }
 
 #[test]
@@ -80,18 +128,34 @@ fn a_record_with_nan_names_the_column_and_row() {
     let d = tempfile::tempdir().unwrap();
     let mut csv = String::from("time_s,ref_disp_m\n");
     for k in 0..200 {
-        let v = if k == 57 { "NaN".to_string() } else { format!("{}", 0.01 * (k as f64 / 100.0).sin()) };
+        let v = if k == 57 {
+            "NaN".to_string()
+        } else {
+            format!("{}", 0.01 * (k as f64 / 100.0).sin())
+        };
         csv.push_str(&format!("{},{}\n", k as f64 / 1024.0, v));
     }
     write(d.path(), "quake.csv", &csv);
-    let f = write(d.path(), "run.toml", "[excitation]\nkind = \"record\"\nfile = \"quake.csv\"\n");
+    let f = write(
+        d.path(),
+        "run.toml",
+        "[excitation]\nkind = \"record\"\nfile = \"quake.csv\"\n",
+    );
     let (code, _, stderr) = study(&["sim", f.to_str().unwrap()]);
     assert_eq!(code, 2, "{stderr}");
-    assert!(stderr.contains("quake.csv") && stderr.contains("`ref_disp_m`, row 58 (line 59)") && stderr.contains("NaN"), "{stderr}");
+    assert!(
+        stderr.contains("quake.csv")
+            && stderr.contains("`ref_disp_m`, row 58 (line 59)")
+            && stderr.contains("NaN"),
+        "{stderr}"
+    );
 }
 
 fn metric(stdout: &str, name: &str) -> f64 {
-    let line = stdout.lines().find(|l| l.trim_start().starts_with(name)).unwrap_or_else(|| panic!("{name} in {stdout}"));
+    let line = stdout
+        .lines()
+        .find(|l| l.trim_start().starts_with(name))
+        .unwrap_or_else(|| panic!("{name} in {stdout}"));
     line.split_whitespace().last().unwrap().parse().unwrap()
 }
 
@@ -106,40 +170,76 @@ fn a_record_drives_the_table_like_the_equivalent_sine() {
     let mut csv = String::from("time_s,ref_disp_m\n");
     for k in 0..4096 {
         let t = k as f64 / 1024.0;
-        let e = if t < 1.0 { 0.5 * (1.0 - (std::f64::consts::PI * t).cos()) } else { 1.0 };
-        csv.push_str(&format!("{t:?},{:?}\n", x * e * (2.0 * std::f64::consts::PI * f * t).sin()));
+        let e = if t < 1.0 {
+            0.5 * (1.0 - (std::f64::consts::PI * t).cos())
+        } else {
+            1.0
+        };
+        csv.push_str(&format!(
+            "{t:?},{:?}\n",
+            x * e * (2.0 * std::f64::consts::PI * f * t).sin()
+        ));
     }
     write(d.path(), "quake.csv", &csv);
-    let rec = write(d.path(), "rec.toml", "[excitation]\nkind = \"record\"\nfile = \"quake.csv\"\ncolumn = \"ref_disp_m\"\n");
+    let rec = write(
+        d.path(),
+        "rec.toml",
+        "[excitation]\nkind = \"record\"\nfile = \"quake.csv\"\ncolumn = \"ref_disp_m\"\n",
+    );
     let sine = write(d.path(), "sine.toml", "[excitation]\nkind = \"sine\"\nfreq_hz = 1.5\namp_m = 0.02\ntaper_s = 1.0\nduration_s = 4.0\nwindow_cycles = 6\n");
     let (code, rec_out, stderr) = study(&["sim", rec.to_str().unwrap()]);
     assert_eq!(code, 0, "{stderr}");
     let (code, sine_out, stderr) = study(&["sim", sine.to_str().unwrap()]);
     assert_eq!(code, 0, "{stderr}");
-    for name in ["rms_err_disp_ratio", "rms_err_accel_ratio", "max_abs_valve_cmd_v"] {
+    for name in [
+        "rms_err_disp_ratio",
+        "rms_err_accel_ratio",
+        "max_abs_valve_cmd_v",
+    ] {
         let (r, s) = (metric(&rec_out, name), metric(&sine_out, name));
         assert!(((r - s) / s).abs() < 0.03, "{name}: record {r} vs sine {s}");
     }
     // Harmonic metrics are not defined for a record.
-    assert!(rec_out.lines().any(|l| l.trim_start().starts_with("amp_ratio") && l.trim_end().ends_with('-')), "{rec_out}");
+    assert!(
+        rec_out
+            .lines()
+            .any(|l| l.trim_start().starts_with("amp_ratio") && l.trim_end().ends_with('-')),
+        "{rec_out}"
+    );
 }
 
 #[test]
 fn a_record_beyond_the_stroke_names_the_row() {
     let d = tempfile::tempdir().unwrap();
-    write(d.path(), "big.csv", "time_s,ref_disp_m\n0,0\n0.5,0.2\n1.0,0.9\n1.5,0.1\n");
-    let f = write(d.path(), "run.toml", "[excitation]\nkind = \"record\"\nfile = \"big.csv\"\n");
+    write(
+        d.path(),
+        "big.csv",
+        "time_s,ref_disp_m\n0,0\n0.5,0.2\n1.0,0.9\n1.5,0.1\n",
+    );
+    let f = write(
+        d.path(),
+        "run.toml",
+        "[excitation]\nkind = \"record\"\nfile = \"big.csv\"\n",
+    );
     let (code, _, stderr) = study(&["sim", f.to_str().unwrap()]);
     assert_eq!(code, 2, "{stderr}");
-    assert!(stderr.contains("row 3") && stderr.contains("exceeds the stroke"), "{stderr}");
+    assert!(
+        stderr.contains("row 3") && stderr.contains("exceeds the stroke"),
+        "{stderr}"
+    );
 }
 
 #[test]
 fn a_diverging_run_is_reported_with_time_and_reason() {
     let d = tempfile::tempdir().unwrap();
-    let f = write(d.path(), "run.toml", &format!("[model.controller]\ng_d = 400.0\n{SINE}"));
+    let f = write(
+        d.path(),
+        "run.toml",
+        &format!("[model.controller]\ng_d = 400.0\n{SINE}"),
+    );
     let out = d.path().join("h.parquet");
-    let (code, stdout, stderr) = study(&["sim", f.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let (code, stdout, stderr) =
+        study(&["sim", f.to_str().unwrap(), "--out", out.to_str().unwrap()]);
     assert_eq!(code, 1, "{stdout}{stderr}");
     assert!(stdout.contains("status      failed at t = "), "{stdout}");
     assert!(stderr.contains("failed at t = "), "{stderr}");

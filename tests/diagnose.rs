@@ -10,14 +10,24 @@ use common::followed_state;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use vshake::shell::tables::{read_bools, read_columns_allow_nan, read_f64_lists, read_string_lists, read_strings};
+use vshake::shell::tables::{
+    read_bools, read_columns_allow_nan, read_f64_lists, read_string_lists, read_strings,
+};
 
 /// Sensor noise of the synthetic campaigns: about 1 % of the smallest test's rms per channel.
 const NOISE: &str = "accel=0.02,disp=1e-5,force=2000";
 
 fn study(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_study")).args(args).env("RUST_BACKTRACE", "0").output().expect("run study");
-    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stdout).into(), String::from_utf8_lossy(&out.stderr).into())
+    let out = Command::new(env!("CARGO_BIN_EXE_study"))
+        .args(args)
+        .env("RUST_BACKTRACE", "0")
+        .output()
+        .expect("run study");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into(),
+        String::from_utf8_lossy(&out.stderr).into(),
+    )
 }
 
 fn campaign() -> PathBuf {
@@ -47,20 +57,31 @@ struct Diagnosis {
 
 impl Diagnosis {
     fn first(&self) -> (&String, &Cand) {
-        self.cands.iter().find(|(_, c)| c.rank == 1).expect("a first candidate")
+        self.cands
+            .iter()
+            .find(|(_, c)| c.rank == 1)
+            .expect("a first candidate")
     }
 }
 
 fn diagnose(dir: &Path) -> Diagnosis {
     let report = dir.join("report");
-    let (code, stdout, stderr) = study(&["diagnose", dir.join("diagnosis.toml").to_str().unwrap(), "--report", report.to_str().unwrap()]);
+    let (code, stdout, stderr) = study(&[
+        "diagnose",
+        dir.join("diagnosis.toml").to_str().unwrap(),
+        "--report",
+        report.to_str().unwrap(),
+    ]);
     assert_eq!(code, 0, "{stdout}{stderr}");
     let c = report.join("candidates.parquet");
     let num = read_columns_allow_nan(&c, &["rank", "explained"]).unwrap();
     let s = |col: &str| read_strings(&c, col).unwrap();
     let (effects, families) = (s("effect"), s("family"));
     let params = read_string_lists(&c, "params").unwrap();
-    let (est, se) = (read_f64_lists(&c, "estimates").unwrap(), read_f64_lists(&c, "std_errors").unwrap());
+    let (est, se) = (
+        read_f64_lists(&c, "estimates").unwrap(),
+        read_f64_lists(&c, "std_errors").unwrap(),
+    );
     let sig = read_bools(&c, "significant").unwrap();
     let mut cands = HashMap::new();
     for i in 0..effects.len() {
@@ -86,19 +107,39 @@ fn diagnose(dir: &Path) -> Diagnosis {
         e.0 += v * v;
         e.1 += 1;
     }
-    let residual = sums.into_iter().map(|(m, (s, n))| (m, (s / n as f64).sqrt())).collect();
+    let residual = sums
+        .into_iter()
+        .map(|(m, (s, n))| (m, (s / n as f64).sqrt()))
+        .collect();
     let ph = read_columns_allow_nan(&t, &["phase_err_fundamental_deg"]).unwrap();
     let mut phase: HashMap<String, f64> = HashMap::new();
-    for (m, v) in models.iter().zip(ph.column("phase_err_fundamental_deg").unwrap()) {
+    for (m, v) in models
+        .iter()
+        .zip(ph.column("phase_err_fundamental_deg").unwrap())
+    {
         let e = phase.entry(m.clone()).or_insert(0.0);
         *e = e.max(v.abs());
     }
-    Diagnosis { stdout, cands, residual, phase }
+    Diagnosis {
+        stdout,
+        cands,
+        residual,
+        phase,
+    }
 }
 
 fn synth(dir: &Path, extra: &[&str]) {
     let c = campaign();
-    let mut args = vec!["synth", c.to_str().unwrap(), "--out", dir.to_str().unwrap(), "--noise", NOISE, "--seed", "7"];
+    let mut args = vec![
+        "synth",
+        c.to_str().unwrap(),
+        "--out",
+        dir.to_str().unwrap(),
+        "--noise",
+        NOISE,
+        "--seed",
+        "7",
+    ];
     args.extend_from_slice(extra);
     let (code, out, err) = study(&args);
     assert_eq!(code, 0, "{out}{err}");
@@ -111,26 +152,61 @@ fn hidden(effect: &str, family: &str, truth: &[(&str, f64)]) {
     for (p, v) in truth {
         args.extend(["--set".to_string(), format!("{effect}.{p}={v}")]);
     }
-    synth(d.path(), &args.iter().map(String::as_str).collect::<Vec<_>>());
+    synth(
+        d.path(),
+        &args.iter().map(String::as_str).collect::<Vec<_>>(),
+    );
     let r = diagnose(d.path());
     let (first, best) = r.first();
-    assert_eq!(best.family, family, "ranked first: {first} ({}), not the {family} family\n{}", best.family, r.stdout);
-    assert!(best.significant && best.explained > 0.9, "{first}: {best:?}\n{}", r.stdout);
-    assert!(r.stdout.contains(&format!("most likely missing: {first} ({family})")), "{}", r.stdout);
+    assert_eq!(
+        best.family, family,
+        "ranked first: {first} ({}), not the {family} family\n{}",
+        best.family, r.stdout
+    );
+    assert!(
+        best.significant && best.explained > 0.9,
+        "{first}: {best:?}\n{}",
+        r.stdout
+    );
+    assert!(
+        r.stdout
+            .contains(&format!("most likely missing: {first} ({family})")),
+        "{}",
+        r.stdout
+    );
     let c = &r.cands[effect];
     let (before, after) = (r.residual["baseline"], r.residual[effect]);
-    assert!(before > 0.02 && before < 0.3, "a realistic size: the hidden effect's residual is {before}");
-    assert!(after <= 0.5 * before, "{effect}: the fit cuts the residual {before} -> {after}, not by half");
+    assert!(
+        before > 0.02 && before < 0.3,
+        "a realistic size: the hidden effect's residual is {before}"
+    );
+    assert!(
+        after <= 0.5 * before,
+        "{effect}: the fit cuts the residual {before} -> {after}, not by half"
+    );
     // The evidence: with the effect fitted, the fundamental's phase agrees to the noise.
-    assert!(r.phase[effect] < 0.1, "{effect}: phase error left {}° (baseline {}°)", r.phase[effect], r.phase["baseline"]);
+    assert!(
+        r.phase[effect] < 0.1,
+        "{effect}: phase error left {}° (baseline {}°)",
+        r.phase[effect],
+        r.phase["baseline"]
+    );
     for (p, v) in truth {
-        let i = c.params.iter().position(|n| n == &format!("{effect}.{p}")).unwrap_or_else(|| panic!("{p} not fitted: {:?}", c.params));
+        let i = c
+            .params
+            .iter()
+            .position(|n| n == &format!("{effect}.{p}"))
+            .unwrap_or_else(|| panic!("{p} not fitted: {:?}", c.params));
         let (e, s) = (c.estimates[i], c.std_errors[i]);
         // Three standard errors: this one run checks 14 parameters, so a 2-SE (95 %) band would
         // be expected to miss one of them about every other noise draw. That the standard
         // errors are honest is checked on its own, over noise seeds
         // (`standard_errors_match_the_spread_over_noise_seeds`).
-        assert!((e - v).abs() <= 3.0 * s, "{effect}.{p}: {e} ± {s} does not cover the truth {v}\n{}", r.stdout);
+        assert!(
+            (e - v).abs() <= 3.0 * s,
+            "{effect}.{p}: {e} ± {s} does not cover the truth {v}\n{}",
+            r.stdout
+        );
     }
 }
 
@@ -145,25 +221,60 @@ fn hidden_pair(a: (&str, &str, &[(&str, f64)]), b: (&str, &str, &[(&str, f64)]))
             args.extend(["--set".to_string(), format!("{e}.{p}={v}")]);
         }
     }
-    synth(d.path(), &args.iter().map(String::as_str).collect::<Vec<_>>());
+    synth(
+        d.path(),
+        &args.iter().map(String::as_str).collect::<Vec<_>>(),
+    );
     let r = diagnose(d.path());
-    let verdict = r.stdout.lines().find(|l| l.contains("verdict:")).unwrap_or_default().to_string();
+    let verdict = r
+        .stdout
+        .lines()
+        .find(|l| l.contains("verdict:"))
+        .unwrap_or_default()
+        .to_string();
     for (e, family, _) in [a, b] {
-        assert!(verdict.contains(&format!("{e} ({family})")), "the verdict does not name {e} ({family}): {verdict}\n{}", r.stdout);
+        assert!(
+            verdict.contains(&format!("{e} ({family})")),
+            "the verdict does not name {e} ({family}): {verdict}\n{}",
+            r.stdout
+        );
     }
-    assert!(verdict.contains("most likely missing:") && verdict.contains(" + "), "{verdict}");
+    assert!(
+        verdict.contains("most likely missing:") && verdict.contains(" + "),
+        "{verdict}"
+    );
     // The last selection step is the joint fit of both.
     let sel = d.path().join("report/selection.parquet");
     let num = read_columns_allow_nan(&sel, &["residual_rms", "noise_rms"]).unwrap();
     let last = num.column("residual_rms").unwrap().len() - 1;
-    let (after, noise) = (num.column("residual_rms").unwrap()[last], num.column("noise_rms").unwrap()[last]);
-    assert!(after <= 1.5 * noise, "joint fit leaves {after}, noise floor {noise}\n{}", r.stdout);
-    let (params, est, se) = (read_string_lists(&sel, "params").unwrap(), read_f64_lists(&sel, "estimates").unwrap(), read_f64_lists(&sel, "std_errors").unwrap());
+    let (after, noise) = (
+        num.column("residual_rms").unwrap()[last],
+        num.column("noise_rms").unwrap()[last],
+    );
+    assert!(
+        after <= 1.5 * noise,
+        "joint fit leaves {after}, noise floor {noise}\n{}",
+        r.stdout
+    );
+    let (params, est, se) = (
+        read_string_lists(&sel, "params").unwrap(),
+        read_f64_lists(&sel, "estimates").unwrap(),
+        read_f64_lists(&sel, "std_errors").unwrap(),
+    );
     let (names, est, se) = (&params[last], &est[last], &se[last]);
     for (e, _, truth) in [a, b] {
         for (p, v) in truth {
-            let i = names.iter().position(|n| *n == format!("{e}.{p}")).unwrap_or_else(|| panic!("{e}.{p} not in the joint fit: {names:?}"));
-            assert!((est[i] - v).abs() <= 3.0 * se[i], "{e}.{p}: {} ± {} does not cover the truth {v}\n{}", est[i], se[i], r.stdout);
+            let i = names
+                .iter()
+                .position(|n| *n == format!("{e}.{p}"))
+                .unwrap_or_else(|| panic!("{e}.{p} not in the joint fit: {names:?}"));
+            assert!(
+                (est[i] - v).abs() <= 3.0 * se[i],
+                "{e}.{p}: {} ± {} does not cover the truth {v}\n{}",
+                est[i],
+                se[i],
+                r.stdout
+            );
         }
     }
 }
@@ -171,12 +282,22 @@ fn hidden_pair(a: (&str, &str, &[(&str, f64)]), b: (&str, &str, &[(&str, f64)]))
 /// Acceptance of issue 11: two missing effects from different families are both named.
 #[test]
 fn spool_dynamics_and_leakage_together_are_both_found() {
-    hidden_pair(("spool_dynamics", "valve dynamics", &[("freq_hz", 50.0)]), ("leakage", "leakage", &[("c_int", 1.0e-10)]));
+    hidden_pair(
+        ("spool_dynamics", "valve dynamics", &[("freq_hz", 50.0)]),
+        ("leakage", "leakage", &[("c_int", 1.0e-10)]),
+    );
 }
 
 #[test]
 fn seal_friction_and_supply_together_are_both_found() {
-    hidden_pair(("seal_friction", "friction", &[("f_c", 9000.0), ("f_s", 14000.0)]), ("supply", "supply pressure", &[("q_pump", 0.16)]));
+    hidden_pair(
+        (
+            "seal_friction",
+            "friction",
+            &[("f_c", 9000.0), ("f_s", 14000.0)],
+        ),
+        ("supply", "supply pressure", &[("q_pump", 0.16)]),
+    );
 }
 
 #[test]
@@ -201,29 +322,49 @@ fn supply_droop_is_found() {
 
 #[test]
 fn seal_friction_is_found() {
-    hidden("seal_friction", "friction", &[("f_c", 9000.0), ("f_s", 14000.0)]);
+    hidden(
+        "seal_friction",
+        "friction",
+        &[("f_c", 9000.0), ("f_s", 14000.0)],
+    );
 }
 
 #[test]
 fn flow_saturation_is_found() {
-    hidden("flow_saturation", "valve flow nonlinearity", &[("x_sat", 0.010)]);
+    hidden(
+        "flow_saturation",
+        "valve flow nonlinearity",
+        &[("x_sat", 0.010)],
+    );
 }
 
 /// The flexible bulk modulus: softer at low chamber pressure (as entrained air makes it), a
 /// curve the library's fixed forms only approach.
 #[test]
 fn a_pressure_dependent_bulk_modulus_is_found() {
-    hidden("bulk_curve", "compressibility", &[("b0", 0.3), ("b1", 0.8), ("b2", 1.0)]);
+    hidden(
+        "bulk_curve",
+        "compressibility",
+        &[("b0", 0.3), ("b1", 0.8), ("b2", 1.0)],
+    );
 }
 
 #[test]
 fn compressibility_is_found() {
-    hidden("compressibility", "compressibility", &[("dead_volume", 0.04), ("air_fraction", 0.02)]);
+    hidden(
+        "compressibility",
+        "compressibility",
+        &[("dead_volume", 0.04), ("air_fraction", 0.02)],
+    );
 }
 
 #[test]
 fn reaction_mass_is_found() {
-    hidden("reaction_mass", "reaction mass", &[("m_r", 1.5e6), ("f_r", 10.0)]);
+    hidden(
+        "reaction_mass",
+        "reaction mass",
+        &[("m_r", 1.5e6), ("f_r", 10.0)],
+    );
 }
 
 #[test]
@@ -242,7 +383,11 @@ fn a_control_campaign_has_no_significant_missing_effect() {
     let d = tempfile::tempdir().unwrap();
     synth(d.path(), &[]);
     let r = diagnose(d.path());
-    assert!(r.stdout.contains("no significant missing effect"), "{}", r.stdout);
+    assert!(
+        r.stdout.contains("no significant missing effect"),
+        "{}",
+        r.stdout
+    );
     assert!(r.cands.values().all(|c| !c.significant), "{:?}", r.cands);
 }
 
@@ -262,7 +407,12 @@ impl vshake::kernel::effects::Effect<1> for Specimen {
     fn extra_force(&self, _l: usize, y: f64, v: f64, s: &Self::State) -> f64 {
         self.k * (s[0][0] - y) + self.c * (s[1][0] - v)
     }
-    fn derivs(&self, plant: &vshake::kernel::effects::PlantView<'_, 1>, s: &Self::State, ds: &mut Self::State) {
+    fn derivs(
+        &self,
+        plant: &vshake::kernel::effects::PlantView<'_, 1>,
+        s: &Self::State,
+        ds: &mut Self::State,
+    ) {
         use vshake::kernel::state::idx::{VEL as V, Y};
         let (y, v) = (plant.state[Y][0], plant.state[V][0]);
         ds[0][0] = s[1][0];
@@ -279,7 +429,9 @@ impl Noise {
     }
     fn normal(&mut self, sd: f64) -> f64 {
         use rand_distr::Distribution;
-        rand_distr::Normal::new(0.0, sd).expect("a standard deviation >= 0").sample(&mut self.0)
+        rand_distr::Normal::new(0.0, sd)
+            .expect("a standard deviation >= 0")
+            .sample(&mut self.0)
     }
 }
 
@@ -292,19 +444,35 @@ fn write_hidden<E: vshake::kernel::effects::Effect<1>>(dir: &Path, effect: &E) {
     // The campaign's files and layout, then each test's data replaced by the effect's run.
     synth(dir, &[]);
     let model = ModelParams::default();
-    let lc = vshake::shell::campaign_io::load_campaign(&dir.join("diagnosis.toml"), &model).unwrap();
+    let lc =
+        vshake::shell::campaign_io::load_campaign(&dir.join("diagnosis.toml"), &model).unwrap();
     let mut noise = Noise::new(11);
     let aligned = vshake::shell::campaign_io::load_tests(&lc, None).unwrap();
     for (test, at) in lc.campaign.tests.iter().zip(&aligned) {
         let path = lc.base.join(&test.data);
         // synth writes at the controller's rate from t = 0: the file's rows are the drive's ticks.
-        let rows = vshake::shell::campaign_io::read_measured(&path).unwrap().rows();
+        let rows = vshake::shell::campaign_io::read_measured(&path)
+            .unwrap()
+            .rows();
         let mut reference = at.drive.clone();
         reference.truncate(rows);
         let mut h = History::with_capacity(rows);
-        let [res] = simulate::run(&LaneParams::<1>::new(&[&test.model]).unwrap(), effect, &reference, &Solver::default(), &mut h).unwrap();
+        let [res] = simulate::run(
+            &LaneParams::<1>::new(&[&test.model]).unwrap(),
+            effect,
+            &reference,
+            &Solver::default(),
+            &mut h,
+        )
+        .unwrap();
         assert_eq!(res.status, simulate::LaneStatus::Ok);
-        let mut col = |n: &str, sd: f64| -> Vec<f64> { h.channel(n).unwrap().iter().map(|x| x + noise.normal(sd)).collect() };
+        let mut col = |n: &str, sd: f64| -> Vec<f64> {
+            h.channel(n)
+                .unwrap()
+                .iter()
+                .map(|x| x + noise.normal(sd))
+                .collect()
+        };
         let cols = vec![
             ("time_s", h.channel("time_s").unwrap().to_vec()),
             ("ref_disp_m", reference.command.clone()),
@@ -323,29 +491,74 @@ fn write_hidden<E: vshake::kernel::effects::Effect<1>>(dir: &Path, effect: &E) {
 fn an_effect_outside_the_library_gets_no_confident_answer() {
     let d = tempfile::tempdir().unwrap();
     let w = 2.0 * std::f64::consts::PI * 5.0;
-    write_hidden(d.path(), &Specimen { m: 20_000.0, k: 20_000.0 * w * w, c: 2.0 * 0.05 * 20_000.0 * w });
+    write_hidden(
+        d.path(),
+        &Specimen {
+            m: 20_000.0,
+            k: 20_000.0 * w * w,
+            c: 2.0 * 0.05 * 20_000.0 * w,
+        },
+    );
     let r = diagnose(d.path());
     println!("{}", r.stdout);
     let (first, best) = r.first();
-    assert!(!r.stdout.contains("most likely missing"), "a confident wrong answer ({first}):\n{}", r.stdout);
+    assert!(
+        !r.stdout.contains("most likely missing"),
+        "a confident wrong answer ({first}):\n{}",
+        r.stdout
+    );
     assert!(best.explained < 0.5, "{first} explains {}", best.explained);
-    assert!(r.stdout.contains("explains only") || r.stdout.contains("explain only") || r.stdout.contains("no significant missing effect"), "{}", r.stdout);
-    assert!(r.residual["baseline"] > 0.02, "the specimen leaves a clear residual: {}", r.residual["baseline"]);
+    assert!(
+        r.stdout.contains("explains only")
+            || r.stdout.contains("explain only")
+            || r.stdout.contains("no significant missing effect"),
+        "{}",
+        r.stdout
+    );
+    assert!(
+        r.residual["baseline"] > 0.02,
+        "the specimen leaves a clear residual: {}",
+        r.residual["baseline"]
+    );
     // The specimen is a resonance (5 Hz, inside the campaign's 1–8 Hz): its force is a dynamic
     // one, in phase with the displacement below 5 Hz and against it above, not a function of any
     // one state at the same instant. The map names the platen's displacement through a term with
     // memory, and finds the specimen: its frequency, damping and mass.
     let (res, state, term, r2) = followed_state(&d.path().join("report"));
-    assert_eq!((res.as_str(), state.as_str()), ("platen_force", "displacement"), "{term}, R² {r2}\n{}", r.stdout);
-    assert!(term.contains("oscillator") && r2 > 0.8, "{term}, R² {r2}\n{}", r.stdout);
+    assert_eq!(
+        (res.as_str(), state.as_str()),
+        ("platen_force", "displacement"),
+        "{term}, R² {r2}\n{}",
+        r.stdout
+    );
+    assert!(
+        term.contains("oscillator") && r2 > 0.8,
+        "{term}, R² {r2}\n{}",
+        r.stdout
+    );
     let p = d.path().join("report/stateterms.parquet");
-    let (terms, num) = (read_strings(&p, "term").unwrap(), read_columns_allow_nan(&p, &["f_n_hz", "zeta", "coef"]).unwrap());
-    let i = terms.iter().position(|t| t.contains("oscillator")).expect("an oscillator row");
-    let osc = (num.column("f_n_hz").unwrap()[i], num.column("zeta").unwrap()[i], num.column("coef").unwrap()[i]);
+    let (terms, num) = (
+        read_strings(&p, "term").unwrap(),
+        read_columns_allow_nan(&p, &["f_n_hz", "zeta", "coef"]).unwrap(),
+    );
+    let i = terms
+        .iter()
+        .position(|t| t.contains("oscillator"))
+        .expect("an oscillator row");
+    let osc = (
+        num.column("f_n_hz").unwrap()[i],
+        num.column("zeta").unwrap()[i],
+        num.column("coef").unwrap()[i],
+    );
     assert!((osc.0 / 5.0 - 1.0).abs() < 0.05, "f_n {} Hz", osc.0);
     assert!((osc.1 / 0.05 - 1.0).abs() < 0.3, "ζ {}", osc.1);
     assert!((osc.2 / 20_000.0 - 1.0).abs() < 0.1, "mass {} kg", osc.2);
-    assert!(r.stdout.contains("probably not in the library") && r.stdout.contains("a resonance within the tests' band"), "{}", r.stdout);
+    assert!(
+        r.stdout.contains("probably not in the library")
+            && r.stdout.contains("a resonance within the tests' band"),
+        "{}",
+        r.stdout
+    );
 }
 
 /// A flow gain that grows with the opening (an expansion: ports that widen), x_eff = x·(1 + a·|x|/x_ref),
@@ -373,21 +586,47 @@ impl vshake::kernel::effects::Effect<1> for Expansion {
 #[test]
 fn a_flow_gain_rising_with_opening_is_explained_by_the_flow_gain_curve() {
     let d = tempfile::tempdir().unwrap();
-    write_hidden(d.path(), &Expansion { a: 1.0, inv_ref: 1.0 / 19.05e-3 });
+    write_hidden(
+        d.path(),
+        &Expansion {
+            a: 1.0,
+            inv_ref: 1.0 / 19.05e-3,
+        },
+    );
     let r = diagnose(d.path());
     println!("{}", r.stdout);
     let (first, best) = r.first();
     assert_eq!(first, "flow_gain", "ranked first: {first}\n{}", r.stdout);
     assert_eq!(best.family, "valve flow nonlinearity");
-    assert!(best.significant && best.explained > 0.9, "{first}: {best:?}\n{}", r.stdout);
-    assert!(r.stdout.contains("most likely missing: flow_gain (valve flow nonlinearity)"), "{}", r.stdout);
+    assert!(
+        best.significant && best.explained > 0.9,
+        "{first}: {best:?}\n{}",
+        r.stdout
+    );
+    assert!(
+        r.stdout
+            .contains("most likely missing: flow_gain (valve flow nonlinearity)"),
+        "{}",
+        r.stdout
+    );
     // The curve it finds rises with the opening, as the hidden one does (g = 1 + r at knot r).
     let g = &r.cands["flow_gain"].estimates;
-    assert!(g[1] < g[2] && g[2] < g[3], "the fitted gains rise with opening: {g:?}");
-    assert!(r.residual["flow_gain"] < 0.5 * r.residual["baseline"], "{}", r.stdout);
+    assert!(
+        g[1] < g[2] && g[2] < g[3],
+        "the fitted gains rise with opening: {g:?}"
+    );
+    assert!(
+        r.residual["flow_gain"] < 0.5 * r.residual["baseline"],
+        "{}",
+        r.stdout
+    );
     // The residual map points at the valve: a missing flow that follows the spool opening.
     let (res, state, term, r2) = followed_state(&d.path().join("report"));
-    assert!(res.starts_with("valve_") && state == "spool_opening", "{res} follows {term} in {state}, R² {r2}\n{}", r.stdout);
+    assert!(
+        res.starts_with("valve_") && state == "spool_opening",
+        "{res} follows {term} in {state}, R² {r2}\n{}",
+        r.stdout
+    );
 }
 
 /// The reported standard errors are the real spread of the estimates: the same hidden effect
@@ -402,15 +641,42 @@ fn standard_errors_match_the_spread_over_noise_seeds() {
     for seed in 1..=8 {
         let dir = d.path().join(format!("s{seed}"));
         let seed = seed.to_string();
-        let args = ["synth", c.to_str().unwrap(), "--out", dir.to_str().unwrap(), "--noise", NOISE, "--seed", &seed, "--effect", "flow_saturation", "--set", "flow_saturation.x_sat=0.010"];
+        let args = [
+            "synth",
+            c.to_str().unwrap(),
+            "--out",
+            dir.to_str().unwrap(),
+            "--noise",
+            NOISE,
+            "--seed",
+            &seed,
+            "--effect",
+            "flow_saturation",
+            "--set",
+            "flow_saturation.x_sat=0.010",
+        ];
         let (code, out, err) = study(&args);
         assert_eq!(code, 0, "{out}{err}");
         let fitted = dir.join("fitted.toml");
-        let (code, out, err) = study(&["fit", dir.join("diagnosis.toml").to_str().unwrap(), "--effect", "flow_saturation", "--out", fitted.to_str().unwrap()]);
+        let (code, out, err) = study(&[
+            "fit",
+            dir.join("diagnosis.toml").to_str().unwrap(),
+            "--effect",
+            "flow_saturation",
+            "--out",
+            fitted.to_str().unwrap(),
+        ]);
         assert_eq!(code, 0, "{out}{err}");
         // "# Fitted by ...: flow_saturation.x_sat = 0.00999983708617635 ± 7.968e-8"
         let head = std::fs::read_to_string(&fitted).unwrap();
-        let tail = head.lines().next().unwrap().split("flow_saturation.x_sat = ").nth(1).unwrap().to_string();
+        let tail = head
+            .lines()
+            .next()
+            .unwrap()
+            .split("flow_saturation.x_sat = ")
+            .nth(1)
+            .unwrap()
+            .to_string();
         let (e, s) = tail.split_once(" ± ").unwrap();
         est.push(e.trim().parse::<f64>().unwrap());
         se.push(s.trim().parse::<f64>().unwrap());
@@ -419,6 +685,12 @@ fn standard_errors_match_the_spread_over_noise_seeds() {
     let sd = (est.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / 7.0).sqrt();
     let reported = se.iter().sum::<f64>() / 8.0;
     println!("x_sat over 8 seeds: mean {mean:e}, spread {sd:e}, mean reported standard error {reported:e} (ratio {:.2})", sd / reported);
-    assert!(sd > 0.38 * reported && sd < 1.70 * reported, "spread {sd} vs reported {reported}: {est:?}");
-    assert!((mean - 0.010).abs() < 3.0 * reported / 8f64.sqrt(), "unbiased: mean {mean}");
+    assert!(
+        sd > 0.38 * reported && sd < 1.70 * reported,
+        "spread {sd} vs reported {reported}: {est:?}"
+    );
+    assert!(
+        (mean - 0.010).abs() < 3.0 * reported / 8f64.sqrt(),
+        "unbiased: mean {mean}"
+    );
 }

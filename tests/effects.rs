@@ -6,8 +6,15 @@ use std::path::Path;
 use std::process::Command;
 
 fn study(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_study")).args(args).output().expect("run study");
-    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stdout).into(), String::from_utf8_lossy(&out.stderr).into())
+    let out = Command::new(env!("CARGO_BIN_EXE_study"))
+        .args(args)
+        .output()
+        .expect("run study");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into(),
+        String::from_utf8_lossy(&out.stderr).into(),
+    )
 }
 
 /// Per test: the columns of the compare report's tests table, and the residual bins.
@@ -30,7 +37,14 @@ fn hidden(effect: &str, sets: &[&str]) -> Report {
 fn hidden_compared(effect: &str, sets: &[&str], open_loop: Option<&str>) -> Report {
     let d = tempfile::tempdir().unwrap();
     let campaign = Path::new(env!("CARGO_MANIFEST_DIR")).join("studies/campaigns/signatures.toml");
-    let mut args = vec!["synth", campaign.to_str().unwrap(), "--out", d.path().to_str().unwrap(), "--effect", effect];
+    let mut args = vec![
+        "synth",
+        campaign.to_str().unwrap(),
+        "--out",
+        d.path().to_str().unwrap(),
+        "--effect",
+        effect,
+    ];
     for s in sets {
         args.extend(["--set", s]);
     }
@@ -38,7 +52,12 @@ fn hidden_compared(effect: &str, sets: &[&str], open_loop: Option<&str>) -> Repo
     assert_eq!(code, 0, "{out}{err}");
     let report = d.path().join("report");
     let campaign = d.path().join("signatures.toml");
-    let mut args = vec!["compare", campaign.to_str().unwrap(), "--report", report.to_str().unwrap()];
+    let mut args = vec![
+        "compare",
+        campaign.to_str().unwrap(),
+        "--report",
+        report.to_str().unwrap(),
+    ];
     if let Some(o) = open_loop {
         args.extend(["--open-loop", o]);
     }
@@ -58,26 +77,44 @@ fn hidden_compared(effect: &str, sets: &[&str], open_loop: Option<&str>) -> Repo
         "accel_over_disp_measured",
         "accel_over_disp_model",
     ];
-    let t = vshake::shell::tables::read_columns_allow_nan(&report.join("tests.parquet"), &cols).unwrap();
+    let t = vshake::shell::tables::read_columns_allow_nan(&report.join("tests.parquet"), &cols)
+        .unwrap();
     let names = ["f2_a0p3", "f2_a1p5", "f6_a0p3", "f6_a1p5", "f3_a3p2"];
     let mut tests = HashMap::new();
     for (i, n) in names.iter().enumerate() {
-        let row: HashMap<String, f64> = cols.iter().map(|c| (c.to_string(), t.column(c).unwrap()[i])).collect();
+        let row: HashMap<String, f64> = cols
+            .iter()
+            .map(|c| (c.to_string(), t.column(c).unwrap()[i]))
+            .collect();
         tests.insert(n.to_string(), row);
     }
     // Residual magnitude of harmonics 2 and 3 per test (harmonics table: 9 rows per test).
-    let h = vshake::shell::tables::read_columns_allow_nan(&report.join("harmonics.parquet"), &["residual_abs"]).unwrap();
+    let h = vshake::shell::tables::read_columns_allow_nan(
+        &report.join("harmonics.parquet"),
+        &["residual_abs"],
+    )
+    .unwrap();
     for (i, n) in names.iter().enumerate() {
         let row = tests.get_mut(*n).unwrap();
         row.insert("r2".into(), h.column("residual_abs").unwrap()[9 * i + 1]);
         row.insert("r3".into(), h.column("residual_abs").unwrap()[9 * i + 2]);
     }
     // Bins: velocity reversal and peak velocity residuals per test.
-    let b = vshake::shell::tables::read_columns_allow_nan(&report.join("bins.parquet"), &["rms_residual_ratio"]).unwrap();
+    let b = vshake::shell::tables::read_columns_allow_nan(
+        &report.join("bins.parquet"),
+        &["rms_residual_ratio"],
+    )
+    .unwrap();
     for (i, n) in names.iter().enumerate() {
         let row = tests.get_mut(*n).unwrap();
-        row.insert("bin_reversal".into(), b.column("rms_residual_ratio").unwrap()[3 * i]);
-        row.insert("bin_peak_velocity".into(), b.column("rms_residual_ratio").unwrap()[3 * i + 1]);
+        row.insert(
+            "bin_reversal".into(),
+            b.column("rms_residual_ratio").unwrap()[3 * i],
+        );
+        row.insert(
+            "bin_peak_velocity".into(),
+            b.column("rms_residual_ratio").unwrap()[3 * i + 1],
+        );
     }
     Report { tests }
 }
@@ -88,10 +125,22 @@ fn hidden_compared(effect: &str, sets: &[&str], open_loop: Option<&str>) -> Repo
 fn seal_friction_raises_h3_at_low_amplitude_near_reversal() {
     let r = hidden("seal_friction", &[]);
     let dh3 = |t: &str| r.get(t, "h3_measured_ratio") - r.get(t, "h3_model_ratio");
-    assert!(dh3("f2_a0p3") > 0.002, "h3 rises at 0.3 g: {}", dh3("f2_a0p3"));
-    assert!(dh3("f2_a0p3") > 5.0 * dh3("f2_a1p5").abs(), "more at low amplitude: {} vs {}", dh3("f2_a0p3"), dh3("f2_a1p5"));
+    assert!(
+        dh3("f2_a0p3") > 0.002,
+        "h3 rises at 0.3 g: {}",
+        dh3("f2_a0p3")
+    );
+    assert!(
+        dh3("f2_a0p3") > 5.0 * dh3("f2_a1p5").abs(),
+        "more at low amplitude: {} vs {}",
+        dh3("f2_a0p3"),
+        dh3("f2_a1p5")
+    );
     assert!(r.get("f2_a0p3", "bin_reversal") > 3.0 * r.get("f2_a0p3", "bin_peak_velocity"));
-    assert!(r.get("f2_a0p3", "rms_residual_accel_ratio") > 3.0 * r.get("f2_a1p5", "rms_residual_accel_ratio"));
+    assert!(
+        r.get("f2_a0p3", "rms_residual_accel_ratio")
+            > 3.0 * r.get("f2_a1p5", "rms_residual_accel_ratio")
+    );
 }
 
 /// Supply droop: the residual grows with amplitude (the pump cannot follow the draw of large
@@ -100,11 +149,24 @@ fn seal_friction_raises_h3_at_low_amplitude_near_reversal() {
 fn supply_droop_grows_with_amplitude_and_shows_in_the_envelope() {
     let r = hidden("supply", &[]);
     let res = |t: &str| r.get(t, "rms_residual_accel_ratio");
-    assert!(res("f2_a1p5") > 5.0 * res("f2_a0p3"), "{} vs {}", res("f2_a1p5"), res("f2_a0p3"));
+    assert!(
+        res("f2_a1p5") > 5.0 * res("f2_a0p3"),
+        "{} vs {}",
+        res("f2_a1p5"),
+        res("f2_a0p3")
+    );
     assert!(res("f3_a3p2") > res("f2_a1p5"));
     let drift = |t: &str| r.get(t, "drift_measured_per_cycle") - r.get(t, "drift_model_per_cycle");
-    assert!(drift("f3_a3p2") < -0.005, "envelope sinks: {}", drift("f3_a3p2"));
-    assert!(drift("f2_a0p3").abs() < 0.001, "not at small draw: {}", drift("f2_a0p3"));
+    assert!(
+        drift("f3_a3p2") < -0.005,
+        "envelope sinks: {}",
+        drift("f3_a3p2")
+    );
+    assert!(
+        drift("f2_a0p3").abs() < 0.001,
+        "not at small draw: {}",
+        drift("f2_a0p3")
+    );
 }
 
 /// Spool dynamics (80 Hz, ζ = 0.7): the spool lags its command by 2ζ·f/f_n, and at 2 Hz the
@@ -115,10 +177,16 @@ fn spool_dynamics_adds_phase_lag() {
     let lag = 2.0 * 0.7 * 2.0 / 80.0 * 180.0 / std::f64::consts::PI;
     for t in ["f2_a0p3", "f2_a1p5"] {
         let d = r.get(t, "phase_measured_deg") - r.get(t, "phase_model_deg");
-        assert!((d + lag).abs() < 0.5 * lag, "{t}: phase change {d}° against the spool's lag −{lag:.2}°");
+        assert!(
+            (d + lag).abs() < 0.5 * lag,
+            "{t}: phase change {d}° against the spool's lag −{lag:.2}°"
+        );
     }
     for t in ["f2_a0p3", "f2_a1p5", "f6_a0p3", "f6_a1p5", "f3_a3p2"] {
-        assert!(r.get(t, "amp_ratio_measured") < r.get(t, "amp_ratio_model") - 0.01, "{t}");
+        assert!(
+            r.get(t, "amp_ratio_measured") < r.get(t, "amp_ratio_model") - 0.01,
+            "{t}"
+        );
     }
 }
 
@@ -144,13 +212,25 @@ fn open_loop_separates_the_valve_from_the_plant() {
     for t in TESTS {
         let lag = 2.0 * 0.7 * freq(t) / 80.0 * 180.0 / std::f64::consts::PI;
         let d = dphase(&valve, t);
-        assert!((d + lag).abs() < 0.1 * lag, "{t}: open-loop phase change {d}° against the spool's lag −{lag:.2}°");
+        assert!(
+            (d + lag).abs() < 0.1 * lag,
+            "{t}: open-loop phase change {d}° against the spool's lag −{lag:.2}°"
+        );
     }
-    assert!(dphase(&valve, "f6_a0p3") < 2.5 * dphase(&valve, "f2_a0p3"), "the lag grows with frequency");
+    assert!(
+        dphase(&valve, "f6_a0p3") < 2.5 * dphase(&valve, "f2_a0p3"),
+        "the lag grows with frequency"
+    );
     let spool = hidden_compared("spool_dynamics", &[], Some("spool"));
     for t in TESTS {
-        let (rs, rv) = (spool.get(t, "rms_residual_accel_ratio"), valve.get(t, "rms_residual_accel_ratio"));
-        assert!(rs < 0.03 * rv && rs < 1e-3, "{t}: spool-driven residual {rs} vs valve-driven {rv}");
+        let (rs, rv) = (
+            spool.get(t, "rms_residual_accel_ratio"),
+            valve.get(t, "rms_residual_accel_ratio"),
+        );
+        assert!(
+            rs < 0.03 * rv && rs < 1e-3,
+            "{t}: spool-driven residual {rs} vs valve-driven {rv}"
+        );
     }
 }
 
@@ -163,16 +243,25 @@ fn transport_delay_lags_in_proportion_to_frequency() {
     for t in TESTS {
         let lag = 360.0 * freq(t) * tau;
         let d = dphase(&open, t);
-        assert!((d + lag).abs() < 0.05 * lag, "{t}: open-loop phase change {d}° against −{lag:.2}°");
+        assert!(
+            (d + lag).abs() < 0.05 * lag,
+            "{t}: open-loop phase change {d}° against −{lag:.2}°"
+        );
         let dr = open.get(t, "amp_ratio_measured") / open.get(t, "amp_ratio_model") - 1.0;
         assert!(dr.abs() < 2e-3, "{t}: amplitude changed by {dr}");
     }
     let closed = hidden("transport_delay", &[]);
     for t in TESTS {
-        assert!(closed.get(t, "amp_ratio_measured") < closed.get(t, "amp_ratio_model") - 0.01, "{t}");
+        assert!(
+            closed.get(t, "amp_ratio_measured") < closed.get(t, "amp_ratio_model") - 0.01,
+            "{t}"
+        );
     }
     let d2 = dphase(&closed, "f2_a0p3");
-    assert!((d2 + 360.0 * 2.0 * tau).abs() < 0.3 * 360.0 * 2.0 * tau, "closed loop at 2 Hz: {d2}°");
+    assert!(
+        (d2 + 360.0 * 2.0 * tau).abs() < 0.3 * 360.0 * 2.0 * tau,
+        "closed loop at 2 Hz: {d2}°"
+    );
 }
 
 /// Effective bulk modulus and dead volume: a softer oil column (resonance ≈ 10 Hz) changes the
@@ -183,11 +272,31 @@ fn compressibility_grows_with_frequency_and_air_with_amplitude() {
     let r = hidden("compressibility", &[]);
     let res = |t: &str| r.get(t, "rms_residual_accel_ratio");
     for a in ["a0p3", "a1p5"] {
-        assert!(res(&format!("f6_{a}")) > 2.0 * res(&format!("f2_{a}")), "{a}: {} vs {}", res(&format!("f6_{a}")), res(&format!("f2_{a}")));
-        assert!(dphase(&r, &format!("f6_{a}")) < -0.5, "{a}: extra lag at 6 Hz {}", dphase(&r, &format!("f6_{a}")));
+        assert!(
+            res(&format!("f6_{a}")) > 2.0 * res(&format!("f2_{a}")),
+            "{a}: {} vs {}",
+            res(&format!("f6_{a}")),
+            res(&format!("f2_{a}"))
+        );
+        assert!(
+            dphase(&r, &format!("f6_{a}")) < -0.5,
+            "{a}: extra lag at 6 Hz {}",
+            dphase(&r, &format!("f6_{a}"))
+        );
     }
-    let air = hidden("compressibility", &["compressibility.dead_volume=0", "compressibility.air_fraction=0.05"]);
-    assert!(air.get("f6_a1p5", "r2") > 3.0 * air.get("f6_a0p3", "r2"), "h2 residual {} vs {}", air.get("f6_a1p5", "r2"), air.get("f6_a0p3", "r2"));
+    let air = hidden(
+        "compressibility",
+        &[
+            "compressibility.dead_volume=0",
+            "compressibility.air_fraction=0.05",
+        ],
+    );
+    assert!(
+        air.get("f6_a1p5", "r2") > 3.0 * air.get("f6_a0p3", "r2"),
+        "h2 residual {} vs {}",
+        air.get("f6_a1p5", "r2"),
+        air.get("f6_a0p3", "r2")
+    );
 }
 
 /// Reaction-mass compliance: the LVDT reads the stroke, the accelerometer the platen, so the two
@@ -204,11 +313,20 @@ fn reaction_mass_breaks_the_kinematic_consistency() {
     for t in TESTS {
         let gap = r.get(t, "accel_over_disp_measured") - 1.0;
         let p = predicted(freq(t));
-        assert!((gap - p).abs() < 0.25 * p + 5e-4, "{t}: a/x − 1 = {gap} against {p}");
-        assert!((r.get(t, "accel_over_disp_model") - 1.0).abs() < 1e-3, "{t}: the model is one body");
+        assert!(
+            (gap - p).abs() < 0.25 * p + 5e-4,
+            "{t}: a/x − 1 = {gap} against {p}"
+        );
+        assert!(
+            (r.get(t, "accel_over_disp_model") - 1.0).abs() < 1e-3,
+            "{t}: the model is one body"
+        );
     }
     for t in ["f6_a0p3", "f6_a1p5"] {
-        assert!(r.get(t, "rms_residual_disp_ratio") > 2.0 * r.get(t, "rms_residual_accel_ratio"), "{t}");
+        assert!(
+            r.get(t, "rms_residual_disp_ratio") > 2.0 * r.get(t, "rms_residual_accel_ratio"),
+            "{t}"
+        );
     }
 }
 
@@ -218,8 +336,14 @@ fn reaction_mass_breaks_the_kinematic_consistency() {
 fn leakage_shows_in_displacement_more_than_acceleration() {
     let r = hidden("leakage", &["leakage.c_int=2e-10"]);
     for t in ["f2_a0p3", "f6_a0p3", "f6_a1p5"] {
-        let (x, a) = (r.get(t, "rms_residual_disp_ratio"), r.get(t, "rms_residual_accel_ratio"));
-        assert!(x > 5.0 * a && a < 0.02, "{t}: displacement {x} vs acceleration {a}");
+        let (x, a) = (
+            r.get(t, "rms_residual_disp_ratio"),
+            r.get(t, "rms_residual_accel_ratio"),
+        );
+        assert!(
+            x > 5.0 * a && a < 0.02,
+            "{t}: displacement {x} vs acceleration {a}"
+        );
     }
 }
 
@@ -229,10 +353,20 @@ fn leakage_shows_in_displacement_more_than_acceleration() {
 fn flow_saturation_bites_at_high_velocity_demand() {
     let r = hidden("flow_saturation", &[]);
     let res = |t: &str| r.get(t, "rms_residual_accel_ratio");
-    assert!(res("f2_a1p5") > 100.0 * res("f6_a0p3"), "{} vs {}", res("f2_a1p5"), res("f6_a0p3"));
+    assert!(
+        res("f2_a1p5") > 100.0 * res("f6_a0p3"),
+        "{} vs {}",
+        res("f2_a1p5"),
+        res("f6_a0p3")
+    );
     assert!(res("f3_a3p2") > 0.05);
     let dh3 = |t: &str| r.get(t, "h3_measured_ratio") - r.get(t, "h3_model_ratio");
-    assert!(dh3("f3_a3p2") > 0.01 && dh3("f6_a0p3").abs() < 1e-3, "{} {}", dh3("f3_a3p2"), dh3("f6_a0p3"));
+    assert!(
+        dh3("f3_a3p2") > 0.01 && dh3("f6_a0p3").abs() < 1e-3,
+        "{} {}",
+        dh3("f3_a3p2"),
+        dh3("f6_a0p3")
+    );
     assert!(r.get("f3_a3p2", "amp_ratio_measured") < r.get("f3_a3p2", "amp_ratio_model") - 0.05);
 }
 
@@ -242,7 +376,12 @@ fn flow_saturation_bites_at_high_velocity_demand() {
 fn hold_down_nonlinearity_grows_with_displacement() {
     let r = hidden("hold_down", &[]);
     let res = |t: &str| r.get(t, "rms_residual_accel_ratio");
-    assert!(res("f2_a1p5") > 100.0 * res("f6_a1p5"), "{} vs {}", res("f2_a1p5"), res("f6_a1p5"));
+    assert!(
+        res("f2_a1p5") > 100.0 * res("f6_a1p5"),
+        "{} vs {}",
+        res("f2_a1p5"),
+        res("f6_a1p5")
+    );
     let dh3 = r.get("f2_a1p5", "h3_measured_ratio") - r.get("f2_a1p5", "h3_model_ratio");
     assert!(dh3 > 0.005, "{dh3}");
 }
@@ -253,8 +392,16 @@ fn hold_down_nonlinearity_grows_with_displacement() {
 fn port_asymmetry_shows_as_even_harmonics() {
     let r = hidden("asymmetry", &[]);
     for t in ["f2_a0p3", "f2_a1p5", "f6_a0p3", "f6_a1p5", "f3_a3p2"] {
-        assert!(r.get(t, "r2") > 2.0 * r.get(t, "r3"), "{t}: |R2| {} vs |R3| {}", r.get(t, "r2"), r.get(t, "r3"));
-        assert!(r.get(t, "rms_residual_disp_ratio") > r.get(t, "rms_residual_accel_ratio"), "{t}");
+        assert!(
+            r.get(t, "r2") > 2.0 * r.get(t, "r3"),
+            "{t}: |R2| {} vs |R3| {}",
+            r.get(t, "r2"),
+            r.get(t, "r3")
+        );
+        assert!(
+            r.get(t, "rms_residual_disp_ratio") > r.get(t, "rms_residual_accel_ratio"),
+            "{t}"
+        );
     }
 }
 
@@ -266,17 +413,35 @@ fn a_switched_off_effect_is_neutral() {
     let base = "[excitation]\nkind = \"sine\"\nfreq_hz = 3.0\namp_g = 1.73\nwindow_cycles = 4\n";
     // Each run's full history, every channel, as bits.
     let history = |name: &str, model: &str| -> Vec<Vec<u64>> {
-        let (file, out) = (d.path().join(format!("{name}.toml")), d.path().join(format!("{name}.parquet")));
+        let (file, out) = (
+            d.path().join(format!("{name}.toml")),
+            d.path().join(format!("{name}.parquet")),
+        );
         std::fs::write(&file, format!("{model}{base}")).unwrap();
-        let (code, stdout, stderr) = study(&["sim", file.to_str().unwrap(), "-q", "--out", out.to_str().unwrap()]);
+        let (code, stdout, stderr) = study(&[
+            "sim",
+            file.to_str().unwrap(),
+            "-q",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
         assert_eq!(code, 0, "{name}: {stdout}{stderr}");
-        let names: Vec<&str> = vshake::orchestration::sim::CHANNELS.iter().map(|c| c.name).collect();
+        let names: Vec<&str> = vshake::orchestration::sim::CHANNELS
+            .iter()
+            .map(|c| c.name)
+            .collect();
         let t = vshake::shell::tables::read_columns_allow_nan(&out, &names).unwrap();
-        names.iter().map(|n| t.column(n).unwrap().iter().map(|v| v.to_bits()).collect()).collect()
+        names
+            .iter()
+            .map(|n| t.column(n).unwrap().iter().map(|v| v.to_bits()).collect())
+            .collect()
     };
     let a = history("a", "");
     let b = history("b", "[model.seal_friction]\nenabled = false\nf_c = 9000.0\n[model.spool_dynamics]\nenabled = false\n");
-    assert_eq!(a, b, "switched off, the effects leave every channel bit for bit");
+    assert_eq!(
+        a, b,
+        "switched off, the effects leave every channel bit for bit"
+    );
     let c = history("c", "[model.seal_friction]\n");
     assert_ne!(a, c, "switched on, it changes the run");
 }
@@ -285,7 +450,10 @@ fn a_switched_off_effect_is_neutral() {
 /// bit, lane by lane, next to lanes where effects are on (the set's "neutral when off").
 /// An effect is switched on with its first freed parameter 10 % off its default, so one whose
 /// defaults are neutral (a flow-gain curve of 1) changes the run too.
-fn switched_on(base: &vshake::kernel::params::ModelParams, e: vshake::kernel::effects::EffectId) -> vshake::kernel::params::ModelParams {
+fn switched_on(
+    base: &vshake::kernel::params::ModelParams,
+    e: vshake::kernel::effects::EffectId,
+) -> vshake::kernel::params::ModelParams {
     let mut m = base.clone();
     *m.effects.get_mut(e) = true;
     let info = e.info();
@@ -296,19 +464,35 @@ fn switched_on(base: &vshake::kernel::params::ModelParams, e: vshake::kernel::ef
 }
 
 /// A lane's status and every metric's bit pattern (a sine's spectral metrics are NaN).
-fn bits(r: &vshake::kernel::simulate::LaneResult) -> (vshake::kernel::simulate::LaneStatus, Vec<u64>) {
+fn bits(
+    r: &vshake::kernel::simulate::LaneResult,
+) -> (vshake::kernel::simulate::LaneStatus, Vec<u64>) {
     (r.status, r.metrics.bits())
 }
 
 #[test]
 fn the_effect_set_is_the_baseline_where_everything_is_off() {
-    use vshake::kernel::effects::{effect_set, Baseline};
     use vshake::kernel::effects::EffectId;
+    use vshake::kernel::effects::{effect_set, Baseline};
     use vshake::kernel::params::ModelParams;
     use vshake::kernel::simulate::{self, LaneParams, NoObserver, Solver};
     let base = ModelParams::default();
-    let reference = vshake::kernel::excitation::Sine { freq_hz: 3.0, amp_m: 0.0488, taper_s: 1.0, duration_s: 3.0, window_cycles: Some(4) }.reference(1024.0);
-    let [expected] = simulate::run(&LaneParams::<1>::new(&[&base]).unwrap(), &Baseline, &reference, &Solver::default(), &mut NoObserver).unwrap();
+    let reference = vshake::kernel::excitation::Sine {
+        freq_hz: 3.0,
+        amp_m: 0.0488,
+        taper_s: 1.0,
+        duration_s: 3.0,
+        window_cycles: Some(4),
+    }
+    .reference(1024.0);
+    let [expected] = simulate::run(
+        &LaneParams::<1>::new(&[&base]).unwrap(),
+        &Baseline,
+        &reference,
+        &Solver::default(),
+        &mut NoObserver,
+    )
+    .unwrap();
     // Lane 0 off, lanes 1.. with one effect each.
     let mut sets = vec![base.clone()];
     for e in EffectId::ALL.into_iter().take(7) {
@@ -316,10 +500,25 @@ fn the_effect_set_is_the_baseline_where_everything_is_off() {
     }
     let refs: Vec<&ModelParams> = sets.iter().collect();
     let lp = LaneParams::<8>::new(&refs).unwrap();
-    let got = simulate::run(&lp, &effect_set::<8>(&refs), &reference, &Solver::default(), &mut NoObserver).unwrap();
-    assert_eq!(bits(&got[0]), bits(&expected), "all off = baseline, bit for bit");
+    let got = simulate::run(
+        &lp,
+        &effect_set::<8>(&refs),
+        &reference,
+        &Solver::default(),
+        &mut NoObserver,
+    )
+    .unwrap();
+    assert_eq!(
+        bits(&got[0]),
+        bits(&expected),
+        "all off = baseline, bit for bit"
+    );
     for (l, e) in EffectId::ALL.into_iter().take(7).enumerate() {
-        assert_ne!(got[l + 1].metrics.amp_ratio, expected.metrics.amp_ratio, "{e} on changes the run");
+        assert_ne!(
+            got[l + 1].metrics.amp_ratio,
+            expected.metrics.amp_ratio,
+            "{e} on changes the run"
+        );
     }
     // The remaining effects, each on in its own lane next to an all-off lane.
     let mut sets = vec![base.clone()];
@@ -328,10 +527,21 @@ fn the_effect_set_is_the_baseline_where_everything_is_off() {
     }
     let refs: Vec<&ModelParams> = sets.iter().collect();
     let lp = LaneParams::<8>::new(&refs).unwrap();
-    let got = simulate::run(&lp, &effect_set::<8>(&refs), &reference, &Solver::default(), &mut NoObserver).unwrap();
+    let got = simulate::run(
+        &lp,
+        &effect_set::<8>(&refs),
+        &reference,
+        &Solver::default(),
+        &mut NoObserver,
+    )
+    .unwrap();
     assert_eq!(bits(&got[0]), bits(&expected));
     for (l, e) in EffectId::ALL.into_iter().skip(7).enumerate() {
-        assert_ne!(got[l + 1].metrics.amp_ratio, expected.metrics.amp_ratio, "{e} on changes the run");
+        assert_ne!(
+            got[l + 1].metrics.amp_ratio,
+            expected.metrics.amp_ratio,
+            "{e} on changes the run"
+        );
     }
 }
 
@@ -346,7 +556,14 @@ fn a_kernel_for_one_effect_equals_the_effect_set_bit_for_bit() {
     use vshake::kernel::simulate::{self, LaneParams, NoObserver, Solver};
     use vshake::orchestration::sim::run_lanes_single;
     let base = ModelParams::default();
-    let reference = vshake::kernel::excitation::Sine { freq_hz: 5.0, amp_m: 0.02, taper_s: 0.5, duration_s: 1.5, window_cycles: Some(4) }.reference(1024.0);
+    let reference = vshake::kernel::excitation::Sine {
+        freq_hz: 5.0,
+        amp_m: 0.02,
+        taper_s: 0.5,
+        duration_s: 1.5,
+        window_cycles: Some(4),
+    }
+    .reference(1024.0);
     for e in EffectId::ALL {
         let mut sets = vec![base.clone()];
         for k in 1..8 {
@@ -358,9 +575,25 @@ fn a_kernel_for_one_effect_equals_the_effect_set_bit_for_bit() {
             sets.push(m);
         }
         let refs: Vec<&ModelParams> = sets.iter().collect();
-        let whole = simulate::run(&LaneParams::<8>::new(&refs).unwrap(), &effect_set::<8>(&refs), &reference, &Solver::default(), &mut NoObserver).unwrap();
-        let single = run_lanes_single::<8, _>(&refs, &reference, &Solver::default(), &mut NoObserver).unwrap();
-        assert_eq!(single.iter().map(bits).collect::<Vec<_>>(), whole.iter().map(bits).collect::<Vec<_>>(), "{e}: the kernel for it alone = the effect set");
-        assert_ne!(single[1].metrics.amp_ratio, single[0].metrics.amp_ratio, "{e} on changes the run");
+        let whole = simulate::run(
+            &LaneParams::<8>::new(&refs).unwrap(),
+            &effect_set::<8>(&refs),
+            &reference,
+            &Solver::default(),
+            &mut NoObserver,
+        )
+        .unwrap();
+        let single =
+            run_lanes_single::<8, _>(&refs, &reference, &Solver::default(), &mut NoObserver)
+                .unwrap();
+        assert_eq!(
+            single.iter().map(bits).collect::<Vec<_>>(),
+            whole.iter().map(bits).collect::<Vec<_>>(),
+            "{e}: the kernel for it alone = the effect set"
+        );
+        assert_ne!(
+            single[1].metrics.amp_ratio, single[0].metrics.amp_ratio,
+            "{e} on changes the run"
+        );
     }
 }

@@ -27,18 +27,30 @@ fn rust_files(dir: &Path) -> Vec<PathBuf> {
 fn the_readme_layout_names_every_module() {
     let readme = std::fs::read_to_string(root().join("README.md")).unwrap();
     let start = readme.find("\n## Layout\n").expect("a Layout section");
-    let end = readme[start + 1..].find("\n## ").map_or(readme.len(), |e| start + 1 + e);
+    let end = readme[start + 1..]
+        .find("\n## ")
+        .map_or(readme.len(), |e| start + 1 + e);
     let section = &readme[start..end];
     for layer in ["kernel", "orchestration", "shell"] {
-        assert!(section.contains(&format!("`src/{layer}/`")), "the layer {layer} is not in the Layout section");
+        assert!(
+            section.contains(&format!("`src/{layer}/`")),
+            "the layer {layer} is not in the Layout section"
+        );
         let dir = root().join("src").join(layer);
         for f in std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().path()) {
             let stem = f.file_stem().unwrap().to_string_lossy().to_string();
             if stem == "mod" {
                 continue;
             }
-            let name = if f.is_dir() { format!("`{stem}/`") } else { format!("`{stem}`") };
-            assert!(section.contains(&name), "src/{layer}/{stem} is not named in the README's Layout section");
+            let name = if f.is_dir() {
+                format!("`{stem}/`")
+            } else {
+                format!("`{stem}`")
+            };
+            assert!(
+                section.contains(&name),
+                "src/{layer}/{stem} is not named in the README's Layout section"
+            );
         }
     }
 }
@@ -54,9 +66,16 @@ fn function_lengths(src: &str) -> Vec<(usize, String, usize)> {
         if line.starts_with("#[cfg(test)]") {
             break;
         }
-        let code = line.trim_start_matches("pub ").trim_start_matches("pub(crate) ").trim_start_matches("const ").trim_start_matches("unsafe ");
+        let code = line
+            .trim_start_matches("pub ")
+            .trim_start_matches("pub(crate) ")
+            .trim_start_matches("const ")
+            .trim_start_matches("unsafe ");
         if let Some(rest) = code.strip_prefix("fn ") {
-            let name: String = rest.chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect();
+            let name: String = rest
+                .chars()
+                .take_while(|c| c.is_alphanumeric() || *c == '_')
+                .collect();
             let (mut depth, mut started, mut j) = (0i64, false, i);
             'scan: while j < lines.len() {
                 let text = strip(lines[j]);
@@ -126,7 +145,10 @@ fn strip(line: &str) -> String {
 #[test]
 fn the_length_counter_counts() {
     let src = "fn a() {\n    let s = \"}\";\n    let c = '{';\n}\n\npub fn b<'a>(x: &'a str) -> &'a str {\n    // }\n    x\n}\n";
-    assert_eq!(function_lengths(src), vec![(4, "a".to_string(), 1), (4, "b".to_string(), 6)]);
+    assert_eq!(
+        function_lengths(src),
+        vec![(4, "a".to_string(), 1), (4, "b".to_string(), 6)]
+    );
 }
 
 /// No function in the shell or orchestration layers is over 80 lines (STYLE: one screen).
@@ -137,10 +159,17 @@ fn shell_and_orchestration_functions_fit_on_a_screen() {
         for f in rust_files(&root().join("src").join(layer)) {
             for (n, name, line) in function_lengths(&std::fs::read_to_string(&f).unwrap()) {
                 if n > 80 {
-                    long.push(format!("{}:{line} {name}: {n} lines", f.strip_prefix(root()).unwrap().display()));
+                    long.push(format!(
+                        "{}:{line} {name}: {n} lines",
+                        f.strip_prefix(root()).unwrap().display()
+                    ));
                 }
             }
         }
     }
-    assert!(long.is_empty(), "functions over 80 lines:\n{}", long.join("\n"));
+    assert!(
+        long.is_empty(),
+        "functions over 80 lines:\n{}",
+        long.join("\n")
+    );
 }

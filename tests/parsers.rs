@@ -22,7 +22,12 @@ fn check(result: anyhow::Result<()>, file: &Path) -> Result<(), TestCaseError> {
         let message = format!("{e:#}");
         prop_assert_eq!(exit_code(&e), 2, "not bad input: {}", message);
         let name = file.file_name().unwrap().to_string_lossy().to_string();
-        prop_assert!(message.contains(&name), "the message does not name {}: {}", name, message);
+        prop_assert!(
+            message.contains(&name),
+            "the message does not name {}: {}",
+            name,
+            message
+        );
     }
     Ok(())
 }
@@ -65,8 +70,28 @@ fn mutate(seed: &[u8], edits: &[Edit]) -> Vec<u8> {
 
 /// Values that break assumptions: wrong types, out of range, non-finite, huge, empty.
 const ODD_VALUES: [&str; 22] = [
-    "-1", "0", "1e400", "-1e400", "nan", "inf", "-inf", "1e9", "1000000000", "9223372036854775807", "-9223372036854775808", "\"\"", "\"x\"", "[]",
-    "{}", "[1, \"a\"]", "true", "0.5", "1e-300", "65537", "\"lhs\"", "\"../../nope.csv\"",
+    "-1",
+    "0",
+    "1e400",
+    "-1e400",
+    "nan",
+    "inf",
+    "-inf",
+    "1e9",
+    "1000000000",
+    "9223372036854775807",
+    "-9223372036854775808",
+    "\"\"",
+    "\"x\"",
+    "[]",
+    "{}",
+    "[1, \"a\"]",
+    "true",
+    "0.5",
+    "1e-300",
+    "65537",
+    "\"lhs\"",
+    "\"../../nope.csv\"",
 ];
 
 /// Puts an odd value after the `=` of some lines of a TOML text.
@@ -88,7 +113,14 @@ fn picks() -> impl Strategy<Value = Vec<(usize, usize)>> {
 // ---- study files ----------------------------------------------------------------------------
 
 fn study_seeds() -> Vec<Vec<u8>> {
-    ["studies/gains_sweep.toml", "studies/port_width.toml", "studies/smoke.toml"].iter().map(|p| std::fs::read(repo(p)).unwrap()).collect()
+    [
+        "studies/gains_sweep.toml",
+        "studies/port_width.toml",
+        "studies/smoke.toml",
+    ]
+    .iter()
+    .map(|p| std::fs::read(repo(p)).unwrap())
+    .collect()
 }
 
 /// Loads a study as `study run` does; an accepted one is also planned (references and the
@@ -99,7 +131,9 @@ fn try_study(dir: &Path, bytes: &[u8]) -> Result<(), TestCaseError> {
     let result = load_study(&path).and_then(|spec| {
         let small = spec.samples <= 100_000
             && spec.excitations.iter().all(|e| match &e.spec {
-                vshake::orchestration::spec::ExcitationSpec::Sine { sine, .. } => sine.duration_s <= 60.0,
+                vshake::orchestration::spec::ExcitationSpec::Sine { sine, .. } => {
+                    sine.duration_s <= 60.0
+                }
                 _ => true,
             });
         if small {
@@ -146,7 +180,11 @@ fn measured_csv() -> String {
         let t = k as f64 / 1024.0;
         let w = 2.0 * std::f64::consts::PI * 16.0;
         let x = 4.85e-4 * (w * t).sin() * (t / 0.125).min(1.0);
-        s += &format!("{t:.6},{x:.6e},{:.6e},{:.6e}\n", 0.98 * x, -w * w * 0.98 * x);
+        s += &format!(
+            "{t:.6},{x:.6e},{:.6e},{:.6e}\n",
+            0.98 * x,
+            -w * w * 0.98 * x
+        );
     }
     s
 }
@@ -163,7 +201,12 @@ fn measured_parquet(dir: &Path) -> Vec<u8> {
 }
 
 /// Loads a campaign and its one test as `study compare` does.
-fn try_campaign(dir: &Path, campaign: &[u8], data_name: &str, data: &[u8]) -> Result<(), TestCaseError> {
+fn try_campaign(
+    dir: &Path,
+    campaign: &[u8],
+    data_name: &str,
+    data: &[u8],
+) -> Result<(), TestCaseError> {
     let path = dir.join("fuzzed_campaign.toml");
     std::fs::write(&path, campaign).unwrap();
     std::fs::write(dir.join(data_name), data).unwrap();

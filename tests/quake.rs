@@ -15,8 +15,15 @@ use common::content;
 use vshake::shell::tables::read_columns_allow_nan;
 
 fn study(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_study")).args(args).output().expect("run study");
-    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stdout).into(), String::from_utf8_lossy(&out.stderr).into())
+    let out = Command::new(env!("CARGO_BIN_EXE_study"))
+        .args(args)
+        .output()
+        .expect("run study");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into(),
+        String::from_utf8_lossy(&out.stderr).into(),
+    )
 }
 
 fn ok(args: &[&str]) -> String {
@@ -43,8 +50,15 @@ fn write_at2(path: &Path, accel_g: &[f64], dt: f64) {
 fn record_g() -> Vec<f64> {
     let dt = 0.01;
     let white = quake::noise(42, 0, 3000);
-    let g = GroundParams { t_strong_s: 10.0, ..GroundParams::default() };
-    ground::filtered_noise(&g, &white, dt).iter().enumerate().map(|(k, a)| a / G + 0.01 + 0.005 * k as f64 / 3000.0).collect()
+    let g = GroundParams {
+        t_strong_s: 10.0,
+        ..GroundParams::default()
+    };
+    ground::filtered_noise(&g, &white, dt)
+        .iter()
+        .enumerate()
+        .map(|(k, a)| a / G + 0.01 + 0.005 * k as f64 / 3000.0)
+        .collect()
 }
 
 #[test]
@@ -71,30 +85,62 @@ fn an_at2_record_round_trips_read_scaled_integrated() {
     // Integrated: without processing, the baseline error runs the displacement away (tens of
     // metres); processed, the residual drift stays below 1e-3 of the peak displacement and the
     // table ends at rest.
-    let naive: f64 = scaled.iter().enumerate().map(|(k, a)| a * 0.01 * (3000 - k) as f64 * 0.01).sum();
+    let naive: f64 = scaled
+        .iter()
+        .enumerate()
+        .map(|(k, a)| a * 0.01 * (3000 - k) as f64 * 0.01)
+        .sum();
     assert!(naive.abs() > 5.0, "naive drift {naive} m");
     let p = ground::to_displacement(&scaled, 0.01, &Processing::default());
     let peak = p.disp_m.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    let peak_v = p.disp_m.windows(2).fold(0.0f64, |m, w| m.max(((w[1] - w[0]) / 0.01).abs()));
-    assert!(p.drift_m <= 1e-3 * peak, "drift {} m of a {peak} m peak", p.drift_m);
-    assert!(p.end_velocity_mps <= 1e-3 * peak_v, "end velocity {} m/s of a {peak_v} m/s peak", p.end_velocity_mps);
+    let peak_v = p
+        .disp_m
+        .windows(2)
+        .fold(0.0f64, |m, w| m.max(((w[1] - w[0]) / 0.01).abs()));
+    assert!(
+        p.drift_m <= 1e-3 * peak,
+        "drift {} m of a {peak} m peak",
+        p.drift_m
+    );
+    assert!(
+        p.end_velocity_mps <= 1e-3 * peak_v,
+        "end velocity {} m/s of a {peak_v} m/s peak",
+        p.end_velocity_mps
+    );
     println!("naive drift {naive:.2} m; processed: drift {:.3e} m of a {peak:.4} m peak ({:.2e}), end velocity {:.3e} m/s of {peak_v:.4} m/s", p.drift_m, p.drift_m / peak, p.end_velocity_mps);
     assert_eq!(p.pad, 1000);
     assert_eq!(p.disp_m.len(), 3000 + 2 * 1000);
 
     // The same file as a study excitation: `study sim` runs it and reports the spectral metrics.
     let sim = d.path().join("sim.toml");
-    std::fs::write(&sim, "[excitation]\nkind = \"record\"\nfile = \"RSN_TEST_090.AT2\"\npga_g = 0.35\n").unwrap();
+    std::fs::write(
+        &sim,
+        "[excitation]\nkind = \"record\"\nfile = \"RSN_TEST_090.AT2\"\npga_g = 0.35\n",
+    )
+    .unwrap();
     let out = ok(&["sim", sim.to_str().unwrap()]);
-    assert!(out.contains("acceleration record") && out.contains("scaled to 0.35 g"), "{out}");
-    let line = out.lines().find(|l| l.trim_start().starts_with("spectral_err_mean")).expect(&out);
+    assert!(
+        out.contains("acceleration record") && out.contains("scaled to 0.35 g"),
+        "{out}"
+    );
+    let line = out
+        .lines()
+        .find(|l| l.trim_start().starts_with("spectral_err_mean"))
+        .expect(&out);
     let v: f64 = line.split_whitespace().nth(1).unwrap().parse().unwrap();
     assert!(v.is_finite() && v > 0.0 && v < 1.0, "{line}");
     // Scaled beyond the table: refused before the run, naming the limit.
-    std::fs::write(&sim, "[excitation]\nkind = \"record\"\nfile = \"RSN_TEST_090.AT2\"\npga_g = 6.0\n").unwrap();
+    std::fs::write(
+        &sim,
+        "[excitation]\nkind = \"record\"\nfile = \"RSN_TEST_090.AT2\"\npga_g = 6.0\n",
+    )
+    .unwrap();
     let (code, out, err) = study(&["sim", sim.to_str().unwrap()]);
     assert_eq!(code, 2, "{out}{err}");
-    assert!(err.contains("RSN_TEST_090.AT2") && err.contains("table's limits"), "{err}");
+    assert!(
+        err.contains("RSN_TEST_090.AT2") && err.contains("table's limits"),
+        "{err}"
+    );
 }
 
 const PER_SAMPLE: &str = r#"
@@ -154,15 +200,35 @@ fn stochastic_realisations_are_bit_identical_across_threads_chunks_and_shards() 
     };
     let want = content(&run("t1.parquet", &["--threads", "1", "--chunk", "5"]));
     assert_eq!(want[0].1.len(), 26);
-    assert_eq!(content(&run("t2.parquet", &["--threads", "2", "--chunk", "3"])), want);
+    assert_eq!(
+        content(&run("t2.parquet", &["--threads", "2", "--chunk", "3"])),
+        want
+    );
     let shards = d.path().join("shards");
     std::fs::create_dir(&shards).unwrap();
     for i in 0..3 {
         let part = shards.join(format!("part{i}.parquet"));
-        ok(&["run", s, "--shard", &format!("{i}/3"), "--out", part.to_str().unwrap(), "--threads", &(i % 2 + 1).to_string(), "--chunk", "2", "-q"]);
+        ok(&[
+            "run",
+            s,
+            "--shard",
+            &format!("{i}/3"),
+            "--out",
+            part.to_str().unwrap(),
+            "--threads",
+            &(i % 2 + 1).to_string(),
+            "--chunk",
+            "2",
+            "-q",
+        ]);
     }
     let merged = d.path().join("merged.parquet");
-    ok(&["merge", shards.to_str().unwrap(), "--out", merged.to_str().unwrap()]);
+    ok(&[
+        "merge",
+        shards.to_str().unwrap(),
+        "--out",
+        merged.to_str().unwrap(),
+    ]);
     assert_eq!(content(&merged), want);
 
     // Each sample has its own realisation: no two samples' spectral errors are equal, and a
@@ -177,7 +243,12 @@ fn stochastic_realisations_are_bit_identical_across_threads_chunks_and_shards() 
     // Another seed, other motions.
     std::fs::write(&spec, PER_SAMPLE.replace("seed = 11", "seed = 12")).unwrap();
     let other = content(&run("seed12.parquet", &[]));
-    let other_err = other.iter().find(|(n, _)| n == "spectral_err_mean").unwrap().1.clone();
+    let other_err = other
+        .iter()
+        .find(|(n, _)| n == "spectral_err_mean")
+        .unwrap()
+        .1
+        .clone();
     assert!(other_err.iter().zip(&err).all(|(a, b)| a != b));
 }
 
@@ -187,21 +258,50 @@ fn the_record_sweep_writes_spectral_columns_duckdb_reads_and_sensitivity_ranks_t
     let out = d.path().join("record_sweep.parquet");
     let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("studies/record_sweep.toml");
     // 8 base points of the bundled design: 64 samples x 3 motions.
-    ok(&["run", file.to_str().unwrap(), "--samples", "8", "--out", out.to_str().unwrap(), "-q"]);
+    ok(&[
+        "run",
+        file.to_str().unwrap(),
+        "--samples",
+        "8",
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/check_spectral.py");
-    let py = Command::new("python3").arg(&script).arg(&out).arg("192").output().expect("python3");
-    assert!(py.status.success(), "DuckDB must read the spectral columns:\n{}{}", String::from_utf8_lossy(&py.stdout), String::from_utf8_lossy(&py.stderr));
+    let py = Command::new("python3")
+        .arg(&script)
+        .arg(&out)
+        .arg("192")
+        .output()
+        .expect("python3");
+    assert!(
+        py.status.success(),
+        "DuckDB must read the spectral columns:\n{}{}",
+        String::from_utf8_lossy(&py.stdout),
+        String::from_utf8_lossy(&py.stderr)
+    );
     assert_eq!(String::from_utf8_lossy(&py.stdout).lines().count(), 3);
 
     let sens = d.path().join("sens.parquet");
-    let said = ok(&["sensitivity", out.to_str().unwrap(), "--out", sens.to_str().unwrap(), "--metrics", "spectral_err_mean"]);
+    let said = ok(&[
+        "sensitivity",
+        out.to_str().unwrap(),
+        "--out",
+        sens.to_str().unwrap(),
+        "--metrics",
+        "spectral_err_mean",
+    ]);
     for m in ["firm_0p5g", "soft_0p4g", "rock_0p8g"] {
         assert!(said.contains(&format!("spectral_err_mean @ {m}")), "{said}");
     }
     let t = read_columns_allow_nan(&sens, &["st", "s1"]).unwrap();
     // One row per motion and gain, each with a total index.
     assert_eq!(t.rows(), 3 * 6);
-    assert!(t.column("st").unwrap().iter().all(|v| v.is_finite()), "{:?}", t.column("st"));
+    assert!(
+        t.column("st").unwrap().iter().all(|v| v.is_finite()),
+        "{:?}",
+        t.column("st")
+    );
 }
 
 /// The default step is converged on earthquake motions too: on the record benchmark's motion
@@ -219,20 +319,56 @@ fn the_default_step_is_converged_on_ground_motions() {
     ];
     let mut worst = (0.0f64, String::new());
     for (k, ground) in motions.into_iter().enumerate() {
-        let exc = ExcitationSpec::Stochastic { duration_s: 15.0, realisation: Realisation::Fixed(k as u64), seed: None, ground, processing: Processing::default(), f_ref_hz: 50.0 };
-        let r = quake::generated(&exc, &ModelParams::default(), 20261123, 0).unwrap().with_spectrum(quake::default_spectrum());
-        for (g_d, l_v, l_a, g_f) in [(1.5, 0.38, 0.52, -1.5), (1.1, 0.29, 0.39, -1.9), (1.9, 0.47, 0.65, -1.1)] {
+        let exc = ExcitationSpec::Stochastic {
+            duration_s: 15.0,
+            realisation: Realisation::Fixed(k as u64),
+            seed: None,
+            ground,
+            processing: Processing::default(),
+            f_ref_hz: 50.0,
+        };
+        let r = quake::generated(&exc, &ModelParams::default(), 20261123, 0)
+            .unwrap()
+            .with_spectrum(quake::default_spectrum());
+        for (g_d, l_v, l_a, g_f) in [
+            (1.5, 0.38, 0.52, -1.5),
+            (1.1, 0.29, 0.39, -1.9),
+            (1.9, 0.47, 0.65, -1.1),
+        ] {
             let mut p = ModelParams::default();
-            (p.controller.g_d, p.controller.l_v, p.controller.l_a, p.controller.g_f) = (g_d, l_v, l_a, g_f);
-            let run = |substeps| vshake::orchestration::sim::run_lanes::<1, _>(&[&p], &r, &Solver { substeps }, &mut NoObserver).unwrap()[0];
+            (
+                p.controller.g_d,
+                p.controller.l_v,
+                p.controller.l_a,
+                p.controller.g_f,
+            ) = (g_d, l_v, l_a, g_f);
+            let run = |substeps| {
+                vshake::orchestration::sim::run_lanes::<1, _>(
+                    &[&p],
+                    &r,
+                    &Solver { substeps },
+                    &mut NoObserver,
+                )
+                .unwrap()[0]
+            };
             let (a, b) = (run(Solver::default().substeps), run(32));
-            assert!(a.status == LaneStatus::Ok && b.status == LaneStatus::Ok, "motion {k}: {:?} {:?}", a.status, b.status);
+            assert!(
+                a.status == LaneStatus::Ok && b.status == LaneStatus::Ok,
+                "motion {k}: {:?} {:?}",
+                a.status,
+                b.status
+            );
             for ((name, x), (_, y)) in a.metrics.columns().into_iter().zip(b.metrics.columns()) {
                 if x.is_nan() && y.is_nan() {
                     continue;
                 }
                 if !((x - y).abs() <= worst.0) {
-                    worst = ((x - y).abs(), format!("motion {k}, gains {g_d}/{l_v}/{l_a}/{g_f}, {name}: {x} against {y}"));
+                    worst = (
+                        (x - y).abs(),
+                        format!(
+                            "motion {k}, gains {g_d}/{l_v}/{l_a}/{g_f}, {name}: {x} against {y}"
+                        ),
+                    );
                 }
             }
         }

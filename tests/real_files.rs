@@ -8,8 +8,15 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 fn study(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_study")).args(args).output().expect("run study");
-    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stdout).into(), String::from_utf8_lossy(&out.stderr).into())
+    let out = Command::new(env!("CARGO_BIN_EXE_study"))
+        .args(args)
+        .output()
+        .expect("run study");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into(),
+        String::from_utf8_lossy(&out.stderr).into(),
+    )
 }
 
 /// Two sine tests (3 Hz 1.73 g and 4 Hz 1 g), CSV files.
@@ -52,8 +59,15 @@ impl Csv {
     fn read(path: &Path) -> Csv {
         let text = std::fs::read_to_string(path).unwrap();
         let mut lines = text.lines();
-        let header = lines.next().unwrap().split(',').map(str::to_string).collect();
-        let rows = lines.map(|l| l.split(',').map(str::to_string).collect()).collect();
+        let header = lines
+            .next()
+            .unwrap()
+            .split(',')
+            .map(str::to_string)
+            .collect();
+        let rows = lines
+            .map(|l| l.split(',').map(str::to_string).collect())
+            .collect();
         Csv { header, rows }
     }
     fn write(&self, path: &Path, sep: &str) {
@@ -65,7 +79,10 @@ impl Csv {
         std::fs::write(path, s).unwrap();
     }
     fn col(&self, name: &str) -> usize {
-        self.header.iter().position(|h| h == name).unwrap_or_else(|| panic!("no column {name}"))
+        self.header
+            .iter()
+            .position(|h| h == name)
+            .unwrap_or_else(|| panic!("no column {name}"))
     }
     /// Applies `f` to every cell of column `name`.
     fn map(&mut self, name: &str, f: impl Fn(f64) -> String) {
@@ -78,7 +95,10 @@ impl Csv {
 
 /// `v` printed with `d` significant digits, as a DAQ export does (`%.{d}g`).
 fn sig(v: f64, d: usize) -> String {
-    format!("{:.*e}", d - 1, v).parse::<f64>().unwrap().to_string()
+    format!("{:.*e}", d - 1, v)
+        .parse::<f64>()
+        .unwrap()
+        .to_string()
 }
 
 /// Copies the campaign in `from` to `to`, each data file transformed by `f`.
@@ -101,14 +121,23 @@ struct Results {
 
 impl Results {
     fn col(&self, name: &str) -> Vec<f64> {
-        let t = vshake::shell::tables::read_columns_allow_nan(&self.report.join("tests.parquet"), &[name]).unwrap();
+        let t = vshake::shell::tables::read_columns_allow_nan(
+            &self.report.join("tests.parquet"),
+            &[name],
+        )
+        .unwrap();
         t.column(name).unwrap().to_vec()
     }
 }
 
 fn compare(campaign: &Path, extra: &[&str]) -> Results {
     let report = campaign.parent().unwrap().join("report");
-    let mut args = vec!["compare", campaign.to_str().unwrap(), "--report", report.to_str().unwrap()];
+    let mut args = vec![
+        "compare",
+        campaign.to_str().unwrap(),
+        "--report",
+        report.to_str().unwrap(),
+    ];
     args.extend_from_slice(extra);
     let (code, stdout, stderr) = study(&args);
     assert_eq!(code, 0, "{stdout}{stderr}");
@@ -116,8 +145,15 @@ fn compare(campaign: &Path, extra: &[&str]) -> Results {
 }
 
 /// Columns of the tests table that must not move with the file's layout.
-const RESULT_COLUMNS: [&str; 7] =
-    ["amp_ratio_measured", "amp_ratio_model", "phase_measured_deg", "phase_model_deg", "h3_measured_ratio", "rms_residual_accel_ratio", "rms_residual_disp_ratio"];
+const RESULT_COLUMNS: [&str; 7] = [
+    "amp_ratio_measured",
+    "amp_ratio_model",
+    "phase_measured_deg",
+    "phase_model_deg",
+    "h3_measured_ratio",
+    "rms_residual_accel_ratio",
+    "rms_residual_disp_ratio",
+];
 
 fn assert_same(a: &Results, b: &Results, tol: f64, what: &str) {
     for c in RESULT_COLUMNS {
@@ -135,10 +171,19 @@ fn rounded_time_is_rebuilt_and_gives_the_clean_results() {
     let clean = synth(&d.path().join("clean"), &[]);
     let base = compare(&clean, &[]);
     for digits in [6, 7, 9] {
-        let c = transform(&d.path().join("clean"), &d.path().join(format!("t{digits}")), |csv| csv.map("time_s", |t| sig(t, digits)));
+        let c = transform(
+            &d.path().join("clean"),
+            &d.path().join(format!("t{digits}")),
+            |csv| csv.map("time_s", |t| sig(t, digits)),
+        );
         let r = compare(&c, &[]);
         assert_same(&r, &base, 1e-12, &format!("{digits} digits"));
-        assert!(r.stdout.contains("consistent with rounding to") && r.stdout.contains("the grid was rebuilt"), "{}", r.stdout);
+        assert!(
+            r.stdout.contains("consistent with rounding to")
+                && r.stdout.contains("the grid was rebuilt"),
+            "{}",
+            r.stdout
+        );
         assert_eq!(r.col("rate_hz"), vec![1024.0, 1024.0]);
     }
 }
@@ -153,14 +198,22 @@ fn other_sample_rates_are_compared_on_their_own_samples() {
     for rate in ["256", "500", "2048"] {
         let r = compare(&synth(&d.path().join(rate), &["--rate", rate]), &[]);
         assert_eq!(r.col("rate_hz"), vec![rate.parse::<f64>().unwrap(); 2]);
-        for c in ["rms_residual_accel_ratio", "rms_residual_disp_ratio", "rms_residual_force_ratio"] {
+        for c in [
+            "rms_residual_accel_ratio",
+            "rms_residual_disp_ratio",
+            "rms_residual_force_ratio",
+        ] {
             for v in r.col(c) {
                 assert!(v < 1e-5, "{rate} Hz: {c} = {v}");
             }
         }
         // The acceleration sampled off the ticks aliases the controller-rate ripple (no
         // anti-aliasing filter in synth): a few 1e-4 of the fundamental.
-        for (c, tol) in [("amp_ratio_measured", 1e-3), ("phase_measured_deg", 0.05), ("h3_measured_ratio", 1e-3)] {
+        for (c, tol) in [
+            ("amp_ratio_measured", 1e-3),
+            ("phase_measured_deg", 0.05),
+            ("h3_measured_ratio", 1e-3),
+        ] {
             for (x, y) in r.col(c).iter().zip(base.col(c)) {
                 assert!((x - y).abs() < tol, "{rate} Hz: {c} {x} vs {y} at 1024 Hz");
             }
@@ -174,11 +227,20 @@ fn other_sample_rates_are_compared_on_their_own_samples() {
 fn harmonics_above_nyquist_are_left_out_and_never_drawn() {
     let d = tempfile::tempdir().unwrap();
     let r = compare(&synth(d.path(), &["--rate", "50"]), &[]);
-    assert!(r.stdout.contains("at or above the Nyquist frequency of a 50 Hz file (25 Hz): left out"), "{}", r.stdout);
+    assert!(
+        r.stdout
+            .contains("at or above the Nyquist frequency of a 50 Hz file (25 Hz): left out"),
+        "{}",
+        r.stdout
+    );
     // 3 Hz: h9 (27 Hz) is out, h8 (24 Hz) is in; 4 Hz: h7 (28 Hz) and up are out.
     let h9 = r.col("h9_measured_ratio");
     assert!(h9[0].is_nan() && h9[1].is_nan());
-    assert!(r.col("h8_measured_ratio")[0].is_finite() && r.col("h6_measured_ratio")[1].is_finite() && r.col("h7_measured_ratio")[1].is_nan());
+    assert!(
+        r.col("h8_measured_ratio")[0].is_finite()
+            && r.col("h6_measured_ratio")[1].is_finite()
+            && r.col("h7_measured_ratio")[1].is_nan()
+    );
     let html = std::fs::read_to_string(r.report.join("report.html")).unwrap();
     for bad in ["NaN", "inf"] {
         assert!(!html.contains(bad), "the report shows {bad}");
@@ -192,11 +254,19 @@ fn pre_trigger_extra_length_and_time_origin_are_found() {
     let d = tempfile::tempdir().unwrap();
     let base = compare(&synth(&d.path().join("clean"), &[]), &[]);
     // synth's own pre-trigger.
-    let pre = compare(&synth(&d.path().join("pre"), &["--pre-trigger", "0.5"]), &[]);
+    let pre = compare(
+        &synth(&d.path().join("pre"), &["--pre-trigger", "0.5"]),
+        &[],
+    );
     assert_same(&pre, &base, 1e-9, "pre-trigger");
     assert_eq!(pre.col("start_s"), vec![0.5, 0.5]);
     assert_eq!(pre.col("start_row"), vec![513.0, 513.0]);
-    assert!(pre.stdout.contains("the excitation starts at t = 0.5000 s (row 513; found from ref_disp_m)"), "{}", pre.stdout);
+    assert!(
+        pre.stdout
+            .contains("the excitation starts at t = 0.5000 s (row 513; found from ref_disp_m)"),
+        "{}",
+        pre.stdout
+    );
     // 1 s at rest appended (the reference back at 0, the sensors at their last value).
     let post = transform(&d.path().join("clean"), &d.path().join("post"), |csv| {
         let (t, x) = (csv.col("time_s"), csv.col("ref_disp_m"));
@@ -212,23 +282,38 @@ fn pre_trigger_extra_length_and_time_origin_are_found() {
     let post = compare(&post, &[]);
     assert_same(&post, &base, 1e-9, "1 s longer");
     assert_eq!(post.col("end_s"), vec![3.0, 3.0]);
-    assert!(post.stdout.contains("the excitation ends at t = 3.0000 s"), "{}", post.stdout);
+    assert!(
+        post.stdout.contains("the excitation ends at t = 3.0000 s"),
+        "{}",
+        post.stdout
+    );
     // Another time origin.
-    let late = transform(&d.path().join("clean"), &d.path().join("late"), |csv| csv.map("time_s", |t| format!("{:?}", t + 1000.0)));
+    let late = transform(&d.path().join("clean"), &d.path().join("late"), |csv| {
+        csv.map("time_s", |t| format!("{:?}", t + 1000.0))
+    });
     let late = compare(&late, &[]);
     assert_same(&late, &base, 1e-9, "time from 1000 s");
     assert_eq!(late.col("start_s"), vec![1000.0, 1000.0]);
     // `t0_s` in the campaign overrides the search.
     let given = d.path().join("pre/given.toml");
-    std::fs::write(&given, CAMPAIGN.replace("taper_s = 1.0 }", "taper_s = 1.0 }\nt0_s = 0.5")).unwrap();
+    std::fs::write(
+        &given,
+        CAMPAIGN.replace("taper_s = 1.0 }", "taper_s = 1.0 }\nt0_s = 0.5"),
+    )
+    .unwrap();
     let (code, stdout, stderr) = study(&["compare", given.to_str().unwrap()]);
     assert_eq!(code, 0, "{stderr}");
     assert!(stdout.contains("0.5000 s (row 513, t0_s)"), "{stdout}");
     // Too short for the analysis window: an error naming the test.
-    let short = transform(&d.path().join("clean"), &d.path().join("short"), |csv| csv.rows.truncate(1500));
+    let short = transform(&d.path().join("clean"), &d.path().join("short"), |csv| {
+        csv.rows.truncate(1500)
+    });
     let (code, _, stderr) = study(&["compare", short.to_str().unwrap()]);
     assert_eq!(code, 2, "{stderr}");
-    assert!(stderr.contains("sine_3hz_1p73g") && stderr.contains("too short"), "{stderr}");
+    assert!(
+        stderr.contains("sine_3hz_1p73g") && stderr.contains("too short"),
+        "{stderr}"
+    );
 }
 
 /// Columns in another order, columns vshake does not read, `;` with decimal commas and tabs:
@@ -241,9 +326,11 @@ fn column_order_extra_columns_and_separators_do_not_matter() {
     let shuffled = transform(&clean_dir, &d.path().join("shuffled"), |csv| {
         let order: Vec<usize> = vec![3, 0, 8, 1, 5, 2, 7, 4, 6];
         assert_eq!(csv.header.len(), order.len());
-        let pick = |r: &Vec<String>| -> Vec<String> { order.iter().map(|&i| r[i].clone()).collect() };
-        csv.header = pick(&csv.header);
-        csv.rows = csv.rows.iter().map(pick).collect();
+        fn pick(order: &[usize], r: &[String]) -> Vec<String> {
+            order.iter().map(|&i| r[i].clone()).collect()
+        }
+        csv.header = pick(&order, &csv.header);
+        csv.rows = csv.rows.iter().map(|r| pick(&order, r)).collect();
         csv.header.insert(2, "temperature_c".into());
         csv.header.push("channel_17_raw".into());
         for (i, r) in csv.rows.iter_mut().enumerate() {
@@ -252,7 +339,10 @@ fn column_order_extra_columns_and_separators_do_not_matter() {
         }
     });
     assert_same(&compare(&shuffled, &[]), &base, 0.0, "columns reordered");
-    for (dir, sep, comma, word) in [("semi", ";", true, "semicolon"), ("tab", "\t", false, "tab")] {
+    for (dir, sep, comma, word) in [
+        ("semi", ";", true, "semicolon"),
+        ("tab", "\t", false, "tab"),
+    ] {
         let to = d.path().join(dir);
         std::fs::create_dir_all(&to).unwrap();
         std::fs::copy(clean_dir.join("real.toml"), to.join("real.toml")).unwrap();
@@ -269,7 +359,12 @@ fn column_order_extra_columns_and_separators_do_not_matter() {
         }
         let r = compare(&to.join("real.toml"), &[]);
         assert_same(&r, &base, 0.0, word);
-        assert!(r.stdout.contains(&format!("read as {word}-separated values")), "{}", r.stdout);
+        assert!(
+            r.stdout
+                .contains(&format!("read as {word}-separated values")),
+            "{}",
+            r.stdout
+        );
     }
 }
 
@@ -280,7 +375,8 @@ fn wrong_files_get_a_warning_that_names_test_and_cause() {
     let d = tempfile::tempdir().unwrap();
     let clean = d.path().join("clean");
     synth(&clean, &[]);
-    let cases: Vec<(&str, Box<dyn Fn(&Path, &Path)>, Vec<&str>)> = vec![
+    type Mangle = Box<dyn Fn(&Path, &Path)>;
+    let cases: Vec<(&str, Mangle, Vec<&str>)> = vec![
         (
             "4 Hz file under a 3 Hz test",
             Box::new(|from: &Path, to: &Path| {
@@ -302,21 +398,37 @@ fn wrong_files_get_a_warning_that_names_test_and_cause() {
         let c = to.join("real.toml");
         let (code, stdout, stderr) = study(&["compare", c.to_str().unwrap()]);
         assert_eq!(code, 0, "{what}: {stderr}");
-        assert!(stderr.contains("warning(s) about the measured data"), "{what}: {stderr}");
+        assert!(
+            stderr.contains("warning(s) about the measured data"),
+            "{what}: {stderr}"
+        );
         for n in needles {
             assert!(stdout.contains(n), "{what}: expected {n:?} in\n{stdout}");
         }
-        assert!(stdout.contains("sine_3hz_1p73g"), "{what}: results still come out");
+        assert!(
+            stdout.contains("sine_3hz_1p73g"),
+            "{what}: results still come out"
+        );
         let (code, _, stderr) = study(&["compare", c.to_str().unwrap(), "--strict"]);
         assert_eq!(code, 2, "{what} under --strict: {stderr}");
-        assert!(stderr.contains(needles[0]), "{what} under --strict: {stderr}");
+        assert!(
+            stderr.contains(needles[0]),
+            "{what} under --strict: {stderr}"
+        );
     }
     // A displacement in mm at a 47.7 mm amplitude is beyond any stroke: an error with the cause.
     let to = d.path().join("mm");
-    transform(&clean, &to, |csv| csv.map("disp_m", |v| format!("{:?}", v * 1000.0)));
+    transform(&clean, &to, |csv| {
+        csv.map("disp_m", |v| format!("{:?}", v * 1000.0))
+    });
     let (code, _, stderr) = study(&["compare", to.join("real.toml").to_str().unwrap()]);
     assert_eq!(code, 2);
-    assert!(stderr.contains("sine_3hz_1p73g.csv: column `disp_m`") && stderr.contains("beyond any physical range") && stderr.contains("mm?"), "{stderr}");
+    assert!(
+        stderr.contains("sine_3hz_1p73g.csv: column `disp_m`")
+            && stderr.contains("beyond any physical range")
+            && stderr.contains("mm?"),
+        "{stderr}"
+    );
 }
 
 /// Multiplies column `name` of the 3 Hz test's file by `k`.
@@ -365,7 +477,11 @@ fn every_data_problem_of_a_campaign_at_once() {
     ] {
         assert!(stderr.contains(n), "expected {n:?} in\n{stderr}");
     }
-    assert_eq!(stderr.matches("not found").count(), 1, "said once: {stderr}");
+    assert_eq!(
+        stderr.matches("not found").count(),
+        1,
+        "said once: {stderr}"
+    );
     // The same under fit and diagnose (they read through the same path).
     for cmd in ["fit", "diagnose"] {
         let c = bad.join("real.toml");
@@ -375,7 +491,10 @@ fn every_data_problem_of_a_campaign_at_once() {
         }
         let (code, _, stderr) = study(&args);
         assert_eq!(code, 2, "{cmd}: {stderr}");
-        assert!(stderr.contains("5 problems in the measured data of"), "{cmd}: {stderr}");
+        assert!(
+            stderr.contains("5 problems in the measured data of"),
+            "{cmd}: {stderr}"
+        );
     }
 }
 
@@ -387,17 +506,32 @@ fn the_docs_describe_every_campaign_key() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let formats = std::fs::read_to_string(root.join("docs/formats.md")).expect("docs/formats.md");
     assert!(root.join("docs/model.md").is_file(), "docs/model.md");
-    for key in campaign::CAMPAIGN_KEYS.iter().chain(&campaign::TEST_KEYS).chain(&campaign::WEIGHT_KEYS).chain(&spec::SINE_KEYS).chain(&spec::RECORD_KEYS) {
-        assert!(formats.contains(&format!("`{key}`")), "docs/formats.md does not describe `{key}`");
+    for key in campaign::CAMPAIGN_KEYS
+        .iter()
+        .chain(&campaign::TEST_KEYS)
+        .chain(&campaign::WEIGHT_KEYS)
+        .chain(&spec::SINE_KEYS)
+        .chain(&spec::RECORD_KEYS)
+    {
+        assert!(
+            formats.contains(&format!("`{key}`")),
+            "docs/formats.md does not describe `{key}`"
+        );
     }
     let (code, help, _) = study(&["--help"]);
     assert_eq!(code, 0);
-    assert!(help.contains("docs/model.md") && help.contains("docs/formats.md"), "{help}");
+    assert!(
+        help.contains("docs/model.md") && help.contains("docs/formats.md"),
+        "{help}"
+    );
     let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
     assert!(readme.contains("docs/model.md") && readme.contains("docs/formats.md"));
     for text in [&readme, &help] {
         for stray in ["(FORMATS.md", "(MODEL.md", " FORMATS.md", " MODEL.md"] {
-            assert!(!text.contains(stray), "points to {stray:?} outside the repository");
+            assert!(
+                !text.contains(stray),
+                "points to {stray:?} outside the repository"
+            );
         }
     }
 }
@@ -409,30 +543,72 @@ fn the_docs_describe_every_campaign_key() {
 fn diagnosis_of_a_re_exported_campaign_is_the_clean_ones() {
     let d = tempfile::tempdir().unwrap();
     let noise = "accel=0.05,disp=2e-5";
-    let clean = synth(&d.path().join("clean"), &["--effect", "seal_friction", "--noise", noise]);
-    let re = synth(&d.path().join("re_raw"), &["--effect", "seal_friction", "--noise", noise, "--rate", "256", "--pre-trigger", "0.5"]);
-    let re = transform(re.parent().unwrap(), &d.path().join("re"), |csv| csv.map("time_s", |t| sig(t, 6)));
+    let clean = synth(
+        &d.path().join("clean"),
+        &["--effect", "seal_friction", "--noise", noise],
+    );
+    let re = synth(
+        &d.path().join("re_raw"),
+        &[
+            "--effect",
+            "seal_friction",
+            "--noise",
+            noise,
+            "--rate",
+            "256",
+            "--pre-trigger",
+            "0.5",
+        ],
+    );
+    let re = transform(re.parent().unwrap(), &d.path().join("re"), |csv| {
+        csv.map("time_s", |t| sig(t, 6))
+    });
     let run = |c: &Path| {
         let report = c.parent().unwrap().join("report");
-        let (code, stdout, stderr) = study(&["diagnose", c.to_str().unwrap(), "--report", report.to_str().unwrap()]);
+        let (code, stdout, stderr) = study(&[
+            "diagnose",
+            c.to_str().unwrap(),
+            "--report",
+            report.to_str().unwrap(),
+        ]);
         assert_eq!(code, 0, "{stderr}");
         // The verdict and the candidate's estimates from the report's tables.
         use vshake::shell::{meta, tables};
-        let verdict = meta::get(&tables::parquet_metadata(&report.join("candidates.parquet")).unwrap(), meta::Key::Verdict).unwrap().to_string();
+        let verdict = meta::get(
+            &tables::parquet_metadata(&report.join("candidates.parquet")).unwrap(),
+            meta::Key::Verdict,
+        )
+        .unwrap()
+        .to_string();
         let cands = report.join("candidates.parquet");
         let effects = tables::read_strings(&cands, "effect").unwrap();
-        let i = effects.iter().position(|e| e == "seal_friction").unwrap_or_else(|| panic!("{effects:?}"));
-        let (est, se) = (tables::read_f64_lists(&cands, "estimates").unwrap(), tables::read_f64_lists(&cands, "std_errors").unwrap());
+        let i = effects
+            .iter()
+            .position(|e| e == "seal_friction")
+            .unwrap_or_else(|| panic!("{effects:?}"));
+        let (est, se) = (
+            tables::read_f64_lists(&cands, "estimates").unwrap(),
+            tables::read_f64_lists(&cands, "std_errors").unwrap(),
+        );
         let fitted: Vec<(f64, f64)> = est[i].iter().copied().zip(se[i].iter().copied()).collect();
         (verdict, fitted, stdout)
     };
     let (v0, f0, out0) = run(&clean);
     let (v1, f1, out1) = run(&re);
-    assert!(v0.contains("most likely missing: seal_friction (friction)"), "{out0}");
-    assert!(v1.contains("most likely missing: seal_friction (friction)"), "{out1}");
+    assert!(
+        v0.contains("most likely missing: seal_friction (friction)"),
+        "{out0}"
+    );
+    assert!(
+        v1.contains("most likely missing: seal_friction (friction)"),
+        "{out1}"
+    );
     assert_eq!(f0.len(), 2);
     for ((a, sa), (b, sb)) in f0.iter().zip(&f1) {
         // Two independent noise draws: the difference has the combined standard error.
-        assert!((a - b).abs() <= 3.0 * sa.hypot(*sb), "{a} ± {sa} vs {b} ± {sb}\n{out0}\n{out1}");
+        assert!(
+            (a - b).abs() <= 3.0 * sa.hypot(*sb),
+            "{a} ± {sa} vs {b} ± {sb}\n{out0}\n{out1}"
+        );
     }
 }

@@ -5,23 +5,42 @@ use vshake::kernel::effects::Baseline;
 use vshake::kernel::excitation::{Reference, Sine};
 use vshake::kernel::metrics::Metrics;
 use vshake::kernel::params::{ModelParams, ValveLaw};
-use vshake::kernel::simulate::{self, LaneParams, LaneStatus, NoObserver, Observer, Solver, TickView};
+use vshake::kernel::simulate::{
+    self, LaneParams, LaneStatus, NoObserver, Observer, Solver, TickView,
+};
 use vshake::kernel::state::idx;
 
 fn reference_sine(amp_g: f64) -> Reference {
-    Sine { freq_hz: 3.0, amp_m: Sine::amp_from_g(amp_g, 3.0), taper_s: 1.0, duration_s: 3.0, window_cycles: Some(4) }.reference(1024.0)
+    Sine {
+        freq_hz: 3.0,
+        amp_m: Sine::amp_from_g(amp_g, 3.0),
+        taper_s: 1.0,
+        duration_s: 3.0,
+        window_cycles: Some(4),
+    }
+    .reference(1024.0)
 }
 
 fn metrics(p: &ModelParams, amp_g: f64, substeps: usize) -> Metrics {
     let lp = LaneParams::<1>::new(&[p]).unwrap();
-    let [r] = simulate::run(&lp, &Baseline, &reference_sine(amp_g), &Solver { substeps }, &mut NoObserver).unwrap();
+    let [r] = simulate::run(
+        &lp,
+        &Baseline,
+        &reference_sine(amp_g),
+        &Solver { substeps },
+        &mut NoObserver,
+    )
+    .unwrap();
     assert_eq!(r.status, LaneStatus::Ok);
     r.metrics
 }
 
 fn assert_rel(name: &str, got: f64, want: f64, tol: f64) {
     let rel = ((got - want) / want).abs();
-    assert!(rel <= tol, "{name}: got {got}, reference {want}, relative error {rel:.2e} > {tol}");
+    assert!(
+        rel <= tol,
+        "{name}: got {got}, reference {want}, relative error {rel:.2e} > {tol}"
+    );
 }
 
 /// docs/model.md §5: ±0.5 % relative on ratios, ±0.2° on phase, ±2 % relative on h_k. The table gives
@@ -30,11 +49,18 @@ fn assert_rel(name: &str, got: f64, want: f64, tol: f64) {
 fn reference_table_of_model_md_section_5() {
     let p = ModelParams::default();
     // amplitude, ratio, phase, h2, h3, h5, max|u|
-    let table = [(1.73, 0.9987, 0.07, 0.0143, 0.0309, 0.0090, 3.40), (3.20, 0.9428, -0.37, 0.0302, 0.0561, 0.0191, 6.27)];
+    let table = [
+        (1.73, 0.9987, 0.07, 0.0143, 0.0309, 0.0090, 3.40),
+        (3.20, 0.9428, -0.37, 0.0302, 0.0561, 0.0191, 6.27),
+    ];
     for (g, ratio, phase, h2, h3, h5, umax) in table {
         let m = metrics(&p, g, Solver::default().substeps);
         assert_rel(&format!("{g} g ratio"), m.amp_ratio, ratio, 0.005);
-        assert!((m.phase_err_deg - phase).abs() <= 0.2, "{g} g phase: got {} reference {phase}", m.phase_err_deg);
+        assert!(
+            (m.phase_err_deg - phase).abs() <= 0.2,
+            "{g} g phase: got {} reference {phase}",
+            m.phase_err_deg
+        );
         assert_rel(&format!("{g} g h2"), m.h(2), h2, 0.02);
         assert_rel(&format!("{g} g h3"), m.h(3), h3, 0.02);
         assert_rel(&format!("{g} g h5"), m.h(5), h5, 0.02);
@@ -47,12 +73,20 @@ fn reference_table_of_model_md_section_5() {
 #[test]
 fn linear_valve_removes_the_odd_harmonic_distortion() {
     let orifice = ModelParams::default();
-    let linear = ModelParams { valve_law: ValveLaw::Linear, ..ModelParams::default() };
+    let linear = ModelParams {
+        valve_law: ValveLaw::Linear,
+        ..ModelParams::default()
+    };
     for (g, thd_lin, thd_orf) in [(1.73, 0.0045, 0.0326), (3.20, 0.0032, 0.0603)] {
         let mo = metrics(&orifice, g, 8);
         let ml = metrics(&linear, g, 8);
         let factor = mo.thd_odd / ml.thd_odd;
-        assert!(factor >= 5.0, "{g} g: THD_odd orifice {} / linear {} = {factor:.2} < 5", mo.thd_odd, ml.thd_odd);
+        assert!(
+            factor >= 5.0,
+            "{g} g: THD_odd orifice {} / linear {} = {factor:.2} < 5",
+            mo.thd_odd,
+            ml.thd_odd
+        );
         assert_rel(&format!("{g} g THD_odd orifice"), mo.thd_odd, thd_orf, 0.02);
         assert_rel(&format!("{g} g THD_odd linear"), ml.thd_odd, thd_lin, 0.02);
     }
@@ -67,34 +101,68 @@ fn default_step_is_converged() {
     let n = Solver::default().substeps;
     let published = ModelParams::default();
     let mut corners = vec![published.clone()];
-    for (g_d, l_v, l_a, g_f) in [(1.1, 0.29, 0.39, -1.9), (1.9, 0.47, 0.65, -1.1), (1.1, 0.47, 0.39, -1.1), (1.9, 0.29, 0.65, -1.9)] {
+    for (g_d, l_v, l_a, g_f) in [
+        (1.1, 0.29, 0.39, -1.9),
+        (1.9, 0.47, 0.65, -1.1),
+        (1.1, 0.47, 0.39, -1.1),
+        (1.9, 0.29, 0.65, -1.9),
+    ] {
         let mut p = published.clone();
-        (p.controller.g_d, p.controller.l_v, p.controller.l_a, p.controller.g_f) = (g_d, l_v, l_a, g_f);
+        (
+            p.controller.g_d,
+            p.controller.l_v,
+            p.controller.l_a,
+            p.controller.g_f,
+        ) = (g_d, l_v, l_a, g_f);
         corners.push(p);
     }
     let mut worst = (0.0f64, String::new());
     for (c, p) in corners.iter().enumerate() {
         for g in [1.73, 3.20] {
             let lp = LaneParams::<1>::new(&[p]).unwrap();
-            let run = |substeps| simulate::run(&lp, &Baseline, &reference_sine(g), &Solver { substeps }, &mut NoObserver).unwrap()[0];
+            let run = |substeps| {
+                simulate::run(
+                    &lp,
+                    &Baseline,
+                    &reference_sine(g),
+                    &Solver { substeps },
+                    &mut NoObserver,
+                )
+                .unwrap()[0]
+            };
             let (a, b) = (run(n), run(32));
             if b.status != LaneStatus::Ok {
-                assert_ne!(a.status, LaneStatus::Ok, "corner {c} at {g} g: only the default step's run finished");
+                assert_ne!(
+                    a.status,
+                    LaneStatus::Ok,
+                    "corner {c} at {g} g: only the default step's run finished"
+                );
                 continue;
             }
-            assert_eq!(a.status, LaneStatus::Ok, "corner {c} at {g} g: the 32-substep run finished, the default step's did not");
+            assert_eq!(
+                a.status,
+                LaneStatus::Ok,
+                "corner {c} at {g} g: the 32-substep run finished, the default step's did not"
+            );
             for ((name, x), (_, y)) in a.metrics.columns().into_iter().zip(b.metrics.columns()) {
                 // The spectral metrics do not apply to a sine: NaN in both runs.
                 if x.is_nan() && y.is_nan() && name.starts_with("spectral_err") {
                     continue;
                 }
                 if !((x - y).abs() <= worst.0) {
-                    worst = ((x - y).abs(), format!("corner {c}, {g} g, {name}: {x} against {y}"));
+                    worst = (
+                        (x - y).abs(),
+                        format!("corner {c}, {g} g, {name}: {x} against {y}"),
+                    );
                 }
             }
         }
     }
-    assert!(worst.0 <= 1e-5, "{n} substeps are not converged: {}", worst.1);
+    assert!(
+        worst.0 <= 1e-5,
+        "{n} substeps are not converged: {}",
+        worst.1
+    );
     let p = ModelParams::default();
     for g in [1.73, 3.20] {
         let a = metrics(&p, g, n);
@@ -120,7 +188,10 @@ impl Observer<1> for RestProbe {
         self.ticks += 1;
         self.max_y = self.max_y.max(v.x[0].abs());
         for i in 0..2 {
-            self.max_dp = self.max_dp.max((v.state[idx::P1[i]][0] - self.p0.0).abs()).max((v.state[idx::P2[i]][0] - self.p0.1).abs());
+            self.max_dp = self
+                .max_dp
+                .max((v.state[idx::P1[i]][0] - self.p0.0).abs())
+                .max((v.state[idx::P2[i]][0] - self.p0.1).abs());
         }
     }
 }
@@ -131,16 +202,36 @@ fn zero_command_stays_at_rest() {
     let p = ModelParams::default();
     let n = 10 * 1024;
     let zero = vec![0.0; n];
-    let reference = Reference { f_s: 1024.0, x: zero.clone(), v: zero.clone(), a: zero.clone(), j: zero.clone(), command: zero, window: (0, n), fundamental_hz: None, drive: Default::default(), spectrum: None };
+    let reference = Reference {
+        f_s: 1024.0,
+        x: zero.clone(),
+        v: zero.clone(),
+        a: zero.clone(),
+        j: zero.clone(),
+        command: zero,
+        window: (0, n),
+        fundamental_hz: None,
+        drive: Default::default(),
+        spectrum: None,
+    };
     let (p1, p2) = p.no_load_pressures();
     assert!((p1 - 8.2136e6).abs() < 100.0 && (p2 - 12.8364e6).abs() < 100.0);
-    let mut probe = RestProbe { max_y: 0.0, max_dp: 0.0, p0: (p1, p2), ticks: 0 };
+    let mut probe = RestProbe {
+        max_y: 0.0,
+        max_dp: 0.0,
+        p0: (p1, p2),
+        ticks: 0,
+    };
     let lp = LaneParams::<1>::new(&[&p]).unwrap();
     let [r] = simulate::run(&lp, &Baseline, &reference, &Solver::default(), &mut probe).unwrap();
     assert_eq!(r.status, LaneStatus::Ok);
     assert_eq!(probe.ticks, n);
     assert!(probe.max_y < 1e-6, "|y| reached {} m", probe.max_y);
-    assert!(probe.max_dp < 1.0, "pressures drifted by {} Pa", probe.max_dp);
+    assert!(
+        probe.max_dp < 1.0,
+        "pressures drifted by {} Pa",
+        probe.max_dp
+    );
     assert_eq!(r.metrics.max_abs_u_v, 0.0);
 }
 
@@ -159,22 +250,58 @@ fn lanes_are_independent_and_equal_the_scalar_path() {
     let refs: Vec<&ModelParams> = sets.iter().collect();
     let reference = reference_sine(1.73);
     let lp8 = LaneParams::<8>::new(&refs).unwrap();
-    let batch = simulate::run(&lp8, &Baseline, &reference, &Solver::default(), &mut NoObserver).unwrap();
+    let batch = simulate::run(
+        &lp8,
+        &Baseline,
+        &reference,
+        &Solver::default(),
+        &mut NoObserver,
+    )
+    .unwrap();
     for (i, p) in sets.iter().enumerate() {
         let lp1 = LaneParams::<1>::new(&[p]).unwrap();
-        let [single] = simulate::run(&lp1, &Baseline, &reference, &Solver::default(), &mut NoObserver).unwrap();
+        let [single] = simulate::run(
+            &lp1,
+            &Baseline,
+            &reference,
+            &Solver::default(),
+            &mut NoObserver,
+        )
+        .unwrap();
         assert_eq!(batch[i].status, single.status);
-        for ((name, a), (_, b)) in batch[i].metrics.columns().into_iter().zip(single.metrics.columns()) {
+        for ((name, a), (_, b)) in batch[i]
+            .metrics
+            .columns()
+            .into_iter()
+            .zip(single.metrics.columns())
+        {
             assert_eq!(a.to_bits(), b.to_bits(), "lane {i} {name}: {a} vs {b}");
         }
     }
     // The lanes really differ.
     assert_ne!(batch[0].metrics.amp_ratio, batch[7].metrics.amp_ratio);
     // The portable build gives the same bits as the runtime-detected (AVX2) one.
-    let portable = simulate::run_on(simulate::Isa::Portable, &lp8, &Baseline, &reference, &Solver::default(), &mut NoObserver).unwrap();
+    let portable = simulate::run_on(
+        simulate::Isa::Portable,
+        &lp8,
+        &Baseline,
+        &reference,
+        &Solver::default(),
+        &mut NoObserver,
+    )
+    .unwrap();
     for i in 0..8 {
-        for ((name, a), (_, b)) in batch[i].metrics.columns().into_iter().zip(portable[i].metrics.columns()) {
-            assert_eq!(a.to_bits(), b.to_bits(), "lane {i} {name}: {a} (auto) vs {b} (portable)");
+        for ((name, a), (_, b)) in batch[i]
+            .metrics
+            .columns()
+            .into_iter()
+            .zip(portable[i].metrics.columns())
+        {
+            assert_eq!(
+                a.to_bits(),
+                b.to_bits(),
+                "lane {i} {name}: {a} (auto) vs {b} (portable)"
+            );
         }
     }
 }
@@ -187,7 +314,14 @@ fn a_diverging_lane_fails_alone() {
     bad.controller.g_d = 400.0;
     let reference = reference_sine(1.73);
     let lp = LaneParams::<2>::new(&[&good, &bad]).unwrap();
-    let r = simulate::run(&lp, &Baseline, &reference, &Solver::default(), &mut NoObserver).unwrap();
+    let r = simulate::run(
+        &lp,
+        &Baseline,
+        &reference,
+        &Solver::default(),
+        &mut NoObserver,
+    )
+    .unwrap();
     assert_eq!(r[0].status, LaneStatus::Ok);
     assert!((r[0].metrics.amp_ratio - 0.9987).abs() < 0.005);
     match r[1].status {

@@ -15,7 +15,11 @@ fn bin() -> Command {
 
 fn study(args: &[&str]) -> (i32, String, String) {
     let out = bin().args(args).output().expect("run study");
-    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stdout).into(), String::from_utf8_lossy(&out.stderr).into())
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into(),
+        String::from_utf8_lossy(&out.stderr).into(),
+    )
 }
 
 fn gains_sweep() -> PathBuf {
@@ -29,21 +33,44 @@ fn s(p: &Path) -> &str {
 /// Every cell of a results file, as text (floats by their bit patterns, so NaN compares too).
 fn cells(path: &Path) -> Vec<(String, Vec<String>)> {
     let (fields, reader) = parquet_batches(path).unwrap();
-    let mut cols: Vec<(String, Vec<String>)> = fields.iter().map(|f| (f.name().clone(), Vec::new())).collect();
+    let mut cols: Vec<(String, Vec<String>)> = fields
+        .iter()
+        .map(|f| (f.name().clone(), Vec::new()))
+        .collect();
     for batch in reader {
         let batch = batch.unwrap();
         for (i, c) in batch.columns().iter().enumerate() {
             let a = c.as_any();
             let text: Vec<String> = if let Some(x) = a.downcast_ref::<Float64Array>() {
-                (0..x.len()).map(|r| if x.is_null(r) { "null".into() } else { format!("{:x}", x.value(r).to_bits()) }).collect()
+                (0..x.len())
+                    .map(|r| {
+                        if x.is_null(r) {
+                            "null".into()
+                        } else {
+                            format!("{:x}", x.value(r).to_bits())
+                        }
+                    })
+                    .collect()
             } else if let Some(x) = a.downcast_ref::<UInt64Array>() {
                 x.values().iter().map(|v| v.to_string()).collect()
             } else if let Some(x) = a.downcast_ref::<UInt32Array>() {
                 x.values().iter().map(|v| v.to_string()).collect()
             } else if let Some(x) = a.downcast_ref::<StringArray>() {
-                (0..x.len()).map(|r| if x.is_null(r) { "null".into() } else { x.value(r).to_string() }).collect()
+                (0..x.len())
+                    .map(|r| {
+                        if x.is_null(r) {
+                            "null".into()
+                        } else {
+                            x.value(r).to_string()
+                        }
+                    })
+                    .collect()
             } else {
-                panic!("{}: unexpected column type {:?}", path.display(), c.data_type())
+                panic!(
+                    "{}: unexpected column type {:?}",
+                    path.display(),
+                    c.data_type()
+                )
             };
             cols[i].1.extend(text);
         }
@@ -52,7 +79,11 @@ fn cells(path: &Path) -> Vec<(String, Vec<String>)> {
 }
 
 fn meta(path: &Path, key: &str) -> Option<String> {
-    parquet_metadata(path).unwrap().into_iter().find(|(k, _)| k == key).map(|(_, v)| v)
+    parquet_metadata(path)
+        .unwrap()
+        .into_iter()
+        .find(|(k, _)| k == key)
+        .map(|(_, v)| v)
 }
 
 /// The uninterrupted gains sweep, computed once for the tests of this file.
@@ -70,7 +101,18 @@ fn reference() -> &'static Path {
 
 /// Starts the gains sweep on one thread (about 7 s) with checkpoints every 0.2 s.
 fn start(out: &Path, extra: &[&str]) -> Child {
-    bin().args(["run", s(&gains_sweep()), "--out", s(out), "--threads", "1", "--checkpoint-secs", "0.2", "-q"])
+    bin()
+        .args([
+            "run",
+            s(&gains_sweep()),
+            "--out",
+            s(out),
+            "--threads",
+            "1",
+            "--checkpoint-secs",
+            "0.2",
+            "-q",
+        ])
         .args(extra)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -82,7 +124,11 @@ fn start(out: &Path, extra: &[&str]) -> Child {
 fn wait_for(path: &Path, extra: Duration) {
     let t = Instant::now();
     while !path.exists() {
-        assert!(t.elapsed() < Duration::from_secs(60), "{} never appeared", path.display());
+        assert!(
+            t.elapsed() < Duration::from_secs(60),
+            "{} never appeared",
+            path.display()
+        );
         std::thread::sleep(Duration::from_millis(20));
     }
     std::thread::sleep(extra);
@@ -95,7 +141,11 @@ fn with_suffix(p: &Path, suffix: &str) -> PathBuf {
 }
 
 fn signal(child: &Child, sig: &str) {
-    let ok = Command::new("kill").args([sig, &child.id().to_string()]).status().unwrap().success();
+    let ok = Command::new("kill")
+        .args([sig, &child.id().to_string()])
+        .status()
+        .unwrap()
+        .success();
     assert!(ok, "kill {sig}");
 }
 
@@ -111,24 +161,43 @@ fn sigterm_then_resume_equals_an_uninterrupted_run() {
     let o = child.wait_with_output().unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(143), "{err}");
-    assert!(err.contains("stopped by SIGTERM") && err.contains("--resume"), "{err}");
+    assert!(
+        err.contains("stopped by SIGTERM") && err.contains("--resume"),
+        "{err}"
+    );
     assert_eq!(meta(&out, "vshake.complete").as_deref(), Some("false"));
     let done: usize = meta(&out, "vshake.rows_done").unwrap().parse().unwrap();
     assert!(done > 0 && done < 16_384, "{done} rows");
-    assert_eq!(cells(&out)[0].1.len(), done, "every finished row is readable");
+    assert_eq!(
+        cells(&out)[0].1.len(),
+        done,
+        "every finished row is readable"
+    );
     assert!(!with_suffix(&out, ".tmp.checkpoint").exists());
 
     let (code, _, err) = study(&["sensitivity", s(&out)]);
-    assert!(code == 2 && err.contains("incomplete") && err.contains("--resume"), "sensitivity reads only complete files: {err}");
+    assert!(
+        code == 2 && err.contains("incomplete") && err.contains("--resume"),
+        "sensitivity reads only complete files: {err}"
+    );
 
     let (code, stdout, err) = study(&["run", "--resume", s(&out), "-q"]);
     assert_eq!(code, 0, "{stdout}{err}");
-    assert!(stdout.contains(&format!("{} samples ({done} rows) kept", done / 2)), "{stdout}");
+    assert!(
+        stdout.contains(&format!("{} samples ({done} rows) kept", done / 2)),
+        "{stdout}"
+    );
     assert_eq!(cells(&out), cells(reference()));
-    assert!(parquet_metadata(&out).unwrap() == parquet_metadata(reference()).unwrap(), "the metadata differs");
+    assert!(
+        parquet_metadata(&out).unwrap() == parquet_metadata(reference()).unwrap(),
+        "the metadata differs"
+    );
     // A complete file is left alone.
     let (code, stdout, _) = study(&["run", "--resume", s(&out)]);
-    assert!(code == 0 && stdout.contains("complete (16384 rows); nothing to do"), "{stdout}");
+    assert!(
+        code == 0 && stdout.contains("complete (16384 rows); nothing to do"),
+        "{stdout}"
+    );
 }
 
 /// Acceptance: SIGKILL mid-study leaves the temp file and its checkpoint; `--resume` recovers
@@ -139,32 +208,73 @@ fn sigkill_then_resume_from_the_last_checkpoint() {
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("killed.parquet");
     let mut child = start(&out, &[]);
-    wait_for(&with_suffix(&out, ".tmp.checkpoint"), Duration::from_millis(1000));
+    wait_for(
+        &with_suffix(&out, ".tmp.checkpoint"),
+        Duration::from_millis(1000),
+    );
     signal(&child, "-KILL");
     child.wait().unwrap();
     assert!(!out.exists() && with_suffix(&out, ".tmp").exists());
     // A resume killed before its own first checkpoint: the rows recovered into FILE.killed stay,
     // and the next resume starts from them.
-    let mut again = bin().args(["run", "--resume", s(&out), "--threads", "1", "--checkpoint-secs", "1000", "-q"]).spawn().unwrap();
+    let mut again = bin()
+        .args([
+            "run",
+            "--resume",
+            s(&out),
+            "--threads",
+            "1",
+            "--checkpoint-secs",
+            "1000",
+            "-q",
+        ])
+        .spawn()
+        .unwrap();
     wait_for(&with_suffix(&out, ".tmp"), Duration::from_millis(300));
     signal(&again, "-KILL");
     again.wait().unwrap();
-    assert!(!out.exists() && with_suffix(&out, ".killed").exists() && !with_suffix(&out, ".tmp.checkpoint").exists());
+    assert!(
+        !out.exists()
+            && with_suffix(&out, ".killed").exists()
+            && !with_suffix(&out, ".tmp.checkpoint").exists()
+    );
     let (code, stdout, err) = study(&["run", "--resume", s(&out), "-q"]);
     assert_eq!(code, 0, "{stdout}{err}");
-    assert!(stdout.contains("kept from") && stdout.contains(".killed"), "{stdout}");
+    assert!(
+        stdout.contains("kept from") && stdout.contains(".killed"),
+        "{stdout}"
+    );
     assert_eq!(cells(&out), cells(reference()));
-    assert!(parquet_metadata(&out).unwrap() == parquet_metadata(reference()).unwrap(), "the metadata differs");
+    assert!(
+        parquet_metadata(&out).unwrap() == parquet_metadata(reference()).unwrap(),
+        "the metadata differs"
+    );
     assert!(!with_suffix(&out, ".killed").exists() && !with_suffix(&out, ".tmp").exists());
 
     let early = d.path().join("early.parquet");
-    let mut child = bin().args(["run", s(&gains_sweep()), "--out", s(&early), "--threads", "1", "--checkpoint-secs", "1000", "-q"]).spawn().unwrap();
+    let mut child = bin()
+        .args([
+            "run",
+            s(&gains_sweep()),
+            "--out",
+            s(&early),
+            "--threads",
+            "1",
+            "--checkpoint-secs",
+            "1000",
+            "-q",
+        ])
+        .spawn()
+        .unwrap();
     wait_for(&with_suffix(&early, ".tmp"), Duration::from_millis(300));
     signal(&child, "-KILL");
     child.wait().unwrap();
     let (code, _, err) = study(&["run", "--resume", s(&early)]);
     assert_eq!(code, 2, "{err}");
-    assert!(err.contains("early.parquet.tmp") && err.contains("killed before its first checkpoint"), "{err}");
+    assert!(
+        err.contains("early.parquet.tmp") && err.contains("killed before its first checkpoint"),
+        "{err}"
+    );
 }
 
 /// `study merge` counts a stopped shard as missing and says how to finish it; resumed, the
@@ -175,17 +285,43 @@ fn merge_treats_an_incomplete_shard_as_missing() {
     let shards = d.path().join("shards");
     std::fs::create_dir(&shards).unwrap();
     let s0 = shards.join("s0.parquet");
-    let mut child = bin().args(["run", s(&gains_sweep()), "--shard", "0/2", "--out", s(&s0), "--threads", "1", "-q"]).spawn().unwrap();
+    let mut child = bin()
+        .args([
+            "run",
+            s(&gains_sweep()),
+            "--shard",
+            "0/2",
+            "--out",
+            s(&s0),
+            "--threads",
+            "1",
+            "-q",
+        ])
+        .spawn()
+        .unwrap();
     wait_for(&with_suffix(&s0, ".tmp"), Duration::from_millis(800));
     signal(&child, "-TERM");
     assert_eq!(child.wait().unwrap().code(), Some(143));
     let s1 = shards.join("s1.parquet");
-    let (code, _, err) = study(&["run", s(&gains_sweep()), "--shard", "1/2", "--out", s(&s1), "-q"]);
+    let (code, _, err) = study(&[
+        "run",
+        s(&gains_sweep()),
+        "--shard",
+        "1/2",
+        "--out",
+        s(&s1),
+        "-q",
+    ]);
     assert_eq!(code, 0, "{err}");
     let merged = d.path().join("merged.parquet");
     let (code, _, err) = study(&["merge", s(&shards), "--out", s(&merged)]);
     assert_eq!(code, 2, "{err}");
-    assert!(err.contains("shard 0/2 missing") && err.contains("s0.parquet: shard 0 is incomplete") && err.contains("--resume"), "{err}");
+    assert!(
+        err.contains("shard 0/2 missing")
+            && err.contains("s0.parquet: shard 0 is incomplete")
+            && err.contains("--resume"),
+        "{err}"
+    );
     assert!(!merged.exists());
     let (code, _, err) = study(&["run", "--resume", s(&s0), "-q"]);
     assert_eq!(code, 0, "{err}");
@@ -195,7 +331,13 @@ fn merge_treats_an_incomplete_shard_as_missing() {
 }
 
 /// A small study file: Monte Carlo over two gains, one sine.
-fn small_study(dir: &Path, samples: &str, sampling: &str, excitation: &str, extra: &str) -> PathBuf {
+fn small_study(
+    dir: &Path,
+    samples: &str,
+    sampling: &str,
+    excitation: &str,
+    extra: &str,
+) -> PathBuf {
     let p = dir.join("small.toml");
     let text = format!(
         "[study]\nname = \"small\"\nseed = 1\nsamples = {samples}\n\n[method]\nsampling = \"{sampling}\"\n\n\
@@ -219,22 +361,37 @@ fn the_output_path_is_checked_before_any_work() {
     std::fs::create_dir(&dir).unwrap();
     let (code, out, err) = study(&["run", s(&st), "--out", s(&dir), "-q"]);
     assert_eq!(code, 0, "{out}{err}");
-    assert!(dir.join("small.parquet").exists() && out.contains("wrote       ") && out.contains("small.parquet"), "{out}");
+    assert!(
+        dir.join("small.parquet").exists()
+            && out.contains("wrote       ")
+            && out.contains("small.parquet"),
+        "{out}"
+    );
 
     std::fs::remove_file(dir.join("small.parquet")).unwrap();
     std::fs::create_dir(dir.join("small.parquet")).unwrap();
     let (code, out, err) = study(&["run", s(&st), "--out", s(&dir)]);
     assert_eq!(code, 2, "{out}{err}");
-    assert!(err.contains("small.parquet: is a folder") && !out.contains("done"), "{out}{err}");
+    assert!(
+        err.contains("small.parquet: is a folder") && !out.contains("done"),
+        "{out}{err}"
+    );
 
     // Read-only: a folder without write permission, or (for root, who ignores permissions) sysfs.
     let ro = d.path().join("ro");
     std::fs::create_dir(&ro).unwrap();
     std::fs::set_permissions(&ro, std::os::unix::fs::PermissionsExt::from_mode(0o555)).unwrap();
-    let target = if std::fs::File::create(ro.join("probe")).is_ok() { PathBuf::from("/sys/vshake-test.parquet") } else { ro.join("x.parquet") };
+    let target = if std::fs::File::create(ro.join("probe")).is_ok() {
+        PathBuf::from("/sys/vshake-test.parquet")
+    } else {
+        ro.join("x.parquet")
+    };
     let (code, out, err) = study(&["run", s(&st), "--out", s(&target)]);
     assert_eq!(code, 2, "{out}{err}");
-    assert!(err.contains("cannot write the results file") && !out.contains("done") && !target.exists(), "{out}{err}");
+    assert!(
+        err.contains("cannot write the results file") && !out.contains("done") && !target.exists(),
+        "{out}{err}"
+    );
 }
 
 /// A file-size limit reached mid-run (`ulimit -f`) is a clear error, and leaves no file that
@@ -244,12 +401,24 @@ fn a_file_size_limit_mid_run_is_a_clear_error() {
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("big.parquet");
     // 100 blocks of 512 bytes (POSIX sh) or 1 KiB (bash): far below the sweep's 1.4 MB.
-    let cmd = format!("ulimit -f 100; exec '{}' run '{}' --out '{}' -q --checkpoint-secs 0.2", env!("CARGO_BIN_EXE_study"), s(&gains_sweep()), s(&out));
+    let cmd = format!(
+        "ulimit -f 100; exec '{}' run '{}' --out '{}' -q --checkpoint-secs 0.2",
+        env!("CARGO_BIN_EXE_study"),
+        s(&gains_sweep()),
+        s(&out)
+    );
     let o = Command::new("sh").args(["-c", &cmd]).output().unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(1), "{err}");
-    assert!(err.contains("File too large") || err.contains("file too large"), "{err}");
-    assert!(!out.exists() && !with_suffix(&out, ".tmp").exists() && !with_suffix(&out, ".tmp.checkpoint").exists());
+    assert!(
+        err.contains("File too large") || err.contains("file too large"),
+        "{err}"
+    );
+    assert!(
+        !out.exists()
+            && !with_suffix(&out, ".tmp").exists()
+            && !with_suffix(&out, ".tmp.checkpoint").exists()
+    );
 }
 
 /// `--dry-run` prints the runs, an estimate and the output size, and writes nothing.
@@ -259,8 +428,16 @@ fn dry_run_sizes_the_run_and_writes_nothing() {
     let st = small_study(d.path(), "4096", "lhs", SINE, "");
     let (code, out, err) = study(&["run", s(&st), "--dry-run"]);
     assert_eq!(code, 0, "{out}{err}");
-    assert!(out.contains("4096 samples x 1 excitations = 4096 runs") && out.contains("estimate") && out.contains("output"), "{out}");
-    assert!(std::fs::read_dir(d.path()).unwrap().count() == 1, "only the study file");
+    assert!(
+        out.contains("4096 samples x 1 excitations = 4096 runs")
+            && out.contains("estimate")
+            && out.contains("output"),
+        "{out}"
+    );
+    assert!(
+        std::fs::read_dir(d.path()).unwrap().count() == 1,
+        "only the study file"
+    );
 }
 
 /// A Latin hypercube whose permutations would not fit in memory is refused at once with the
@@ -272,21 +449,50 @@ fn huge_designs_are_refused_or_announced() {
     let st = small_study(d.path(), "1000000000", "lhs", SINE, "");
     let (code, out, err) = study(&["run", s(&st)]);
     assert_eq!(code, 2, "{out}{err}");
-    assert!(err.contains("study.samples") && err.contains("7.5 GiB") && err.contains("monte_carlo"), "{err}");
-    assert!(t.elapsed() < Duration::from_secs(10), "refused before allocating");
-    let (code, _, err) = study(&["run", s(&small_study(d.path(), "64", "lhs", SINE, "")), "--samples", "1000000000"]);
-    assert!(code == 2 && err.contains("--samples 1000000000") && err.contains("GiB"), "{err}");
+    assert!(
+        err.contains("study.samples") && err.contains("7.5 GiB") && err.contains("monte_carlo"),
+        "{err}"
+    );
+    assert!(
+        t.elapsed() < Duration::from_secs(10),
+        "refused before allocating"
+    );
+    let (code, _, err) = study(&[
+        "run",
+        s(&small_study(d.path(), "64", "lhs", SINE, "")),
+        "--samples",
+        "1000000000",
+    ]);
+    assert!(
+        code == 2 && err.contains("--samples 1000000000") && err.contains("GiB"),
+        "{err}"
+    );
 
     let st = small_study(d.path(), "1000000000", "monte_carlo", SINE, "");
     let (code, out, err) = study(&["run", s(&st), "--dry-run"]);
     assert_eq!(code, 0, "{err}");
     assert!(out.contains("days wall") && out.contains("--yes"), "{out}");
-    let mut child = bin().args(["run", s(&st), "--out", s(&d.path().join("mc.parquet")), "-q"]).stderr(Stdio::piped()).spawn().unwrap();
+    let mut child = bin()
+        .args([
+            "run",
+            s(&st),
+            "--out",
+            s(&d.path().join("mc.parquet")),
+            "-q",
+        ])
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
     let mut first = String::new();
-    BufReader::new(child.stderr.take().unwrap()).read_line(&mut first).unwrap();
+    BufReader::new(child.stderr.take().unwrap())
+        .read_line(&mut first)
+        .unwrap();
     child.kill().unwrap();
     child.wait().unwrap();
-    assert!(first.starts_with("WARNING: this run is estimated at") && first.contains("days"), "{first}");
+    assert!(
+        first.starts_with("WARNING: this run is estimated at") && first.contains("days"),
+        "{first}"
+    );
 }
 
 /// Settings that cannot work are refused with the key, or noted.
@@ -295,37 +501,77 @@ fn impossible_settings_are_refused() {
     let d = tempfile::tempdir().unwrap();
     let high = "kind = \"sine\"\nfreq_hz = 200.0\namp_g = 0.1\nduration_s = 3.0";
     // A harmonic at or above Nyquist, asked for by name: refused.
-    let st = small_study(d.path(), "8", "monte_carlo", high, "[responses]\nmetrics = [\"amp_ratio\", \"h3_ratio\"]\n");
+    let st = small_study(
+        d.path(),
+        "8",
+        "monte_carlo",
+        high,
+        "[responses]\nmetrics = [\"amp_ratio\", \"h3_ratio\"]\n",
+    );
     let (code, _, err) = study(&["run", s(&st)]);
     assert_eq!(code, 2, "{err}");
-    assert!(err.contains("responses.metrics[1]") && err.contains("600 Hz") && err.contains("Nyquist"), "{err}");
+    assert!(
+        err.contains("responses.metrics[1]") && err.contains("600 Hz") && err.contains("Nyquist"),
+        "{err}"
+    );
     // By default: the column is NaN, with a note.
     let st = small_study(d.path(), "8", "monte_carlo", high, "");
     let out_file = d.path().join("high.parquet");
     let (code, out, err) = study(&["run", s(&st), "--out", s(&out_file), "-q"]);
     assert_eq!(code, 0, "{err}");
-    assert!(out.contains("note") && out.contains("h3, h4, h5, h6, h7, h8, h9 at or above the Nyquist frequency 512 Hz"), "{out}");
+    assert!(
+        out.contains("note")
+            && out.contains("h3, h4, h5, h6, h7, h8, h9 at or above the Nyquist frequency 512 Hz"),
+        "{out}"
+    );
     let c = cells(&out_file);
     let col = |n: &str| c.iter().find(|(k, _)| k == n).unwrap().1.clone();
     let nan = |v: &String| f64::from_bits(u64::from_str_radix(v, 16).unwrap()).is_nan();
     let status = col("status");
     let ok: Vec<usize> = (0..status.len()).filter(|&i| status[i] == "ok").collect();
     assert!(!ok.is_empty());
-    assert!(ok.iter().all(|&i| nan(&col("h3_ratio")[i]) && !nan(&col("h2_ratio")[i]) && !nan(&col("thd_even_ratio")[i])));
+    assert!(ok.iter().all(|&i| nan(&col("h3_ratio")[i])
+        && !nan(&col("h2_ratio")[i])
+        && !nan(&col("thd_even_ratio")[i])));
 
     let bad_taper = "kind = \"sine\"\nfreq_hz = 3.0\namp_g = 1.0\ntaper_s = 4.0\nduration_s = 3.0";
-    let (code, _, err) = study(&["run", s(&small_study(d.path(), "8", "monte_carlo", bad_taper, ""))]);
-    assert!(code == 2 && err.contains("excitations[0].taper_s") && err.contains("shorter than duration_s"), "{err}");
+    let (code, _, err) = study(&[
+        "run",
+        s(&small_study(d.path(), "8", "monte_carlo", bad_taper, "")),
+    ]);
+    assert!(
+        code == 2
+            && err.contains("excitations[0].taper_s")
+            && err.contains("shorter than duration_s"),
+        "{err}"
+    );
 
-    let hist = small_study(d.path(), "8", "monte_carlo", SINE, "[output]\nhistories = [3, 999999]\n");
+    let hist = small_study(
+        d.path(),
+        "8",
+        "monte_carlo",
+        SINE,
+        "[output]\nhistories = [3, 999999]\n",
+    );
     let (code, out, err) = study(&["run", s(&hist), "--out", s(&d.path().join("h.parquet"))]);
-    assert!(code == 2 && err.contains("output.histories[1]: sample 999999 does not exist") && !out.contains("done"), "{out}{err}");
+    assert!(
+        code == 2
+            && err.contains("output.histories[1]: sample 999999 does not exist")
+            && !out.contains("done"),
+        "{out}{err}"
+    );
     assert!(!d.path().join("h_histories").exists());
 
     for bad in ["\"lots\"", "1.5e9", "-3"] {
-        let (code, _, err) = study(&["run", s(&small_study(d.path(), bad, "monte_carlo", SINE, ""))]);
+        let (code, _, err) = study(&[
+            "run",
+            s(&small_study(d.path(), bad, "monte_carlo", SINE, "")),
+        ]);
         assert_eq!(code, 2, "{err}");
-        assert!(err.contains("study.samples") && !err.contains("missing"), "samples = {bad}: {err}");
+        assert!(
+            err.contains("study.samples") && !err.contains("missing"),
+            "samples = {bad}: {err}"
+        );
     }
 }
 
@@ -333,9 +579,17 @@ fn impossible_settings_are_refused() {
 /// place, not a Rust backtrace dump.
 #[test]
 fn a_panic_is_reported_as_an_internal_error() {
-    let o = bin().arg("params").env("VSHAKE_PANIC_FOR_TEST", "1").output().unwrap();
+    let o = bin()
+        .arg("params")
+        .env("VSHAKE_PANIC_FOR_TEST", "1")
+        .output()
+        .unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(70), "{err}");
-    assert!(err.starts_with("internal error (a bug in vshake") && err.contains("VSHAKE_PANIC_FOR_TEST is set at src/main.rs:"), "{err}");
+    assert!(
+        err.starts_with("internal error (a bug in vshake")
+            && err.contains("VSHAKE_PANIC_FOR_TEST is set at src/main.rs:"),
+        "{err}"
+    );
     assert!(!err.contains("panicked at"), "{err}");
 }

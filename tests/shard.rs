@@ -7,8 +7,15 @@ mod common;
 use common::content;
 
 fn study(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_study")).args(args).output().expect("run study");
-    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stdout).into(), String::from_utf8_lossy(&out.stderr).into())
+    let out = Command::new(env!("CARGO_BIN_EXE_study"))
+        .args(args)
+        .output()
+        .expect("run study");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into(),
+        String::from_utf8_lossy(&out.stderr).into(),
+    )
 }
 
 fn smoke() -> PathBuf {
@@ -27,9 +34,20 @@ fn merged_shards_equal_the_unsharded_run() {
     let d = tempfile::tempdir().unwrap();
     let s = smoke();
     let full = d.path().join("full.parquet");
-    ok(&["run", s.to_str().unwrap(), "--out", full.to_str().unwrap(), "-q"]);
+    ok(&[
+        "run",
+        s.to_str().unwrap(),
+        "--out",
+        full.to_str().unwrap(),
+        "-q",
+    ]);
     let want = content(&full);
-    assert!(want.len() > 5 && want[0].1.len() == 64, "{} columns, {} rows", want.len(), want[0].1.len());
+    assert!(
+        want.len() > 5 && want[0].1.len() == 64,
+        "{} columns, {} rows",
+        want.len(),
+        want[0].1.len()
+    );
     for n in [1usize, 3, 4, 7] {
         let dir = d.path().join(format!("n{n}"));
         std::fs::create_dir(&dir).unwrap();
@@ -37,18 +55,42 @@ fn merged_shards_equal_the_unsharded_run() {
             let out = dir.join(format!("part{i}.parquet"));
             // Threads and chunk sizes differ per shard: the slice, not the schedule, decides.
             let (threads, chunk) = ((i % 2 + 1).to_string(), (3 + i).to_string());
-            ok(&["run", s.to_str().unwrap(), "--shard", &format!("{i}/{n}"), "--out", out.to_str().unwrap(), "--threads", &threads, "--chunk", &chunk, "-q"]);
+            ok(&[
+                "run",
+                s.to_str().unwrap(),
+                "--shard",
+                &format!("{i}/{n}"),
+                "--out",
+                out.to_str().unwrap(),
+                "--threads",
+                &threads,
+                "--chunk",
+                &chunk,
+                "-q",
+            ]);
         }
         let merged = d.path().join(format!("merged{n}.parquet"));
-        let said = ok(&["merge", dir.to_str().unwrap(), "--out", merged.to_str().unwrap()]);
+        let said = ok(&[
+            "merge",
+            dir.to_str().unwrap(),
+            "--out",
+            merged.to_str().unwrap(),
+        ]);
         assert!(said.contains(&format!("{n} shards, 64 rows")), "{said}");
         assert_eq!(content(&merged), want, "N = {n}");
         // The merged file says what the unsharded one says (no shard keys left).
         let meta = vshake::shell::tables::parquet_metadata(&merged).unwrap();
-        assert!(meta.iter().all(|(k, _)| !k.starts_with("vshake.shard")), "{meta:?}");
+        assert!(
+            meta.iter().all(|(k, _)| !k.starts_with("vshake.shard")),
+            "{meta:?}"
+        );
         let full_meta = vshake::shell::tables::parquet_metadata(&full).unwrap();
         let keys = |m: &[(String, String)]| {
-            let mut v = m.iter().filter(|(k, _)| k.starts_with("vshake.")).cloned().collect::<Vec<_>>();
+            let mut v = m
+                .iter()
+                .filter(|(k, _)| k.starts_with("vshake."))
+                .cloned()
+                .collect::<Vec<_>>();
             v.sort();
             v
         };
@@ -64,11 +106,24 @@ fn merge_refuses_missing_duplicate_and_foreign_shards() {
     let s = smoke();
     let part = |dir: &Path, study: &Path, i: usize, n: usize, name: &str| {
         std::fs::create_dir_all(dir).unwrap();
-        ok(&["run", study.to_str().unwrap(), "--shard", &format!("{i}/{n}"), "--out", dir.join(name).to_str().unwrap(), "-q"]);
+        ok(&[
+            "run",
+            study.to_str().unwrap(),
+            "--shard",
+            &format!("{i}/{n}"),
+            "--out",
+            dir.join(name).to_str().unwrap(),
+            "-q",
+        ]);
     };
     let merge = |dir: &Path| {
         let out = dir.with_extension("parquet");
-        let (code, stdout, stderr) = study(&["merge", dir.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+        let (code, stdout, stderr) = study(&[
+            "merge",
+            dir.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
         assert_eq!(code, 2, "{stdout}{stderr}");
         assert!(!out.exists(), "no merged file");
         assert!(!dir.with_extension("parquet.tmp").exists(), "no temp file");
@@ -79,22 +134,42 @@ fn merge_refuses_missing_duplicate_and_foreign_shards() {
     part(&missing, &s, 0, 3, "a.parquet");
     part(&missing, &s, 2, 3, "c.parquet");
     let e = merge(&missing);
-    assert!(e.contains("shard 1/3 missing") && e.contains("found 2 of 3"), "{e}");
+    assert!(
+        e.contains("shard 1/3 missing") && e.contains("found 2 of 3"),
+        "{e}"
+    );
     // Duplicate: shard 1 of 2 twice.
     let dup = d.path().join("dup");
     part(&dup, &s, 0, 2, "a.parquet");
     part(&dup, &s, 1, 2, "b.parquet");
     part(&dup, &s, 1, 2, "b_again.parquet");
     let e = merge(&dup);
-    assert!(e.contains("shard 1/2 appears twice") && e.contains("b.parquet") && e.contains("b_again.parquet"), "{e}");
+    assert!(
+        e.contains("shard 1/2 appears twice")
+            && e.contains("b.parquet")
+            && e.contains("b_again.parquet"),
+        "{e}"
+    );
     // Another seed: the same study with seed 8 for shard 1.
     let other = d.path().join("smoke_seed8.toml");
-    std::fs::write(&other, std::fs::read_to_string(&s).unwrap().replace("seed = 7", "seed = 8")).unwrap();
+    std::fs::write(
+        &other,
+        std::fs::read_to_string(&s)
+            .unwrap()
+            .replace("seed = 7", "seed = 8"),
+    )
+    .unwrap();
     let foreign = d.path().join("foreign");
     part(&foreign, &s, 0, 2, "a.parquet");
     part(&foreign, &other, 1, 2, "b.parquet");
     let e = merge(&foreign);
-    assert!(e.contains("b.parquet") && e.contains("another run") && e.contains("seed (8)") && e.contains("(7)"), "{e}");
+    assert!(
+        e.contains("b.parquet")
+            && e.contains("another run")
+            && e.contains("seed (8)")
+            && e.contains("(7)"),
+        "{e}"
+    );
     // A file that is no shard, and bad --shard values.
     let (code, _, e) = study(&["run", s.to_str().unwrap(), "--shard", "4/4", "-q"]);
     assert_eq!(code, 2);
@@ -110,17 +185,52 @@ fn slurm_scripts_wire_the_array_to_the_shards() {
     let d = tempfile::tempdir().unwrap();
     let s = smoke();
     let dir = d.path().join("job");
-    let out = ok(&["slurm", s.to_str().unwrap(), "--shards", "4", "--partition", "debug", "--time", "00:10:00", "--cpus", "1", "--dir", dir.to_str().unwrap()]);
-    assert!(out.contains("64 samples x 1 excitations in 4 shards"), "{out}");
+    let out = ok(&[
+        "slurm",
+        s.to_str().unwrap(),
+        "--shards",
+        "4",
+        "--partition",
+        "debug",
+        "--time",
+        "00:10:00",
+        "--cpus",
+        "1",
+        "--dir",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(
+        out.contains("64 samples x 1 excitations in 4 shards"),
+        "{out}"
+    );
     let array = std::fs::read_to_string(dir.join("array.sbatch")).unwrap();
-    for want in ["#SBATCH --array=0-3", "#SBATCH --partition=debug", "#SBATCH --time=00:10:00", "#SBATCH --cpus-per-task=1", "--shard \"${SLURM_ARRAY_TASK_ID}/4\"", "--log-progress"] {
+    for want in [
+        "#SBATCH --array=0-3",
+        "#SBATCH --partition=debug",
+        "#SBATCH --time=00:10:00",
+        "#SBATCH --cpus-per-task=1",
+        "--shard \"${SLURM_ARRAY_TASK_ID}/4\"",
+        "--log-progress",
+    ] {
         assert!(array.contains(want), "{want} not in\n{array}");
     }
     let merge = std::fs::read_to_string(dir.join("merge.sbatch")).unwrap();
-    assert!(merge.contains(" merge ") && merge.contains("smoke.parquet"), "{merge}");
+    assert!(
+        merge.contains(" merge ") && merge.contains("smoke.parquet"),
+        "{merge}"
+    );
     let submit = std::fs::read_to_string(dir.join("submit.sh")).unwrap();
     assert!(submit.contains("--dependency=afterok:${array}"), "{submit}");
-    let (code, _, e) = study(&["slurm", s.to_str().unwrap(), "--shards", "4", "--time", "1 day", "--dir", dir.to_str().unwrap()]);
+    let (code, _, e) = study(&[
+        "slurm",
+        s.to_str().unwrap(),
+        "--shards",
+        "4",
+        "--time",
+        "1 day",
+        "--dir",
+        dir.to_str().unwrap(),
+    ]);
     assert_eq!(code, 2);
     assert!(e.contains("--time"), "{e}");
 }

@@ -9,8 +9,15 @@ use vshake::orchestration::study::StudySpec;
 use vshake::shell::run_cmd;
 
 fn study(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_study")).args(args).output().expect("run study");
-    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stdout).into(), String::from_utf8_lossy(&out.stderr).into())
+    let out = Command::new(env!("CARGO_BIN_EXE_study"))
+        .args(args)
+        .output()
+        .expect("run study");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into(),
+        String::from_utf8_lossy(&out.stderr).into(),
+    )
 }
 
 fn studies_dir() -> PathBuf {
@@ -28,23 +35,34 @@ fn every_bundled_file_parses_and_validates() {
         let text = std::fs::read_to_string(&path).unwrap();
         let table: toml::Table = text.parse().unwrap();
         if table.contains_key("study") {
-            let spec = StudySpec::from_toml(&text, &path.display().to_string()).unwrap_or_else(|e| panic!("{e}"));
+            let spec = StudySpec::from_toml(&text, &path.display().to_string())
+                .unwrap_or_else(|e| panic!("{e}"));
             // Its plan can be built (record files found, design sized).
-            let plan = run_cmd::plan_for(&spec, &studies_dir()).unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
+            let plan = run_cmd::plan_for(&spec, &studies_dir())
+                .unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
             assert!(plan.rows() > 0);
         } else {
-            vshake::orchestration::spec::SimSpec::from_toml(&text, &path.display().to_string()).unwrap_or_else(|e| panic!("{e}"));
+            vshake::orchestration::spec::SimSpec::from_toml(&text, &path.display().to_string())
+                .unwrap_or_else(|e| panic!("{e}"));
         }
         n += 1;
     }
-    assert!(n >= 4, "studies/ holds the sim example, smoke, gains_sweep and port_width ({n} found)");
+    assert!(
+        n >= 4,
+        "studies/ holds the sim example, smoke, gains_sweep and port_width ({n} found)"
+    );
     // Campaign definitions (their data is made by `study synth`).
     let mut c = 0;
     for entry in std::fs::read_dir(studies_dir().join("campaigns")).unwrap() {
         let path = entry.unwrap().path();
         if path.extension().is_some_and(|e| e == "toml") {
             let text = std::fs::read_to_string(&path).unwrap();
-            let camp = vshake::orchestration::campaign::Campaign::from_toml(&text, &path.display().to_string(), &Default::default()).unwrap_or_else(|e| panic!("{e}"));
+            let camp = vshake::orchestration::campaign::Campaign::from_toml(
+                &text,
+                &path.display().to_string(),
+                &Default::default(),
+            )
+            .unwrap_or_else(|e| panic!("{e}"));
             assert!(!camp.tests.is_empty());
             c += 1;
         }
@@ -104,9 +122,21 @@ window_cycles = 5
 "#;
 
 fn run_rows(plan: &Plan, threads: usize, chunk: usize) -> Vec<Row> {
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
     let mut rows: Vec<Row> = Vec::new();
-    batch::run_plan(plan, 0..plan.samples(), &pool, chunk, &mut rows, &|_| {}, &|| false).unwrap();
+    batch::run_plan(
+        plan,
+        0..plan.samples(),
+        &pool,
+        chunk,
+        &mut rows,
+        &|_| {},
+        &|| false,
+    )
+    .unwrap();
     rows
 }
 
@@ -128,7 +158,13 @@ fn results_are_identical_for_any_thread_count_and_chunk_size() {
         let rows = run_rows(&plan, threads, chunk);
         assert_eq!(rows.len(), reference.len());
         for (a, b) in reference.iter().zip(&rows) {
-            assert_eq!(key(a), key(b), "sample {} excitation {} differs with {threads} threads, chunk {chunk}", a.sample_id, a.excitation);
+            assert_eq!(
+                key(a),
+                key(b),
+                "sample {} excitation {} differs with {threads} threads, chunk {chunk}",
+                a.sample_id,
+                a.excitation
+            );
             assert_eq!(a.status, b.status);
         }
     }
@@ -136,11 +172,27 @@ fn results_are_identical_for_any_thread_count_and_chunk_size() {
     // laws (α = 0.5 takes the square-root path, 0.6 the power law) run, and the samples fill
     // several groups of lanes.
     assert!(reference.iter().any(|r| r.status.label() == "invalid"));
-    let ok: Vec<&Row> = reference.iter().filter(|r| r.status.label() == "ok").collect();
-    let alpha = plan.columns.iter().position(|c| c.path() == "platen.alpha").expect("alpha varies");
-    let laws: std::collections::BTreeSet<u64> = ok.iter().map(|r| r.values[alpha].to_bits()).collect();
-    assert_eq!(laws.len(), 2, "both damping laws among the runs that finished");
-    assert!(ok.len() > 2 * vshake::kernel::LANES, "{} runs finished", ok.len());
+    let ok: Vec<&Row> = reference
+        .iter()
+        .filter(|r| r.status.label() == "ok")
+        .collect();
+    let alpha = plan
+        .columns
+        .iter()
+        .position(|c| c.path() == "platen.alpha")
+        .expect("alpha varies");
+    let laws: std::collections::BTreeSet<u64> =
+        ok.iter().map(|r| r.values[alpha].to_bits()).collect();
+    assert_eq!(
+        laws.len(),
+        2,
+        "both damping laws among the runs that finished"
+    );
+    assert!(
+        ok.len() > 2 * vshake::kernel::LANES,
+        "{} runs finished",
+        ok.len()
+    );
 }
 
 fn expect_refused(text: &str, needle: &str) {
@@ -150,36 +202,80 @@ fn expect_refused(text: &str, needle: &str) {
     let out = d.path().join("out.parquet");
     let (code, _, stderr) = study(&["run", f.to_str().unwrap(), "--out", out.to_str().unwrap()]);
     assert_eq!(code, 2, "{stderr}");
-    assert!(stderr.contains("bad.toml") && stderr.contains(needle), "expected {needle:?} in {stderr}");
-    assert!(!out.exists() && !d.path().join("out.parquet.tmp").exists(), "no output file");
+    assert!(
+        stderr.contains("bad.toml") && stderr.contains(needle),
+        "expected {needle:?} in {stderr}"
+    );
+    assert!(
+        !out.exists() && !d.path().join("out.parquet.tmp").exists(),
+        "no output file"
+    );
 }
 
 #[test]
 fn bad_study_files_are_refused_with_the_key_path() {
     let smoke = std::fs::read_to_string(studies_dir().join("smoke.toml")).unwrap();
-    expect_refused(&smoke.replacen("name = \"controller.g_d\"", "name = \"controller.gain_d\"", 1), "variables[0].name: unknown parameter `controller.gain_d`");
-    expect_refused(&smoke.replacen("low = 1.0\nhigh = 2.0", "low = 3.0\nhigh = 2.0", 1), "variables[0].low: low = 3 must be below high = 2");
     expect_refused(
-        &smoke.replacen("distribution = \"uniform\"\nlow = 1.0\nhigh = 2.0", "distribution = \"normal\"\nmean = 1.5\nstd = -0.1", 1),
+        &smoke.replacen(
+            "name = \"controller.g_d\"",
+            "name = \"controller.gain_d\"",
+            1,
+        ),
+        "variables[0].name: unknown parameter `controller.gain_d`",
+    );
+    expect_refused(
+        &smoke.replacen("low = 1.0\nhigh = 2.0", "low = 3.0\nhigh = 2.0", 1),
+        "variables[0].low: low = 3 must be below high = 2",
+    );
+    expect_refused(
+        &smoke.replacen(
+            "distribution = \"uniform\"\nlow = 1.0\nhigh = 2.0",
+            "distribution = \"normal\"\nmean = 1.5\nstd = -0.1",
+            1,
+        ),
         "variables[0].std: std = -0.1 must be positive",
     );
-    expect_refused(&smoke.replacen("sampling = \"saltelli\"", "sampling = \"saltire\"", 1), "method.sampling: unknown method \"saltire\"");
+    expect_refused(
+        &smoke.replacen("sampling = \"saltelli\"", "sampling = \"saltire\"", 1),
+        "method.sampling: unknown method \"saltire\"",
+    );
     let (head, _) = smoke.split_once("[[excitations]]").unwrap();
     let (_, tail) = smoke.split_once("[output]").unwrap();
-    expect_refused(&format!("excitations = []\n{head}[output]{tail}"), "excitations: the excitation list is empty");
+    expect_refused(
+        &format!("excitations = []\n{head}[output]{tail}"),
+        "excitations: the excitation list is empty",
+    );
 }
 
 #[test]
 fn smoke_study_results_open_in_pyarrow_and_duckdb() {
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("smoke.parquet");
-    let (code, stdout, stderr) = study(&["run", studies_dir().join("smoke.toml").to_str().unwrap(), "--out", out.to_str().unwrap(), "--quiet"]);
+    let (code, stdout, stderr) = study(&[
+        "run",
+        studies_dir().join("smoke.toml").to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ]);
     assert_eq!(code, 0, "{stderr}");
-    assert!(stdout.contains("64 rows") && stdout.contains("64 ok"), "{stdout}");
-    assert!(d.path().join("smoke_histories/sample0_sine_3hz_1g.parquet").exists());
+    assert!(
+        stdout.contains("64 rows") && stdout.contains("64 ok"),
+        "{stdout}"
+    );
+    assert!(d
+        .path()
+        .join("smoke_histories/sample0_sine_3hz_1g.parquet")
+        .exists());
     let columns = "sample_id,excitation_id,excitation,design_base,design_block,g_d,l_a,mu_coef,amp_ratio,phase_err_deg,h3_ratio,thd_odd_ratio,rms_err_accel_ratio,status,fail_time_s,fail_reason";
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/check_results.py");
-    let py = Command::new("python3").arg(&script).arg(&out).arg("64").arg(columns).output().expect("python3");
+    let py = Command::new("python3")
+        .arg(&script)
+        .arg(&out)
+        .arg("64")
+        .arg(columns)
+        .output()
+        .expect("python3");
     assert!(
         py.status.success(),
         "the results file must open in pyarrow and DuckDB (install them with `python3 -m pip install pyarrow duckdb`):\n{}{}",
@@ -189,37 +285,76 @@ fn smoke_study_results_open_in_pyarrow_and_duckdb() {
 
     // Sensitivity of the smoke results: a table with a row per (metric, varied parameter).
     let sens = d.path().join("sens.parquet");
-    let (code, stdout, stderr) = study(&["sensitivity", out.to_str().unwrap(), "--out", sens.to_str().unwrap(), "--metrics", "amp_ratio,thd_odd_ratio"]);
+    let (code, stdout, stderr) = study(&[
+        "sensitivity",
+        out.to_str().unwrap(),
+        "--out",
+        sens.to_str().unwrap(),
+        "--metrics",
+        "amp_ratio,thd_odd_ratio",
+    ]);
     assert_eq!(code, 0, "{stderr}");
-    assert!(stdout.contains("amp_ratio @ sine_3hz_1g") && stdout.contains("controller.l_a"), "{stdout}");
-    let t = vshake::shell::tables::read_columns_allow_nan(&sens, &["st", "s1", "src", "prcc"]).unwrap();
+    assert!(
+        stdout.contains("amp_ratio @ sine_3hz_1g") && stdout.contains("controller.l_a"),
+        "{stdout}"
+    );
+    let t =
+        vshake::shell::tables::read_columns_allow_nan(&sens, &["st", "s1", "src", "prcc"]).unwrap();
     assert_eq!(t.rows(), 2 * 2);
     // The acceleration lead dominates the amplitude ratio at 3 Hz (the displacement gain is
     // nearly inert there): its total index and SRC are the larger.
-    let first = stdout.lines().skip_while(|l| !l.starts_with("amp_ratio")).nth(2).unwrap();
+    let first = stdout
+        .lines()
+        .skip_while(|l| !l.starts_with("amp_ratio"))
+        .nth(2)
+        .unwrap();
     assert!(first.contains("controller.l_a"), "{stdout}");
 }
 
 #[test]
 fn a_design_file_drives_a_study() {
     let d = tempfile::tempdir().unwrap();
-    std::fs::write(d.path().join("design.csv"), "controller.g_d,l_a\n1.2,0.5\n1.8,0.55\n1.5,0.52\n").unwrap();
+    std::fs::write(
+        d.path().join("design.csv"),
+        "controller.g_d,l_a\n1.2,0.5\n1.8,0.55\n1.5,0.52\n",
+    )
+    .unwrap();
     let text = "[study]\nname = \"fromfile\"\n[method]\nsampling = \"file\"\nfile = \"design.csv\"\n[[excitations]]\nkind = \"sine\"\nfreq_hz = 3.0\namp_g = 1.73\nwindow_cycles = 4\n";
     let f = d.path().join("s.toml");
     std::fs::write(&f, text).unwrap();
     let out = d.path().join("r.parquet");
-    let (code, stdout, stderr) = study(&["run", f.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"]);
+    let (code, stdout, stderr) = study(&[
+        "run",
+        f.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
     assert_eq!(code, 0, "{stderr}");
     assert!(stdout.contains("3 rows"), "{stdout}");
-    let t = vshake::shell::tables::read_columns_allow_nan(&out, &["g_d", "l_a", "amp_ratio"]).unwrap();
+    let t =
+        vshake::shell::tables::read_columns_allow_nan(&out, &["g_d", "l_a", "amp_ratio"]).unwrap();
     assert_eq!(t.column("g_d").unwrap(), &[1.2, 1.8, 1.5]);
     // Row 3 is the published controller: the reference amplitude ratio.
     assert!((t.column("amp_ratio").unwrap()[2] - 0.9987).abs() < 0.005);
     // An unknown column is refused with the file and the column.
-    std::fs::write(d.path().join("design.csv"), "controller.g_d,bogus\n1.2,0.5\n").unwrap();
-    let (code, _, stderr) = study(&["run", f.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"]);
+    std::fs::write(
+        d.path().join("design.csv"),
+        "controller.g_d,bogus\n1.2,0.5\n",
+    )
+    .unwrap();
+    let (code, _, stderr) = study(&[
+        "run",
+        f.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
     assert_eq!(code, 2);
-    assert!(stderr.contains("design.csv: column `bogus` is not a model parameter"), "{stderr}");
+    assert!(
+        stderr.contains("design.csv: column `bogus` is not a model parameter"),
+        "{stderr}"
+    );
 }
 
 /// Sobol' indices stay aligned with their parameters when a design dimension happens to be
@@ -262,10 +397,23 @@ metrics = ["amp_ratio"]
     let f = d.path().join("aligned.toml");
     std::fs::write(&f, text).unwrap();
     let out = d.path().join("r.parquet");
-    let (code, _, stderr) = study(&["run", f.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"]);
+    let (code, _, stderr) = study(&[
+        "run",
+        f.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
     assert_eq!(code, 0, "{stderr}");
     let sens = d.path().join("s.parquet");
-    let (code, stdout, stderr) = study(&["sensitivity", out.to_str().unwrap(), "--out", sens.to_str().unwrap(), "--bootstrap", "50"]);
+    let (code, stdout, stderr) = study(&[
+        "sensitivity",
+        out.to_str().unwrap(),
+        "--out",
+        sens.to_str().unwrap(),
+        "--bootstrap",
+        "50",
+    ]);
     assert_eq!(code, 0, "{stderr}");
     // Rows in design order: g_d, l_a, l_v.
     let t = vshake::shell::tables::read_columns_allow_nan(&sens, &["st"]).unwrap();

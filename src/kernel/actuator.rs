@@ -29,7 +29,14 @@ pub fn stiffness_factors(c: &ActuatorLane, y: f64) -> (f64, f64) {
 
 /// (dP1/dt, dP2/dt) from the net flows into chamber 1 and out of chamber 2 (all valves).
 #[inline(always)]
-pub fn pressure_rates(c: &ActuatorLane, b1: f64, b2: f64, q_in1: f64, q_out2: f64, v: f64) -> (f64, f64) {
+pub fn pressure_rates(
+    c: &ActuatorLane,
+    b1: f64,
+    b2: f64,
+    q_in1: f64,
+    q_out2: f64,
+    v: f64,
+) -> (f64, f64) {
     (b1 * (q_in1 - c.a1 * v), b2 * (c.a2 * v - q_out2))
 }
 

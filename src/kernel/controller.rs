@@ -27,11 +27,21 @@ pub fn notch_coefficients(f0: f64, bw: f64, depth_db: f64, f_s: f64) -> Biquad {
     let zeta_z = zeta_p * 10f64.powf(-depth_db / 20.0);
     let c = w0 / (w0 / (2.0 * f_s)).tan();
     let poly = |zeta: f64| {
-        [c * c + 2.0 * zeta * w0 * c + w0 * w0, 2.0 * (w0 * w0 - c * c), c * c - 2.0 * zeta * w0 * c + w0 * w0]
+        [
+            c * c + 2.0 * zeta * w0 * c + w0 * w0,
+            2.0 * (w0 * w0 - c * c),
+            c * c - 2.0 * zeta * w0 * c + w0 * w0,
+        ]
     };
     let b = poly(zeta_z);
     let a = poly(zeta_p);
-    [b[0] / a[0], b[1] / a[0], b[2] / a[0], a[1] / a[0], a[2] / a[0]]
+    [
+        b[0] / a[0],
+        b[1] / a[0],
+        b[2] / a[0],
+        a[1] / a[0],
+        a[2] / a[0],
+    ]
 }
 
 /// Per-lane controller coefficients (gains folded with the 10 V scale and the normalisations).
@@ -97,7 +107,10 @@ pub struct ControllerMemory {
 impl ControllerMemory {
     /// Memory before the first tick: F[−1] = F[0], F_hp[−1] = 0.
     pub fn new(f0: f64) -> Self {
-        ControllerMemory { f_prev: f0, ..Default::default() }
+        ControllerMemory {
+            f_prev: f0,
+            ..Default::default()
+        }
     }
 }
 
@@ -115,7 +128,8 @@ pub struct RefState {
 pub fn tick(c: &ControllerLane, m: &mut ControllerMemory, r: &RefState, x: f64, f: f64) -> f64 {
     m.f_hp = c.hp_b * (f - m.f_prev) + c.hp_a * m.f_hp;
     m.f_prev = f;
-    let mut u = c.c_fb * (r.x - x) + c.c_d * r.x + c.c_v * r.v + c.c_a * r.a + c.c_j * r.j + c.c_f * m.f_hp;
+    let mut u =
+        c.c_fb * (r.x - x) + c.c_d * r.x + c.c_v * r.v + c.c_a * r.a + c.c_j * r.j + c.c_f * m.f_hp;
     for (q, s) in c.notches.iter().zip(m.notch.iter_mut()) {
         let y = q[0] * u + s[0];
         s[0] = q[1] * u - q[3] * y + s[1];
@@ -141,13 +155,19 @@ mod tests {
     #[test]
     fn notch_has_its_depth_at_f0_and_unit_gain_far_away() {
         let q = notch_coefficients(40.0, 8.0, 20.0, 1024.0);
-        assert!((gain_at(&q, 40.0, 1024.0) - 0.1).abs() < 1e-9, "pre-warping puts the depth at f0");
+        assert!(
+            (gain_at(&q, 40.0, 1024.0) - 0.1).abs() < 1e-9,
+            "pre-warping puts the depth at f0"
+        );
         assert!((gain_at(&q, 1.0, 1024.0) - 1.0).abs() < 1e-3);
         // Depth 0 is the identity, to the bit.
         let p = ControllerParams::default();
         let c = ControllerLane::new(&p, 10.0, 1.905e-3);
         let mut m = ControllerMemory::new(0.0);
-        let r = RefState { x: 0.0123, ..Default::default() };
+        let r = RefState {
+            x: 0.0123,
+            ..Default::default()
+        };
         let u = tick(&c, &mut m, &r, 0.0, 0.0);
         assert_eq!(u, c.c_fb * 0.0123);
     }

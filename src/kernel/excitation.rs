@@ -120,7 +120,13 @@ impl Reference {
 
     /// Keeps the first `n` ticks (the window is clipped to them).
     pub fn truncate(&mut self, n: usize) {
-        for v in [&mut self.x, &mut self.v, &mut self.a, &mut self.j, &mut self.command] {
+        for v in [
+            &mut self.x,
+            &mut self.v,
+            &mut self.a,
+            &mut self.j,
+            &mut self.command,
+        ] {
             v.truncate(n);
         }
         self.window = (self.window.0.min(n), self.window.1.min(n));
@@ -132,7 +138,10 @@ impl Reference {
     pub fn hold_to(&mut self, n: usize) {
         while !self.is_empty() && self.len() < n {
             let k = self.len() - 1;
-            let (s, c) = ([self.x[k], self.v[k], self.a[k], self.j[k]], self.command[k]);
+            let (s, c) = (
+                [self.x[k], self.v[k], self.a[k], self.j[k]],
+                self.command[k],
+            );
             self.push(s, c);
         }
     }
@@ -156,7 +165,10 @@ impl Reference {
         (0..4)
             .map(|i| {
                 let xi = (j0 + i) as f64;
-                let w: f64 = (0..4).filter(|&q| q != i).map(|q| (p - (j0 + q) as f64) / (xi - (j0 + q) as f64)).product();
+                let w: f64 = (0..4)
+                    .filter(|&q| q != i)
+                    .map(|q| (p - (j0 + q) as f64) / (xi - (j0 + q) as f64))
+                    .product();
                 w * values[j0 + i]
             })
             .sum()
@@ -187,7 +199,9 @@ impl Sine {
 
     /// Number of whole cycles in the default window.
     pub fn default_cycles(&self) -> u32 {
-        ((self.duration_s - self.taper_s - 1.0) * self.freq_hz).floor().max(0.0) as u32
+        ((self.duration_s - self.taper_s - 1.0) * self.freq_hz)
+            .floor()
+            .max(0.0) as u32
     }
 
     /// Reference states at time t.
@@ -198,7 +212,12 @@ impl Sine {
         let ed = if t < self.taper_s {
             let p = PI / self.taper_s;
             let (ps, pc) = (p * t).sin_cos();
-            [0.5 * (1.0 - pc), 0.5 * p * ps, 0.5 * p * p * pc, -0.5 * p * p * p * ps]
+            [
+                0.5 * (1.0 - pc),
+                0.5 * p * ps,
+                0.5 * p * p * pc,
+                -0.5 * p * p * p * ps,
+            ]
         } else {
             [1.0, 0.0, 0.0, 0.0]
         };
@@ -216,7 +235,11 @@ impl Sine {
         if t < 0.0 {
             return 0.0;
         }
-        let e = if t < self.taper_s { 0.5 * (1.0 - (PI * t / self.taper_s).cos()) } else { 1.0 };
+        let e = if t < self.taper_s {
+            0.5 * (1.0 - (PI * t / self.taper_s).cos())
+        } else {
+            1.0
+        };
         self.amp_m * e * (2.0 * PI * self.freq_hz * t).sin()
     }
 
@@ -321,8 +344,15 @@ fn matmul5(a: &[[f64; 5]; 5], b: &[[f64; 5]; 5]) -> [[f64; 5]; 5] {
 
 /// exp(m) by a 20-term Taylor series after scaling m to norm ≤ ¼, then squaring back.
 pub(crate) fn expm5(m: &[[f64; 5]; 5]) -> [[f64; 5]; 5] {
-    let norm = m.iter().map(|r| r.iter().map(|v| v.abs()).sum::<f64>()).fold(0.0, f64::max);
-    let squarings = if norm > 0.25 { (norm / 0.25).log2().ceil() as i32 } else { 0 };
+    let norm = m
+        .iter()
+        .map(|r| r.iter().map(|v| v.abs()).sum::<f64>())
+        .fold(0.0, f64::max);
+    let squarings = if norm > 0.25 {
+        (norm / 0.25).log2().ceil() as i32
+    } else {
+        0
+    };
     let scale = 0.5f64.powi(squarings);
     let mut a = *m;
     a.iter_mut().flatten().for_each(|v| *v *= scale);
@@ -353,14 +383,24 @@ mod tests {
 
     #[test]
     fn sine_derivatives_are_consistent() {
-        let s = Sine { freq_hz: 3.0, amp_m: 0.05, taper_s: 1.0, duration_s: 3.0, window_cycles: Some(4) };
+        let s = Sine {
+            freq_hz: 3.0,
+            amp_m: 0.05,
+            taper_s: 1.0,
+            duration_s: 3.0,
+            window_cycles: Some(4),
+        };
         for &t in &[0.1, 0.5, 0.999, 1.5, 2.2] {
             let h = 1e-6;
             let (p, m) = (s.states(t + h), s.states(t - h));
             let c = s.states(t);
             for d in 0..3 {
                 let fd = (p[d] - m[d]) / (2.0 * h);
-                assert!((fd - c[d + 1]).abs() <= 1e-5 * (1.0 + c[d + 1].abs()), "t={t} d={d}: {fd} vs {}", c[d + 1]);
+                assert!(
+                    (fd - c[d + 1]).abs() <= 1e-5 * (1.0 + c[d + 1].abs()),
+                    "t={t} d={d}: {fd} vs {}",
+                    c[d + 1]
+                );
             }
         }
         let r = s.reference(1024.0);
@@ -376,7 +416,11 @@ mod tests {
         let f_s = 1024.0;
         let t: Vec<f64> = (0..=2048).map(|k| k as f64 / f_s).collect();
         let d: Vec<f64> = t.iter().map(|t| 0.1 * t).collect();
-        let rec = Record { time_s: t, disp_m: d, f_ref_hz: 50.0 };
+        let rec = Record {
+            time_s: t,
+            disp_m: d,
+            f_ref_hz: 50.0,
+        };
         let r = rec.reference(f_s);
         assert_eq!(r.len(), 2049);
         let k = 2000;
@@ -385,7 +429,12 @@ mod tests {
         // ripple by 1.22e-6 m/s.
         assert!((r.v[k] - 0.1).abs() < 2e-6, "{}", r.v[k]);
         // Same argument with one and two more factors of 2πn·1024: bounds 8.8e-3 m/s², 77 m/s³.
-        assert!(r.a[k].abs() < 8.8e-3 && r.j[k].abs() < 77.0, "a {} j {}", r.a[k], r.j[k]);
+        assert!(
+            r.a[k].abs() < 8.8e-3 && r.j[k].abs() < 77.0,
+            "a {} j {}",
+            r.a[k],
+            r.j[k]
+        );
         let lag = 4.0 / (2.0 * PI * 50.0);
         // Held input: half a tick of extra lag.
         let expected = 0.1 * (k as f64 / f_s - lag - 0.5 / f_s);

@@ -39,7 +39,11 @@ mod tests {
 
     #[test]
     fn saturates_at_one_while_loading() {
-        let c = FrictionLane { inv_y: 1.0 / 2e-4, kappa: 0.5, kappa_neg: 0.0 };
+        let c = FrictionLane {
+            inv_y: 1.0 / 2e-4,
+            kappa: 0.5,
+            kappa_neg: 0.0,
+        };
         assert_eq!(dz_dt(&c, 0.3, 1.0), 0.0);
         assert_eq!(dz_dt(&c, -0.3, -1.0), 0.0);
         // Unloading with κ = 0.5: the bracket is 0, z moves at v/Y.

@@ -24,6 +24,7 @@
 
 use super::params::{params, Component, Range, G};
 use std::f64::consts::PI;
+use std::ops::{Add, Mul};
 
 params! {
     /// A stochastic ground motion's parameters (docs/model.md §4b). The plant never reads them:
@@ -60,7 +61,10 @@ pub struct Processing {
 
 impl Default for Processing {
     fn default() -> Self {
-        Processing { highpass_hz: 0.2, taper_s: 0.5 }
+        Processing {
+            highpass_hz: 0.2,
+            taper_s: 0.5,
+        }
     }
 }
 
@@ -117,7 +121,14 @@ pub fn to_displacement(accel: &[f64], dt: f64, p: &Processing) -> Processed {
         v = v1;
         disp.push(d);
     }
-    Processed { dt, drift_m: d.abs(), end_velocity_mps: v.abs(), disp_m: disp, accel_mps2: a, pad }
+    Processed {
+        dt,
+        drift_m: d.abs(),
+        end_velocity_mps: v.abs(),
+        disp_m: disp,
+        accel_mps2: a,
+        pad,
+    }
 }
 
 /// A 2nd-order Butterworth section (bilinear transform with a prewarped corner).
@@ -131,7 +142,10 @@ impl Biquad {
         let k = (PI * fc * dt).tan();
         let q = std::f64::consts::FRAC_1_SQRT_2;
         let norm = 1.0 / (1.0 + k / q + k * k);
-        Biquad { b: [norm, -2.0 * norm, norm], a: [2.0 * (k * k - 1.0) * norm, (1.0 - k / q + k * k) * norm] }
+        Biquad {
+            b: [norm, -2.0 * norm, norm],
+            a: [2.0 * (k * k - 1.0) * norm, (1.0 - k / q + k * k) * norm],
+        }
     }
 
     /// In place, from rest (direct form II transposed).
@@ -189,7 +203,8 @@ pub fn filtered_noise(g: &GroundParams, white: &[f64], dt: f64) -> Vec<f64> {
         .enumerate()
         .map(|(k, &w)| {
             let y = wg * wg * s[0] + 2.0 * zg * wg * s[1] - wf * wf * s[2] - 2.0 * zf * wf * s[3];
-            let next: [f64; 4] = std::array::from_fn(|r| (0..4).map(|c| e[r][c] * s[c]).sum::<f64>() + e[r][4] * w);
+            let next: [f64; 4] =
+                std::array::from_fn(|r| (0..4).map(|c| e[r][c] * s[c]).sum::<f64>() + e[r][4] * w);
             s = next;
             y * envelope(g, k as f64 * dt)
         })
@@ -203,22 +218,17 @@ pub fn filtered_noise(g: &GroundParams, white: &[f64], dt: f64) -> Vec<f64> {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Jet(pub [f64; 4]);
 
-impl Jet {
-    /// Time itself.
-    pub fn t(t: f64) -> Jet {
-        Jet([t, 1.0, 0.0, 0.0])
-    }
-    pub fn constant(c: f64) -> Jet {
-        Jet([c, 0.0, 0.0, 0.0])
-    }
-    pub fn add(self, o: Jet) -> Jet {
+impl std::ops::Add for Jet {
+    type Output = Jet;
+    fn add(self, o: Jet) -> Jet {
         Jet(std::array::from_fn(|i| self.0[i] + o.0[i]))
     }
-    pub fn scale(self, c: f64) -> Jet {
-        Jet(self.0.map(|v| v * c))
-    }
+}
+
+impl std::ops::Mul for Jet {
+    type Output = Jet;
     /// Leibniz's rule.
-    pub fn mul(self, o: Jet) -> Jet {
+    fn mul(self, o: Jet) -> Jet {
         let (a, b) = (self.0, o.0);
         Jet([
             a[0] * b[0],
@@ -227,10 +237,28 @@ impl Jet {
             a[3] * b[0] + 3.0 * a[2] * b[1] + 3.0 * a[1] * b[2] + a[0] * b[3],
         ])
     }
+}
+
+impl Jet {
+    /// Time itself.
+    pub fn t(t: f64) -> Jet {
+        Jet([t, 1.0, 0.0, 0.0])
+    }
+    pub fn constant(c: f64) -> Jet {
+        Jet([c, 0.0, 0.0, 0.0])
+    }
+    pub fn scale(self, c: f64) -> Jet {
+        Jet(self.0.map(|v| v * c))
+    }
     /// f∘self for f with derivatives `f` = (f, f′, f″, f‴) at self's value (Faà di Bruno).
     fn compose(self, f: [f64; 4]) -> Jet {
         let u = self.0;
-        Jet([f[0], f[1] * u[1], f[2] * u[1] * u[1] + f[1] * u[2], f[3] * u[1].powi(3) + 3.0 * f[2] * u[1] * u[2] + f[1] * u[3]])
+        Jet([
+            f[0],
+            f[1] * u[1],
+            f[2] * u[1] * u[1] + f[1] * u[2],
+            f[3] * u[1].powi(3) + 3.0 * f[2] * u[1] * u[2] + f[1] * u[3],
+        ])
     }
     pub fn sin(self) -> Jet {
         let (s, c) = self.0[0].sin_cos();
@@ -260,7 +288,9 @@ fn taper(t: f64, taper: f64, duration: f64) -> Jet {
         Jet::constant(0.5).add(Jet::t(t).scale(p).cos().scale(-0.5))
     } else if t > duration - taper {
         // h(duration − t): the derivatives in t are h's with the odd orders negated.
-        Jet::constant(0.5).add(Jet::t(duration - t).scale(p).cos().scale(-0.5)).flip_odd()
+        Jet::constant(0.5)
+            .add(Jet::t(duration - t).scale(p).cos().scale(-0.5))
+            .flip_odd()
     } else {
         Jet::constant(1.0)
     }
@@ -303,17 +333,27 @@ impl Sweep {
         let (phase, freq) = match self.law {
             SweepLaw::Linear => {
                 let k = (f1 - f0) / d;
-                (tt.scale(f0).add(tt.mul(tt).scale(0.5 * k)).scale(2.0 * PI), tt.scale(k).add(Jet::constant(f0)))
+                (
+                    tt.scale(f0).add(tt.mul(tt).scale(0.5 * k)).scale(2.0 * PI),
+                    tt.scale(k).add(Jet::constant(f0)),
+                )
             }
             SweepLaw::Log => {
                 let r = (f1 / f0).ln() / d;
                 let grow = tt.scale(r).exp();
-                (grow.add(Jet::constant(-1.0)).scale(2.0 * PI * f0 / r), grow.scale(f0))
+                (
+                    grow.add(Jet::constant(-1.0)).scale(2.0 * PI * f0 / r),
+                    grow.scale(f0),
+                )
             }
         };
         let amp = match self.amp_m {
             Some(x) => Jet::constant(x),
-            None => freq.mul(freq).scale(4.0 * PI * PI).recip().scale(self.accel_mps2),
+            None => freq
+                .mul(freq)
+                .scale(4.0 * PI * PI)
+                .recip()
+                .scale(self.accel_mps2),
         };
         taper(t, self.taper_s, d).mul(amp).mul(phase.sin()).0
     }
@@ -337,14 +377,27 @@ impl Multisine {
     /// The components in [f_lo, f_hi] at multiples of 1/duration, each of acceleration amplitude
     /// giving an rms acceleration `rms_mps2` (before the taper); `phases` gives one phase per
     /// component (drawn by the caller), cycled if short.
-    pub fn new(f_lo: f64, f_hi: f64, duration_s: f64, taper_s: f64, rms_mps2: f64, phases: impl Fn(usize) -> f64) -> Multisine {
+    pub fn new(
+        f_lo: f64,
+        f_hi: f64,
+        duration_s: f64,
+        taper_s: f64,
+        rms_mps2: f64,
+        phases: impl Fn(usize) -> f64,
+    ) -> Multisine {
         let df = 1.0 / duration_s;
         let first = (f_lo / df).ceil().max(1.0) as usize;
         let last = (f_hi / df).floor() as usize;
         let freqs_hz: Vec<f64> = (first..=last.max(first)).map(|k| k as f64 * df).collect();
         let accel_amp = rms_mps2 * (2.0 / freqs_hz.len() as f64).sqrt();
         let phases = (0..freqs_hz.len()).map(phases).collect();
-        Multisine { freqs_hz, accel_amp, phases, duration_s, taper_s }
+        Multisine {
+            freqs_hz,
+            accel_amp,
+            phases,
+            duration_s,
+            taper_s,
+        }
     }
 
     /// (x, v, a, j) at time t.
@@ -373,7 +426,11 @@ mod tests {
             let (p, m, c) = (f(t + h), f(t - h), f(t));
             for d in 0..3 {
                 let fd = (p[d] - m[d]) / (2.0 * h);
-                assert!((fd - c[d + 1]).abs() <= 1e-5 * (1.0 + c[d + 1].abs()), "t={t} d={d}: {fd} vs {}", c[d + 1]);
+                assert!(
+                    (fd - c[d + 1]).abs() <= 1e-5 * (1.0 + c[d + 1].abs()),
+                    "t={t} d={d}: {fd} vs {}",
+                    c[d + 1]
+                );
             }
         }
     }
@@ -382,7 +439,15 @@ mod tests {
     fn sweep_and_multisine_derivatives_are_exact() {
         for law in [SweepLaw::Linear, SweepLaw::Log] {
             for amp_m in [Some(0.01), None] {
-                let s = Sweep { f0_hz: 0.5, f1_hz: 20.0, duration_s: 30.0, taper_s: 2.0, law, amp_m, accel_mps2: 2.0 };
+                let s = Sweep {
+                    f0_hz: 0.5,
+                    f1_hz: 20.0,
+                    duration_s: 30.0,
+                    taper_s: 2.0,
+                    law,
+                    amp_m,
+                    accel_mps2: 2.0,
+                };
                 fd_check(|t| s.states(t), &[0.3, 1.99, 2.01, 10.0, 27.5, 29.9]);
             }
         }
@@ -395,11 +460,28 @@ mod tests {
     fn a_sweep_makes_as_many_cycles_as_its_frequency_law() {
         // ∫f dt over the run: log f0·T·(r − 1)/ln r, linear (f0 + f1)/2·T; x crosses zero twice
         // a cycle.
-        for (law, cycles) in [(SweepLaw::Log, 15.0 * 8.0 / 16f64.ln()), (SweepLaw::Linear, 8.5 * 8.0)] {
-            let s = Sweep { f0_hz: 1.0, f1_hz: 16.0, duration_s: 8.0, taper_s: 0.0, law, amp_m: Some(0.01), accel_mps2: 0.0 };
+        for (law, cycles) in [
+            (SweepLaw::Log, 15.0 * 8.0 / 16f64.ln()),
+            (SweepLaw::Linear, 8.5 * 8.0),
+        ] {
+            let s = Sweep {
+                f0_hz: 1.0,
+                f1_hz: 16.0,
+                duration_s: 8.0,
+                taper_s: 0.0,
+                law,
+                amp_m: Some(0.01),
+                accel_mps2: 0.0,
+            };
             let x: Vec<f64> = (1..80_000).map(|i| s.states(i as f64 * 1e-4)[0]).collect();
-            let crossings = x.windows(2).filter(|w| (w[0] < 0.0) != (w[1] < 0.0)).count() as f64;
-            assert!((crossings - 2.0 * cycles).abs() <= 1.0, "{law:?}: {crossings} crossings for {cycles} cycles");
+            let crossings = x
+                .windows(2)
+                .filter(|w| (w[0] < 0.0) != (w[1] < 0.0))
+                .count() as f64;
+            assert!(
+                (crossings - 2.0 * cycles).abs() <= 1.0,
+                "{law:?}: {crossings} crossings for {cycles} cycles"
+            );
         }
     }
 }

@@ -49,7 +49,10 @@ impl Metrics {
     /// The highest harmonic k ≤ 9 of `f0` strictly below the Nyquist frequency f_s/2 (0 when
     /// even the fundamental is not).
     pub fn highest_harmonic(f0: f64, f_s: f64) -> usize {
-        (1..=N_HARM).take_while(|&k| (k as f64) * f0 < 0.5 * f_s).last().unwrap_or(0)
+        (1..=N_HARM)
+            .take_while(|&k| (k as f64) * f0 < 0.5 * f_s)
+            .last()
+            .unwrap_or(0)
     }
 
     pub const NAN: Metrics = Metrics {
@@ -75,7 +78,10 @@ impl Metrics {
     /// Every metric's bit pattern, in [`Metrics::columns`] order: to compare two runs bit for
     /// bit (`==` on the struct fails on the NaN of a metric that does not apply).
     pub fn bits(&self) -> Vec<u64> {
-        self.columns().into_iter().map(|(_, v)| v.to_bits()).collect()
+        self.columns()
+            .into_iter()
+            .map(|(_, v)| v.to_bits())
+            .collect()
     }
 
     /// h_k for k = 2…9.
@@ -85,8 +91,14 @@ impl Metrics {
 
     /// (column name, value) pairs in a fixed order, as written to result tables.
     pub fn columns(&self) -> Vec<(&'static str, f64)> {
-        let mut v = vec![("amp_ratio", self.amp_ratio), ("phase_err_deg", self.phase_err_deg)];
-        const H: [&str; 8] = ["h2_ratio", "h3_ratio", "h4_ratio", "h5_ratio", "h6_ratio", "h7_ratio", "h8_ratio", "h9_ratio"];
+        let mut v = vec![
+            ("amp_ratio", self.amp_ratio),
+            ("phase_err_deg", self.phase_err_deg),
+        ];
+        const H: [&str; 8] = [
+            "h2_ratio", "h3_ratio", "h4_ratio", "h5_ratio", "h6_ratio", "h7_ratio", "h8_ratio",
+            "h9_ratio",
+        ];
         v.extend(H.iter().zip(self.h.iter()).map(|(n, x)| (*n, *x)));
         v.extend([
             ("thd_odd_ratio", self.thd_odd),
@@ -134,7 +146,10 @@ impl Basis {
     /// sin_cos calls per tick cost as much as the rest of the tick; the recurrence is within
     /// 1e-14 of them (`recurrence_matches_sin_cos`).
     pub fn at(k: usize, f_s: f64, f: f64) -> Basis {
-        let mut b = Basis { cos: [0.0; N_HARM], sin: [0.0; N_HARM] };
+        let mut b = Basis {
+            cos: [0.0; N_HARM],
+            sin: [0.0; N_HARM],
+        };
         let cycles = f * (k as f64) / f_s;
         let (s1, c1) = (2.0 * std::f64::consts::PI * (cycles - cycles.floor())).sin_cos();
         b.cos[0] = c1;
@@ -238,7 +253,10 @@ impl<const N: usize> MetricsAcc<N> {
             self.err_x2[l] += ex * ex;
             self.peak_err_a[l] = self.peak_err_a[l].max(ea.abs());
             self.peak_err_x[l] = self.peak_err_x[l].max(ex.abs());
-            for (c, (got, want)) in [(w.a, w.a_r), (w.v, w.v_r), (w.x, w.x_r)].into_iter().enumerate() {
+            for (c, (got, want)) in [(w.a, w.a_r), (w.v, w.v_r), (w.x, w.x_r)]
+                .into_iter()
+                .enumerate()
+            {
                 self.peak[c][l] = self.peak[c][l].max(got[l].abs());
                 self.peak_r[c][l] = self.peak_r[c][l].max(want[l].abs());
             }
@@ -277,7 +295,12 @@ impl<const N: usize> MetricsAcc<N> {
     /// would be an alias of a lower frequency, so its ratio is NaN and it is left out of the
     /// THD sums ([`Metrics::highest_harmonic`]). `target` is the lane's spectrum and its target
     /// PSA, when the reference has one.
-    pub fn finish(&self, l: usize, harmonics: Option<usize>, target: Option<(&SpectrumSpec, &[f64])>) -> Metrics {
+    pub fn finish(
+        &self,
+        l: usize,
+        harmonics: Option<usize>,
+        target: Option<(&SpectrumSpec, &[f64])>,
+    ) -> Metrics {
         // H_k = (2/n)(Σ s cos − j Σ s sin): magnitude and angle; the 2/n cancels in every ratio.
         let mag = |re: f64, im: f64| re.hypot(im);
         let ang = |re: f64, im: f64| (-im).atan2(re);
@@ -299,16 +322,24 @@ impl<const N: usize> MetricsAcc<N> {
         if let (Some(top), true) = (harmonics, self.n > 0) {
             let h1 = mag(self.a_re[0][l], self.a_im[0][l]);
             m.amp_ratio = h1 / mag(self.ar_re[l], self.ar_im[l]);
-            m.phase_err_deg = wrap(ang(self.a_re[0][l], self.a_im[0][l]) - ang(self.ar_re[l], self.ar_im[l]));
+            m.phase_err_deg =
+                wrap(ang(self.a_re[0][l], self.a_im[0][l]) - ang(self.ar_re[l], self.ar_im[l]));
             for k in 2..=top.min(N_HARM) {
                 m.h[k - 2] = mag(self.a_re[k - 1][l], self.a_im[k - 1][l]) / h1;
             }
             let h = m.h;
-            let thd = |ks: [usize; 4]| ks.into_iter().filter(|&k| k <= top).map(|k| h[k - 2].powi(2)).sum::<f64>().sqrt();
+            let thd = |ks: [usize; 4]| {
+                ks.into_iter()
+                    .filter(|&k| k <= top)
+                    .map(|k| h[k - 2].powi(2))
+                    .sum::<f64>()
+                    .sqrt()
+            };
             m.thd_odd = thd([3, 5, 7, 9]);
             m.thd_even = thd([2, 4, 6, 8]);
             m.disp_amp_ratio = mag(self.x_re[l], self.x_im[l]) / mag(self.xr_re[l], self.xr_im[l]);
-            m.disp_phase_err_deg = wrap(ang(self.x_re[l], self.x_im[l]) - ang(self.xr_re[l], self.xr_im[l]));
+            m.disp_phase_err_deg =
+                wrap(ang(self.x_re[l], self.x_im[l]) - ang(self.xr_re[l], self.xr_im[l]));
         }
         m
     }
@@ -327,8 +358,19 @@ mod tests {
         for k in 0..1024 {
             let t = k as f64 / f_s;
             let ar = (w * t).sin();
-            let a = 2.0 * (w * t + 0.1).sin() + 0.1 * (3.0 * w * t).sin() + 0.04 * (2.0 * w * t).cos();
-            acc.window_tick(Some(&Basis::at(k, f_s, f)), &WindowTick { a_r: &[ar], v_r: &[ar], x_r: &[ar], a: &[a], v: &[ar], x: &[ar] });
+            let a =
+                2.0 * (w * t + 0.1).sin() + 0.1 * (3.0 * w * t).sin() + 0.04 * (2.0 * w * t).cos();
+            acc.window_tick(
+                Some(&Basis::at(k, f_s, f)),
+                &WindowTick {
+                    a_r: &[ar],
+                    v_r: &[ar],
+                    x_r: &[ar],
+                    a: &[a],
+                    v: &[ar],
+                    x: &[ar],
+                },
+            );
         }
         let m = acc.finish(0, Some(N_HARM), None);
         assert!((m.amp_ratio - 2.0).abs() < 1e-12);
@@ -354,7 +396,17 @@ mod tests {
             let t = k as f64 / f_s;
             let ar = (w * t).sin();
             let a = ar + 0.1 * (3.0 * w * t).sin() + 0.05 * (2.0 * w * t).sin();
-            acc.window_tick(Some(&Basis::at(k, f_s, f)), &WindowTick { a_r: &[ar], v_r: &[ar], x_r: &[ar], a: &[a], v: &[ar], x: &[ar] });
+            acc.window_tick(
+                Some(&Basis::at(k, f_s, f)),
+                &WindowTick {
+                    a_r: &[ar],
+                    v_r: &[ar],
+                    x_r: &[ar],
+                    a: &[a],
+                    v: &[ar],
+                    x: &[ar],
+                },
+            );
         }
         let m = acc.finish(0, Some(Metrics::highest_harmonic(f, f_s)), None);
         assert!((m.h(2) - 0.05).abs() < 1e-9, "{}", m.h(2));
@@ -369,8 +421,15 @@ mod tests {
             // 3.75 Hz at 1024 Hz: every phase below is exact in binary, so only sin_cos rounds.
             let b = Basis::at(k, 1024.0, 3.75);
             for h in 0..N_HARM {
-                let phase = 2.0 * std::f64::consts::PI * ((h + 1) as f64 * 3.75 * k as f64 / 1024.0).fract();
-                assert!((b.cos[h] - phase.cos()).abs() < 1e-14 && (b.sin[h] - phase.sin()).abs() < 1e-14, "k {k} harmonic {}", h + 1);
+                let phase = 2.0
+                    * std::f64::consts::PI
+                    * ((h + 1) as f64 * 3.75 * k as f64 / 1024.0).fract();
+                assert!(
+                    (b.cos[h] - phase.cos()).abs() < 1e-14
+                        && (b.sin[h] - phase.sin()).abs() < 1e-14,
+                    "k {k} harmonic {}",
+                    h + 1
+                );
             }
         }
     }

@@ -41,27 +41,60 @@ pub struct Range {
 
 impl Range {
     pub const fn gt(lo: f64) -> Self {
-        Range { lo, hi: f64::INFINITY, lo_inclusive: false, hi_inclusive: false }
+        Range {
+            lo,
+            hi: f64::INFINITY,
+            lo_inclusive: false,
+            hi_inclusive: false,
+        }
     }
     pub const fn ge(lo: f64) -> Self {
-        Range { lo, hi: f64::INFINITY, lo_inclusive: true, hi_inclusive: false }
+        Range {
+            lo,
+            hi: f64::INFINITY,
+            lo_inclusive: true,
+            hi_inclusive: false,
+        }
     }
     pub const fn closed(lo: f64, hi: f64) -> Self {
-        Range { lo, hi, lo_inclusive: true, hi_inclusive: true }
+        Range {
+            lo,
+            hi,
+            lo_inclusive: true,
+            hi_inclusive: true,
+        }
     }
     pub const fn open_closed(lo: f64, hi: f64) -> Self {
-        Range { lo, hi, lo_inclusive: false, hi_inclusive: true }
+        Range {
+            lo,
+            hi,
+            lo_inclusive: false,
+            hi_inclusive: true,
+        }
     }
     pub const fn any() -> Self {
-        Range { lo: f64::NEG_INFINITY, hi: f64::INFINITY, lo_inclusive: false, hi_inclusive: false }
+        Range {
+            lo: f64::NEG_INFINITY,
+            hi: f64::INFINITY,
+            lo_inclusive: false,
+            hi_inclusive: false,
+        }
     }
     /// True when `v` is finite and inside the range.
     pub fn contains(&self, v: f64) -> bool {
         if !v.is_finite() {
             return false;
         }
-        let lo_ok = if self.lo_inclusive { v >= self.lo } else { v > self.lo };
-        let hi_ok = if self.hi_inclusive { v <= self.hi } else { v < self.hi };
+        let lo_ok = if self.lo_inclusive {
+            v >= self.lo
+        } else {
+            v > self.lo
+        };
+        let hi_ok = if self.hi_inclusive {
+            v <= self.hi
+        } else {
+            v < self.hi
+        };
         lo_ok && hi_ok
     }
 }
@@ -349,7 +382,13 @@ pub enum Component {
 
 impl Component {
     /// The baseline's parts, in registry order.
-    pub const BASELINE: [Component; 5] = [Component::Servovalve, Component::Actuator, Component::Platen, Component::Friction, Component::Controller];
+    pub const BASELINE: [Component; 5] = [
+        Component::Servovalve,
+        Component::Actuator,
+        Component::Platen,
+        Component::Friction,
+        Component::Controller,
+    ];
 
     /// Its name (model-file table, parameter prefix).
     pub fn name(self) -> &'static str {
@@ -368,7 +407,12 @@ impl Component {
     pub fn effect(self) -> Option<EffectId> {
         match self {
             Component::Effect(e) => Some(e),
-            Component::Servovalve | Component::Actuator | Component::Platen | Component::Friction | Component::Controller | Component::Ground => None,
+            Component::Servovalve
+            | Component::Actuator
+            | Component::Platen
+            | Component::Friction
+            | Component::Controller
+            | Component::Ground => None,
         }
     }
 
@@ -450,7 +494,10 @@ impl ModelParams {
 
     /// The components (in registry order): the baseline's parts, then the library effects.
     pub fn components() -> impl Iterator<Item = Component> {
-        Component::BASELINE.into_iter().chain([Component::Ground]).chain(EffectId::ALL.map(Component::Effect))
+        Component::BASELINE
+            .into_iter()
+            .chain([Component::Ground])
+            .chain(EffectId::ALL.map(Component::Effect))
     }
 
     /// Checks every range and every relation between parameters; returns all problems at once.
@@ -469,7 +516,10 @@ impl ModelParams {
         if sv.p_r >= sv.p_s {
             issues.push(ParamIssue {
                 path: "servovalve.p_r, servovalve.p_s".into(),
-                message: format!("return pressure {} Pa must be below supply pressure {} Pa", sv.p_r, sv.p_s),
+                message: format!(
+                    "return pressure {} Pa must be below supply pressure {} Pa",
+                    sv.p_r, sv.p_s
+                ),
             });
         }
         if sv.n_val.fract() != 0.0 {
@@ -555,7 +605,12 @@ mod tests {
             (info.set)(&mut p, 1.25);
             assert_eq!((info.get)(&p), 1.25);
             let found = ModelParams::lookup(&info.path()).expect("its own path");
-            assert_eq!((found.component, found.name), (info.component, info.name), "{} looks up another row", info.path());
+            assert_eq!(
+                (found.component, found.name),
+                (info.component, info.name),
+                "{} looks up another row",
+                info.path()
+            );
         }
     }
 

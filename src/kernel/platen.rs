@@ -41,7 +41,11 @@ pub struct PowDamping;
 impl Damping for PowDamping {
     #[inline(always)]
     fn pow(v_abs: f64, alpha: f64) -> f64 {
-        if alpha == 0.5 { v_abs.sqrt() } else { v_abs.powf(alpha) }
+        if alpha == 0.5 {
+            v_abs.sqrt()
+        } else {
+            v_abs.powf(alpha)
+        }
     }
 }
 
@@ -59,7 +63,13 @@ mod tests {
     fn accel_balances_forces() {
         // Worked by hand: F − k·y − (c·|v|^α + μ)·z over m, with y = 0.01 m, v = 0.25 m/s, z = 1:
         // (1e6 − 12 660 − (41 000·0.5 + 7 597)) / 144 000 = 959 243 / 144 000.
-        let c = PlatenLane { inv_m: 1.0 / 144e3, k: 1.266e6, c: 0.041e6, alpha: 0.5, mu: 7597.0 };
+        let c = PlatenLane {
+            inv_m: 1.0 / 144e3,
+            k: 1.266e6,
+            c: 0.041e6,
+            alpha: 0.5,
+            mu: 7597.0,
+        };
         let a = accel::<SqrtDamping>(&c, 1e6, 0.0, 0.01, 0.25, 1.0);
         assert!((a - 959_243.0 / 144e3).abs() < 1e-12, "{a}");
         // The general law at α = ½ is the square root.
@@ -71,5 +81,4 @@ mod tests {
         let b = accel::<PowDamping>(&c, 1e6, 2e4, -0.02, -0.36, -0.5);
         assert!((b - 7.362_666_177_450_024).abs() < 1e-12, "{b}");
     }
-
 }

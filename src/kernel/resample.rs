@@ -20,7 +20,16 @@ use super::simulate::{Observer, TickView};
 use super::state::idx;
 
 /// The channels a [`Resampler`] keeps, in the order of [`Resampler::channel`].
-pub const CHANNELS: [&str; 8] = ["accel_mps2", "disp_m", "force_n", "p1_pa", "p2_pa", "valve_cmd_v", "spool_m", "vel_mps"];
+pub const CHANNELS: [&str; 8] = [
+    "accel_mps2",
+    "disp_m",
+    "force_n",
+    "p1_pa",
+    "p2_pa",
+    "valve_cmd_v",
+    "spool_m",
+    "vel_mps",
+];
 
 /// Index of a channel in [`CHANNELS`].
 pub mod ch {
@@ -46,7 +55,10 @@ pub struct Resampler<const N: usize> {
 impl<const N: usize> Resampler<N> {
     pub fn new(times: &[f64]) -> Self {
         debug_assert!(times.windows(2).all(|w| w[0] <= w[1]), "times ascending");
-        Resampler { times: times.to_vec(), out: Vec::with_capacity(times.len()) }
+        Resampler {
+            times: times.to_vec(),
+            out: Vec::with_capacity(times.len()),
+        }
     }
     /// Samples produced so far (all of them once the run has passed the last time).
     pub fn len(&self) -> usize {
@@ -98,7 +110,14 @@ mod tests {
     fn sampled(times: &[f64], substeps: usize) -> Resampler<1> {
         let p = ModelParams::default();
         let lp = LaneParams::<1>::new(&[&p]).unwrap();
-        let r = Sine { freq_hz: 8.0, amp_m: Sine::amp_from_g(1.5, 8.0), taper_s: 0.5, duration_s: 1.5, window_cycles: None }.reference(1024.0);
+        let r = Sine {
+            freq_hz: 8.0,
+            amp_m: Sine::amp_from_g(1.5, 8.0),
+            taper_s: 0.5,
+            duration_s: 1.5,
+            window_cycles: None,
+        }
+        .reference(1024.0);
         let mut rs = Resampler::<1>::new(times);
         run(&lp, &Baseline, &r, &Solver { substeps }, &mut rs).unwrap();
         assert!(rs.complete());
@@ -109,7 +128,11 @@ mod tests {
     fn rel_err(a: &Resampler<1>, b: &Resampler<1>, c: usize) -> f64 {
         let (x, y) = (a.channel(c, 0), b.channel(c, 0));
         let rms = (y.iter().map(|v| v * v).sum::<f64>() / y.len() as f64).sqrt();
-        x.iter().zip(&y).map(|(p, q)| (p - q).abs()).fold(0.0, f64::max) / rms
+        x.iter()
+            .zip(&y)
+            .map(|(p, q)| (p - q).abs())
+            .fold(0.0, f64::max)
+            / rms
     }
 
     /// Samples at 500 Hz (no common tick with 1024 Hz) from 8 substeps against the
@@ -123,13 +146,27 @@ mod tests {
         let (ta, tb) = (sampled(&ticks, 8), sampled(&ticks, 256));
         for c in [ch::ACCEL, ch::DISP, ch::FORCE, ch::P1, ch::VEL] {
             let (off, on) = (rel_err(&a, &b, c), rel_err(&ta, &tb, c));
-            assert!(off < 1e-5 && off < 3.0 * on.max(1e-9), "{}: off the ticks {off:e}, on the ticks {on:e}", CHANNELS[c]);
+            assert!(
+                off < 1e-5 && off < 3.0 * on.max(1e-9),
+                "{}: off the ticks {off:e}, on the ticks {on:e}",
+                CHANNELS[c]
+            );
         }
         // The held valve command is the tick's value, exactly, at every substep count.
         let (u8, u256) = (a.channel(ch::VALVE_CMD, 0), b.channel(ch::VALVE_CMD, 0));
-        let u_ticks = sampled(&times.iter().map(|t| (t * 1024.0).floor() / 1024.0).collect::<Vec<_>>(), 8).channel(ch::VALVE_CMD, 0);
+        let u_ticks = sampled(
+            &times
+                .iter()
+                .map(|t| (t * 1024.0).floor() / 1024.0)
+                .collect::<Vec<_>>(),
+            8,
+        )
+        .channel(ch::VALVE_CMD, 0);
         assert_eq!(u8, u_ticks);
-        assert!(u8.iter().zip(&u256).all(|(p, q)| (p - q).abs() < 1e-4), "the held commands of both runs agree to their convergence");
+        assert!(
+            u8.iter().zip(&u256).all(|(p, q)| (p - q).abs() < 1e-4),
+            "the held commands of both runs agree to their convergence"
+        );
     }
 
     /// Times on the ticks read back the tick values bit for bit, whatever else is sampled.
@@ -143,16 +180,30 @@ mod tests {
         }
         let p = ModelParams::default();
         let lp = LaneParams::<1>::new(&[&p]).unwrap();
-        let r = Sine { freq_hz: 8.0, amp_m: Sine::amp_from_g(1.5, 8.0), taper_s: 0.5, duration_s: 1.5, window_cycles: None }.reference(1024.0);
+        let r = Sine {
+            freq_hz: 8.0,
+            amp_m: Sine::amp_from_g(1.5, 8.0),
+            taper_s: 0.5,
+            duration_s: 1.5,
+            window_cycles: None,
+        }
+        .reference(1024.0);
         let mut ticks = Ticks(Vec::new());
         run(&lp, &Baseline, &r, &Solver::default(), &mut ticks).unwrap();
-        let mut mixed: Vec<f64> = (0..1500).flat_map(|k| [k as f64 / 1024.0, (k as f64 + 0.3) / 1024.0]).collect();
+        let mut mixed: Vec<f64> = (0..1500)
+            .flat_map(|k| [k as f64 / 1024.0, (k as f64 + 0.3) / 1024.0])
+            .collect();
         mixed.truncate(2 * 1499);
         let both = sampled(&mixed, Solver::default().substeps);
         for (c, ci) in [ch::ACCEL, ch::DISP, ch::FORCE].into_iter().enumerate() {
             let y = both.channel(ci, 0);
             for k in 0..1499 {
-                assert_eq!(ticks.0[k][c].to_bits(), y[2 * k].to_bits(), "{} at tick {k}", CHANNELS[ci]);
+                assert_eq!(
+                    ticks.0[k][c].to_bits(),
+                    y[2 * k].to_bits(),
+                    "{} at tick {k}",
+                    CHANNELS[ci]
+                );
             }
         }
     }

@@ -40,7 +40,7 @@ pub fn inv_fourth_root(s: f64) -> f64 {
     let mut y = f64::from_bits(FOURTH_ROOT_SEED.wrapping_sub(s.to_bits() >> 2));
     for _ in 0..4 {
         let y2 = y * y;
-        y = y * (1.25 - 0.25 * s * (y2 * y2));
+        y *= 1.25 - 0.25 * s * (y2 * y2);
     }
     y
 }
@@ -129,12 +129,24 @@ mod tests {
             }
             s *= 1e7;
         }
-        assert!(worst < 2.0 * f64::EPSILON, "largest relative error {worst:e}");
+        assert!(
+            worst < 2.0 * f64::EPSILON,
+            "largest relative error {worst:e}"
+        );
     }
 
     #[test]
     fn orifice_selects_the_right_lands() {
-        let c = ValveLane { kw1: 1.0, kw2: 2.0, kw3: 3.0, kw4: 4.0, p_r: 1e5, p_tr2: 1e-6, kq1: 0.0, kq2: 0.0 };
+        let c = ValveLane {
+            kw1: 1.0,
+            kw2: 2.0,
+            kw3: 3.0,
+            kw4: 4.0,
+            p_r: 1e5,
+            p_tr2: 1e-6,
+            kq1: 0.0,
+            kq2: 0.0,
+        };
         let (p1, p2, ps) = (8e6, 12e6, 20e6);
         let (q1, q2) = Orifice::flows(&c, 0.01, p1, p2, ps);
         assert!((q1 - 0.01 * (ps - p1).sqrt()).abs() < 1e-9);

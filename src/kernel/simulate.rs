@@ -90,7 +90,9 @@ pub enum SetupError {
     NotUniform { lane: usize },
     #[error("the reference was made at {reference} Hz but the controller runs at {controller} Hz")]
     RateMismatch { reference: f64, controller: f64 },
-    #[error("the lanes' references differ in rate, length, window, fundamental, spectrum or drive")]
+    #[error(
+        "the lanes' references differ in rate, length, window, fundamental, spectrum or drive"
+    )]
     LaneReferences,
     #[error("substeps must be at least 1")]
     Substeps,
@@ -102,7 +104,10 @@ impl<const N: usize> LaneParams<N> {
     /// Coefficients for up to N parameter sets; missing lanes repeat the last set.
     pub fn new(sets: &[&ModelParams]) -> Result<Self, SetupError> {
         if sets.is_empty() || sets.len() > N {
-            return Err(SetupError::LaneCount { got: sets.len(), max: N });
+            return Err(SetupError::LaneCount {
+                got: sets.len(),
+                max: N,
+            });
         }
         let p = |l: usize| sets[l.min(sets.len() - 1)];
         for (l, s) in sets.iter().enumerate() {
@@ -129,15 +134,32 @@ impl<const N: usize> LaneParams<N> {
         });
         let act: [ActuatorLane; N] = std::array::from_fn(|l| {
             let a = &p(l).actuator;
-            ActuatorLane { beta: a.beta, a1: a.a1, a2: a.a2, l: a.l, vd1: a.vd1, vd2: a.vd2 }
+            ActuatorLane {
+                beta: a.beta,
+                a1: a.a1,
+                a2: a.a2,
+                l: a.l,
+                vd1: a.vd1,
+                vd2: a.vd2,
+            }
         });
         let platen: [PlatenLane; N] = std::array::from_fn(|l| {
             let m = p(l);
-            PlatenLane { inv_m: 1.0 / m.platen.m, k: m.platen.k, c: m.platen.c, alpha: m.platen.alpha, mu: m.mu() }
+            PlatenLane {
+                inv_m: 1.0 / m.platen.m,
+                k: m.platen.k,
+                c: m.platen.c,
+                alpha: m.platen.alpha,
+                mu: m.mu(),
+            }
         });
         let friction: [FrictionLane; N] = std::array::from_fn(|l| {
             let f = &p(l).friction;
-            FrictionLane { inv_y: 1.0 / f.y_yield, kappa: f.kappa, kappa_neg: 2.0 * f.kappa - 1.0 }
+            FrictionLane {
+                inv_y: 1.0 / f.y_yield,
+                kappa: f.kappa,
+                kappa_neg: 2.0 * f.kappa - 1.0,
+            }
         });
         Ok(LaneParams {
             valve: ValveSoa::from_lanes(&valve),
@@ -165,15 +187,25 @@ pub enum Failure {
     /// |y| reached the half stroke L.
     StrokeLimit { disp_m: f64 },
     /// A chamber pressure left [−1 MPa, 2·P_S].
-    Pressure { actuator: usize, chamber: usize, pa: f64 },
+    Pressure {
+        actuator: usize,
+        chamber: usize,
+        pa: f64,
+    },
 }
 
 impl fmt::Display for Failure {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Failure::NonFinite => write!(f, "state became non-finite (diverged)"),
-            Failure::StrokeLimit { disp_m } => write!(f, "stroke limit reached (y = {disp_m:.4} m)"),
-            Failure::Pressure { actuator, chamber, pa } => write!(
+            Failure::StrokeLimit { disp_m } => {
+                write!(f, "stroke limit reached (y = {disp_m:.4} m)")
+            }
+            Failure::Pressure {
+                actuator,
+                chamber,
+                pa,
+            } => write!(
                 f,
                 "pressure P{chamber} of actuator {} left [-1 MPa, 2 P_S] ({:.3} MPa)",
                 actuator + 1,
@@ -279,7 +311,8 @@ impl Isa {
     /// The widest instruction set this CPU runs (runtime detection).
     pub fn detected() -> Isa {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        {
             return Isa::Avx2;
         }
         Isa::Portable
@@ -355,10 +388,18 @@ pub fn run_each_on<const N: usize, E: Effect<N>, O: Observer<N>>(
     // AVX2 only where the CPU has it: asking for it elsewhere runs the portable build.
     let wide = isa == Isa::Avx2 && Isa::detected() == Isa::Avx2;
     Ok(match (lp.valve_law, lp.alpha_half) {
-        (ValveLaw::Orifice, true) => actuators::<N, Orifice, SqrtDamping, E, O>(wide, lp, effect, refs, solver, obs),
-        (ValveLaw::Orifice, false) => actuators::<N, Orifice, PowDamping, E, O>(wide, lp, effect, refs, solver, obs),
-        (ValveLaw::Linear, true) => actuators::<N, Linear, SqrtDamping, E, O>(wide, lp, effect, refs, solver, obs),
-        (ValveLaw::Linear, false) => actuators::<N, Linear, PowDamping, E, O>(wide, lp, effect, refs, solver, obs),
+        (ValveLaw::Orifice, true) => {
+            actuators::<N, Orifice, SqrtDamping, E, O>(wide, lp, effect, refs, solver, obs)
+        }
+        (ValveLaw::Orifice, false) => {
+            actuators::<N, Orifice, PowDamping, E, O>(wide, lp, effect, refs, solver, obs)
+        }
+        (ValveLaw::Linear, true) => {
+            actuators::<N, Linear, SqrtDamping, E, O>(wide, lp, effect, refs, solver, obs)
+        }
+        (ValveLaw::Linear, false) => {
+            actuators::<N, Linear, PowDamping, E, O>(wide, lp, effect, refs, solver, obs)
+        }
     })
 }
 
@@ -384,7 +425,9 @@ pub fn run_usual<const N: usize, E: Effect<N>, O: Observer<N>>(
             if effect.symmetric() {
                 integrate_avx2::<N, 1, Orifice, SqrtDamping, E, O>(lp, effect, refs, solver, obs)
             } else {
-                integrate_avx2::<N, N_ACT, Orifice, SqrtDamping, E, O>(lp, effect, refs, solver, obs)
+                integrate_avx2::<N, N_ACT, Orifice, SqrtDamping, E, O>(
+                    lp, effect, refs, solver, obs,
+                )
             }
         }));
     }
@@ -394,7 +437,11 @@ pub fn run_usual<const N: usize, E: Effect<N>, O: Observer<N>>(
 
 /// The checks before a run: the reference's rate is the controller's, substeps ≥ 1, a drive as
 /// long as the reference.
-fn check<const N: usize>(lp: &LaneParams<N>, refs: &[&Reference; N], solver: &Solver) -> Result<(), SetupError> {
+fn check<const N: usize>(
+    lp: &LaneParams<N>,
+    refs: &[&Reference; N],
+    solver: &Solver,
+) -> Result<(), SetupError> {
     let reference = refs[0];
     for r in &refs[1..] {
         let same = std::ptr::eq(*r, reference)
@@ -410,14 +457,20 @@ fn check<const N: usize>(lp: &LaneParams<N>, refs: &[&Reference; N], solver: &So
         }
     }
     if reference.f_s != lp.f_s {
-        return Err(SetupError::RateMismatch { reference: reference.f_s, controller: lp.f_s });
+        return Err(SetupError::RateMismatch {
+            reference: reference.f_s,
+            controller: lp.f_s,
+        });
     }
     if solver.substeps == 0 {
         return Err(SetupError::Substeps);
     }
     if let Drive::ValveCommand(d) | Drive::Spool(d) = &reference.drive {
         if d.len() != reference.len() {
-            return Err(SetupError::DriveLength { got: d.len(), expected: reference.len() });
+            return Err(SetupError::DriveLength {
+                got: d.len(),
+                expected: reference.len(),
+            });
         }
     }
     Ok(())
@@ -440,7 +493,14 @@ fn actuators<const N: usize, Q: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N
     }
 }
 
-fn dispatch<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N>>(
+fn dispatch<
+    const N: usize,
+    const A: usize,
+    Q: FlowLaw,
+    D: Damping,
+    E: Effect<N>,
+    O: Observer<N>,
+>(
     wide: bool,
     lp: &LaneParams<N>,
     effect: &E,
@@ -459,7 +519,14 @@ fn dispatch<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N>
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn integrate_avx2<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N>>(
+unsafe fn integrate_avx2<
+    const N: usize,
+    const A: usize,
+    Q: FlowLaw,
+    D: Damping,
+    E: Effect<N>,
+    O: Observer<N>,
+>(
     lp: &LaneParams<N>,
     effect: &E,
     refs: &[&Reference; N],
@@ -533,7 +600,16 @@ fn rhs<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N>>(
         ds[Y][l] = v;
         ds[Z][l] = friction::dz_dt(&lp.friction.lane(l), v, z);
     }
-    let view = PlantView { x_c, opening: &xs, q_supply: &q_supply, state: s, q_in1: &q_in1, q_out2: &q_out2, p_s: &p_s, f_act: &f_act };
+    let view = PlantView {
+        x_c,
+        opening: &xs,
+        q_supply: &q_supply,
+        state: s,
+        q_in1: &q_in1,
+        q_out2: &q_out2,
+        p_s: &p_s,
+        f_act: &f_act,
+    };
     effect.derivs(&view, es, des);
 }
 
@@ -559,7 +635,14 @@ struct Probe<const N: usize, E: Effect<N>> {
 
 impl<const N: usize, E: Effect<N>> Probe<N, E> {
     fn new(es: E::State) -> Self {
-        Probe { s: [[0.0; N]; NP], tmp: [[0.0; N]; NP], k: [[[0.0; N]; NP]; 4], es, etmp: es, ek: [es; 4] }
+        Probe {
+            s: [[0.0; N]; NP],
+            tmp: [[0.0; N]; NP],
+            k: [[[0.0; N]; NP]; 4],
+            es,
+            etmp: es,
+            ek: [es; 4],
+        }
     }
 
     /// The plant `delta` after the node (s, es) whose derivatives are (k1, ek1), by one RK4 step
@@ -594,7 +677,14 @@ impl<const N: usize, E: Effect<N>> Probe<N, E> {
             self.s = *s;
             self.es = *es;
             rk4_combine(&mut self.s, delta / 6.0, k1, k2, k3, k4);
-            rk4_combine(self.es.as_mut(), delta / 6.0, ek1.as_ref(), ek2.as_ref(), ek3.as_ref(), ek4.as_ref());
+            rk4_combine(
+                self.es.as_mut(),
+                delta / 6.0,
+                ek1.as_ref(),
+                ek2.as_ref(),
+                ek3.as_ref(),
+                ek4.as_ref(),
+            );
             rhs::<N, A, Q, D, E>(lp, effect, x_c, &self.s, &self.es, ka, eka);
         } else {
             self.s = *s;
@@ -608,7 +698,19 @@ impl<const N: usize, E: Effect<N>> Probe<N, E> {
             spool[l] = effect.spool_position(l, 0, x_c[l], &self.es);
         }
         let a = self.k[3][VEL];
-        obs.sample(&TickView { k: held.k, sub: held.sub, t: held.t, r: held.r, x: &x, a: &a, u: held.u, x_c, spool: &spool, f: &f, state: &self.s });
+        obs.sample(&TickView {
+            k: held.k,
+            sub: held.sub,
+            t: held.t,
+            r: held.r,
+            x: &x,
+            a: &a,
+            u: held.u,
+            x_c,
+            spool: &spool,
+            f: &f,
+            state: &self.s,
+        });
     }
 }
 
@@ -622,7 +724,14 @@ fn axpy<const N: usize>(out: &mut [[f64; N]], base: &[[f64; N]], h: f64, k: &[[f
 }
 
 #[inline(always)]
-fn rk4_combine<const N: usize>(s: &mut [[f64; N]], h6: f64, k1: &[[f64; N]], k2: &[[f64; N]], k3: &[[f64; N]], k4: &[[f64; N]]) {
+fn rk4_combine<const N: usize>(
+    s: &mut [[f64; N]],
+    h6: f64,
+    k1: &[[f64; N]],
+    k2: &[[f64; N]],
+    k3: &[[f64; N]],
+    k4: &[[f64; N]],
+) {
     for j in 0..s.len() {
         for l in 0..N {
             s[j][l] += h6 * (k1[j][l] + 2.0 * (k2[j][l] + k3[j][l]) + k4[j][l]);
@@ -644,7 +753,9 @@ fn initial_state<const N: usize>(lp: &LaneParams<N>) -> [[f64; N]; NP] {
 fn total_force<const N: usize>(lp: &LaneParams<N>, s: &[[f64; N]; NP], f: &mut [f64; N]) {
     for l in 0..N {
         let act = lp.act.lane(l);
-        f[l] = (0..N_ACT).map(|i| actuator::force(&act, s[P1[i]][l], s[P2[i]][l])).sum();
+        f[l] = (0..N_ACT)
+            .map(|i| actuator::force(&act, s[P1[i]][l], s[P2[i]][l]))
+            .sum();
     }
 }
 
@@ -660,7 +771,11 @@ fn check_lane<const N: usize>(lp: &LaneParams<N>, s: &[[f64; N]; NP], l: usize) 
         for (chamber, j) in [(1, P1[i]), (2, P2[i])] {
             let p = s[j][l];
             if !(-1.0e6..=p_hi).contains(&p) {
-                return Some(Failure::Pressure { actuator: i, chamber, pa: p });
+                return Some(Failure::Pressure {
+                    actuator: i,
+                    chamber,
+                    pa: p,
+                });
             }
         }
     }
@@ -668,7 +783,14 @@ fn check_lane<const N: usize>(lp: &LaneParams<N>, s: &[[f64; N]; NP], l: usize) 
 }
 
 #[inline(always)]
-fn integrate<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N>>(
+fn integrate<
+    const N: usize,
+    const A: usize,
+    Q: FlowLaw,
+    D: Damping,
+    E: Effect<N>,
+    O: Observer<N>,
+>(
     lp: &LaneParams<N>,
     effect: &E,
     refs: &[&Reference; N],
@@ -684,9 +806,20 @@ fn integrate<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N
     let mut mem: [ControllerMemory; N] = std::array::from_fn(|l| ControllerMemory::new(f[l]));
     let mut status = [LaneStatus::Ok; N];
     let reference = refs[0];
-    let mut acc = MetricsAcc::<N>::new(reference.spectrum.as_ref().map(|(spec, _)| (spec, 1.0 / lp.f_s)));
+    let mut acc = MetricsAcc::<N>::new(
+        reference
+            .spectrum
+            .as_ref()
+            .map(|(spec, _)| (spec, 1.0 / lp.f_s)),
+    );
 
-    let (mut k1, mut k2, mut k3, mut k4, mut tmp) = ([[0.0; N]; NP], [[0.0; N]; NP], [[0.0; N]; NP], [[0.0; N]; NP], [[0.0; N]; NP]);
+    let (mut k1, mut k2, mut k3, mut k4, mut tmp) = (
+        [[0.0; N]; NP],
+        [[0.0; N]; NP],
+        [[0.0; N]; NP],
+        [[0.0; N]; NP],
+        [[0.0; N]; NP],
+    );
     let (mut ek1, mut ek2, mut ek3, mut ek4, mut etmp) = (es, es, es, es, es);
     let mut u = [0.0; N];
     let mut x_c = [0.0; N];
@@ -696,7 +829,11 @@ fn integrate<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N
     let h = 1.0 / (lp.f_s * solver.substeps as f64);
     // Dense output: the next requested sample time's slot.
     let mut next_sample = 0usize;
-    let sample_slot = |obs: &O, i: usize| obs.sample_times().get(i).map(|&t| slot(t, lp.f_s, solver.substeps));
+    let sample_slot = |obs: &O, i: usize| {
+        obs.sample_times()
+            .get(i)
+            .map(|&t| slot(t, lp.f_s, solver.substeps))
+    };
     let mut pending = sample_slot(obs, 0);
     let mut probe = Probe::<N, E>::new(es);
     let (w0, w1) = reference.window;
@@ -705,7 +842,12 @@ fn integrate<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N
     let (mut a_r, mut v_r, mut x_r, mut v) = ([0.0; N], [0.0; N], [0.0; N], [0.0; N]);
     for k in 0..reference.len() {
         let t = reference.time(k);
-        let rl: [RefState; N] = std::array::from_fn(|l| RefState { x: refs[l].x[k], v: refs[l].v[k], a: refs[l].a[k], j: refs[l].j[k] });
+        let rl: [RefState; N] = std::array::from_fn(|l| RefState {
+            x: refs[l].x[k],
+            v: refs[l].v[k],
+            a: refs[l].a[k],
+            j: refs[l].j[k],
+        });
         // Observers (single-lane histories) see lane 0's reference.
         let r = rl[0];
         total_force(lp, &s, &mut f);
@@ -735,14 +877,36 @@ fn integrate<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N
         for l in 0..N {
             spool[l] = effect.spool_position(l, 0, x_c[l], &es);
         }
-        obs.tick(&TickView { k, sub: 0, t, r: &r, x: &x, a: &a, u: &u, x_c: &x_c, spool: &spool, f: &f, state: &s });
+        obs.tick(&TickView {
+            k,
+            sub: 0,
+            t,
+            r: &r,
+            x: &x,
+            a: &a,
+            u: &u,
+            x_c: &x_c,
+            spool: &spool,
+            f: &f,
+            state: &s,
+        });
         acc.every_tick(&u);
         if (w0..w1).contains(&k) {
             let basis = fundamental.map(|f0| Basis::at(k, lp.f_s, f0));
             for l in 0..N {
                 (a_r[l], v_r[l], x_r[l], v[l]) = (rl[l].a, rl[l].v, rl[l].x, s[VEL][l]);
             }
-            acc.window_tick(basis.as_ref(), &WindowTick { a_r: &a_r, v_r: &v_r, x_r: &x_r, a: &a, v: &v, x: &x });
+            acc.window_tick(
+                basis.as_ref(),
+                &WindowTick {
+                    a_r: &a_r,
+                    v_r: &v_r,
+                    x_r: &x_r,
+                    a: &a,
+                    v: &v,
+                    x: &x,
+                },
+            );
         }
 
         for sub in 0..solver.substeps {
@@ -755,7 +919,24 @@ fn integrate<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N
                     break;
                 }
                 let delta = (pos - sub as f64) * h;
-                probe.sample::<A, Q, D, O>(lp, effect, &x_c, &s, &es, &k1, &ek1, delta, &Held { k, sub, t: t + pos * h, r: &r, u: &u }, obs);
+                probe.sample::<A, Q, D, O>(
+                    lp,
+                    effect,
+                    &x_c,
+                    &s,
+                    &es,
+                    &k1,
+                    &ek1,
+                    delta,
+                    &Held {
+                        k,
+                        sub,
+                        t: t + pos * h,
+                        r: &r,
+                        u: &u,
+                    },
+                    obs,
+                );
                 next_sample += 1;
                 pending = sample_slot(obs, next_sample);
             }
@@ -769,7 +950,14 @@ fn integrate<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N
             axpy(etmp.as_mut(), es.as_ref(), h, ek3.as_ref());
             rhs::<N, A, Q, D, E>(lp, effect, &x_c, &tmp, &etmp, &mut k4, &mut ek4);
             rk4_combine(&mut s, h / 6.0, &k1, &k2, &k3, &k4);
-            rk4_combine(es.as_mut(), h / 6.0, ek1.as_ref(), ek2.as_ref(), ek3.as_ref(), ek4.as_ref());
+            rk4_combine(
+                es.as_mut(),
+                h / 6.0,
+                ek1.as_ref(),
+                ek2.as_ref(),
+                ek3.as_ref(),
+                ek4.as_ref(),
+            );
         }
 
         // Guard (docs/model.md §3), once per tick.
@@ -779,7 +967,10 @@ fn integrate<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N
                 continue;
             }
             if let Some(reason) = check_lane(lp, &s, l) {
-                status[l] = LaneStatus::Failed { time_s: reference.time(k + 1), reason };
+                status[l] = LaneStatus::Failed {
+                    time_s: reference.time(k + 1),
+                    reason,
+                };
                 for j in 0..NP {
                     s[j][l] = s_rest[j][l];
                 }
@@ -799,9 +990,19 @@ fn integrate<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N
     std::array::from_fn(|l| match status[l] {
         LaneStatus::Ok => LaneResult {
             status: status[l],
-            metrics: acc.finish(l, fundamental.map(|f0| Metrics::highest_harmonic(f0, lp.f_s)), refs[l].spectrum.as_ref().map(|(spec, psa)| (spec, psa.as_slice()))),
+            metrics: acc.finish(
+                l,
+                fundamental.map(|f0| Metrics::highest_harmonic(f0, lp.f_s)),
+                refs[l]
+                    .spectrum
+                    .as_ref()
+                    .map(|(spec, psa)| (spec, psa.as_slice())),
+            ),
         },
-        failed => LaneResult { status: failed, metrics: Metrics::NAN },
+        failed => LaneResult {
+            status: failed,
+            metrics: Metrics::NAN,
+        },
     })
 }
 
@@ -828,7 +1029,14 @@ mod tests {
             .collect();
         let refs: Vec<&ModelParams> = sets.iter().collect();
         let lp = LaneParams::<8>::new(&refs).unwrap();
-        let r = Sine { freq_hz: 3.0, amp_m: Sine::amp_from_g(2.0, 3.0), taper_s: 0.5, duration_s: 2.0, window_cycles: Some(3) }.reference(1024.0);
+        let r = Sine {
+            freq_hz: 3.0,
+            amp_m: Sine::amp_from_g(2.0, 3.0),
+            taper_s: 0.5,
+            duration_s: 2.0,
+            window_cycles: Some(3),
+        }
+        .reference(1024.0);
         let solver = Solver::default();
         // The same with effects that have states of their own per actuator (the spool's, the
         // delay's) or shared (the supply's), on in some lanes.
@@ -838,7 +1046,16 @@ mod tests {
             .map(|(i, p)| {
                 let mut p = p.clone();
                 use crate::kernel::effects::EffectId;
-                for (k, id) in [EffectId::SpoolDynamics, EffectId::TransportDelay, EffectId::Supply, EffectId::SealFriction, EffectId::Leakage].into_iter().enumerate() {
+                for (k, id) in [
+                    EffectId::SpoolDynamics,
+                    EffectId::TransportDelay,
+                    EffectId::Supply,
+                    EffectId::SealFriction,
+                    EffectId::Leakage,
+                ]
+                .into_iter()
+                .enumerate()
+                {
                     *p.effects.get_mut(id) = (i + k) % 3 != 0;
                 }
                 p
@@ -849,23 +1066,62 @@ mod tests {
         let set = crate::kernel::effects::effect_set::<8>(&erefs);
         assert!(set.symmetric());
         for wide in [false, Isa::detected() == Isa::Avx2] {
-            let one = dispatch::<8, 1, Orifice, SqrtDamping, _, NoObserver>(wide, &elp, &set, &[&r; 8], &solver, &mut NoObserver);
-            let two = dispatch::<8, 2, Orifice, SqrtDamping, _, NoObserver>(wide, &elp, &set, &[&r; 8], &solver, &mut NoObserver);
+            let one = dispatch::<8, 1, Orifice, SqrtDamping, _, NoObserver>(
+                wide,
+                &elp,
+                &set,
+                &[&r; 8],
+                &solver,
+                &mut NoObserver,
+            );
+            let two = dispatch::<8, 2, Orifice, SqrtDamping, _, NoObserver>(
+                wide,
+                &elp,
+                &set,
+                &[&r; 8],
+                &solver,
+                &mut NoObserver,
+            );
             assert!(one.iter().any(|x| x.status == LaneStatus::Ok));
             for (l, (a, b)) in one.iter().zip(&two).enumerate() {
                 assert_eq!(a.status, b.status, "effects, lane {l}");
-                for ((name, x), (_, y)) in a.metrics.columns().into_iter().zip(b.metrics.columns()) {
-                    assert_eq!(x.to_bits(), y.to_bits(), "effects, lane {l} {name}: {x} vs {y}");
+                for ((name, x), (_, y)) in a.metrics.columns().into_iter().zip(b.metrics.columns())
+                {
+                    assert_eq!(
+                        x.to_bits(),
+                        y.to_bits(),
+                        "effects, lane {l} {name}: {x} vs {y}"
+                    );
                 }
             }
         }
         for wide in [false, Isa::detected() == Isa::Avx2] {
-            let one = dispatch::<8, 1, Orifice, SqrtDamping, Baseline, NoObserver>(wide, &lp, &Baseline, &[&r; 8], &solver, &mut NoObserver);
-            let two = dispatch::<8, 2, Orifice, SqrtDamping, Baseline, NoObserver>(wide, &lp, &Baseline, &[&r; 8], &solver, &mut NoObserver);
-            assert!(one.iter().any(|x| x.status == LaneStatus::Ok) && one.iter().any(|x| x.status != LaneStatus::Ok), "wants ok and failed lanes: {:?}", one.map(|x| x.status));
+            let one = dispatch::<8, 1, Orifice, SqrtDamping, Baseline, NoObserver>(
+                wide,
+                &lp,
+                &Baseline,
+                &[&r; 8],
+                &solver,
+                &mut NoObserver,
+            );
+            let two = dispatch::<8, 2, Orifice, SqrtDamping, Baseline, NoObserver>(
+                wide,
+                &lp,
+                &Baseline,
+                &[&r; 8],
+                &solver,
+                &mut NoObserver,
+            );
+            assert!(
+                one.iter().any(|x| x.status == LaneStatus::Ok)
+                    && one.iter().any(|x| x.status != LaneStatus::Ok),
+                "wants ok and failed lanes: {:?}",
+                one.map(|x| x.status)
+            );
             for (l, (a, b)) in one.iter().zip(&two).enumerate() {
                 assert_eq!(a.status, b.status, "lane {l}");
-                for ((name, x), (_, y)) in a.metrics.columns().into_iter().zip(b.metrics.columns()) {
+                for ((name, x), (_, y)) in a.metrics.columns().into_iter().zip(b.metrics.columns())
+                {
                     assert_eq!(x.to_bits(), y.to_bits(), "lane {l} {name}: {x} vs {y}");
                 }
             }

@@ -36,16 +36,26 @@ impl SpectrumSpec {
         let periods: Vec<f64> = if count == 1 {
             vec![t_min]
         } else {
-            (0..count).map(|i| t_min * (t_max / t_min).powf(i as f64 / (count - 1) as f64)).collect()
+            (0..count)
+                .map(|i| t_min * (t_max / t_min).powf(i as f64 / (count - 1) as f64))
+                .collect()
         };
-        SpectrumSpec { periods, damping, band: (t_min, t_max) }
+        SpectrumSpec {
+            periods,
+            damping,
+            band: (t_min, t_max),
+        }
     }
 
     /// Indices of the periods inside the error band.
     pub fn in_band(&self) -> impl Iterator<Item = usize> + '_ {
         // A relative slack of 1e-12 so that log-spaced end points computed by powf stay in.
         let (lo, hi) = self.band;
-        self.periods.iter().enumerate().filter(move |(_, t)| **t >= lo * (1.0 - 1e-12) && **t <= hi * (1.0 + 1e-12)).map(|(i, _)| i)
+        self.periods
+            .iter()
+            .enumerate()
+            .filter(move |(_, t)| **t >= lo * (1.0 - 1e-12) && **t <= hi * (1.0 + 1e-12))
+            .map(|(i, _)| i)
     }
 
     /// The mean and the largest |ln(PSA_achieved / PSA_target)| over the band.
@@ -57,7 +67,11 @@ impl SpectrumSpec {
             max = max.max(e);
             n += 1;
         }
-        if n == 0 { (f64::NAN, f64::NAN) } else { (sum / n as f64, max) }
+        if n == 0 {
+            (f64::NAN, f64::NAN)
+        } else {
+            (sum / n as f64, max)
+        }
     }
 }
 
@@ -85,7 +99,11 @@ impl Oscillator {
         let e = super::excitation::expm5(&m);
         // [u, v](dt) = E[0..2][0..2]·[u, v] + E[·][2]·a_k + E[·][3]·(a_{k+1} − a_k)/dt.
         let b = |r: usize| [e[r][2] - e[r][3] / dt, e[r][3] / dt];
-        Oscillator { a: [[e[0][0], e[0][1]], [e[1][0], e[1][1]]], b: [b(0), b(1)], w2: w * w }
+        Oscillator {
+            a: [[e[0][0], e[0][1]], [e[1][0], e[1][1]]],
+            b: [b(0), b(1)],
+            w2: w * w,
+        }
     }
 
     /// One tick: (u, v) with the base acceleration going from `a0` to `a1`.
@@ -100,7 +118,10 @@ impl Oscillator {
 
 /// The oscillators of `spec` at tick `dt`.
 pub fn oscillators(spec: &SpectrumSpec, dt: f64) -> Vec<Oscillator> {
-    spec.periods.iter().map(|&t| Oscillator::new(t, spec.damping, dt)).collect()
+    spec.periods
+        .iter()
+        .map(|&t| Oscillator::new(t, spec.damping, dt))
+        .collect()
 }
 
 /// PSA at every period of `spec` for the acceleration `accel` sampled every `dt` s, starting at
@@ -134,7 +155,14 @@ pub struct SpectrumAcc<const N: usize> {
 impl<const N: usize> SpectrumAcc<N> {
     pub fn new(spec: &SpectrumSpec, dt: f64) -> Self {
         let p = spec.periods.len();
-        SpectrumAcc { osc: oscillators(spec, dt), u: vec![[0.0; N]; p], v: vec![[0.0; N]; p], peak: vec![[0.0; N]; p], prev: [0.0; N], started: false }
+        SpectrumAcc {
+            osc: oscillators(spec, dt),
+            u: vec![[0.0; N]; p],
+            v: vec![[0.0; N]; p],
+            peak: vec![[0.0; N]; p],
+            prev: [0.0; N],
+            started: false,
+        }
     }
 
     /// The acceleration of every lane at the next tick (the first tick only sets the start).
@@ -157,7 +185,11 @@ impl<const N: usize> SpectrumAcc<N> {
 
     /// Lane `l`'s PSA at every period.
     pub fn psa(&self, l: usize) -> Vec<f64> {
-        self.osc.iter().zip(&self.peak).map(|(o, p)| o.w2 * p[l]).collect()
+        self.osc
+            .iter()
+            .zip(&self.peak)
+            .map(|(o, p)| o.w2 * p[l])
+            .collect()
     }
 }
 
@@ -176,7 +208,10 @@ mod tests {
         let c1 = -2.0 * zeta * c / w.powi(3);
         // u̇(0) = 0: −c/ω² − ζω C₁ + ω_d C₂ = 0.
         let c2 = (c / (w * w) + zeta * w * c1) / wd;
-        let exact = |t: f64| -(c / (w * w)) * (t - 2.0 * zeta / w) + (-zeta * w * t).exp() * (c1 * (wd * t).cos() + c2 * (wd * t).sin());
+        let exact = |t: f64| {
+            -(c / (w * w)) * (t - 2.0 * zeta / w)
+                + (-zeta * w * t).exp() * (c1 * (wd * t).cos() + c2 * (wd * t).sin())
+        };
         let o = Oscillator::new(t_n, zeta, dt);
         let (mut u, mut v) = (0.0, 0.0);
         let mut worst = 0.0f64;
@@ -199,18 +234,39 @@ mod tests {
             let dt = 1.0 / f_s;
             let wd = w * (1.0 - zeta * zeta).sqrt();
             let big = amp / (2.0 * zeta * w * w);
-            let exact = |t: f64| big * ((w * t).cos() - (-zeta * w * t).exp() * ((wd * t).cos() + zeta * w / wd * (wd * t).sin()));
+            let exact = |t: f64| {
+                big * ((w * t).cos()
+                    - (-zeta * w * t).exp() * ((wd * t).cos() + zeta * w / wd * (wd * t).sin()))
+            };
             let n = (8.0 * t_n * f_s) as usize;
             let accel: Vec<f64> = (0..=n).map(|k| amp * (w * k as f64 * dt).sin()).collect();
-            let spec = SpectrumSpec { periods: vec![t_n], damping: zeta, band: (t_n, t_n) };
+            let spec = SpectrumSpec {
+                periods: vec![t_n],
+                damping: zeta,
+                band: (t_n, t_n),
+            };
             let got = psa(&accel, dt, &spec)[0];
-            let want = w * w * (0..=n).map(|k| exact(k as f64 * dt).abs()).fold(0.0, f64::max);
-            assert!((got / want - 1.0).abs() < 1e-6, "T {t_n} s: {got} vs {want}");
+            let want = w
+                * w
+                * (0..=n)
+                    .map(|k| exact(k as f64 * dt).abs())
+                    .fold(0.0, f64::max);
+            assert!(
+                (got / want - 1.0).abs() < 1e-6,
+                "T {t_n} s: {got} vs {want}"
+            );
             // And the online accumulator gives the same bits as the offline spectrum.
             let mut acc = SpectrumAcc::<2>::new(&spec, dt);
             accel.iter().for_each(|&a| acc.tick(&[a, 0.5 * a]));
             assert_eq!(acc.psa(0)[0], got);
-            assert_eq!(acc.psa(1)[0], psa(&accel.iter().map(|a| 0.5 * a).collect::<Vec<_>>(), dt, &spec)[0]);
+            assert_eq!(
+                acc.psa(1)[0],
+                psa(
+                    &accel.iter().map(|a| 0.5 * a).collect::<Vec<_>>(),
+                    dt,
+                    &spec
+                )[0]
+            );
         }
     }
 

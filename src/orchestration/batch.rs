@@ -11,13 +11,13 @@
 //!   fails is a row with its status, time and reason; the study goes on.
 
 use super::sampling::{saltelli_block, Design, UnitDesign};
-use super::study::{Method, StudySpec};
 use super::spec::ExcitationSpec;
+use super::study::{Method, StudySpec};
 use crate::kernel::excitation::Reference;
-use crate::kernel::spectrum::SpectrumSpec;
 use crate::kernel::metrics::Metrics;
 use crate::kernel::params::{ModelParams, ParamInfo};
 use crate::kernel::simulate::{self, LaneStatus, NoObserver};
+use crate::kernel::spectrum::SpectrumSpec;
 use crate::kernel::LANES;
 use rayon::prelude::*;
 use std::ops::Range;
@@ -55,7 +55,14 @@ pub struct Plan {
 
 /// Which excitations of `spec` need a reference per sample, given the varied parameter paths.
 fn per_sample(spec: &StudySpec, varied: &[String]) -> Vec<Option<ExcitationSpec>> {
-    spec.excitations.iter().map(|e| e.spec.per_sample(|p| varied.iter().any(|v| v == p)).then(|| e.spec.clone())).collect()
+    spec.excitations
+        .iter()
+        .map(|e| {
+            e.spec
+                .per_sample(|p| varied.iter().any(|v| v == p))
+                .then(|| e.spec.clone())
+        })
+        .collect()
 }
 
 /// Status of one row.
@@ -63,9 +70,14 @@ fn per_sample(spec: &StudySpec, varied: &[String]) -> Vec<Option<ExcitationSpec>
 pub enum RowStatus {
     Ok,
     /// The run failed (diverged, stroke or pressure limit) at a time.
-    Failed { time_s: f64, reason: String },
+    Failed {
+        time_s: f64,
+        reason: String,
+    },
     /// The sample's parameters are outside their valid ranges; it was not run.
-    Invalid { reason: String },
+    Invalid {
+        reason: String,
+    },
 }
 
 impl RowStatus {
@@ -116,12 +128,23 @@ impl Plan {
             base: spec.model.clone(),
             columns: spec.variables.iter().map(|v| v.info).collect(),
             dims,
-            fixed: spec.variables.iter().map(|v| v.dist.quantile(0.5)).collect(),
+            fixed: spec
+                .variables
+                .iter()
+                .map(|v| v.dist.quantile(0.5))
+                .collect(),
             dists: spec.variables.iter().map(|v| v.dist.clone()).collect(),
             saltelli_dims: matches!(spec.method, Method::Saltelli).then_some(varied.len()),
             design: DesignSource::Generated(design),
             references,
-            per_sample: per_sample(spec, &spec.varied().iter().map(|v| v.info.path()).collect::<Vec<_>>()),
+            per_sample: per_sample(
+                spec,
+                &spec
+                    .varied()
+                    .iter()
+                    .map(|v| v.info.path())
+                    .collect::<Vec<_>>(),
+            ),
             seed: spec.seed,
             spectrum: spec.spectrum.clone(),
             solver: spec.solver,
@@ -129,7 +152,12 @@ impl Plan {
     }
 
     /// A plan whose samples are the rows of a design table.
-    pub fn from_table(spec: &StudySpec, columns: Vec<&'static ParamInfo>, rows: Vec<Vec<f64>>, references: Vec<Reference>) -> Plan {
+    pub fn from_table(
+        spec: &StudySpec,
+        columns: Vec<&'static ParamInfo>,
+        rows: Vec<Vec<f64>>,
+        references: Vec<Reference>,
+    ) -> Plan {
         Plan {
             base: spec.model.clone(),
             dims: (0..columns.len()).map(Some).collect(),
@@ -189,8 +217,17 @@ impl Plan {
         for (info, v) in self.columns.iter().zip(&values) {
             (info.set)(&mut model, *v);
         }
-        let model = model.validate().map(|_| model).map_err(|list| list.iter().map(|i| i.to_string()).collect::<Vec<_>>().join("; "));
-        Sample { id: id as u64, values, model }
+        let model = model.validate().map(|_| model).map_err(|list| {
+            list.iter()
+                .map(|i| i.to_string())
+                .collect::<Vec<_>>()
+                .join("; ")
+        });
+        Sample {
+            id: id as u64,
+            values,
+            model,
+        }
     }
 
     /// Runs samples `range` for every excitation: rows in (sample, excitation) order.
@@ -203,11 +240,15 @@ impl Plan {
         let samples: Vec<Sample> = ids.into_iter().map(|i| self.sample(i)).collect();
         let n_exc = self.references.len();
         let mut rows: Vec<Option<Row>> = vec![None; samples.len() * n_exc];
-        let valid: Vec<usize> = (0..samples.len()).filter(|&i| samples[i].model.is_ok()).collect();
-        let saltelli = |id: u64| self.saltelli_dims.map(|d| {
-            let (b, k) = saltelli_block(id as usize, d);
-            (b as u32, k as u32)
-        });
+        let valid: Vec<usize> = (0..samples.len())
+            .filter(|&i| samples[i].model.is_ok())
+            .collect();
+        let saltelli = |id: u64| {
+            self.saltelli_dims.map(|d| {
+                let (b, k) = saltelli_block(id as usize, d);
+                (b as u32, k as u32)
+            })
+        };
         for (e, reference) in self.references.iter().enumerate() {
             // The lanes' references: the excitation's, or each sample's own (a sample whose
             // motion cannot run is a row that says why).
@@ -217,35 +258,76 @@ impl Plan {
                 runnable.clear();
                 for &i in &valid {
                     let s = &samples[i];
-                    match super::quake::generated(exc, s.model.as_ref().expect("valid"), self.seed, s.id) {
+                    match super::quake::generated(
+                        exc,
+                        s.model.as_ref().expect("valid"),
+                        self.seed,
+                        s.id,
+                    ) {
                         Ok(r) => {
                             own[i] = Some(r.with_spectrum(self.spectrum.clone()));
                             runnable.push(i);
                         }
                         Err(reason) => {
                             let status = RowStatus::Invalid { reason };
-                            rows[i * n_exc + e] = Some(Row { sample_id: s.id, excitation: e as u32, saltelli: saltelli(s.id), values: s.values.clone(), status, metrics: Metrics::NAN });
+                            rows[i * n_exc + e] = Some(Row {
+                                sample_id: s.id,
+                                excitation: e as u32,
+                                saltelli: saltelli(s.id),
+                                values: s.values.clone(),
+                                status,
+                                metrics: Metrics::NAN,
+                            });
                         }
                     }
                 }
             }
             for group in runnable.chunks(LANES) {
-                let models: Vec<&ModelParams> = group.iter().map(|&i| samples[i].model.as_ref().expect("valid")).collect();
-                let refs: Vec<&Reference> = group.iter().map(|&i| own[i].as_ref().unwrap_or(reference)).collect();
+                let models: Vec<&ModelParams> = group
+                    .iter()
+                    .map(|&i| samples[i].model.as_ref().expect("valid"))
+                    .collect();
+                let refs: Vec<&Reference> = group
+                    .iter()
+                    .map(|&i| own[i].as_ref().unwrap_or(reference))
+                    .collect();
                 // Lanes without effects give the same bits in the effect set (it is neutral
                 // there), and a lane's reference is its own, so the kernel `run_lanes_each`
                 // chooses per group does not make a row depend on its neighbours.
-                let results = super::sim::run_lanes_each::<LANES, _>(&models, &refs, &self.solver, &mut NoObserver);
+                let results = super::sim::run_lanes_each::<LANES, _>(
+                    &models,
+                    &refs,
+                    &self.solver,
+                    &mut NoObserver,
+                );
                 for (lane, &i) in group.iter().enumerate() {
                     let (status, metrics) = match &results {
                         Ok(r) => match r[lane].status {
                             LaneStatus::Ok => (RowStatus::Ok, r[lane].metrics),
-                            LaneStatus::Failed { time_s, reason } => (RowStatus::Failed { time_s, reason: reason.to_string() }, Metrics::NAN),
+                            LaneStatus::Failed { time_s, reason } => (
+                                RowStatus::Failed {
+                                    time_s,
+                                    reason: reason.to_string(),
+                                },
+                                Metrics::NAN,
+                            ),
                         },
-                        Err(e) => (RowStatus::Invalid { reason: e.to_string() }, Metrics::NAN),
+                        Err(e) => (
+                            RowStatus::Invalid {
+                                reason: e.to_string(),
+                            },
+                            Metrics::NAN,
+                        ),
                     };
                     let s = &samples[i];
-                    rows[i * n_exc + e] = Some(Row { sample_id: s.id, excitation: e as u32, saltelli: saltelli(s.id), values: s.values.clone(), status, metrics });
+                    rows[i * n_exc + e] = Some(Row {
+                        sample_id: s.id,
+                        excitation: e as u32,
+                        saltelli: saltelli(s.id),
+                        values: s.values.clone(),
+                        status,
+                        metrics,
+                    });
                 }
             }
             for s in samples.iter().enumerate().filter(|(_, s)| s.model.is_err()) {
@@ -261,7 +343,9 @@ impl Plan {
                 });
             }
         }
-        rows.into_iter().map(|r| r.expect("every row filled")).collect()
+        rows.into_iter()
+            .map(|r| r.expect("every row filled"))
+            .collect()
     }
 }
 
@@ -299,17 +383,32 @@ impl Calibration {
 /// two groups of [`LANES`] per thread), until a round takes `round` or covers the range; the
 /// last round is the measure (the first ones warm the threads and caches up). Failing samples end
 /// early in a real run too, so spreading the samples over the design weighs them as the run will.
-pub fn calibrate(plan: &Plan, range: Range<usize>, pool: &rayon::ThreadPool, round: std::time::Duration) -> Calibration {
+pub fn calibrate(
+    plan: &Plan,
+    range: Range<usize>,
+    pool: &rayon::ThreadPool,
+    round: std::time::Duration,
+) -> Calibration {
     let len = range.len();
     let mut n = (2 * LANES * pool.current_num_threads()).min(len).max(1);
     loop {
         // Offset by half a stride, so that a round does not start on the range's first sample only.
-        let ids: Vec<usize> = (0..n).map(|i| range.start + ((2 * i + 1) * len) / (2 * n)).collect();
+        let ids: Vec<usize> = (0..n)
+            .map(|i| range.start + ((2 * i + 1) * len) / (2 * n))
+            .collect();
         let t = std::time::Instant::now();
-        let rows: Vec<Row> = pool.install(|| ids.par_chunks(LANES).flat_map_iter(|g| plan.run_samples(g.iter().copied())).collect());
+        let rows: Vec<Row> = pool.install(|| {
+            ids.par_chunks(LANES)
+                .flat_map_iter(|g| plan.run_samples(g.iter().copied()))
+                .collect()
+        });
         let secs = t.elapsed().as_secs_f64();
         if secs >= round.as_secs_f64() || n >= len {
-            return Calibration { samples: n, secs, rows };
+            return Calibration {
+                samples: n,
+                secs,
+                rows,
+            };
         }
         n = (2 * n).min(len);
     }
@@ -358,9 +457,15 @@ pub fn run_plan(
 ) -> anyhow::Result<Summary> {
     let chunk = chunk.max(1);
     let wave = (pool.current_num_threads() * 4).max(1);
-    let mut summary = Summary { next: range.start, ..Summary::default() };
+    let mut summary = Summary {
+        next: range.start,
+        ..Summary::default()
+    };
     while summary.next < range.end {
-        let starts: Vec<usize> = (summary.next..range.end).step_by(chunk).take(wave).collect();
+        let starts: Vec<usize> = (summary.next..range.end)
+            .step_by(chunk)
+            .take(wave)
+            .collect();
         let results: Vec<Option<Vec<Row>>> = pool.install(|| {
             starts
                 .par_iter()

@@ -40,7 +40,11 @@ pub struct Weights {
 
 impl Default for Weights {
     fn default() -> Self {
-        Weights { accel: 1.0, disp: 1.0, force: 1.0 }
+        Weights {
+            accel: 1.0,
+            disp: 1.0,
+            force: 1.0,
+        }
     }
 }
 
@@ -73,7 +77,11 @@ pub struct Campaign {
 impl Campaign {
     /// Parses a campaign; `base_model` is the model the tests start from (defaults, or a model
     /// file given with `--model`).
-    pub fn from_toml(text: &str, file: &str, base_model: &ModelParams) -> Result<Campaign, InputError> {
+    pub fn from_toml(
+        text: &str,
+        file: &str,
+        base_model: &ModelParams,
+    ) -> Result<Campaign, InputError> {
         let table = super::toml_fields::parse(text, file)?;
         let mut issues = Issues::default();
         let mut root = Fields::new("", &table);
@@ -100,7 +108,10 @@ impl Campaign {
                         issues.push(t.path_of("name"), "missing");
                     }
                     if data.is_none() {
-                        issues.push(t.path_of("data"), "missing (the CSV or Parquet file of the test)");
+                        issues.push(
+                            t.path_of("data"),
+                            "missing (the CSV or Parquet file of the test)",
+                        );
                     }
                     let mut model = base_model.clone();
                     if let Some(m) = t.table("model", &mut issues) {
@@ -109,10 +120,15 @@ impl Campaign {
                     }
                     let mut weights = Weights::default();
                     if let Some(mut w) = t.table("weights", &mut issues) {
-                        for (key, slot) in [("accel", &mut weights.accel), ("disp", &mut weights.disp), ("force", &mut weights.force)] {
+                        for (key, slot) in [
+                            ("accel", &mut weights.accel),
+                            ("disp", &mut weights.disp),
+                            ("force", &mut weights.force),
+                        ] {
                             if let Some(v) = w.f64(key, &mut issues) {
                                 if v < 0.0 {
-                                    issues.push(w.path_of(key), format!("{v} must not be negative"));
+                                    issues
+                                        .push(w.path_of(key), format!("{v} must not be negative"));
                                 }
                                 *slot = v;
                             }
@@ -137,7 +153,16 @@ impl Campaign {
                         if tests.iter().any(|x: &TestSpec| x.name == name) {
                             issues.push("test", format!("test name {name:?} is used twice"));
                         }
-                        tests.push(TestSpec { name, data, excitation, model, weights, window_given, duration_given, t0_s });
+                        tests.push(TestSpec {
+                            name,
+                            data,
+                            excitation,
+                            model,
+                            weights,
+                            window_given,
+                            duration_given,
+                            t0_s,
+                        });
                     }
                 }
             }
@@ -145,7 +170,11 @@ impl Campaign {
         }
         root.finish(&["campaign", "test"], &mut issues);
         issues.into_result(file)?;
-        Ok(Campaign { name, description, tests })
+        Ok(Campaign {
+            name,
+            description,
+            tests,
+        })
     }
 }
 
@@ -190,7 +219,15 @@ weights = { force = 0.0 }
     #[test]
     fn reads_the_formats_md_example() {
         // docs/formats.md's record excitation names only the column: the file is the test's data.
-        let c = Campaign::from_toml(&FORMATS_EXAMPLE.replace("kind = \"record\", column", "kind = \"record\", file = \"elcentro50.parquet\", column"), "c.toml", &ModelParams::default()).unwrap();
+        let c = Campaign::from_toml(
+            &FORMATS_EXAMPLE.replace(
+                "kind = \"record\", column",
+                "kind = \"record\", file = \"elcentro50.parquet\", column",
+            ),
+            "c.toml",
+            &ModelParams::default(),
+        )
+        .unwrap();
         assert_eq!(c.tests.len(), 2);
         assert_eq!(c.tests[1].model.platen.m, 150000.0);
         assert_eq!(c.tests[0].model.platen.m, 144000.0);

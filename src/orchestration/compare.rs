@@ -19,11 +19,11 @@
 //! For a record the harmonic and envelope quantities are NaN/empty.
 
 use super::measured::{wrap_deg, AlignedTest, OpenLoop, Samples};
-use rayon::prelude::*;
 use super::sim;
 use crate::kernel::metrics::N_HARM;
 use crate::kernel::resample::ch;
 use crate::kernel::simulate::{LaneStatus, Solver};
+use rayon::prelude::*;
 use std::f64::consts::PI;
 
 /// A complex number (re, im).
@@ -137,7 +137,11 @@ impl Projector {
         for i in 0..p {
             for j in 0..=i {
                 let s = g[i * p + j] - (0..j).map(|k| l[i * p + k] * l[j * p + k]).sum::<f64>();
-                l[i * p + j] = if i == j { s.max(f64::MIN_POSITIVE).sqrt() } else { s / l[j * p + j] };
+                l[i * p + j] = if i == j {
+                    s.max(f64::MIN_POSITIVE).sqrt()
+                } else {
+                    s / l[j * p + j]
+                };
             }
         }
         let mut rows = vec![vec![0.0; n]; p];
@@ -159,7 +163,11 @@ impl Projector {
                 rows[i][m] = y[i];
             }
         }
-        Projector { n_harm, rows, basis: xs }
+        Projector {
+            n_harm,
+            rows,
+            basis: xs,
+        }
     }
 
     /// Harmonics the projector resolves.
@@ -175,8 +183,23 @@ impl Projector {
     /// ‖x − P x‖²: what of `x` the mean and the resolved harmonics do not hold (other
     /// frequencies, higher harmonics, a trend, noise).
     pub fn remainder_sq(&self, x: &[f64]) -> f64 {
-        let c: Vec<f64> = self.rows.iter().map(|r| r.iter().zip(x).map(|(a, b)| a * b).sum()).collect();
-        x.iter().enumerate().map(|(m, &v)| (v - self.basis.iter().zip(&c).map(|(b, c)| b[m] * c).sum::<f64>()).powi(2)).sum()
+        let c: Vec<f64> = self
+            .rows
+            .iter()
+            .map(|r| r.iter().zip(x).map(|(a, b)| a * b).sum())
+            .collect();
+        x.iter()
+            .enumerate()
+            .map(|(m, &v)| {
+                (v - self
+                    .basis
+                    .iter()
+                    .zip(&c)
+                    .map(|(b, c)| b[m] * c)
+                    .sum::<f64>())
+                .powi(2)
+            })
+            .sum()
     }
 
     /// The basis at the samples, one row per function: the constant, then cos and sin of each
@@ -225,7 +248,11 @@ fn drift(amps: &[f64]) -> f64 {
     }
     let xm = (n - 1) as f64 / 2.0;
     let ym = amps.iter().sum::<f64>() / n as f64;
-    let sxy: f64 = amps.iter().enumerate().map(|(i, y)| (i as f64 - xm) * (y - ym)).sum();
+    let sxy: f64 = amps
+        .iter()
+        .enumerate()
+        .map(|(i, y)| (i as f64 - xm) * (y - ym))
+        .sum();
     let sxx: f64 = (0..n).map(|i| (i as f64 - xm).powi(2)).sum();
     sxy / sxx / ym
 }
@@ -242,7 +269,11 @@ pub fn compare(s: &Samples, measured: &Channels<'_>, model: &Channels<'_>) -> Co
         Bin {
             name,
             fraction: ks.len() as f64 / n.max(1) as f64,
-            rms_residual_ratio: if ks.is_empty() { f64::NAN } else { rms(ks.iter().map(|&k| model.accel[k] - measured.accel[k])) / rms_meas },
+            rms_residual_ratio: if ks.is_empty() {
+                f64::NAN
+            } else {
+                rms(ks.iter().map(|&k| model.accel[k] - measured.accel[k])) / rms_meas
+            },
         }
     };
     let bins = [
@@ -292,17 +323,25 @@ pub fn compare(s: &Samples, measured: &Channels<'_>, model: &Channels<'_>) -> Co
     for k in 0..s.n_harm {
         c.harm_model[k] = (hm[k].0 / r1, hm[k].1 / r1);
         c.harm_measured[k] = (hx[k].0 / r1, hx[k].1 / r1);
-        c.residual[k] = (c.harm_model[k].0 - c.harm_measured[k].0, c.harm_model[k].1 - c.harm_measured[k].1);
+        c.residual[k] = (
+            c.harm_model[k].0 - c.harm_measured[k].0,
+            c.harm_model[k].1 - c.harm_measured[k].1,
+        );
     }
     // Whole cycles of the window: boundaries at round(i·R/f) from the window's start.
     let per = s.rate_hz / f;
     let cycles = (n as f64 / per + 1e-9).floor() as usize;
     for i in 0..cycles {
-        let (a, b) = ((i as f64 * per).round() as usize, (((i + 1) as f64 * per).round() as usize).min(n));
+        let (a, b) = (
+            (i as f64 * per).round() as usize,
+            (((i + 1) as f64 * per).round() as usize).min(n),
+        );
         let cycle = Projector::new(&s.tau[a..b], f, s.n_harm);
         let r = mag(cycle.apply(&s.ref_a[a..b])[0]);
-        c.cycle_amp_model.push(mag(cycle.apply(&model.accel[a..b])[0]) / r);
-        c.cycle_amp_measured.push(mag(cycle.apply(&measured.accel[a..b])[0]) / r);
+        c.cycle_amp_model
+            .push(mag(cycle.apply(&model.accel[a..b])[0]) / r);
+        c.cycle_amp_measured
+            .push(mag(cycle.apply(&measured.accel[a..b])[0]) / r);
     }
     c.drift_model = drift(&c.cycle_amp_model);
     c.drift_measured = drift(&c.cycle_amp_measured);
@@ -355,24 +394,43 @@ impl Compared {
 /// Drives the test's model as the test was driven, samples it at the test's samples and
 /// compares. Fails (with the reason) when the model fails.
 pub fn compare_test(test: &AlignedTest, solver: &Solver) -> Result<Compared, String> {
-    let (result, rs) = sim::run_sampled(&test.model, &test.drive, solver, &test.samples.tau).map_err(|e| format!("test {:?}: {e}", test.name))?;
+    let (result, rs) = sim::run_sampled(&test.model, &test.drive, solver, &test.samples.tau)
+        .map_err(|e| format!("test {:?}: {e}", test.name))?;
     if let LaneStatus::Failed { time_s, reason } = result.status {
         return Err(format!("test {:?}: the model failed at t = {time_s:.4} s after the excitation's start: {reason}", test.name));
     }
-    let (accel, disp, force) = (rs.channel(ch::ACCEL, 0), rs.channel(ch::DISP, 0), rs.channel(ch::FORCE, 0));
+    let (accel, disp, force) = (
+        rs.channel(ch::ACCEL, 0),
+        rs.channel(ch::DISP, 0),
+        rs.channel(ch::FORCE, 0),
+    );
     let m = &test.measured;
     let comparison = compare(
         &test.samples,
-        &Channels { accel: &m.accel, disp: &m.disp, force: m.force.as_deref() },
-        &Channels { accel: &accel, disp: &disp, force: Some(&force) },
+        &Channels {
+            accel: &m.accel,
+            disp: &m.disp,
+            force: m.force.as_deref(),
+        },
+        &Channels {
+            accel: &accel,
+            disp: &disp,
+            force: Some(&force),
+        },
     );
-    let pick = |measured: &Option<Vec<f64>>, c: usize| measured.clone().unwrap_or_else(|| rs.channel(c, 0));
+    let pick = |measured: &Option<Vec<f64>>, c: usize| {
+        measured.clone().unwrap_or_else(|| rs.channel(c, 0))
+    };
     // Chamber pressures: measured, else the model's corrected by the measured force where the
     // file has it (a load the model lacks moves them: the force residual split between the
     // chambers, A1·δP1 − A2·δP2 = r_F/n_act with A1·δP1 = −A2·δP2 [chosen]).
     let (mut p1, mut p2) = (pick(&m.p1, ch::P1), pick(&m.p2, ch::P2));
     if let (Some(f), None, None) = (&m.force, &m.p1, &m.p2) {
-        let (a1, a2, n_act) = (test.model.actuator.a1, test.model.actuator.a2, crate::kernel::N_ACT as f64);
+        let (a1, a2, n_act) = (
+            test.model.actuator.a1,
+            test.model.actuator.a2,
+            crate::kernel::N_ACT as f64,
+        );
         for k in 0..p1.len() {
             let r = f[k] - force[k];
             p1[k] += r / (2.0 * n_act * a1);
@@ -381,9 +439,39 @@ pub fn compare_test(test: &AlignedTest, solver: &Solver) -> Result<Compared, Str
     }
     // The spool: measured, else the opening the measured command asks for, else the model's.
     let sv = &test.model.servovalve;
-    let spool = m.spool.clone().or_else(|| m.valve_cmd.as_ref().map(|u| u.iter().map(|u| sv.k_sp * u.clamp(-sv.u_lim, sv.u_lim)).collect())).unwrap_or_else(|| rs.channel(ch::SPOOL, 0));
-    let states = super::statemap::test_states(&test.model, &spool, &rs.channel(ch::VEL, 0), &p1, &p2, &m.disp);
-    Ok(Compared { test: test.clone(), comparison, accel_model: accel, disp_model: disp, force_model: force, states, spool_model: rs.channel(ch::SPOOL, 0), vel_model: rs.channel(ch::VEL, 0), p1, p1_model: rs.channel(ch::P1, 0), p2, p2_model: rs.channel(ch::P2, 0) })
+    let spool = m
+        .spool
+        .clone()
+        .or_else(|| {
+            m.valve_cmd.as_ref().map(|u| {
+                u.iter()
+                    .map(|u| sv.k_sp * u.clamp(-sv.u_lim, sv.u_lim))
+                    .collect()
+            })
+        })
+        .unwrap_or_else(|| rs.channel(ch::SPOOL, 0));
+    let states = super::statemap::test_states(
+        &test.model,
+        &spool,
+        &rs.channel(ch::VEL, 0),
+        &p1,
+        &p2,
+        &m.disp,
+    );
+    Ok(Compared {
+        test: test.clone(),
+        comparison,
+        accel_model: accel,
+        disp_model: disp,
+        force_model: force,
+        states,
+        spool_model: rs.channel(ch::SPOOL, 0),
+        vel_model: rs.channel(ch::VEL, 0),
+        p1,
+        p1_model: rs.channel(ch::P1, 0),
+        p2,
+        p2_model: rs.channel(ch::P2, 0),
+    })
 }
 
 /// A comparison to run: the tests as aligned to the model (each with its model and its drive:
@@ -403,7 +491,10 @@ impl CompareSpec {
     /// Compares every test, in parallel on the current thread pool; a model failure stops the
     /// comparison with its test and reason.
     pub fn run(&self) -> Result<Vec<Compared>, String> {
-        self.tests.par_iter().map(|t| compare_test(t, &self.solver)).collect()
+        self.tests
+            .par_iter()
+            .map(|t| compare_test(t, &self.solver))
+            .collect()
     }
 }
 
@@ -438,22 +529,62 @@ mod tests {
 
     #[test]
     fn a_known_difference_is_found_where_it_is() {
-        let sine = Sine { freq_hz: 2.0, amp_m: 0.05, taper_s: 0.0, duration_s: 4.0, window_cycles: Some(6) };
+        let sine = Sine {
+            freq_hz: 2.0,
+            amp_m: 0.05,
+            taper_s: 0.0,
+            duration_s: 4.0,
+            window_cycles: Some(6),
+        };
         let s = samples(&sine);
         let w = 2.0 * std::f64::consts::PI * 2.0;
         let amax = s.ref_a.iter().map(|v| v.abs()).fold(0.0, f64::max);
         // "Measured": the reference plus 3 % third harmonic; "model": the reference with a
         // growing envelope (1 % per cycle).
-        let meas: Vec<f64> = s.tau.iter().zip(&s.ref_a).map(|(t, a)| a + 0.03 * amax * (3.0 * w * t).sin()).collect();
-        let model: Vec<f64> = s.tau.iter().zip(&s.ref_a).map(|(t, a)| a * (1.0 + 0.01 * t * 2.0)).collect();
-        let c = compare(&s, &Channels { accel: &meas, disp: &s.ref_x, force: None }, &Channels { accel: &model, disp: &s.ref_x, force: None });
-        assert!((c.h_measured[1] - 0.03).abs() < 1e-6, "h3 measured {}", c.h_measured[1]);
+        let meas: Vec<f64> = s
+            .tau
+            .iter()
+            .zip(&s.ref_a)
+            .map(|(t, a)| a + 0.03 * amax * (3.0 * w * t).sin())
+            .collect();
+        let model: Vec<f64> = s
+            .tau
+            .iter()
+            .zip(&s.ref_a)
+            .map(|(t, a)| a * (1.0 + 0.01 * t * 2.0))
+            .collect();
+        let c = compare(
+            &s,
+            &Channels {
+                accel: &meas,
+                disp: &s.ref_x,
+                force: None,
+            },
+            &Channels {
+                accel: &model,
+                disp: &s.ref_x,
+                force: None,
+            },
+        );
+        assert!(
+            (c.h_measured[1] - 0.03).abs() < 1e-6,
+            "h3 measured {}",
+            c.h_measured[1]
+        );
         // The model's linear envelope is not periodic over the window, so it leaks into every
         // harmonic: its component at 2f bounds h3 by 0.02·(3 s)/(π·12) ≈ 1.6e-3.
         assert!(c.h_model[1] < 1.6e-3, "h3 model {}", c.h_model[1]);
-        assert!((mag(c.residual[2]) - 0.03).abs() < 1.6e-3, "the residual sits in k = 3: {}", mag(c.residual[2]));
+        assert!(
+            (mag(c.residual[2]) - 0.03).abs() < 1.6e-3,
+            "the residual sits in k = 3: {}",
+            mag(c.residual[2])
+        );
         // Envelope slope 0.01 per cycle over a window-mean envelope of 1 + 0.02·2.5 s = 1.05.
-        assert!((c.drift_model - 0.01 / 1.05).abs() < 1e-4, "model drift {}", c.drift_model);
+        assert!(
+            (c.drift_model - 0.01 / 1.05).abs() < 1e-4,
+            "model drift {}",
+            c.drift_model
+        );
         assert!(c.drift_measured.abs() < 1e-9);
         assert!((c.amp_ratio_measured - 1.0).abs() < 1e-9 && c.phase_measured_deg.abs() < 1e-9);
         assert_eq!(c.cycle_amp_model.len(), 6);
@@ -464,30 +595,79 @@ mod tests {
 
     #[test]
     fn identical_channels_have_zero_residual() {
-        let s = samples(&Sine { freq_hz: 3.0, amp_m: 0.02, taper_s: 1.0, duration_s: 3.0, window_cycles: Some(4) });
-        let ch = Channels { accel: &s.ref_a, disp: &s.ref_x, force: None };
+        let s = samples(&Sine {
+            freq_hz: 3.0,
+            amp_m: 0.02,
+            taper_s: 1.0,
+            duration_s: 3.0,
+            window_cycles: Some(4),
+        });
+        let ch = Channels {
+            accel: &s.ref_a,
+            disp: &s.ref_x,
+            force: None,
+        };
         let c = compare(&s, &ch, &ch);
         assert_eq!(c.rms_residual_accel_ratio, 0.0);
         assert!(c.residual.iter().all(|z| z.0 == 0.0 && z.1 == 0.0));
         assert!((c.amp_ratio_model - 1.0).abs() < 1e-12);
         // The reference's a and x are one body's: a = −ω²x in the window.
-        assert!((c.accel_over_disp_measured - 1.0).abs() < 1e-9, "{}", c.accel_over_disp_measured);
+        assert!(
+            (c.accel_over_disp_measured - 1.0).abs() < 1e-9,
+            "{}",
+            c.accel_over_disp_measured
+        );
     }
 
     /// Harmonics at or above the Nyquist frequency of the file are left out (NaN), the rest
     /// computed on the file's own samples.
     #[test]
     fn harmonics_above_nyquist_are_left_out() {
-        let sine = Sine { freq_hz: 30.0, amp_m: 0.001, taper_s: 0.0, duration_s: 1.0, window_cycles: Some(20) };
+        let sine = Sine {
+            freq_hz: 30.0,
+            amp_m: 0.001,
+            taper_s: 0.0,
+            duration_s: 1.0,
+            window_cycles: Some(20),
+        };
         let mut s = samples(&sine);
         // Every 5th sample: a 204.8 Hz file, Nyquist 102.4 Hz: h1…h3 remain.
         let keep = |v: &Vec<f64>| v.iter().step_by(5).copied().collect::<Vec<f64>>();
-        s = Samples { rate_hz: 204.8, tau: keep(&s.tau), time: keep(&s.time), ref_x: keep(&s.ref_x), ref_v: keep(&s.ref_v), ref_a: keep(&s.ref_a), n_harm: 3, ..s };
+        s = Samples {
+            rate_hz: 204.8,
+            tau: keep(&s.tau),
+            time: keep(&s.time),
+            ref_x: keep(&s.ref_x),
+            ref_v: keep(&s.ref_v),
+            ref_a: keep(&s.ref_a),
+            n_harm: 3,
+            ..s
+        };
         let meas: Vec<f64> = s.ref_a.iter().map(|a| 0.9 * a).collect();
-        let c = compare(&s, &Channels { accel: &meas, disp: &s.ref_x, force: None }, &Channels { accel: &s.ref_a, disp: &s.ref_x, force: None });
-        assert!((c.amp_ratio_measured - 0.9).abs() < 1e-3, "{}", c.amp_ratio_measured);
+        let c = compare(
+            &s,
+            &Channels {
+                accel: &meas,
+                disp: &s.ref_x,
+                force: None,
+            },
+            &Channels {
+                accel: &s.ref_a,
+                disp: &s.ref_x,
+                force: None,
+            },
+        );
+        assert!(
+            (c.amp_ratio_measured - 0.9).abs() < 1e-3,
+            "{}",
+            c.amp_ratio_measured
+        );
         assert!(c.h_measured[0].is_finite() && c.h_measured[1].is_finite());
-        assert!(c.h_measured[2..].iter().all(|h| h.is_nan()), "{:?}", c.h_measured);
+        assert!(
+            c.h_measured[2..].iter().all(|h| h.is_nan()),
+            "{:?}",
+            c.h_measured
+        );
         assert!(c.residual[3..].iter().all(|z| z.0.is_nan()));
     }
 }

@@ -31,9 +31,9 @@
 //! leaves more than [`NOISE_FACTOR`] times the noise floor is said to, with the state and term of
 //! what it leaves.
 
+use super::fit::{self, FeatureInfo, Free, Problem};
 use super::measured::AlignedTest;
 use super::statemap::StateMap;
-use super::fit::{self, FeatureInfo, Free, Problem};
 use crate::kernel::params::{EffectId, ModelParams};
 use rayon::prelude::*;
 
@@ -123,17 +123,25 @@ pub enum Verdict {
     NothingSignificant,
     /// The best candidate (and those forward selection added to it) is significant and explains
     /// most of the residual.
-    Missing { effects: Vec<EffectId>, explained: f64 },
+    Missing {
+        effects: Vec<EffectId>,
+        explained: f64,
+    },
     /// The best candidate (with those added to it) is significant but explains little of the
     /// residual.
-    Unexplained { effects: Vec<EffectId>, explained: f64 },
+    Unexplained {
+        effects: Vec<EffectId>,
+        explained: f64,
+    },
 }
 
 impl Diagnosis {
     pub fn verdict(&self) -> Verdict {
         match self.candidates.first() {
             Some(c) if c.significant() => {
-                let effects: Vec<EffectId> = std::iter::once(c.effect).chain(self.more.iter().map(|s| s.effect)).collect();
+                let effects: Vec<EffectId> = std::iter::once(c.effect)
+                    .chain(self.more.iter().map(|s| s.effect))
+                    .collect();
                 let explained = self.more.last().map_or(c.explained, |s| s.explained);
                 if self.more.is_empty() || explained >= EXPLAINS_TOGETHER {
                     if explained >= EXPLAINS_ENOUGH {
@@ -143,7 +151,10 @@ impl Diagnosis {
                     }
                 } else if c.explained >= EXPLAINS_ENOUGH {
                     // The effects added to it do not close the gap to the noise: name the first only.
-                    Verdict::Missing { effects: vec![c.effect], explained: c.explained }
+                    Verdict::Missing {
+                        effects: vec![c.effect],
+                        explained: c.explained,
+                    }
                 } else {
                     Verdict::Unexplained { effects, explained }
                 }
@@ -156,7 +167,11 @@ impl Diagnosis {
     pub fn chosen_fit(&self) -> Option<&fit::FitResult> {
         match self.more.last() {
             Some(s) => Some(&s.fit),
-            None => self.candidates.first().filter(|c| c.significant()).and_then(|c| c.fit.as_ref().ok()),
+            None => self
+                .candidates
+                .first()
+                .filter(|c| c.significant())
+                .and_then(|c| c.fit.as_ref().ok()),
         }
     }
 
@@ -164,12 +179,17 @@ impl Diagnosis {
     /// none).
     pub fn named_fit(&self) -> Option<(&[Free], &fit::FitResult)> {
         let n = match self.verdict() {
-            Verdict::Missing { effects, .. } | Verdict::Unexplained { effects, .. } => effects.len(),
+            Verdict::Missing { effects, .. } | Verdict::Unexplained { effects, .. } => {
+                effects.len()
+            }
             Verdict::NothingSignificant => return None,
         };
         match n {
             0 => None,
-            1 => self.candidates.first().and_then(|c| c.fit.as_ref().ok().map(|f| (c.free.as_slice(), f))),
+            1 => self
+                .candidates
+                .first()
+                .and_then(|c| c.fit.as_ref().ok().map(|f| (c.free.as_slice(), f))),
             n => self.more.get(n - 2).map(|s| (s.free.as_slice(), &s.fit)),
         }
     }
@@ -177,12 +197,18 @@ impl Diagnosis {
     /// ", but it leaves a residual 3.9× the noise floor: …" when the named effects do not take the
     /// residual to within [`NOISE_FACTOR`] of the noise; empty when they do.
     fn short_of_noise(&self) -> String {
-        let Some((_, f)) = self.named_fit() else { return String::new() };
+        let Some((_, f)) = self.named_fit() else {
+            return String::new();
+        };
         let ratio = f.after.residual_rms() / self.noise_rms;
         if !(ratio > NOISE_FACTOR) {
             return String::new();
         }
-        let left = self.state_map_after.as_ref().and_then(|m| m.sentence()).map_or(String::new(), |s| format!("; in what is left, {s}"));
+        let left = self
+            .state_map_after
+            .as_ref()
+            .and_then(|m| m.sentence())
+            .map_or(String::new(), |s| format!("; in what is left, {s}"));
         format!(", but leaves a residual {ratio:.1}x the noise floor: its form is probably not quite the plant's{left}")
     }
 
@@ -242,7 +268,10 @@ impl Diagnosis {
         if !(self.baseline.residual_rms() > NOISE_FACTOR * self.noise_rms) {
             return String::new();
         }
-        self.state_map.as_ref().and_then(|m| m.sentence()).map_or(String::new(), |s| format!("; {s}"))
+        self.state_map
+            .as_ref()
+            .and_then(|m| m.sentence())
+            .map_or(String::new(), |s| format!("; {s}"))
     }
 }
 
@@ -250,11 +279,17 @@ impl Diagnosis {
     /// What each chosen effect adds, in order: "A 60 %, + B 35 %" (shares of the residual beyond
     /// noise, each over the effects before it).
     fn shares(&self) -> String {
-        let Some(first) = self.candidates.first() else { return String::new() };
+        let Some(first) = self.candidates.first() else {
+            return String::new();
+        };
         let mut prev = first.explained;
         let mut parts = vec![format!("{} {:.0} %", first.effect, 100.0 * prev)];
         for s in &self.more {
-            parts.push(format!("+ {} {:.0} %", s.effect, 100.0 * (s.explained - prev)));
+            parts.push(format!(
+                "+ {} {:.0} %",
+                s.effect,
+                100.0 * (s.explained - prev)
+            ));
             prev = s.explained;
         }
         parts.join(", ")
@@ -268,7 +303,13 @@ impl Diagnosis {
     pub fn map_states(&mut self, aligned: &[AlignedTest]) {
         self.state_map = state_map(aligned);
         if let Some((free, fit)) = self.named_fit() {
-            let fitted: Vec<AlignedTest> = aligned.iter().map(|t| AlignedTest { model: fit::apply(&t.model, free, &fit.u), ..t.clone() }).collect();
+            let fitted: Vec<AlignedTest> = aligned
+                .iter()
+                .map(|t| AlignedTest {
+                    model: fit::apply(&t.model, free, &fit.u),
+                    ..t.clone()
+                })
+                .collect();
             self.state_map_after = state_map(&fitted);
         }
     }
@@ -277,7 +318,10 @@ impl Diagnosis {
 /// The residual of `aligned` mapped onto the plant's states (None when a model run fails).
 fn state_map(aligned: &[AlignedTest]) -> Option<StateMap> {
     let solver = Default::default();
-    let compared: Result<Vec<_>, String> = aligned.par_iter().map(|t| super::compare::compare_test(t, &solver)).collect();
+    let compared: Result<Vec<_>, String> = aligned
+        .par_iter()
+        .map(|t| super::compare::compare_test(t, &solver))
+        .collect();
     compared.ok().map(|c| super::statemap::map(&c))
 }
 
@@ -288,7 +332,8 @@ pub fn free_of(effect: EffectId, model: &ModelParams) -> Vec<Free> {
         .free
         .iter()
         .map(|n| {
-            let info = ModelParams::lookup(&format!("{effect}.{n}")).expect("default free parameters are registered");
+            let info = ModelParams::lookup(&format!("{effect}.{n}"))
+                .expect("default free parameters are registered");
             Free::new(info, (info.get)(model))
         })
         .collect()
@@ -314,31 +359,76 @@ pub fn diagnose(problem: &Problem, candidates: &[EffectId]) -> Diagnosis {
                     let rc = f.after.residual_rms();
                     let excess = rb * rb - n2;
                     // A candidate that fits the features worse than the baseline explains nothing.
-                    let e = if excess > 0.0 && f.chi2_after() < chi2_b { (1.0 - (rc * rc - n2) / excess).clamp(0.0, 1.0) } else { 0.0 };
+                    let e = if excess > 0.0 && f.chi2_after() < chi2_b {
+                        (1.0 - (rc * rc - n2) / excess).clamp(0.0, 1.0)
+                    } else {
+                        0.0
+                    };
                     (chi2_b - f.chi2_after() - p * (n as f64).ln(), e)
                 }
                 Err(_) => (f64::NEG_INFINITY, 0.0),
             };
-            Candidate { effect, family: effect.info().family, free, fit, delta_bic, explained, lowers_residual }
+            Candidate {
+                effect,
+                family: effect.info().family,
+                free,
+                fit,
+                delta_bic,
+                explained,
+                lowers_residual,
+            }
         })
         .collect();
-    out.sort_by(|a, b| b.significant().cmp(&a.significant()).then(b.delta_bic.total_cmp(&a.delta_bic)));
+    out.sort_by(|a, b| {
+        b.significant()
+            .cmp(&a.significant())
+            .then(b.delta_bic.total_cmp(&a.delta_bic))
+    });
     let more = forward_selection(problem, &out, n, (rb, n2));
-    Diagnosis { baseline, n, noise_rms: noise, candidates: out, more, features: problem.features(), state_map: None, state_map_after: None }
+    Diagnosis {
+        baseline,
+        n,
+        noise_rms: noise,
+        candidates: out,
+        more,
+        features: problem.features(),
+        state_map: None,
+        state_map_after: None,
+    }
 }
 
 /// Forward selection on top of the best candidate (see the module docs): the effects it adds.
 /// `baseline_rms` is the baseline's residual rms and the square of its noise floor.
-fn forward_selection(problem: &Problem, ranked: &[Candidate], n: usize, baseline_rms: (f64, f64)) -> Vec<Step> {
+fn forward_selection(
+    problem: &Problem,
+    ranked: &[Candidate],
+    n: usize,
+    baseline_rms: (f64, f64),
+) -> Vec<Step> {
     let (rb, n2) = baseline_rms;
     let ln_n = (n as f64).ln();
     let excess = rb * rb - n2;
-    let share = |e: &fit::Eval| if excess > 0.0 { (1.0 - (e.residual_rms().powi(2) - n2) / excess).clamp(0.0, 1.0) } else { 0.0 };
-    let Some(best) = ranked.first().filter(|c| c.significant()) else { return Vec::new() };
-    let Ok(best_fit) = &best.fit else { return Vec::new() };
+    let share = |e: &fit::Eval| {
+        if excess > 0.0 {
+            (1.0 - (e.residual_rms().powi(2) - n2) / excess).clamp(0.0, 1.0)
+        } else {
+            0.0
+        }
+    };
+    let Some(best) = ranked.first().filter(|c| c.significant()) else {
+        return Vec::new();
+    };
+    let Ok(best_fit) = &best.fit else {
+        return Vec::new();
+    };
     let mut chosen: Vec<EffectId> = vec![best.effect];
     // The chosen parameters at their estimates, and the evaluation they leave.
-    let mut free: Vec<Free> = best.free.iter().zip(&best_fit.estimate).map(|(f, &v)| Free::new(f.info, v)).collect();
+    let mut free: Vec<Free> = best
+        .free
+        .iter()
+        .zip(&best_fit.estimate)
+        .map(|(f, &v)| Free::new(f.info, v))
+        .collect();
     let mut at = best_fit.after.clone();
     let mut steps = Vec::new();
     let model0 = &problem.tests[0].model;
@@ -349,7 +439,10 @@ fn forward_selection(problem: &Problem, ranked: &[Candidate], n: usize, baseline
         if at.chi2() - n as f64 <= (ln_n + SIGNIFICANT_BIC).max(3.0 * (2.0 * n as f64).sqrt()) {
             break;
         }
-        let rest: Vec<&Candidate> = ranked.iter().filter(|c| !chosen.contains(&c.effect) && c.fit.is_ok()).collect();
+        let rest: Vec<&Candidate> = ranked
+            .iter()
+            .filter(|c| !chosen.contains(&c.effect) && c.fit.is_ok())
+            .collect();
         let tried: Vec<(EffectId, Vec<Free>, Result<fit::FitResult, fit::FitError>)> = rest
             .par_iter()
             .map(|c| {
@@ -369,14 +462,23 @@ fn forward_selection(problem: &Problem, ranked: &[Candidate], n: usize, baseline
                 let p_new = (f.len() - free.len()) as f64;
                 let dbic = chi2_at - r.chi2_after() - p_new * ln_n;
                 let removes = (rms_at * rms_at - r.after.residual_rms().powi(2)) / excess_at;
-                (dbic > SIGNIFICANT_BIC && r.after.residual_rms() <= rms_at && removes >= ADDS_ENOUGH).then_some((effect, f, r, dbic))
+                (dbic > SIGNIFICANT_BIC
+                    && r.after.residual_rms() <= rms_at
+                    && removes >= ADDS_ENOUGH)
+                    .then_some((effect, f, r, dbic))
             })
             .max_by(|a, b| a.3.total_cmp(&b.3));
-        let Some((effect, f, mut r, mut dbic)) = next else { break };
+        let Some((effect, f, mut r, mut dbic)) = next else {
+            break;
+        };
         if !r.converged {
             // The chosen set's parameters started where they compensated for the missing effect:
             // the joint fit may need more iterations than a candidate's screening fit.
-            let restart: Vec<Free> = f.iter().zip(&r.estimate).map(|(f, &v)| Free::new(f.info, v)).collect();
+            let restart: Vec<Free> = f
+                .iter()
+                .zip(&r.estimate)
+                .map(|(f, &v)| Free::new(f.info, v))
+                .collect();
             if let Ok(polished) = fit::fit_from(problem, &restart, 4 * MAX_ITER, r.after.clone()) {
                 if polished.chi2_after() <= r.chi2_after() {
                     dbic += r.chi2_after() - polished.chi2_after();
@@ -384,10 +486,21 @@ fn forward_selection(problem: &Problem, ranked: &[Candidate], n: usize, baseline
                 }
             }
         }
-        free = f.iter().zip(&r.estimate).map(|(f, &v)| Free::new(f.info, v)).collect();
+        free = f
+            .iter()
+            .zip(&r.estimate)
+            .map(|(f, &v)| Free::new(f.info, v))
+            .collect();
         at = r.after.clone();
         chosen.push(effect);
-        steps.push(Step { effect, family: effect.info().family, free: f, explained: share(&r.after), fit: r, delta_bic: dbic });
+        steps.push(Step {
+            effect,
+            family: effect.info().family,
+            free: f,
+            explained: share(&r.after),
+            fit: r,
+            delta_bic: dbic,
+        });
     }
     steps
 }
@@ -398,7 +511,10 @@ pub fn evidence(d: &Diagnosis, c: &Candidate, top: usize) -> Vec<(usize, usize, 
     let Ok(f) = &c.fit else { return Vec::new() };
     let b = fit::grouped(&d.features, &d.baseline.r);
     let a = fit::grouped(&d.features, &f.after.r);
-    let mut v: Vec<(usize, usize, f64, f64)> = b.iter().map(|(&(t, k), &x)| (t, k, x, a.get(&(t, k)).copied().unwrap_or(f64::NAN))).collect();
+    let mut v: Vec<(usize, usize, f64, f64)> = b
+        .iter()
+        .map(|(&(t, k), &x)| (t, k, x, a.get(&(t, k)).copied().unwrap_or(f64::NAN)))
+        .collect();
     v.sort_by(|x, y| (y.2 - y.3).total_cmp(&(x.2 - x.3)));
     v.truncate(top);
     v

@@ -59,7 +59,6 @@ pub fn block_len(rate_hz: f64) -> usize {
     ((rate_hz / 64.0).round() as usize).max(1)
 }
 
-
 /// Which channel a feature comes from.
 pub const CHANNELS: [&str; 3] = ["accel", "disp", "force"];
 
@@ -108,14 +107,21 @@ fn rms_slice(v: &[f64]) -> f64 {
 
 /// σ of white noise in `x` from its third differences, floored at 1e-6 of its rms.
 pub fn noise_sigma_differences(x: &[f64]) -> f64 {
-    let d3: Vec<f64> = x.windows(4).map(|w| w[3] - 3.0 * w[2] + 3.0 * w[1] - w[0]).collect();
-    (rms_slice(&d3) / 20f64.sqrt()).max(1e-6 * rms_slice(x)).max(f64::MIN_POSITIVE)
+    let d3: Vec<f64> = x
+        .windows(4)
+        .map(|w| w[3] - 3.0 * w[2] + 3.0 * w[1] - w[0])
+        .collect();
+    (rms_slice(&d3) / 20f64.sqrt())
+        .max(1e-6 * rms_slice(x))
+        .max(f64::MIN_POSITIVE)
 }
 
 /// σ of white noise in `x` sampled at model times `tau` at `rate_hz`: see the module docs. With
 /// a fundamental `f`, the residual of the periodic fit; without, third differences.
 pub fn noise_sigma(x: &[f64], tau: &[f64], rate_hz: f64, f: Option<f64>) -> f64 {
-    let Some(f) = f else { return noise_sigma_differences(x) };
+    let Some(f) = f else {
+        return noise_sigma_differences(x);
+    };
     let n = x.len();
     let k_max = ((0.45 * rate_hz / f).floor() as usize).min(60);
     let p = 2 * k_max + 5;
@@ -138,7 +144,11 @@ pub fn noise_sigma(x: &[f64], tau: &[f64], rate_hz: f64, f: Option<f64>) -> f64 
             4 => s * th(1).sin(),
             _ => {
                 let k = (j - 5) / 2 + 1;
-                if (j - 5) % 2 == 0 { th(k).cos() } else { th(k).sin() }
+                if (j - 5) % 2 == 0 {
+                    th(k).cos()
+                } else {
+                    th(k).sin()
+                }
             }
         }
     });
@@ -146,13 +156,21 @@ pub fn noise_sigma(x: &[f64], tau: &[f64], rate_hz: f64, f: Option<f64>) -> f64 
     let coef = a.qr().solve_lstsq(&b);
     let fitted = &a * &coef;
     let rss: f64 = (0..n).map(|i| (x[i] - fitted[(i, 0)]).powi(2)).sum();
-    (rss / (n - p) as f64).sqrt().max(1e-6 * rms_slice(x)).max(f64::MIN_POSITIVE)
+    (rss / (n - p) as f64)
+        .sqrt()
+        .max(1e-6 * rms_slice(x))
+        .max(f64::MIN_POSITIVE)
 }
 
 /// The unweighted linear features of channel `c` at the samples `s`: the harmonics below the
 /// Nyquist frequency and, for displacement and force, the mean (a sine, `proj` of the samples);
 /// or block means (a record).
-fn channel_features(s: &Samples, proj: Option<&super::compare::Projector>, c: usize, x: &[f64]) -> Vec<f64> {
+fn channel_features(
+    s: &Samples,
+    proj: Option<&super::compare::Projector>,
+    c: usize,
+    x: &[f64],
+) -> Vec<f64> {
     match proj {
         Some(p) => {
             let h = p.apply(x);
@@ -164,7 +182,10 @@ fn channel_features(s: &Samples, proj: Option<&super::compare::Projector>, c: us
         }
         None => {
             let b = block_len(s.rate_hz);
-            x.chunks(b).filter(|c| c.len() == b).map(|c| c.iter().sum::<f64>() / b as f64).collect()
+            x.chunks(b)
+                .filter(|c| c.len() == b)
+                .map(|c| c.iter().sum::<f64>() / b as f64)
+                .collect()
         }
     }
 }
@@ -173,15 +194,44 @@ impl TestData {
     /// Prepares a measured test aligned to the model.
     pub fn new(t: &AlignedTest) -> Self {
         let m = &t.measured;
-        Self::from_parts(t.name.clone(), t.model.clone(), t.drive.clone(), t.samples.clone(), [Some(m.accel.clone()), Some(m.disp.clone()), m.force.clone()], t.weights)
+        Self::from_parts(
+            t.name.clone(),
+            t.model.clone(),
+            t.drive.clone(),
+            t.samples.clone(),
+            [Some(m.accel.clone()), Some(m.disp.clone()), m.force.clone()],
+            t.weights,
+        )
     }
 
     /// Prepares a test from its parts: the measured features, the noise estimate and the feature
     /// scales.
-    pub fn from_parts(name: String, model: ModelParams, drive: Reference, samples: Samples, measured: [Option<Vec<f64>>; 3], weights: Weights) -> Self {
+    pub fn from_parts(
+        name: String,
+        model: ModelParams,
+        drive: Reference,
+        samples: Samples,
+        measured: [Option<Vec<f64>>; 3],
+        weights: Weights,
+    ) -> Self {
         let w = [weights.accel, weights.disp, weights.force];
-        let proj = samples.fundamental_hz.map(|f| super::compare::Projector::new(&samples.tau, f, samples.n_harm));
-        let mut t = TestData { name, model, drive, samples, measured, weights, sigma: [f64::NAN; 3], meas: Vec::new(), scale: Vec::new(), info: Vec::new(), proj, dof: 0.0 };
+        let proj = samples
+            .fundamental_hz
+            .map(|f| super::compare::Projector::new(&samples.tau, f, samples.n_harm));
+        let mut t = TestData {
+            name,
+            model,
+            drive,
+            samples,
+            measured,
+            weights,
+            sigma: [f64::NAN; 3],
+            meas: Vec::new(),
+            scale: Vec::new(),
+            info: Vec::new(),
+            proj,
+            dof: 0.0,
+        };
         let s = &t.samples;
         let sine = s.fundamental_hz.is_some();
         let n = s.len();
@@ -193,7 +243,11 @@ impl TestData {
             let sigma = noise_sigma(x, &s.tau, s.rate_hz, s.fundamental_hz);
             t.sigma[c] = sigma;
             let fs = channel_features(s, t.proj.as_ref(), c, x);
-            let sd = if sine { sigma * (2.0 / n as f64).sqrt() } else { sigma / (block_len(s.rate_hz) as f64).sqrt() };
+            let sd = if sine {
+                sigma * (2.0 / n as f64).sqrt()
+            } else {
+                sigma / (block_len(s.rate_hz) as f64).sqrt()
+            };
             let n_harm = t.proj.as_ref().map_or(0, |p| 2 * p.n_harm());
             for (i, v) in fs.iter().enumerate() {
                 t.meas.push(*v);
@@ -204,7 +258,11 @@ impl TestData {
                     _ => (sigma / (n as f64).sqrt(), MEAN),
                 };
                 t.scale.push(scale / w[c]);
-                t.info.push(FeatureInfo { test: 0, channel: c, harmonic });
+                t.info.push(FeatureInfo {
+                    test: 0,
+                    channel: c,
+                    harmonic,
+                });
                 t.dof += 1.0;
             }
             if let Some(p) = &t.proj {
@@ -212,7 +270,11 @@ impl TestData {
                 // of freedom for a model right to the noise (measured value 0).
                 t.meas.push(0.0);
                 t.scale.push(sigma / w[c]);
-                t.info.push(FeatureInfo { test: 0, channel: c, harmonic: REMAINDER });
+                t.info.push(FeatureInfo {
+                    test: 0,
+                    channel: c,
+                    harmonic: REMAINDER,
+                });
                 t.dof += n.saturating_sub(p.n_functions()) as f64;
             }
         }
@@ -283,7 +345,11 @@ impl TestData {
     /// The weighted residual features of lane `l` of a run resampled at the test's samples, and
     /// the rms residual / rms measured of each channel (acceleration, displacement, force).
     fn lane_features(&self, rs: &Resampler<LANES>, l: usize) -> (Vec<f64>, [f64; 3]) {
-        let model_ch: [Vec<f64>; 3] = [rs.channel(ch::ACCEL, l), rs.channel(ch::DISP, l), rs.channel(ch::FORCE, l)];
+        let model_ch: [Vec<f64>; 3] = [
+            rs.channel(ch::ACCEL, l),
+            rs.channel(ch::DISP, l),
+            rs.channel(ch::FORCE, l),
+        ];
         let mut r = Vec::with_capacity(self.len());
         let mut at = 0;
         for c in 0..3 {
@@ -303,7 +369,11 @@ impl TestData {
         }
         let rms: [f64; 3] = std::array::from_fn(|c| match &self.measured[c] {
             Some(x) => {
-                let num: f64 = x.iter().zip(&model_ch[c]).map(|(a, b)| (b - a).powi(2)).sum();
+                let num: f64 = x
+                    .iter()
+                    .zip(&model_ch[c])
+                    .map(|(a, b)| (b - a).powi(2))
+                    .sum();
                 let den: f64 = x.iter().map(|a| a * a).sum();
                 (num / den).sqrt()
             }
@@ -320,7 +390,10 @@ impl Problem {
                 f.test = i;
             }
         }
-        Problem { tests, solver: Solver::default() }
+        Problem {
+            tests,
+            solver: Solver::default(),
+        }
     }
 
     /// The χ² a model right to the noise leaves: the features' degrees of freedom.
@@ -351,11 +424,17 @@ impl Problem {
                 at += t.len();
                 // The acceleration's features come first in a test: H1 is features 0 (re) and 1 (im).
                 let first = t.info.first().copied();
-                if e.failure.is_some() || t.samples.fundamental_hz.is_none() || first.map(|f| f.channel) != Some(0) {
+                if e.failure.is_some()
+                    || t.samples.fundamental_hz.is_none()
+                    || first.map(|f| f.channel) != Some(0)
+                {
                     return f64::NAN;
                 }
                 let (mr, mi) = (t.meas[0], t.meas[1]);
-                let (xr, xi) = (mr + e.r[start] * t.scale[0], mi + e.r[start + 1] * t.scale[1]);
+                let (xr, xi) = (
+                    mr + e.r[start] * t.scale[0],
+                    mi + e.r[start + 1] * t.scale[1],
+                );
                 wrap_deg((xi.atan2(xr) - mi.atan2(mr)).to_degrees())
             })
             .collect()
@@ -363,13 +442,22 @@ impl Problem {
 
     /// What each feature is, all tests in order.
     pub fn features(&self) -> Vec<FeatureInfo> {
-        self.tests.iter().flat_map(|t| t.info.iter().copied()).collect()
+        self.tests
+            .iter()
+            .flat_map(|t| t.info.iter().copied())
+            .collect()
     }
 
     /// Evaluates `sets(test)` — one model per parameter set for each test — in batches of
     /// [`LANES`] lanes, the tests in parallel.
-    pub fn evaluate(&self, n_sets: usize, set: &(dyn Fn(usize, &ModelParams) -> ModelParams + Sync)) -> Vec<Eval> {
-        let chunks: Vec<(usize, usize)> = (0..self.tests.len()).flat_map(|t| (0..n_sets.div_ceil(LANES)).map(move |c| (t, c))).collect();
+    pub fn evaluate(
+        &self,
+        n_sets: usize,
+        set: &(dyn Fn(usize, &ModelParams) -> ModelParams + Sync),
+    ) -> Vec<Eval> {
+        let chunks: Vec<(usize, usize)> = (0..self.tests.len())
+            .flat_map(|t| (0..n_sets.div_ceil(LANES)).map(move |c| (t, c)))
+            .collect();
         // Per (test, chunk): per lane, the weighted features and rms, or a failure.
         type Lane = Result<(Vec<f64>, [f64; 3]), String>;
         let done: Vec<Vec<Lane>> = chunks
@@ -381,17 +469,29 @@ impl Problem {
                 let models: Vec<ModelParams> = (lo..hi).map(|k| set(k, &t.model)).collect();
                 let refs: Vec<&ModelParams> = models.iter().collect();
                 if let Some(bad) = models.iter().find_map(|m| m.validate().err()) {
-                    let msg = bad.iter().map(|i| i.to_string()).collect::<Vec<_>>().join("; ");
+                    let msg = bad
+                        .iter()
+                        .map(|i| i.to_string())
+                        .collect::<Vec<_>>()
+                        .join("; ");
                     return vec![Err(format!("test {:?}: {msg}", t.name)); hi - lo];
                 }
                 let mut rs = Resampler::<LANES>::new(&t.samples.tau);
-                let res = match super::sim::run_lanes_single::<LANES, _>(&refs, &t.drive, &self.solver, &mut rs) {
+                let res = match super::sim::run_lanes_single::<LANES, _>(
+                    &refs,
+                    &t.drive,
+                    &self.solver,
+                    &mut rs,
+                ) {
                     Ok(r) => r,
                     Err(e) => return vec![Err(format!("test {:?}: {e}", t.name)); hi - lo],
                 };
                 (0..hi - lo)
                     .map(|l| match res[l].status {
-                        LaneStatus::Failed { time_s, reason } => Err(format!("test {:?}: the model failed at t = {time_s:.4} s: {reason}", t.name)),
+                        LaneStatus::Failed { time_s, reason } => Err(format!(
+                            "test {:?}: the model failed at t = {time_s:.4} s: {reason}",
+                            t.name
+                        )),
                         LaneStatus::Ok => Ok(t.lane_features(&rs, l)),
                     })
                     .collect()
@@ -399,7 +499,11 @@ impl Problem {
             .collect();
         (0..n_sets)
             .map(|k| {
-                let mut e = Eval { r: Vec::new(), rms: Vec::new(), failure: None };
+                let mut e = Eval {
+                    r: Vec::new(),
+                    rms: Vec::new(),
+                    failure: None,
+                };
                 for (i, &(_, c)) in chunks.iter().enumerate() {
                     if k / LANES != c {
                         continue;
@@ -435,16 +539,36 @@ pub struct Free {
 
 impl Free {
     pub fn new(info: &'static ParamInfo, start: f64) -> Self {
-        Free { info, start, log: start > 0.0 && info.range.lo >= 0.0 }
+        Free {
+            info,
+            start,
+            log: start > 0.0 && info.range.lo >= 0.0,
+        }
     }
     /// The parameter's value at scaled coordinate u, inside its valid range.
     pub fn value(&self, u: f64) -> f64 {
         let u = if u.is_finite() { u } else { 0.0 };
-        let v = if self.log { self.start * u.exp() } else { self.start + u * self.start.abs().max(1.0) };
+        let v = if self.log {
+            self.start * u.exp()
+        } else {
+            self.start + u * self.start.abs().max(1.0)
+        };
         // Inside the valid range (an open end is kept a relative 1e-12 away).
         let r = self.info.range;
-        let lo = if !r.lo.is_finite() { f64::MIN } else if r.lo_inclusive { r.lo } else { r.lo + r.lo.abs() * 1e-12 + f64::MIN_POSITIVE };
-        let hi = if !r.hi.is_finite() { f64::MAX } else if r.hi_inclusive { r.hi } else { r.hi - r.hi.abs() * 1e-12 - f64::MIN_POSITIVE };
+        let lo = if !r.lo.is_finite() {
+            f64::MIN
+        } else if r.lo_inclusive {
+            r.lo
+        } else {
+            r.lo + r.lo.abs() * 1e-12 + f64::MIN_POSITIVE
+        };
+        let hi = if !r.hi.is_finite() {
+            f64::MAX
+        } else if r.hi_inclusive {
+            r.hi
+        } else {
+            r.hi - r.hi.abs() * 1e-12 - f64::MIN_POSITIVE
+        };
         v.clamp(lo, hi)
     }
     /// d value / d u at u.
@@ -509,15 +633,27 @@ fn solve(a: &[Vec<f64>], b: &[f64]) -> Vec<f64> {
 /// JᵀJ and Jᵀr of the columns `j` (one per parameter) and residual `r`.
 fn normal(j: &[Vec<f64>], r: &[f64]) -> (Vec<Vec<f64>>, Vec<f64>) {
     let p = j.len();
-    let a = (0..p).map(|i| (0..p).map(|k| j[i].iter().zip(&j[k]).map(|(x, y)| x * y).sum()).collect()).collect();
-    let g = (0..p).map(|i| j[i].iter().zip(r).map(|(x, y)| x * y).sum()).collect();
+    let a = (0..p)
+        .map(|i| {
+            (0..p)
+                .map(|k| j[i].iter().zip(&j[k]).map(|(x, y)| x * y).sum())
+                .collect()
+        })
+        .collect();
+    let g = (0..p)
+        .map(|i| j[i].iter().zip(r).map(|(x, y)| x * y).sum())
+        .collect();
     (a, g)
 }
 
 /// Evaluates each point of `points` with its forward-difference neighbours (one batch of lanes
 /// when it fits): per point, its evaluation and the Jacobian columns there, or `None` where the
 /// point or a neighbour fails.
-fn with_jacobian(problem: &Problem, free: &[Free], points: &[Vec<f64>]) -> Vec<(Eval, Option<Vec<Vec<f64>>>)> {
+fn with_jacobian(
+    problem: &Problem,
+    free: &[Free],
+    points: &[Vec<f64>],
+) -> Vec<(Eval, Option<Vec<Vec<f64>>>)> {
     let p = free.len();
     let mut sets = Vec::with_capacity(points.len() * (p + 1));
     for u in points {
@@ -535,7 +671,10 @@ fn with_jacobian(problem: &Problem, free: &[Free], points: &[Vec<f64>]) -> Vec<(
             if base.failure.is_some() || c[1..].iter().any(|e| e.failure.is_some()) {
                 return (base, None);
             }
-            let cols = c[1..].iter().map(|e| e.r.iter().zip(&base.r).map(|(a, b)| (a - b) / H).collect()).collect();
+            let cols = c[1..]
+                .iter()
+                .map(|e| e.r.iter().zip(&base.r).map(|(a, b)| (a - b) / H).collect())
+                .collect();
             (base, Some(cols))
         })
         .collect()
@@ -572,7 +711,9 @@ impl std::fmt::Display for FitError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             FitError::Start(why) => f.write_str(why),
-            FitError::NoJacobian => f.write_str("a parameter step of 1e-3 from the start makes the model fail"),
+            FitError::NoJacobian => {
+                f.write_str("a parameter step of 1e-3 from the start makes the model fail")
+            }
         }
     }
 }
@@ -580,13 +721,23 @@ impl std::fmt::Display for FitError {
 impl std::error::Error for FitError {}
 
 pub fn fit(problem: &Problem, free: &[Free], max_iter: usize) -> Result<FitResult, FitError> {
-    fit_from(problem, free, max_iter, problem.evaluate(1, &|_, m| m.clone()).remove(0))
+    fit_from(
+        problem,
+        free,
+        max_iter,
+        problem.evaluate(1, &|_, m| m.clone()).remove(0),
+    )
 }
 
 /// [`fit`], given the evaluation of the models as given (a diagnosis evaluates it once for every
 /// candidate). Levenberg–Marquardt: each iteration tries several damping factors at once
 /// ([`lambdas`]) and keeps the best step that lowers χ².
-pub fn fit_from(problem: &Problem, free: &[Free], max_iter: usize, before: Eval) -> Result<FitResult, FitError> {
+pub fn fit_from(
+    problem: &Problem,
+    free: &[Free],
+    max_iter: usize,
+    before: Eval,
+) -> Result<FitResult, FitError> {
     let p = free.len();
     let mut u = vec![0.0; p];
     let (mut at, j0) = with_jacobian(problem, free, std::slice::from_ref(&u)).remove(0);
@@ -602,13 +753,22 @@ pub fn fit_from(problem: &Problem, free: &[Free], max_iter: usize, before: Eval)
         let chi2 = at.chi2();
         let (a, g) = normal(&j, &at.r);
         let lams = lambdas(lambda, p);
-        let trials: Vec<Vec<f64>> = lams.iter().map(|&l| damped_step(&a, &g, l, &u, free)).collect();
+        let trials: Vec<Vec<f64>> = lams
+            .iter()
+            .map(|&l| damped_step(&a, &g, l, &u, free))
+            .collect();
         let ev = with_jacobian(problem, free, &trials);
-        let best = (0..ev.len()).filter(|&k| ev[k].1.is_some()).min_by(|&x, &y| ev[x].0.chi2().total_cmp(&ev[y].0.chi2()));
+        let best = (0..ev.len())
+            .filter(|&k| ev[k].1.is_some())
+            .min_by(|&x, &y| ev[x].0.chi2().total_cmp(&ev[y].0.chi2()));
         match best {
             Some(b) if ev[b].0.chi2() < chi2 => {
                 let new = ev[b].0.chi2();
-                let step: f64 = trials[b].iter().zip(&u).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+                let step: f64 = trials[b]
+                    .iter()
+                    .zip(&u)
+                    .map(|(x, y)| (x - y).abs())
+                    .fold(0.0, f64::max);
                 u = trials[b].clone();
                 lambda = lams[b].max(1e-9);
                 (at, j) = (ev[b].0.clone(), ev[b].1.clone().expect("filtered"));
@@ -632,7 +792,12 @@ pub fn fit_from(problem: &Problem, free: &[Free], max_iter: usize, before: Eval)
     let (se_u, corr) = uncertainty(&j, &after, n);
     Ok(FitResult {
         estimate: free.iter().zip(&u).map(|(f, &x)| f.value(x)).collect(),
-        se: free.iter().zip(&u).zip(&se_u).map(|((f, &x), s)| f.slope(x) * s).collect(),
+        se: free
+            .iter()
+            .zip(&u)
+            .zip(&se_u)
+            .map(|((f, &x), s)| f.slope(x) * s)
+            .collect(),
         corr,
         u,
         before,
@@ -659,7 +824,11 @@ fn damped_step(a: &[Vec<f64>], g: &[f64], l: f64, u: &[f64], free: &[Free]) -> V
         .enumerate()
         .map(|(i, ((x, dx), f))| {
             // A parameter the features do not see (zero column) does not move.
-            let dx = if dx.is_finite() && a[i][i] > 0.0 { dx.clamp(-2.0, 2.0) } else { 0.0 };
+            let dx = if dx.is_finite() && a[i][i] > 0.0 {
+                dx.clamp(-2.0, 2.0)
+            } else {
+                0.0
+            };
             // Keep u where the clamp to the valid range puts the value.
             let v = f.value(x + dx);
             if f.log {
@@ -676,7 +845,11 @@ fn damped_step(a: &[Vec<f64>], g: &[f64], l: f64, u: &[f64], free: &[Free]) -> V
 fn uncertainty(j: &[Vec<f64>], after: &Eval, n: usize) -> (Vec<f64>, Vec<Vec<f64>>) {
     let (a, _) = normal(j, &after.r);
     let p = a.len();
-    let s2 = if n > p { (after.chi2() / (n - p) as f64).max(1.0) } else { 1.0 };
+    let s2 = if n > p {
+        (after.chi2() / (n - p) as f64).max(1.0)
+    } else {
+        1.0
+    };
     // Columns of (JᵀJ)⁻¹ (symmetric).
     let inv: Vec<Vec<f64>> = (0..p)
         .map(|k| {
@@ -686,12 +859,17 @@ fn uncertainty(j: &[Vec<f64>], after: &Eval, n: usize) -> (Vec<f64>, Vec<Vec<f64
         .collect();
     let cov = |i: usize, k: usize| s2 * inv[k][i];
     let se_u: Vec<f64> = (0..p).map(|i| cov(i, i).max(0.0).sqrt()).collect();
-    let corr = (0..p).map(|i| (0..p).map(|k| cov(i, k) / (se_u[i] * se_u[k])).collect()).collect();
+    let corr = (0..p)
+        .map(|i| (0..p).map(|k| cov(i, k) / (se_u[i] * se_u[k])).collect())
+        .collect();
     (se_u, corr)
 }
 
 /// χ² contributions grouped by (test, harmonic) — what a candidate explains.
-pub fn grouped(features: &[FeatureInfo], r: &[f64]) -> std::collections::BTreeMap<(usize, usize), f64> {
+pub fn grouped(
+    features: &[FeatureInfo],
+    r: &[f64],
+) -> std::collections::BTreeMap<(usize, usize), f64> {
     let mut g = std::collections::BTreeMap::new();
     for (f, v) in features.iter().zip(r) {
         *g.entry((f.test, f.harmonic)).or_insert(0.0) += v * v;
@@ -714,9 +892,18 @@ mod tests {
         let time_s: Vec<f64> = (0..n).map(|i| i as f64 * 0.01).collect();
         let disp_m: Vec<f64> = time_s
             .iter()
-            .map(|t| (t / 1.0).min(1.0) * (0.02 * (2.0 * std::f64::consts::PI * 1.5 * t).sin() + 0.004 * (2.0 * std::f64::consts::PI * 4.0 * t).sin()))
+            .map(|t| {
+                (t / 1.0).min(1.0)
+                    * (0.02 * (2.0 * std::f64::consts::PI * 1.5 * t).sin()
+                        + 0.004 * (2.0 * std::f64::consts::PI * 4.0 * t).sin())
+            })
             .collect();
-        let mut reference = Record { time_s, disp_m, f_ref_hz: 50.0 }.reference(1024.0);
+        let mut reference = Record {
+            time_s,
+            disp_m,
+            f_ref_hz: 50.0,
+        }
+        .reference(1024.0);
         // Compared at 500 Hz, every sample of the record's span.
         let tau: Vec<f64> = (0..1500).map(|i| i as f64 / 500.0).collect();
         reference.hold_to((tau[tau.len() - 1] * 1024.0) as usize + 2);
@@ -725,11 +912,35 @@ mod tests {
         let (res, rs) = run_sampled(&truth, &reference, &Solver::default(), &tau).unwrap();
         assert_eq!(res.status, LaneStatus::Ok);
         let ch = |c: usize| Some(rs.channel(c, 0));
-        let at = |v: &[f64]| tau.iter().map(|&t| reference.at_time(v, t)).collect::<Vec<f64>>();
-        let samples = Samples { rate_hz: 500.0, time: tau.clone(), ref_x: at(&reference.x), ref_v: at(&reference.v), ref_a: at(&reference.a), tau, fundamental_hz: None, n_harm: 0 };
-        let test = TestData::from_parts("rec".into(), ModelParams::default(), reference, samples, [ch(ch::ACCEL), ch(ch::DISP), ch(ch::FORCE)], Weights::default());
+        let at = |v: &[f64]| {
+            tau.iter()
+                .map(|&t| reference.at_time(v, t))
+                .collect::<Vec<f64>>()
+        };
+        let samples = Samples {
+            rate_hz: 500.0,
+            time: tau.clone(),
+            ref_x: at(&reference.x),
+            ref_v: at(&reference.v),
+            ref_a: at(&reference.a),
+            tau,
+            fundamental_hz: None,
+            n_harm: 0,
+        };
+        let test = TestData::from_parts(
+            "rec".into(),
+            ModelParams::default(),
+            reference,
+            samples,
+            [ch(ch::ACCEL), ch(ch::DISP), ch(ch::FORCE)],
+            Weights::default(),
+        );
         assert_eq!(block_len(500.0), 8);
-        assert!(test.samples.fundamental_hz.is_none() && test.len() == 3 * (1500 / 8), "block features: {}", test.len());
+        assert!(
+            test.samples.fundamental_hz.is_none() && test.len() == 3 * (1500 / 8),
+            "block features: {}",
+            test.len()
+        );
         let problem = Problem::new(vec![test]);
         let info = ModelParams::lookup("servovalve.kv").unwrap();
         let free = [Free::new(info, ModelParams::default().servovalve.kv)];
@@ -737,7 +948,11 @@ mod tests {
         assert!(r.converged);
         let want = truth.servovalve.kv;
         // Noise-free data: the estimate is the truth to the fit's convergence.
-        assert!((r.estimate[0] - want).abs() < 1e-6 * want, "{} vs {want}", r.estimate[0]);
+        assert!(
+            (r.estimate[0] - want).abs() < 1e-6 * want,
+            "{} vs {want}",
+            r.estimate[0]
+        );
         assert!(r.chi2_after() < 1e-6 * r.chi2_before());
         assert!(r.after.residual_rms() < 1e-3 * r.before.residual_rms());
     }
@@ -752,18 +967,29 @@ mod tests {
         let noise = Normal::new(0.0, 0.02).unwrap();
         for rate in [256.0, 1024.0] {
             let f = 8.0;
-            let tau: Vec<f64> = (0..(4.0 * rate) as usize).map(|i| 1.0 + i as f64 / rate).collect();
+            let tau: Vec<f64> = (0..(4.0 * rate) as usize)
+                .map(|i| 1.0 + i as f64 / rate)
+                .collect();
             let w = 2.0 * std::f64::consts::PI * f;
             let x: Vec<f64> = tau
                 .iter()
-                .map(|t| 10.0 * (1.0 + 0.01 * t) * (w * t).sin() + 0.3 * (3.0 * w * t + 0.4).sin() + 0.05 * (9.0 * w * t).cos() + noise.sample(&mut rng))
+                .map(|t| {
+                    10.0 * (1.0 + 0.01 * t) * (w * t).sin()
+                        + 0.3 * (3.0 * w * t + 0.4).sin()
+                        + 0.05 * (9.0 * w * t).cos()
+                        + noise.sample(&mut rng)
+                })
                 .collect();
             let s = noise_sigma(&x, &tau, rate, Some(f));
             assert!((s / 0.02 - 1.0).abs() < 0.08, "{rate} Hz: {s}");
             if rate == 256.0 {
                 // Third differences keep (2π·8/256)³ of the 10 m/s² fundamental and amplify the
                 // 72 Hz harmonic (2·sin(π·72/256))³ = 3.8 times: nearly twice the noise.
-                assert!(noise_sigma_differences(&x) > 1.5 * 0.02, "{}", noise_sigma_differences(&x));
+                assert!(
+                    noise_sigma_differences(&x) > 1.5 * 0.02,
+                    "{}",
+                    noise_sigma_differences(&x)
+                );
             }
         }
     }

@@ -76,24 +76,39 @@ pub struct NumTable {
 
 impl NumTable {
     pub fn column(&self, name: &str) -> Option<&[f64]> {
-        self.names.iter().position(|n| n == name).map(|i| self.columns[i].as_slice())
+        self.names
+            .iter()
+            .position(|n| n == name)
+            .map(|i| self.columns[i].as_slice())
     }
     pub fn rows(&self) -> usize {
         self.columns.first().map_or(0, Vec::len)
     }
     /// A problem at a column and a 1-based data row.
-    pub fn problem(&self, column: Option<&str>, row: Option<usize>, message: impl Into<String>) -> DataProblem {
+    pub fn problem(
+        &self,
+        column: Option<&str>,
+        row: Option<usize>,
+        message: impl Into<String>,
+    ) -> DataProblem {
         let mut place = String::new();
         if let Some(c) = column {
             place.push_str(&format!("column `{c}`"));
         }
         if let Some(r) = row {
-            place.push_str(&format!("{}row {r}", if place.is_empty() { "" } else { ", " }));
+            place.push_str(&format!(
+                "{}row {r}",
+                if place.is_empty() { "" } else { ", " }
+            ));
             if self.csv {
                 place.push_str(&format!(" (line {})", r + 1));
             }
         }
-        DataProblem { file: self.file.display().to_string(), place, message: message.into() }
+        DataProblem {
+            file: self.file.display().to_string(),
+            place,
+            message: message.into(),
+        }
     }
 
     /// The rebuilt time base of column `name`.
@@ -106,7 +121,9 @@ impl NumTable {
     pub fn check_limits(&self) -> Vec<DataProblem> {
         let mut out = Vec::new();
         for (name, limit, unit) in LIMITS {
-            let Some(col) = self.column(name) else { continue };
+            let Some(col) = self.column(name) else {
+                continue;
+            };
             let beyond = col.iter().filter(|v| v.abs() > limit).count();
             if let Some((i, v)) = col.iter().enumerate().find(|(_, v)| v.abs() > limit) {
                 let why = if beyond == 1 {
@@ -120,7 +137,13 @@ impl NumTable {
                     };
                     format!("{beyond} rows are beyond it: the column is in another unit{hint}")
                 };
-                out.push(self.problem(Some(name), Some(i + 1), format!("{v:e} is beyond any physical range (|value| ≤ {limit:e} {unit}): {why}")));
+                out.push(self.problem(
+                    Some(name),
+                    Some(i + 1),
+                    format!(
+                        "{v:e} is beyond any physical range (|value| ≤ {limit:e} {unit}): {why}"
+                    ),
+                ));
             }
         }
         out
@@ -280,7 +303,12 @@ struct Located {
 
 /// Aligns a measured test to the model; `record` is the table holding a record excitation's
 /// column when it is another file than the test's data. Every problem of the file is returned.
-pub fn align(test: &TestSpec, data: &NumTable, record: Option<&NumTable>, open_loop: Option<OpenLoop>) -> Result<AlignedTest, Vec<DataProblem>> {
+pub fn align(
+    test: &TestSpec,
+    data: &NumTable,
+    record: Option<&NumTable>,
+    open_loop: Option<OpenLoop>,
+) -> Result<AlignedTest, Vec<DataProblem>> {
     let time = check_file(data, open_loop)?;
     let mut notes = data.notes.clone();
     notes.extend(time.note());
@@ -288,21 +316,44 @@ pub fn align(test: &TestSpec, data: &NumTable, record: Option<&NumTable>, open_l
     let (rate, rows, f_s) = (time.rate_hz, time.rows, test.model.controller.f_s);
     let located = match &test.excitation {
         ExcitationSpec::Sine { sine, .. } => locate_sine(test, sine, data, &time, &mut warnings)?,
-        ExcitationSpec::Record { column, time_column, .. } => locate_record(test, (column, time_column), data, record, &time)?,
+        ExcitationSpec::Record {
+            column,
+            time_column,
+            ..
+        } => locate_record(test, (column, time_column), data, record, &time)?,
         generated => locate_generated(test, generated, data, &time)?,
     };
-    let (start_row, start, end_row, cycles) = (located.start_row, located.start, located.end_row, located.cycles);
+    let (start_row, start, end_row, cycles) = (
+        located.start_row,
+        located.start,
+        located.end_row,
+        located.cycles,
+    );
     let window = analysis_window(test, data, &located, rate)?;
-    let tau: Vec<f64> = (window.0..window.1).map(|n| (n as f64 - start_row) / rate).collect();
+    let tau: Vec<f64> = (window.0..window.1)
+        .map(|n| (n as f64 - start_row) / rate)
+        .collect();
     let n_ticks = (tau[tau.len() - 1] * f_s).floor() as usize + 2;
     let mut drive = match (&test.excitation, located.record) {
-        (ExcitationSpec::Sine { sine, .. }, _) => Sine { duration_s: n_ticks as f64 / f_s, window_cycles: None, ..*sine }.reference(f_s),
+        (ExcitationSpec::Sine { sine, .. }, _) => Sine {
+            duration_s: n_ticks as f64 / f_s,
+            window_cycles: None,
+            ..*sine
+        }
+        .reference(f_s),
         (_, Some(r)) => r,
         (_, None) => unreachable!("a record or a generated motion has its reference"),
     };
     drive.hold_to(n_ticks);
     if let Some(mode) = open_loop {
-        drive.drive = measured_drive(mode, data.column(mode.column()).expect("checked"), start_row, rate, f_s, drive.len());
+        drive.drive = measured_drive(
+            mode,
+            data.column(mode.column()).expect("checked"),
+            start_row,
+            rate,
+            f_s,
+            drive.len(),
+        );
     }
     let (ref_x, ref_v, ref_a) = reference_states(&test.excitation, &drive, &tau);
     let (fundamental_hz, n_harm) = harmonics_in(test, data, rate, &mut notes)?;
@@ -316,10 +367,32 @@ pub fn align(test: &TestSpec, data: &NumTable, record: Option<&NumTable>, open_l
         valve_cmd: slice("valve_cmd_v"),
         spool: slice("spool_m"),
     };
-    let alignment = Alignment { time, start_row, start, end_row, window, cycles };
+    let alignment = Alignment {
+        time,
+        start_row,
+        start,
+        end_row,
+        window,
+        cycles,
+    };
     notes.extend(alignment.notes(rows));
-    let samples = Samples { rate_hz: rate, time: (window.0..window.1).map(|n| alignment.time.time(n as f64)).collect(), tau, ref_x, ref_v, ref_a, fundamental_hz, n_harm };
-    warnings.extend(channel_checks(&samples, &measured).into_iter().map(|w| format!("test {:?}: {w}", test.name)));
+    let samples = Samples {
+        rate_hz: rate,
+        time: (window.0..window.1)
+            .map(|n| alignment.time.time(n as f64))
+            .collect(),
+        tau,
+        ref_x,
+        ref_v,
+        ref_a,
+        fundamental_hz,
+        n_harm,
+    };
+    warnings.extend(
+        channel_checks(&samples, &measured)
+            .into_iter()
+            .map(|w| format!("test {:?}: {w}", test.name)),
+    );
     Ok(AlignedTest {
         name: test.name.clone(),
         file: data.file.clone(),
@@ -345,7 +418,11 @@ fn check_file(data: &NumTable, open_loop: Option<OpenLoop>) -> Result<TimeBase, 
                 OpenLoop::Valve => "valve",
                 OpenLoop::Spool => "spool",
             };
-            problems.push(data.problem(Some(mode.column()), None, format!("missing; `--open-loop {word}` drives the model with it")));
+            problems.push(data.problem(
+                Some(mode.column()),
+                None,
+                format!("missing; `--open-loop {word}` drives the model with it"),
+            ));
         }
     }
     match time {
@@ -359,7 +436,10 @@ fn check_file(data: &NumTable, open_loop: Option<OpenLoop>) -> Result<TimeBase, 
 fn model_for(test: &TestSpec, open_loop: Option<OpenLoop>) -> ModelParams {
     let mut model = test.model.clone();
     if open_loop == Some(OpenLoop::Spool) {
-        for e in crate::kernel::effects::EffectId::ALL.into_iter().filter(|e| e.info().moves_spool) {
+        for e in crate::kernel::effects::EffectId::ALL
+            .into_iter()
+            .filter(|e| e.info().moves_spool)
+        {
             *model.effects.get_mut(e) = false;
         }
     }
@@ -368,18 +448,46 @@ fn model_for(test: &TestSpec, open_loop: Option<OpenLoop>) -> ModelParams {
 
 /// A sine's start and end in the file (given by `t0_s` or found from `ref_disp_m`) and its
 /// window's whole cycles.
-fn locate_sine(test: &TestSpec, sine: &Sine, data: &NumTable, time: &TimeBase, warnings: &mut Vec<String>) -> Result<Located, Vec<DataProblem>> {
+fn locate_sine(
+    test: &TestSpec,
+    sine: &Sine,
+    data: &NumTable,
+    time: &TimeBase,
+    warnings: &mut Vec<String>,
+) -> Result<Located, Vec<DataProblem>> {
     let rate = time.rate_hz;
     let given = test.t0_s.map(|t| (t - time.t0_s) * rate);
-    let fit = align_sine(sine, data.column("ref_disp_m").expect("required column"), rate, given, test.duration_given.then_some(sine.duration_s));
-    warnings.extend(fit.warnings.iter().map(|w| format!("test {:?}: {w}", test.name)));
+    let fit = align_sine(
+        sine,
+        data.column("ref_disp_m").expect("required column"),
+        rate,
+        given,
+        test.duration_given.then_some(sine.duration_s),
+    );
+    warnings.extend(
+        fit.warnings
+            .iter()
+            .map(|w| format!("test {:?}: {w}", test.name)),
+    );
     if let Some(e) = fit.error {
-        return Err(vec![data.problem(None, None, format!("test {:?}: {e}", test.name))]);
+        return Err(vec![data.problem(
+            None,
+            None,
+            format!("test {:?}: {e}", test.name),
+        )]);
     }
     let motion_s = (fit.end_row as f64 - fit.start_row) / rate;
     // The default window counts the cycles in the motion as found, give or take the sample at
     // each end (the end is found to a sample).
-    let n = if test.window_given { sine.window_cycles.unwrap_or(0) } else { Sine { duration_s: motion_s + 1.0 / rate, ..*sine }.default_cycles() };
+    let n = if test.window_given {
+        sine.window_cycles.unwrap_or(0)
+    } else {
+        Sine {
+            duration_s: motion_s + 1.0 / rate,
+            ..*sine
+        }
+        .default_cycles()
+    };
     if n == 0 {
         return Err(vec![data.problem(None, None, format!(
             "test {:?}: the excitation lasts {motion_s:.3} s in the file (from t = {:.4} s): too short for a whole cycle after taper_s + 1 s",
@@ -387,59 +495,148 @@ fn locate_sine(test: &TestSpec, sine: &Sine, data: &NumTable, time: &TimeBase, w
             time.time(fit.start_row)
         ))]);
     }
-    let start = if given.is_some() { Start::Given } else { Start::Detected };
-    Ok(Located { start_row: fit.start_row, start, end_row: fit.end_row, cycles: Some(n), record: None })
+    let start = if given.is_some() {
+        Start::Given
+    } else {
+        Start::Detected
+    };
+    Ok(Located {
+        start_row: fit.start_row,
+        start,
+        end_row: fit.end_row,
+        cycles: Some(n),
+        record: None,
+    })
 }
 
 /// A record's reference (from `t0_s`, else its first sample, on the data's clock) and the rows
 /// it spans in the file; a displacement beyond the stroke is refused at its row.
-fn locate_record(test: &TestSpec, (column, time_column): (&str, &str), data: &NumTable, record: Option<&NumTable>, time: &TimeBase) -> Result<Located, Vec<DataProblem>> {
-    let ExcitationSpec::Record { f_ref_hz, scale, unit, pga_g, processing, .. } = &test.excitation else { unreachable!("a record") };
+fn locate_record(
+    test: &TestSpec,
+    (column, time_column): (&str, &str),
+    data: &NumTable,
+    record: Option<&NumTable>,
+    time: &TimeBase,
+) -> Result<Located, Vec<DataProblem>> {
+    let ExcitationSpec::Record {
+        f_ref_hz,
+        scale,
+        unit,
+        pga_g,
+        processing,
+        ..
+    } = &test.excitation
+    else {
+        unreachable!("a record")
+    };
     let source = record.unwrap_or(data);
     let Some(values) = source.column(column) else {
-        return Err(vec![source.problem(Some(column), None, format!("missing: the record of test {:?}", test.name))]);
+        return Err(vec![source.problem(
+            Some(column),
+            None,
+            format!("missing: the record of test {:?}", test.name),
+        )]);
     };
-    let rec_time = if record.is_some() { source.time_base(time_column).map_err(|p| vec![p])? } else { time.clone() };
+    let rec_time = if record.is_some() {
+        source.time_base(time_column).map_err(|p| vec![p])?
+    } else {
+        time.clone()
+    };
     let t0 = test.t0_s.unwrap_or(rec_time.t0_s);
     let first = ((t0 - rec_time.t0_s) * rec_time.rate_hz).ceil().max(0.0) as usize;
-    let rec_t: Vec<f64> = (first..values.len()).map(|i| rec_time.time(i as f64) - t0).collect();
+    let rec_t: Vec<f64> = (first..values.len())
+        .map(|i| rec_time.time(i as f64) - t0)
+        .collect();
     let rec_x = super::quake::scaled(&values[first..], *unit, *scale, *pga_g);
     if rec_t.len() < 2 {
-        return Err(vec![source.problem(Some(column), None, format!("test {:?}: fewer than two record samples after t0_s", test.name))]);
+        return Err(vec![source.problem(
+            Some(column),
+            None,
+            format!(
+                "test {:?}: fewer than two record samples after t0_s",
+                test.name
+            ),
+        )]);
     }
     let f_s = test.model.controller.f_s;
     let r = if unit.is_acceleration() {
-        super::quake::from_acceleration(&rec_x, 0.0, 1.0 / rec_time.rate_hz, processing, *f_ref_hz, f_s)
+        super::quake::from_acceleration(
+            &rec_x,
+            0.0,
+            1.0 / rec_time.rate_hz,
+            processing,
+            *f_ref_hz,
+            f_s,
+        )
     } else {
         let l = test.model.actuator.l;
         if let Some((i, v)) = rec_x.iter().enumerate().find(|(_, v)| v.abs() >= l) {
             return Err(vec![source.problem(Some(column), Some(first + i + 1), format!("displacement {v} m (after unit {} and scale {scale}) exceeds the stroke (half stroke actuator.l = {l} m)", unit.name()))]);
         }
-        Record { time_s: rec_t, disp_m: rec_x, f_ref_hz: *f_ref_hz }.reference(f_s)
+        Record {
+            time_s: rec_t,
+            disp_m: rec_x,
+            f_ref_hz: *f_ref_hz,
+        }
+        .reference(f_s)
     };
-    super::quake::check_limits(&r, &test.model).map_err(|m| vec![source.problem(Some(column), None, format!("test {:?}: {m}", test.name))])?;
+    super::quake::check_limits(&r, &test.model).map_err(|m| {
+        vec![source.problem(Some(column), None, format!("test {:?}: {m}", test.name))]
+    })?;
     let span = (r.len() - 1) as f64 / f_s;
     let rate = time.rate_hz;
     let start_row = ((t0 - time.t0_s) * rate).max(0.0);
     let end_row = (((span + t0 - time.t0_s) * rate + 1e-6).floor() as usize + 1).min(time.rows);
-    let start = if test.t0_s.is_some() { Start::Given } else { Start::FirstRow };
-    Ok(Located { start_row, start, end_row, cycles: None, record: Some(r) })
+    let start = if test.t0_s.is_some() {
+        Start::Given
+    } else {
+        Start::FirstRow
+    };
+    Ok(Located {
+        start_row,
+        start,
+        end_row,
+        cycles: None,
+        record: Some(r),
+    })
 }
 
 /// A generated motion (stochastic, sweep, random) in a measured test: its reference from the
 /// campaign (its own `seed`, else 0), starting at `t0_s` or the file's first row.
-fn locate_generated(test: &TestSpec, excitation: &ExcitationSpec, data: &NumTable, time: &TimeBase) -> Result<Located, Vec<DataProblem>> {
-    let r = super::quake::generated(excitation, &test.model, 0, 0).map_err(|m| vec![data.problem(None, None, format!("test {:?}: {m}", test.name))])?;
+fn locate_generated(
+    test: &TestSpec,
+    excitation: &ExcitationSpec,
+    data: &NumTable,
+    time: &TimeBase,
+) -> Result<Located, Vec<DataProblem>> {
+    let r = super::quake::generated(excitation, &test.model, 0, 0)
+        .map_err(|m| vec![data.problem(None, None, format!("test {:?}: {m}", test.name))])?;
     let t0 = test.t0_s.unwrap_or(time.t0_s);
     let span = (r.len() - 1) as f64 / test.model.controller.f_s;
     let start_row = ((t0 - time.t0_s) * time.rate_hz).max(0.0);
-    let end_row = (((span + t0 - time.t0_s) * time.rate_hz + 1e-6).floor() as usize + 1).min(time.rows);
-    let start = if test.t0_s.is_some() { Start::Given } else { Start::FirstRow };
-    Ok(Located { start_row, start, end_row, cycles: None, record: Some(r) })
+    let end_row =
+        (((span + t0 - time.t0_s) * time.rate_hz + 1e-6).floor() as usize + 1).min(time.rows);
+    let start = if test.t0_s.is_some() {
+        Start::Given
+    } else {
+        Start::FirstRow
+    };
+    Ok(Located {
+        start_row,
+        start,
+        end_row,
+        cycles: None,
+        record: Some(r),
+    })
 }
 
 /// The analysis window, in the file's rows: a sine's last whole cycles, a record's span.
-fn analysis_window(test: &TestSpec, data: &NumTable, at: &Located, rate: f64) -> Result<(usize, usize), Vec<DataProblem>> {
+fn analysis_window(
+    test: &TestSpec,
+    data: &NumTable,
+    at: &Located,
+    rate: f64,
+) -> Result<(usize, usize), Vec<DataProblem>> {
     let w_first = at.start_row.ceil().max(0.0) as usize;
     let window = match (&test.excitation, at.cycles) {
         (ExcitationSpec::Sine { sine, .. }, Some(n)) => {
@@ -457,20 +654,38 @@ fn analysis_window(test: &TestSpec, data: &NumTable, at: &Located, rate: f64) ->
         _ => (w_first, at.end_row),
     };
     if window.1 <= window.0 + 1 {
-        return Err(vec![data.problem(None, None, format!("test {:?}: no samples to compare after the excitation's start", test.name))]);
+        return Err(vec![data.problem(
+            None,
+            None,
+            format!(
+                "test {:?}: no samples to compare after the excitation's start",
+                test.name
+            ),
+        )]);
     }
     Ok(window)
 }
 
 /// Open loop: the measured column `c` at the model's `n` ticks (linear between the file's
 /// samples).
-fn measured_drive(mode: OpenLoop, c: &[f64], start_row: f64, rate: f64, f_s: f64, n: usize) -> Drive {
+fn measured_drive(
+    mode: OpenLoop,
+    c: &[f64],
+    start_row: f64,
+    rate: f64,
+    f_s: f64,
+    n: usize,
+) -> Drive {
     let rows = c.len();
     let at = |k: usize| {
         let q = start_row + k as f64 * rate / f_s;
         let i = q.floor().clamp(0.0, (rows - 1) as f64) as usize;
         let w = (q - i as f64).clamp(0.0, 1.0);
-        if w == 0.0 || i + 1 >= rows { c[i.min(rows - 1)] } else { c[i] + w * (c[i + 1] - c[i]) }
+        if w == 0.0 || i + 1 >= rows {
+            c[i.min(rows - 1)]
+        } else {
+            c[i] + w * (c[i + 1] - c[i])
+        }
     };
     let v: Vec<f64> = (0..n).map(at).collect();
     match mode {
@@ -480,11 +695,19 @@ fn measured_drive(mode: OpenLoop, c: &[f64], start_row: f64, rate: f64, f_s: f64
 }
 
 /// Reference states at the samples' model times: analytic for a sine, from the ticks for a record.
-fn reference_states(excitation: &ExcitationSpec, drive: &Reference, tau: &[f64]) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+fn reference_states(
+    excitation: &ExcitationSpec,
+    drive: &Reference,
+    tau: &[f64],
+) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
     match excitation {
         ExcitationSpec::Sine { sine, .. } => {
             let st: Vec<[f64; 4]> = tau.iter().map(|&t| sine.states(t)).collect();
-            (st.iter().map(|s| s[0]).collect(), st.iter().map(|s| s[1]).collect(), st.iter().map(|s| s[2]).collect())
+            (
+                st.iter().map(|s| s[0]).collect(),
+                st.iter().map(|s| s[1]).collect(),
+                st.iter().map(|s| s[2]).collect(),
+            )
         }
         _ => (
             tau.iter().map(|&t| drive.at_time(&drive.x, t)).collect(),
@@ -496,10 +719,19 @@ fn reference_states(excitation: &ExcitationSpec, drive: &Reference, tau: &[f64])
 
 /// A sine's fundamental and the harmonics below the file's Nyquist frequency (a note names
 /// those left out; a fundamental at or above it is refused).
-fn harmonics_in(test: &TestSpec, data: &NumTable, rate: f64, notes: &mut Vec<String>) -> Result<(Option<f64>, usize), Vec<DataProblem>> {
-    let ExcitationSpec::Sine { sine, .. } = &test.excitation else { return Ok((None, 0)) };
+fn harmonics_in(
+    test: &TestSpec,
+    data: &NumTable,
+    rate: f64,
+    notes: &mut Vec<String>,
+) -> Result<(Option<f64>, usize), Vec<DataProblem>> {
+    let ExcitationSpec::Sine { sine, .. } = &test.excitation else {
+        return Ok((None, 0));
+    };
     let f = sine.freq_hz;
-    let n_harm = (1..=N_HARM).take_while(|&k| (k as f64) * f < 0.5 * rate).count();
+    let n_harm = (1..=N_HARM)
+        .take_while(|&k| (k as f64) * f < 0.5 * rate)
+        .count();
     if n_harm == 0 {
         return Err(vec![data.problem(Some("time_s"), None, format!("test {:?}: its {f} Hz excitation is at or above the file's Nyquist frequency ({} Hz)", test.name, 0.5 * rate))]);
     }
@@ -547,7 +779,9 @@ struct SineFit {
 
 /// Σ (r_n − x_r((n − s)/R))² over rows [lo, hi).
 fn misfit(sine: &Sine, r: &[f64], rate: f64, s: f64, lo: usize, hi: usize) -> f64 {
-    (lo..hi).map(|n| (r[n] - sine.displacement((n as f64 - s) / rate)).powi(2)).sum()
+    (lo..hi)
+        .map(|n| (r[n] - sine.displacement((n as f64 - s) / rate)).powi(2))
+        .sum()
 }
 
 /// Golden-section minimum of `f` on [a, b] to `tol`.
@@ -592,10 +826,21 @@ fn crossing_freq(r: &[f64], rate: f64, lo: usize, hi: usize) -> Option<f64> {
 }
 
 /// Finds the start and end of `sine` in `r` (see the module docs).
-fn align_sine(sine: &Sine, r: &[f64], rate: f64, given_row: Option<f64>, duration: Option<f64>) -> SineFit {
+fn align_sine(
+    sine: &Sine,
+    r: &[f64],
+    rate: f64,
+    given_row: Option<f64>,
+    duration: Option<f64>,
+) -> SineFit {
     let n = r.len();
     let p = rate / sine.freq_hz;
-    let mut out = SineFit { start_row: 0.0, end_row: n, warnings: Vec::new(), error: None };
+    let mut out = SineFit {
+        start_row: 0.0,
+        end_row: n,
+        warnings: Vec::new(),
+        error: None,
+    };
     let peak = r.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let onset = r.iter().position(|v| v.abs() > 0.01 * peak);
     let start = match (given_row, onset) {
@@ -609,10 +854,19 @@ fn align_sine(sine: &Sine, r: &[f64], rate: f64, given_row: Option<f64>, duratio
     out.start_row = start;
     let first = start.ceil().max(0.0) as usize;
     if first >= n {
-        out.error = Some(format!("the excitation would start at row {:.1}, after the file's last row ({n})", start + 1.0));
+        out.error = Some(format!(
+            "the excitation would start at row {:.1}, after the file's last row ({n})",
+            start + 1.0
+        ));
         return out;
     }
-    let detected_end = end_of_sine(sine, r, rate, start, ((start + sine.taper_s * rate + 2.0 * p).ceil() as usize).clamp(first + 1, n));
+    let detected_end = end_of_sine(
+        sine,
+        r,
+        rate,
+        start,
+        ((start + sine.taper_s * rate + 2.0 * p).ceil() as usize).clamp(first + 1, n),
+    );
     out.end_row = match duration {
         Some(d) => {
             let end = (start + d * rate - 1e-6).ceil().max(0.0) as usize;
@@ -632,7 +886,8 @@ fn align_sine(sine: &Sine, r: &[f64], rate: f64, given_row: Option<f64>, duratio
         None => detected_end,
     };
     if onset.is_some() {
-        out.warnings.extend(mismatch(sine, r, rate, start, out.end_row));
+        out.warnings
+            .extend(mismatch(sine, r, rate, start, out.end_row));
     }
     out
 }
@@ -662,16 +917,32 @@ fn detect_start(sine: &Sine, r: &[f64], rate: f64, on: f64) -> f64 {
     let best = (m0..=m1)
         .map(|m| s_phase + m as f64 * p)
         .filter(|s| *s >= lo && *s <= on + 0.5 * p)
-        .min_by(|a, b| misfit(sine, r, rate, *a, 0, region).total_cmp(&misfit(sine, r, rate, *b, 0, region)))
+        .min_by(|a, b| {
+            misfit(sine, r, rate, *a, 0, region).total_cmp(&misfit(sine, r, rate, *b, 0, region))
+        })
         .unwrap_or(on);
-    let s1 = golden(|s| misfit(sine, r, rate, s, 0, region), best - 0.25 * p, best + 0.25 * p, 1e-9);
+    let s1 = golden(
+        |s| misfit(sine, r, rate, s, 0, region),
+        best - 0.25 * p,
+        best + 0.25 * p,
+        1e-9,
+    );
     // Where the column leaves the sine, then the start again over the whole excitation.
     let end = end_of_sine(sine, r, rate, s1, region);
-    let s2 = golden(|s| misfit(sine, r, rate, s, 0, end), s1 - 1.0, s1 + 1.0, 1e-9);
+    let s2 = golden(
+        |s| misfit(sine, r, rate, s, 0, end),
+        s1 - 1.0,
+        s1 + 1.0,
+        1e-9,
+    );
     // [chosen] A start within 0.01 row of a row is that row (0.01 row is 5 µs at 2 kHz, 0.02°
     // of a 10 Hz fundamental): a reference column interpolated between controller ticks moves
     // the fitted start by that much.
-    if (s2 - s2.round()).abs() < 0.01 { s2.round() } else { s2 }
+    if (s2 - s2.round()).abs() < 0.01 {
+        s2.round()
+    } else {
+        s2
+    }
 }
 
 /// A warning when the reference column between `start` and `end` is not the campaign's sine
@@ -713,7 +984,11 @@ fn end_of_sine(sine: &Sine, r: &[f64], rate: f64, s: f64, from: usize) -> usize 
     let from = from.clamp(first, n);
     let e = |k: usize| r[k] - sine.displacement((k as f64 - s) / rate);
     // The column's own mismatch where it surely follows the sine (noise, rounding).
-    let own = if from > first { ((first..from).map(|k| e(k).powi(2)).sum::<f64>() / (from - first) as f64).sqrt() } else { 0.0 };
+    let own = if from > first {
+        ((first..from).map(|k| e(k).powi(2)).sum::<f64>() / (from - first) as f64).sqrt()
+    } else {
+        0.0
+    };
     let tol = (1e-3 * sine.amp_m).max(6.0 * own);
     let quarter = ((rate / sine.freq_hz / 4.0).round() as usize).max(3);
     let mut k = from;
@@ -756,14 +1031,21 @@ fn fundamental(x: &[f64], tau: &[f64], f: f64) -> (f64, f64) {
 
 /// A 0-based (fractional) row as the 1-based row a user reads: a fraction only when it is one.
 pub fn fmt_row(r: f64) -> String {
-    if r == r.round() { format!("{}", r as i64 + 1) } else { format!("{:.2}", r + 1.0) }
+    if r == r.round() {
+        format!("{}", r as i64 + 1)
+    } else {
+        format!("{:.2}", r + 1.0)
+    }
 }
 
 pub use crate::kernel::metrics::wrap_deg;
 
 /// Common unit mix-ups and the factor each puts into a ratio that should be 1.
 fn unit_cause(ratio: f64, causes: &[(f64, &str)]) -> Option<String> {
-    causes.iter().find(|(k, _)| (ratio / k).ln().abs() < 1.25f64.ln()).map(|(_, c)| c.to_string())
+    causes
+        .iter()
+        .find(|(k, _)| (ratio / k).ln().abs() < 1.25f64.ln())
+        .map(|(_, c)| c.to_string())
 }
 
 /// Data-only checks on the compared samples: kinematic consistency (units) and the sign of each
@@ -773,8 +1055,14 @@ fn channel_checks(s: &Samples, m: &Measured) -> Vec<String> {
     match s.fundamental_hz {
         Some(f) => {
             let w2 = (2.0 * PI * f).powi(2);
-            let (a1, x1) = (fundamental(&m.accel, &s.tau, f), fundamental(&m.disp, &s.tau, f));
-            let (ar1, xr1) = (fundamental(&s.ref_a, &s.tau, f), fundamental(&s.ref_x, &s.tau, f));
+            let (a1, x1) = (
+                fundamental(&m.accel, &s.tau, f),
+                fundamental(&m.disp, &s.tau, f),
+            );
+            let (ar1, xr1) = (
+                fundamental(&s.ref_a, &s.tau, f),
+                fundamental(&s.ref_x, &s.tau, f),
+            );
             let mag = |c: (f64, f64)| c.0.hypot(c.1);
             let kappa = mag(a1) / (w2 * mag(x1));
             if kappa.is_finite() && (kappa.ln()).abs() > 1.25f64.ln() {
@@ -783,10 +1071,15 @@ fn channel_checks(s: &Samples, m: &Measured) -> Vec<String> {
                     (1e-3, "the displacement is in mm"),
                     (1e-2, "the displacement is in cm"),
                     (1e3, "the acceleration is in mm/s²"),
-                    (1e-3 / G, "the acceleration is in g and the displacement in mm"),
+                    (
+                        1e-3 / G,
+                        "the acceleration is in g and the displacement in mm",
+                    ),
                     (0.0254, "the displacement is in inches"),
                 ];
-                let cause = unit_cause(kappa, &causes).unwrap_or_else(|| "a wrong channel, or sensors that do not see one rigid body".into());
+                let cause = unit_cause(kappa, &causes).unwrap_or_else(|| {
+                    "a wrong channel, or sensors that do not see one rigid body".into()
+                });
                 out.push(format!(
                     "the acceleration and displacement channels disagree: |a1|/(w^2 |x1|) = {kappa:.4} (1 for one rigid body; 1/9.81 = 0.102 if the acceleration is in g, 0.001 if the displacement is in mm): likely {cause}"
                 ));
@@ -800,17 +1093,33 @@ fn channel_checks(s: &Samples, m: &Measured) -> Vec<String> {
         }
         None => {
             // A record: regression slope of each channel on its reference.
-            for (name, v, r) in [("accel_mps2", &m.accel, &s.ref_a), ("disp_m", &m.disp, &s.ref_x)] {
+            for (name, v, r) in [
+                ("accel_mps2", &m.accel, &s.ref_a),
+                ("disp_m", &m.disp, &s.ref_x),
+            ] {
                 let rr: f64 = r.iter().map(|x| x * x).sum();
                 if rr <= 0.0 {
                     continue;
                 }
                 let beta = v.iter().zip(r.iter()).map(|(a, b)| a * b).sum::<f64>() / rr;
                 if beta < -0.5 {
-                    out.push(format!("`{name}` follows the reference with slope {beta:.3}: a flipped sign?"));
+                    out.push(format!(
+                        "`{name}` follows the reference with slope {beta:.3}: a flipped sign?"
+                    ));
                 } else if !(0.2..=5.0).contains(&beta) {
-                    let causes: &[(f64, &str)] = if name == "disp_m" { &[(1e3, "the displacement is in mm"), (1e2, "the displacement is in cm")] } else { &[(1.0 / G, "the acceleration is in g"), (1e3, "the acceleration is in mm/s²")] };
-                    let cause = unit_cause(beta, causes).unwrap_or_else(|| "a wrong channel or another unit".into());
+                    let causes: &[(f64, &str)] = if name == "disp_m" {
+                        &[
+                            (1e3, "the displacement is in mm"),
+                            (1e2, "the displacement is in cm"),
+                        ]
+                    } else {
+                        &[
+                            (1.0 / G, "the acceleration is in g"),
+                            (1e3, "the acceleration is in mm/s²"),
+                        ]
+                    };
+                    let cause = unit_cause(beta, causes)
+                        .unwrap_or_else(|| "a wrong channel or another unit".into());
                     out.push(format!("`{name}` follows the reference with slope {beta:.4} (about 1 for a table that tracks): likely {cause}"));
                 }
             }
@@ -824,7 +1133,13 @@ mod tests {
     use super::*;
 
     fn sine() -> Sine {
-        Sine { freq_hz: 3.0, amp_m: 0.02, taper_s: 1.0, duration_s: 3.0, window_cycles: None }
+        Sine {
+            freq_hz: 3.0,
+            amp_m: 0.02,
+            taper_s: 1.0,
+            duration_s: 3.0,
+            window_cycles: None,
+        }
     }
 
     fn column(s: &Sine, rate: f64, pre_s: f64, post_s: f64) -> Vec<f64> {
@@ -832,7 +1147,11 @@ mod tests {
         (0..n)
             .map(|k| {
                 let t = k as f64 / rate - pre_s;
-                if t < s.duration_s { s.displacement(t) } else { 0.0 }
+                if t < s.duration_s {
+                    s.displacement(t)
+                } else {
+                    0.0
+                }
             })
             .collect()
     }
@@ -840,13 +1159,32 @@ mod tests {
     #[test]
     fn the_start_and_end_of_a_sine_are_found_to_a_fraction_of_a_row() {
         let s = sine();
-        for (rate, pre, post) in [(1024.0, 0.0, 0.0), (256.0, 0.5, 0.0), (500.0, 0.3217, 1.0), (2048.0, 0.75, 0.4)] {
+        for (rate, pre, post) in [
+            (1024.0, 0.0, 0.0),
+            (256.0, 0.5, 0.0),
+            (500.0, 0.3217, 1.0),
+            (2048.0, 0.75, 0.4),
+        ] {
             let r = column(&s, rate, pre, post);
             let fit = align_sine(&s, &r, rate, None, None);
-            assert!(fit.error.is_none() && fit.warnings.is_empty(), "{rate} Hz: {:?} {:?}", fit.error, fit.warnings);
-            assert!((fit.start_row - pre * rate).abs() < 1e-6, "{rate} Hz: start {} vs {}", fit.start_row, pre * rate);
+            assert!(
+                fit.error.is_none() && fit.warnings.is_empty(),
+                "{rate} Hz: {:?} {:?}",
+                fit.error,
+                fit.warnings
+            );
+            assert!(
+                (fit.start_row - pre * rate).abs() < 1e-6,
+                "{rate} Hz: start {} vs {}",
+                fit.start_row,
+                pre * rate
+            );
             let end = ((pre + s.duration_s) * rate).ceil() as usize;
-            assert!((fit.end_row as i64 - end as i64).abs() <= 1, "{rate} Hz: end {} vs {end}", fit.end_row);
+            assert!(
+                (fit.end_row as i64 - end as i64).abs() <= 1,
+                "{rate} Hz: end {} vs {end}",
+                fit.end_row
+            );
         }
         // On a row exactly: the start is snapped to it.
         let fit = align_sine(&s, &column(&s, 256.0, 0.5, 0.0), 256.0, None, None);
@@ -866,10 +1204,22 @@ mod tests {
         for _ in 0..20_000 {
             let n = g.random_range(1..40usize);
             let rate = [1.0, 2.0, 10.0, 100.0, 1024.0][g.random_range(0..5usize)];
-            let r: Vec<f64> = (0..n).map(|_| if g.random_bool(0.5) { 0.0 } else { g.random_range(-0.03..0.03) }).collect();
+            let r: Vec<f64> = (0..n)
+                .map(|_| {
+                    if g.random_bool(0.5) {
+                        0.0
+                    } else {
+                        g.random_range(-0.03..0.03)
+                    }
+                })
+                .collect();
             let fit = align_sine(&s, &r, rate, None, None);
             assert!(fit.start_row.is_finite(), "{r:?} at {rate} Hz");
-            assert!(fit.end_row <= r.len(), "{r:?} at {rate} Hz: end {}", fit.end_row);
+            assert!(
+                fit.end_row <= r.len(),
+                "{r:?} at {rate} Hz: end {}",
+                fit.end_row
+            );
         }
     }
 
@@ -879,13 +1229,30 @@ mod tests {
         let mut other = s;
         other.freq_hz = 4.0;
         let fit = align_sine(&s, &column(&other, 1024.0, 0.0, 0.0), 1024.0, None, None);
-        assert!(fit.warnings.iter().any(|w| w.contains("4.000 Hz") && w.contains("another test")), "{:?}", fit.warnings);
-        let mm: Vec<f64> = column(&s, 1024.0, 0.2, 0.0).iter().map(|v| v * 1000.0).collect();
+        assert!(
+            fit.warnings
+                .iter()
+                .any(|w| w.contains("4.000 Hz") && w.contains("another test")),
+            "{:?}",
+            fit.warnings
+        );
+        let mm: Vec<f64> = column(&s, 1024.0, 0.2, 0.0)
+            .iter()
+            .map(|v| v * 1000.0)
+            .collect();
         let fit = align_sine(&s, &mm, 1024.0, None, None);
-        assert!(fit.warnings.iter().any(|w| w.contains("in mm?")), "{:?}", fit.warnings);
+        assert!(
+            fit.warnings.iter().any(|w| w.contains("in mm?")),
+            "{:?}",
+            fit.warnings
+        );
         let zero = vec![0.0; 3072];
         let fit = align_sine(&s, &zero, 1024.0, None, None);
-        assert!(fit.warnings.iter().any(|w| w.contains("zero throughout")), "{:?}", fit.warnings);
+        assert!(
+            fit.warnings.iter().any(|w| w.contains("zero throughout")),
+            "{:?}",
+            fit.warnings
+        );
     }
 
     #[test]
@@ -893,7 +1260,13 @@ mod tests {
         let s = sine();
         let r = column(&s, 1024.0, 0.5, 0.0);
         let fit = align_sine(&s, &r, 1024.0, None, Some(4.0));
-        assert!(fit.error.as_deref().is_some_and(|e| e.contains("too short")), "{:?}", fit.error);
+        assert!(
+            fit.error
+                .as_deref()
+                .is_some_and(|e| e.contains("too short")),
+            "{:?}",
+            fit.error
+        );
         let fit = align_sine(&s, &r, 1024.0, Some(512.0), Some(2.0));
         assert_eq!((fit.start_row, fit.end_row), (512.0, 512 + 2048));
     }

@@ -86,7 +86,12 @@ impl Kind {
 /// One test's input state, in the form a filter needs.
 pub enum Input {
     /// Mean and harmonics of the state, with the projector's basis at the samples.
-    Sine { f: f64, h: Vec<(f64, f64)>, cos: Vec<Vec<f64>>, sin: Vec<Vec<f64>> },
+    Sine {
+        f: f64,
+        h: Vec<(f64, f64)>,
+        cos: Vec<Vec<f64>>,
+        sin: Vec<Vec<f64>>,
+    },
     /// The state at the samples (for [`Kind::Carried`]: the base acceleration), and the interval.
     Record { x: Vec<f64>, dt: f64 },
 }
@@ -116,7 +121,12 @@ impl Input {
                     })
                     .collect();
                 let n = cos.first().map_or(0, Vec::len);
-                out.extend((0..n).map(|i| p.iter().enumerate().map(|(k, &(pr, pi))| pr * cos[k][i] - pi * sin[k][i]).sum::<f64>()));
+                out.extend((0..n).map(|i| {
+                    p.iter()
+                        .enumerate()
+                        .map(|(k, &(pr, pi))| pr * cos[k][i] - pi * sin[k][i])
+                        .sum::<f64>()
+                }));
             }
             Input::Record { x, dt } => {
                 let (c, k) = (2.0 * zeta * wn, wn * wn);
@@ -130,7 +140,14 @@ impl Input {
                 let m = ((wn * dt / 0.5).ceil() as usize).max(1);
                 let h = dt / m as f64;
                 // The lag starts at rest at the first value (no step at t = 0).
-                let (mut u, mut w) = (if kind == Kind::Lag { x.first().copied().unwrap_or(0.0) } else { 0.0 }, 0.0f64);
+                let (mut u, mut w) = (
+                    if kind == Kind::Lag {
+                        x.first().copied().unwrap_or(0.0)
+                    } else {
+                        0.0
+                    },
+                    0.0f64,
+                );
                 for i in 0..x.len() {
                     out.push(output(u, w, x[i]));
                     let (a0, a1) = (x[i], *x.get(i + 1).unwrap_or(&x[i]));
@@ -179,10 +196,17 @@ impl MemoryFit {
             (Kind::Carried, m) if m.abs() >= 1000.0 => format!(", {:.1} t moving", m / 1000.0),
             (Kind::Carried, m) => format!(", {m:.0} kg moving"),
             // (L − 1) ≈ −2iζΩ/ω_n well below ω_n: a delay of gain·2ζ/ω_n.
-            (Kind::Lag, g) => format!(", gain {g:.2}: {:.2} ms behind the command at low frequency", 1e3 * g * 2.0 * self.zeta / (2.0 * PI * self.f_n)),
+            (Kind::Lag, g) => format!(
+                ", gain {g:.2}: {:.2} ms behind the command at low frequency",
+                1e3 * g * 2.0 * self.zeta / (2.0 * PI * self.f_n)
+            ),
         };
         // At the grid's top the data say only "fast": a rigid mass, a short delay.
-        let f = if self.f_n >= F_HI { format!("f_n ≥ {F_HI:.0} Hz") } else { format!("f_n {:.2} Hz", self.f_n) };
+        let f = if self.f_n >= F_HI {
+            format!("f_n ≥ {F_HI:.0} Hz")
+        } else {
+            format!("f_n {:.2} Hz", self.f_n)
+        };
         format!("{f}, ζ {:.1} %{g}", 100.0 * self.zeta)
     }
 
@@ -230,11 +254,27 @@ pub fn fit(kind: Kind, inputs: &[Input], y: &[f64]) -> Option<MemoryFit> {
         for x in inputs {
             x.filtered(kind, f_n, zeta, &mut col);
         }
-        let (r2, gain) = if col.len() == y.len() && col.iter().all(|v| v.is_finite()) { simple_fit(&col, y) } else { (0.0, 0.0) };
-        MemoryFit { kind, f_n, zeta, gain, r2 }
+        let (r2, gain) = if col.len() == y.len() && col.iter().all(|v| v.is_finite()) {
+            simple_fit(&col, y)
+        } else {
+            (0.0, 0.0)
+        };
+        MemoryFit {
+            kind,
+            f_n,
+            zeta,
+            gain,
+            r2,
+        }
     };
     let ratio = (F_HI / F_LO).powf(1.0 / (N_F - 1) as f64);
-    let mut best = MemoryFit { kind, f_n: F_LO, zeta: ZETAS[0], gain: 0.0, r2: -1.0 };
+    let mut best = MemoryFit {
+        kind,
+        f_n: F_LO,
+        zeta: ZETAS[0],
+        gain: 0.0,
+        r2: -1.0,
+    };
     let mut at = (0, 0);
     for i in 0..N_F {
         for (j, &z) in ZETAS.iter().enumerate() {
@@ -246,7 +286,10 @@ pub fn fit(kind: Kind, inputs: &[Input], y: &[f64]) -> Option<MemoryFit> {
     }
     // Refine: ±1 step in f_n (21 values), between the neighbouring ζ (11 values, log-spaced).
     let f0 = F_LO * ratio.powi(at.0 as i32);
-    let (z_lo, z_hi) = (ZETAS[at.1.saturating_sub(1)], ZETAS[(at.1 + 1).min(ZETAS.len() - 1)]);
+    let (z_lo, z_hi) = (
+        ZETAS[at.1.saturating_sub(1)],
+        ZETAS[(at.1 + 1).min(ZETAS.len() - 1)],
+    );
     for i in 0..21 {
         let f = (f0 * ratio.powf(-1.0 + i as f64 / 10.0)).clamp(F_LO, F_HI);
         for j in 0..11 {
@@ -262,8 +305,17 @@ pub fn fit(kind: Kind, inputs: &[Input], y: &[f64]) -> Option<MemoryFit> {
     let (mut step_f, mut step_z) = (ratio.ln() / 10.0, (z_hi / z_lo).ln().max(0.1) / 10.0);
     while step_f > 1e-4 || step_z > 1e-4 {
         let moves = [(step_f, 0.0), (-step_f, 0.0), (0.0, step_z), (0.0, -step_z)];
-        let tried = moves.map(|(df, dz)| eval((best.f_n * df.exp()).clamp(F_LO, F_HI), (best.zeta * dz.exp()).clamp(ZETA_MIN, ZETA_MAX)));
-        match tried.into_iter().filter(|r| r.r2 > best.r2).max_by(|a, b| a.r2.total_cmp(&b.r2)) {
+        let tried = moves.map(|(df, dz)| {
+            eval(
+                (best.f_n * df.exp()).clamp(F_LO, F_HI),
+                (best.zeta * dz.exp()).clamp(ZETA_MIN, ZETA_MAX),
+            )
+        });
+        match tried
+            .into_iter()
+            .filter(|r| r.r2 > best.r2)
+            .max_by(|a, b| a.r2.total_cmp(&b.r2))
+        {
             Some(r) => best = r,
             None => (step_f, step_z) = (step_f / 2.0, step_z / 2.0),
         }
@@ -292,16 +344,36 @@ mod tests {
         let d = ((wn * wn - w * w).powi(2) + (2.0 * zeta * wn * w).powi(2)).sqrt();
         for (kind, input, gain) in [
             // |z̈| = ω²·|T|·y0 in closed form.
-            (Kind::Carried, tau.iter().map(|t| -w * w * y0 * (w * t).sin()).collect::<Vec<f64>>(), w * w * (wn.powi(4) + (2.0 * zeta * wn * w).powi(2)).sqrt() / d),
+            (
+                Kind::Carried,
+                tau.iter()
+                    .map(|t| -w * w * y0 * (w * t).sin())
+                    .collect::<Vec<f64>>(),
+                w * w * (wn.powi(4) + (2.0 * zeta * wn * w).powi(2)).sqrt() / d,
+            ),
             // |ω_n²/D − 1|.
-            (Kind::Lag, tau.iter().map(|t| y0 * (w * t).sin()).collect(), ((wn * wn * (wn * wn - w * w) / (d * d) - 1.0).powi(2) + (wn * wn * 2.0 * zeta * wn * w / (d * d)).powi(2)).sqrt()),
+            (
+                Kind::Lag,
+                tau.iter().map(|t| y0 * (w * t).sin()).collect(),
+                ((wn * wn * (wn * wn - w * w) / (d * d) - 1.0).powi(2)
+                    + (wn * wn * 2.0 * zeta * wn * w / (d * d)).powi(2))
+                .sqrt(),
+            ),
         ] {
             let mut rec = Vec::new();
-            Input::Record { x: input, dt: 1.0 / rate }.filtered(kind, f_n, zeta, &mut rec);
+            Input::Record {
+                x: input,
+                dt: 1.0 / rate,
+            }
+            .filtered(kind, f_n, zeta, &mut rec);
             let mut sine = Vec::new();
             Input::sine(&p, f, &disp).filtered(kind, f_n, zeta, &mut sine);
             let peak = sine.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-            assert!((peak / (gain * y0) - 1.0).abs() < 1e-3, "{kind:?}: {peak} vs {}", gain * y0);
+            assert!(
+                (peak / (gain * y0) - 1.0).abs() < 1e-3,
+                "{kind:?}: {peak} vs {}",
+                gain * y0
+            );
             for (a, b) in rec[n - 2048..].iter().zip(&sine) {
                 assert!((a - b).abs() < 1e-4 * peak, "{kind:?}: {a} vs {b}");
             }
@@ -315,12 +387,24 @@ mod tests {
         let rate = 1024.0;
         let tau: Vec<f64> = (0..2048).map(|k| k as f64 / rate).collect();
         let mut inputs = Vec::new();
-        for &(f, y0) in &[(1.0, 0.05), (2.0, 0.02), (4.0, 0.01), (6.0, 0.005), (8.0, 0.003)] {
+        for &(f, y0) in &[
+            (1.0, 0.05),
+            (2.0, 0.02),
+            (4.0, 0.01),
+            (6.0, 0.005),
+            (8.0, 0.003),
+        ] {
             let w = 2.0 * PI * f;
-            let disp: Vec<f64> = tau.iter().map(|t| y0 * (w * t).sin() + 0.1 * y0 * (3.0 * w * t).cos()).collect();
+            let disp: Vec<f64> = tau
+                .iter()
+                .map(|t| y0 * (w * t).sin() + 0.1 * y0 * (3.0 * w * t).cos())
+                .collect();
             inputs.push(Input::sine(&Projector::new(&tau, f, 9), f, &disp));
         }
-        for (kind, f_n, zeta, gain) in [(Kind::Carried, 4.7, 0.07, 12_000.0), (Kind::Lag, 31.0, 0.6, 0.8)] {
+        for (kind, f_n, zeta, gain) in [
+            (Kind::Carried, 4.7, 0.07, 12_000.0),
+            (Kind::Lag, 31.0, 0.6, 0.8),
+        ] {
             let mut y = Vec::new();
             for x in &inputs {
                 x.filtered(kind, f_n, zeta, &mut y);
@@ -328,7 +412,12 @@ mod tests {
             y.iter_mut().for_each(|v| *v *= gain);
             let r = fit(kind, &inputs, &y).unwrap();
             assert!(r.r2 > 1.0 - 1e-6, "{r:?}");
-            assert!((r.f_n / f_n - 1.0).abs() < 1e-3 && (r.zeta / zeta - 1.0).abs() < 1e-2 && (r.gain / gain - 1.0).abs() < 1e-3, "{r:?}");
+            assert!(
+                (r.f_n / f_n - 1.0).abs() < 1e-3
+                    && (r.zeta / zeta - 1.0).abs() < 1e-2
+                    && (r.gain / gain - 1.0).abs() < 1e-3,
+                "{r:?}"
+            );
         }
     }
 }

@@ -41,20 +41,37 @@ fn noise_rng(seed: u64, stream: u64) -> ChaCha8Rng {
 /// `n` standard normal draws of stream `stream` of `seed` (see the module docs).
 pub fn noise(seed: u64, stream: u64, n: usize) -> Vec<f64> {
     let mut rng = noise_rng(seed, stream);
-    (0..n).map(|_| rng.sample::<f64, _>(StandardNormal)).collect()
+    (0..n)
+        .map(|_| rng.sample::<f64, _>(StandardNormal))
+        .collect()
 }
 
 /// The reference of a generated excitation (stochastic, sweep, random) for `model` (whose
 /// `ground.*` a stochastic motion reads), with noise of (`seed`, `sample`) where it has any. An
 /// error says why the motion cannot run (the table's limits).
-pub fn generated(excitation: &ExcitationSpec, model: &ModelParams, seed: u64, sample: u64) -> Result<Reference, String> {
+pub fn generated(
+    excitation: &ExcitationSpec,
+    model: &ModelParams,
+    seed: u64,
+    sample: u64,
+) -> Result<Reference, String> {
     let f_s = model.controller.f_s;
     let r = match excitation {
-        ExcitationSpec::Stochastic { duration_s, realisation, seed: own, ground: given, processing, f_ref_hz } => {
+        ExcitationSpec::Stochastic {
+            duration_s,
+            realisation,
+            seed: own,
+            ground: given,
+            processing,
+            f_ref_hz,
+        } => {
             // The model's ground.* (a study's sampled values), the excitation's own keys over them.
             let mut m = model.clone();
             for (name, v) in given {
-                let info = GroundParams::PARAMS.iter().find(|p| p.name == *name).expect("a ground parameter name");
+                let info = GroundParams::PARAMS
+                    .iter()
+                    .find(|p| p.name == *name)
+                    .expect("a ground parameter name");
                 (info.set)(&mut m, *v);
             }
             let g = m.ground;
@@ -63,16 +80,33 @@ pub fn generated(excitation: &ExcitationSpec, model: &ModelParams, seed: u64, sa
             let accel = ground::filtered_noise(&g, &white, 1.0 / f_s);
             from_acceleration(&accel, 0.0, 1.0 / f_s, processing, *f_ref_hz, f_s)
         }
-        ExcitationSpec::Sweep { sweep, .. } => closed_form(f_s, sweep.duration_s, |t| sweep.states(t)),
-        ExcitationSpec::Random { f_lo_hz, f_hi_hz, rms_g, duration_s, taper_s, realisation, seed: own } => {
+        ExcitationSpec::Sweep { sweep, .. } => {
+            closed_form(f_s, sweep.duration_s, |t| sweep.states(t))
+        }
+        ExcitationSpec::Random {
+            f_lo_hz,
+            f_hi_hz,
+            rms_g,
+            duration_s,
+            taper_s,
+            realisation,
+            seed: own,
+        } => {
             let df = 1.0 / duration_s;
-            let count = ((f_hi_hz / df).floor() - (f_lo_hz / df).ceil().max(1.0) + 1.0).max(1.0) as usize;
+            let count =
+                ((f_hi_hz / df).floor() - (f_lo_hz / df).ceil().max(1.0) + 1.0).max(1.0) as usize;
             let mut rng = noise_rng(own.unwrap_or(seed), realisation.stream(sample));
-            let phases: Vec<f64> = (0..count).map(|_| 2.0 * std::f64::consts::PI * rng.random::<f64>()).collect();
-            let m = Multisine::new(*f_lo_hz, *f_hi_hz, *duration_s, *taper_s, rms_g * G, |k| phases[k % phases.len()]);
+            let phases: Vec<f64> = (0..count)
+                .map(|_| 2.0 * std::f64::consts::PI * rng.random::<f64>())
+                .collect();
+            let m = Multisine::new(*f_lo_hz, *f_hi_hz, *duration_s, *taper_s, rms_g * G, |k| {
+                phases[k % phases.len()]
+            });
             closed_form(f_s, *duration_s, |t| m.states(t))
         }
-        ExcitationSpec::Sine { .. } | ExcitationSpec::Record { .. } => unreachable!("sines and records are built by sim::reference_for"),
+        ExcitationSpec::Sine { .. } | ExcitationSpec::Record { .. } => {
+            unreachable!("sines and records are built by sim::reference_for")
+        }
     };
     check_limits(&r, model)?;
     Ok(r)
@@ -87,9 +121,20 @@ fn closed_form(f_s: f64, duration: f64, states: impl Fn(f64) -> [f64; 4]) -> Ref
 
 /// A displacement reference from a ground acceleration (m/s², every `dt` s from `t0`): processed
 /// into a displacement, then the record filter.
-pub fn from_acceleration(accel: &[f64], t0: f64, dt: f64, p: &Processing, f_ref_hz: f64, f_s: f64) -> Reference {
+pub fn from_acceleration(
+    accel: &[f64],
+    t0: f64,
+    dt: f64,
+    p: &Processing,
+    f_ref_hz: f64,
+    f_s: f64,
+) -> Reference {
     let d = ground::to_displacement(accel, dt, p);
-    let rec = Record { time_s: (0..d.disp_m.len()).map(|k| t0 + k as f64 * dt).collect(), disp_m: d.disp_m, f_ref_hz };
+    let rec = Record {
+        time_s: (0..d.disp_m.len()).map(|k| t0 + k as f64 * dt).collect(),
+        disp_m: d.disp_m,
+        f_ref_hz,
+    };
     rec.reference(f_s)
 }
 
@@ -109,18 +154,34 @@ pub fn scaled(values: &[f64], unit: RecordUnit, scale: f64, pga_g: Option<f64>) 
 /// (controller.v_max) and the force to accelerate the platen (platen.m · a ≤ controller.f_max).
 pub fn check_limits(r: &Reference, model: &ModelParams) -> Result<(), String> {
     let (x, v, a) = r.peaks();
-    let (l, v_max, f_max, m) = (model.actuator.l, model.controller.v_max, model.controller.f_max, model.platen.m);
+    let (l, v_max, f_max, m) = (
+        model.actuator.l,
+        model.controller.v_max,
+        model.controller.f_max,
+        model.platen.m,
+    );
     let mut over = Vec::new();
     if x >= l {
-        over.push(format!("peak displacement {x:.4} m reaches the stroke (half stroke actuator.l = {l} m)"));
+        over.push(format!(
+            "peak displacement {x:.4} m reaches the stroke (half stroke actuator.l = {l} m)"
+        ));
     }
     if v > v_max {
-        over.push(format!("peak velocity {v:.3} m/s exceeds controller.v_max = {v_max} m/s"));
+        over.push(format!(
+            "peak velocity {v:.3} m/s exceeds controller.v_max = {v_max} m/s"
+        ));
     }
     if m * a > f_max {
         over.push(format!("peak acceleration {:.3} g needs {:.3} MN on the {m} kg platen, beyond controller.f_max = {} MN", a / G, m * a / 1e6, f_max / 1e6));
     }
-    if over.is_empty() { Ok(()) } else { Err(format!("the motion exceeds the table's limits: {}; scale it down", over.join("; "))) }
+    if over.is_empty() {
+        Ok(())
+    } else {
+        Err(format!(
+            "the motion exceeds the table's limits: {}; scale it down",
+            over.join("; ")
+        ))
+    }
 }
 
 #[cfg(test)]
@@ -129,7 +190,14 @@ mod tests {
     use crate::orchestration::spec::Realisation;
 
     fn stochastic(realisation: Realisation) -> ExcitationSpec {
-        ExcitationSpec::Stochastic { duration_s: 10.0, realisation, seed: None, ground: vec![("pga_g", 0.3)], processing: Processing::default(), f_ref_hz: 50.0 }
+        ExcitationSpec::Stochastic {
+            duration_s: 10.0,
+            realisation,
+            seed: None,
+            ground: vec![("pga_g", 0.3)],
+            processing: Processing::default(),
+            f_ref_hz: 50.0,
+        }
     }
 
     #[test]
@@ -152,21 +220,50 @@ mod tests {
     fn every_key_of_the_excitation_applies_over_the_model() {
         // The excitation's keys, all of them, win over the model's ground.*; the others stay.
         let keys = vec![("pga_g", 0.4), ("f_g_hz", 1.2), ("zeta_g", 0.35)];
-        let exc = |ground| ExcitationSpec::Stochastic { duration_s: 8.0, realisation: Realisation::Fixed(1), seed: None, ground, processing: Processing::default(), f_ref_hz: 50.0 };
+        let exc = |ground| ExcitationSpec::Stochastic {
+            duration_s: 8.0,
+            realisation: Realisation::Fixed(1),
+            seed: None,
+            ground,
+            processing: Processing::default(),
+            f_ref_hz: 50.0,
+        };
         let mut m = ModelParams::default();
         m.ground.t_strong_s = 3.0;
         let mut by_model = m.clone();
-        (by_model.ground.pga_g, by_model.ground.f_g_hz, by_model.ground.zeta_g) = (0.4, 1.2, 0.35);
-        assert_eq!(generated(&exc(keys), &m, 5, 0).unwrap(), generated(&exc(vec![]), &by_model, 5, 0).unwrap());
-        assert_ne!(generated(&exc(vec![("pga_g", 0.4)]), &m, 5, 0).unwrap(), generated(&exc(vec![]), &by_model, 5, 0).unwrap());
+        (
+            by_model.ground.pga_g,
+            by_model.ground.f_g_hz,
+            by_model.ground.zeta_g,
+        ) = (0.4, 1.2, 0.35);
+        assert_eq!(
+            generated(&exc(keys), &m, 5, 0).unwrap(),
+            generated(&exc(vec![]), &by_model, 5, 0).unwrap()
+        );
+        assert_ne!(
+            generated(&exc(vec![("pga_g", 0.4)]), &m, 5, 0).unwrap(),
+            generated(&exc(vec![]), &by_model, 5, 0).unwrap()
+        );
     }
 
     #[test]
     fn limits_are_named() {
         let m = ModelParams::default();
         // 20 g on the 144 t platen needs 28 MN, beyond the 6.8 MN of controller.f_max.
-        let big = ExcitationSpec::Stochastic { duration_s: 10.0, realisation: Realisation::Fixed(0), seed: None, ground: vec![("pga_g", 20.0)], processing: Processing::default(), f_ref_hz: 50.0 };
-        let Err(e) = generated(&big, &m, 1, 0) else { panic!("a 20 g motion passed the limits") };
-        assert!(e.contains("exceeds the table's limits") && e.contains("controller.f_max"), "{e}");
+        let big = ExcitationSpec::Stochastic {
+            duration_s: 10.0,
+            realisation: Realisation::Fixed(0),
+            seed: None,
+            ground: vec![("pga_g", 20.0)],
+            processing: Processing::default(),
+            f_ref_hz: 50.0,
+        };
+        let Err(e) = generated(&big, &m, 1, 0) else {
+            panic!("a 20 g motion passed the limits")
+        };
+        assert!(
+            e.contains("exceeds the table's limits") && e.contains("controller.f_max"),
+            "{e}"
+        );
     }
 }

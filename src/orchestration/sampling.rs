@@ -14,16 +14,38 @@ use rand::{RngExt, SeedableRng};
 /// A parameter distribution.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Distribution {
-    Fixed { value: f64 },
-    Uniform { low: f64, high: f64 },
-    LogUniform { low: f64, high: f64 },
+    Fixed {
+        value: f64,
+    },
+    Uniform {
+        low: f64,
+        high: f64,
+    },
+    LogUniform {
+        low: f64,
+        high: f64,
+    },
     /// Normal, optionally truncated to [low, high].
-    Normal { mean: f64, std: f64, low: Option<f64>, high: Option<f64> },
+    Normal {
+        mean: f64,
+        std: f64,
+        low: Option<f64>,
+        high: Option<f64>,
+    },
     /// ln x ~ Normal(mu, sigma).
-    LogNormal { mu: f64, sigma: f64 },
-    Triangular { low: f64, mode: f64, high: f64 },
+    LogNormal {
+        mu: f64,
+        sigma: f64,
+    },
+    Triangular {
+        low: f64,
+        mode: f64,
+        high: f64,
+    },
     /// One of the listed values, equally likely (a grid takes each in turn).
-    List { values: Vec<f64> },
+    List {
+        values: Vec<f64>,
+    },
 }
 
 impl Distribution {
@@ -38,15 +60,25 @@ impl Distribution {
             Distribution::Fixed { value } => *value,
             Distribution::Uniform { low, high } => low + u * (high - low),
             Distribution::LogUniform { low, high } => (low.ln() + u * (high.ln() - low.ln())).exp(),
-            Distribution::Normal { mean, std, low, high } => {
+            Distribution::Normal {
+                mean,
+                std,
+                low,
+                high,
+            } => {
                 let a = low.map_or(0.0, |l| normal_cdf((l - mean) / std));
                 let b = high.map_or(1.0, |h| normal_cdf((h - mean) / std));
                 let p = (a + u * (b - a)).clamp(1e-300, 1.0 - 1e-16);
                 let x = mean + std * normal_quantile(p);
                 // Rounding in the CDF must not step outside the truncation.
-                x.clamp(low.unwrap_or(f64::NEG_INFINITY), high.unwrap_or(f64::INFINITY))
+                x.clamp(
+                    low.unwrap_or(f64::NEG_INFINITY),
+                    high.unwrap_or(f64::INFINITY),
+                )
             }
-            Distribution::LogNormal { mu, sigma } => (mu + sigma * normal_quantile(u.clamp(1e-300, 1.0 - 1e-16))).exp(),
+            Distribution::LogNormal { mu, sigma } => {
+                (mu + sigma * normal_quantile(u.clamp(1e-300, 1.0 - 1e-16))).exp()
+            }
             Distribution::Triangular { low, mode, high } => {
                 let (a, c, b) = (*low, *mode, *high);
                 let fc = (c - a) / (b - a);
@@ -56,7 +88,9 @@ impl Distribution {
                     b - ((1.0 - u) * (b - a) * (b - c)).sqrt()
                 }
             }
-            Distribution::List { values } => values[((u * values.len() as f64) as usize).min(values.len() - 1)],
+            Distribution::List { values } => {
+                values[((u * values.len() as f64) as usize).min(values.len() - 1)]
+            }
         }
     }
 
@@ -68,8 +102,13 @@ impl Distribution {
             Distribution::Fixed { value } => vec![*value],
             Distribution::List { values } => values.clone(),
             Distribution::Uniform { low, high } => linspace(*low, *high, levels),
-            Distribution::LogUniform { low, high } => linspace(low.ln(), high.ln(), levels).into_iter().map(f64::exp).collect(),
-            _ => (0..levels).map(|i| self.quantile((i as f64 + 0.5) / levels as f64)).collect(),
+            Distribution::LogUniform { low, high } => linspace(low.ln(), high.ln(), levels)
+                .into_iter()
+                .map(f64::exp)
+                .collect(),
+            _ => (0..levels)
+                .map(|i| self.quantile((i as f64 + 0.5) / levels as f64))
+                .collect(),
         }
     }
 }
@@ -78,24 +117,53 @@ fn linspace(a: f64, b: f64, n: usize) -> Vec<f64> {
     if n == 1 {
         return vec![0.5 * (a + b)];
     }
-    (0..n).map(|i| a + (b - a) * i as f64 / (n - 1) as f64).collect()
+    (0..n)
+        .map(|i| a + (b - a) * i as f64 / (n - 1) as f64)
+        .collect()
 }
 
 /// Standard normal quantile Φ⁻¹(p), Acklam's rational approximation (relative error < 1.2e-9).
 #[allow(clippy::excessive_precision)] // the coefficients as published
 pub fn normal_quantile(p: f64) -> f64 {
-    const A: [f64; 6] = [-3.969683028665376e1, 2.209460984245205e2, -2.759285104469687e2, 1.383577518672690e2, -3.066479806614716e1, 2.506628277459239];
-    const B: [f64; 5] = [-5.447609879822406e1, 1.615858368580409e2, -1.556989798598866e2, 6.680131188771972e1, -1.328068155288572e1];
-    const C: [f64; 6] = [-7.784894002430293e-3, -3.223964580411365e-1, -2.400758277161838, -2.549732539343734, 4.374664141464968, 2.938163982698783];
-    const D: [f64; 4] = [7.784695709041462e-3, 3.224671290700398e-1, 2.445134137142996, 3.754408661907416];
+    const A: [f64; 6] = [
+        -3.969683028665376e1,
+        2.209460984245205e2,
+        -2.759285104469687e2,
+        1.383577518672690e2,
+        -3.066479806614716e1,
+        2.506628277459239,
+    ];
+    const B: [f64; 5] = [
+        -5.447609879822406e1,
+        1.615858368580409e2,
+        -1.556989798598866e2,
+        6.680131188771972e1,
+        -1.328068155288572e1,
+    ];
+    const C: [f64; 6] = [
+        -7.784894002430293e-3,
+        -3.223964580411365e-1,
+        -2.400758277161838,
+        -2.549732539343734,
+        4.374664141464968,
+        2.938163982698783,
+    ];
+    const D: [f64; 4] = [
+        7.784695709041462e-3,
+        3.224671290700398e-1,
+        2.445134137142996,
+        3.754408661907416,
+    ];
     const P_LOW: f64 = 0.02425;
     if p < P_LOW {
         let q = (-2.0 * p.ln()).sqrt();
-        (((((C[0] * q + C[1]) * q + C[2]) * q + C[3]) * q + C[4]) * q + C[5]) / ((((D[0] * q + D[1]) * q + D[2]) * q + D[3]) * q + 1.0)
+        (((((C[0] * q + C[1]) * q + C[2]) * q + C[3]) * q + C[4]) * q + C[5])
+            / ((((D[0] * q + D[1]) * q + D[2]) * q + D[3]) * q + 1.0)
     } else if p <= 1.0 - P_LOW {
         let q = p - 0.5;
         let r = q * q;
-        (((((A[0] * r + A[1]) * r + A[2]) * r + A[3]) * r + A[4]) * r + A[5]) * q / (((((B[0] * r + B[1]) * r + B[2]) * r + B[3]) * r + B[4]) * r + 1.0)
+        (((((A[0] * r + A[1]) * r + A[2]) * r + A[3]) * r + A[4]) * r + A[5]) * q
+            / (((((B[0] * r + B[1]) * r + B[2]) * r + B[3]) * r + B[4]) * r + 1.0)
     } else {
         -normal_quantile(1.0 - p)
     }
@@ -114,10 +182,14 @@ pub enum Design {
     LatinHypercube,
     Sobol,
     /// Full factorial over the given value lists (one per varied dimension).
-    Grid { values: Vec<Vec<f64>> },
+    Grid {
+        values: Vec<Vec<f64>>,
+    },
     /// Saltelli's design for Sobol' indices: `base` points of A and B, each followed by the d
     /// points AB_i (A with column i from B): N·(d + 2) runs.
-    Saltelli { base: usize },
+    Saltelli {
+        base: usize,
+    },
 }
 
 /// Largest number of points of a Sobol' sequence (sobol_burley).
@@ -166,7 +238,13 @@ impl UnitDesign {
         } else {
             Vec::new()
         };
-        UnitDesign { design, dims, samples: runs, seed, lhs_perm }
+        UnitDesign {
+            design,
+            dims,
+            samples: runs,
+            seed,
+            lhs_perm,
+        }
     }
 
     /// The unit point of `sample` (for a grid: the level indices as u = index, see [`Self::grid_index`]).
@@ -211,7 +289,9 @@ impl UnitDesign {
 
     /// Grid design: the level index of each dimension for `sample` (last dimension fastest).
     pub fn grid_index(&self, sample: usize, out: &mut [usize]) {
-        let Design::Grid { values } = &self.design else { panic!("not a grid") };
+        let Design::Grid { values } = &self.design else {
+            panic!("not a grid")
+        };
         let mut rest = sample;
         for j in (0..values.len()).rev() {
             out[j] = rest % values[j].len();
@@ -243,15 +323,40 @@ mod tests {
 
     #[test]
     fn distributions_map_the_unit_interval() {
-        let t = Distribution::Triangular { low: 0.0, mode: 1.0, high: 4.0 };
+        let t = Distribution::Triangular {
+            low: 0.0,
+            mode: 1.0,
+            high: 4.0,
+        };
         assert!((t.quantile(0.25) - 1.0).abs() < 1e-12);
-        let n = Distribution::Normal { mean: 1.0, std: 1.0, low: Some(0.0), high: Some(2.0) };
+        let n = Distribution::Normal {
+            mean: 1.0,
+            std: 1.0,
+            low: Some(0.0),
+            high: Some(2.0),
+        };
         assert!((n.quantile(0.5) - 1.0).abs() < 1e-6);
         assert!(n.quantile(0.0) >= 0.0 && n.quantile(0.999999) <= 2.0);
-        let lu = Distribution::LogUniform { low: 1.0, high: 100.0 };
+        let lu = Distribution::LogUniform {
+            low: 1.0,
+            high: 100.0,
+        };
         assert!((lu.quantile(0.5) - 10.0).abs() < 1e-9);
-        assert_eq!(Distribution::List { values: vec![1.0, 2.0, 3.0] }.quantile(0.99), 3.0);
-        assert_eq!(Distribution::Uniform { low: 1.0, high: 2.0 }.grid(3), vec![1.0, 1.5, 2.0]);
+        assert_eq!(
+            Distribution::List {
+                values: vec![1.0, 2.0, 3.0]
+            }
+            .quantile(0.99),
+            3.0
+        );
+        assert_eq!(
+            Distribution::Uniform {
+                low: 1.0,
+                high: 2.0
+            }
+            .grid(3),
+            vec![1.0, 1.5, 2.0]
+        );
     }
 
     #[test]
@@ -271,7 +376,11 @@ mod tests {
 
     #[test]
     fn points_depend_only_on_seed_and_index() {
-        for design in [Design::MonteCarlo, Design::Sobol, Design::Saltelli { base: 16 }] {
+        for design in [
+            Design::MonteCarlo,
+            Design::Sobol,
+            Design::Saltelli { base: 16 },
+        ] {
             let a = UnitDesign::new(design.clone(), 4, 16, 99);
             let b = UnitDesign::new(design, 4, 16, 99);
             let (mut x, mut y) = ([0.0; 4], [0.0; 4]);

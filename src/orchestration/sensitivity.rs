@@ -52,7 +52,12 @@ fn point_indices(fa: &[f64], fb: &[f64], fab: &[Vec<f64>], idx: &[usize]) -> Vec
     let mean = idx.iter().map(|&j| fa[j] + fb[j]).sum::<f64>() / (2.0 * n);
     fab.iter()
         .map(|fi| {
-            let s1 = idx.iter().map(|&j| (fb[j] - mean) * (fi[j] - fa[j])).sum::<f64>() / n / v;
+            let s1 = idx
+                .iter()
+                .map(|&j| (fb[j] - mean) * (fi[j] - fa[j]))
+                .sum::<f64>()
+                / n
+                / v;
             let st = idx.iter().map(|&j| (fa[j] - fi[j]).powi(2)).sum::<f64>() / (2.0 * n) / v;
             (s1, st)
         })
@@ -67,12 +72,19 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
 
 /// First-order and total Sobol' indices with `bootstrap` resamples (95 % percentile intervals).
 /// `fa`, `fb` hold f at the N base points of A and B; `fab[i]` at AB_i.
-pub fn sobol(fa: &[f64], fb: &[f64], fab: &[Vec<f64>], bootstrap: usize, seed: u64) -> Vec<SobolIndex> {
+pub fn sobol(
+    fa: &[f64],
+    fb: &[f64],
+    fab: &[Vec<f64>],
+    bootstrap: usize,
+    seed: u64,
+) -> Vec<SobolIndex> {
     let n = fa.len();
     let all: Vec<usize> = (0..n).collect();
     let point = point_indices(fa, fb, fab, &all);
     let d = fab.len();
-    let mut boots: Vec<(Vec<f64>, Vec<f64>)> = vec![(Vec::with_capacity(bootstrap), Vec::with_capacity(bootstrap)); d];
+    let mut boots: Vec<(Vec<f64>, Vec<f64>)> =
+        vec![(Vec::with_capacity(bootstrap), Vec::with_capacity(bootstrap)); d];
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut idx = vec![0; n];
     for _ in 0..bootstrap {
@@ -90,12 +102,23 @@ pub fn sobol(fa: &[f64], fb: &[f64], fab: &[Vec<f64>], bootstrap: usize, seed: u
         .map(|((s1, st), (mut b1, mut bt))| {
             let ci = |b: &mut Vec<f64>, v: f64| {
                 if b.is_empty() {
-                    return Estimate { value: v, ci_low: f64::NAN, ci_high: f64::NAN };
+                    return Estimate {
+                        value: v,
+                        ci_low: f64::NAN,
+                        ci_high: f64::NAN,
+                    };
                 }
                 b.sort_by(f64::total_cmp);
-                Estimate { value: v, ci_low: percentile(b, 0.025), ci_high: percentile(b, 0.975) }
+                Estimate {
+                    value: v,
+                    ci_low: percentile(b, 0.025),
+                    ci_high: percentile(b, 0.975),
+                }
             };
-            SobolIndex { first: ci(&mut b1, s1), total: ci(&mut bt, st) }
+            SobolIndex {
+                first: ci(&mut b1, s1),
+                total: ci(&mut bt, st),
+            }
         })
         .collect()
 }
@@ -104,7 +127,9 @@ fn standardise(v: &[f64]) -> Vec<f64> {
     let n = v.len() as f64;
     let mean = v.iter().sum::<f64>() / n;
     let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
-    v.iter().map(|x| if sd > 0.0 { (x - mean) / sd } else { 0.0 }).collect()
+    v.iter()
+        .map(|x| if sd > 0.0 { (x - mean) / sd } else { 0.0 })
+        .collect()
 }
 
 /// Least squares with an intercept: returns (coefficients without the intercept, residuals).
@@ -114,7 +139,9 @@ fn lstsq(x: &[Vec<f64>], y: &[f64]) -> (Vec<f64>, Vec<f64>) {
     let b = Mat::<f64>::from_fn(n, 1, |i, _| y[i]);
     let sol = a.qr().solve_lstsq(&b);
     let coef: Vec<f64> = (0..=d).map(|j| sol[(j, 0)]).collect();
-    let resid = (0..n).map(|i| y[i] - (0..=d).map(|j| a[(i, j)] * coef[j]).sum::<f64>()).collect();
+    let resid = (0..n)
+        .map(|i| y[i] - (0..=d).map(|j| a[(i, j)] * coef[j]).sum::<f64>())
+        .collect();
     (coef[1..].to_vec(), resid)
 }
 
@@ -125,7 +152,14 @@ pub fn src(x: &[Vec<f64>], y: &[f64]) -> (Vec<f64>, f64) {
     let (coef, resid) = lstsq(&xs, &ys);
     let ss_tot: f64 = ys.iter().map(|v| v * v).sum();
     let ss_res: f64 = resid.iter().map(|r| r * r).sum();
-    (coef, if ss_tot > 0.0 { 1.0 - ss_res / ss_tot } else { f64::NAN })
+    (
+        coef,
+        if ss_tot > 0.0 {
+            1.0 - ss_res / ss_tot
+        } else {
+            f64::NAN
+        },
+    )
 }
 
 /// Ranks 1…n, ties sharing their average rank.
@@ -159,7 +193,12 @@ pub fn prcc(x: &[Vec<f64>], y: &[f64]) -> Vec<f64> {
     let ry = ranks(y);
     (0..x.len())
         .map(|i| {
-            let others: Vec<Vec<f64>> = rx.iter().enumerate().filter(|(j, _)| *j != i).map(|(_, c)| c.clone()).collect();
+            let others: Vec<Vec<f64>> = rx
+                .iter()
+                .enumerate()
+                .filter(|(j, _)| *j != i)
+                .map(|(_, c)| c.clone())
+                .collect();
             let (_, res_x) = lstsq(&others, &rx[i]);
             let (_, res_y) = lstsq(&others, &ry);
             correlation(&res_x, &res_y)
@@ -196,8 +235,18 @@ pub struct Indices {
 /// The outputs of a Saltelli design regrouped by base point: one row `[f_A, f_B, f_AB_1, …,
 /// f_AB_d]` per base point whose every block finished, and the number of base points dropped
 /// because one of their runs failed (NaN) or is absent.
-pub fn saltelli_blocks(rows: &[usize], base: &[f64], block: &[f64], y: &[f64], d: usize) -> (Vec<Vec<f64>>, usize) {
-    let n_base = rows.iter().map(|&r| base[r] as usize + 1).max().unwrap_or(0);
+pub fn saltelli_blocks(
+    rows: &[usize],
+    base: &[f64],
+    block: &[f64],
+    y: &[f64],
+    d: usize,
+) -> (Vec<Vec<f64>>, usize) {
+    let n_base = rows
+        .iter()
+        .map(|&r| base[r] as usize + 1)
+        .max()
+        .unwrap_or(0);
     let mut table = vec![vec![f64::NAN; d + 2]; n_base];
     for &r in rows {
         let (b, k) = (base[r] as usize, block[r] as usize);
@@ -205,7 +254,10 @@ pub fn saltelli_blocks(rows: &[usize], base: &[f64], block: &[f64], y: &[f64], d
             table[b][k] = y[r];
         }
     }
-    let complete: Vec<Vec<f64>> = table.into_iter().filter(|v| v.iter().all(|x| x.is_finite())).collect();
+    let complete: Vec<Vec<f64>> = table
+        .into_iter()
+        .filter(|v| v.iter().all(|x| x.is_finite()))
+        .collect();
     let dropped = n_base - complete.len();
     (complete, dropped)
 }
@@ -215,18 +267,29 @@ pub fn saltelli_blocks(rows: &[usize], base: &[f64], block: &[f64], y: &[f64], d
 /// analysed in.
 pub fn analyse(results: &Results<'_>, e: usize, y: &[f64], bootstrap: usize) -> Indices {
     let d = results.inputs.len();
-    let rows: Vec<usize> = (0..y.len()).filter(|&r| results.excitation[r] as usize == e).collect();
+    let rows: Vec<usize> = (0..y.len())
+        .filter(|&r| results.excitation[r] as usize == e)
+        .collect();
     let (sobol_idx, dropped, used) = match results.saltelli {
         Some((base, block)) => {
             let (complete, dropped) = saltelli_blocks(&rows, base, block, y, d);
             let sobol_idx = (complete.len() >= 2).then(|| {
                 let fa: Vec<f64> = complete.iter().map(|v| v[0]).collect();
                 let fb: Vec<f64> = complete.iter().map(|v| v[1]).collect();
-                let fab: Vec<Vec<f64>> = (0..d).map(|i| complete.iter().map(|v| v[2 + i]).collect()).collect();
+                let fab: Vec<Vec<f64>> = (0..d)
+                    .map(|i| complete.iter().map(|v| v[2 + i]).collect())
+                    .collect();
                 sobol(&fa, &fb, &fab, bootstrap, 0x5eed ^ ((e as u64) << 8))
             });
             // The regression measures use the A and B points: independent samples of the design.
-            (sobol_idx, dropped, rows.iter().copied().filter(|&r| block[r] < 2.0 && y[r].is_finite()).collect::<Vec<_>>())
+            (
+                sobol_idx,
+                dropped,
+                rows.iter()
+                    .copied()
+                    .filter(|&r| block[r] < 2.0 && y[r].is_finite())
+                    .collect::<Vec<_>>(),
+            )
         }
         None => {
             let used: Vec<usize> = rows.iter().copied().filter(|&r| y[r].is_finite()).collect();
@@ -235,14 +298,25 @@ pub fn analyse(results: &Results<'_>, e: usize, y: &[f64], bootstrap: usize) -> 
     };
     let n = used.len();
     let (src_v, r2, prcc_v) = if n > d + 2 && used.iter().any(|&r| y[r] != y[used[0]]) {
-        let x: Vec<Vec<f64>> = results.inputs.iter().map(|c| used.iter().map(|&r| c[r]).collect()).collect();
+        let x: Vec<Vec<f64>> = results
+            .inputs
+            .iter()
+            .map(|c| used.iter().map(|&r| c[r]).collect())
+            .collect();
         let yy: Vec<f64> = used.iter().map(|&r| y[r]).collect();
         let (s, r2) = src(&x, &yy);
         (s, r2, prcc(&x, &yy))
     } else {
         (vec![f64::NAN; d], f64::NAN, vec![f64::NAN; d])
     };
-    Indices { sobol: sobol_idx, src: src_v, prcc: prcc_v, r2, n, dropped }
+    Indices {
+        sobol: sobol_idx,
+        src: src_v,
+        prcc: prcc_v,
+        r2,
+        n,
+        dropped,
+    }
 }
 
 #[cfg(test)]
@@ -260,8 +334,12 @@ mod tests {
     fn sobol_indices_of_the_ishigami_function() {
         let base = 8192;
         let design = UnitDesign::new(Design::Saltelli { base }, 3, base, 42);
-        let u_to_x = Distribution::Uniform { low: -std::f64::consts::PI, high: std::f64::consts::PI };
-        let (mut fa, mut fb, mut fab) = (vec![0.0; base], vec![0.0; base], vec![vec![0.0; base]; 3]);
+        let u_to_x = Distribution::Uniform {
+            low: -std::f64::consts::PI,
+            high: std::f64::consts::PI,
+        };
+        let (mut fa, mut fb, mut fab) =
+            (vec![0.0; base], vec![0.0; base], vec![vec![0.0; base]; 3]);
         let mut u = [0.0; 3];
         for s in 0..design.samples {
             design.point(s, &mut u);
@@ -278,12 +356,35 @@ mod tests {
         let exact_s1 = [0.3139, 0.4424, 0.0];
         let exact_st = [0.5576, 0.4424, 0.2437];
         for i in 0..3 {
-            assert!((idx[i].first.value - exact_s1[i]).abs() < 0.02, "S{} = {:?}", i + 1, idx[i].first);
-            assert!((idx[i].total.value - exact_st[i]).abs() < 0.02, "ST{} = {:?}", i + 1, idx[i].total);
+            assert!(
+                (idx[i].first.value - exact_s1[i]).abs() < 0.02,
+                "S{} = {:?}",
+                i + 1,
+                idx[i].first
+            );
+            assert!(
+                (idx[i].total.value - exact_st[i]).abs() < 0.02,
+                "ST{} = {:?}",
+                i + 1,
+                idx[i].total
+            );
             // The interval is a real interval around the estimate, and covers the exact value.
-            assert!(idx[i].first.ci_low < idx[i].first.value && idx[i].first.value < idx[i].first.ci_high);
-            assert!(idx[i].first.ci_low <= exact_s1[i] && exact_s1[i] <= idx[i].first.ci_high, "S{}: {:?}", i + 1, idx[i].first);
-            assert!(idx[i].total.ci_low <= exact_st[i] && exact_st[i] <= idx[i].total.ci_high, "ST{}: {:?}", i + 1, idx[i].total);
+            assert!(
+                idx[i].first.ci_low < idx[i].first.value
+                    && idx[i].first.value < idx[i].first.ci_high
+            );
+            assert!(
+                idx[i].first.ci_low <= exact_s1[i] && exact_s1[i] <= idx[i].first.ci_high,
+                "S{}: {:?}",
+                i + 1,
+                idx[i].first
+            );
+            assert!(
+                idx[i].total.ci_low <= exact_st[i] && exact_st[i] <= idx[i].total.ci_high,
+                "ST{}: {:?}",
+                i + 1,
+                idx[i].total
+            );
         }
     }
 
@@ -293,15 +394,22 @@ mod tests {
         // R² near 1; the PRCC of x2 is the correlation of noise with x2, ≈ 0 (|ρ| < 4/√n).
         let n = 400;
         let mut rng = ChaCha8Rng::seed_from_u64(1);
-        let x: Vec<Vec<f64>> = (0..3).map(|_| (0..n).map(|_| rng.random::<f64>()).collect()).collect();
+        let x: Vec<Vec<f64>> = (0..3)
+            .map(|_| (0..n).map(|_| rng.random::<f64>()).collect())
+            .collect();
         let noise: Vec<f64> = (0..n).map(|_| rng.random::<f64>() - 0.5).collect();
-        let y: Vec<f64> = (0..n).map(|i| 3.0 * x[0][i] - x[1][i] + 0.05 * noise[i]).collect();
+        let y: Vec<f64> = (0..n)
+            .map(|i| 3.0 * x[0][i] - x[1][i] + 0.05 * noise[i])
+            .collect();
         let (coef, r2) = src(&x, &y);
         assert!(r2 > 0.999, "{r2}");
         // SRC_k = b_k·sd(x_k)/sd(y), with the sample's standard deviations.
         let sd = |v: &[f64]| variance(v.iter().copied()).sqrt();
         for (k, b) in [3.0, -1.0].into_iter().enumerate() {
-            assert!((coef[k] - b * sd(&x[k]) / sd(&y)).abs() < 0.01, "SRC{k}: {coef:?}");
+            assert!(
+                (coef[k] - b * sd(&x[k]) / sd(&y)).abs() < 0.01,
+                "SRC{k}: {coef:?}"
+            );
         }
         assert!(coef[2].abs() < 0.01, "{coef:?}");
         let p = prcc(&x, &y);

@@ -8,7 +8,9 @@ use crate::kernel::effects::{effect_set, with_single, Baseline, Effect, EffectFn
 use crate::kernel::excitation::{Record, Reference};
 use crate::kernel::params::ModelParams;
 use crate::kernel::resample::Resampler;
-use crate::kernel::simulate::{self, LaneParams, LaneResult, Observer, SetupError, Solver, TickView};
+use crate::kernel::simulate::{
+    self, LaneParams, LaneResult, Observer, SetupError, Solver, TickView,
+};
 use crate::kernel::state::idx;
 
 /// A channel of a time history: its column name (the docs/formats.md measured-test name where
@@ -22,19 +24,71 @@ pub struct Channel {
 
 /// The channels of a time history, in column order.
 pub const CHANNELS: [Channel; 13] = [
-    Channel { name: "time_s", meaning: "time t_k", at: |v| v.t },
-    Channel { name: "ref_disp_m", meaning: "reference displacement x_r", at: |v| v.r.x },
-    Channel { name: "ref_accel_mps2", meaning: "reference acceleration a_r", at: |v| v.r.a },
-    Channel { name: "disp_m", meaning: "platen displacement feedback x", at: |v| v.x[0] },
-    Channel { name: "accel_mps2", meaning: "platen acceleration dv/dt at t_k", at: |v| v.a[0] },
-    Channel { name: "valve_cmd_v", meaning: "valve command u after the clamp", at: |v| v.u[0] },
-    Channel { name: "force_n", meaning: "total actuator force F", at: |v| v.f[0] },
-    Channel { name: "p1_pa", meaning: "cap-side pressure P1, actuator 1", at: |v| v.state[idx::P1[0]][0] },
-    Channel { name: "p2_pa", meaning: "rod-side pressure P2, actuator 1", at: |v| v.state[idx::P2[0]][0] },
-    Channel { name: "p1_act2_pa", meaning: "cap-side pressure P1, actuator 2", at: |v| v.state[idx::P1[1]][0] },
-    Channel { name: "p2_act2_pa", meaning: "rod-side pressure P2, actuator 2", at: |v| v.state[idx::P2[1]][0] },
-    Channel { name: "spool_m", meaning: "spool position of actuator 1 (the command x_c unless a valve effect is on)", at: |v| v.spool[0] },
-    Channel { name: "ref_vel_mps", meaning: "reference velocity v_r", at: |v| v.r.v },
+    Channel {
+        name: "time_s",
+        meaning: "time t_k",
+        at: |v| v.t,
+    },
+    Channel {
+        name: "ref_disp_m",
+        meaning: "reference displacement x_r",
+        at: |v| v.r.x,
+    },
+    Channel {
+        name: "ref_accel_mps2",
+        meaning: "reference acceleration a_r",
+        at: |v| v.r.a,
+    },
+    Channel {
+        name: "disp_m",
+        meaning: "platen displacement feedback x",
+        at: |v| v.x[0],
+    },
+    Channel {
+        name: "accel_mps2",
+        meaning: "platen acceleration dv/dt at t_k",
+        at: |v| v.a[0],
+    },
+    Channel {
+        name: "valve_cmd_v",
+        meaning: "valve command u after the clamp",
+        at: |v| v.u[0],
+    },
+    Channel {
+        name: "force_n",
+        meaning: "total actuator force F",
+        at: |v| v.f[0],
+    },
+    Channel {
+        name: "p1_pa",
+        meaning: "cap-side pressure P1, actuator 1",
+        at: |v| v.state[idx::P1[0]][0],
+    },
+    Channel {
+        name: "p2_pa",
+        meaning: "rod-side pressure P2, actuator 1",
+        at: |v| v.state[idx::P2[0]][0],
+    },
+    Channel {
+        name: "p1_act2_pa",
+        meaning: "cap-side pressure P1, actuator 2",
+        at: |v| v.state[idx::P1[1]][0],
+    },
+    Channel {
+        name: "p2_act2_pa",
+        meaning: "rod-side pressure P2, actuator 2",
+        at: |v| v.state[idx::P2[1]][0],
+    },
+    Channel {
+        name: "spool_m",
+        meaning: "spool position of actuator 1 (the command x_c unless a valve effect is on)",
+        at: |v| v.spool[0],
+    },
+    Channel {
+        name: "ref_vel_mps",
+        meaning: "reference velocity v_r",
+        at: |v| v.r.v,
+    },
 ];
 
 /// Time history of lane 0, one vector per channel of [`CHANNELS`].
@@ -45,7 +99,9 @@ pub struct History {
 
 impl History {
     pub fn with_capacity(n: usize) -> Self {
-        History { columns: (0..CHANNELS.len()).map(|_| Vec::with_capacity(n)).collect() }
+        History {
+            columns: (0..CHANNELS.len()).map(|_| Vec::with_capacity(n)).collect(),
+        }
     }
     pub fn len(&self) -> usize {
         self.columns.first().map_or(0, Vec::len)
@@ -55,11 +111,18 @@ impl History {
     }
     /// The channel called `name`.
     pub fn channel(&self, name: &str) -> Option<&[f64]> {
-        CHANNELS.iter().position(|c| c.name == name).map(|i| self.columns[i].as_slice())
+        CHANNELS
+            .iter()
+            .position(|c| c.name == name)
+            .map(|i| self.columns[i].as_slice())
     }
     /// The columns with their names, for a table.
     pub fn named_columns(&self) -> Vec<(&'static str, &[f64])> {
-        CHANNELS.iter().map(|c| c.name).zip(self.columns.iter().map(Vec::as_slice)).collect()
+        CHANNELS
+            .iter()
+            .map(|c| c.name)
+            .zip(self.columns.iter().map(Vec::as_slice))
+            .collect()
     }
 }
 
@@ -80,13 +143,23 @@ pub struct SimOutcome {
 
 /// Runs up to N models as the lanes of one batch against `reference`: through the effect set
 /// when any lane switches an effect on, else through the bare baseline kernel.
-pub fn run_lanes<const N: usize, O: Observer<N>>(models: &[&ModelParams], reference: &Reference, solver: &Solver, obs: &mut O) -> Result<[LaneResult; N], SetupError> {
+pub fn run_lanes<const N: usize, O: Observer<N>>(
+    models: &[&ModelParams],
+    reference: &Reference,
+    solver: &Solver,
+    obs: &mut O,
+) -> Result<[LaneResult; N], SetupError> {
     run_lanes_each(models, &[reference], solver, obs)
 }
 
 /// [`run_lanes`] with a reference per model (`refs[i]` for `models[i]`; one reference is every
 /// lane's); the lanes beyond the models repeat the last, as [`LaneParams::new`] does.
-pub fn run_lanes_each<const N: usize, O: Observer<N>>(models: &[&ModelParams], refs: &[&Reference], solver: &Solver, obs: &mut O) -> Result<[LaneResult; N], SetupError> {
+pub fn run_lanes_each<const N: usize, O: Observer<N>>(
+    models: &[&ModelParams],
+    refs: &[&Reference],
+    solver: &Solver,
+    obs: &mut O,
+) -> Result<[LaneResult; N], SetupError> {
     let lp = LaneParams::<N>::new(models)?;
     let refs: [&Reference; N] = std::array::from_fn(|l| refs[l.min(refs.len() - 1)]);
     if models.iter().any(|m| m.effects.any()) {
@@ -101,12 +174,25 @@ pub fn run_lanes_each<const N: usize, O: Observer<N>>(models: &[&ModelParams], r
 /// configuration is the usual one ([`simulate::run_usual`]); else `run_lanes` itself. The same
 /// numbers as the effect set, bit for bit, several times faster
 /// ([`crate::kernel::effects::EffectFn`]).
-pub fn run_lanes_single<const N: usize, O: Observer<N>>(models: &[&ModelParams], reference: &Reference, solver: &Solver, obs: &mut O) -> Result<[LaneResult; N], SetupError> {
-    let on: Vec<EffectId> = EffectId::ALL.into_iter().filter(|&e| models.iter().any(|m| m.effects.get(e))).collect();
+pub fn run_lanes_single<const N: usize, O: Observer<N>>(
+    models: &[&ModelParams],
+    reference: &Reference,
+    solver: &Solver,
+    obs: &mut O,
+) -> Result<[LaneResult; N], SetupError> {
+    let on: Vec<EffectId> = EffectId::ALL
+        .into_iter()
+        .filter(|&e| models.iter().any(|m| m.effects.get(e)))
+        .collect();
     if let [id] = on[..] {
         let lp = LaneParams::<N>::new(models)?;
         let lanes: [&ModelParams; N] = std::array::from_fn(|l| models[l.min(models.len() - 1)]);
-        let single = Single { lp: &lp, reference, solver, obs: &mut *obs };
+        let single = Single {
+            lp: &lp,
+            reference,
+            solver,
+            obs: &mut *obs,
+        };
         if let Some(done) = with_single(id, lanes, single) {
             return done;
         }
@@ -135,27 +221,70 @@ impl<const N: usize, O: Observer<N>> EffectFn<N> for Single<'_, N, O> {
 /// at its row. A generated motion's noise is stream 0 of `seed` unless it names its own
 /// realisation ([`super::quake`]). Every reference but a sine carries the default response
 /// spectrum, and is checked against the table's limits.
-pub fn reference_for(excitation: &ExcitationSpec, model: &ModelParams, record: Option<&NumTable>, seed: u64) -> Result<Reference, DataProblem> {
+pub fn reference_for(
+    excitation: &ExcitationSpec,
+    model: &ModelParams,
+    record: Option<&NumTable>,
+    seed: u64,
+) -> Result<Reference, DataProblem> {
     let f_s = model.controller.f_s;
     let r = match (excitation, record) {
         (ExcitationSpec::Sine { sine, .. }, _) => return Ok(sine.reference(f_s)),
-        (ExcitationSpec::Record { column, time_column, f_ref_hz, scale, unit, pga_g, processing, .. }, Some(t)) => {
+        (
+            ExcitationSpec::Record {
+                column,
+                time_column,
+                f_ref_hz,
+                scale,
+                unit,
+                pga_g,
+                processing,
+                ..
+            },
+            Some(t),
+        ) => {
             let grid = t.time_base(time_column)?;
-            let values = quake::scaled(t.column(column).expect("the record's column was read"), *unit, *scale, *pga_g);
+            let values = quake::scaled(
+                t.column(column).expect("the record's column was read"),
+                *unit,
+                *scale,
+                *pga_g,
+            );
             let r = if unit.is_acceleration() {
-                quake::from_acceleration(&values, grid.time(0.0), 1.0 / grid.rate_hz, processing, *f_ref_hz, f_s)
+                quake::from_acceleration(
+                    &values,
+                    grid.time(0.0),
+                    1.0 / grid.rate_hz,
+                    processing,
+                    *f_ref_hz,
+                    f_s,
+                )
             } else {
                 let l = model.actuator.l;
                 if let Some((row, d)) = values.iter().enumerate().find(|(_, d)| d.abs() >= l) {
                     return Err(t.problem(Some(column), Some(row + 1), format!("displacement {d} m (after unit {} and scale {scale}) exceeds the stroke (half stroke actuator.l = {l} m)", unit.name())));
                 }
-                Record { time_s: (0..t.rows()).map(|i| grid.time(i as f64)).collect(), disp_m: values, f_ref_hz: *f_ref_hz }.reference(f_s)
+                Record {
+                    time_s: (0..t.rows()).map(|i| grid.time(i as f64)).collect(),
+                    disp_m: values,
+                    f_ref_hz: *f_ref_hz,
+                }
+                .reference(f_s)
             };
             quake::check_limits(&r, model).map_err(|m| t.problem(Some(column), None, m))?;
             r
         }
-        (ExcitationSpec::Record { file, .. }, None) => panic!("the record {} was not read before its reference was built", file.display()),
-        (generated, _) => quake::generated(generated, model, seed, 0).map_err(|message| DataProblem { file: format!("excitation ({})", generated.describe()), place: String::new(), message })?,
+        (ExcitationSpec::Record { file, .. }, None) => panic!(
+            "the record {} was not read before its reference was built",
+            file.display()
+        ),
+        (generated, _) => {
+            quake::generated(generated, model, seed, 0).map_err(|message| DataProblem {
+                file: format!("excitation ({})", generated.describe()),
+                place: String::new(),
+                message,
+            })?
+        }
     };
     Ok(r.with_spectrum(quake::default_spectrum()))
 }
@@ -169,7 +298,12 @@ pub fn run_sim(spec: &SimSpec, reference: &Reference) -> Result<SimOutcome, Setu
 
 /// Runs `model` against `reference` and samples its channels at the model times `tau`
 /// ([`crate::kernel::resample`]).
-pub fn run_sampled(model: &ModelParams, reference: &Reference, solver: &Solver, tau: &[f64]) -> Result<(LaneResult, Resampler<1>), SetupError> {
+pub fn run_sampled(
+    model: &ModelParams,
+    reference: &Reference,
+    solver: &Solver,
+    tau: &[f64],
+) -> Result<(LaneResult, Resampler<1>), SetupError> {
     let mut rs = Resampler::<1>::new(tau);
     let [result] = run_lanes::<1, _>(&[model], reference, solver, &mut rs)?;
     Ok((result, rs))

@@ -27,6 +27,7 @@
 //!   `ground.*` parameter as a key (`f_g_hz = 3.0`);
 //! - `{ kind = "sweep", f0_hz = 0.5, f1_hz = 20, duration_s = 40, amp_g = 0.2, law = "log" }`;
 //! - `{ kind = "random", f_lo_hz = 0.5, f_hi_hz = 15, rms_g = 0.1, duration_s = 20 }`.
+//!
 //! Every problem is reported at once with its key path.
 
 use super::toml_fields::{Fields, InputError, Issues};
@@ -59,11 +60,26 @@ pub enum ExcitationSpec {
     },
     /// A Kanai–Tajimi / Clough–Penzien ground motion (kernel::ground), its parameters the
     /// model's `ground.*` with `ground` overriding them.
-    Stochastic { duration_s: f64, realisation: Realisation, seed: Option<u64>, ground: Vec<(&'static str, f64)>, processing: Processing, f_ref_hz: f64 },
+    Stochastic {
+        duration_s: f64,
+        realisation: Realisation,
+        seed: Option<u64>,
+        ground: Vec<(&'static str, f64)>,
+        processing: Processing,
+        f_ref_hz: f64,
+    },
     /// A sine sweep (kernel::ground::Sweep); `amp_g` as given, if it was.
     Sweep { sweep: Sweep, amp_g: Option<f64> },
     /// Band-limited random: a random-phase multisine (kernel::ground::Multisine).
-    Random { f_lo_hz: f64, f_hi_hz: f64, rms_g: f64, duration_s: f64, taper_s: f64, realisation: Realisation, seed: Option<u64> },
+    Random {
+        f_lo_hz: f64,
+        f_hi_hz: f64,
+        rms_g: f64,
+        duration_s: f64,
+        taper_s: f64,
+        realisation: Realisation,
+        seed: Option<u64>,
+    },
 }
 
 /// What a record column holds.
@@ -137,13 +153,30 @@ impl ExcitationSpec {
     pub fn label(&self) -> (String, f64, f64) {
         match self {
             ExcitationSpec::Sine { sine, amp_g } => {
-                let g = amp_g.unwrap_or(sine.amp_m * (2.0 * std::f64::consts::PI * sine.freq_hz).powi(2) / crate::kernel::params::G);
-                (format!("sine {} Hz {:.2} g", sine.freq_hz, g), sine.freq_hz, g)
+                let g = amp_g.unwrap_or(
+                    sine.amp_m * (2.0 * std::f64::consts::PI * sine.freq_hz).powi(2)
+                        / crate::kernel::params::G,
+                );
+                (
+                    format!("sine {} Hz {:.2} g", sine.freq_hz, g),
+                    sine.freq_hz,
+                    g,
+                )
             }
-            ExcitationSpec::Record { column, .. } => (format!("record {column}"), f64::NAN, f64::NAN),
-            ExcitationSpec::Stochastic { .. } => ("stochastic ground motion".into(), f64::NAN, f64::NAN),
-            ExcitationSpec::Sweep { sweep, .. } => (format!("sweep {}-{} Hz", sweep.f0_hz, sweep.f1_hz), f64::NAN, f64::NAN),
-            ExcitationSpec::Random { f_lo_hz, f_hi_hz, .. } => (format!("random {f_lo_hz}-{f_hi_hz} Hz"), f64::NAN, f64::NAN),
+            ExcitationSpec::Record { column, .. } => {
+                (format!("record {column}"), f64::NAN, f64::NAN)
+            }
+            ExcitationSpec::Stochastic { .. } => {
+                ("stochastic ground motion".into(), f64::NAN, f64::NAN)
+            }
+            ExcitationSpec::Sweep { sweep, .. } => (
+                format!("sweep {}-{} Hz", sweep.f0_hz, sweep.f1_hz),
+                f64::NAN,
+                f64::NAN,
+            ),
+            ExcitationSpec::Random {
+                f_lo_hz, f_hi_hz, ..
+            } => (format!("random {f_lo_hz}-{f_hi_hz} Hz"), f64::NAN, f64::NAN),
         }
     }
 
@@ -157,8 +190,15 @@ impl ExcitationSpec {
     /// motion whose `ground.*` parameters the study varies (`varied` says which paths vary).
     pub fn per_sample(&self, varied: impl Fn(&str) -> bool) -> bool {
         match self {
-            ExcitationSpec::Stochastic { realisation, ground, .. } => {
-                *realisation == Realisation::PerSample || crate::kernel::ground::GroundParams::PARAMS.iter().any(|p| varied(&p.path()) && !ground.iter().any(|(n, _)| *n == p.name))
+            ExcitationSpec::Stochastic {
+                realisation,
+                ground,
+                ..
+            } => {
+                *realisation == Realisation::PerSample
+                    || crate::kernel::ground::GroundParams::PARAMS
+                        .iter()
+                        .any(|p| varied(&p.path()) && !ground.iter().any(|(n, _)| *n == p.name))
             }
             ExcitationSpec::Random { realisation, .. } => *realisation == Realisation::PerSample,
             _ => false,
@@ -219,8 +259,13 @@ pub struct SimSpec {
 /// Reads `[model.<component>]` overrides into `model` (defaults for everything not named).
 pub fn read_model(mut f: Fields<'_>, model: &mut ModelParams, issues: &mut Issues) {
     for comp in ModelParams::components() {
-        let Some(mut t) = f.table(comp.name(), issues) else { continue };
-        let names: Vec<&str> = ModelParams::registry().filter(|p| p.component == comp).map(|p| p.name).collect();
+        let Some(mut t) = f.table(comp.name(), issues) else {
+            continue;
+        };
+        let names: Vec<&str> = ModelParams::registry()
+            .filter(|p| p.component == comp)
+            .map(|p| p.name)
+            .collect();
         let mut expected = names.clone();
         if let Some(e) = comp.effect() {
             // An optional effect is on when its table is given (`enabled = false` switches it off).
@@ -233,7 +278,10 @@ pub fn read_model(mut f: Fields<'_>, model: &mut ModelParams, issues: &mut Issue
                 match law {
                     "orifice" => model.valve_law = ValveLaw::Orifice,
                     "linear" => model.valve_law = ValveLaw::Linear,
-                    other => issues.push(t.path_of("law"), format!("unknown valve law {other:?}; expected \"orifice\" or \"linear\"")),
+                    other => issues.push(
+                        t.path_of("law"),
+                        format!("unknown valve law {other:?}; expected \"orifice\" or \"linear\""),
+                    ),
                 }
             }
         }
@@ -245,26 +293,45 @@ pub fn read_model(mut f: Fields<'_>, model: &mut ModelParams, issues: &mut Issue
         }
         t.finish(&expected, issues);
     }
-    f.finish(&ModelParams::components().map(Component::name).collect::<Vec<_>>(), issues);
+    f.finish(
+        &ModelParams::components()
+            .map(Component::name)
+            .collect::<Vec<_>>(),
+        issues,
+    );
 }
 
 /// Validates a model, prefixing every path with `prefix` (e.g. `model`).
 pub fn validate_model(model: &ModelParams, prefix: &str, issues: &mut Issues) {
     if let Err(list) = model.validate() {
         for i in list {
-            let path = i.path.split(", ").map(|p| format!("{prefix}.{p}")).collect::<Vec<_>>().join(", ");
+            let path = i
+                .path
+                .split(", ")
+                .map(|p| format!("{prefix}.{p}"))
+                .collect::<Vec<_>>()
+                .join(", ");
             issues.push(path, i.message);
         }
     }
 }
 
 /// Reads an excitation table (`[excitation]` or an inline table of a campaign test).
-pub fn read_excitation(f: Fields<'_>, model: &ModelParams, issues: &mut Issues) -> Option<ExcitationSpec> {
+pub fn read_excitation(
+    f: Fields<'_>,
+    model: &ModelParams,
+    issues: &mut Issues,
+) -> Option<ExcitationSpec> {
     read_excitation_in(f, model, issues, &[], None)
 }
 
 /// [`read_excitation`] for a table that also holds `extra` keys read by the caller.
-pub fn read_excitation_with_extra(f: Fields<'_>, model: &ModelParams, issues: &mut Issues, extra: &[&str]) -> Option<ExcitationSpec> {
+pub fn read_excitation_with_extra(
+    f: Fields<'_>,
+    model: &ModelParams,
+    issues: &mut Issues,
+    extra: &[&str],
+) -> Option<ExcitationSpec> {
     read_excitation_in(f, model, issues, extra, None)
 }
 
@@ -280,16 +347,37 @@ pub fn read_excitation_in(
     let kind = f.str("kind", issues);
     let (out, expected): (_, &[&str]) = match kind {
         Some("sine") => (read_sine(&mut f, model, issues), &SINE_KEYS),
-        Some("record") => (read_record(&mut f, model, issues, default_file), &RECORD_KEYS),
-        Some("stochastic") => (super::spec_quake::read_stochastic(&mut f, model, issues), &super::spec_quake::STOCHASTIC_KEYS[..]),
-        Some("sweep") => (super::spec_quake::read_sweep(&mut f, model, issues), &super::spec_quake::SWEEP_KEYS[..]),
-        Some("random") => (super::spec_quake::read_random(&mut f, model, issues), &super::spec_quake::RANDOM_KEYS[..]),
+        Some("record") => (
+            read_record(&mut f, model, issues, default_file),
+            &RECORD_KEYS,
+        ),
+        Some("stochastic") => (
+            super::spec_quake::read_stochastic(&mut f, model, issues),
+            &super::spec_quake::STOCHASTIC_KEYS[..],
+        ),
+        Some("sweep") => (
+            super::spec_quake::read_sweep(&mut f, model, issues),
+            &super::spec_quake::SWEEP_KEYS[..],
+        ),
+        Some("random") => (
+            super::spec_quake::read_random(&mut f, model, issues),
+            &super::spec_quake::RANDOM_KEYS[..],
+        ),
         Some(other) => {
-            issues.push(f.path_of("kind"), format!("unknown excitation kind {other:?}; expected one of {}", KINDS.join(", ")));
+            issues.push(
+                f.path_of("kind"),
+                format!(
+                    "unknown excitation kind {other:?}; expected one of {}",
+                    KINDS.join(", ")
+                ),
+            );
             (None, &SINE_KEYS)
         }
         None => {
-            issues.push(f.path_of("kind"), format!("missing (one of {})", KINDS.join(", ")));
+            issues.push(
+                f.path_of("kind"),
+                format!("missing (one of {})", KINDS.join(", ")),
+            );
             (None, &SINE_KEYS)
         }
     };
@@ -298,11 +386,21 @@ pub fn read_excitation_in(
 }
 
 /// The excitation kinds.
-pub const KINDS: [&str; 5] = ["\"sine\"", "\"record\"", "\"stochastic\"", "\"sweep\"", "\"random\""];
+pub const KINDS: [&str; 5] = [
+    "\"sine\"",
+    "\"record\"",
+    "\"stochastic\"",
+    "\"sweep\"",
+    "\"random\"",
+];
 
 /// A sine: its frequency below Nyquist, its amplitude (in g or in metres) within the stroke,
 /// a taper shorter than the run, and an analysis window that fits.
-fn read_sine(f: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues) -> Option<ExcitationSpec> {
+fn read_sine(
+    f: &mut Fields<'_>,
+    model: &ModelParams,
+    issues: &mut Issues,
+) -> Option<ExcitationSpec> {
     let freq = f.f64("freq_hz", issues);
     let amp_g = f.f64("amp_g", issues);
     let amp_m = f.f64("amp_m", issues);
@@ -313,7 +411,12 @@ fn read_sine(f: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues) -> Op
     let freq = match freq {
         Some(x) if x > 0.0 && x < nyq => Some(x),
         Some(x) => {
-            issues.push(f.path_of("freq_hz"), format!("{x} Hz must be in (0, {nyq}) Hz (below the controller's Nyquist frequency)"));
+            issues.push(
+                f.path_of("freq_hz"),
+                format!(
+                    "{x} Hz must be in (0, {nyq}) Hz (below the controller's Nyquist frequency)"
+                ),
+            );
             None
         }
         None => {
@@ -322,10 +425,16 @@ fn read_sine(f: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues) -> Op
         }
     };
     if taper < 0.0 {
-        issues.push(f.path_of("taper_s"), format!("{taper} s must not be negative"));
+        issues.push(
+            f.path_of("taper_s"),
+            format!("{taper} s must not be negative"),
+        );
     }
     if duration <= 0.0 || duration > 3600.0 {
-        issues.push(f.path_of("duration_s"), format!("{duration} s must be in (0, 3600] s"));
+        issues.push(
+            f.path_of("duration_s"),
+            format!("{duration} s must be in (0, 3600] s"),
+        );
     } else if taper >= duration {
         issues.push(f.path_of("taper_s"), format!("{taper} s must be shorter than duration_s = {duration} s (the taper would fill the whole run)"));
     }
@@ -333,33 +442,65 @@ fn read_sine(f: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues) -> Op
     let cycles = match cycles {
         Some(c) if c >= 1 => Some(c as u32),
         Some(c) => {
-            issues.push(f.path_of("window_cycles"), format!("{c} must be at least 1"));
+            issues.push(
+                f.path_of("window_cycles"),
+                format!("{c} must be at least 1"),
+            );
             None
         }
         None => None,
     };
-    let (Some(freq), Some(x_amp)) = (freq, x_amp) else { return None };
-    let mut sine = Sine { freq_hz: freq, amp_m: x_amp, taper_s: taper, duration_s: duration, window_cycles: cycles };
+    let (Some(freq), Some(x_amp)) = (freq, x_amp) else {
+        return None;
+    };
+    let mut sine = Sine {
+        freq_hz: freq,
+        amp_m: x_amp,
+        taper_s: taper,
+        duration_s: duration,
+        window_cycles: cycles,
+    };
     let n = cycles.unwrap_or_else(|| sine.default_cycles());
     sine.window_cycles = Some(n);
     if n == 0 {
         issues.push(f.path_of("duration_s"), format!("{duration} s leaves no whole cycle after taper_s + 1 s for the analysis window; lengthen the run or set window_cycles"));
     } else if n as f64 / freq > duration + 1e-9 {
-        issues.push(f.path_of("window_cycles"), format!("{n} cycles ({:.3} s) do not fit in the {duration} s run", n as f64 / freq));
+        issues.push(
+            f.path_of("window_cycles"),
+            format!(
+                "{n} cycles ({:.3} s) do not fit in the {duration} s run",
+                n as f64 / freq
+            ),
+        );
     }
-    Some(ExcitationSpec::Sine { sine, amp_g: amp_g.filter(|_| amp_m.is_none()) })
+    Some(ExcitationSpec::Sine {
+        sine,
+        amp_g: amp_g.filter(|_| amp_m.is_none()),
+    })
 }
 
 /// A sine's displacement amplitude, m, from `amp_g` or `amp_m` (exactly one), positive and below
 /// the half stroke.
-fn sine_amplitude(f: &Fields<'_>, model: &ModelParams, (amp_g, amp_m): (Option<f64>, Option<f64>), freq: Option<f64>, issues: &mut Issues) -> Option<f64> {
+fn sine_amplitude(
+    f: &Fields<'_>,
+    model: &ModelParams,
+    (amp_g, amp_m): (Option<f64>, Option<f64>),
+    freq: Option<f64>,
+    issues: &mut Issues,
+) -> Option<f64> {
     let (x, key, given) = match (amp_g, amp_m, freq) {
         (Some(_), Some(_), _) => {
-            issues.push(f.path_of("amp_m"), "give the amplitude once: amp_g or amp_m, not both");
+            issues.push(
+                f.path_of("amp_m"),
+                "give the amplitude once: amp_g or amp_m, not both",
+            );
             return None;
         }
         (None, None, _) => {
-            issues.push(f.path_of("amp_g"), "missing (acceleration amplitude in g, or amp_m in metres)");
+            issues.push(
+                f.path_of("amp_g"),
+                "missing (acceleration amplitude in g, or amp_m in metres)",
+            );
             return None;
         }
         (Some(g), None, Some(fr)) => (Sine::amp_from_g(g, fr), "amp_g", g),
@@ -380,7 +521,12 @@ fn sine_amplitude(f: &Fields<'_>, model: &ModelParams, (amp_g, amp_m): (Option<f
 
 /// A record: its file (or the campaign test's own data file), columns, the reference filter's
 /// cut-off and a scale.
-fn read_record(f: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues, default_file: Option<&std::path::Path>) -> Option<ExcitationSpec> {
+fn read_record(
+    f: &mut Fields<'_>,
+    model: &ModelParams,
+    issues: &mut Issues,
+    default_file: Option<&std::path::Path>,
+) -> Option<ExcitationSpec> {
     let file = f.str("file", issues);
     let column = f.str("column", issues).unwrap_or("ref_disp_m");
     let time_column = f.str("time_column", issues).unwrap_or("time_s");
@@ -389,20 +535,35 @@ fn read_record(f: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues, def
     let pga_g = f.f64("pga_g", issues);
     let unit_key = f.str("unit", issues);
     let processing = super::spec_quake::read_processing(f, issues);
-    let Some(file) = file.map(PathBuf::from).or_else(|| default_file.map(PathBuf::from)) else {
-        issues.push(f.path_of("file"), "missing (the CSV, Parquet or .AT2 file holding the record)");
+    let Some(file) = file
+        .map(PathBuf::from)
+        .or_else(|| default_file.map(PathBuf::from))
+    else {
+        issues.push(
+            f.path_of("file"),
+            "missing (the CSV, Parquet or .AT2 file holding the record)",
+        );
         return None;
     };
     let at2 = is_at2(&file);
     let unit = match (unit_key, at2) {
         (None, true) | (Some("g"), true) => RecordUnit::G,
         (Some(u), true) => {
-            issues.push(f.path_of("unit"), format!("{u:?}: a PEER .AT2 file holds acceleration in g"));
+            issues.push(
+                f.path_of("unit"),
+                format!("{u:?}: a PEER .AT2 file holds acceleration in g"),
+            );
             RecordUnit::G
         }
         (None, false) => RecordUnit::M,
         (Some(u), false) => RecordUnit::parse(u).unwrap_or_else(|| {
-            issues.push(f.path_of("unit"), format!("unknown unit {u:?}; expected one of {:?}", RecordUnit::NAMES));
+            issues.push(
+                f.path_of("unit"),
+                format!(
+                    "unknown unit {u:?}; expected one of {:?}",
+                    RecordUnit::NAMES
+                ),
+            );
             RecordUnit::M
         }),
     };
@@ -415,20 +576,57 @@ fn read_record(f: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues, def
             issues.push(f.path_of("pga_g"), format!("{g} g must be positive"));
         }
     }
-    let column = if at2 { super::spec_quake::AT2_COLUMN } else { column };
-    let time_column = if at2 { super::spec_quake::AT2_TIME } else { time_column };
-    Some(ExcitationSpec::Record { file, column: column.to_string(), time_column: time_column.to_string(), f_ref_hz: f_ref, scale: scale.unwrap_or(1.0), unit, pga_g, processing })
+    let column = if at2 {
+        super::spec_quake::AT2_COLUMN
+    } else {
+        column
+    };
+    let time_column = if at2 {
+        super::spec_quake::AT2_TIME
+    } else {
+        time_column
+    };
+    Some(ExcitationSpec::Record {
+        file,
+        column: column.to_string(),
+        time_column: time_column.to_string(),
+        f_ref_hz: f_ref,
+        scale: scale.unwrap_or(1.0),
+        unit,
+        pga_g,
+        processing,
+    })
 }
 
 /// Whether `file` is a PEER NGA acceleration file (extension `.AT2`, any case).
 pub fn is_at2(file: &std::path::Path) -> bool {
-    file.extension().is_some_and(|e| e.eq_ignore_ascii_case("at2"))
+    file.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("at2"))
 }
 
 /// The keys of a sine excitation (campaign tests, study excitations); docs/formats.md lists each.
-pub const SINE_KEYS: [&str; 7] = ["kind", "freq_hz", "amp_g", "amp_m", "taper_s", "duration_s", "window_cycles"];
+pub const SINE_KEYS: [&str; 7] = [
+    "kind",
+    "freq_hz",
+    "amp_g",
+    "amp_m",
+    "taper_s",
+    "duration_s",
+    "window_cycles",
+];
 /// The keys of a record excitation; docs/formats.md lists each.
-pub const RECORD_KEYS: [&str; 10] = ["kind", "file", "column", "time_column", "f_ref_hz", "scale", "unit", "pga_g", "highpass_hz", "taper_s"];
+pub const RECORD_KEYS: [&str; 10] = [
+    "kind",
+    "file",
+    "column",
+    "time_column",
+    "f_ref_hz",
+    "scale",
+    "unit",
+    "pga_g",
+    "highpass_hz",
+    "taper_s",
+];
 
 /// Reads `[solver]`; `extra` names keys of the same table read by the caller.
 pub fn read_solver(mut f: Fields<'_>, issues: &mut Issues, extra: &[&str]) -> Solver {
@@ -458,7 +656,10 @@ impl SimSpec {
         let excitation = match root.table("excitation", &mut issues) {
             Some(e) => read_excitation(e, &model, &mut issues),
             None => {
-                issues.push("excitation", format!("missing table (kind = one of {})", KINDS.join(", ")));
+                issues.push(
+                    "excitation",
+                    format!("missing table (kind = one of {})", KINDS.join(", ")),
+                );
                 None
             }
         };
@@ -468,7 +669,11 @@ impl SimSpec {
         };
         root.finish(&["model", "excitation", "solver"], &mut issues);
         issues.into_result(file)?;
-        Ok(SimSpec { model, excitation: excitation.expect("no issues means an excitation"), solver })
+        Ok(SimSpec {
+            model,
+            excitation: excitation.expect("no issues means an excitation"),
+            solver,
+        })
     }
 
     /// The spec after defaults, as TOML (every parameter written out), for result metadata.
@@ -487,7 +692,10 @@ impl SimSpec {
                 }
                 e.insert("taper_s".into(), sine.taper_s.into());
                 e.insert("duration_s".into(), sine.duration_s.into());
-                e.insert("window_cycles".into(), (sine.window_cycles.unwrap_or_else(|| sine.default_cycles()) as i64).into());
+                e.insert(
+                    "window_cycles".into(),
+                    (sine.window_cycles.unwrap_or_else(|| sine.default_cycles()) as i64).into(),
+                );
             }
             other => e = super::spec_quake::excitation_table(other),
         }
@@ -545,7 +753,9 @@ window_cycles = 4
         assert_eq!(s.model.valve_law, ValveLaw::Linear);
         assert_eq!(s.model.platen.k, 1.266e6);
         assert_eq!(s.solver.substeps, Solver::default().substeps);
-        let ExcitationSpec::Sine { sine, .. } = s.excitation else { panic!() };
+        let ExcitationSpec::Sine { sine, .. } = s.excitation else {
+            panic!()
+        };
         assert_eq!(sine.duration_s, 3.0);
         assert_eq!(sine.window_cycles, Some(4));
         // The resolved TOML reads back to the same spec.

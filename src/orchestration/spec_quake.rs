@@ -13,19 +13,53 @@ pub const AT2_TIME: &str = "time_s";
 
 /// The keys of a stochastic excitation: its own and every `ground.*` parameter's name.
 pub const STOCHASTIC_KEYS: [&str; 15] = [
-    "kind", "duration_s", "realisation", "seed", "f_ref_hz", "highpass_hz", "taper_s",
-    "pga_g", "f_g_hz", "zeta_g", "f_f_hz", "zeta_f", "t_rise_s", "t_strong_s", "decay_per_s",
+    "kind",
+    "duration_s",
+    "realisation",
+    "seed",
+    "f_ref_hz",
+    "highpass_hz",
+    "taper_s",
+    "pga_g",
+    "f_g_hz",
+    "zeta_g",
+    "f_f_hz",
+    "zeta_f",
+    "t_rise_s",
+    "t_strong_s",
+    "decay_per_s",
 ];
 /// The keys of a sweep.
-pub const SWEEP_KEYS: [&str; 8] = ["kind", "f0_hz", "f1_hz", "duration_s", "amp_g", "amp_m", "law", "taper_s"];
+pub const SWEEP_KEYS: [&str; 8] = [
+    "kind",
+    "f0_hz",
+    "f1_hz",
+    "duration_s",
+    "amp_g",
+    "amp_m",
+    "law",
+    "taper_s",
+];
 /// The keys of a band-limited random excitation.
-pub const RANDOM_KEYS: [&str; 8] = ["kind", "f_lo_hz", "f_hi_hz", "rms_g", "duration_s", "taper_s", "realisation", "seed"];
+pub const RANDOM_KEYS: [&str; 8] = [
+    "kind",
+    "f_lo_hz",
+    "f_hi_hz",
+    "rms_g",
+    "duration_s",
+    "taper_s",
+    "realisation",
+    "seed",
+];
 
 /// `f_ref_hz`: the corner of the reference's state-variable filter (default 50 Hz), below f_s/2.
 pub fn read_f_ref(f: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues) -> f64 {
     let f_ref = f.f64("f_ref_hz", issues).unwrap_or(50.0);
     if !(f_ref > 0.0 && f_ref < 0.5 * model.controller.f_s) {
-        issues.push(f.path_of("f_ref_hz"), format!("{f_ref} Hz must be in (0, f_s/2)"));
+        issues.push(
+            f.path_of("f_ref_hz"),
+            format!("{f_ref} Hz must be in (0, f_s/2)"),
+        );
     }
     f_ref
 }
@@ -37,7 +71,10 @@ pub fn read_processing(f: &mut Fields<'_>, issues: &mut Issues) -> Processing {
         if hp > 0.0 && hp <= 10.0 {
             p.highpass_hz = hp;
         } else {
-            issues.push(f.path_of("highpass_hz"), format!("{hp} Hz must be in (0, 10] Hz"));
+            issues.push(
+                f.path_of("highpass_hz"),
+                format!("{hp} Hz must be in (0, 10] Hz"),
+            );
         }
     }
     if let Some(t) = f.f64("taper_s", issues) {
@@ -55,7 +92,10 @@ fn read_duration(f: &mut Fields<'_>, issues: &mut Issues, default: Option<f64>) 
     match f.f64("duration_s", issues).or(default) {
         Some(d) if d > 0.0 && d <= 3600.0 => Some(d),
         Some(d) => {
-            issues.push(f.path_of("duration_s"), format!("{d} s must be in (0, 3600] s"));
+            issues.push(
+                f.path_of("duration_s"),
+                format!("{d} s must be in (0, 3600] s"),
+            );
             None
         }
         None => {
@@ -85,7 +125,11 @@ fn read_realisation(f: &mut Fields<'_>, issues: &mut Issues) -> (Realisation, Op
 }
 
 /// A stochastic ground motion: its length, realisation and any `ground.*` parameter.
-pub fn read_stochastic(f: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues) -> Option<ExcitationSpec> {
+pub fn read_stochastic(
+    f: &mut Fields<'_>,
+    model: &ModelParams,
+    issues: &mut Issues,
+) -> Option<ExcitationSpec> {
     let duration = read_duration(f, issues, Some(20.0));
     let (realisation, seed) = read_realisation(f, issues);
     let f_ref_hz = read_f_ref(f, model, issues);
@@ -96,20 +140,41 @@ pub fn read_stochastic(f: &mut Fields<'_>, model: &ModelParams, issues: &mut Iss
             if p.range.contains(v) {
                 ground.push((p.name, v));
             } else {
-                issues.push(f.path_of(p.name), format!("{v} {} is outside the valid range {}", p.unit, p.range));
+                issues.push(
+                    f.path_of(p.name),
+                    format!("{v} {} is outside the valid range {}", p.unit, p.range),
+                );
             }
         }
     }
-    Some(ExcitationSpec::Stochastic { duration_s: duration?, realisation, seed, ground, processing, f_ref_hz })
+    Some(ExcitationSpec::Stochastic {
+        duration_s: duration?,
+        realisation,
+        seed,
+        ground,
+        processing,
+        f_ref_hz,
+    })
 }
 
 /// Two frequencies `lo_key` < `hi_key` in (0, f_s/2).
-fn read_band(f: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues, (lo_key, hi_key): (&str, &str), increasing: bool) -> Option<(f64, f64)> {
+fn read_band(
+    f: &mut Fields<'_>,
+    model: &ModelParams,
+    issues: &mut Issues,
+    (lo_key, hi_key): (&str, &str),
+    increasing: bool,
+) -> Option<(f64, f64)> {
     let nyq = 0.5 * model.controller.f_s;
     let mut one = |key: &str, issues: &mut Issues| match f.f64(key, issues) {
         Some(x) if x > 0.0 && x < nyq => Some(x),
         Some(x) => {
-            issues.push(f.path_of(key), format!("{x} Hz must be in (0, {nyq}) Hz (below the controller's Nyquist frequency)"));
+            issues.push(
+                f.path_of(key),
+                format!(
+                    "{x} Hz must be in (0, {nyq}) Hz (below the controller's Nyquist frequency)"
+                ),
+            );
             None
         }
         None => {
@@ -119,7 +184,10 @@ fn read_band(f: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues, (lo_k
     };
     let (lo, hi) = (one(lo_key, issues)?, one(hi_key, issues)?);
     if increasing && lo >= hi {
-        issues.push(f.path_of(hi_key), format!("{hi} Hz must be above {lo_key} = {lo} Hz"));
+        issues.push(
+            f.path_of(hi_key),
+            format!("{hi} Hz must be above {lo_key} = {lo} Hz"),
+        );
         return None;
     }
     Some((lo, hi))
@@ -129,13 +197,20 @@ fn read_band(f: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues, (lo_k
 fn read_taper(f: &mut Fields<'_>, issues: &mut Issues, duration: Option<f64>) -> f64 {
     let t = f.f64("taper_s", issues).unwrap_or(1.0);
     if t < 0.0 || duration.is_some_and(|d| 2.0 * t >= d) {
-        issues.push(f.path_of("taper_s"), format!("{t} s must be ≥ 0 and shorter than half the run (the taper is in and out)"));
+        issues.push(
+            f.path_of("taper_s"),
+            format!("{t} s must be ≥ 0 and shorter than half the run (the taper is in and out)"),
+        );
     }
     t
 }
 
 /// A sine sweep: f0 → f1 (either direction), its law, amplitude and taper.
-pub fn read_sweep(f: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues) -> Option<ExcitationSpec> {
+pub fn read_sweep(
+    f: &mut Fields<'_>,
+    model: &ModelParams,
+    issues: &mut Issues,
+) -> Option<ExcitationSpec> {
     let band = read_band(f, model, issues, ("f0_hz", "f1_hz"), false);
     let duration = read_duration(f, issues, None);
     let taper = read_taper(f, issues, duration);
@@ -143,7 +218,10 @@ pub fn read_sweep(f: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues) 
         "log" => SweepLaw::Log,
         "linear" => SweepLaw::Linear,
         other => {
-            issues.push(f.path_of("law"), format!("unknown sweep law {other:?}; expected \"log\" or \"linear\""));
+            issues.push(
+                f.path_of("law"),
+                format!("unknown sweep law {other:?}; expected \"log\" or \"linear\""),
+            );
             SweepLaw::Log
         }
     };
@@ -156,22 +234,47 @@ pub fn read_sweep(f: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues) 
             None
         }
         (Some(_), Some(_)) => {
-            issues.push(f.path_of("amp_m"), "give the amplitude once: amp_g or amp_m, not both");
+            issues.push(
+                f.path_of("amp_m"),
+                "give the amplitude once: amp_g or amp_m, not both",
+            );
             None
         }
         (g, m) => {
             let key = if g.is_some() { "amp_g" } else { "amp_m" };
-            issues.push(f.path_of(key), format!("{} must be positive (and amp_m below the half stroke actuator.l = {} m)", g.or(m).unwrap_or(0.0), model.actuator.l));
+            issues.push(
+                f.path_of(key),
+                format!(
+                    "{} must be positive (and amp_m below the half stroke actuator.l = {} m)",
+                    g.or(m).unwrap_or(0.0),
+                    model.actuator.l
+                ),
+            );
             None
         }
     };
     let ((f0, f1), duration, (amp_m, accel)) = (band?, duration?, amp?);
-    let sweep = Sweep { f0_hz: f0, f1_hz: f1, duration_s: duration, taper_s: taper, law, amp_m, accel_mps2: accel };
-    Some(ExcitationSpec::Sweep { sweep, amp_g: amp_g.filter(|_| amp_m.is_none()) })
+    let sweep = Sweep {
+        f0_hz: f0,
+        f1_hz: f1,
+        duration_s: duration,
+        taper_s: taper,
+        law,
+        amp_m,
+        accel_mps2: accel,
+    };
+    Some(ExcitationSpec::Sweep {
+        sweep,
+        amp_g: amp_g.filter(|_| amp_m.is_none()),
+    })
 }
 
 /// Band-limited random: the band, the rms acceleration, the run and its realisation.
-pub fn read_random(f: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues) -> Option<ExcitationSpec> {
+pub fn read_random(
+    f: &mut Fields<'_>,
+    model: &ModelParams,
+    issues: &mut Issues,
+) -> Option<ExcitationSpec> {
     let band = read_band(f, model, issues, ("f_lo_hz", "f_hi_hz"), true);
     let duration = read_duration(f, issues, None);
     let taper_s = read_taper(f, issues, duration);
@@ -192,7 +295,15 @@ pub fn read_random(f: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues)
         issues.push(f.path_of("duration_s"), format!("{duration_s} s holds no multiple of 1/duration_s in [{f_lo_hz}, {f_hi_hz}] Hz; widen the band or lengthen the run"));
         return None;
     }
-    Some(ExcitationSpec::Random { f_lo_hz, f_hi_hz, rms_g, duration_s, taper_s, realisation, seed })
+    Some(ExcitationSpec::Random {
+        f_lo_hz,
+        f_hi_hz,
+        rms_g,
+        duration_s,
+        taper_s,
+        realisation,
+        seed,
+    })
 }
 
 /// An excitation other than a sine as a resolved TOML table (every default written out).
@@ -206,8 +317,19 @@ pub fn excitation_table(e: &ExcitationSpec) -> toml::Table {
         Realisation::PerSample => "per_sample".into(),
     };
     match e {
-        ExcitationSpec::Sine { .. } => unreachable!("a sine's table is written by spec::resolved_toml"),
-        ExcitationSpec::Record { file, column, time_column, f_ref_hz, scale, unit, pga_g, processing } => {
+        ExcitationSpec::Sine { .. } => {
+            unreachable!("a sine's table is written by spec::resolved_toml")
+        }
+        ExcitationSpec::Record {
+            file,
+            column,
+            time_column,
+            f_ref_hz,
+            scale,
+            unit,
+            pga_g,
+            processing,
+        } => {
             put("kind", "record".into());
             put("file", file.display().to_string().into());
             if !super::spec::is_at2(file) {
@@ -225,7 +347,14 @@ pub fn excitation_table(e: &ExcitationSpec) -> toml::Table {
                 put("taper_s", processing.taper_s.into());
             }
         }
-        ExcitationSpec::Stochastic { duration_s, realisation: r, seed, ground, processing, f_ref_hz } => {
+        ExcitationSpec::Stochastic {
+            duration_s,
+            realisation: r,
+            seed,
+            ground,
+            processing,
+            f_ref_hz,
+        } => {
             put("kind", "stochastic".into());
             put("duration_s", (*duration_s).into());
             put("realisation", realisation(r));
@@ -245,14 +374,30 @@ pub fn excitation_table(e: &ExcitationSpec) -> toml::Table {
             put("f1_hz", sweep.f1_hz.into());
             put("duration_s", sweep.duration_s.into());
             put("taper_s", sweep.taper_s.into());
-            put("law", if sweep.law == SweepLaw::Log { "log" } else { "linear" }.into());
+            put(
+                "law",
+                if sweep.law == SweepLaw::Log {
+                    "log"
+                } else {
+                    "linear"
+                }
+                .into(),
+            );
             match (sweep.amp_m, amp_g) {
                 (Some(m), _) => put("amp_m", m.into()),
                 (None, Some(g)) => put("amp_g", (*g).into()),
                 (None, None) => put("amp_g", (sweep.accel_mps2 / G).into()),
             }
         }
-        ExcitationSpec::Random { f_lo_hz, f_hi_hz, rms_g, duration_s, taper_s, realisation: r, seed } => {
+        ExcitationSpec::Random {
+            f_lo_hz,
+            f_hi_hz,
+            rms_g,
+            duration_s,
+            taper_s,
+            realisation: r,
+            seed,
+        } => {
             put("kind", "random".into());
             put("f_lo_hz", (*f_lo_hz).into());
             put("f_hi_hz", (*f_hi_hz).into());

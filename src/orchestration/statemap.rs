@@ -76,7 +76,13 @@ pub enum State {
 }
 
 impl State {
-    pub const ALL: [State; 5] = [State::SpoolOpening, State::Velocity, State::PressureDifference, State::Displacement, State::ValveFlow];
+    pub const ALL: [State; 5] = [
+        State::SpoolOpening,
+        State::Velocity,
+        State::PressureDifference,
+        State::Displacement,
+        State::ValveFlow,
+    ];
 
     /// The states residual `r` is regressed on: the platen's balance on the platen's states, the
     /// chambers' on the valve's (a force on the platen depends on its motion, a flow on the
@@ -85,7 +91,11 @@ impl State {
     pub fn of(r: Residual) -> &'static [State] {
         match r {
             Residual::PlatenForce => &[State::Velocity, State::Displacement],
-            Residual::ValveFlow => &[State::SpoolOpening, State::PressureDifference, State::ValveFlow],
+            Residual::ValveFlow => &[
+                State::SpoolOpening,
+                State::PressureDifference,
+                State::ValveFlow,
+            ],
             // The flow read as an opening: the opening's own coordinates (the flow is made of them).
             Residual::ValveOpening => &[State::SpoolOpening, State::PressureDifference],
             Residual::Accel | Residual::Force => &State::ALL,
@@ -166,7 +176,15 @@ pub enum Term {
 }
 
 /// Every term of the library, in the order of the regression's columns.
-pub const TERMS: [Term; 7] = [Term::Linear, Term::SignedSquare, Term::Cube, Term::SignedSqrt, Term::Sign, Term::NearNull, Term::Abs];
+pub const TERMS: [Term; 7] = [
+    Term::Linear,
+    Term::SignedSquare,
+    Term::Cube,
+    Term::SignedSqrt,
+    Term::Sign,
+    Term::NearNull,
+    Term::Abs,
+];
 
 impl Term {
     pub fn eval(self, x: f64) -> f64 {
@@ -202,22 +220,32 @@ pub fn reading(state: State, term: Term) -> &'static str {
     use Term::*;
     match (state, term) {
         (SpoolOpening, Linear) => "a flow gain off by a constant factor",
-        (SpoolOpening, SignedSquare | Cube) => "a flow-gain nonlinearity (a gain that grows with opening)",
+        (SpoolOpening, SignedSquare | Cube) => {
+            "a flow-gain nonlinearity (a gain that grows with opening)"
+        }
         (SpoolOpening, SignedSqrt) => "a flow-gain nonlinearity (a gain that falls with opening)",
-        (SpoolOpening, Sign | NearNull) => "a flow change at small spool openings (overlap, dead band or underlap near null)",
+        (SpoolOpening, Sign | NearNull) => {
+            "a flow change at small spool openings (overlap, dead band or underlap near null)"
+        }
         (SpoolOpening, Abs) => "a flow that differs between the two directions of the spool",
         (Velocity, Linear) => "a viscous force",
         (Velocity, Sign | NearNull) => "a friction force that changes sign with the velocity",
         (Velocity, SignedSqrt) => "a dissipative force growing like √|v|",
         (Velocity, SignedSquare | Cube) => "a drag growing faster than the velocity",
         (Velocity, Abs) => "a force that does not reverse with the velocity",
-        (PressureDifference, Linear | SignedSqrt) => "a flow or a force proportional to the load pressure (leakage, compliance)",
+        (PressureDifference, Linear | SignedSqrt) => {
+            "a flow or a force proportional to the load pressure (leakage, compliance)"
+        }
         (PressureDifference, _) => "a load-pressure nonlinearity",
-        (Displacement, Linear) => "a spring or a mass moving with the table (a specimen, the hold-down)",
+        (Displacement, Linear) => {
+            "a spring or a mass moving with the table (a specimen, the hold-down)"
+        }
         (Displacement, SignedSquare | Cube) => "a hardening or softening spring",
         (Displacement, _) => "a force that depends on the table's position",
         (ValveFlow, Linear) => "a flow loss proportional to the flow",
-        (ValveFlow, SignedSquare | Cube | Abs) => "a loss growing with the flow (supply droop, line losses)",
+        (ValveFlow, SignedSquare | Cube | Abs) => {
+            "a loss growing with the flow (supply droop, line losses)"
+        }
         (ValveFlow, _) => "a flow change at small flows",
     }
 }
@@ -239,7 +267,13 @@ pub enum Residual {
 }
 
 impl Residual {
-    pub const ALL: [Residual; 5] = [Residual::Accel, Residual::Force, Residual::PlatenForce, Residual::ValveFlow, Residual::ValveOpening];
+    pub const ALL: [Residual; 5] = [
+        Residual::Accel,
+        Residual::Force,
+        Residual::PlatenForce,
+        Residual::ValveFlow,
+        Residual::ValveOpening,
+    ];
     pub fn name(self) -> &'static str {
         match self {
             Residual::Accel => "accel",
@@ -262,14 +296,25 @@ impl Residual {
 
 /// The plant's states of one test at its compared samples (physical units; the spool opening as
 /// a fraction of the full stroke), in the order of [`State::ALL`].
-pub fn test_states(model: &ModelParams, spool_m: &[f64], vel: &[f64], p1: &[f64], p2: &[f64], disp: &[f64]) -> [Vec<f64>; 5] {
+pub fn test_states(
+    model: &ModelParams,
+    spool_m: &[f64],
+    vel: &[f64],
+    p1: &[f64],
+    p2: &[f64],
+    disp: &[f64],
+) -> [Vec<f64>; 5] {
     let stroke = model.servovalve.k_sp * model.servovalve.u_lim;
     [
         spool_m.iter().map(|x| x / stroke).collect(),
         vel.to_vec(),
         p1.iter().zip(p2).map(|(a, b)| a - b).collect(),
         disp.to_vec(),
-        spool_m.iter().zip(p1).map(|(&x, &p)| cap_flow(model, x, p)).collect(),
+        spool_m
+            .iter()
+            .zip(p1)
+            .map(|(&x, &p)| cap_flow(model, x, p))
+            .collect(),
     ]
 }
 
@@ -280,7 +325,11 @@ fn cap_flow(model: &ModelParams, x: f64, p1: f64) -> f64 {
     let sv = &model.servovalve;
     let k = sv.n_val * sv.kv * sv.w3;
     let p_tr2 = sv.p_tr * sv.p_tr;
-    if x > 0.0 { k * sv.r1 * x * sq(sv.p_s - p1, p_tr2) } else { k * x * sq(p1 - sv.p_r, p_tr2) }
+    if x > 0.0 {
+        k * sv.r1 * x * sq(sv.p_s - p1, p_tr2)
+    } else {
+        k * x * sq(p1 - sv.p_r, p_tr2)
+    }
 }
 
 /// ∂(cap flow)/∂x at spool position `x` and cap pressure `p1`: the active land's K·sq(Δp), m²/s.
@@ -288,7 +337,11 @@ fn cap_gain(model: &ModelParams, x: f64, p1: f64) -> f64 {
     let sv = &model.servovalve;
     let k = sv.n_val * sv.kv * sv.w3;
     let p_tr2 = sv.p_tr * sv.p_tr;
-    if x > 0.0 { k * sv.r1 * sq(sv.p_s - p1, p_tr2) } else { k * sq(p1 - sv.p_r, p_tr2) }
+    if x > 0.0 {
+        k * sv.r1 * sq(sv.p_s - p1, p_tr2)
+    } else {
+        k * sq(p1 - sv.p_r, p_tr2)
+    }
 }
 
 /// The actuators' force rate dF/dt the baseline's chambers give at spool position `x`, chamber
@@ -301,9 +354,18 @@ fn force_rate(model: &ModelParams, x: f64, p1: f64, p2: f64, v: f64, y: f64) -> 
     let k = sv.n_val * sv.kv * sv.w3;
     let p_tr2 = sv.p_tr * sv.p_tr;
     let q1 = cap_flow(model, x, p1);
-    let q2 = if x > 0.0 { k * sv.r2 * x * sq(p2 - sv.p_r, p_tr2) } else { k * sv.r4 * x * sq(sv.p_s - p2, p_tr2) };
-    let (v1, v2) = ((a.a1 * (a.l + y) + a.vd1).max(1e-9), (a.a2 * (a.l - y) + a.vd2).max(1e-9));
-    crate::kernel::N_ACT as f64 * a.beta * (a.a1 / v1 * (q1 - a.a1 * v) - a.a2 / v2 * (a.a2 * v - q2))
+    let q2 = if x > 0.0 {
+        k * sv.r2 * x * sq(p2 - sv.p_r, p_tr2)
+    } else {
+        k * sv.r4 * x * sq(sv.p_s - p2, p_tr2)
+    };
+    let (v1, v2) = (
+        (a.a1 * (a.l + y) + a.vd1).max(1e-9),
+        (a.a2 * (a.l - y) + a.vd2).max(1e-9),
+    );
+    crate::kernel::N_ACT as f64
+        * a.beta
+        * (a.a1 / v1 * (q1 - a.a1 * v) - a.a2 / v2 * (a.a2 * v - q2))
 }
 
 /// One test's residuals at its samples, in the order of [`Residual::ALL`] (the platen force is
@@ -317,7 +379,9 @@ pub fn test_residuals(c: &Compared) -> ([Option<Vec<f64>>; 5], [f64; 5]) {
     let n = s.len();
     let mass = model.platen.m;
     // Noise-free parts (mean and harmonics for a sine) and rates.
-    let proj = s.fundamental_hz.map(|f| (Projector::new(&s.tau, f, s.n_harm), f));
+    let proj = s
+        .fundamental_hz
+        .map(|f| (Projector::new(&s.tau, f, s.n_harm), f));
     let smooth = |x: &[f64]| match &proj {
         Some((p, f)) => harmonic_and_rate(p, &s.tau, *f, x),
         None => (x.to_vec(), rate_of(x, s.rate_hz)),
@@ -325,11 +389,17 @@ pub fn test_residuals(c: &Compared) -> ([Option<Vec<f64>>; 5], [f64; 5]) {
     let ra: Vec<f64> = (0..n).map(|k| m.accel[k] - c.accel_model[k]).collect();
     let (rf, f_meas): (Vec<f64>, Vec<f64>) = match &m.force {
         Some(f) => ((0..n).map(|k| f[k] - c.force_model[k]).collect(), f.clone()),
-        None => (ra.iter().map(|r| mass * r).collect(), m.accel.iter().map(|a| mass * a).collect()),
+        None => (
+            ra.iter().map(|r| mass * r).collect(),
+            m.accel.iter().map(|a| mass * a).collect(),
+        ),
     };
     let (ra, _) = smooth(&ra);
     let (rf, rf_rate) = smooth(&rf);
-    let platen = m.force.as_ref().map(|_| (0..n).map(|k| rf[k] - mass * ra[k]).collect::<Vec<f64>>());
+    let platen = m
+        .force
+        .as_ref()
+        .map(|_| (0..n).map(|k| rf[k] - mass * ra[k]).collect::<Vec<f64>>());
     // Flow balance of the chambers: the measured force rate against the rate the valve law and
     // the chambers give at the measured opening, pressures and motion. The model obeys its own
     // law, so the measured rate is dF_model/dt + dr_F/dt and the model's rate cancels; what is
@@ -343,19 +413,41 @@ pub fn test_residuals(c: &Compared) -> ([Option<Vec<f64>>; 5], [f64; 5]) {
         .map(|k| {
             let (y, y_model) = (c.states[3][k], c.disp_model[k]);
             let x = c.states[0][k] * stroke;
-            let expected = force_rate(model, x, c.p1[k], c.p2[k], v_meas[k], y) - force_rate(model, c.spool_model[k], c.p1_model[k], c.p2_model[k], c.vel_model[k], y_model);
-            let (v1, v2) = ((a.a1 * (a.l + y) + a.vd1).max(1e-9), (a.a2 * (a.l - y) + a.vd2).max(1e-9));
+            let expected = force_rate(model, x, c.p1[k], c.p2[k], v_meas[k], y)
+                - force_rate(
+                    model,
+                    c.spool_model[k],
+                    c.p1_model[k],
+                    c.p2_model[k],
+                    c.vel_model[k],
+                    y_model,
+                );
+            let (v1, v2) = (
+                (a.a1 * (a.l + y) + a.vd1).max(1e-9),
+                (a.a2 * (a.l - y) + a.vd2).max(1e-9),
+            );
             let per_flow = n_act * a.beta * (a.a1 / v1 + a.a2 / v2 * a.a2 / a.a1);
             (rf_rate[k] - expected) / per_flow
         })
         .collect();
     let (flow, _) = smooth(&flow);
-    let opening: Vec<f64> = (0..n).map(|k| flow[k] / cap_gain(model, c.states[0][k] * stroke, c.p1[k]).max(1e-12) / stroke).collect();
+    let opening: Vec<f64> = (0..n)
+        .map(|k| flow[k] / cap_gain(model, c.states[0][k] * stroke, c.p1[k]).max(1e-12) / stroke)
+        .collect();
     let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt();
     // The opening is already a fraction of the full stroke: not rescaled, so its map reads directly
     // as a width (a dead band δ shows as δ/stroke).
-    let scales = [rms(&m.accel), rms(&f_meas), rms(&f_meas), rms(&c.states[4]), 1.0];
-    ([Some(ra), Some(rf), platen, Some(flow), Some(opening)], scales)
+    let scales = [
+        rms(&m.accel),
+        rms(&f_meas),
+        rms(&f_meas),
+        rms(&c.states[4]),
+        1.0,
+    ];
+    (
+        [Some(ra), Some(rf), platen, Some(flow), Some(opening)],
+        scales,
+    )
 }
 
 /// The mean-and-harmonics part of `x` and its time derivative.
@@ -391,7 +483,11 @@ fn rate_of(x: &[f64], rate_hz: f64) -> Vec<f64> {
     (0..n)
         .map(|i| {
             let (a, b) = (i.saturating_sub(1), (i + 1).min(n - 1));
-            if b > a { (smooth[b] - smooth[a]) * rate_hz / (b - a) as f64 } else { 0.0 }
+            if b > a {
+                (smooth[b] - smooth[a]) * rate_hz / (b - a) as f64
+            } else {
+                0.0
+            }
         })
         .collect()
 }
@@ -472,7 +568,12 @@ pub const MEMORY_MARGIN: f64 = 0.05;
 
 /// The residuals that are regressed on the states: the platen's force balance and the chambers'
 /// flow balance; the residual force itself when the files have no force.
-pub const REGRESSED: [Residual; 4] = [Residual::Force, Residual::PlatenForce, Residual::ValveFlow, Residual::ValveOpening];
+pub const REGRESSED: [Residual; 4] = [
+    Residual::Force,
+    Residual::PlatenForce,
+    Residual::ValveFlow,
+    Residual::ValveOpening,
+];
 
 /// The map and regressions of the compared tests.
 pub fn map(compared: &[Compared]) -> StateMap {
@@ -505,12 +606,23 @@ pub fn map(compared: &[Compared]) -> StateMap {
     }
     // The platen's balance on a term with memory, in newtons.
     let at = |r: Residual| Residual::ALL.iter().position(|&x| x == r).unwrap_or(0);
-    let platen = if res[at(Residual::PlatenForce)].is_some() { Residual::PlatenForce } else { Residual::Force };
+    let platen = if res[at(Residual::PlatenForce)].is_some() {
+        Residual::PlatenForce
+    } else {
+        Residual::Force
+    };
     let mut memory = Vec::new();
     for (kind, r) in [(Kind::Carried, platen), (Kind::Lag, Residual::ValveOpening)] {
         let Some(y) = &res[at(r)] else { continue };
         let y: Vec<f64> = y.iter().map(|v| v * res_scale[at(r)]).collect();
-        if let Some(mut fit) = memory::fit(kind, &compared.iter().map(|c| input_of(kind, c)).collect::<Vec<_>>(), &y) {
+        if let Some(mut fit) = memory::fit(
+            kind,
+            &compared
+                .iter()
+                .map(|c| input_of(kind, c))
+                .collect::<Vec<_>>(),
+            &y,
+        ) {
             // The residual force in closed loop is what the controller left: no mass can be read.
             if r == Residual::Force {
                 fit.gain = f64::NAN;
@@ -518,8 +630,13 @@ pub fn map(compared: &[Compared]) -> StateMap {
             memory.push((r, fit));
         }
     }
-    let fundamentals = compared.iter().filter_map(|c| c.test.samples.fundamental_hz);
-    let band = fundamentals.clone().reduce(f64::min).zip(fundamentals.reduce(f64::max));
+    let fundamentals = compared
+        .iter()
+        .filter_map(|c| c.test.samples.fundamental_hz);
+    let band = fundamentals
+        .clone()
+        .reduce(f64::min)
+        .zip(fundamentals.reduce(f64::max));
     let mut scales = [1.0; 5];
     for (i, st) in State::ALL.iter().enumerate() {
         if *st != State::SpoolOpening {
@@ -529,19 +646,38 @@ pub fn map(compared: &[Compared]) -> StateMap {
         let s = scales[i];
         states[i].iter_mut().for_each(|x| *x /= s);
     }
-    let bins = State::ALL.iter().enumerate().flat_map(|(i, &st)| bins_of(st, scales[i], &states[i], &res)).collect();
+    let bins = State::ALL
+        .iter()
+        .enumerate()
+        .flat_map(|(i, &st)| bins_of(st, scales[i], &states[i], &res))
+        .collect();
     let mut per_state = Vec::new();
     let mut joint = Vec::new();
     for r in REGRESSED {
-        let Some(y) = &res[Residual::ALL.iter().position(|&x| x == r).unwrap_or(0)] else { continue };
+        let Some(y) = &res[Residual::ALL.iter().position(|&x| x == r).unwrap_or(0)] else {
+            continue;
+        };
         let idx = |st: State| State::ALL.iter().position(|&x| x == st).unwrap_or(0);
-        let mut v: Vec<Regression> = State::of(r).iter().map(|&st| stlsq(r, Some(st), &[(st, &states[idx(st)])], y)).collect();
+        let mut v: Vec<Regression> = State::of(r)
+            .iter()
+            .map(|&st| stlsq(r, Some(st), &[(st, &states[idx(st)])], y))
+            .collect();
         v.sort_by(|a, b| b.r2.total_cmp(&a.r2));
         per_state.push(v);
-        let all: Vec<(State, &Vec<f64>)> = State::of(r).iter().map(|&st| (st, &states[idx(st)])).collect();
+        let all: Vec<(State, &Vec<f64>)> = State::of(r)
+            .iter()
+            .map(|&st| (st, &states[idx(st)]))
+            .collect();
         joint.push(stlsq(r, None, &all, y));
     }
-    StateMap { bins, per_state, joint, memory, band, samples: n }
+    StateMap {
+        bins,
+        per_state,
+        joint,
+        memory,
+        band,
+        samples: n,
+    }
 }
 
 /// A test's input to a term with memory of family `kind` ([`memory::fit`]): the measured
@@ -555,8 +691,14 @@ fn input_of(kind: Kind, c: &Compared) -> Input {
     };
     match (s.fundamental_hz, kind) {
         (Some(f), _) => Input::sine(&Projector::new(&s.tau, f, s.n_harm), f, x),
-        (None, Kind::Carried) => Input::Record { x: rate_of(&rate_of(x, s.rate_hz), s.rate_hz), dt: 1.0 / s.rate_hz },
-        (None, Kind::Lag) => Input::Record { x: x.clone(), dt: 1.0 / s.rate_hz },
+        (None, Kind::Carried) => Input::Record {
+            x: rate_of(&rate_of(x, s.rate_hz), s.rate_hz),
+            dt: 1.0 / s.rate_hz,
+        },
+        (None, Kind::Lag) => Input::Record {
+            x: x.clone(),
+            dt: 1.0 / s.rate_hz,
+        },
     }
 }
 
@@ -566,7 +708,9 @@ fn bins_of(state: State, scale: f64, x: &[f64], res: &[Option<Vec<f64>>; 5]) -> 
         .map(|b| {
             let (lo, hi) = (-1.0 + b as f64 * w, -1.0 + (b + 1) as f64 * w);
             let last = b + 1 == N_BINS;
-            let ks: Vec<usize> = (0..x.len()).filter(|&k| x[k] >= lo && (x[k] < hi || (last && x[k] <= hi))).collect();
+            let ks: Vec<usize> = (0..x.len())
+                .filter(|&k| x[k] >= lo && (x[k] < hi || (last && x[k] <= hi)))
+                .collect();
             let stat = |r: &Option<Vec<f64>>| match r {
                 Some(r) if !ks.is_empty() => {
                     let m = ks.iter().map(|&k| r[k]).sum::<f64>() / ks.len() as f64;
@@ -576,7 +720,15 @@ fn bins_of(state: State, scale: f64, x: &[f64], res: &[Option<Vec<f64>>; 5]) -> 
                 _ => (f64::NAN, f64::NAN),
             };
             let s: Vec<(f64, f64)> = res.iter().map(stat).collect();
-            MapBin { state, lo, hi, scale, samples: ks.len(), mean: std::array::from_fn(|i| s[i].0), rms: std::array::from_fn(|i| s[i].1) }
+            MapBin {
+                state,
+                lo,
+                hi,
+                scale,
+                samples: ks.len(),
+                mean: std::array::from_fn(|i| s[i].0),
+                rms: std::array::from_fn(|i| s[i].1),
+            }
         })
         .collect()
 }
@@ -599,9 +751,19 @@ fn lstsq(cols: &[Vec<f64>], y: &[f64]) -> (Vec<f64>, f64) {
 }
 
 /// Sequentially thresholded least squares of `y` on the terms of `states`.
-fn stlsq(residual: Residual, state: Option<State>, states: &[(State, &Vec<f64>)], y: &[f64]) -> Regression {
+fn stlsq(
+    residual: Residual,
+    state: Option<State>,
+    states: &[(State, &Vec<f64>)],
+    y: &[f64],
+) -> Regression {
     let n = y.len();
-    let empty = Regression { residual, state, r2: 0.0, terms: Vec::new() };
+    let empty = Regression {
+        residual,
+        state,
+        r2: 0.0,
+        terms: Vec::new(),
+    };
     if n < 2 * TERMS.len() * states.len() + 2 {
         return empty;
     }
@@ -633,7 +795,12 @@ fn stlsq(residual: Residual, state: Option<State>, states: &[(State, &Vec<f64>)]
     for _ in 0..20 {
         let sel: Vec<Vec<f64>> = active.iter().map(|&j| cols[j].clone()).collect();
         (coef, rss) = lstsq(&sel, &y);
-        let keep: Vec<usize> = active.iter().zip(&coef).filter(|(_, c)| c.abs() >= THRESHOLD).map(|(&j, _)| j).collect();
+        let keep: Vec<usize> = active
+            .iter()
+            .zip(&coef)
+            .filter(|(_, c)| c.abs() >= THRESHOLD)
+            .map(|(&j, _)| j)
+            .collect();
         if keep.len() == active.len() || keep.is_empty() {
             if keep.is_empty() {
                 active.clear();
@@ -648,24 +815,41 @@ fn stlsq(residual: Residual, state: Option<State>, states: &[(State, &Vec<f64>)]
     let mut terms: Vec<TermFit> = active
         .iter()
         .enumerate()
-        .map(|(i, &j)| TermFit { state: labels[j].0, term: labels[j].1, coef: coef[i], alone: (1.0 - lstsq(std::slice::from_ref(&cols[j]), &y).1 / tss).max(0.0) })
+        .map(|(i, &j)| TermFit {
+            state: labels[j].0,
+            term: labels[j].1,
+            coef: coef[i],
+            alone: (1.0 - lstsq(std::slice::from_ref(&cols[j]), &y).1 / tss).max(0.0),
+        })
         .collect();
     terms.sort_by(|a, b| b.alone.total_cmp(&a.alone));
-    Regression { residual, state, r2, terms }
+    Regression {
+        residual,
+        state,
+        r2,
+        terms,
+    }
 }
 
 impl StateMap {
     /// The regressions of residual `r`, one per state, largest R² first (empty when the tests
     /// lack what it needs).
     pub fn by_state(&self, r: Residual) -> &[Regression] {
-        self.per_state.iter().find(|v| v.first().is_some_and(|g| g.residual == r)).map_or(&[], |v| v.as_slice())
+        self.per_state
+            .iter()
+            .find(|v| v.first().is_some_and(|g| g.residual == r))
+            .map_or(&[], |v| v.as_slice())
     }
 
     /// The state and term the residual follows most: over the platen's force balance (the
     /// residual force when the files have no force) and the chambers' flow balance, the
     /// per-state regression of largest R², and its term that alone explains most.
     pub fn strongest(&self) -> Option<(&Regression, &TermFit)> {
-        let force = if self.by_state(Residual::PlatenForce).is_empty() { Residual::Force } else { Residual::PlatenForce };
+        let force = if self.by_state(Residual::PlatenForce).is_empty() {
+            Residual::Force
+        } else {
+            Residual::PlatenForce
+        };
         [force, Residual::ValveFlow, Residual::ValveOpening]
             .iter()
             .filter_map(|&r| self.by_state(r).first())
@@ -679,8 +863,12 @@ impl StateMap {
         let fixed = self.strongest().filter(|(reg, _)| reg.state.is_some());
         let fixed_r2 = fixed.map_or(0.0, |(reg, _)| reg.r2);
         match self.memory.iter().max_by(|a, b| a.1.r2.total_cmp(&b.1.r2)) {
-            Some((r, o)) if o.r2 >= MIN_R2 && o.r2 >= fixed_r2 + MEMORY_MARGIN => Some(Named::Memory(*r, o)),
-            _ => fixed.filter(|(reg, _)| reg.r2 >= MIN_R2).map(|(reg, t)| Named::Static(reg, t)),
+            Some((r, o)) if o.r2 >= MIN_R2 && o.r2 >= fixed_r2 + MEMORY_MARGIN => {
+                Some(Named::Memory(*r, o))
+            }
+            _ => fixed
+                .filter(|(reg, _)| reg.r2 >= MIN_R2)
+                .map(|(reg, t)| Named::Static(reg, t)),
         }
     }
 
@@ -689,7 +877,14 @@ impl StateMap {
         Some(match self.named()? {
             Named::Static(reg, t) => {
                 let st = reg.state?;
-                format!("the {} follows {} in {} (R² = {:.2}): {}", reg.residual.label(), t.formula(), st.label(), reg.r2, reading(st, t.term))
+                format!(
+                    "the {} follows {} in {} (R² = {:.2}): {}",
+                    reg.residual.label(),
+                    t.formula(),
+                    st.label(),
+                    reg.r2,
+                    reading(st, t.term)
+                )
             }
             Named::Memory(r, o) => format!(
                 "the {} follows the {} through a term with memory, {} ({}; R² = {:.2}): {}",
@@ -716,15 +911,40 @@ mod tests {
         let t: Vec<f64> = (0..n).map(|k| k as f64 / n as f64 * 6.0).collect();
         // Two correlated states: x a sine, v a sine with a third harmonic and a phase shift.
         let x: Vec<f64> = t.iter().map(|t| (2.0 * PI * t).sin()).collect();
-        let v: Vec<f64> = t.iter().map(|t| 0.8 * (2.0 * PI * t + 0.3).sin() + 0.2 * (6.0 * PI * t).sin()).collect();
-        let y: Vec<f64> = x.iter().map(|&x| 3.0 * Term::NearNull.eval(x) + 0.1).collect();
-        let rx = stlsq(Residual::Force, Some(State::SpoolOpening), &[(State::SpoolOpening, &x)], &y);
-        let rv = stlsq(Residual::Force, Some(State::Velocity), &[(State::Velocity, &v)], &y);
+        let v: Vec<f64> = t
+            .iter()
+            .map(|t| 0.8 * (2.0 * PI * t + 0.3).sin() + 0.2 * (6.0 * PI * t).sin())
+            .collect();
+        let y: Vec<f64> = x
+            .iter()
+            .map(|&x| 3.0 * Term::NearNull.eval(x) + 0.1)
+            .collect();
+        let rx = stlsq(
+            Residual::Force,
+            Some(State::SpoolOpening),
+            &[(State::SpoolOpening, &x)],
+            &y,
+        );
+        let rv = stlsq(
+            Residual::Force,
+            Some(State::Velocity),
+            &[(State::Velocity, &v)],
+            &y,
+        );
         assert!(rx.r2 > 0.999, "{rx:?}");
         assert!(rv.r2 < rx.r2 - 0.1, "{rv:?}");
         assert_eq!(rx.terms[0].term, Term::NearNull, "{rx:?}");
-        let all = stlsq(Residual::Force, None, &[(State::SpoolOpening, &x), (State::Velocity, &v)], &y);
-        assert_eq!((all.terms[0].state, all.terms[0].term), (State::SpoolOpening, Term::NearNull), "{all:?}");
+        let all = stlsq(
+            Residual::Force,
+            None,
+            &[(State::SpoolOpening, &x), (State::Velocity, &v)],
+            &y,
+        );
+        assert_eq!(
+            (all.terms[0].state, all.terms[0].term),
+            (State::SpoolOpening, Term::NearNull),
+            "{all:?}"
+        );
         assert!(all.terms.len() <= 3, "sparse: {all:?}");
     }
 
@@ -733,13 +953,21 @@ mod tests {
     fn harmonic_rate_is_the_derivative() {
         let f = 2.0;
         let tau: Vec<f64> = (0..1024).map(|k| k as f64 / 512.0).collect();
-        let x: Vec<f64> = tau.iter().map(|t| 0.5 + (2.0 * PI * f * t).sin() + 0.3 * (6.0 * PI * f * t).cos()).collect();
+        let x: Vec<f64> = tau
+            .iter()
+            .map(|t| 0.5 + (2.0 * PI * f * t).sin() + 0.3 * (6.0 * PI * f * t).cos())
+            .collect();
         let p = Projector::new(&tau, f, 9);
         let (v, r) = harmonic_and_rate(&p, &tau, f, &x);
         for (i, t) in tau.iter().enumerate() {
             let w = 2.0 * PI * f;
             let d = w * (w * t).cos() - 0.9 * w * (3.0 * w * t).sin();
-            assert!((v[i] - x[i]).abs() < 1e-9 && (r[i] - d).abs() < 1e-7, "{i}: {} {} vs {d}", v[i], r[i]);
+            assert!(
+                (v[i] - x[i]).abs() < 1e-9 && (r[i] - d).abs() < 1e-7,
+                "{i}: {} {} vs {d}",
+                v[i],
+                r[i]
+            );
         }
     }
 }

@@ -49,9 +49,9 @@ use super::sampling::{Design, Distribution, SOBOL_MAX_DIMS, SOBOL_MAX_POINTS};
 use super::spec::{self, ExcitationSpec};
 use super::toml_fields::{Fields, InputError, Issues};
 use crate::kernel::metrics::Metrics;
-use crate::kernel::spectrum::SpectrumSpec;
 use crate::kernel::params::{ModelParams, ParamInfo};
 use crate::kernel::simulate::Solver;
+use crate::kernel::spectrum::SpectrumSpec;
 use std::path::PathBuf;
 
 /// A varied (or fixed) parameter.
@@ -80,10 +80,14 @@ pub enum Method {
     MonteCarlo,
     Lhs,
     Sobol,
-    Grid { levels: usize },
+    Grid {
+        levels: usize,
+    },
     Saltelli,
     /// A design read from a file: one column per parameter path (or column name).
-    File { path: PathBuf },
+    File {
+        path: PathBuf,
+    },
 }
 
 impl Method {
@@ -159,7 +163,10 @@ fn design_size(method: &Method, samples: usize, varied: usize) -> Result<(), Str
 /// Whether `name` is a word safe in file names and in comma-separated metadata lists: letters,
 /// digits, `_`, `-` and `.` (study and excitation names).
 pub fn is_word(name: &str) -> bool {
-    !name.is_empty() && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-' || c == '.')
+    !name.is_empty()
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-' || c == '.')
 }
 
 /// `[study]`: name, description, seed, samples.
@@ -173,7 +180,13 @@ struct Header {
 }
 
 fn read_header(root: &mut Fields<'_>, issues: &mut Issues) -> Header {
-    let mut h = Header { name: None, description: String::new(), seed: 0, samples: None, samples_given: false };
+    let mut h = Header {
+        name: None,
+        description: String::new(),
+        seed: 0,
+        samples: None,
+        samples_given: false,
+    };
     let Some(mut s) = root.table("study", issues) else {
         issues.push("study", "missing table ([study] name, seed, samples)");
         return h;
@@ -195,8 +208,14 @@ fn read_header(root: &mut Fields<'_>, issues: &mut Issues) -> Header {
         }
     }
     match &h.name {
-        None => issues.push("study.name", "missing (names the study and its default output file)"),
-        Some(n) if !is_word(n) => issues.push("study.name", format!("{n:?} must be a non-empty file-name-safe word (letters, digits, _ - .)")),
+        None => issues.push(
+            "study.name",
+            "missing (names the study and its default output file)",
+        ),
+        Some(n) if !is_word(n) => issues.push(
+            "study.name",
+            format!("{n:?} must be a non-empty file-name-safe word (letters, digits, _ - .)"),
+        ),
         Some(_) => {}
     }
     s.finish(&["name", "description", "seed", "samples"], issues);
@@ -205,7 +224,9 @@ fn read_header(root: &mut Fields<'_>, issues: &mut Issues) -> Header {
 
 /// `[method]`: the sampling method (Monte Carlo when absent).
 fn read_method(root: &mut Fields<'_>, issues: &mut Issues) -> Method {
-    let Some(mut m) = root.table("method", issues) else { return Method::MonteCarlo };
+    let Some(mut m) = root.table("method", issues) else {
+        return Method::MonteCarlo;
+    };
     let sampling = m.str("sampling", issues).unwrap_or("monte_carlo");
     let levels = m.int("levels", issues);
     let mfile = m.str("file", issues);
@@ -219,12 +240,19 @@ fn read_method(root: &mut Fields<'_>, issues: &mut Issues) -> Method {
             if !(1..=1000).contains(&l) {
                 issues.push(m.path_of("levels"), format!("{l} must be in 1..=1000"));
             }
-            Method::Grid { levels: l.clamp(1, 1000) as usize }
+            Method::Grid {
+                levels: l.clamp(1, 1000) as usize,
+            }
         }
         "file" => match mfile {
-            Some(p) => Method::File { path: PathBuf::from(p) },
+            Some(p) => Method::File {
+                path: PathBuf::from(p),
+            },
             None => {
-                issues.push(m.path_of("file"), "missing (the CSV or Parquet design file)");
+                issues.push(
+                    m.path_of("file"),
+                    "missing (the CSV or Parquet design file)",
+                );
                 Method::MonteCarlo
             }
         },
@@ -239,28 +267,53 @@ fn read_method(root: &mut Fields<'_>, issues: &mut Issues) -> Method {
 
 /// `[[variables]]`: each one read and checked against the model (an effect's parameter needs the
 /// effect on; a parameter is listed once).
-fn read_variables(root: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues) -> Vec<Variable> {
-    let variables: Vec<Variable> = root.tables("variables", issues).unwrap_or_default().into_iter().filter_map(|v| read_variable(v, issues)).collect();
+fn read_variables(
+    root: &mut Fields<'_>,
+    model: &ModelParams,
+    issues: &mut Issues,
+) -> Vec<Variable> {
+    let variables: Vec<Variable> = root
+        .tables("variables", issues)
+        .unwrap_or_default()
+        .into_iter()
+        .filter_map(|v| read_variable(v, issues))
+        .collect();
     for (i, v) in variables.iter().enumerate() {
         let comp = v.info.component;
         if comp.effect().is_some_and(|e| !model.effects.get(e)) {
-            issues.push(format!("variables[{i}].name"), format!("effect `{comp}` is not switched on: add a [model.{comp}] table"));
+            issues.push(
+                format!("variables[{i}].name"),
+                format!("effect `{comp}` is not switched on: add a [model.{comp}] table"),
+            );
         }
         if variables[..i].iter().any(|w| std::ptr::eq(w.info, v.info)) {
-            issues.push(format!("variables[{i}].name"), format!("{} is listed twice", v.path()));
+            issues.push(
+                format!("variables[{i}].name"),
+                format!("{} is listed twice", v.path()),
+            );
         }
     }
     variables
 }
 
 /// `[[excitations]]`: at least one, each with a distinct name that is a word ([`is_word`]).
-fn read_excitations(root: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues) -> Vec<NamedExcitation> {
+fn read_excitations(
+    root: &mut Fields<'_>,
+    model: &ModelParams,
+    issues: &mut Issues,
+) -> Vec<NamedExcitation> {
     let mut excitations: Vec<NamedExcitation> = Vec::new();
     match root.tables("excitations", issues) {
-        Some(list) if list.is_empty() => issues.push("excitations", "the excitation list is empty: every sample needs at least one excitation"),
+        Some(list) if list.is_empty() => issues.push(
+            "excitations",
+            "the excitation list is empty: every sample needs at least one excitation",
+        ),
         Some(list) => {
             for (i, mut e) in list.into_iter().enumerate() {
-                let ename = e.str("name", issues).map(str::to_string).unwrap_or_else(|| format!("exc{i}"));
+                let ename = e
+                    .str("name", issues)
+                    .map(str::to_string)
+                    .unwrap_or_else(|| format!("exc{i}"));
                 let path = e.path_of("name");
                 if !is_word(&ename) {
                     issues.push(path.clone(), format!("{ename:?} must be a non-empty word of letters, digits, _ - . (it names history files and is listed in the results' metadata)"));
@@ -270,11 +323,20 @@ fn read_excitations(root: &mut Fields<'_>, model: &ModelParams, issues: &mut Iss
                     if excitations.iter().any(|n| n.name == ename) {
                         issues.push(path, format!("excitation name {ename:?} is used twice"));
                     }
-                    excitations.push(NamedExcitation { name: ename, spec: x });
+                    excitations.push(NamedExcitation {
+                        name: ename,
+                        spec: x,
+                    });
                 }
             }
         }
-        None => issues.push("excitations", format!("missing ([[excitations]] with kind = one of {})", spec::KINDS.join(", "))),
+        None => issues.push(
+            "excitations",
+            format!(
+                "missing ([[excitations]] with kind = one of {})",
+                spec::KINDS.join(", ")
+            ),
+        ),
     }
     excitations
 }
@@ -284,22 +346,38 @@ fn read_excitations(root: &mut Fields<'_>, model: &ModelParams, issues: &mut Iss
 /// 0.05–4 s, 20) and the error band `band_s = [low, high]` (default every period).
 fn read_spectrum(root: &mut Fields<'_>, issues: &mut Issues) -> SpectrumSpec {
     let mut spec = super::quake::default_spectrum();
-    let Some(mut t) = root.table("spectrum", issues) else { return spec };
+    let Some(mut t) = root.table("spectrum", issues) else {
+        return spec;
+    };
     let damping = t.f64("damping", issues).unwrap_or(spec.damping);
     if !(damping > 0.0 && damping < 1.0) {
-        issues.push(t.path_of("damping"), format!("{damping} must be in (0, 1) (a damping ratio)"));
+        issues.push(
+            t.path_of("damping"),
+            format!("{damping} must be in (0, 1) (a damping ratio)"),
+        );
     }
-    let (t_min, t_max, count) = (t.f64("t_min_s", issues), t.f64("t_max_s", issues), t.int("count", issues));
+    let (t_min, t_max, count) = (
+        t.f64("t_min_s", issues),
+        t.f64("t_max_s", issues),
+        t.int("count", issues),
+    );
     let periods = match t.f64_array("periods_s", issues) {
         Some(p) => {
             if t_min.or(t_max).is_some() || count.is_some() {
-                issues.push(t.path_of("periods_s"), "give periods_s or t_min_s/t_max_s/count, not both");
+                issues.push(
+                    t.path_of("periods_s"),
+                    "give periods_s or t_min_s/t_max_s/count, not both",
+                );
             }
             p
         }
         None => {
-            let (lo, hi, n) = (t_min.unwrap_or(0.05), t_max.unwrap_or(4.0), count.unwrap_or(20));
-            if !(lo > 0.0 && hi > lo) || !(1..=200).contains(&n) {
+            let (lo, hi, n) = (
+                t_min.unwrap_or(0.05),
+                t_max.unwrap_or(4.0),
+                count.unwrap_or(20),
+            );
+            if !(lo > 0.0 && hi > lo && (1..=200).contains(&n)) {
                 issues.push(t.path_of("count"), format!("t_min_s = {lo}, t_max_s = {hi}, count = {n}: need 0 < t_min_s < t_max_s and 1 ≤ count ≤ 200"));
                 Vec::new()
             } else {
@@ -307,21 +385,50 @@ fn read_spectrum(root: &mut Fields<'_>, issues: &mut Issues) -> SpectrumSpec {
             }
         }
     };
-    if periods.is_empty() || periods.iter().any(|p| !(*p > 0.0)) || periods.windows(2).any(|w| w[1] <= w[0]) {
-        issues.push(t.path_of("periods_s"), "the periods must be positive and increasing (at least one)");
+    if periods.is_empty()
+        || periods.iter().any(|p| !(*p > 0.0))
+        || periods.windows(2).any(|w| w[1] <= w[0])
+    {
+        issues.push(
+            t.path_of("periods_s"),
+            "the periods must be positive and increasing (at least one)",
+        );
     }
     let band = match t.f64_array("band_s", issues) {
         Some(b) if b.len() == 2 && b[0] <= b[1] => (b[0], b[1]),
         Some(b) => {
-            issues.push(t.path_of("band_s"), format!("{b:?}: expected [low, high] periods in s, low ≤ high"));
+            issues.push(
+                t.path_of("band_s"),
+                format!("{b:?}: expected [low, high] periods in s, low ≤ high"),
+            );
             (0.0, f64::INFINITY)
         }
-        None => (periods.first().copied().unwrap_or(0.0), periods.last().copied().unwrap_or(0.0)),
+        None => (
+            periods.first().copied().unwrap_or(0.0),
+            periods.last().copied().unwrap_or(0.0),
+        ),
     };
-    t.finish(&["damping", "periods_s", "t_min_s", "t_max_s", "count", "band_s"], issues);
-    spec = SpectrumSpec { periods, damping, band };
+    t.finish(
+        &[
+            "damping",
+            "periods_s",
+            "t_min_s",
+            "t_max_s",
+            "count",
+            "band_s",
+        ],
+        issues,
+    );
+    spec = SpectrumSpec {
+        periods,
+        damping,
+        band,
+    };
     if spec.in_band().next().is_none() {
-        issues.push("spectrum.band_s", "no period of the spectrum lies in the band");
+        issues.push(
+            "spectrum.band_s",
+            "no period of the spectrum lies in the band",
+        );
     }
     spec
 }
@@ -329,11 +436,20 @@ fn read_spectrum(root: &mut Fields<'_>, issues: &mut Issues) -> SpectrumSpec {
 /// A `ground.*` variable that a stochastic excitation also sets: the excitation's value would
 /// win, so the variable would vary nothing there.
 fn ground_overlap(variables: &[Variable], excitations: &[NamedExcitation], issues: &mut Issues) {
-    for v in variables.iter().filter(|v| v.info.component == crate::kernel::params::Component::Ground && v.dist.varies()) {
+    for v in variables
+        .iter()
+        .filter(|v| v.info.component == crate::kernel::params::Component::Ground && v.dist.varies())
+    {
         for e in excitations {
             if let ExcitationSpec::Stochastic { ground, .. } = &e.spec {
                 if ground.iter().any(|(n, _)| *n == v.info.name) {
-                    issues.push(format!("excitations.{}.{}", e.name, v.info.name), format!("is fixed here, but the study varies {}: remove one", v.info.path()));
+                    issues.push(
+                        format!("excitations.{}.{}", e.name, v.info.name),
+                        format!(
+                            "is fixed here, but the study varies {}: remove one",
+                            v.info.path()
+                        ),
+                    );
                 }
             }
         }
@@ -344,7 +460,9 @@ fn ground_overlap(variables: &[Variable], excitations: &[NamedExcitation], issue
 /// was written.
 fn read_responses(root: &mut Fields<'_>, issues: &mut Issues) -> (Vec<&'static str>, bool) {
     let all = all_metric_names();
-    let Some(mut r) = root.table("responses", issues) else { return (all, false) };
+    let Some(mut r) = root.table("responses", issues) else {
+        return (all, false);
+    };
     let listed = r.has("metrics");
     let mut metrics = all.clone();
     if let Some(list) = r.str_array("metrics", issues) {
@@ -353,8 +471,16 @@ fn read_responses(root: &mut Fields<'_>, issues: &mut Issues) -> (Vec<&'static s
             match all.iter().find(|a| *a == m) {
                 Some(a) => metrics.push(*a),
                 None => {
-                    let hint = super::toml_fields::suggest(m, &all).map(|s| format!(" (did you mean `{s}`?)")).unwrap_or_default();
-                    issues.push(format!("responses.metrics[{i}]"), format!("unknown metric {m:?}{hint}; expected one of: {}", all.join(", ")));
+                    let hint = super::toml_fields::suggest(m, &all)
+                        .map(|s| format!(" (did you mean `{s}`?)"))
+                        .unwrap_or_default();
+                    issues.push(
+                        format!("responses.metrics[{i}]"),
+                        format!(
+                            "unknown metric {m:?}{hint}; expected one of: {}",
+                            all.join(", ")
+                        ),
+                    );
                 }
             }
         }
@@ -368,19 +494,27 @@ fn read_responses(root: &mut Fields<'_>, issues: &mut Issues) -> (Vec<&'static s
 
 /// `[output]`: the results file and the samples whose full histories are written.
 fn read_output(root: &mut Fields<'_>, issues: &mut Issues) -> (Option<PathBuf>, Vec<u64>) {
-    let Some(mut o) = root.table("output", issues) else { return (None, Vec::new()) };
+    let Some(mut o) = root.table("output", issues) else {
+        return (None, Vec::new());
+    };
     let output = o.str("file", issues).map(PathBuf::from);
     let mut histories = Vec::new();
     if let Some(h) = o.f64_array("histories", issues) {
         for (i, x) in h.iter().enumerate() {
             if *x < 0.0 || x.fract() != 0.0 {
-                issues.push(format!("output.histories[{i}]"), format!("{x} is not a sample id"));
+                issues.push(
+                    format!("output.histories[{i}]"),
+                    format!("{x} is not a sample id"),
+                );
             } else {
                 histories.push(*x as u64);
             }
         }
         if histories.len() > 100 {
-            issues.push("output.histories", "at most 100 full histories may be requested");
+            issues.push(
+                "output.histories",
+                "at most 100 full histories may be requested",
+            );
         }
     }
     o.finish(&["file", "histories"], issues);
@@ -389,7 +523,9 @@ fn read_output(root: &mut Fields<'_>, issues: &mut Issues) -> (Option<PathBuf>, 
 
 /// `[solver]`: the solver and the samples per work item.
 fn read_study_solver(root: &mut Fields<'_>, issues: &mut Issues) -> (Solver, usize) {
-    let Some(mut s) = root.table("solver", issues) else { return (Solver::default(), 64) };
+    let Some(mut s) = root.table("solver", issues) else {
+        return (Solver::default(), 64);
+    };
     let mut chunk = 64;
     if let Some(c) = s.int("chunk", issues) {
         if (1..=1 << 20).contains(&c) {
@@ -405,8 +541,16 @@ fn read_study_solver(root: &mut Fields<'_>, issues: &mut Issues) -> (Solver, usi
 /// The design as a whole: samples where the method needs them, its size, its dimensions.
 fn check_design(method: &Method, header: &Header, variables: &[Variable], issues: &mut Issues) {
     let varied = variables.iter().filter(|v| v.dist.varies()).count();
-    if matches!(method, Method::MonteCarlo | Method::Lhs | Method::Sobol | Method::Saltelli) && header.samples.is_none() && !header.samples_given {
-        issues.push("study.samples", format!("missing (required by sampling = \"{}\")", method.name()));
+    if matches!(
+        method,
+        Method::MonteCarlo | Method::Lhs | Method::Sobol | Method::Saltelli
+    ) && header.samples.is_none()
+        && !header.samples_given
+    {
+        issues.push(
+            "study.samples",
+            format!("missing (required by sampling = \"{}\")", method.name()),
+        );
     }
     if let Some(n) = header.samples {
         if let Err(why) = design_size(method, n, varied) {
@@ -414,13 +558,25 @@ fn check_design(method: &Method, header: &Header, variables: &[Variable], issues
         }
     }
     if matches!(method, Method::Sobol | Method::Saltelli) && 2 * varied > SOBOL_MAX_DIMS {
-        issues.push("variables", format!("at most {} varied parameters for Sobol' designs", SOBOL_MAX_DIMS / 2));
+        issues.push(
+            "variables",
+            format!(
+                "at most {} varied parameters for Sobol' designs",
+                SOBOL_MAX_DIMS / 2
+            ),
+        );
     }
     if matches!(method, Method::Saltelli) && varied == 0 {
-        issues.push("variables", "a Saltelli design needs at least one varied parameter");
+        issues.push(
+            "variables",
+            "a Saltelli design needs at least one varied parameter",
+        );
     }
     if let Method::Grid { levels } = method {
-        let runs: f64 = variables.iter().map(|v| v.dist.grid(*levels).len() as f64).product();
+        let runs: f64 = variables
+            .iter()
+            .map(|v| v.dist.grid(*levels).len() as f64)
+            .product();
         if runs > 1e8 {
             issues.push("method.levels", format!("the grid has {runs:.3e} points"));
         }
@@ -434,15 +590,31 @@ fn check_design(method: &Method, header: &Header, variables: &[Variable], issues
 /// harmonic would be an alias of a lower frequency. Listed in `[responses] metrics`, it is refused
 /// (an issue at its index); by default it is kept as a column of NaN for that excitation (and left
 /// out of the THD sums), with a note.
-fn aliased_harmonics(excitations: &[NamedExcitation], metrics: &[&str], listed: bool, f_s: f64, issues: &mut Issues) -> Vec<String> {
+fn aliased_harmonics(
+    excitations: &[NamedExcitation],
+    metrics: &[&str],
+    listed: bool,
+    f_s: f64,
+    issues: &mut Issues,
+) -> Vec<String> {
     let mut notes = Vec::new();
     for e in excitations {
-        let ExcitationSpec::Sine { sine, .. } = &e.spec else { continue };
+        let ExcitationSpec::Sine { sine, .. } = &e.spec else {
+            continue;
+        };
         let top = Metrics::highest_harmonic(sine.freq_hz, f_s);
         let aliased: Vec<(usize, usize)> = metrics
             .iter()
             .enumerate()
-            .filter_map(|(i, m)| Some((i, m.strip_prefix('h')?.strip_suffix("_ratio")?.parse::<usize>().ok()?)))
+            .filter_map(|(i, m)| {
+                Some((
+                    i,
+                    m.strip_prefix('h')?
+                        .strip_suffix("_ratio")?
+                        .parse::<usize>()
+                        .ok()?,
+                ))
+            })
             .filter(|&(_, k)| k > top)
             .collect();
         if aliased.is_empty() {
@@ -473,7 +645,20 @@ fn aliased_harmonics(excitations: &[NamedExcitation], metrics: &[&str], listed: 
     notes
 }
 
-const DIST_KEYS: [&str; 12] = ["name", "distribution", "value", "low", "high", "mean", "std", "mu", "sigma", "mode", "values", "levels"];
+const DIST_KEYS: [&str; 12] = [
+    "name",
+    "distribution",
+    "value",
+    "low",
+    "high",
+    "mean",
+    "std",
+    "mu",
+    "sigma",
+    "mode",
+    "values",
+    "levels",
+];
 
 fn read_variable(mut f: Fields<'_>, issues: &mut Issues) -> Option<Variable> {
     let info = read_parameter(&mut f, issues);
@@ -482,20 +667,31 @@ fn read_variable(mut f: Fields<'_>, issues: &mut Issues) -> Option<Variable> {
         check_support(&f, info, d, issues);
     }
     f.finish(&DIST_KEYS, issues);
-    Some(Variable { info: info?, dist: d? })
+    Some(Variable {
+        info: info?,
+        dist: d?,
+    })
 }
 
 /// A variable's `name`: a registered parameter that may vary.
 fn read_parameter(f: &mut Fields<'_>, issues: &mut Issues) -> Option<&'static ParamInfo> {
     let Some(n) = f.str("name", issues) else {
-        issues.push(f.path_of("name"), "missing (a parameter path such as \"controller.g_d\")");
+        issues.push(
+            f.path_of("name"),
+            "missing (a parameter path such as \"controller.g_d\")",
+        );
         return None;
     };
     let Some(info) = ModelParams::lookup(n) else {
         let all: Vec<String> = ModelParams::registry().map(|p| p.path()).collect();
         let refs: Vec<&str> = all.iter().map(String::as_str).collect();
-        let hint = super::toml_fields::suggest(n, &refs).map(|s| format!(" (did you mean `{s}`?)")).unwrap_or_default();
-        issues.push(f.path_of("name"), format!("unknown parameter `{n}`{hint}; `study params` lists them"));
+        let hint = super::toml_fields::suggest(n, &refs)
+            .map(|s| format!(" (did you mean `{s}`?)"))
+            .unwrap_or_default();
+        issues.push(
+            f.path_of("name"),
+            format!("unknown parameter `{n}`{hint}; `study params` lists them"),
+        );
         return None;
     };
     if let Some(why) = cannot_vary(info) {
@@ -545,10 +741,16 @@ fn read_bounded(f: &mut Fields<'_>, log: bool, issues: &mut Issues) -> Option<Di
         return None;
     };
     if low >= high {
-        issues.push(f.path_of("low"), format!("low = {low} must be below high = {high}"));
+        issues.push(
+            f.path_of("low"),
+            format!("low = {low} must be below high = {high}"),
+        );
         None
     } else if log && low <= 0.0 {
-        issues.push(f.path_of("low"), format!("low = {low} must be positive for a log-uniform distribution"));
+        issues.push(
+            f.path_of("low"),
+            format!("low = {low} must be positive for a log-uniform distribution"),
+        );
         None
     } else if log {
         Some(Distribution::LogUniform { low, high })
@@ -565,10 +767,18 @@ fn read_normal(f: &mut Fields<'_>, issues: &mut Issues) -> Option<Distribution> 
         (Some(mean), Some(std)) if std > 0.0 => {
             if let (Some(l), Some(h)) = (low, high) {
                 if l >= h {
-                    issues.push(f.path_of("low"), format!("low = {l} must be below high = {h}"));
+                    issues.push(
+                        f.path_of("low"),
+                        format!("low = {l} must be below high = {h}"),
+                    );
                 }
             }
-            Some(Distribution::Normal { mean, std, low, high })
+            Some(Distribution::Normal {
+                mean,
+                std,
+                low,
+                high,
+            })
         }
         (Some(_), Some(std)) => {
             issues.push(f.path_of("std"), format!("std = {std} must be positive"));
@@ -587,13 +797,27 @@ fn check_support(f: &Fields<'_>, info: &ParamInfo, d: &Distribution, issues: &mu
     let candidates: Vec<f64> = match d {
         Distribution::Fixed { value } => vec![*value],
         Distribution::List { values } => values.clone(),
-        Distribution::Uniform { low, high } | Distribution::LogUniform { low, high } | Distribution::Triangular { low, high, .. } => {
-            if !info.range.contains(*low) && !info.range.contains(*high) { vec![*low] } else { vec![] }
+        Distribution::Uniform { low, high }
+        | Distribution::LogUniform { low, high }
+        | Distribution::Triangular { low, high, .. } => {
+            if !info.range.contains(*low) && !info.range.contains(*high) {
+                vec![*low]
+            } else {
+                vec![]
+            }
         }
         Distribution::Normal { .. } | Distribution::LogNormal { .. } => vec![],
     };
     if let Some(v) = candidates.into_iter().find(|v| !info.range.contains(*v)) {
-        issues.push(f.path_of("name"), format!("{} = {v} {} is outside its valid range {}", info.path(), info.unit, info.range));
+        issues.push(
+            f.path_of("name"),
+            format!(
+                "{} = {v} {} is outside its valid range {}",
+                info.path(),
+                info.unit,
+                info.range
+            ),
+        );
     }
 }
 
@@ -613,12 +837,31 @@ impl StudySpec {
         let variables = read_variables(&mut root, &model, &mut issues);
         let excitations = read_excitations(&mut root, &model, &mut issues);
         let (metrics, metrics_listed) = read_responses(&mut root, &mut issues);
-        let notes = aliased_harmonics(&excitations, &metrics, metrics_listed, model.controller.f_s, &mut issues);
+        let notes = aliased_harmonics(
+            &excitations,
+            &metrics,
+            metrics_listed,
+            model.controller.f_s,
+            &mut issues,
+        );
         let (output, histories) = read_output(&mut root, &mut issues);
         let (solver, chunk) = read_study_solver(&mut root, &mut issues);
         let spectrum = read_spectrum(&mut root, &mut issues);
         ground_overlap(&variables, &excitations, &mut issues);
-        root.finish(&["study", "method", "model", "variables", "excitations", "responses", "output", "solver", "spectrum"], &mut issues);
+        root.finish(
+            &[
+                "study",
+                "method",
+                "model",
+                "variables",
+                "excitations",
+                "responses",
+                "output",
+                "solver",
+                "spectrum",
+            ],
+            &mut issues,
+        );
         check_design(&method, &header, &variables, &mut issues);
         issues.into_result(file)?;
         let name = header.name.expect("checked");
@@ -658,7 +901,9 @@ impl StudySpec {
             Method::Lhs => Design::LatinHypercube,
             Method::Sobol => Design::Sobol,
             Method::Saltelli => Design::Saltelli { base: self.samples },
-            Method::Grid { levels } => Design::Grid { values: self.varied().iter().map(|v| v.dist.grid(*levels)).collect() },
+            Method::Grid { levels } => Design::Grid {
+                values: self.varied().iter().map(|v| v.dist.grid(*levels)).collect(),
+            },
             Method::File { .. } => panic!("a file design is read, not generated"),
         }
     }
@@ -674,12 +919,24 @@ impl StudySpec {
         root.insert("study".into(), s.into());
         root.insert("method".into(), self.method_table().into());
         root.insert("model".into(), spec::model_table(&self.model).into());
-        root.insert("variables".into(), toml::Value::Array(self.variables.iter().map(|v| variable_table(v).into()).collect()));
+        root.insert(
+            "variables".into(),
+            toml::Value::Array(
+                self.variables
+                    .iter()
+                    .map(|v| variable_table(v).into())
+                    .collect(),
+            ),
+        );
         let exc: Vec<toml::Value> = self
             .excitations
             .iter()
             .map(|e| {
-                let sim = spec::SimSpec { model: self.model.clone(), excitation: e.spec.clone(), solver: self.solver };
+                let sim = spec::SimSpec {
+                    model: self.model.clone(),
+                    excitation: e.spec.clone(),
+                    solver: self.solver,
+                };
                 let full: toml::Table = sim.resolved_toml().parse().expect("own TOML");
                 let mut t = full["excitation"].as_table().cloned().unwrap_or_default();
                 t.insert("name".into(), e.name.clone().into());
@@ -688,11 +945,17 @@ impl StudySpec {
             .collect();
         root.insert("excitations".into(), toml::Value::Array(exc));
         let mut r = toml::Table::new();
-        r.insert("metrics".into(), toml::Value::Array(self.metrics.iter().map(|m| (*m).into()).collect()));
+        r.insert(
+            "metrics".into(),
+            toml::Value::Array(self.metrics.iter().map(|m| (*m).into()).collect()),
+        );
         root.insert("responses".into(), r.into());
         let mut o = toml::Table::new();
         o.insert("file".into(), self.output.display().to_string().into());
-        o.insert("histories".into(), toml::Value::Array(self.histories.iter().map(|h| (*h as i64).into()).collect()));
+        o.insert(
+            "histories".into(),
+            toml::Value::Array(self.histories.iter().map(|h| (*h as i64).into()).collect()),
+        );
         root.insert("output".into(), o.into());
         let mut sv = toml::Table::new();
         sv.insert("substeps".into(), (self.solver.substeps as i64).into());
@@ -701,8 +964,14 @@ impl StudySpec {
         let sp = &self.spectrum;
         let mut t = toml::Table::new();
         t.insert("damping".into(), sp.damping.into());
-        t.insert("periods_s".into(), toml::Value::Array(sp.periods.iter().map(|p| (*p).into()).collect()));
-        t.insert("band_s".into(), toml::Value::Array(vec![sp.band.0.into(), sp.band.1.into()]));
+        t.insert(
+            "periods_s".into(),
+            toml::Value::Array(sp.periods.iter().map(|p| (*p).into()).collect()),
+        );
+        t.insert(
+            "band_s".into(),
+            toml::Value::Array(vec![sp.band.0.into(), sp.band.1.into()]),
+        );
         root.insert("spectrum".into(), t.into());
         toml::to_string(&root).expect("TOML of plain values")
     }
@@ -731,15 +1000,38 @@ fn variable_table(v: &Variable) -> toml::Table {
     let (kind, keys): (&str, Vec<(&str, f64)>) = match &v.dist {
         Distribution::Fixed { value } => ("fixed", vec![("value", *value)]),
         Distribution::Uniform { low, high } => ("uniform", vec![("low", *low), ("high", *high)]),
-        Distribution::LogUniform { low, high } => ("log_uniform", vec![("low", *low), ("high", *high)]),
-        Distribution::Normal { mean, std, low, high } => {
-            let bounds = [("low", *low), ("high", *high)].into_iter().filter_map(|(k, x)| x.map(|x| (k, x)));
-            ("normal", [("mean", *mean), ("std", *std)].into_iter().chain(bounds).collect())
+        Distribution::LogUniform { low, high } => {
+            ("log_uniform", vec![("low", *low), ("high", *high)])
         }
-        Distribution::LogNormal { mu, sigma } => ("log_normal", vec![("mu", *mu), ("sigma", *sigma)]),
-        Distribution::Triangular { low, mode, high } => ("triangular", vec![("low", *low), ("mode", *mode), ("high", *high)]),
+        Distribution::Normal {
+            mean,
+            std,
+            low,
+            high,
+        } => {
+            let bounds = [("low", *low), ("high", *high)]
+                .into_iter()
+                .filter_map(|(k, x)| x.map(|x| (k, x)));
+            (
+                "normal",
+                [("mean", *mean), ("std", *std)]
+                    .into_iter()
+                    .chain(bounds)
+                    .collect(),
+            )
+        }
+        Distribution::LogNormal { mu, sigma } => {
+            ("log_normal", vec![("mu", *mu), ("sigma", *sigma)])
+        }
+        Distribution::Triangular { low, mode, high } => (
+            "triangular",
+            vec![("low", *low), ("mode", *mode), ("high", *high)],
+        ),
         Distribution::List { values } => {
-            t.insert("values".into(), toml::Value::Array(values.iter().map(|x| (*x).into()).collect()));
+            t.insert(
+                "values".into(),
+                toml::Value::Array(values.iter().map(|x| (*x).into()).collect()),
+            );
             ("list", vec![])
         }
     };
@@ -750,7 +1042,11 @@ fn variable_table(v: &Variable) -> toml::Table {
     t
 }
 
-fn read_named_excitation(f: Fields<'_>, model: &ModelParams, issues: &mut Issues) -> Option<ExcitationSpec> {
+fn read_named_excitation(
+    f: Fields<'_>,
+    model: &ModelParams,
+    issues: &mut Issues,
+) -> Option<ExcitationSpec> {
     // The excitation reader reports unknown keys; `name` was already consumed from this table.
     spec::read_excitation_with_extra(f, model, issues, &["name"])
 }
@@ -796,10 +1092,26 @@ amp_g = 1.0
     #[test]
     fn bad_studies_name_the_key_path() {
         let cases: [(&str, &str, &str); 4] = [
-            ("name = \"controller.g_d\"", "name = \"controller.gd\"", "variables[0].name"),
-            ("low = 1.0\nhigh = 2.0", "low = 3.0\nhigh = 2.0", "variables[0].low"),
-            ("sampling = \"lhs\"", "sampling = \"latin\"", "method.sampling"),
-            ("distribution = \"uniform\"\nlow = 1.0\nhigh = 2.0", "distribution = \"normal\"\nmean = 1.0\nstd = -2.0", "variables[0].std"),
+            (
+                "name = \"controller.g_d\"",
+                "name = \"controller.gd\"",
+                "variables[0].name",
+            ),
+            (
+                "low = 1.0\nhigh = 2.0",
+                "low = 3.0\nhigh = 2.0",
+                "variables[0].low",
+            ),
+            (
+                "sampling = \"lhs\"",
+                "sampling = \"latin\"",
+                "method.sampling",
+            ),
+            (
+                "distribution = \"uniform\"\nlow = 1.0\nhigh = 2.0",
+                "distribution = \"normal\"\nmean = 1.0\nstd = -2.0",
+                "variables[0].std",
+            ),
         ];
         for (from, to, path) in cases {
             let text = STUDY.replacen(from, to, 1);

@@ -84,16 +84,39 @@ impl TimeBase {
 
 /// A rate for printing: whole hertz exactly, else six significant digits.
 pub fn fmt_rate(r: f64) -> String {
-    if r == r.round() { format!("{r:.0}") } else { format!("{r:.6}") }
+    if r == r.round() {
+        format!("{r:.0}")
+    } else {
+        format!("{r:.6}")
+    }
 }
 
 /// Why a time column is refused. Rows are 1-based data rows.
 #[derive(Debug, Clone, PartialEq)]
 pub enum TimeProblem {
-    TooFew { rows: usize },
-    GoesBack { row: usize, t: f64, prev: f64 },
-    Gap { row: usize, t: f64, prev: f64, missing: usize, step: f64, more: usize },
-    OffGrid { row: usize, t: f64, grid: f64, allowed: f64, rate_hz: f64 },
+    TooFew {
+        rows: usize,
+    },
+    GoesBack {
+        row: usize,
+        t: f64,
+        prev: f64,
+    },
+    Gap {
+        row: usize,
+        t: f64,
+        prev: f64,
+        missing: usize,
+        step: f64,
+        more: usize,
+    },
+    OffGrid {
+        row: usize,
+        t: f64,
+        grid: f64,
+        allowed: f64,
+        rate_hz: f64,
+    },
 }
 
 impl TimeProblem {
@@ -101,7 +124,9 @@ impl TimeProblem {
     pub fn row(&self) -> usize {
         match self {
             TimeProblem::TooFew { rows } => *rows,
-            TimeProblem::GoesBack { row, .. } | TimeProblem::Gap { row, .. } | TimeProblem::OffGrid { row, .. } => *row,
+            TimeProblem::GoesBack { row, .. }
+            | TimeProblem::Gap { row, .. }
+            | TimeProblem::OffGrid { row, .. } => *row,
         }
     }
 }
@@ -144,7 +169,11 @@ pub fn printed_quantum(x: f64) -> (f64, u32) {
 fn median(v: &mut [f64]) -> f64 {
     v.sort_by(f64::total_cmp);
     let n = v.len();
-    if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) }
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
 }
 
 /// Rebuilds the grid of a time column (see the module docs).
@@ -167,15 +196,27 @@ pub fn rebuild(t: &[f64]) -> Result<TimeBase, TimeProblem> {
     let mut max_jitter: f64 = 0.0;
     for i in 0..n {
         let e = t[i] - grid(i);
-        let allowed = (0.5 * q(i) * (1.0 + 1e-9)).max(STEP_TOLERANCE * b) + fit_err + 4.0 * f64::EPSILON * t[i].abs();
+        let allowed = (0.5 * q(i) * (1.0 + 1e-9)).max(STEP_TOLERANCE * b)
+            + fit_err
+            + 4.0 * f64::EPSILON * t[i].abs();
         if e.abs() > allowed {
-            return Err(TimeProblem::OffGrid { row: i + 1, t: t[i], grid: grid(i), allowed, rate_hz });
+            return Err(TimeProblem::OffGrid {
+                row: i + 1,
+                t: t[i],
+                grid: grid(i),
+                allowed,
+                rate_hz,
+            });
         }
         max_jitter = max_jitter.max(e.abs());
     }
     // On the grid to the last bit of each value: the column was exact, nothing was rebuilt.
     let exact = (0..n).all(|i| (t[i] - grid(i)).abs() <= 4.0 * f64::EPSILON * t[i].abs().max(b));
-    let resolution_s = if jittery { quanta.iter().map(|x| x.0).fold(0.0, f64::max) } else { 0.0 };
+    let resolution_s = if jittery {
+        quanta.iter().map(|x| x.0).fold(0.0, f64::max)
+    } else {
+        0.0
+    };
     let digits = quanta.iter().map(|x| x.1).max().unwrap_or(17);
     Ok(TimeBase {
         rate_hz,
@@ -211,10 +252,18 @@ fn nominal_step(t: &[f64], d: &[f64]) -> Result<f64, TimeProblem> {
     let n = t.len();
     let step_med = median(&mut d.to_vec());
     let step_mean = (t[n - 1] - t[0]) / (n - 1) as f64;
-    let step = if step_med > 0.0 && (step_med / step_mean - 1.0).abs() < 0.5 { step_med } else { step_mean };
+    let step = if step_med > 0.0 && (step_med / step_mean - 1.0).abs() < 0.5 {
+        step_med
+    } else {
+        step_mean
+    };
     if !(step > 0.0) {
         let i = (1..n).find(|&i| t[i] <= t[i - 1]).unwrap_or(1);
-        return Err(TimeProblem::GoesBack { row: i + 1, t: t[i], prev: t[i - 1] });
+        return Err(TimeProblem::GoesBack {
+            row: i + 1,
+            t: t[i],
+            prev: t[i - 1],
+        });
     }
     Ok(step)
 }
@@ -223,9 +272,17 @@ fn nominal_step(t: &[f64], d: &[f64]) -> Result<f64, TimeProblem> {
 /// gaps whatever its digits; a rounded one where its rows' digits resolve a step. Returns
 /// whether the column jitters and how many differences its digits cannot resolve; the first
 /// problem in row order is refused (after a gap, only further gaps are counted).
-fn check_steps(t: &[f64], d: &[f64], step: f64, q: &dyn Fn(usize) -> f64) -> Result<(bool, usize), TimeProblem> {
+fn check_steps(
+    t: &[f64],
+    d: &[f64],
+    step: f64,
+    q: &dyn Fn(usize) -> f64,
+) -> Result<(bool, usize), TimeProblem> {
     let steps: Vec<f64> = d.iter().map(|di| (di / step).round()).collect();
-    let jittery = d.iter().zip(&steps).any(|(di, m)| (di - m * step).abs() > 1e-6 * step);
+    let jittery = d
+        .iter()
+        .zip(&steps)
+        .any(|(di, m)| (di - m * step).abs() > 1e-6 * step);
     let reliable = |i: usize| !jittery || 0.5 * (q(i) + q(i - 1)) < 0.5 * step;
     let mut first: Option<TimeProblem> = None;
     let mut gaps = 0;
@@ -239,11 +296,28 @@ fn check_steps(t: &[f64], d: &[f64], step: f64, q: &dyn Fn(usize) -> f64) -> Res
         let allowed = 0.5 * (q(i) + q(i - 1)) + STEP_TOLERANCE * step;
         let problem = if (d[i - 1] - m * step).abs() > allowed {
             // Neither one step nor a whole number of them: an edited or stray row.
-            Some(TimeProblem::OffGrid { row: i + 1, t: t[i], grid: t[i - 1] + m.max(1.0) * step, allowed, rate_hz: 1.0 / step })
+            Some(TimeProblem::OffGrid {
+                row: i + 1,
+                t: t[i],
+                grid: t[i - 1] + m.max(1.0) * step,
+                allowed,
+                rate_hz: 1.0 / step,
+            })
         } else if m <= 0.0 {
-            Some(TimeProblem::GoesBack { row: i + 1, t: t[i], prev: t[i - 1] })
+            Some(TimeProblem::GoesBack {
+                row: i + 1,
+                t: t[i],
+                prev: t[i - 1],
+            })
         } else if m >= 2.0 {
-            Some(TimeProblem::Gap { row: i + 1, t: t[i], prev: t[i - 1], missing: m as usize - 1, step, more: 0 })
+            Some(TimeProblem::Gap {
+                row: i + 1,
+                t: t[i],
+                prev: t[i - 1],
+                missing: m as usize - 1,
+                step,
+                more: 0,
+            })
         } else {
             None
         };
@@ -258,8 +332,23 @@ fn check_steps(t: &[f64], d: &[f64], step: f64, q: &dyn Fn(usize) -> f64) -> Res
             (Some(_), Some(_)) => break,
         }
     }
-    if let Some(TimeProblem::Gap { row, t, prev, missing, step, .. }) = first {
-        return Err(TimeProblem::Gap { row, t, prev, missing, step, more: gaps - 1 });
+    if let Some(TimeProblem::Gap {
+        row,
+        t,
+        prev,
+        missing,
+        step,
+        ..
+    }) = first
+    {
+        return Err(TimeProblem::Gap {
+            row,
+            t,
+            prev,
+            missing,
+            step,
+            more: gaps - 1,
+        });
     }
     Ok((jittery, unreliable))
 }
@@ -289,13 +378,24 @@ impl Line {
         }
         let mut b = sxy / sxx;
         let mut a = tm - b * im;
-        let s_e = (t.iter().enumerate().map(|(i, &ti)| (ti - a - b * i as f64).powi(2)).sum::<f64>() / (nf - 2.0).max(1.0)).sqrt();
+        let s_e = (t
+            .iter()
+            .enumerate()
+            .map(|(i, &ti)| (ti - a - b * i as f64).powi(2))
+            .sum::<f64>()
+            / (nf - 2.0).max(1.0))
+        .sqrt();
         let se_b = s_e / sxx.sqrt();
         let whole = (1.0 / b).round();
         let mut whole_hz = false;
         if whole >= 1.0 && (1.0 / whole - b).abs() <= (4.0 * se_b).max(1e-12 * b) {
             b = 1.0 / whole;
-            a = t.iter().enumerate().map(|(i, &ti)| ti - i as f64 * b).sum::<f64>() / nf;
+            a = t
+                .iter()
+                .enumerate()
+                .map(|(i, &ti)| ti - i as f64 * b)
+                .sum::<f64>()
+                / nf;
             whole_hz = true;
         }
         // An intercept within a millionth of a step of the first printed time is that time (0
@@ -303,7 +403,14 @@ impl Line {
         if (a - t[0]).abs() < 1e-6 * b {
             a = t[0];
         }
-        Line { a, b, rate_hz: if whole_hz { whole } else { 1.0 / b }, whole_hz, s_e, sxx }
+        Line {
+            a,
+            b,
+            rate_hz: if whole_hz { whole } else { 1.0 / b },
+            whole_hz,
+            s_e,
+            sxx,
+        }
     }
 }
 
@@ -312,7 +419,9 @@ mod tests {
     use super::*;
 
     fn printed(t: &[f64], digits: usize) -> Vec<f64> {
-        t.iter().map(|x| format!("{:.*e}", digits - 1, x).parse().unwrap()).collect()
+        t.iter()
+            .map(|x| format!("{:.*e}", digits - 1, x).parse().unwrap())
+            .collect()
     }
 
     fn grid(rate: f64, n: usize, t0: f64) -> Vec<f64> {
@@ -332,7 +441,8 @@ mod tests {
             for digits in [6, 7, 9] {
                 let n = (12.0 * rate) as usize;
                 let exact = grid(rate, n, 0.0);
-                let tb = rebuild(&printed(&exact, digits)).unwrap_or_else(|e| panic!("{rate} Hz, {digits} digits: {e}"));
+                let tb = rebuild(&printed(&exact, digits))
+                    .unwrap_or_else(|e| panic!("{rate} Hz, {digits} digits: {e}"));
                 assert_eq!(tb.rate_hz, rate, "{rate} Hz, {digits} digits");
                 assert!(tb.whole_hz);
                 assert!(tb.t0_s.abs() < 1e-7, "{}", tb.t0_s);
@@ -342,13 +452,23 @@ mod tests {
         // A rate that is not a whole number of hertz keeps its fitted value.
         let r = 1000.0 / 3.0;
         let tb = rebuild(&printed(&grid(r, 4000, 0.25), 9)).unwrap();
-        assert!(!tb.whole_hz && (tb.rate_hz / r - 1.0).abs() < 1e-8, "{}", tb.rate_hz);
+        assert!(
+            !tb.whole_hz && (tb.rate_hz / r - 1.0).abs() < 1e-8,
+            "{}",
+            tb.rate_hz
+        );
         // Exact binary times need no rebuilding.
         let tb = rebuild(&grid(1024.0, 3000, 0.0)).unwrap();
         assert!(!tb.rounded() && tb.note().is_none());
         // A note says the jitter is rounding.
         let tb = rebuild(&printed(&grid(256.0, 3000, 0.0), 6)).unwrap();
-        assert!(tb.note().unwrap().contains("rounding to 6 significant digits"), "{:?}", tb.note());
+        assert!(
+            tb.note()
+                .unwrap()
+                .contains("rounding to 6 significant digits"),
+            "{:?}",
+            tb.note()
+        );
     }
 
     #[test]
@@ -356,7 +476,9 @@ mod tests {
         let mut t = printed(&grid(512.0, 4000, 0.0), 7);
         t.drain(1000..1010);
         match rebuild(&t) {
-            Err(TimeProblem::Gap { row, missing, more, .. }) => {
+            Err(TimeProblem::Gap {
+                row, missing, more, ..
+            }) => {
                 assert_eq!((row, missing, more), (1001, 10, 0));
             }
             other => panic!("{other:?}"),
@@ -367,9 +489,20 @@ mod tests {
     fn time_going_back_and_a_drifting_clock_are_refused() {
         let mut t = grid(1024.0, 3000, 0.0);
         t[2] = 0.0;
-        assert!(matches!(rebuild(&t), Err(TimeProblem::GoesBack { row: 3, .. })));
+        assert!(matches!(
+            rebuild(&t),
+            Err(TimeProblem::GoesBack { row: 3, .. })
+        ));
         // A clock 0.2 % fast for the second half: within a step everywhere, off the grid.
-        let t: Vec<f64> = (0..4000).map(|i| if i < 2000 { i as f64 / 1000.0 } else { 2.0 + (i - 2000) as f64 * 1.002 / 1000.0 }).collect();
+        let t: Vec<f64> = (0..4000)
+            .map(|i| {
+                if i < 2000 {
+                    i as f64 / 1000.0
+                } else {
+                    2.0 + (i - 2000) as f64 * 1.002 / 1000.0
+                }
+            })
+            .collect();
         let e = rebuild(&t).unwrap_err();
         assert!(matches!(e, TimeProblem::OffGrid { .. }), "{e:?}");
         assert!(e.to_string().contains("drifts"), "{e}");
@@ -378,12 +511,18 @@ mod tests {
     #[test]
     fn too_coarse_printing_is_accepted_but_says_so() {
         // 2048 Hz printed with 4 decimals: a step is 4.9e-4 s, the resolution 1e-4 s: resolvable.
-        let t: Vec<f64> = grid(2048.0, 20000, 0.0).iter().map(|x| (x * 1e4).round() / 1e4).collect();
+        let t: Vec<f64> = grid(2048.0, 20000, 0.0)
+            .iter()
+            .map(|x| (x * 1e4).round() / 1e4)
+            .collect();
         let tb = rebuild(&t).unwrap();
         assert_eq!(tb.rate_hz, 2048.0);
         assert!(!tb.unresolved);
         // Printed to 1 ms: consistent with rounding, but a dropped row could hide.
-        let t: Vec<f64> = grid(2048.0, 20000, 0.0).iter().map(|x| (x * 1e3).round() / 1e3).collect();
+        let t: Vec<f64> = grid(2048.0, 20000, 0.0)
+            .iter()
+            .map(|x| (x * 1e3).round() / 1e3)
+            .collect();
         let tb = rebuild(&t).unwrap();
         assert_eq!(tb.rate_hz, 2048.0);
         assert!(tb.unresolved && tb.note().unwrap().contains("cannot be detected"));

@@ -32,7 +32,13 @@ pub struct InputError {
 impl fmt::Display for InputError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let n = self.issues.len();
-        write!(f, "{}: {} problem{}", self.file, n, if n == 1 { "" } else { "s" })?;
+        write!(
+            f,
+            "{}: {} problem{}",
+            self.file,
+            n,
+            if n == 1 { "" } else { "s" }
+        )?;
         for i in &self.issues {
             write!(f, "\n  {i}")?;
         }
@@ -46,13 +52,19 @@ pub struct Issues(pub Vec<Issue>);
 
 impl Issues {
     pub fn push(&mut self, path: impl Into<String>, message: impl Into<String>) {
-        self.0.push(Issue { path: path.into(), message: message.into() });
+        self.0.push(Issue {
+            path: path.into(),
+            message: message.into(),
+        });
     }
     pub fn into_result(self, file: &str) -> Result<(), InputError> {
         if self.0.is_empty() {
             Ok(())
         } else {
-            Err(InputError { file: file.to_string(), issues: self.0 })
+            Err(InputError {
+                file: file.to_string(),
+                issues: self.0,
+            })
         }
     }
 }
@@ -68,7 +80,13 @@ pub fn parse(text: &str, file: &str) -> Result<toml::Table, InputError> {
         });
         InputError {
             file: file.to_string(),
-            issues: vec![Issue { path: String::new(), message: format!("{}: {msg}", loc.unwrap_or_else(|| "TOML syntax error".into())) }],
+            issues: vec![Issue {
+                path: String::new(),
+                message: format!(
+                    "{}: {msg}",
+                    loc.unwrap_or_else(|| "TOML syntax error".into())
+                ),
+            }],
         }
     })
 }
@@ -90,7 +108,11 @@ fn join(prefix: &str, key: &str) -> String {
 
 impl<'a> Fields<'a> {
     pub fn new(path: impl Into<String>, table: &'a toml::Table) -> Self {
-        Fields { path: path.into(), table, used: BTreeSet::new() }
+        Fields {
+            path: path.into(),
+            table,
+            used: BTreeSet::new(),
+        }
     }
 
     /// Full path of `key` in this table.
@@ -115,7 +137,10 @@ impl<'a> Fields<'a> {
             toml::Value::Float(x) => *x,
             toml::Value::Integer(i) => *i as f64,
             other => {
-                issues.push(self.path_of(key), format!("expected a number, found {}", other.type_str()));
+                issues.push(
+                    self.path_of(key),
+                    format!("expected a number, found {}", other.type_str()),
+                );
                 return None;
             }
         };
@@ -127,11 +152,20 @@ impl<'a> Fields<'a> {
     }
 
     /// A value of one TOML type, or an issue naming the key and what was found.
-    fn typed<T>(&mut self, key: &str, issues: &mut Issues, expected: &str, get: impl Fn(&'a toml::Value) -> Option<T>) -> Option<T> {
+    fn typed<T>(
+        &mut self,
+        key: &str,
+        issues: &mut Issues,
+        expected: &str,
+        get: impl Fn(&'a toml::Value) -> Option<T>,
+    ) -> Option<T> {
         let v = self.take(key)?;
         let out = get(v);
         if out.is_none() {
-            issues.push(self.path_of(key), format!("expected {expected}, found {}", v.type_str()));
+            issues.push(
+                self.path_of(key),
+                format!("expected {expected}, found {}", v.type_str()),
+            );
         }
         out
     }
@@ -148,7 +182,9 @@ impl<'a> Fields<'a> {
 
     /// A whole number (`Ok`) or a string (`Err`).
     pub fn int_or_str(&mut self, key: &str, issues: &mut Issues) -> Option<Result<i64, &'a str>> {
-        self.typed(key, issues, "a whole number or a string", |v| v.as_integer().map(Ok).or_else(|| v.as_str().map(Err)))
+        self.typed(key, issues, "a whole number or a string", |v| {
+            v.as_integer().map(Ok).or_else(|| v.as_str().map(Err))
+        })
     }
 
     /// A boolean.
@@ -162,7 +198,10 @@ impl<'a> Fields<'a> {
         match self.take(key)? {
             toml::Value::Table(t) => Some(Fields::new(path, t)),
             other => {
-                issues.push(path, format!("expected a table, found {}", other.type_str()));
+                issues.push(
+                    path,
+                    format!("expected a table, found {}", other.type_str()),
+                );
                 None
             }
         }
@@ -177,31 +216,53 @@ impl<'a> Fields<'a> {
                 for (i, v) in items.iter().enumerate() {
                     match v {
                         toml::Value::Table(t) => out.push(Fields::new(format!("{path}[{i}]"), t)),
-                        other => issues.push(format!("{path}[{i}]"), format!("expected a table, found {}", other.type_str())),
+                        other => issues.push(
+                            format!("{path}[{i}]"),
+                            format!("expected a table, found {}", other.type_str()),
+                        ),
                     }
                 }
                 Some(out)
             }
             other => {
-                issues.push(path, format!("expected an array of tables ([[{key}]]), found {}", other.type_str()));
+                issues.push(
+                    path,
+                    format!(
+                        "expected an array of tables ([[{key}]]), found {}",
+                        other.type_str()
+                    ),
+                );
                 None
             }
         }
     }
 
     /// An array whose every element `get` accepts; a bad element is an issue at `key[i]`.
-    fn array<T>(&mut self, key: &str, issues: &mut Issues, what: &str, element: &str, get: impl Fn(&'a toml::Value) -> Option<T>) -> Option<Vec<T>> {
+    fn array<T>(
+        &mut self,
+        key: &str,
+        issues: &mut Issues,
+        what: &str,
+        element: &str,
+        get: impl Fn(&'a toml::Value) -> Option<T>,
+    ) -> Option<Vec<T>> {
         let path = self.path_of(key);
         let v = self.take(key)?;
         let Some(items) = v.as_array() else {
-            issues.push(path, format!("expected an array of {what}, found {}", v.type_str()));
+            issues.push(
+                path,
+                format!("expected an array of {what}, found {}", v.type_str()),
+            );
             return None;
         };
         let mut out = Vec::with_capacity(items.len());
         for (i, item) in items.iter().enumerate() {
             match get(item) {
                 Some(x) => out.push(x),
-                None => issues.push(format!("{path}[{i}]"), format!("expected {element}, found {item}")),
+                None => issues.push(
+                    format!("{path}[{i}]"),
+                    format!("expected {element}, found {item}"),
+                ),
             }
         }
         Some(out)
@@ -225,8 +286,14 @@ impl<'a> Fields<'a> {
     pub fn finish(self, expected: &[&str], issues: &mut Issues) {
         for key in self.table.keys() {
             if !self.used.contains(key.as_str()) {
-                let hint = suggest(key, expected).map(|s| format!(" (did you mean `{s}`?)")).unwrap_or_default();
-                let list = if expected.is_empty() { String::new() } else { format!("; expected one of: {}", expected.join(", ")) };
+                let hint = suggest(key, expected)
+                    .map(|s| format!(" (did you mean `{s}`?)"))
+                    .unwrap_or_default();
+                let list = if expected.is_empty() {
+                    String::new()
+                } else {
+                    format!("; expected one of: {}", expected.join(", "))
+                };
                 issues.push(self.path_of(key), format!("unknown key{hint}{list}"));
             }
         }
@@ -254,7 +321,11 @@ fn levenshtein(a: &str, b: &str) -> usize {
     for (i, ca) in a.chars().enumerate() {
         let mut cur = vec![i + 1];
         for (j, cb) in b.iter().enumerate() {
-            cur.push((prev[j] + (ca != *cb) as usize).min(prev[j + 1] + 1).min(cur[j] + 1));
+            cur.push(
+                (prev[j] + (ca != *cb) as usize)
+                    .min(prev[j + 1] + 1)
+                    .min(cur[j] + 1),
+            );
         }
         prev = cur;
     }

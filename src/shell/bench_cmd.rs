@@ -8,11 +8,11 @@ use super::cli::BenchArgs;
 use crate::kernel::effects::Baseline;
 use crate::kernel::excitation::{Reference, Sine};
 use crate::kernel::ground::Processing;
-use crate::orchestration::quake;
-use crate::orchestration::spec::{ExcitationSpec, Realisation};
 use crate::kernel::params::ModelParams;
 use crate::kernel::simulate::{self, Isa, LaneParams, NoObserver, Solver};
 use crate::kernel::LANES;
+use crate::orchestration::quake;
+use crate::orchestration::spec::{ExcitationSpec, Realisation};
 use anyhow::{bail, Context};
 use rayon::prelude::*;
 use std::io::Write;
@@ -22,14 +22,29 @@ use std::time::Instant;
 const STAGES: f64 = 4.0;
 
 fn reference() -> Reference {
-    Sine { freq_hz: 3.0, amp_m: Sine::amp_from_g(1.73, 3.0), taper_s: 1.0, duration_s: 3.0, window_cycles: Some(4) }.reference(1024.0)
+    Sine {
+        freq_hz: 3.0,
+        amp_m: Sine::amp_from_g(1.73, 3.0),
+        taper_s: 1.0,
+        duration_s: 3.0,
+        window_cycles: Some(4),
+    }
+    .reference(1024.0)
 }
 
 /// The record benchmark's motion: record_sweep.toml's first (firm ground, 0.5 g, 15 s between
 /// 10 s pads: 35 s), with the default response spectrum accumulated online.
 pub fn record_reference() -> anyhow::Result<Reference> {
-    let exc = ExcitationSpec::Stochastic { duration_s: 15.0, realisation: Realisation::Fixed(0), seed: None, ground: vec![("pga_g", 0.5)], processing: Processing::default(), f_ref_hz: 50.0 };
-    let r = quake::generated(&exc, &ModelParams::default(), 20261123, 0).map_err(anyhow::Error::msg)?;
+    let exc = ExcitationSpec::Stochastic {
+        duration_s: 15.0,
+        realisation: Realisation::Fixed(0),
+        seed: None,
+        ground: vec![("pga_g", 0.5)],
+        processing: Processing::default(),
+        f_ref_hz: 50.0,
+    };
+    let r =
+        quake::generated(&exc, &ModelParams::default(), 20261123, 0).map_err(anyhow::Error::msg)?;
     Ok(r.with_spectrum(quake::default_spectrum()))
 }
 
@@ -40,15 +55,25 @@ fn throughput<const N: usize>(threads: usize, secs: f64, r: &Reference) -> anyho
     let sets: Vec<&ModelParams> = (0..N).map(|_| &p).collect();
     let lp = LaneParams::<N>::new(&sets)?;
     let solver = Solver::default();
-    let run_once = || simulate::run(&lp, &Baseline, r, &solver, &mut NoObserver).map(|x| x[0].metrics.rms_err_accel_ratio);
+    let run_once = || {
+        simulate::run(&lp, &Baseline, r, &solver, &mut NoObserver)
+            .map(|x| x[0].metrics.rms_err_accel_ratio)
+    };
     // Calibrate the repetitions to the time budget with one run.
     let t = Instant::now();
     run_once()?;
     let per_run = t.elapsed().as_secs_f64().max(1e-6);
     let reps = ((secs / per_run) as usize).max(2);
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()?;
     let t = Instant::now();
-    let done: Vec<f64> = pool.install(|| (0..reps * threads).into_par_iter().map(|_| run_once().unwrap_or(f64::NAN)).collect());
+    let done: Vec<f64> = pool.install(|| {
+        (0..reps * threads)
+            .into_par_iter()
+            .map(|_| run_once().unwrap_or(f64::NAN))
+            .collect()
+    });
     let wall = t.elapsed().as_secs_f64();
     anyhow::ensure!(done.iter().all(|x| x.is_finite()), "benchmark run failed");
     Ok((reps * threads * N) as f64 * r.len() as f64 / r.f_s / wall)
@@ -103,7 +128,11 @@ pub fn measure(secs: f64) -> anyhow::Result<Figures> {
         record1: 0.0,
         record2: 0.0,
         limit: 0.0,
-        rates: Rates { flops: 0.0, divs: 0.0, sqrts: 0.0 },
+        rates: Rates {
+            flops: 0.0,
+            divs: 0.0,
+            sqrts: 0.0,
+        },
         rhs_per_sim_s: r.f_s * rhs_per_tick,
     };
     let chain_iters = 50_000_000;
@@ -111,9 +140,15 @@ pub fn measure(secs: f64) -> anyhow::Result<Figures> {
         // Clock: a dependent chain of 1-cycle operations, 2 per iteration.
         let t = Instant::now();
         std::hint::black_box(calibrate::add_chain(std::hint::black_box(chain_iters), 1));
-        f.clock_hz = f.clock_hz.max(2.0 * chain_iters as f64 / t.elapsed().as_secs_f64());
+        f.clock_hz = f
+            .clock_hz
+            .max(2.0 * chain_iters as f64 / t.elapsed().as_secs_f64());
         let m = calibrate::rates(budget / 3.0);
-        f.rates = Rates { flops: f.rates.flops.max(m.flops), divs: f.rates.divs.max(m.divs), sqrts: f.rates.sqrts.max(m.sqrts) };
+        f.rates = Rates {
+            flops: f.rates.flops.max(m.flops),
+            divs: f.rates.divs.max(m.divs),
+            sqrts: f.rates.sqrts.max(m.sqrts),
+        };
         f.scalar = f.scalar.max(throughput::<1>(1, budget, &r)?);
         f.batch1 = f.batch1.max(throughput::<LANES>(1, budget, &r)?);
         f.batch2 = f.batch2.max(throughput::<LANES>(2, budget, &r)?);
@@ -125,9 +160,16 @@ pub fn measure(secs: f64) -> anyhow::Result<Figures> {
 }
 
 fn read_baseline(path: &std::path::Path) -> anyhow::Result<(f64, f64)> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let t: toml::Table = text.parse().with_context(|| format!("{} is not TOML", path.display()))?;
-    let get = |k: &str| t.get(k).and_then(|v| v.as_float()).with_context(|| format!("{}: missing number `{k}`", path.display()));
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let t: toml::Table = text
+        .parse()
+        .with_context(|| format!("{} is not TOML", path.display()))?;
+    let get = |k: &str| {
+        t.get(k)
+            .and_then(|v| v.as_float())
+            .with_context(|| format!("{}: missing number `{k}`", path.display()))
+    };
     Ok((get("batch_over_scalar")?, get("batch_over_limit")?))
 }
 
@@ -136,11 +178,20 @@ fn bench_diagnose(campaign: &std::path::Path, max_seconds: Option<f64>) -> anyho
     let model = crate::kernel::params::ModelParams::default();
     let problem = super::fit_cmd::load_problem(campaign, &model, false)?.problem;
     let candidates = crate::kernel::params::EffectId::ALL;
-    let simulated: f64 = problem.tests.iter().map(|t| t.drive.len() as f64 / t.drive.f_s).sum();
+    let simulated: f64 = problem
+        .tests
+        .iter()
+        .map(|t| t.drive.len() as f64 / t.drive.f_s)
+        .sum();
     let t0 = std::time::Instant::now();
     let d = crate::orchestration::diagnose::diagnose(&problem, &candidates);
     let secs = t0.elapsed().as_secs_f64();
-    let runs: usize = d.candidates.iter().filter_map(|c| c.fit.as_ref().ok()).map(|f| f.iterations + 1).sum();
+    let runs: usize = d
+        .candidates
+        .iter()
+        .filter_map(|c| c.fit.as_ref().ok())
+        .map(|f| f.iterations + 1)
+        .sum();
     let mut out = std::io::stdout().lock();
     writeln!(
         out,
@@ -153,9 +204,16 @@ fn bench_diagnose(campaign: &std::path::Path, max_seconds: Option<f64>) -> anyho
     writeln!(out, "  wall time {secs:.1} s; {runs} batches of {LANES} lanes per test (one per Levenberg-Marquardt iteration, Jacobian included)")?;
     writeln!(out, "  verdict: {}", d.summary())?;
     if let Some(max) = max_seconds {
-        writeln!(out, "  gate: {secs:.1} s against {max} s {}", if secs <= max { "ok" } else { "FAILED" })?;
+        writeln!(
+            out,
+            "  gate: {secs:.1} s against {max} s {}",
+            if secs <= max { "ok" } else { "FAILED" }
+        )?;
         if secs > max {
-            return Err(super::RunFailed(format!("the diagnosis took {secs:.1} s, more than {max} s")).into());
+            return Err(super::RunFailed(format!(
+                "the diagnosis took {secs:.1} s, more than {max} s"
+            ))
+            .into());
         }
     }
     Ok(())
@@ -170,11 +228,39 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     let substeps = Solver::default().substeps;
     let h_us = 1e6 / (1024.0 * substeps as f64);
     writeln!(out, "study bench: 3 s sine at 1.73 g, RK4 h = {h_us:.1} µs ({substeps} substeps per 1024 Hz tick; converged: every metric within 1e-5 of the 32-substep answer), {} kernel", Isa::detected())?;
-    writeln!(out, "  clock (dependent add chain)        {:>8.2} GHz", f.clock_hz / 1e9)?;
-    writeln!(out, "  {:<34} {:>8.0} sim-s/wall-s  {:>6.1} cycles per lane per RHS", "scalar path (1 lane, 1 thread)", f.scalar, f.cycles_per_rhs(f.scalar))?;
-    writeln!(out, "  {:<34} {:>8.0} sim-s/wall-s  {:>6.1} cycles per lane per RHS", format!("batch ({LANES} lanes, 1 thread)"), f.batch1, f.cycles_per_rhs(f.batch1))?;
-    writeln!(out, "  {:<34} {:>8.0} sim-s/wall-s  ({:.2}x one thread)", format!("batch ({LANES} lanes, 2 threads)"), f.batch2, f.batch2 / f.batch1)?;
-    writeln!(out, "  {:<34} {:>8.0} sim-s/wall-s  {:>6.1} cycles per lane per RHS", "limit (1 thread)", f.limit, f.cycles_per_rhs(f.limit))?;
+    writeln!(
+        out,
+        "  clock (dependent add chain)        {:>8.2} GHz",
+        f.clock_hz / 1e9
+    )?;
+    writeln!(
+        out,
+        "  {:<34} {:>8.0} sim-s/wall-s  {:>6.1} cycles per lane per RHS",
+        "scalar path (1 lane, 1 thread)",
+        f.scalar,
+        f.cycles_per_rhs(f.scalar)
+    )?;
+    writeln!(
+        out,
+        "  {:<34} {:>8.0} sim-s/wall-s  {:>6.1} cycles per lane per RHS",
+        format!("batch ({LANES} lanes, 1 thread)"),
+        f.batch1,
+        f.cycles_per_rhs(f.batch1)
+    )?;
+    writeln!(
+        out,
+        "  {:<34} {:>8.0} sim-s/wall-s  ({:.2}x one thread)",
+        format!("batch ({LANES} lanes, 2 threads)"),
+        f.batch2,
+        f.batch2 / f.batch1
+    )?;
+    writeln!(
+        out,
+        "  {:<34} {:>8.0} sim-s/wall-s  {:>6.1} cycles per lane per RHS",
+        "limit (1 thread)",
+        f.limit,
+        f.cycles_per_rhs(f.limit)
+    )?;
     writeln!(
         out,
         "    the model's minimal operation count per lane: {} mul/add, {} div, {} sqrt, {} (.)^-1/4 per RHS, {TICK_OPS} per tick (+{WINDOW_OPS} in the window);",
@@ -194,9 +280,27 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         spectrum.periods.len(),
         100.0 * spectrum.damping
     )?;
-    writeln!(out, "  {:<34} {:>8.0} sim-s/wall-s  {:>6.1} cycles per lane per RHS", format!("record batch ({LANES} lanes, 1 thread)"), f.record1, f.cycles_per_rhs(f.record1))?;
-    writeln!(out, "  {:<34} {:>8.0} sim-s/wall-s  ({:.2}x one thread)", format!("record batch ({LANES} lanes, 2 threads)"), f.record2, f.record2 / f.record1)?;
-    writeln!(out, "  ratios: batch/scalar {:.2}, batch/limit {:.2}, 2 threads/1 thread {:.2}", f.batch_over_scalar(), f.batch_over_limit(), f.batch2 / f.batch1)?;
+    writeln!(
+        out,
+        "  {:<34} {:>8.0} sim-s/wall-s  {:>6.1} cycles per lane per RHS",
+        format!("record batch ({LANES} lanes, 1 thread)"),
+        f.record1,
+        f.cycles_per_rhs(f.record1)
+    )?;
+    writeln!(
+        out,
+        "  {:<34} {:>8.0} sim-s/wall-s  ({:.2}x one thread)",
+        format!("record batch ({LANES} lanes, 2 threads)"),
+        f.record2,
+        f.record2 / f.record1
+    )?;
+    writeln!(
+        out,
+        "  ratios: batch/scalar {:.2}, batch/limit {:.2}, 2 threads/1 thread {:.2}",
+        f.batch_over_scalar(),
+        f.batch_over_limit(),
+        f.batch2 / f.batch1
+    )?;
     if let Some(path) = &args.write_baseline {
         let text = format!(
             "# Ratios measured by `study bench` (same run, same machine); the CI gate fails when one falls\n# more than 25 % below these.\nbatch_over_scalar = {:.3}\nbatch_over_limit = {:.3}\n",
@@ -209,15 +313,26 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     if let Some(path) = &args.gate {
         let (bs, bl) = read_baseline(path)?;
         let mut bad = Vec::new();
-        for (name, got, base) in [("batch/scalar", f.batch_over_scalar(), bs), ("batch/limit", f.batch_over_limit(), bl)] {
+        for (name, got, base) in [
+            ("batch/scalar", f.batch_over_scalar(), bs),
+            ("batch/limit", f.batch_over_limit(), bl),
+        ] {
             let floor = 0.75 * base;
-            writeln!(out, "  gate {name}: {got:.3} against baseline {base:.3} (floor {floor:.3}) {}", if got >= floor { "ok" } else { "FAILED" })?;
+            writeln!(
+                out,
+                "  gate {name}: {got:.3} against baseline {base:.3} (floor {floor:.3}) {}",
+                if got >= floor { "ok" } else { "FAILED" }
+            )?;
             if got < floor {
                 bad.push(name);
             }
         }
         if !bad.is_empty() {
-            bail!("benchmark gate failed: {} fell more than 25 % below the baseline {}", bad.join(", "), path.display());
+            bail!(
+                "benchmark gate failed: {} fell more than 25 % below the baseline {}",
+                bad.join(", "),
+                path.display()
+            );
         }
     }
     Ok(())

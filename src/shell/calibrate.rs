@@ -48,7 +48,12 @@ pub struct OpCount {
 }
 
 /// One right-hand-side evaluation of one lane (the table of the module doc).
-pub const MINIMAL: OpCount = OpCount { flops: 55.0, divs: 2.0, sqrts: 1.0, fourth_roots: 2.0 };
+pub const MINIMAL: OpCount = OpCount {
+    flops: 55.0,
+    divs: 2.0,
+    sqrts: 1.0,
+    fourth_roots: 2.0,
+};
 
 /// Per tick and lane outside the evaluations: controller 23, guard 10.
 pub const TICK_OPS: f64 = 33.0;
@@ -91,7 +96,8 @@ impl Rates {
     /// The limit in simulated seconds per wall second of one thread: `rhs_per_tick` evaluations
     /// and the tick's own work, `window_share` of the ticks in the analysis window, at `f_s`.
     pub fn limit(&self, rhs_per_tick: f64, window_share: f64, f_s: f64) -> f64 {
-        let tick = rhs_per_tick * self.rhs_seconds(&MINIMAL) + (TICK_OPS + window_share * WINDOW_OPS) / self.flops;
+        let tick = rhs_per_tick * self.rhs_seconds(&MINIMAL)
+            + (TICK_OPS + window_share * WINDOW_OPS) / self.flops;
         1.0 / (f_s * tick)
     }
 }
@@ -175,7 +181,8 @@ fn rate(secs: f64, ops_per_iter: f64, f: impl Fn(usize) -> f64) -> f64 {
     let probe = 10_000;
     let t = std::time::Instant::now();
     black_box(f(black_box(probe)));
-    let iters = ((secs / t.elapsed().as_secs_f64().max(1e-7)) * probe as f64).max(probe as f64) as usize;
+    let iters =
+        ((secs / t.elapsed().as_secs_f64().max(1e-7)) * probe as f64).max(probe as f64) as usize;
     let t = std::time::Instant::now();
     black_box(f(black_box(iters)));
     iters as f64 * ops_per_iter / t.elapsed().as_secs_f64()
@@ -232,16 +239,27 @@ mod tests {
     #[test]
     fn the_limit_takes_the_slower_unit_and_the_best_split() {
         // A machine whose divider is free: both fourth roots go to it, the pipes bound the time.
-        let r = Rates { flops: 1e9, divs: 1e12, sqrts: 1e12 };
+        let r = Rates {
+            flops: 1e9,
+            divs: 1e12,
+            sqrts: 1e12,
+        };
         assert!((r.rhs_seconds(&MINIMAL) - MINIMAL.flops / 1e9).abs() < 1e-12);
         // A machine whose divider is slow: the fourth roots go to the pipes.
-        let r = Rates { flops: 1e9, divs: 1e6, sqrts: 1e6 };
+        let r = Rates {
+            flops: 1e9,
+            divs: 1e6,
+            sqrts: 1e6,
+        };
         let pipes = (MINIMAL.flops + 2.0 * FOURTH_ROOT_FLOPS) / 1e9;
         let divider = 3.0 / 1e6;
         assert!((r.rhs_seconds(&MINIMAL) - pipes.max(divider)).abs() < 1e-15);
         // Sixteen evaluations and the tick's work at 1024 Hz.
         let lim = r.limit(16.0, 0.5, 1024.0);
-        assert!((lim - 1.0 / (1024.0 * (16.0 * pipes.max(divider) + (TICK_OPS + 25.0) / 1e9))).abs() < 1e-9 * lim);
+        assert!(
+            (lim - 1.0 / (1024.0 * (16.0 * pipes.max(divider) + (TICK_OPS + 25.0) / 1e9))).abs()
+                < 1e-9 * lim
+        );
     }
 
     #[test]

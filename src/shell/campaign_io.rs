@@ -21,16 +21,22 @@ pub fn load_model(path: Option<&Path>) -> anyhow::Result<ModelParams> {
     match path {
         None => Ok(ModelParams::default()),
         Some(p) => {
-            let text = std::fs::read_to_string(p).map_err(|e| BadInput(format!("{}: cannot read: {e}", p.display())))?;
+            let text = std::fs::read_to_string(p)
+                .map_err(|e| BadInput(format!("{}: cannot read: {e}", p.display())))?;
             Ok(campaign::model_from_toml(&text, &p.display().to_string())?)
         }
     }
 }
 
 pub fn load_campaign(file: &Path, model: &ModelParams) -> anyhow::Result<LoadedCampaign> {
-    let text = std::fs::read_to_string(file).map_err(|e| BadInput(format!("{}: cannot read: {e}", file.display())))?;
+    let text = std::fs::read_to_string(file)
+        .map_err(|e| BadInput(format!("{}: cannot read: {e}", file.display())))?;
     let campaign = Campaign::from_toml(&text, &file.display().to_string(), model)?;
-    Ok(LoadedCampaign { file: file.to_path_buf(), base: file.parent().unwrap_or(Path::new(".")).to_path_buf(), campaign })
+    Ok(LoadedCampaign {
+        file: file.to_path_buf(),
+        base: file.parent().unwrap_or(Path::new(".")).to_path_buf(),
+        campaign,
+    })
 }
 
 /// Reads a measured test: the required columns and the optional ones present, every cell a
@@ -39,17 +45,34 @@ pub fn load_campaign(file: &Path, model: &ModelParams) -> anyhow::Result<LoadedC
 pub fn read_measured(path: &Path) -> Result<NumTable, Vec<String>> {
     match tables::read_columns_lenient(path, &REQUIRED, &OPTIONAL) {
         Ok((table, bad)) if bad.is_empty() => Ok(table),
-        Ok((table, bad)) => Err(bad.iter().map(|e| e.to_string()).chain(table.check_limits().iter().map(|p| p.to_string())).collect()),
+        Ok((table, bad)) => Err(bad
+            .iter()
+            .map(|e| e.to_string())
+            .chain(table.check_limits().iter().map(|p| p.to_string()))
+            .collect()),
         Err(e) => Err(e.each()),
     }
 }
 
 /// Reads one test's files and aligns it; its problems as lines.
-fn load_test(lc: &LoadedCampaign, test: &TestSpec, open_loop: Option<OpenLoop>) -> anyhow::Result<Result<AlignedTest, Vec<String>>> {
+fn load_test(
+    lc: &LoadedCampaign,
+    test: &TestSpec,
+    open_loop: Option<OpenLoop>,
+) -> anyhow::Result<Result<AlignedTest, Vec<String>>> {
     let path = lc.base.join(&test.data);
     if !path.is_file() {
-        let what = if path.is_dir() { "a folder, not a data file" } else { "not found" };
-        return Ok(Err(vec![format!("{}: {what} (the data of test `{}` in {})", path.display(), test.name, lc.file.display())]));
+        let what = if path.is_dir() {
+            "a folder, not a data file"
+        } else {
+            "not found"
+        };
+        return Ok(Err(vec![format!(
+            "{}: {what} (the data of test `{}` in {})",
+            path.display(),
+            test.name,
+            lc.file.display()
+        )]));
     }
     let data = match read_measured(&path) {
         Ok(t) => t,
@@ -57,19 +80,30 @@ fn load_test(lc: &LoadedCampaign, test: &TestSpec, open_loop: Option<OpenLoop>) 
     };
     // A record in another file than the test's data.
     let record = match &test.excitation {
-        ExcitationSpec::Record { file, column, time_column, .. } if file != &test.data => match tables::read_record(&lc.base.join(file), column, time_column) {
-            Ok(t) => Some(t),
-            Err(e) if e.is_input() => return Ok(Err(e.each())),
-            Err(e) => return Err(e.into()),
-        },
+        ExcitationSpec::Record {
+            file,
+            column,
+            time_column,
+            ..
+        } if file != &test.data => {
+            match tables::read_record(&lc.base.join(file), column, time_column) {
+                Ok(t) => Some(t),
+                Err(e) if e.is_input() => return Ok(Err(e.each())),
+                Err(e) => return Err(e.into()),
+            }
+        }
         _ => None,
     };
-    Ok(measured::align(test, &data, record.as_ref(), open_loop).map_err(|ps| ps.iter().map(|p| p.to_string()).collect()))
+    Ok(measured::align(test, &data, record.as_ref(), open_loop)
+        .map_err(|ps| ps.iter().map(|p| p.to_string()).collect()))
 }
 
 /// Reads and aligns every test of a campaign. Every problem of every file is reported at once
 /// (exit code 2), a missing file once.
-pub fn load_tests(lc: &LoadedCampaign, open_loop: Option<OpenLoop>) -> anyhow::Result<Vec<AlignedTest>> {
+pub fn load_tests(
+    lc: &LoadedCampaign,
+    open_loop: Option<OpenLoop>,
+) -> anyhow::Result<Vec<AlignedTest>> {
     let mut tests = Vec::new();
     let mut problems: Vec<String> = Vec::new();
     for test in &lc.campaign.tests {
@@ -89,16 +123,38 @@ fn problem_list(campaign: &Path, what: &str, problems: &[String]) -> String {
     if problems.len() == 1 {
         return problems[0].clone();
     }
-    format!("{} problems in the {what} of {}:\n  - {}", problems.len(), campaign.display(), problems.join("\n  - "))
+    format!(
+        "{} problems in the {what} of {}:\n  - {}",
+        problems.len(),
+        campaign.display(),
+        problems.join("\n  - ")
+    )
 }
 
 /// The notes and warnings of aligned tests, printed as two blocks; under `strict`, warnings are
 /// an error (exit code 2) instead.
-pub fn report_checks(out: &mut dyn std::io::Write, campaign: &Path, tests: &[AlignedTest], extra_warnings: &[String], strict: bool) -> anyhow::Result<()> {
-    let notes: Vec<String> = tests.iter().flat_map(|t| t.notes.iter().map(move |n| format!("{}: {n}", t.name))).collect();
-    let warnings: Vec<String> = tests.iter().flat_map(|t| t.warnings.iter().cloned()).chain(extra_warnings.iter().cloned()).collect();
+pub fn report_checks(
+    out: &mut dyn std::io::Write,
+    campaign: &Path,
+    tests: &[AlignedTest],
+    extra_warnings: &[String],
+    strict: bool,
+) -> anyhow::Result<()> {
+    let notes: Vec<String> = tests
+        .iter()
+        .flat_map(|t| t.notes.iter().map(move |n| format!("{}: {n}", t.name)))
+        .collect();
+    let warnings: Vec<String> = tests
+        .iter()
+        .flat_map(|t| t.warnings.iter().cloned())
+        .chain(extra_warnings.iter().cloned())
+        .collect();
     if strict && !warnings.is_empty() {
-        return Err(BadInput(format!("{} (--strict)", problem_list(campaign, "measured data", &warnings))).into());
+        return Err(BadInput(format!(
+            "{} (--strict)",
+            problem_list(campaign, "measured data", &warnings)
+        ))
+        .into());
     }
     if !notes.is_empty() {
         writeln!(out, "\n  notes on the data files:")?;
@@ -107,7 +163,10 @@ pub fn report_checks(out: &mut dyn std::io::Write, campaign: &Path, tests: &[Ali
         }
     }
     if !warnings.is_empty() {
-        writeln!(out, "\n  WARNINGS (results above may be wrong science; --strict makes these errors):")?;
+        writeln!(
+            out,
+            "\n  WARNINGS (results above may be wrong science; --strict makes these errors):"
+        )?;
         for w in &warnings {
             writeln!(out, "    {w}")?;
         }

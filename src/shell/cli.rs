@@ -4,12 +4,16 @@ use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 
 #[derive(Debug, Parser)]
-#[command(name = "study", version, about = "vshake: the virtual shake table (UCSD-NEES LHPOST servo-hydraulic model)",
+#[command(
+    name = "study",
+    version,
+    about = "vshake: the virtual shake table (UCSD-NEES LHPOST servo-hydraulic model)",
     long_about = "vshake: the virtual shake table. A nonlinear servo-hydraulic model of the UCSD-NEES LHPOST \
 (three-variable controller, four-port orifice servo-valves, single-ended actuators, rigid platen with friction).\n\n\
 Exit codes: 0 success; 1 a run failed (diverged, stroke or pressure limit) or a system error; 2 bad input.\n\n\
 Documentation: README.md (tour and tutorials), docs/model.md (the physics contract: every equation, default \
-and source), docs/formats.md (measured-test files, campaigns, study files and results tables).")]
+and source), docs/formats.md (measured-test files, campaigns, study files and results tables)."
+)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,

@@ -3,8 +3,8 @@
 use super::cli::DiagnoseArgs;
 use super::fit_cmd::{check_effect, load_problem, print_checks, residual_warnings};
 use super::meta::{self, Key, Kind};
-use super::BadInput;
 use super::tables::{self, Column};
+use super::BadInput;
 use super::{campaign_io::load_model, RunFailed};
 use crate::kernel::params::EffectId;
 use crate::orchestration::diagnose::{self, Diagnosis};
@@ -25,9 +25,15 @@ fn harmonic_label(k: usize) -> String {
 pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
     let model = load_model(args.model.as_deref())?;
     let candidates: Vec<EffectId> = if args.candidates.is_empty() {
-        EffectId::ALL.into_iter().filter(|&e| !model.effects.get(e)).collect()
+        EffectId::ALL
+            .into_iter()
+            .filter(|&e| !model.effects.get(e))
+            .collect()
     } else {
-        args.candidates.iter().map(|c| check_effect(c, "--candidates")).collect::<anyhow::Result<_>>()?
+        args.candidates
+            .iter()
+            .map(|c| check_effect(c, "--candidates"))
+            .collect::<anyhow::Result<_>>()?
     };
     let loaded = load_problem(&args.campaign, &model, args.strict)?;
     let problem = loaded.problem;
@@ -46,7 +52,15 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
         return Err(BadInput(format!("{} (--strict)", implausible.join("\n"))).into());
     }
     let mut o = std::io::stdout().lock();
-    writeln!(o, "study diagnose {} ({} tests, {} features, {} candidates, {:.1} s)", args.campaign.display(), problem.tests.len(), d.features.len(), d.candidates.len(), secs)?;
+    writeln!(
+        o,
+        "study diagnose {} ({} tests, {} features, {} candidates, {:.1} s)",
+        args.campaign.display(),
+        problem.tests.len(),
+        d.features.len(),
+        d.candidates.len(),
+        secs
+    )?;
     print_candidates(&mut o, &d)?;
     print_evidence(&mut o, &problem, &d)?;
     print_selection(&mut o, &d)?;
@@ -54,7 +68,11 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
         writeln!(o, "\n  the starting model's residual:")?;
         super::state_map::print(&mut o, map)?;
     }
-    if let (Some(map), Some(true)) = (&d.state_map_after, d.named_fit().map(|(_, f)| f.after.residual_rms() > diagnose::NOISE_FACTOR * d.noise_rms)) {
+    if let (Some(map), Some(true)) = (
+        &d.state_map_after,
+        d.named_fit()
+            .map(|(_, f)| f.after.residual_rms() > diagnose::NOISE_FACTOR * d.noise_rms),
+    ) {
         writeln!(o, "\n  the residual the named effects leave:")?;
         super::state_map::print(&mut o, map)?;
     }
@@ -77,7 +95,11 @@ fn print_candidates(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
         d.baseline.residual_rms(),
         d.noise_rms
     )?;
-    writeln!(o, "\n  {:<4} {:<17} {:<24} {:>3} {:>4} {:>11} {:>11} {:>9} {:>11}  significant", "rank", "candidate", "family", "p", "iter", "chi2", "dBIC", "explains", "rms resid.")?;
+    writeln!(
+        o,
+        "\n  {:<4} {:<17} {:<24} {:>3} {:>4} {:>11} {:>11} {:>9} {:>11}  significant",
+        "rank", "candidate", "family", "p", "iter", "chi2", "dBIC", "explains", "rms resid."
+    )?;
     for (i, c) in d.candidates.iter().enumerate() {
         let rms = c.fit.as_ref().map_or(f64::NAN, |f| f.after.residual_rms());
         writeln!(
@@ -87,7 +109,11 @@ fn print_candidates(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
             c.effect.name(),
             c.family,
             c.free.len(),
-            c.fit.as_ref().map_or("-".to_string(), |f| format!("{}{}", f.iterations, if f.converged { "" } else { "!" })),
+            c.fit.as_ref().map_or("-".to_string(), |f| format!(
+                "{}{}",
+                f.iterations,
+                if f.converged { "" } else { "!" }
+            )),
             c.chi2(),
             c.delta_bic,
             100.0 * c.explained,
@@ -107,17 +133,48 @@ fn print_evidence(o: &mut dyn Write, problem: &Problem, d: &Diagnosis) -> std::i
     writeln!(o, "\n  evidence for the top candidates (the residual features each explains; chi2 baseline -> candidate):")?;
     for c in d.candidates.iter().take(3) {
         let Ok(f) = &c.fit else { continue };
-        let params: Vec<String> = c.free.iter().zip(&f.estimate).zip(&f.se).map(|((p, e), s)| format!("{} = {e:.3e} ± {s:.1e} {}", p.info.name, p.info.unit)).collect();
+        let params: Vec<String> = c
+            .free
+            .iter()
+            .zip(&f.estimate)
+            .zip(&f.se)
+            .map(|((p, e), s)| format!("{} = {e:.3e} ± {s:.1e} {}", p.info.name, p.info.unit))
+            .collect();
         writeln!(o, "  {} ({})", c.effect, params.join(", "))?;
         for (t, k, b, a) in diagnose::evidence(d, c, 3) {
-            writeln!(o, "      {} of {:<16} {:>11.4e} -> {:.4e}", harmonic_label(k), problem.tests[t].name, b, a)?;
+            writeln!(
+                o,
+                "      {} of {:<16} {:>11.4e} -> {:.4e}",
+                harmonic_label(k),
+                problem.tests[t].name,
+                b,
+                a
+            )?;
         }
-        let per: Vec<String> = (0..problem.tests.len()).map(|t| format!("{:.1e}->{:.1e}", d.baseline.test_rms(t), f.after.test_rms(t))).collect();
+        let per: Vec<String> = (0..problem.tests.len())
+            .map(|t| {
+                format!(
+                    "{:.1e}->{:.1e}",
+                    d.baseline.test_rms(t),
+                    f.after.test_rms(t)
+                )
+            })
+            .collect();
         writeln!(o, "      residual rms per test: {}", per.join("  "))?;
-        let (pb, pa) = (problem.fundamental_phase_error(&d.baseline), problem.fundamental_phase_error(&f.after));
-        let ph: Vec<String> = (0..problem.tests.len()).filter(|&t| pb[t].is_finite()).map(|t| format!("{:+.2}->{:+.2}", pb[t], pa[t])).collect();
+        let (pb, pa) = (
+            problem.fundamental_phase_error(&d.baseline),
+            problem.fundamental_phase_error(&f.after),
+        );
+        let ph: Vec<String> = (0..problem.tests.len())
+            .filter(|&t| pb[t].is_finite())
+            .map(|t| format!("{:+.2}->{:+.2}", pb[t], pa[t]))
+            .collect();
         if !ph.is_empty() {
-            writeln!(o, "      phase error of the fundamental per test (model - measured, deg): {}", ph.join("  "))?;
+            writeln!(
+                o,
+                "      phase error of the fundamental per test (model - measured, deg): {}",
+                ph.join("  ")
+            )?;
         }
     }
     Ok(())
@@ -129,14 +186,28 @@ fn print_selection(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
         return Ok(());
     }
     writeln!(o, "\n  forward selection (each effect fitted on top of those before it, their parameters refitted with it):")?;
-    writeln!(o, "  {:<22} {:>4} {:>11} {:>11} {:>9} {:>11}  parameters (joint fit)", "effect", "iter", "chi2", "dBIC", "explains", "rms resid.")?;
+    writeln!(
+        o,
+        "  {:<22} {:>4} {:>11} {:>11} {:>9} {:>11}  parameters (joint fit)",
+        "effect", "iter", "chi2", "dBIC", "explains", "rms resid."
+    )?;
     for s in &d.more {
-        let params: Vec<String> = s.free.iter().zip(&s.fit.estimate).zip(&s.fit.se).map(|((p, e), se)| format!("{} = {e:.3e} ± {se:.1e} {}", p.info.path(), p.info.unit)).collect();
+        let params: Vec<String> = s
+            .free
+            .iter()
+            .zip(&s.fit.estimate)
+            .zip(&s.fit.se)
+            .map(|((p, e), se)| format!("{} = {e:.3e} ± {se:.1e} {}", p.info.path(), p.info.unit))
+            .collect();
         writeln!(
             o,
             "  + {:<20} {:>4} {:>11.4e} {:>11.4e} {:>8.1}% {:>11.3e}  {}",
             s.effect.name(),
-            format!("{}{}", s.fit.iterations, if s.fit.converged { "" } else { "!" }),
+            format!(
+                "{}{}",
+                s.fit.iterations,
+                if s.fit.converged { "" } else { "!" }
+            ),
             s.fit.chi2_after(),
             s.delta_bic,
             100.0 * s.explained,
@@ -148,17 +219,33 @@ fn print_selection(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
 }
 
 /// The Parquet tables and the HTML page of a diagnosis.
-pub fn write_report(dir: &std::path::Path, campaign: &str, problem: &Problem, d: &Diagnosis) -> anyhow::Result<()> {
+pub fn write_report(
+    dir: &std::path::Path,
+    campaign: &str,
+    problem: &Problem,
+    d: &Diagnosis,
+) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir)?;
     let mut meta = meta::header(Kind::Diagnose);
-    meta.extend([meta::pair(Key::Campaign, campaign), meta::pair(Key::Verdict, d.summary())]);
+    meta.extend([
+        meta::pair(Key::Campaign, campaign),
+        meta::pair(Key::Verdict, d.summary()),
+    ]);
     if let Some(map) = &d.state_map {
         super::state_map::write(dir, map, &meta)?;
     }
-    tables::write_table(&dir.join("candidates.parquet"), candidates_columns(d), &meta)?;
+    tables::write_table(
+        &dir.join("candidates.parquet"),
+        candidates_columns(d),
+        &meta,
+    )?;
     tables::write_table(&dir.join("selection.parquet"), selection_columns(d), &meta)?;
     tables::write_table(&dir.join("tests.parquet"), tests_columns(problem, d), &meta)?;
-    tables::write_table(&dir.join("evidence.parquet"), evidence_columns(problem, d), &meta)?;
+    tables::write_table(
+        &dir.join("evidence.parquet"),
+        evidence_columns(problem, d),
+        &meta,
+    )?;
     let page = html(campaign, problem, d)?;
     let path = dir.join("report.html");
     let out = tables::AtomicFile::new(&path);
@@ -167,53 +254,157 @@ pub fn write_report(dir: &std::path::Path, campaign: &str, problem: &Problem, d:
     Ok(())
 }
 
-
 /// `candidates.parquet`: one row per candidate, ranked.
 fn candidates_columns(d: &Diagnosis) -> Vec<(String, Column)> {
     let cs = &d.candidates;
     vec![
-            ("rank".into(), Column::U32((1..=cs.len() as u32).collect())),
-            ("effect".into(), Column::Str(cs.iter().map(|c| c.effect.to_string()).collect())),
-            ("family".into(), Column::Str(cs.iter().map(|c| c.family.to_string()).collect())),
-            ("n_params".into(), Column::U32(cs.iter().map(|c| c.free.len() as u32).collect())),
-            ("params".into(), Column::StrList(cs.iter().map(|c| c.free.iter().map(|f| f.info.path()).collect()).collect())),
-            ("estimates".into(), Column::F64List(cs.iter().map(|c| c.fit.as_ref().map_or(Vec::new(), |f| f.estimate.clone())).collect())),
-            ("std_errors".into(), Column::F64List(cs.iter().map(|c| c.fit.as_ref().map_or(Vec::new(), |f| f.se.clone())).collect())),
-            ("chi2".into(), Column::F64(cs.iter().map(|c| c.chi2()).collect())),
-            ("chi2_baseline".into(), Column::F64(vec![d.baseline.chi2(); cs.len()])),
-            ("n_features".into(), Column::U32(vec![d.n as u32; cs.len()])),
-            ("delta_bic".into(), Column::F64(cs.iter().map(|c| c.delta_bic).collect())),
-            ("explained".into(), Column::F64(cs.iter().map(|c| c.explained).collect())),
-            ("significant".into(), Column::Bool(cs.iter().map(|c| c.significant()).collect())),
-            ("failure".into(), Column::Str(cs.iter().map(|c| c.fit.as_ref().err().map(ToString::to_string).unwrap_or_default()).collect())),
-        ]
+        ("rank".into(), Column::U32((1..=cs.len() as u32).collect())),
+        (
+            "effect".into(),
+            Column::Str(cs.iter().map(|c| c.effect.to_string()).collect()),
+        ),
+        (
+            "family".into(),
+            Column::Str(cs.iter().map(|c| c.family.to_string()).collect()),
+        ),
+        (
+            "n_params".into(),
+            Column::U32(cs.iter().map(|c| c.free.len() as u32).collect()),
+        ),
+        (
+            "params".into(),
+            Column::StrList(
+                cs.iter()
+                    .map(|c| c.free.iter().map(|f| f.info.path()).collect())
+                    .collect(),
+            ),
+        ),
+        (
+            "estimates".into(),
+            Column::F64List(
+                cs.iter()
+                    .map(|c| c.fit.as_ref().map_or(Vec::new(), |f| f.estimate.clone()))
+                    .collect(),
+            ),
+        ),
+        (
+            "std_errors".into(),
+            Column::F64List(
+                cs.iter()
+                    .map(|c| c.fit.as_ref().map_or(Vec::new(), |f| f.se.clone()))
+                    .collect(),
+            ),
+        ),
+        (
+            "chi2".into(),
+            Column::F64(cs.iter().map(|c| c.chi2()).collect()),
+        ),
+        (
+            "chi2_baseline".into(),
+            Column::F64(vec![d.baseline.chi2(); cs.len()]),
+        ),
+        ("n_features".into(), Column::U32(vec![d.n as u32; cs.len()])),
+        (
+            "delta_bic".into(),
+            Column::F64(cs.iter().map(|c| c.delta_bic).collect()),
+        ),
+        (
+            "explained".into(),
+            Column::F64(cs.iter().map(|c| c.explained).collect()),
+        ),
+        (
+            "significant".into(),
+            Column::Bool(cs.iter().map(|c| c.significant()).collect()),
+        ),
+        (
+            "failure".into(),
+            Column::Str(
+                cs.iter()
+                    .map(|c| {
+                        c.fit
+                            .as_ref()
+                            .err()
+                            .map(ToString::to_string)
+                            .unwrap_or_default()
+                    })
+                    .collect(),
+            ),
+        ),
+    ]
 }
 
 /// `selection.parquet`: the chosen effects, the best candidate then each forward-selection step
 /// (its joint fit).
 fn selection_columns(d: &Diagnosis) -> Vec<(String, Column)> {
     let cs = &d.candidates;
-    let mut steps: Vec<(&str, &[crate::orchestration::fit::Free], &crate::orchestration::fit::FitResult, f64, f64)> = Vec::new();
+    let mut steps: Vec<(
+        &str,
+        &[crate::orchestration::fit::Free],
+        &crate::orchestration::fit::FitResult,
+        f64,
+        f64,
+    )> = Vec::new();
     if let Some(c) = cs.first().filter(|c| c.significant()) {
         if let Ok(f) = &c.fit {
             steps.push((c.effect.name(), &c.free, f, c.delta_bic, c.explained));
         }
     }
     for st in &d.more {
-        steps.push((st.effect.name(), &st.free, &st.fit, st.delta_bic, st.explained));
+        steps.push((
+            st.effect.name(),
+            &st.free,
+            &st.fit,
+            st.delta_bic,
+            st.explained,
+        ));
     }
     vec![
-            ("step".into(), Column::U32((1..=steps.len() as u32).collect())),
-            ("effect".into(), Column::Str(steps.iter().map(|s| s.0.to_string()).collect())),
-            ("params".into(), Column::StrList(steps.iter().map(|s| s.1.iter().map(|f| f.info.path()).collect()).collect())),
-            ("estimates".into(), Column::F64List(steps.iter().map(|s| s.2.estimate.clone()).collect())),
-            ("std_errors".into(), Column::F64List(steps.iter().map(|s| s.2.se.clone()).collect())),
-            ("chi2".into(), Column::F64(steps.iter().map(|s| s.2.chi2_after()).collect())),
-            ("delta_bic".into(), Column::F64(steps.iter().map(|s| s.3).collect())),
-            ("explained".into(), Column::F64(steps.iter().map(|s| s.4).collect())),
-            ("residual_rms".into(), Column::F64(steps.iter().map(|s| s.2.after.residual_rms()).collect())),
-            ("noise_rms".into(), Column::F64(vec![d.noise_rms; steps.len()])),
-        ]
+        (
+            "step".into(),
+            Column::U32((1..=steps.len() as u32).collect()),
+        ),
+        (
+            "effect".into(),
+            Column::Str(steps.iter().map(|s| s.0.to_string()).collect()),
+        ),
+        (
+            "params".into(),
+            Column::StrList(
+                steps
+                    .iter()
+                    .map(|s| s.1.iter().map(|f| f.info.path()).collect())
+                    .collect(),
+            ),
+        ),
+        (
+            "estimates".into(),
+            Column::F64List(steps.iter().map(|s| s.2.estimate.clone()).collect()),
+        ),
+        (
+            "std_errors".into(),
+            Column::F64List(steps.iter().map(|s| s.2.se.clone()).collect()),
+        ),
+        (
+            "chi2".into(),
+            Column::F64(steps.iter().map(|s| s.2.chi2_after()).collect()),
+        ),
+        (
+            "delta_bic".into(),
+            Column::F64(steps.iter().map(|s| s.3).collect()),
+        ),
+        (
+            "explained".into(),
+            Column::F64(steps.iter().map(|s| s.4).collect()),
+        ),
+        (
+            "residual_rms".into(),
+            Column::F64(steps.iter().map(|s| s.2.after.residual_rms()).collect()),
+        ),
+        (
+            "noise_rms".into(),
+            Column::F64(vec![d.noise_rms; steps.len()]),
+        ),
+    ]
 }
 
 /// `tests.parquet`: the residual per test, baseline and each candidate (the "error falls" table).
@@ -221,19 +412,50 @@ fn tests_columns(problem: &Problem, d: &Diagnosis) -> Vec<(String, Column)> {
     let cs = &d.candidates;
     let mut rows: Vec<(String, &str, f64, f64)> = Vec::new();
     let phase_b = problem.fundamental_phase_error(&d.baseline);
-    let phase_c: Vec<Vec<f64>> = cs.iter().map(|c| c.fit.as_ref().map_or(vec![f64::NAN; problem.tests.len()], |f| problem.fundamental_phase_error(&f.after))).collect();
+    let phase_c: Vec<Vec<f64>> = cs
+        .iter()
+        .map(|c| {
+            c.fit
+                .as_ref()
+                .map_or(vec![f64::NAN; problem.tests.len()], |f| {
+                    problem.fundamental_phase_error(&f.after)
+                })
+        })
+        .collect();
     for (t, test) in problem.tests.iter().enumerate() {
-        rows.push((test.name.clone(), "baseline", d.baseline.test_rms(t), phase_b[t]));
+        rows.push((
+            test.name.clone(),
+            "baseline",
+            d.baseline.test_rms(t),
+            phase_b[t],
+        ));
         for (i, c) in cs.iter().enumerate() {
-            rows.push((test.name.clone(), c.effect.name(), c.fit.as_ref().map_or(f64::NAN, |f| f.after.test_rms(t)), phase_c[i][t]));
+            rows.push((
+                test.name.clone(),
+                c.effect.name(),
+                c.fit.as_ref().map_or(f64::NAN, |f| f.after.test_rms(t)),
+                phase_c[i][t],
+            ));
         }
     }
     vec![
-            ("test".into(), Column::Str(rows.iter().map(|r| r.0.clone()).collect())),
-            ("model".into(), Column::Str(rows.iter().map(|r| r.1.to_string()).collect())),
-            ("rms_residual_ratio".into(), Column::F64(rows.iter().map(|r| r.2).collect())),
-            ("phase_err_fundamental_deg".into(), Column::F64(rows.iter().map(|r| r.3).collect())),
-        ]
+        (
+            "test".into(),
+            Column::Str(rows.iter().map(|r| r.0.clone()).collect()),
+        ),
+        (
+            "model".into(),
+            Column::Str(rows.iter().map(|r| r.1.to_string()).collect()),
+        ),
+        (
+            "rms_residual_ratio".into(),
+            Column::F64(rows.iter().map(|r| r.2).collect()),
+        ),
+        (
+            "phase_err_fundamental_deg".into(),
+            Column::F64(rows.iter().map(|r| r.3).collect()),
+        ),
+    ]
 }
 
 /// `evidence.parquet`: per candidate, the residual features it explains.
@@ -245,25 +467,46 @@ fn evidence_columns(problem: &Problem, d: &Diagnosis) -> Vec<(String, Column)> {
         }
     }
     vec![
-            ("effect".into(), Column::Str(ev.iter().map(|e| e.0.to_string()).collect())),
-            ("test".into(), Column::Str(ev.iter().map(|e| problem.tests[e.1].name.clone()).collect())),
-            ("harmonic".into(), Column::U32(ev.iter().map(|e| e.2 as u32).collect())),
-            ("chi2_baseline".into(), Column::F64(ev.iter().map(|e| e.3).collect())),
-            ("chi2_candidate".into(), Column::F64(ev.iter().map(|e| e.4).collect())),
-        ]
+        (
+            "effect".into(),
+            Column::Str(ev.iter().map(|e| e.0.to_string()).collect()),
+        ),
+        (
+            "test".into(),
+            Column::Str(ev.iter().map(|e| problem.tests[e.1].name.clone()).collect()),
+        ),
+        (
+            "harmonic".into(),
+            Column::U32(ev.iter().map(|e| e.2 as u32).collect()),
+        ),
+        (
+            "chi2_baseline".into(),
+            Column::F64(ev.iter().map(|e| e.3).collect()),
+        ),
+        (
+            "chi2_candidate".into(),
+            Column::F64(ev.iter().map(|e| e.4).collect()),
+        ),
+    ]
 }
 
 /// "The error falls": rms acceleration residual per test, baseline and the top candidates.
 fn error_falls_svg(problem: &Problem, d: &Diagnosis) -> Result<String, Box<dyn std::error::Error>> {
     let n = problem.tests.len();
-    let per = |e: &crate::orchestration::fit::Eval| (0..n).map(|t| e.test_rms(t)).collect::<Vec<f64>>();
+    let per =
+        |e: &crate::orchestration::fit::Eval| (0..n).map(|t| e.test_rms(t)).collect::<Vec<f64>>();
     let mut series: Vec<(String, Vec<f64>)> = vec![("baseline".into(), per(&d.baseline))];
     for c in d.candidates.iter().take(4) {
         if let Ok(f) = &c.fit {
             series.push((c.effect.to_string(), per(&f.after)));
         }
     }
-    let y1 = series.iter().flat_map(|s| s.1.iter().copied()).filter(|v| v.is_finite()).fold(0.0, f64::max).max(1e-12);
+    let y1 = series
+        .iter()
+        .flat_map(|s| s.1.iter().copied())
+        .filter(|v| v.is_finite())
+        .fold(0.0, f64::max)
+        .max(1e-12);
     let mut s = String::new();
     {
         let root = SVGBackend::with_string(&mut s, (900, 380)).into_drawing_area();
@@ -288,21 +531,40 @@ fn error_falls_svg(problem: &Problem, d: &Diagnosis) -> Result<String, Box<dyn s
             .y_desc("rms residual / rms measured")
             .draw()?;
         for (i, (name, v)) in series.iter().enumerate() {
-            let color = if i == 0 { BLACK.to_rgba() } else { Palette99::pick(i - 1).to_rgba() };
-            let pts: Vec<(f64, f64)> = v.iter().enumerate().filter(|(_, y)| y.is_finite()).map(|(t, y)| (t as f64, *y)).collect();
-            c.draw_series(LineSeries::new(pts.clone(), color.stroke_width(if i == 0 { 3 } else { 2 })))?
-                .label(name.clone())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(3)));
+            let color = if i == 0 {
+                BLACK.to_rgba()
+            } else {
+                Palette99::pick(i - 1).to_rgba()
+            };
+            let pts: Vec<(f64, f64)> = v
+                .iter()
+                .enumerate()
+                .filter(|(_, y)| y.is_finite())
+                .map(|(t, y)| (t as f64, *y))
+                .collect();
+            c.draw_series(LineSeries::new(
+                pts.clone(),
+                color.stroke_width(if i == 0 { 3 } else { 2 }),
+            ))?
+            .label(name.clone())
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(3))
+            });
             c.draw_series(pts.into_iter().map(|p| Circle::new(p, 4, color.filled())))?;
         }
-        c.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+        c.configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()?;
         root.present()?;
     }
     Ok(s)
 }
 
 fn esc(s: &str) -> String {
-    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
 }
 
 fn html(campaign: &str, problem: &Problem, d: &Diagnosis) -> anyhow::Result<String> {
@@ -318,11 +580,21 @@ td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}} th{{background:#
         v = esc(&d.summary())
     )?;
     let svg = error_falls_svg(problem, d).map_err(|e| anyhow::anyhow!("drawing a plot: {e}"))?;
-    writeln!(h, "<figure class=\"plot\" id=\"error-falls\">{svg}</figure>")?;
+    writeln!(
+        h,
+        "<figure class=\"plot\" id=\"error-falls\">{svg}</figure>"
+    )?;
     h.push_str("<h2>Candidates</h2>\n<table id=\"candidates\"><tr><th>rank</th><th>effect</th><th>family</th><th>fitted parameters</th><th>chi2</th><th>dBIC</th><th>explains</th><th>significant</th></tr>\n");
     for (i, c) in d.candidates.iter().enumerate() {
         let params = match &c.fit {
-            Ok(f) => c.free.iter().zip(&f.estimate).zip(&f.se).map(|((p, e), s)| format!("{} = {e:.3e} ± {s:.1e} {}", p.info.name, p.info.unit)).collect::<Vec<_>>().join("; "),
+            Ok(f) => c
+                .free
+                .iter()
+                .zip(&f.estimate)
+                .zip(&f.se)
+                .map(|((p, e), s)| format!("{} = {e:.3e} ± {s:.1e} {}", p.info.name, p.info.unit))
+                .collect::<Vec<_>>()
+                .join("; "),
             Err(e) => format!("fit failed: {e}"),
         };
         writeln!(
@@ -343,7 +615,12 @@ td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}} th{{background:#
     for c in d.candidates.iter().take(3) {
         writeln!(h, "<h3>{}</h3>\n<table><tr><th>feature</th><th>test</th><th>chi2 baseline</th><th>chi2 with it</th></tr>", c.effect)?;
         for (t, k, b, a) in diagnose::evidence(d, c, 5) {
-            writeln!(h, "<tr><td>{}</td><td>{}</td><td>{b:.4e}</td><td>{a:.4e}</td></tr>", harmonic_label(k), esc(&problem.tests[t].name))?;
+            writeln!(
+                h,
+                "<tr><td>{}</td><td>{}</td><td>{b:.4e}</td><td>{a:.4e}</td></tr>",
+                harmonic_label(k),
+                esc(&problem.tests[t].name)
+            )?;
         }
         h.push_str("</table>\n");
     }

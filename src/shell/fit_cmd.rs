@@ -30,7 +30,12 @@ pub fn load_problem(campaign: &Path, model: &ModelParams, strict: bool) -> anyho
     let mut checks = Vec::new();
     report_checks(&mut checks, campaign, &aligned, &[], strict)?;
     let tests = aligned.iter().map(TestData::new).collect();
-    Ok(Loaded { campaign: lc, problem: Problem::new(tests), aligned, checks: String::from_utf8_lossy(&checks).into_owned() })
+    Ok(Loaded {
+        campaign: lc,
+        problem: Problem::new(tests),
+        aligned,
+        checks: String::from_utf8_lossy(&checks).into_owned(),
+    })
 }
 
 /// Warnings for tests whose baseline residual is above half the signal (the evaluation `e`).
@@ -47,13 +52,22 @@ pub fn residual_warnings(problem: &Problem, e: &fit::Eval) -> Vec<String> {
 /// The library effect a command-line name means.
 pub fn check_effect(e: &str, flag: &str) -> anyhow::Result<EffectId> {
     EffectId::parse(e.trim()).ok_or_else(|| {
-        let hint = suggest(e.trim(), &EFFECTS).map_or(String::new(), |s| format!(" (did you mean `{s}`?)"));
-        BadInput(format!("{flag} {e:?}: unknown effect{hint}; the library has {}", EFFECTS.join(", "))).into()
+        let hint = suggest(e.trim(), &EFFECTS)
+            .map_or(String::new(), |s| format!(" (did you mean `{s}`?)"));
+        BadInput(format!(
+            "{flag} {e:?}: unknown effect{hint}; the library has {}",
+            EFFECTS.join(", ")
+        ))
+        .into()
     })
 }
 
 /// The free parameters: each effect's defaults, then the named ones.
-pub fn free_parameters(effects: &[String], named: &[String], model: &ModelParams) -> anyhow::Result<Vec<Free>> {
+pub fn free_parameters(
+    effects: &[String],
+    named: &[String],
+    model: &ModelParams,
+) -> anyhow::Result<Vec<Free>> {
     let mut free: Vec<Free> = Vec::new();
     for e in effects {
         let e = check_effect(e, "--effect")?;
@@ -63,29 +77,49 @@ pub fn free_parameters(effects: &[String], named: &[String], model: &ModelParams
     let all_refs: Vec<&str> = all.iter().map(String::as_str).collect();
     for n in named {
         let info = ModelParams::lookup(n.trim()).ok_or_else(|| {
-            let hint = suggest(n.trim(), &all_refs).map_or(String::new(), |s| format!(" (did you mean `{s}`?)"));
-            BadInput(format!("--free {n:?}: unknown parameter{hint} (`study params` lists them)"))
+            let hint = suggest(n.trim(), &all_refs)
+                .map_or(String::new(), |s| format!(" (did you mean `{s}`?)"));
+            BadInput(format!(
+                "--free {n:?}: unknown parameter{hint} (`study params` lists them)"
+            ))
         })?;
-        if !free.iter().any(|f| std::ptr::eq(f.info, info) || f.info.path() == info.path()) {
+        if !free
+            .iter()
+            .any(|f| std::ptr::eq(f.info, info) || f.info.path() == info.path())
+        {
             free.push(Free::new(info, (info.get)(model)));
         }
     }
     if free.is_empty() {
-        return Err(BadInput("nothing to fit: name effects with --effect and/or parameters with --free".into()).into());
+        return Err(BadInput(
+            "nothing to fit: name effects with --effect and/or parameters with --free".into(),
+        )
+        .into());
     }
     if free.len() >= 8 {
-        return Err(BadInput(format!("{} free parameters; at most 7 (one batch of lanes per Jacobian)", free.len())).into());
+        return Err(BadInput(format!(
+            "{} free parameters; at most 7 (one batch of lanes per Jacobian)",
+            free.len()
+        ))
+        .into());
     }
     Ok(free)
 }
 
 /// The data notes and warnings after a fit's or a diagnosis's results (a one-line pointer on
 /// stderr when there are warnings).
-pub fn print_checks(o: &mut dyn Write, checks: &str, implausible: &[String]) -> std::io::Result<()> {
+pub fn print_checks(
+    o: &mut dyn Write,
+    checks: &str,
+    implausible: &[String],
+) -> std::io::Result<()> {
     write!(o, "{checks}")?;
     if !implausible.is_empty() {
         if !checks.contains("WARNINGS") {
-            writeln!(o, "\n  WARNINGS (results above may be wrong science; --strict makes these errors):")?;
+            writeln!(
+                o,
+                "\n  WARNINGS (results above may be wrong science; --strict makes these errors):"
+            )?;
         }
         for w in implausible {
             writeln!(o, "    {w}")?;
@@ -103,7 +137,9 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     let loaded = load_problem(&args.campaign, &model, args.strict)?;
     let problem = &loaded.problem;
     let t0 = std::time::Instant::now();
-    let r = super::run_cmd::pool(args.threads)?.install(|| fit::fit(problem, &free, args.max_iter)).map_err(|e| RunFailed(format!("the fit failed: {e}")))?;
+    let r = super::run_cmd::pool(args.threads)?
+        .install(|| fit::fit(problem, &free, args.max_iter))
+        .map_err(|e| RunFailed(format!("the fit failed: {e}")))?;
     if let Some(f) = &r.before.failure {
         return Err(RunFailed(format!("the starting model fails: {f}")).into());
     }
@@ -120,13 +156,29 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         r.after.r.len(),
         free.len(),
         r.iterations,
-        if r.converged { "converged" } else { "NOT converged: raise --max-iter" },
+        if r.converged {
+            "converged"
+        } else {
+            "NOT converged: raise --max-iter"
+        },
         t0.elapsed().as_secs_f64()
     )?;
     writeln!(o)?;
-    writeln!(o, "  {:<30} {:>12} {:>12} {:>12}  unit", "parameter", "start", "estimate", "std. error")?;
+    writeln!(
+        o,
+        "  {:<30} {:>12} {:>12} {:>12}  unit",
+        "parameter", "start", "estimate", "std. error"
+    )?;
     for ((f, e), s) in free.iter().zip(&r.estimate).zip(&r.se) {
-        writeln!(o, "  {:<30} {:>12.4e} {:>12.4e} {:>12.2e}  {}", f.info.path(), f.start, e, s, f.info.unit)?;
+        writeln!(
+            o,
+            "  {:<30} {:>12.4e} {:>12.4e} {:>12.2e}  {}",
+            f.info.path(),
+            f.start,
+            e,
+            s,
+            f.info.unit
+        )?;
     }
     if free.len() > 1 {
         writeln!(o, "\n  correlations of the estimates:")?;
@@ -136,14 +188,32 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         }
     }
     writeln!(o, "\n  chi2 (features scaled by their noise; about n, their degrees of freedom, for a model right to the noise): {:.4e} -> {:.4e} (n = {})", r.chi2_before(), r.chi2_after(), r.n)?;
-    writeln!(o, "\n  residual rms / measured rms, per test (before -> after):")?;
-    writeln!(o, "  {:<24} {:>24} {:>24} {:>24}", "test", "acceleration", "displacement", "force")?;
+    writeln!(
+        o,
+        "\n  residual rms / measured rms, per test (before -> after):"
+    )?;
+    writeln!(
+        o,
+        "  {:<24} {:>24} {:>24} {:>24}",
+        "test", "acceleration", "displacement", "force"
+    )?;
     for (i, t) in problem.tests.iter().enumerate() {
         let cell = |c: usize| {
             let (b, a) = (r.before.rms[i][c], r.after.rms[i][c]);
-            if b.is_finite() { format!("{b:.3e} -> {a:.3e}") } else { "-".into() }
+            if b.is_finite() {
+                format!("{b:.3e} -> {a:.3e}")
+            } else {
+                "-".into()
+            }
         };
-        writeln!(o, "  {:<24} {:>24} {:>24} {:>24}", t.name, cell(0), cell(1), cell(2))?;
+        writeln!(
+            o,
+            "  {:<24} {:>24} {:>24} {:>24}",
+            t.name,
+            cell(0),
+            cell(1),
+            cell(2)
+        )?;
     }
     let (b, a) = (r.before.residual_rms(), r.after.residual_rms());
     let noise = problem.noise_rms();
@@ -151,12 +221,20 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     // The fitted model: the starting model with the fitted parameters (and their effects on).
     let fitted = fit::apply(&model, &free, &r.u);
     let mut root = toml::Table::new();
-    root.insert("model".into(), toml::Value::Table(crate::orchestration::spec::model_table(&fitted)));
+    root.insert(
+        "model".into(),
+        toml::Value::Table(crate::orchestration::spec::model_table(&fitted)),
+    );
     let header = format!(
         "# Fitted by `study fit {}` (vshake {}): {}\n",
         args.campaign.display(),
         env!("CARGO_PKG_VERSION"),
-        free.iter().zip(&r.estimate).zip(&r.se).map(|((f, e), s)| format!("{} = {e:?} ± {s:.3e}", f.info.path())).collect::<Vec<_>>().join(", ")
+        free.iter()
+            .zip(&r.estimate)
+            .zip(&r.se)
+            .map(|((f, e), s)| format!("{} = {e:?} ± {s:.3e}", f.info.path()))
+            .collect::<Vec<_>>()
+            .join(", ")
     );
     let out = super::tables::AtomicFile::new(&args.out);
     std::fs::write(&out.tmp, header + &toml::to_string(&root)?)?;

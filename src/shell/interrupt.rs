@@ -38,7 +38,8 @@ pub fn install() -> std::io::Result<()> {
 
 /// The signal that asked the run to stop, if any.
 pub fn requested() -> Option<i32> {
-    SEEN.load(Ordering::SeqCst).then(|| SIGNAL.load(Ordering::SeqCst) as i32)
+    SEEN.load(Ordering::SeqCst)
+        .then(|| SIGNAL.load(Ordering::SeqCst) as i32)
 }
 
 /// The signal's name for messages.

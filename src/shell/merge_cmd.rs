@@ -26,10 +26,13 @@ struct ShardFile {
 }
 
 fn get(f: &ShardFile, key: Key) -> anyhow::Result<&str> {
-    f.meta
-        .get(key.as_str())
-        .map(String::as_str)
-        .ok_or_else(|| BadInput(format!("{}: not a shard of `study run --shard I/N` (no {key} in its metadata)", f.path.display())).into())
+    f.meta.get(key.as_str()).map(String::as_str).ok_or_else(|| {
+        BadInput(format!(
+            "{}: not a shard of `study run --shard I/N` (no {key} in its metadata)",
+            f.path.display()
+        ))
+        .into()
+    })
 }
 
 /// Refuses `f` when it is a shard of another run than `first` ([`SAME`]).
@@ -37,8 +40,24 @@ fn same_run(first: &ShardFile, f: &ShardFile) -> anyhow::Result<()> {
     for (key, what) in SAME {
         let (a, b) = (get(first, key)?, get(f, key)?);
         if a != b {
-            let show = |v: &str| if v.len() > 40 { format!("{}…", &v[..v.char_indices().nth(40).map_or(v.len(), |(i, _)| i)]) } else { v.to_string() };
-            return Err(BadInput(format!("{}: a shard of another run: its {what} ({}) differs from {}'s ({})", f.path.display(), show(b), first.path.display(), show(a))).into());
+            let show = |v: &str| {
+                if v.len() > 40 {
+                    format!(
+                        "{}…",
+                        &v[..v.char_indices().nth(40).map_or(v.len(), |(i, _)| i)]
+                    )
+                } else {
+                    v.to_string()
+                }
+            };
+            return Err(BadInput(format!(
+                "{}: a shard of another run: its {what} ({}) differs from {}'s ({})",
+                f.path.display(),
+                show(b),
+                first.path.display(),
+                show(a)
+            ))
+            .into());
         }
     }
     Ok(())
@@ -49,7 +68,10 @@ fn shards(dir: &Path, skip: &Path) -> anyhow::Result<Vec<ShardFile>> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
         .map_err(|e| BadInput(format!("{}: cannot read the folder: {e}", dir.display())))?
         .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "parquet") && std::fs::canonicalize(p).ok() != std::fs::canonicalize(skip).ok())
+        .filter(|p| {
+            p.extension().is_some_and(|x| x == "parquet")
+                && std::fs::canonicalize(p).ok() != std::fs::canonicalize(skip).ok()
+        })
         .collect();
     files.sort();
     if files.is_empty() {
@@ -61,8 +83,14 @@ fn shards(dir: &Path, skip: &Path) -> anyhow::Result<Vec<ShardFile>> {
         let pairs = tables::parquet_metadata(&path).map_err(tables::input_if_user)?;
         let done = meta::incomplete(&pairs);
         let meta: BTreeMap<String, String> = pairs.into_iter().collect();
-        let mut f = ShardFile { path, meta, index: 0 };
-        f.index = get(&f, Key::ShardIndex)?.parse().map_err(|_| BadInput(format!("{}: bad {}", f.path.display(), Key::ShardIndex)))?;
+        let mut f = ShardFile {
+            path,
+            meta,
+            index: 0,
+        };
+        f.index = get(&f, Key::ShardIndex)?
+            .parse()
+            .map_err(|_| BadInput(format!("{}: bad {}", f.path.display(), Key::ShardIndex)))?;
         match done {
             // A stopped shard counts as missing: its rows are not all there.
             Some((rows, total)) => unfinished.push(format!(
@@ -75,32 +103,60 @@ fn shards(dir: &Path, skip: &Path) -> anyhow::Result<Vec<ShardFile>> {
         }
     }
     if list.is_empty() {
-        return Err(BadInput(format!("{}: no complete shard\n{}", dir.display(), unfinished.join("\n"))).into());
+        return Err(BadInput(format!(
+            "{}: no complete shard\n{}",
+            dir.display(),
+            unfinished.join("\n")
+        ))
+        .into());
     }
     let first = &list[0];
     for f in &list[1..] {
         same_run(first, f)?;
     }
-    let count: usize = get(first, Key::ShardCount)?.parse().map_err(|_| BadInput(format!("{}: bad {}", first.path.display(), Key::ShardCount)))?;
+    let count: usize = get(first, Key::ShardCount)?
+        .parse()
+        .map_err(|_| BadInput(format!("{}: bad {}", first.path.display(), Key::ShardCount)))?;
     let mut by_index: BTreeMap<usize, &ShardFile> = BTreeMap::new();
     for f in &list {
         if f.index >= count {
-            return Err(BadInput(format!("{}: shard {}/{count} is out of range", f.path.display(), f.index)).into());
+            return Err(BadInput(format!(
+                "{}: shard {}/{count} is out of range",
+                f.path.display(),
+                f.index
+            ))
+            .into());
         }
         if let Some(other) = by_index.insert(f.index, f) {
-            return Err(BadInput(format!("shard {}/{count} appears twice: {} and {}", f.index, other.path.display(), f.path.display())).into());
+            return Err(BadInput(format!(
+                "shard {}/{count} appears twice: {} and {}",
+                f.index,
+                other.path.display(),
+                f.path.display()
+            ))
+            .into());
         }
     }
-    let missing: Vec<String> = (0..count).filter(|i| !by_index.contains_key(i)).map(|i| format!("{i}/{count}")).collect();
+    let missing: Vec<String> = (0..count)
+        .filter(|i| !by_index.contains_key(i))
+        .map(|i| format!("{i}/{count}"))
+        .collect();
     if !missing.is_empty() {
-        let also = unfinished.iter().map(|u| format!("\n  {u}")).collect::<String>();
+        let also = unfinished
+            .iter()
+            .map(|u| format!("\n  {u}"))
+            .collect::<String>();
         return Err(BadInput(format!(
             "{}: shard{} {} missing (found {} of {count}: {}){also}",
             dir.display(),
             if missing.len() > 1 { "s" } else { "" },
             missing.join(", "),
             by_index.len(),
-            by_index.keys().map(|i| i.to_string()).collect::<Vec<_>>().join(", ")
+            by_index
+                .keys()
+                .map(|i| i.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
         ))
         .into());
     }
@@ -108,9 +164,17 @@ fn shards(dir: &Path, skip: &Path) -> anyhow::Result<Vec<ShardFile>> {
     let mut at = 0usize;
     for f in by_index.values() {
         let s = get(f, Key::ShardSamples)?;
-        let (a, b) = s.split_once("..").and_then(|(a, b)| Some((a.parse::<usize>().ok()?, b.parse::<usize>().ok()?))).ok_or_else(|| BadInput(format!("{}: bad {}", f.path.display(), Key::ShardSamples)))?;
+        let (a, b) = s
+            .split_once("..")
+            .and_then(|(a, b)| Some((a.parse::<usize>().ok()?, b.parse::<usize>().ok()?)))
+            .ok_or_else(|| BadInput(format!("{}: bad {}", f.path.display(), Key::ShardSamples)))?;
         if a != at {
-            return Err(BadInput(format!("{}: shard {}/{count} holds samples {a}..{b}, expected to start at {at}", f.path.display(), f.index)).into());
+            return Err(BadInput(format!(
+                "{}: shard {}/{count} holds samples {a}..{b}, expected to start at {at}",
+                f.path.display(),
+                f.index
+            ))
+            .into());
         }
         at = b;
     }
@@ -120,7 +184,11 @@ fn shards(dir: &Path, skip: &Path) -> anyhow::Result<Vec<ShardFile>> {
 
 pub fn run(args: &MergeArgs) -> anyhow::Result<()> {
     let out = args.out.clone().unwrap_or_else(|| {
-        let name = args.dir.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_else(|| "merged".into());
+        let name = args
+            .dir
+            .file_name()
+            .map(|n| n.to_string_lossy().to_string())
+            .unwrap_or_else(|| "merged".into());
         args.dir.with_file_name(format!("{name}.parquet"))
     });
     let list = shards(&args.dir, &out)?;
@@ -132,9 +200,18 @@ pub fn run(args: &MergeArgs) -> anyhow::Result<()> {
     let mut rows = 0usize;
     for f in &list {
         let (theirs, reader) = tables::parquet_batches(&f.path).map_err(tables::input_if_user)?;
-        let shape = |v: &[arrow_schema::Field]| v.iter().map(|x| (x.name().clone(), x.data_type().clone())).collect::<Vec<_>>();
+        let shape = |v: &[arrow_schema::Field]| {
+            v.iter()
+                .map(|x| (x.name().clone(), x.data_type().clone()))
+                .collect::<Vec<_>>()
+        };
         if shape(&theirs) != shape(&fields) {
-            return Err(BadInput(format!("{}: its columns differ from {}'s", f.path.display(), first.path.display())).into());
+            return Err(BadInput(format!(
+                "{}: its columns differ from {}'s",
+                f.path.display(),
+                first.path.display()
+            ))
+            .into());
         }
         for batch in reader {
             let batch = batch.with_context(|| format!("reading {}", f.path.display()))?;
@@ -148,10 +225,22 @@ pub fn run(args: &MergeArgs) -> anyhow::Result<()> {
         Some(samples * exc)
     })();
     if let Some(e) = expected.filter(|e| *e != rows) {
-        return Err(BadInput(format!("{}: the shards hold {rows} rows, the study has {e}", args.dir.display())).into());
+        return Err(BadInput(format!(
+            "{}: the shards hold {rows} rows, the study has {e}",
+            args.dir.display()
+        ))
+        .into());
     }
-    stream.finish_with(&meta::completion(rows, rows)).with_context(|| format!("writing {}", out.display()))?;
+    stream
+        .finish_with(&meta::completion(rows, rows))
+        .with_context(|| format!("writing {}", out.display()))?;
     let mut o = std::io::stdout().lock();
-    writeln!(o, "study merge {}: {} shards, {rows} rows -> {}", args.dir.display(), list.len(), out.display())?;
+    writeln!(
+        o,
+        "study merge {}: {} shards, {rows} rows -> {}",
+        args.dir.display(),
+        list.len(),
+        out.display()
+    )?;
     Ok(())
 }

@@ -123,12 +123,17 @@ pub fn pair(key: Key, value: impl ToString) -> (String, String) {
 
 /// The pairs every file starts with: its kind and the version of vshake that wrote it.
 pub fn header(kind: Kind) -> Vec<(String, String)> {
-    vec![pair(Key::Kind, kind.as_str()), pair(Key::Version, env!("CARGO_PKG_VERSION"))]
+    vec![
+        pair(Key::Kind, kind.as_str()),
+        pair(Key::Version, env!("CARGO_PKG_VERSION")),
+    ]
 }
 
 /// The value of `key` in `meta`.
 pub fn get(meta: &[(String, String)], key: Key) -> Option<&str> {
-    meta.iter().find(|(k, _)| k == key.as_str()).map(|(_, v)| v.as_str())
+    meta.iter()
+        .find(|(k, _)| k == key.as_str())
+        .map(|(_, v)| v.as_str())
 }
 
 /// Whether `meta` is of kind `kind`.
@@ -142,12 +147,20 @@ pub const LIST_SEPARATOR: char = ',';
 
 /// A list-valued key's value.
 pub fn list<S: AsRef<str>>(items: impl IntoIterator<Item = S>) -> String {
-    items.into_iter().map(|s| s.as_ref().to_string()).collect::<Vec<_>>().join(&LIST_SEPARATOR.to_string())
+    items
+        .into_iter()
+        .map(|s| s.as_ref().to_string())
+        .collect::<Vec<_>>()
+        .join(&LIST_SEPARATOR.to_string())
 }
 
 /// The items of a list-valued key's value (none for an empty value).
 pub fn items(value: &str) -> Vec<String> {
-    value.split(LIST_SEPARATOR).filter(|s| !s.is_empty()).map(str::to_string).collect()
+    value
+        .split(LIST_SEPARATOR)
+        .filter(|s| !s.is_empty())
+        .map(str::to_string)
+        .collect()
 }
 
 /// The key under which the Arrow writer keeps the file's Arrow schema (rewritten by every writer).
@@ -155,14 +168,25 @@ pub const ARROW_SCHEMA: &str = "ARROW:schema";
 
 /// `meta` without the pairs a new file of the same run must not copy: the completion keys and
 /// the Arrow schema, and `also` (a merge drops the shard keys too).
-pub fn carried<'a>(meta: impl IntoIterator<Item = (&'a String, &'a String)>, also: &[Key]) -> Vec<(String, String)> {
-    let dropped = |k: &str| k == ARROW_SCHEMA || COMPLETION_KEYS.iter().chain(also).any(|d| d.as_str() == k);
-    meta.into_iter().filter(|(k, _)| !dropped(k)).map(|(k, v)| (k.clone(), v.clone())).collect()
+pub fn carried<'a>(
+    meta: impl IntoIterator<Item = (&'a String, &'a String)>,
+    also: &[Key],
+) -> Vec<(String, String)> {
+    let dropped =
+        |k: &str| k == ARROW_SCHEMA || COMPLETION_KEYS.iter().chain(also).any(|d| d.as_str() == k);
+    meta.into_iter()
+        .filter(|(k, _)| !dropped(k))
+        .map(|(k, v)| (k.clone(), v.clone()))
+        .collect()
 }
 
 /// The completion pairs of a file holding `done` of `total` rows.
 pub fn completion(done: usize, total: usize) -> Vec<(String, String)> {
-    vec![pair(Key::Complete, done == total), pair(Key::RowsDone, done), pair(Key::RowsTotal, total)]
+    vec![
+        pair(Key::Complete, done == total),
+        pair(Key::RowsDone, done),
+        pair(Key::RowsTotal, total),
+    ]
 }
 
 /// `(rows done, rows total)` of a file its writer marked incomplete; `None` for a complete file.
@@ -179,7 +203,10 @@ mod tests {
     fn keys_are_distinct_and_prefixed() {
         for (i, k) in Key::ALL.iter().enumerate() {
             assert!(k.as_str().starts_with("vshake.") && k.as_str().len() > 7);
-            assert!(Key::ALL[..i].iter().all(|j| j.as_str() != k.as_str()), "{k} twice");
+            assert!(
+                Key::ALL[..i].iter().all(|j| j.as_str() != k.as_str()),
+                "{k} twice"
+            );
         }
     }
 
@@ -187,8 +214,15 @@ mod tests {
     fn lists_round_trip_and_completion_reads_back() {
         assert_eq!(items(&list(["a", "b_c"])), vec!["a", "b_c"]);
         assert!(items(&list(Vec::<String>::new())).is_empty());
-        assert_eq!(incomplete(&completion(3, 8)), Some(("3".to_string(), "8".to_string())));
+        assert_eq!(
+            incomplete(&completion(3, 8)),
+            Some(("3".to_string(), "8".to_string()))
+        );
         assert_eq!(incomplete(&completion(8, 8)), None);
-        assert_eq!(incomplete(&[]), None, "a file without the keys (older versions) is complete");
+        assert_eq!(
+            incomplete(&[]),
+            None,
+            "a file without the keys (older versions) is complete"
+        );
     }
 }

@@ -23,13 +23,24 @@ impl Progress {
         let bar = (!quiet && terminal).then(|| {
             let b = ProgressBar::new(total as u64);
             b.set_style(
-                ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} runs  {per_sec}  ETA {eta}").expect("template").progress_chars("=> "),
+                ProgressStyle::with_template(
+                    "{msg} [{bar:30}] {pos}/{len} runs  {per_sec}  ETA {eta}",
+                )
+                .expect("template")
+                .progress_chars("=> "),
             );
             b.set_message(label.to_string());
             b
         });
         let plain = (!quiet && log_lines).then(|| Mutex::new(Instant::now()));
-        Progress { bar, plain, start: Instant::now(), total, done: AtomicUsize::new(0), label: label.to_string() }
+        Progress {
+            bar,
+            plain,
+            start: Instant::now(),
+            total,
+            done: AtomicUsize::new(0),
+            label: label.to_string(),
+        }
     }
 
     /// `n` more runs finished (callable from any thread).

@@ -4,10 +4,10 @@
 //! states. The numbers behind every plot are the Parquet tables written beside it. A non-finite
 //! value is never drawn: a line breaks around it and a bar is left out, and a table cell shows "-".
 
+use crate::kernel::metrics::N_HARM;
 use crate::orchestration::compare::Compared;
 use crate::orchestration::statemap::{self, Residual, State, StateMap};
 use crate::orchestration::timebase::fmt_rate;
-use crate::kernel::metrics::N_HARM;
 use plotters::prelude::*;
 use std::fmt::Write as _;
 
@@ -16,7 +16,11 @@ const MODEL: RGBColor = RGBColor(214, 39, 40);
 const RESIDUAL: RGBColor = RGBColor(90, 90, 90);
 
 fn range(v: impl Iterator<Item = f64>) -> (f64, f64) {
-    let (lo, hi) = v.filter(|x| x.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(x), b.max(x)));
+    let (lo, hi) = v
+        .filter(|x| x.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
+            (a.min(x), b.max(x))
+        });
     if !lo.is_finite() {
         return (-1.0, 1.0);
     }
@@ -41,7 +45,11 @@ pub fn finite_runs(pts: impl Iterator<Item = (f64, f64)>) -> Vec<Vec<(f64, f64)>
 /// Draws a line of possibly non-finite points as its finite runs; returns the first run's series
 /// annotation target, if any.
 fn draw_line<DB: DrawingBackend>(
-    c: &mut ChartContext<'_, DB, Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>>,
+    c: &mut ChartContext<
+        '_,
+        DB,
+        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+    >,
     pts: impl Iterator<Item = (f64, f64)>,
     style: ShapeStyle,
     label: Option<&str>,
@@ -52,7 +60,9 @@ where
     for (i, run) in finite_runs(pts).into_iter().enumerate() {
         let series = c.draw_series(LineSeries::new(run, style))?;
         if let (0, Some(l)) = (i, label) {
-            series.label(l).legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], style));
+            series
+                .label(l)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], style));
         }
     }
     Ok(())
@@ -70,20 +80,48 @@ fn overlay_svg(r: &Compared) -> Result<String, Box<dyn std::error::Error>> {
         let (tx0, tx1) = (t[0], t[t.len() - 1]);
         let (y0, y1) = range(meas.iter().chain(&r.accel_model).copied());
         let mut c = ChartBuilder::on(&top)
-            .caption(format!("{}: platen acceleration", r.test.name), ("sans-serif", 16))
+            .caption(
+                format!("{}: platen acceleration", r.test.name),
+                ("sans-serif", 16),
+            )
             .margin(8)
             .x_label_area_size(20)
             .y_label_area_size(55)
             .build_cartesian_2d(tx0..tx1, y0..y1)?;
         c.configure_mesh().y_desc("m/s²").draw()?;
-        draw_line(&mut c, t.iter().copied().zip(meas.iter().copied()), MEASURED.stroke_width(2), Some("measured"))?;
-        draw_line(&mut c, t.iter().copied().zip(r.accel_model.iter().copied()), MODEL.stroke_width(1), Some("model"))?;
-        c.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+        draw_line(
+            &mut c,
+            t.iter().copied().zip(meas.iter().copied()),
+            MEASURED.stroke_width(2),
+            Some("measured"),
+        )?;
+        draw_line(
+            &mut c,
+            t.iter().copied().zip(r.accel_model.iter().copied()),
+            MODEL.stroke_width(1),
+            Some("model"),
+        )?;
+        c.configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()?;
         let res: Vec<f64> = r.accel_model.iter().zip(meas).map(|(m, x)| m - x).collect();
         let (r0, r1) = range(res.iter().copied());
-        let mut c = ChartBuilder::on(&bottom).margin(8).x_label_area_size(30).y_label_area_size(55).build_cartesian_2d(tx0..tx1, r0..r1)?;
-        c.configure_mesh().x_desc("t (s)").y_desc("model − meas.").draw()?;
-        draw_line(&mut c, t.iter().copied().zip(res.iter().copied()), RESIDUAL.into(), None)?;
+        let mut c = ChartBuilder::on(&bottom)
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(55)
+            .build_cartesian_2d(tx0..tx1, r0..r1)?;
+        c.configure_mesh()
+            .x_desc("t (s)")
+            .y_desc("model − meas.")
+            .draw()?;
+        draw_line(
+            &mut c,
+            t.iter().copied().zip(res.iter().copied()),
+            RESIDUAL.into(),
+            None,
+        )?;
         root.present()?;
     }
     Ok(s)
@@ -96,22 +134,44 @@ fn harmonics_svg(r: &Compared) -> Result<String, Box<dyn std::error::Error>> {
         let root = SVGBackend::with_string(&mut s, (760, 300)).into_drawing_area();
         root.fill(&WHITE)?;
         let c = &r.comparison;
-        let top = c.h_measured.iter().chain(&c.h_model).copied().filter(|x| x.is_finite()).fold(1e-6, f64::max) * 1.1;
+        let top = c
+            .h_measured
+            .iter()
+            .chain(&c.h_model)
+            .copied()
+            .filter(|x| x.is_finite())
+            .fold(1e-6, f64::max)
+            * 1.1;
         let mut ch = ChartBuilder::on(&root)
-            .caption(format!("{}: harmonics of the acceleration, h_k = |H_k|/|H_1|", r.test.name), ("sans-serif", 16))
+            .caption(
+                format!(
+                    "{}: harmonics of the acceleration, h_k = |H_k|/|H_1|",
+                    r.test.name
+                ),
+                ("sans-serif", 16),
+            )
             .margin(8)
             .x_label_area_size(30)
             .y_label_area_size(55)
             .build_cartesian_2d(1.5f64..(N_HARM as f64 + 0.5), 0f64..top)?;
-        ch.configure_mesh().x_desc("harmonic k").disable_x_mesh().draw()?;
+        ch.configure_mesh()
+            .x_desc("harmonic k")
+            .disable_x_mesh()
+            .draw()?;
         for k in 2..=N_HARM {
             let x = k as f64;
             let (m, d) = (c.h_measured[k - 2], c.h_model[k - 2]);
             if m.is_finite() {
-                ch.draw_series(std::iter::once(Rectangle::new([(x - 0.35, 0.0), (x - 0.02, m)], MEASURED.filled())))?;
+                ch.draw_series(std::iter::once(Rectangle::new(
+                    [(x - 0.35, 0.0), (x - 0.02, m)],
+                    MEASURED.filled(),
+                )))?;
             }
             if d.is_finite() {
-                ch.draw_series(std::iter::once(Rectangle::new([(x + 0.02, 0.0), (x + 0.35, d)], MODEL.filled())))?;
+                ch.draw_series(std::iter::once(Rectangle::new(
+                    [(x + 0.02, 0.0), (x + 0.35, d)],
+                    MODEL.filled(),
+                )))?;
             }
         }
         root.present()?;
@@ -125,7 +185,8 @@ fn amplitude_svg(results: &[Compared]) -> Result<Option<String>, Box<dyn std::er
         .iter()
         .filter_map(|r| match &r.test.excitation {
             crate::orchestration::spec::ExcitationSpec::Sine { sine, .. } => {
-                let g = sine.amp_m * (2.0 * std::f64::consts::PI * sine.freq_hz).powi(2) / crate::kernel::params::G;
+                let g = sine.amp_m * (2.0 * std::f64::consts::PI * sine.freq_hz).powi(2)
+                    / crate::kernel::params::G;
                 Some((sine.freq_hz, g, r.comparison.rms_residual_accel_ratio))
             }
             _ => None,
@@ -142,12 +203,18 @@ fn amplitude_svg(results: &[Compared]) -> Result<Option<String>, Box<dyn std::er
         let (x0, x1) = range(pts.iter().map(|p| p.1));
         let (_, y1) = range(pts.iter().map(|p| p.2));
         let mut c = ChartBuilder::on(&root)
-            .caption("campaign: acceleration residual against amplitude, per frequency", ("sans-serif", 16))
+            .caption(
+                "campaign: acceleration residual against amplitude, per frequency",
+                ("sans-serif", 16),
+            )
             .margin(8)
             .x_label_area_size(30)
             .y_label_area_size(60)
             .build_cartesian_2d(x0.min(0.0)..x1, 0f64..y1.max(1e-9))?;
-        c.configure_mesh().x_desc("amplitude (g)").y_desc("rms residual / rms measured").draw()?;
+        c.configure_mesh()
+            .x_desc("amplitude (g)")
+            .y_desc("rms residual / rms measured")
+            .draw()?;
         let freqs: Vec<f64> = pts.iter().map(|p| p.0).fold(Vec::new(), |mut v, f| {
             if v.last() != Some(&f) {
                 v.push(f);
@@ -156,11 +223,27 @@ fn amplitude_svg(results: &[Compared]) -> Result<Option<String>, Box<dyn std::er
         });
         for (i, f) in freqs.iter().enumerate() {
             let color = Palette99::pick(i).to_rgba();
-            let line: Vec<(f64, f64)> = pts.iter().filter(|p| p.0 == *f).map(|p| (p.1, p.2)).collect();
-            draw_line(&mut c, line.iter().copied(), color.stroke_width(2), Some(&format!("{f} Hz")))?;
-            c.draw_series(line.into_iter().filter(|p| p.1.is_finite()).map(|p| Circle::new(p, 4, color.filled())))?;
+            let line: Vec<(f64, f64)> = pts
+                .iter()
+                .filter(|p| p.0 == *f)
+                .map(|p| (p.1, p.2))
+                .collect();
+            draw_line(
+                &mut c,
+                line.iter().copied(),
+                color.stroke_width(2),
+                Some(&format!("{f} Hz")),
+            )?;
+            c.draw_series(
+                line.into_iter()
+                    .filter(|p| p.1.is_finite())
+                    .map(|p| Circle::new(p, 4, color.filled())),
+            )?;
         }
-        c.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+        c.configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()?;
         root.present()?;
     }
     Ok(Some(s))
@@ -168,26 +251,46 @@ fn amplitude_svg(results: &[Compared]) -> Result<Option<String>, Box<dyn std::er
 
 /// The state map: per regressed residual, its mean in each bin of each scaled state.
 fn state_map_svg(map: &StateMap) -> Result<String, Box<dyn std::error::Error>> {
-    let shown: Vec<(usize, Residual)> = Residual::ALL.iter().copied().enumerate().filter(|(_, r)| statemap::REGRESSED.contains(r) && !map.by_state(*r).is_empty()).collect();
+    let shown: Vec<(usize, Residual)> = Residual::ALL
+        .iter()
+        .copied()
+        .enumerate()
+        .filter(|(_, r)| statemap::REGRESSED.contains(r) && !map.by_state(*r).is_empty())
+        .collect();
     let mut s = String::new();
     {
-        let root = SVGBackend::with_string(&mut s, (760, 260 * shown.len().max(1) as u32)).into_drawing_area();
+        let root = SVGBackend::with_string(&mut s, (760, 260 * shown.len().max(1) as u32))
+            .into_drawing_area();
         root.fill(&WHITE)?;
         for ((i, r), area) in shown.iter().zip(root.split_evenly((shown.len().max(1), 1))) {
             let (y0, y1) = range(map.bins.iter().map(|b| b.mean[*i]));
             let mut c = ChartBuilder::on(&area)
-                .caption(format!("{}: mean per bin of each state", r.label()), ("sans-serif", 15))
+                .caption(
+                    format!("{}: mean per bin of each state", r.label()),
+                    ("sans-serif", 15),
+                )
                 .margin(8)
                 .x_label_area_size(30)
                 .y_label_area_size(60)
                 .build_cartesian_2d(-1f64..1f64, y0..y1)?;
-            c.configure_mesh().x_desc("state / its scale (spool: / full stroke)").y_desc("/ rms measured").draw()?;
+            c.configure_mesh()
+                .x_desc("state / its scale (spool: / full stroke)")
+                .y_desc("/ rms measured")
+                .draw()?;
             for (k, st) in State::ALL.iter().enumerate() {
                 let color = Palette99::pick(k).to_rgba();
-                let pts = map.bins.iter().filter(|b| b.state == *st).map(|b| (0.5 * (b.lo + b.hi), b.mean[*i]));
+                let pts = map
+                    .bins
+                    .iter()
+                    .filter(|b| b.state == *st)
+                    .map(|b| (0.5 * (b.lo + b.hi), b.mean[*i]));
                 draw_line(&mut c, pts, color.stroke_width(2), Some(st.label()))?;
             }
-            c.configure_series_labels().position(SeriesLabelPosition::UpperLeft).background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+            c.configure_series_labels()
+                .position(SeriesLabelPosition::UpperLeft)
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .draw()?;
         }
         root.present()?;
     }
@@ -200,34 +303,69 @@ pub fn state_map_section(map: &StateMap) -> anyhow::Result<String> {
     let mut h = String::from("<h2>Where in state space</h2>\n");
     match map.sentence() {
         Some(s) => writeln!(h, "<p id=\"state-sentence\">{}</p>", esc(&s))?,
-        None => writeln!(h, "<p id=\"state-sentence\">No state's terms explain the residual (R² < {}).</p>", statemap::MIN_R2)?,
+        None => writeln!(
+            h,
+            "<p id=\"state-sentence\">No state's terms explain the residual (R² < {}).</p>",
+            statemap::MIN_R2
+        )?,
     }
     let svg = state_map_svg(map).map_err(|e| anyhow::anyhow!("drawing a plot: {e}"))?;
     writeln!(h, "<figure class=\"plot\" id=\"state-map\">{svg}</figure>")?;
     h.push_str("<table id=\"state-terms\"><tr><th>residual</th><th>state</th><th>R²</th><th>terms kept (R² alone)</th></tr>\n");
     for reg in map.per_state.iter().flatten() {
-        let terms: Vec<String> = reg.terms.iter().map(|t| format!("{} ({:.2})", t.formula(), t.alone)).collect();
-        writeln!(h, "<tr><td>{}</td><td>{}</td><td>{:.2}</td><td style=\"text-align:left\">{}</td></tr>", reg.residual.label(), reg.state.map_or("all", |s| s.label()), reg.r2, esc(&terms.join(", ")))?;
+        let terms: Vec<String> = reg
+            .terms
+            .iter()
+            .map(|t| format!("{} ({:.2})", t.formula(), t.alone))
+            .collect();
+        writeln!(
+            h,
+            "<tr><td>{}</td><td>{}</td><td>{:.2}</td><td style=\"text-align:left\">{}</td></tr>",
+            reg.residual.label(),
+            reg.state.map_or("all", |s| s.label()),
+            reg.r2,
+            esc(&terms.join(", "))
+        )?;
     }
     for (r, m) in &map.memory {
-        writeln!(h, "<tr><td>{}</td><td>{}</td><td>{:.2}</td><td style=\"text-align:left\">{}</td></tr>", r.label(), m.kind.name(), m.r2, esc(&m.describe()))?;
+        writeln!(
+            h,
+            "<tr><td>{}</td><td>{}</td><td>{:.2}</td><td style=\"text-align:left\">{}</td></tr>",
+            r.label(),
+            m.kind.name(),
+            m.r2,
+            esc(&m.describe())
+        )?;
     }
     h.push_str("</table>\n");
     Ok(h)
 }
 
 fn esc(s: &str) -> String {
-    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
 }
 
 /// A number for a table cell ("-" when not finite).
 fn num(v: f64, f: impl Fn(f64) -> String) -> String {
-    if v.is_finite() { f(v) } else { "-".into() }
+    if v.is_finite() {
+        f(v)
+    } else {
+        "-".into()
+    }
 }
 
 /// The whole report as one self-contained HTML page.
-pub fn html(title: &str, results: &[Compared], map: &StateMap, extra_warnings: &[String]) -> anyhow::Result<String> {
-    let plot = |r: Result<String, Box<dyn std::error::Error>>| r.map_err(|e| anyhow::anyhow!("drawing a plot: {e}"));
+pub fn html(
+    title: &str,
+    results: &[Compared],
+    map: &StateMap,
+    extra_warnings: &[String],
+) -> anyhow::Result<String> {
+    let plot = |r: Result<String, Box<dyn std::error::Error>>| {
+        r.map_err(|e| anyhow::anyhow!("drawing a plot: {e}"))
+    };
     let mut h = String::new();
     write!(
         h,
@@ -259,7 +397,11 @@ figure{{margin:12px 0}} .legend span{{display:inline-block;width:14px;height:4px
         )?;
     }
     h.push_str("</table>\n");
-    let warnings: Vec<&String> = results.iter().flat_map(|r| r.test.warnings.iter()).chain(extra_warnings).collect();
+    let warnings: Vec<&String> = results
+        .iter()
+        .flat_map(|r| r.test.warnings.iter())
+        .chain(extra_warnings)
+        .collect();
     if !warnings.is_empty() {
         h.push_str("<h2>Warnings</h2>\n<ul id=\"warnings\" style=\"color:#a00\">\n");
         for w in warnings {
@@ -289,9 +431,17 @@ figure{{margin:12px 0}} .legend span{{display:inline-block;width:14px;height:4px
     h.push_str(&state_map_section(map)?);
     for r in results {
         writeln!(h, "<h2 id=\"test-{n}\">{n}</h2>", n = esc(&r.test.name))?;
-        writeln!(h, "<figure class=\"plot overlay\">{}</figure>", plot(overlay_svg(r))?)?;
+        writeln!(
+            h,
+            "<figure class=\"plot overlay\">{}</figure>",
+            plot(overlay_svg(r))?
+        )?;
         if r.comparison.amp_ratio_model.is_finite() {
-            writeln!(h, "<figure class=\"plot harmonics\">{}</figure>", plot(harmonics_svg(r))?)?;
+            writeln!(
+                h,
+                "<figure class=\"plot harmonics\">{}</figure>",
+                plot(harmonics_svg(r))?
+            )?;
         }
     }
     h.push_str("<p>The numbers behind every plot are in the Parquet tables beside this page (tests, harmonics, bins, cycles, overlay, statemap, stateterms).</p>\n</body></html>\n");

@@ -35,7 +35,12 @@ impl Kept {
         for batch in reader {
             let batch = batch.with_context(|| format!("reading {}", self.source.display()))?;
             let batch = batch.slice(0, batch.num_rows().min(left));
-            let ids = batch.column_by_name("sample_id").and_then(|c| c.as_any().downcast_ref::<UInt64Array>()).ok_or_else(|| BadInput(format!("{}: no sample_id column", self.source.display())))?;
+            let ids = batch
+                .column_by_name("sample_id")
+                .and_then(|c| c.as_any().downcast_ref::<UInt64Array>())
+                .ok_or_else(|| {
+                    BadInput(format!("{}: no sample_id column", self.source.display()))
+                })?;
             for id in ids.values().iter() {
                 if *id != expect {
                     return Err(BadInput(format!("{}: row of sample {id} where sample {expect} was expected: not the rows of this study's run", self.source.display())).into());
@@ -91,21 +96,51 @@ pub fn job(file: &Path) -> anyhow::Result<Option<Job>> {
     }
     let rows = tables::parquet_rows(&source).map_err(input_if_user)?;
     if !temporary && meta::incomplete(&meta).is_none() {
-        writeln!(std::io::stdout(), "study run --resume {}: the file is complete ({rows} rows); nothing to do", file.display())?;
+        writeln!(
+            std::io::stdout(),
+            "study run --resume {}: the file is complete ({rows} rows); nothing to do",
+            file.display()
+        )?;
         return Ok(None);
     }
-    let need = |k: Key| get(k).ok_or_else(|| BadInput(format!("{}: no {k} in its metadata; it cannot be resumed", file.display())));
+    let need = |k: Key| {
+        get(k).ok_or_else(|| {
+            BadInput(format!(
+                "{}: no {k} in its metadata; it cannot be resumed",
+                file.display()
+            ))
+        })
+    };
     let what = format!("{} (the study in its metadata)", source.display());
     let spec = StudySpec::from_toml(need(Key::Study)?, &what)?;
-    let plan = plan_for(&spec, Path::new(need(Key::StudyFile)?).parent().unwrap_or(Path::new(".")))?;
+    let plan = plan_for(
+        &spec,
+        Path::new(need(Key::StudyFile)?)
+            .parent()
+            .unwrap_or(Path::new(".")),
+    )?;
     let shard = match (get(Key::ShardIndex), get(Key::ShardCount)) {
         (Some(i), Some(n)) => Some(Shard::parse(&format!("{i}/{n}"), plan.samples())?),
         _ => None,
     };
-    let range = shard.as_ref().map_or(0..plan.samples(), |s| s.range.clone());
+    let range = shard
+        .as_ref()
+        .map_or(0..plan.samples(), |s| s.range.clone());
     // A row group may end inside a sample's excitations: only whole samples are kept.
     let samples = (rows / plan.references.len()).min(range.len());
     let meta = meta::carried(meta.iter().map(|(k, v)| (k, v)), &[]);
-    let kept = Some(Kept { source, samples, temporary });
-    Ok(Some(Job { spec, plan, shard, range, out: file.to_path_buf(), meta, kept }))
+    let kept = Some(Kept {
+        source,
+        samples,
+        temporary,
+    });
+    Ok(Some(Job {
+        spec,
+        plan,
+        shard,
+        range,
+        out: file.to_path_buf(),
+        meta,
+        kept,
+    }))
 }

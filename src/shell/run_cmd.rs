@@ -1,8 +1,8 @@
 //! `study run`: a study file through the batch engine into a Parquet table.
 
 use super::cli::RunArgs;
-use super::progress::Progress;
 use super::meta::{self, Key, Kind};
+use super::progress::Progress;
 use super::tables::{self, input_if_user, load_reference, Column, ParquetStream};
 use super::{interrupt, BadInput};
 use crate::kernel::params::{ModelParams, ParamInfo};
@@ -23,7 +23,8 @@ pub const SCHEMA_VERSION: &str = "1";
 
 /// Reads and validates a study file.
 pub fn load_study(file: &Path) -> anyhow::Result<StudySpec> {
-    let text = std::fs::read_to_string(file).map_err(|e| BadInput(format!("{}: cannot read: {e}", file.display())))?;
+    let text = std::fs::read_to_string(file)
+        .map_err(|e| BadInput(format!("{}: cannot read: {e}", file.display())))?;
     Ok(StudySpec::from_toml(&text, &file.display().to_string())?)
 }
 
@@ -38,7 +39,9 @@ pub fn plan_for(spec: &StudySpec, base: &Path) -> anyhow::Result<Plan> {
             let names = tables::column_names(&path).map_err(input_if_user)?;
             let wanted: Vec<&str> = names.iter().map(String::as_str).collect();
             let t = tables::read_columns(&path, &wanted, &[]).map_err(input_if_user)?;
-            let rows: Vec<Vec<f64>> = (0..t.rows()).map(|r| t.columns.iter().map(|c| c[r]).collect()).collect();
+            let rows: Vec<Vec<f64>> = (0..t.rows())
+                .map(|r| t.columns.iter().map(|c| c[r]).collect())
+                .collect();
             Ok(Plan::from_table(spec, infos, rows, references))
         }
         _ => {
@@ -51,7 +54,11 @@ pub fn plan_for(spec: &StudySpec, base: &Path) -> anyhow::Result<Plan> {
 /// The excitations' references: each made once, with the study's spectrum where it is not a
 /// sine; one that depends on the sample (`varied` paths) is made per sample by the plan, and
 /// gets an empty placeholder here.
-fn references(spec: &StudySpec, base: &Path, varied: &[String]) -> anyhow::Result<Vec<crate::kernel::excitation::Reference>> {
+fn references(
+    spec: &StudySpec,
+    base: &Path,
+    varied: &[String],
+) -> anyhow::Result<Vec<crate::kernel::excitation::Reference>> {
     let f_s = spec.model.controller.f_s;
     spec.excitations
         .iter()
@@ -59,8 +66,13 @@ fn references(spec: &StudySpec, base: &Path, varied: &[String]) -> anyhow::Resul
             if e.spec.per_sample(|p| varied.iter().any(|v| v == p)) {
                 return Ok(crate::kernel::excitation::Reference::from_states(f_s, &[]));
             }
-            let r = load_reference(&e.spec, &spec.model, base, spec.seed).with_context(|| format!("excitation {:?}", e.name))?;
-            Ok(if e.spec.is_sine() { r } else { r.with_spectrum(spec.spectrum.clone()) })
+            let r = load_reference(&e.spec, &spec.model, base, spec.seed)
+                .with_context(|| format!("excitation {:?}", e.name))?;
+            Ok(if e.spec.is_sine() {
+                r
+            } else {
+                r.with_spectrum(spec.spectrum.clone())
+            })
         })
         .collect()
 }
@@ -71,7 +83,8 @@ fn design_columns(path: &Path) -> anyhow::Result<Vec<&'static ParamInfo>> {
     let names = tables::column_names(path).map_err(input_if_user)?;
     let mut infos: Vec<&'static ParamInfo> = Vec::new();
     for n in &names {
-        let info = ModelParams::lookup(n).or_else(|| ModelParams::registry().find(|p| p.column_name() == *n || p.name == n));
+        let info = ModelParams::lookup(n)
+            .or_else(|| ModelParams::registry().find(|p| p.column_name() == *n || p.name == n));
         match info.map(|i| (i, cannot_vary(i))) {
             Some((_, Some(why))) => return Err(BadInput(format!("{}: column `{n}`: {why}", path.display())).into()),
             Some((i, None)) => infos.push(i),
@@ -99,7 +112,12 @@ pub struct ResultsSink {
 impl ResultsSink {
     /// Column layout: sample_id, excitation_id, excitation, [design_base, design_block],
     /// one column per parameter, one per metric, status, fail_time_s, fail_reason.
-    pub fn create(path: &Path, plan: &Plan, spec: &StudySpec, metadata: &[(String, String)]) -> anyhow::Result<Self> {
+    pub fn create(
+        path: &Path,
+        plan: &Plan,
+        spec: &StudySpec,
+        metadata: &[(String, String)],
+    ) -> anyhow::Result<Self> {
         let saltelli = plan.saltelli_dims.is_some();
         let columns: Vec<String> = plan.columns.iter().map(|c| c.column_name()).collect();
         let template = Self::template(saltelli, &columns, &spec.metrics);
@@ -157,29 +175,58 @@ impl RowSink for ResultsSink {
         let mut cols = vec![
             Column::U64(rows.iter().map(|r| r.sample_id).collect()),
             Column::U32(rows.iter().map(|r| r.excitation).collect()),
-            Column::Str(rows.iter().map(|r| self.exc_names[r.excitation as usize].clone()).collect()),
+            Column::Str(
+                rows.iter()
+                    .map(|r| self.exc_names[r.excitation as usize].clone())
+                    .collect(),
+            ),
         ];
         if self.saltelli {
-            cols.push(Column::U32(rows.iter().map(|r| r.saltelli.map_or(0, |s| s.0)).collect()));
-            cols.push(Column::U32(rows.iter().map(|r| r.saltelli.map_or(0, |s| s.1)).collect()));
+            cols.push(Column::U32(
+                rows.iter().map(|r| r.saltelli.map_or(0, |s| s.0)).collect(),
+            ));
+            cols.push(Column::U32(
+                rows.iter().map(|r| r.saltelli.map_or(0, |s| s.1)).collect(),
+            ));
         }
         for c in 0..self.columns.len() {
             cols.push(Column::F64(rows.iter().map(|r| r.values[c]).collect()));
         }
         // Metric values in table order, once per row; then the chosen ones as columns.
-        let names: Vec<&str> = crate::kernel::metrics::Metrics::NAN.columns().into_iter().map(|(n, _)| n).collect();
+        let names: Vec<&str> = crate::kernel::metrics::Metrics::NAN
+            .columns()
+            .into_iter()
+            .map(|(n, _)| n)
+            .collect();
         let values: Vec<Vec<(&str, f64)>> = rows.iter().map(|r| r.metrics.columns()).collect();
         for m in &self.metrics {
-            let k = names.iter().position(|n| n == m).expect("metric names are validated");
+            let k = names
+                .iter()
+                .position(|n| n == m)
+                .expect("metric names are validated");
             cols.push(Column::F64(values.iter().map(|v| v[k].1).collect()));
         }
-        cols.push(Column::Str(rows.iter().map(|r| r.status.label().to_string()).collect()));
-        cols.push(Column::OptF64(rows.iter().map(|r| if let RowStatus::Failed { time_s, .. } = r.status { Some(time_s) } else { None }).collect()));
+        cols.push(Column::Str(
+            rows.iter().map(|r| r.status.label().to_string()).collect(),
+        ));
+        cols.push(Column::OptF64(
+            rows.iter()
+                .map(|r| {
+                    if let RowStatus::Failed { time_s, .. } = r.status {
+                        Some(time_s)
+                    } else {
+                        None
+                    }
+                })
+                .collect(),
+        ));
         cols.push(Column::OptStr(
             rows.iter()
                 .map(|r| match &r.status {
                     RowStatus::Ok => None,
-                    RowStatus::Failed { reason, .. } | RowStatus::Invalid { reason } => Some(reason.clone()),
+                    RowStatus::Failed { reason, .. } | RowStatus::Invalid { reason } => {
+                        Some(reason.clone())
+                    }
                 })
                 .collect(),
         ));
@@ -188,7 +235,11 @@ impl RowSink for ResultsSink {
 }
 
 /// The metadata every results file carries.
-pub fn results_metadata(spec: &StudySpec, plan: &Plan, extra: &[(String, String)]) -> Vec<(String, String)> {
+pub fn results_metadata(
+    spec: &StudySpec,
+    plan: &Plan,
+    extra: &[(String, String)],
+) -> Vec<(String, String)> {
     let mut m = meta::header(Kind::StudyResults);
     m.extend([
         meta::pair(Key::Study, spec.resolved_toml()),
@@ -196,11 +247,23 @@ pub fn results_metadata(spec: &StudySpec, plan: &Plan, extra: &[(String, String)
         meta::pair(Key::SchemaVersion, SCHEMA_VERSION),
         meta::pair(Key::Design, spec.method.name()),
         meta::pair(Key::Samples, plan.samples()),
-        meta::pair(Key::Excitations, meta::list(spec.excitations.iter().map(|e| &e.name))),
-        meta::pair(Key::Parameters, meta::list(plan.columns.iter().map(|c| c.path()))),
-        meta::pair(Key::ParameterColumns, meta::list(plan.columns.iter().map(|c| c.column_name()))),
+        meta::pair(
+            Key::Excitations,
+            meta::list(spec.excitations.iter().map(|e| &e.name)),
+        ),
+        meta::pair(
+            Key::Parameters,
+            meta::list(plan.columns.iter().map(|c| c.path())),
+        ),
+        meta::pair(
+            Key::ParameterColumns,
+            meta::list(plan.columns.iter().map(|c| c.column_name())),
+        ),
         meta::pair(Key::Metrics, meta::list(&spec.metrics)),
-        meta::pair(Key::DesignParameters, meta::list(design_parameters(spec, plan))),
+        meta::pair(
+            Key::DesignParameters,
+            meta::list(design_parameters(spec, plan)),
+        ),
     ]);
     m.extend_from_slice(extra);
     m
@@ -243,11 +306,18 @@ impl Job {
                 return Err(BadInput("--samples must be at least 1".into()).into());
             }
             spec.samples = n;
-            spec.check_design_size().map_err(|why| BadInput(format!("--samples {n}: {why}")))?;
+            spec.check_design_size()
+                .map_err(|why| BadInput(format!("--samples {n}: {why}")))?;
         }
         let plan = plan_for(&spec, file.parent().unwrap_or(Path::new(".")))?;
-        let shard = args.shard.as_deref().map(|s| Shard::parse(s, plan.samples())).transpose()?;
-        let range = shard.as_ref().map_or(0..plan.samples(), |s| s.range.clone());
+        let shard = args
+            .shard
+            .as_deref()
+            .map(|s| Shard::parse(s, plan.samples()))
+            .transpose()?;
+        let range = shard
+            .as_ref()
+            .map_or(0..plan.samples(), |s| s.range.clone());
         for (i, &id) in spec.histories.iter().enumerate() {
             if id as usize >= plan.samples() {
                 return Err(BadInput(format!("{}: output.histories[{i}]: sample {id} does not exist (the study has samples 0 to {})", file.display(), plan.samples() - 1)).into());
@@ -258,7 +328,15 @@ impl Job {
         let mut extra = vec![meta::pair(Key::StudyFile, study_file.display())];
         extra.extend(shard.as_ref().map_or_else(Vec::new, |s| s.metadata()));
         let meta = results_metadata(&spec, &plan, &extra);
-        Ok(Job { spec, plan, shard, range, out, meta, kept: None })
+        Ok(Job {
+            spec,
+            plan,
+            shard,
+            range,
+            out,
+            meta,
+            kept: None,
+        })
     }
 
     fn samples_kept(&self) -> usize {
@@ -273,21 +351,39 @@ impl Job {
 /// The results file: `--out` (inside it as `<name>.parquet` when it is a folder), else the
 /// study's `[output] file` (with `.shard-I-of-N` for a shard). Refused when it is a folder or its
 /// folder cannot be written: before any work.
-fn output_path(out: Option<&Path>, spec: &StudySpec, shard: Option<&Shard>) -> anyhow::Result<PathBuf> {
+fn output_path(
+    out: Option<&Path>,
+    spec: &StudySpec,
+    shard: Option<&Shard>,
+) -> anyhow::Result<PathBuf> {
     let default = match shard {
         None => spec.output.clone(),
         Some(s) => {
-            let stem = spec.output.file_stem().map(|x| x.to_string_lossy().to_string()).unwrap_or_else(|| "results".into());
-            spec.output.with_file_name(format!("{stem}.shard-{}-of-{}.parquet", s.index, s.count))
+            let stem = spec
+                .output
+                .file_stem()
+                .map(|x| x.to_string_lossy().to_string())
+                .unwrap_or_else(|| "results".into());
+            spec.output
+                .with_file_name(format!("{stem}.shard-{}-of-{}.parquet", s.index, s.count))
         }
     };
     let out = match out {
-        Some(o) if o.is_dir() => o.join(default.file_name().unwrap_or_else(|| std::ffi::OsStr::new("results.parquet"))),
+        Some(o) if o.is_dir() => o.join(
+            default
+                .file_name()
+                .unwrap_or_else(|| std::ffi::OsStr::new("results.parquet")),
+        ),
         Some(o) => o.to_path_buf(),
         None => default,
     };
     if out.is_dir() {
-        return Err(BadInput(format!("{}: is a folder; name the results file (e.g. --out {}.parquet)", out.display(), spec.name)).into());
+        return Err(BadInput(format!(
+            "{}: is a folder; name the results file (e.g. --out {}.parquet)",
+            out.display(),
+            spec.name
+        ))
+        .into());
     }
     check_writable(&out)?;
     Ok(out)
@@ -296,7 +392,11 @@ fn output_path(out: Option<&Path>, spec: &StudySpec, shard: Option<&Shard>) -> a
 /// Checks that the results file's folder (or the nearest existing ancestor of it, which the run
 /// will create the rest of) takes a new file.
 fn check_writable(out: &Path) -> anyhow::Result<()> {
-    let mut dir = out.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new(".")).to_path_buf();
+    let mut dir = out
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."))
+        .to_path_buf();
     while !dir.exists() {
         match dir.parent() {
             Some(p) if !p.as_os_str().is_empty() => dir = p.to_path_buf(),
@@ -304,7 +404,12 @@ fn check_writable(out: &Path) -> anyhow::Result<()> {
         }
     }
     if !dir.is_dir() {
-        return Err(BadInput(format!("{}: cannot write the results file: {} is not a folder", out.display(), dir.display())).into());
+        return Err(BadInput(format!(
+            "{}: cannot write the results file: {} is not a folder",
+            out.display(),
+            dir.display()
+        ))
+        .into());
     }
     let probe = dir.join(format!(".vshake-probe-{}", std::process::id()));
     match std::fs::File::create(&probe) {
@@ -312,13 +417,22 @@ fn check_writable(out: &Path) -> anyhow::Result<()> {
             let _ = std::fs::remove_file(&probe);
             Ok(())
         }
-        Err(e) => Err(BadInput(format!("{}: cannot write the results file in {}: {e}", out.display(), dir.display())).into()),
+        Err(e) => Err(BadInput(format!(
+            "{}: cannot write the results file in {}: {e}",
+            out.display(),
+            dir.display()
+        ))
+        .into()),
     }
 }
 
 pub fn run(args: &RunArgs) -> anyhow::Result<()> {
     if !(args.checkpoint_secs.is_finite() && args.checkpoint_secs > 0.0) {
-        return Err(BadInput(format!("--checkpoint-secs {}: must be a positive number of seconds", args.checkpoint_secs)).into());
+        return Err(BadInput(format!(
+            "--checkpoint-secs {}: must be a positive number of seconds",
+            args.checkpoint_secs
+        ))
+        .into());
     }
     let job = match (&args.resume, &args.file) {
         (Some(f), _) => match super::resume::job(f)? {
@@ -326,7 +440,12 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
             None => return Ok(()),
         },
         (None, Some(file)) => Job::fresh(args, file)?,
-        (None, None) => return Err(BadInput("give a study file (study run STUDY.toml) or --resume RESULTS.parquet".into()).into()),
+        (None, None) => {
+            return Err(BadInput(
+                "give a study file (study run STUDY.toml) or --resume RESULTS.parquet".into(),
+            )
+            .into())
+        }
     };
     // Chunk size and threads are how the run is scheduled, not what it computes: they stay out of
     // the resolved study in the metadata, so shards (and resumed runs) with other ones still merge.
@@ -340,18 +459,38 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
     super::sizing::gate_long_run(&job, todo.clone(), &pool, args.yes)?;
     if !job.spec.histories.is_empty() {
         let dir = history_dir(&job.out);
-        std::fs::create_dir_all(&dir).map_err(|e| BadInput(format!("{}: cannot create the histories folder: {e}", dir.display())))?;
+        std::fs::create_dir_all(&dir).map_err(|e| {
+            BadInput(format!(
+                "{}: cannot create the histories folder: {e}",
+                dir.display()
+            ))
+        })?;
     }
     interrupt::install().context("catching SIGINT and SIGTERM")?;
-    let mut sink = ResultsSink::create(&job.out, &job.plan, &job.spec, &job.meta)?.checkpoints(Duration::from_secs_f64(args.checkpoint_secs));
+    let mut sink = ResultsSink::create(&job.out, &job.plan, &job.spec, &job.meta)?
+        .checkpoints(Duration::from_secs_f64(args.checkpoint_secs));
     if let Some(k) = &job.kept {
         k.copy_into(&mut sink, &job)?;
     }
-    let progress = Progress::new(&job.spec.name, todo.len() * job.plan.references.len(), args.quiet, args.log_progress);
-    let summary = batch::run_plan(&job.plan, todo.clone(), &pool, chunk, &mut sink, &|n| progress.inc(n), &|| interrupt::requested().is_some())?;
+    let progress = Progress::new(
+        &job.spec.name,
+        todo.len() * job.plan.references.len(),
+        args.quiet,
+        args.log_progress,
+    );
+    let summary = batch::run_plan(
+        &job.plan,
+        todo.clone(),
+        &pool,
+        chunk,
+        &mut sink,
+        &|n| progress.inc(n),
+        &|| interrupt::requested().is_some(),
+    )?;
     progress.finish();
     let (done, total) = (sink.rows(), job.rows_total());
-    sink.finish(&meta::completion(done, total)).with_context(|| format!("writing {}", job.out.display()))?;
+    sink.finish(&meta::completion(done, total))
+        .with_context(|| format!("writing {}", job.out.display()))?;
     if let Some(k) = &job.kept {
         k.discard();
     }
@@ -372,13 +511,26 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
     write_histories(&job)
 }
 
-fn print_header(job: &Job, args: &RunArgs, pool: &rayon::ThreadPool, chunk: usize) -> anyhow::Result<()> {
+fn print_header(
+    job: &Job,
+    args: &RunArgs,
+    pool: &rayon::ThreadPool,
+    chunk: usize,
+) -> anyhow::Result<()> {
     let (spec, plan) = (&job.spec, &job.plan);
-    let varied = if matches!(spec.method, Method::File { .. }) { plan.columns.len() } else { spec.varied().len() };
+    let varied = if matches!(spec.method, Method::File { .. }) {
+        plan.columns.len()
+    } else {
+        spec.varied().len()
+    };
     let mut o = std::io::stdout().lock();
     match &args.resume {
         Some(f) => writeln!(o, "study run --resume {}", f.display())?,
-        None => writeln!(o, "study run {}", args.file.as_deref().unwrap_or(Path::new("?")).display())?,
+        None => writeln!(
+            o,
+            "study run {}",
+            args.file.as_deref().unwrap_or(Path::new("?")).display()
+        )?,
     }
     writeln!(
         o,
@@ -400,10 +552,26 @@ fn print_header(job: &Job, args: &RunArgs, pool: &rayon::ThreadPool, chunk: usiz
         spec.solver.substeps
     )?;
     if let Some(s) = &job.shard {
-        writeln!(o, "  shard       {}/{}: samples {}..{} ({} of {})", s.index, s.count, s.range.start, s.range.end, s.range.len(), plan.samples())?;
+        writeln!(
+            o,
+            "  shard       {}/{}: samples {}..{} ({} of {})",
+            s.index,
+            s.count,
+            s.range.start,
+            s.range.end,
+            s.range.len(),
+            plan.samples()
+        )?;
     }
     if let Some(k) = &job.kept {
-        writeln!(o, "  resume      {} samples ({} rows) kept from {}; {} samples to go", k.samples, k.samples * plan.references.len(), k.source.display(), job.range.len() - k.samples)?;
+        writeln!(
+            o,
+            "  resume      {} samples ({} rows) kept from {}; {} samples to go",
+            k.samples,
+            k.samples * plan.references.len(),
+            k.source.display(),
+            job.range.len() - k.samples
+        )?;
     }
     for n in &spec.notes {
         writeln!(o, "  note        {n}")?;
@@ -412,9 +580,20 @@ fn print_header(job: &Job, args: &RunArgs, pool: &rayon::ThreadPool, chunk: usiz
     Ok(())
 }
 
-fn print_done(job: &Job, summary: &batch::Summary, progress: &Progress, samples: usize) -> anyhow::Result<()> {
+fn print_done(
+    job: &Job,
+    summary: &batch::Summary,
+    progress: &Progress,
+    samples: usize,
+) -> anyhow::Result<()> {
     let secs = progress.elapsed().as_secs_f64();
-    let sim_s: f64 = job.plan.references.iter().map(|r| r.len() as f64 / r.f_s).sum::<f64>() * samples as f64;
+    let sim_s: f64 = job
+        .plan
+        .references
+        .iter()
+        .map(|r| r.len() as f64 / r.f_s)
+        .sum::<f64>()
+        * samples as f64;
     let mut o = std::io::stdout().lock();
     writeln!(
         o,
@@ -434,11 +613,19 @@ fn write_histories(job: &Job) -> anyhow::Result<()> {
     let (spec, plan) = (&job.spec, &job.plan);
     let dir = history_dir(&job.out);
     let mut o = std::io::stdout().lock();
-    for &id in spec.histories.iter().filter(|&&id| job.range.contains(&(id as usize))) {
+    for &id in spec
+        .histories
+        .iter()
+        .filter(|&&id| job.range.contains(&(id as usize)))
+    {
         let sample = plan.sample(id as usize);
         let Ok(model) = sample.model else { continue };
         for (e, exc) in spec.excitations.iter().enumerate() {
-            let sim_spec = SimSpec { model: model.clone(), excitation: exc.spec.clone(), solver: spec.solver };
+            let sim_spec = SimSpec {
+                model: model.clone(),
+                excitation: exc.spec.clone(),
+                solver: spec.solver,
+            };
             // A per-sample motion is this sample's realisation; one that cannot run has no history.
             let own = match &plan.per_sample[e] {
                 Some(x) => match crate::orchestration::quake::generated(x, &model, plan.seed, id) {
@@ -451,7 +638,11 @@ fn write_histories(job: &Job) -> anyhow::Result<()> {
             let path = dir.join(format!("sample{id}_{}.parquet", exc.name));
             let cols = outcome.history.named_columns();
             let mut meta = meta::header(Kind::TimeHistory);
-            meta.extend([meta::pair(Key::Spec, sim_spec.resolved_toml()), meta::pair(Key::SampleId, id), meta::pair(Key::SchemaVersion, SCHEMA_VERSION)]);
+            meta.extend([
+                meta::pair(Key::Spec, sim_spec.resolved_toml()),
+                meta::pair(Key::SampleId, id),
+                meta::pair(Key::SchemaVersion, SCHEMA_VERSION),
+            ]);
             tables::write_parquet(&path, &cols, &meta)?;
             writeln!(o, "  history     {}", path.display())?;
         }
@@ -471,30 +662,54 @@ pub struct Shard {
 impl Shard {
     /// Parses `I/N` for a design of `samples` samples.
     pub fn parse(text: &str, samples: usize) -> anyhow::Result<Shard> {
-        let bad = |why: String| -> anyhow::Error { BadInput(format!("--shard {text:?}: {why}")).into() };
-        let (i, n) = text.split_once('/').ok_or_else(|| bad("expected I/N, e.g. 0/4 (I from 0 to N-1)".into()))?;
-        let index: usize = i.trim().parse().map_err(|_| bad(format!("{i:?} is not a shard index")))?;
-        let count: usize = n.trim().parse().map_err(|_| bad(format!("{n:?} is not a shard count")))?;
+        let bad =
+            |why: String| -> anyhow::Error { BadInput(format!("--shard {text:?}: {why}")).into() };
+        let (i, n) = text
+            .split_once('/')
+            .ok_or_else(|| bad("expected I/N, e.g. 0/4 (I from 0 to N-1)".into()))?;
+        let index: usize = i
+            .trim()
+            .parse()
+            .map_err(|_| bad(format!("{i:?} is not a shard index")))?;
+        let count: usize = n
+            .trim()
+            .parse()
+            .map_err(|_| bad(format!("{n:?} is not a shard count")))?;
         if count == 0 || index >= count {
-            return Err(bad(format!("the index must be in 0..{} (0 to N-1)", count.saturating_sub(1))));
+            return Err(bad(format!(
+                "the index must be in 0..{} (0 to N-1)",
+                count.saturating_sub(1)
+            )));
         }
         if count > samples {
-            return Err(bad(format!("{count} shards for a design of {samples} samples; at most {samples}")));
+            return Err(bad(format!(
+                "{count} shards for a design of {samples} samples; at most {samples}"
+            )));
         }
-        Ok(Shard { index, count, range: (index * samples / count)..((index + 1) * samples / count) })
+        Ok(Shard {
+            index,
+            count,
+            range: (index * samples / count)..((index + 1) * samples / count),
+        })
     }
 
     pub fn metadata(&self) -> Vec<(String, String)> {
         vec![
             meta::pair(Key::ShardIndex, self.index),
             meta::pair(Key::ShardCount, self.count),
-            meta::pair(Key::ShardSamples, format!("{}..{}", self.range.start, self.range.end)),
+            meta::pair(
+                Key::ShardSamples,
+                format!("{}..{}", self.range.start, self.range.end),
+            ),
         ]
     }
 }
 
 /// Folder of the full histories requested by a study: `<out stem>_histories/`.
 pub fn history_dir(out: &Path) -> PathBuf {
-    let stem = out.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "results".into());
+    let stem = out
+        .file_stem()
+        .map(|s| s.to_string_lossy().to_string())
+        .unwrap_or_else(|| "results".into());
     out.with_file_name(format!("{stem}_histories"))
 }

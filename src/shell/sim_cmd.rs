@@ -21,7 +21,8 @@ pub fn build_reference(spec: &SimSpec, base: &Path) -> anyhow::Result<Reference>
 
 /// Reads and validates a run file.
 pub fn load_spec(file: &Path) -> anyhow::Result<SimSpec> {
-    let text = std::fs::read_to_string(file).map_err(|e| BadInput(format!("{}: cannot read: {e}", file.display())))?;
+    let text = std::fs::read_to_string(file)
+        .map_err(|e| BadInput(format!("{}: cannot read: {e}", file.display())))?;
     Ok(SimSpec::from_toml(&text, &file.display().to_string())?)
 }
 
@@ -55,45 +56,103 @@ pub fn run(args: &SimArgs) -> anyhow::Result<()> {
         writeln!(stdout, "  {name:<22} {:>12}", fmt_value(v))?;
     }
     if let Some((spectrum, target)) = &reference.spectrum {
-        write_spectrum(&mut stdout, args, &out.history, &reference, spectrum, target)?;
+        write_spectrum(
+            &mut stdout,
+            args,
+            &out.history,
+            &reference,
+            spectrum,
+            target,
+        )?;
     }
     if let Some(path) = &args.out {
         let cols = out.history.named_columns();
         let meta = {
             let mut m = meta::header(Kind::TimeHistory);
-            m.extend([meta::pair(Key::Spec, spec.resolved_toml()), meta::pair(Key::SchemaVersion, super::run_cmd::SCHEMA_VERSION), meta::pair(Key::Status, &status)]);
+            m.extend([
+                meta::pair(Key::Spec, spec.resolved_toml()),
+                meta::pair(Key::SchemaVersion, super::run_cmd::SCHEMA_VERSION),
+                meta::pair(Key::Status, &status),
+            ]);
             m
         };
-        tables::write_parquet(path, &cols, &meta).with_context(|| format!("writing {}", path.display()))?;
-        writeln!(stdout, "\nwrote {} ({} rows x {} channels)", path.display(), out.history.len(), CHANNELS.len())?;
+        tables::write_parquet(path, &cols, &meta)
+            .with_context(|| format!("writing {}", path.display()))?;
+        writeln!(
+            stdout,
+            "\nwrote {} ({} rows x {} channels)",
+            path.display(),
+            out.history.len(),
+            CHANNELS.len()
+        )?;
     }
     match out.result.status {
         LaneStatus::Ok => Ok(()),
-        LaneStatus::Failed { .. } => Err(RunFailed(format!("{}: run {status}", args.file.display())).into()),
+        LaneStatus::Failed { .. } => {
+            Err(RunFailed(format!("{}: run {status}", args.file.display())).into())
+        }
     }
 }
 
 /// The response spectra of the achieved and the target acceleration, printed and (with
 /// `--spectrum`) written: the achieved one from the history's `accel_mps2` over the window, as
 /// the kernel's online spectrum takes it.
-fn write_spectrum(o: &mut impl Write, args: &SimArgs, history: &sim::History, reference: &Reference, spectrum: &SpectrumSpec, target: &[f64]) -> anyhow::Result<()> {
+fn write_spectrum(
+    o: &mut impl Write,
+    args: &SimArgs,
+    history: &sim::History,
+    reference: &Reference,
+    spectrum: &SpectrumSpec,
+    target: &[f64],
+) -> anyhow::Result<()> {
     let cols = history.named_columns();
-    let accel = cols.iter().find(|(n, _)| *n == "accel_mps2").expect("a history has accel_mps2").1;
+    let accel = cols
+        .iter()
+        .find(|(n, _)| *n == "accel_mps2")
+        .expect("a history has accel_mps2")
+        .1;
     let (w0, w1) = reference.window;
-    let got = psa(&accel[w0..w1.min(accel.len())], 1.0 / reference.f_s, spectrum);
-    writeln!(o, "
-  response spectrum ({:.0} % damping), PSA in g", 100.0 * spectrum.damping)?;
-    writeln!(o, "  {:>9} {:>10} {:>10} {:>8}", "period s", "target", "achieved", "ratio")?;
+    let got = psa(
+        &accel[w0..w1.min(accel.len())],
+        1.0 / reference.f_s,
+        spectrum,
+    );
+    writeln!(
+        o,
+        "
+  response spectrum ({:.0} % damping), PSA in g",
+        100.0 * spectrum.damping
+    )?;
+    writeln!(
+        o,
+        "  {:>9} {:>10} {:>10} {:>8}",
+        "period s", "target", "achieved", "ratio"
+    )?;
     for ((t, want), have) in spectrum.periods.iter().zip(target).zip(&got) {
-        writeln!(o, "  {t:>9.3} {:>10.4} {:>10.4} {:>8.3}", want / G, have / G, have / want)?;
+        writeln!(
+            o,
+            "  {t:>9.3} {:>10.4} {:>10.4} {:>8.3}",
+            want / G,
+            have / G,
+            have / want
+        )?;
     }
     if let Some(path) = &args.spectrum {
         let ratio: Vec<f64> = got.iter().zip(target).map(|(a, b)| a / b).collect();
-        let (t_g, a_g): (Vec<f64>, Vec<f64>) = (target.iter().map(|v| v / G).collect(), got.iter().map(|v| v / G).collect());
-        let cols: [(&str, &[f64]); 4] = [("period_s", &spectrum.periods), ("psa_target_g", &t_g), ("psa_g", &a_g), ("ratio", &ratio)];
+        let (t_g, a_g): (Vec<f64>, Vec<f64>) = (
+            target.iter().map(|v| v / G).collect(),
+            got.iter().map(|v| v / G).collect(),
+        );
+        let cols: [(&str, &[f64]); 4] = [
+            ("period_s", &spectrum.periods),
+            ("psa_target_g", &t_g),
+            ("psa_g", &a_g),
+            ("ratio", &ratio),
+        ];
         let mut m = meta::header(Kind::Spectrum);
         m.push(meta::pair(Key::Damping, spectrum.damping));
-        tables::write_parquet(path, &cols, &m).with_context(|| format!("writing {}", path.display()))?;
+        tables::write_parquet(path, &cols, &m)
+            .with_context(|| format!("writing {}", path.display()))?;
         writeln!(o, "  wrote {}", path.display())?;
     }
     Ok(())

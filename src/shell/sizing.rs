@@ -31,9 +31,14 @@ pub fn long_run_decision(wall_s: f64, yes: bool, terminal: bool) -> Decision {
     if wall_s <= LONG_RUN_S || yes {
         return Decision::Go;
     }
-    let what = format!("this run is estimated at {} of wall time", human_time(wall_s));
+    let what = format!(
+        "this run is estimated at {} of wall time",
+        human_time(wall_s)
+    );
     if terminal {
-        Decision::Ask(format!("{what}; pass --yes to start it, or --dry-run to see the estimate, or fewer --samples"))
+        Decision::Ask(format!(
+            "{what}; pass --yes to start it, or --dry-run to see the estimate, or fewer --samples"
+        ))
     } else {
         Decision::Warn(format!("WARNING: {what}; starting anyway because stderr is not a terminal (pass --yes to silence this)"))
     }
@@ -41,12 +46,22 @@ pub fn long_run_decision(wall_s: f64, yes: bool, terminal: bool) -> Decision {
 
 /// Simulated seconds of the samples `todo` (every excitation).
 fn simulated_s(job: &Job, todo: &Range<usize>) -> f64 {
-    job.plan.references.iter().map(|r| r.len() as f64 / r.f_s).sum::<f64>() * todo.len() as f64
+    job.plan
+        .references
+        .iter()
+        .map(|r| r.len() as f64 / r.f_s)
+        .sum::<f64>()
+        * todo.len() as f64
 }
 
 /// Times a few samples when the run could take more than a day even at a fast 1 000 simulated
 /// seconds per wall second per thread, and asks for `--yes` if the estimate is over a day.
-pub fn gate_long_run(job: &Job, todo: Range<usize>, pool: &rayon::ThreadPool, yes: bool) -> anyhow::Result<()> {
+pub fn gate_long_run(
+    job: &Job,
+    todo: Range<usize>,
+    pool: &rayon::ThreadPool,
+    yes: bool,
+) -> anyhow::Result<()> {
     if yes || simulated_s(job, &todo) < LONG_RUN_S * 1_000.0 * pool.current_num_threads() as f64 {
         return Ok(());
     }
@@ -69,7 +84,13 @@ pub fn dry_run(job: &Job, todo: Range<usize>, pool: &rayon::ThreadPool) -> anyho
     let bytes = output_bytes(job, &c, runs)?;
     let mut o = std::io::stdout().lock();
     writeln!(o, "  dry run     nothing is written")?;
-    writeln!(o, "  runs        {} samples x {} excitations = {runs} runs, {:.3e} simulated s", todo.len(), job.plan.references.len(), simulated_s(job, &todo))?;
+    writeln!(
+        o,
+        "  runs        {} samples x {} excitations = {runs} runs, {:.3e} simulated s",
+        todo.len(),
+        job.plan.references.len(),
+        simulated_s(job, &todo)
+    )?;
     writeln!(
         o,
         "  estimate    {} wall ({} samples timed in {:.2} s on {} threads, spread over the design)",
@@ -78,7 +99,12 @@ pub fn dry_run(job: &Job, todo: Range<usize>, pool: &rayon::ThreadPool) -> anyho
         c.secs,
         pool.current_num_threads()
     )?;
-    writeln!(o, "  output      {} ({})", human_bytes(bytes), job.out.display())?;
+    writeln!(
+        o,
+        "  output      {} ({})",
+        human_bytes(bytes),
+        job.out.display()
+    )?;
     if wall > LONG_RUN_S {
         writeln!(o, "  note        over a day: the run will ask for --yes (see `study slurm` to spread it over a cluster)")?;
     }
@@ -96,7 +122,9 @@ fn output_bytes(job: &Job, c: &Calibration, runs: usize) -> anyhow::Result<f64> 
         sink.finish(&[])?;
         Ok(std::fs::metadata(&path)?.len())
     };
-    let sized = (|| Ok::<_, anyhow::Error>((size(&[], "empty.parquet")?, size(&c.rows, "rows.parquet")?)))();
+    let sized =
+        (|| Ok::<_, anyhow::Error>((size(&[], "empty.parquet")?, size(&c.rows, "rows.parquet")?)))(
+        );
     let _ = std::fs::remove_dir_all(&dir);
     let (empty, full) = sized?;
     let per_row = (full.saturating_sub(empty)) as f64 / c.rows.len().max(1) as f64;
@@ -128,13 +156,18 @@ mod tests {
     #[test]
     fn a_run_over_a_day_asks_at_a_terminal_and_warns_in_a_batch_job() {
         assert_eq!(long_run_decision(3_600.0, false, true), Decision::Go);
-        assert_eq!(long_run_decision(2.0 * LONG_RUN_S, true, true), Decision::Go);
+        assert_eq!(
+            long_run_decision(2.0 * LONG_RUN_S, true, true),
+            Decision::Go
+        );
         match long_run_decision(12.0 * LONG_RUN_S, false, true) {
             Decision::Ask(m) => assert!(m.contains("12.0 days") && m.contains("--yes"), "{m}"),
             d => panic!("{d:?}"),
         }
         match long_run_decision(12.0 * LONG_RUN_S, false, false) {
-            Decision::Warn(m) => assert!(m.starts_with("WARNING") && m.contains("12.0 days"), "{m}"),
+            Decision::Warn(m) => {
+                assert!(m.starts_with("WARNING") && m.contains("12.0 days"), "{m}")
+            }
             d => panic!("{d:?}"),
         }
     }

@@ -19,8 +19,15 @@ fn absolute(p: &Path) -> anyhow::Result<PathBuf> {
 
 /// Checks a value that goes into an `#SBATCH` line (no spaces or shell characters).
 fn slurm_value(flag: &str, v: &str) -> anyhow::Result<()> {
-    if v.is_empty() || !v.chars().all(|c| c.is_ascii_alphanumeric() || "-_:.,+".contains(c)) {
-        return Err(BadInput(format!("--{flag} {v:?}: not a Slurm value (letters, digits and - _ : . , +)")).into());
+    if v.is_empty()
+        || !v
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || "-_:.,+".contains(c))
+    {
+        return Err(BadInput(format!(
+            "--{flag} {v:?}: not a Slurm value (letters, digits and - _ : . , +)"
+        ))
+        .into());
     }
     Ok(())
 }
@@ -43,7 +50,11 @@ pub fn run(args: &SlurmArgs) -> anyhow::Result<()> {
     let job = prepare(args)?;
     let (array, merge, submit) = (array_script(&job), merge_script(&job), submit_script(&job));
     let dir = &job.dir;
-    for (file, text) in [("array.sbatch", &array), ("merge.sbatch", &merge), ("submit.sh", &submit)] {
+    for (file, text) in [
+        ("array.sbatch", &array),
+        ("merge.sbatch", &merge),
+        ("submit.sh", &submit),
+    ] {
         let path = dir.join(file);
         std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))?;
         #[cfg(unix)]
@@ -54,10 +65,26 @@ pub fn run(args: &SlurmArgs) -> anyhow::Result<()> {
     }
     let n = args.shards;
     let mut o = std::io::stdout().lock();
-    writeln!(o, "study slurm {}: {} samples x {} excitations in {n} shards", args.file.display(), job.samples, job.excitations)?;
-    writeln!(o, "  {}  the job array (task I = shard I/{n}, {} CPUs, {} each)", dir.join("array.sbatch").display(), args.cpus, args.time)?;
+    writeln!(
+        o,
+        "study slurm {}: {} samples x {} excitations in {n} shards",
+        args.file.display(),
+        job.samples,
+        job.excitations
+    )?;
+    writeln!(
+        o,
+        "  {}  the job array (task I = shard I/{n}, {} CPUs, {} each)",
+        dir.join("array.sbatch").display(),
+        args.cpus,
+        args.time
+    )?;
     writeln!(o, "  {}  the merge job", dir.join("merge.sbatch").display())?;
-    writeln!(o, "  {}  submits both (merge afterok the array)", dir.join("submit.sh").display())?;
+    writeln!(
+        o,
+        "  {}  submits both (merge afterok the array)",
+        dir.join("submit.sh").display()
+    )?;
     writeln!(o, "  submit: bash {}", dir.join("submit.sh").display())?;
     writeln!(o, "  result: {}", job.merged().display())?;
     Ok(())
@@ -72,7 +99,11 @@ fn prepare(args: &SlurmArgs) -> anyhow::Result<Job<'_>> {
         return Err(BadInput("--shards must be at least 1".into()).into());
     }
     // Every shard must be a valid slice (the same check `study run --shard` makes).
-    Shard::parse(&format!("{}/{}", args.shards - 1, args.shards), plan.samples()).map_err(|e| BadInput(e.to_string().replace("--shard", "--shards")))?;
+    Shard::parse(
+        &format!("{}/{}", args.shards - 1, args.shards),
+        plan.samples(),
+    )
+    .map_err(|e| BadInput(e.to_string().replace("--shard", "--shards")))?;
     if args.cpus == 0 {
         return Err(BadInput("--cpus must be at least 1".into()).into());
     }
@@ -84,20 +115,47 @@ fn prepare(args: &SlurmArgs) -> anyhow::Result<Job<'_>> {
             common += &format!("#SBATCH --{flag}={v}\n");
         }
     }
-    let name: String = spec.name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '_' || c == '-' { c } else { '_' }).collect();
-    let dir = args.dir.clone().unwrap_or_else(|| PathBuf::from(format!("slurm_{name}")));
+    let name: String = spec
+        .name
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '_' || c == '-' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    let dir = args
+        .dir
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(format!("slurm_{name}")));
     for d in ["logs", "shards"] {
-        std::fs::create_dir_all(dir.join(d)).with_context(|| format!("cannot create {}", dir.join(d).display()))?;
+        std::fs::create_dir_all(dir.join(d))
+            .with_context(|| format!("cannot create {}", dir.join(d).display()))?;
     }
     let dir = absolute(&dir)?;
     if dir.to_string_lossy().chars().any(|c| "\"$`\\".contains(c)) {
-        return Err(BadInput(format!("--dir {}: the path may not contain \" $ ` or \\ (it goes into the job scripts)", dir.display())).into());
+        return Err(BadInput(format!(
+            "--dir {}: the path may not contain \" $ ` or \\ (it goes into the job scripts)",
+            dir.display()
+        ))
+        .into());
     }
     let bin = match &args.bin {
         Some(b) => absolute(b)?,
         None => std::env::current_exe().context("locating the study executable")?,
     };
-    Ok(Job { args, name, samples: plan.samples(), excitations: plan.references.len(), dir, study: absolute(&args.file)?, bin, common })
+    Ok(Job {
+        args,
+        name,
+        samples: plan.samples(),
+        excitations: plan.references.len(),
+        dir,
+        study: absolute(&args.file)?,
+        bin,
+        common,
+    })
 }
 
 impl Job<'_> {
@@ -108,8 +166,11 @@ impl Job<'_> {
 
 /// The job array: task I runs shard I/N, stops before the time limit, requeues and resumes.
 fn array_script(job: &Job<'_>) -> String {
-    let (args, name, dir, common, n) = (job.args, &job.name, &job.dir, &job.common, job.args.shards);
-    let shard_out = dir.join("shards").join(format!("{name}.shard-${{SLURM_ARRAY_TASK_ID}}-of-{n}.parquet"));
+    let (args, name, dir, common, n) =
+        (job.args, &job.name, &job.dir, &job.common, job.args.shards);
+    let shard_out = dir.join("shards").join(format!(
+        "{name}.shard-${{SLURM_ARRAY_TASK_ID}}-of-{n}.parquet"
+    ));
     // Slurm sends SIGTERM to the batch shell 5 minutes before the time limit (--signal=B:TERM@300);
     // the shell passes it on to `study`, which finishes the chunks in flight, closes its file
     // marked incomplete and exits with 143; the task then requeues itself, and the requeued task

@@ -16,12 +16,33 @@ pub fn print(o: &mut dyn Write, map: &StateMap) -> std::io::Result<()> {
         }
         writeln!(o, "  {}:", r.label())?;
         for reg in map.by_state(r) {
-            let terms: Vec<String> = reg.terms.iter().take(3).map(|t| format!("{} ({:.2})", t.formula(), t.alone)).collect();
+            let terms: Vec<String> = reg
+                .terms
+                .iter()
+                .take(3)
+                .map(|t| format!("{} ({:.2})", t.formula(), t.alone))
+                .collect();
             let st = reg.state.map_or("all states", |s| s.label());
-            writeln!(o, "    {:<28} R^2 {:>5.2}  {}", st, reg.r2, if terms.is_empty() { "-".to_string() } else { terms.join(", ") })?;
+            writeln!(
+                o,
+                "    {:<28} R^2 {:>5.2}  {}",
+                st,
+                reg.r2,
+                if terms.is_empty() {
+                    "-".to_string()
+                } else {
+                    terms.join(", ")
+                }
+            )?;
         }
         for (_, m) in map.memory.iter().filter(|(res, _)| *res == r) {
-            writeln!(o, "    {:<28} R^2 {:>5.2}  {}", m.kind.name(), m.r2, m.describe())?;
+            writeln!(
+                o,
+                "    {:<28} R^2 {:>5.2}  {}",
+                m.kind.name(),
+                m.r2,
+                m.describe()
+            )?;
         }
     }
     match map.sentence() {
@@ -33,24 +54,41 @@ pub fn print(o: &mut dyn Write, map: &StateMap) -> std::io::Result<()> {
 
 /// The state map's tables: `statemap.parquet` (per state and bin, each residual's mean and rms)
 /// and `stateterms.parquet` (per regression, its R² and the terms kept).
-pub fn write(dir: &std::path::Path, map: &StateMap, meta: &[(String, String)]) -> anyhow::Result<()> {
+pub fn write(
+    dir: &std::path::Path,
+    map: &StateMap,
+    meta: &[(String, String)],
+) -> anyhow::Result<()> {
     use statemap::Residual;
     let b = &map.bins;
     let f = |g: &dyn Fn(&statemap::MapBin) -> f64| Column::F64(b.iter().map(g).collect());
     let mut cols = vec![
-        ("state".to_string(), Column::Str(b.iter().map(|x| x.state.name().to_string()).collect())),
+        (
+            "state".to_string(),
+            Column::Str(b.iter().map(|x| x.state.name().to_string()).collect()),
+        ),
         ("bin_lo".to_string(), f(&|x| x.lo)),
         ("bin_hi".to_string(), f(&|x| x.hi)),
         ("scale".to_string(), f(&|x| x.scale)),
-        ("scale_unit".to_string(), Column::Str(b.iter().map(|x| x.state.scale_unit().to_string()).collect())),
-        ("samples".to_string(), Column::U32(b.iter().map(|x| x.samples as u32).collect())),
+        (
+            "scale_unit".to_string(),
+            Column::Str(b.iter().map(|x| x.state.scale_unit().to_string()).collect()),
+        ),
+        (
+            "samples".to_string(),
+            Column::U32(b.iter().map(|x| x.samples as u32).collect()),
+        ),
     ];
     for (i, r) in Residual::ALL.iter().enumerate() {
         cols.push((format!("mean_{}", r.name()), f(&|x| x.mean[i])));
         cols.push((format!("rms_{}", r.name()), f(&|x| x.rms[i])));
     }
     tables::write_table(&dir.join("statemap.parquet"), cols, meta)?;
-    tables::write_table(&dir.join("stateterms.parquet"), state_term_rows(map).into_columns(), meta)
+    tables::write_table(
+        &dir.join("stateterms.parquet"),
+        state_term_rows(map).into_columns(),
+        meta,
+    )
 }
 
 /// The rows of `stateterms.parquet`: every regression's terms (one row without a term when it
@@ -73,7 +111,17 @@ struct StateTermRows {
 
 impl StateTermRows {
     #[allow(clippy::too_many_arguments)]
-    fn push(&mut self, residual: statemap::Residual, states: &str, r2: f64, term_state: &str, term: String, coef: f64, alone: f64, named: bool) {
+    fn push(
+        &mut self,
+        residual: statemap::Residual,
+        states: &str,
+        r2: f64,
+        term_state: &str,
+        term: String,
+        coef: f64,
+        alone: f64,
+        named: bool,
+    ) {
         self.residual.push(residual.name().into());
         self.states.push(states.into());
         self.r2.push(r2);
@@ -109,19 +157,45 @@ fn state_term_rows(map: &StateMap) -> StateTermRows {
     for g in map.per_state.iter().flatten().chain(&map.joint) {
         let states = g.state.map_or("all", |s| s.name());
         if g.terms.is_empty() {
-            rows.push(g.residual, states, g.r2, "", String::new(), f64::NAN, f64::NAN, false);
+            rows.push(
+                g.residual,
+                states,
+                g.r2,
+                "",
+                String::new(),
+                f64::NAN,
+                f64::NAN,
+                false,
+            );
         }
         for t in &g.terms {
             let is = matches!(named, Some(Named::Static(ng, nt)) if std::ptr::eq(ng, g) && std::ptr::eq(nt, t));
-            rows.push(g.residual, states, g.r2, t.state.name(), t.formula(), t.coef, t.alone, is);
+            rows.push(
+                g.residual,
+                states,
+                g.r2,
+                t.state.name(),
+                t.formula(),
+                t.coef,
+                t.alone,
+                is,
+            );
         }
     }
     for (r, m) in &map.memory {
         let st = m.kind.state().name();
         let term = format!("{} (f_n {:.3} Hz, ζ {:.4})", m.kind.name(), m.f_n, m.zeta);
-        rows.push(*r, st, m.r2, st, term, m.gain, m.r2, matches!(named, Some(Named::Memory(_, n)) if std::ptr::eq(n, m)));
+        rows.push(
+            *r,
+            st,
+            m.r2,
+            st,
+            term,
+            m.gain,
+            m.r2,
+            matches!(named, Some(Named::Memory(_, n)) if std::ptr::eq(n, m)),
+        );
         (rows.f_n_hz[rows.r2.len() - 1], rows.zeta[rows.r2.len() - 1]) = (m.f_n, m.zeta);
     }
     rows
 }
-

@@ -3,8 +3,8 @@
 
 use super::campaign_io::{load_campaign, load_model};
 use super::cli::SynthArgs;
-use super::tables::{self, load_reference, Column};
 use super::meta::{self, Key, Kind};
+use super::tables::{self, load_reference, Column};
 use super::{BadInput, RunFailed};
 use crate::kernel::excitation::Reference;
 use crate::kernel::params::ModelParams;
@@ -20,12 +20,20 @@ use std::io::Write;
 use std::path::Path;
 
 /// Channels that take sensor noise, and their column names.
-const NOISY: [(&str, &str); 5] = [("accel", "accel_mps2"), ("disp", "disp_m"), ("force", "force_n"), ("p1", "p1_pa"), ("p2", "p2_pa")];
+const NOISY: [(&str, &str); 5] = [
+    ("accel", "accel_mps2"),
+    ("disp", "disp_m"),
+    ("force", "force_n"),
+    ("p1", "p1_pa"),
+    ("p2", "p2_pa"),
+];
 
 /// Switches on the named effects.
 pub fn apply_effects(model: &mut ModelParams, effects: &[String]) -> anyhow::Result<()> {
     for e in effects {
-        *model.effects.get_mut(super::fit_cmd::check_effect(e, "--effect")?) = true;
+        *model
+            .effects
+            .get_mut(super::fit_cmd::check_effect(e, "--effect")?) = true;
     }
     Ok(())
 }
@@ -33,13 +41,30 @@ pub fn apply_effects(model: &mut ModelParams, effects: &[String]) -> anyhow::Res
 /// Parses `path=value` model settings into `model`.
 pub fn apply_sets(model: &mut ModelParams, sets: &[String]) -> anyhow::Result<()> {
     for s in sets {
-        let (path, value) = s.split_once('=').ok_or_else(|| BadInput(format!("--set {s:?}: expected component.name=value")))?;
-        let info = ModelParams::lookup(path.trim()).ok_or_else(|| BadInput(format!("--set {s:?}: unknown parameter `{}` (`study params` lists them)", path.trim())))?;
-        let v: f64 = value.trim().parse().map_err(|_| BadInput(format!("--set {s:?}: {value:?} is not a number")))?;
+        let (path, value) = s
+            .split_once('=')
+            .ok_or_else(|| BadInput(format!("--set {s:?}: expected component.name=value")))?;
+        let info = ModelParams::lookup(path.trim()).ok_or_else(|| {
+            BadInput(format!(
+                "--set {s:?}: unknown parameter `{}` (`study params` lists them)",
+                path.trim()
+            ))
+        })?;
+        let v: f64 = value
+            .trim()
+            .parse()
+            .map_err(|_| BadInput(format!("--set {s:?}: {value:?} is not a number")))?;
         (info.set)(model, v);
     }
     if let Err(list) = model.validate() {
-        return Err(BadInput(format!("--set: {}", list.iter().map(|i| i.to_string()).collect::<Vec<_>>().join("; "))).into());
+        return Err(BadInput(format!(
+            "--set: {}",
+            list.iter()
+                .map(|i| i.to_string())
+                .collect::<Vec<_>>()
+                .join("; ")
+        ))
+        .into());
     }
     Ok(())
 }
@@ -49,13 +74,28 @@ pub fn parse_noise(spec: Option<&str>) -> anyhow::Result<[f64; 5]> {
     let mut out = [0.0; 5];
     let Some(spec) = spec else { return Ok(out) };
     for item in spec.split(',').filter(|s| !s.trim().is_empty()) {
-        let (k, v) = item.split_once('=').ok_or_else(|| BadInput(format!("--noise {item:?}: expected channel=std")))?;
-        let i = NOISY.iter().position(|(n, _)| *n == k.trim()).ok_or_else(|| {
-            BadInput(format!("--noise: unknown channel {:?}; expected {}", k.trim(), NOISY.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")))
-        })?;
-        let v: f64 = v.trim().parse().map_err(|_| BadInput(format!("--noise {item:?}: not a number")))?;
+        let (k, v) = item
+            .split_once('=')
+            .ok_or_else(|| BadInput(format!("--noise {item:?}: expected channel=std")))?;
+        let i = NOISY
+            .iter()
+            .position(|(n, _)| *n == k.trim())
+            .ok_or_else(|| {
+                BadInput(format!(
+                    "--noise: unknown channel {:?}; expected {}",
+                    k.trim(),
+                    NOISY.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
+                ))
+            })?;
+        let v: f64 = v
+            .trim()
+            .parse()
+            .map_err(|_| BadInput(format!("--noise {item:?}: not a number")))?;
         if !(v >= 0.0 && v.is_finite()) {
-            return Err(BadInput(format!("--noise {item:?}: the standard deviation must be >= 0")).into());
+            return Err(BadInput(format!(
+                "--noise {item:?}: the standard deviation must be >= 0"
+            ))
+            .into());
         }
         out[i] = v;
     }
@@ -63,12 +103,26 @@ pub fn parse_noise(spec: Option<&str>) -> anyhow::Result<[f64; 5]> {
 }
 
 /// Writes a measured-test table as CSV (shortest round-trip digits) or Parquet, by extension.
-pub fn write_measured(path: &Path, cols: &[(&str, Vec<f64>)], meta: &[(String, String)]) -> anyhow::Result<()> {
-    if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("parquet") || e.eq_ignore_ascii_case("pq")) {
-        return tables::write_table(path, cols.iter().map(|(n, v)| (n.to_string(), Column::F64(v.clone()))).collect(), meta);
+pub fn write_measured(
+    path: &Path,
+    cols: &[(&str, Vec<f64>)],
+    meta: &[(String, String)],
+) -> anyhow::Result<()> {
+    if path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("parquet") || e.eq_ignore_ascii_case("pq"))
+    {
+        return tables::write_table(
+            path,
+            cols.iter()
+                .map(|(n, v)| (n.to_string(), Column::F64(v.clone())))
+                .collect(),
+            meta,
+        );
     }
     let out = tables::AtomicFile::new(path);
-    let file = std::fs::File::create(&out.tmp).with_context(|| format!("cannot create {}", out.tmp.display()))?;
+    let file = std::fs::File::create(&out.tmp)
+        .with_context(|| format!("cannot create {}", out.tmp.display()))?;
     let mut w = csv::Writer::from_writer(file);
     w.write_record(cols.iter().map(|(n, _)| *n))?;
     for r in 0..cols[0].1.len() {
@@ -85,27 +139,51 @@ pub fn write_measured(path: &Path, cols: &[(&str, Vec<f64>)], meta: &[(String, S
 /// comparison's own integration].
 const FINE_SUBSTEPS: usize = 64;
 
+/// Named columns of a measured file.
+type Columns = Vec<(&'static str, Vec<f64>)>;
+
 /// The measured-file columns of one test at `rate` (Hz) after `pre_rows` rows at rest: the model
 /// sampled at the file's times (at the ticks themselves when the rate is the controller's).
-fn sample_test(spec: &SimSpec, reference: &mut Reference, rate: f64, pre_rows: usize) -> anyhow::Result<Result<Vec<(&'static str, Vec<f64>)>, String>> {
+fn sample_test(
+    spec: &SimSpec,
+    reference: &mut Reference,
+    rate: f64,
+    pre_rows: usize,
+) -> anyhow::Result<Result<Columns, String>> {
     let f_s = spec.model.controller.f_s;
     let duration = reference.len() as f64 / f_s;
     let n = (duration * rate).round() as usize;
     let tau: Vec<f64> = (0..n).map(|i| i as f64 / rate).collect();
     reference.hold_to((tau[n - 1] * f_s).floor() as usize + 2);
-    let solver = if rate == f_s { spec.solver } else { Solver { substeps: FINE_SUBSTEPS } };
+    let solver = if rate == f_s {
+        spec.solver
+    } else {
+        Solver {
+            substeps: FINE_SUBSTEPS,
+        }
+    };
     let (result, rs) = sim::run_sampled(&spec.model, reference, &solver, &tau)?;
     if let LaneStatus::Failed { time_s, reason } = result.status {
-        return Ok(Err(format!("the model failed at t = {time_s:.4} s: {reason}")));
+        return Ok(Err(format!(
+            "the model failed at t = {time_s:.4} s: {reason}"
+        )));
     }
     // Rows at rest before the excitation: the model's state at its start.
     let with_rest = |c: usize| -> Vec<f64> {
         let v = rs.channel(c, 0);
         std::iter::repeat_n(v[0], pre_rows).chain(v).collect()
     };
-    let ref_disp: Vec<f64> = std::iter::repeat_n(0.0, pre_rows).chain(tau.iter().map(|&t| reference.at_time(&reference.command, t))).collect();
+    let ref_disp: Vec<f64> = std::iter::repeat_n(0.0, pre_rows)
+        .chain(
+            tau.iter()
+                .map(|&t| reference.at_time(&reference.command, t)),
+        )
+        .collect();
     Ok(Ok(vec![
-        ("time_s", (0..pre_rows + n).map(|i| i as f64 / rate).collect()),
+        (
+            "time_s",
+            (0..pre_rows + n).map(|i| i as f64 / rate).collect(),
+        ),
         ("ref_disp_m", ref_disp),
         ("disp_m", with_rest(ch::DISP)),
         ("accel_mps2", with_rest(ch::ACCEL)),
@@ -124,30 +202,52 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
     let noise = parse_noise(args.noise.as_deref())?;
     let rate = args.rate.unwrap_or(model.controller.f_s);
     if !(rate.is_finite() && rate > 0.0 && rate <= 1e6) {
-        return Err(BadInput(format!("--rate {rate}: must be a sample rate in (0, 1e6] Hz")).into());
+        return Err(BadInput(format!(
+            "--rate {rate}: must be a sample rate in (0, 1e6] Hz"
+        ))
+        .into());
     }
     if !(args.pre_trigger.is_finite() && (0.0..=3600.0).contains(&args.pre_trigger)) {
-        return Err(BadInput(format!("--pre-trigger {}: must be in [0, 3600] s", args.pre_trigger)).into());
+        return Err(BadInput(format!(
+            "--pre-trigger {}: must be in [0, 3600] s",
+            args.pre_trigger
+        ))
+        .into());
     }
     let pre_rows = (args.pre_trigger * rate).round() as usize;
     let lc = load_campaign(&args.campaign, &model)?;
-    std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
     let mut stdout = std::io::stdout().lock();
-    writeln!(stdout, "study synth {} -> {}", args.campaign.display(), args.out.display())?;
+    writeln!(
+        stdout,
+        "study synth {} -> {}",
+        args.campaign.display(),
+        args.out.display()
+    )?;
     for (i, test) in lc.campaign.tests.iter().enumerate() {
         let mut test_model = test.model.clone();
         apply_effects(&mut test_model, &args.effect)?;
         apply_sets(&mut test_model, &args.set)?;
         let mut reference = load_reference(&test.excitation, &test_model, &lc.base, 0)?;
-        let spec = SimSpec { model: test_model, excitation: test.excitation.clone(), solver: Default::default() };
-        let cols = sample_test(&spec, &mut reference, rate, pre_rows)?.map_err(|e| RunFailed(format!("test {:?}: {e}", test.name)))?;
+        let spec = SimSpec {
+            model: test_model,
+            excitation: test.excitation.clone(),
+            solver: Default::default(),
+        };
+        let cols = sample_test(&spec, &mut reference, rate, pre_rows)?
+            .map_err(|e| RunFailed(format!("test {:?}: {e}", test.name)))?;
         let mut cols: Vec<(&str, Vec<f64>)> = cols;
         for (c, (_, col)) in NOISY.iter().enumerate() {
             if noise[c] > 0.0 {
                 let mut rng = ChaCha8Rng::seed_from_u64(args.seed);
                 rng.set_stream((i * NOISY.len() + c) as u64);
                 let dist = Normal::new(0.0, noise[c]).expect("std >= 0");
-                let v = &mut cols.iter_mut().find(|(n, _)| n == col).expect("noisy column").1;
+                let v = &mut cols
+                    .iter_mut()
+                    .find(|(n, _)| n == col)
+                    .expect("noisy column")
+                    .1;
                 for x in v.iter_mut() {
                     *x += dist.sample(&mut rng);
                 }
@@ -161,7 +261,10 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
         if !args.blind {
             meta.push(meta::pair(Key::Spec, spec.resolved_toml()));
         }
-        meta.extend([meta::pair(Key::Noise, args.noise.clone().unwrap_or_default()), meta::pair(Key::Seed, args.seed)]);
+        meta.extend([
+            meta::pair(Key::Noise, args.noise.clone().unwrap_or_default()),
+            meta::pair(Key::Seed, args.seed),
+        ]);
         write_measured(&path, &cols, &meta)?;
         // A record that lives in its own file is copied along, so the folder is a whole campaign.
         if let ExcitationSpec::Record { file, .. } = &test.excitation {
@@ -170,10 +273,17 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
                 if let Some(dir) = dst.parent() {
                     std::fs::create_dir_all(dir)?;
                 }
-                std::fs::copy(lc.base.join(file), &dst).with_context(|| format!("copying the record {}", file.display()))?;
+                std::fs::copy(lc.base.join(file), &dst)
+                    .with_context(|| format!("copying the record {}", file.display()))?;
             }
         }
-        writeln!(stdout, "  {:<24} {} ({} rows)", test.name, path.display(), cols[0].1.len())?;
+        writeln!(
+            stdout,
+            "  {:<24} {} ({} rows)",
+            test.name,
+            path.display(),
+            cols[0].1.len()
+        )?;
     }
     let dst = args.out.join(lc.file.file_name().unwrap_or_default());
     if std::fs::canonicalize(&lc.file).ok() != std::fs::canonicalize(&dst).ok() {

@@ -5,18 +5,20 @@
 //! write leaves no file that looks complete). The time base and the values are checked one floor
 //! down ([`crate::orchestration::measured`]).
 
-use arrow_array::builder::{Float64Builder, ListBuilder, StringBuilder};
-use arrow_array::{Array, ArrayRef, Float32Array, Float64Array, Int32Array, Int64Array, RecordBatch};
-use arrow_schema::{DataType, Field, Schema};
-use parquet::arrow::ArrowWriter;
-use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
-use parquet::basic::{Compression, ZstdLevel};
-use parquet::file::metadata::KeyValue;
-use parquet::file::properties::WriterProperties;
 use crate::kernel::excitation::Reference;
 use crate::kernel::params::ModelParams;
 use crate::orchestration::sim;
 use crate::orchestration::spec::ExcitationSpec;
+use arrow_array::builder::{Float64Builder, ListBuilder, StringBuilder};
+use arrow_array::{
+    Array, ArrayRef, Float32Array, Float64Array, Int32Array, Int64Array, RecordBatch,
+};
+use arrow_schema::{DataType, Field, Schema};
+use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+use parquet::arrow::ArrowWriter;
+use parquet::basic::{Compression, ZstdLevel};
+use parquet::file::metadata::KeyValue;
+use parquet::file::properties::WriterProperties;
 use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -29,11 +31,25 @@ pub enum TableError {
     #[error("{file}: {}", io_message(err))]
     Io { file: PathBuf, err: std::io::Error },
     #[error("{file}: not a readable {kind} file: {message}")]
-    Format { file: PathBuf, kind: &'static str, message: String },
+    Format {
+        file: PathBuf,
+        kind: &'static str,
+        message: String,
+    },
     #[error("{file}: required column `{column}` is missing{hint}")]
-    MissingColumn { file: PathBuf, column: String, hint: String },
+    MissingColumn {
+        file: PathBuf,
+        column: String,
+        hint: String,
+    },
     #[error("{file}: column `{column}`, row {row}{line}: {message}")]
-    BadCell { file: PathBuf, column: String, row: usize, line: String, message: String },
+    BadCell {
+        file: PathBuf,
+        column: String,
+        row: usize,
+        line: String,
+        message: String,
+    },
     #[error("{file}: the file has a header but no data rows")]
     Empty { file: PathBuf },
     #[error("{file}: the file is empty (no header, no rows)")]
@@ -46,7 +62,11 @@ pub enum TableError {
 impl TableError {
     /// One problem as itself, several as [`TableError::Many`].
     fn all(mut v: Vec<TableError>) -> TableError {
-        if v.len() == 1 { v.remove(0) } else { TableError::Many(v) }
+        if v.len() == 1 {
+            v.remove(0)
+        } else {
+            TableError::Many(v)
+        }
     }
     /// The single problems (a [`TableError::Many`] unpacked).
     pub fn each(&self) -> Vec<String> {
@@ -79,16 +99,33 @@ impl BadCells {
         self.first
             .into_iter()
             .map(|(c, e)| match (e, more.get(c).copied().unwrap_or(0)) {
-                (TableError::BadCell { file, column, row, line, message }, m) if m > 0 => {
-                    TableError::BadCell { file, column, row, line, message: format!("{message} (and {m} more bad cell(s) in this column)") }
-                }
+                (
+                    TableError::BadCell {
+                        file,
+                        column,
+                        row,
+                        line,
+                        message,
+                    },
+                    m,
+                ) if m > 0 => TableError::BadCell {
+                    file,
+                    column,
+                    row,
+                    line,
+                    message: format!("{message} (and {m} more bad cell(s) in this column)"),
+                },
                 (e, _) => e,
             })
             .collect()
     }
     fn finish(self) -> Result<(), TableError> {
         let errors = self.errors();
-        if errors.is_empty() { Ok(()) } else { Err(TableError::all(errors)) }
+        if errors.is_empty() {
+            Ok(())
+        } else {
+            Err(TableError::all(errors))
+        }
     }
 }
 
@@ -105,7 +142,12 @@ impl TableError {
     /// but a failing disk (a file that is not there or not readable is the user's to fix).
     pub fn is_input(&self) -> bool {
         match self {
-            TableError::Io { err, .. } => matches!(err.kind(), std::io::ErrorKind::NotFound | std::io::ErrorKind::PermissionDenied | std::io::ErrorKind::IsADirectory),
+            TableError::Io { err, .. } => matches!(
+                err.kind(),
+                std::io::ErrorKind::NotFound
+                    | std::io::ErrorKind::PermissionDenied
+                    | std::io::ErrorKind::IsADirectory
+            ),
             TableError::Many(v) => v.iter().all(TableError::is_input),
             _ => true,
         }
@@ -118,13 +160,27 @@ fn stem(name: &str) -> &str {
 }
 
 fn missing(file: &Path, column: &str, found: &[String]) -> TableError {
-    let other_units: Vec<&String> = found.iter().filter(|f| stem(f) == stem(column) && *f != column).collect();
+    let other_units: Vec<&String> = found
+        .iter()
+        .filter(|f| stem(f) == stem(column) && *f != column)
+        .collect();
     let hint = if !other_units.is_empty() {
-        format!(" (found {}: other units? vshake reads SI columns named as in docs/formats.md)", other_units.iter().map(|s| format!("`{s}`")).collect::<Vec<_>>().join(", "))
+        format!(
+            " (found {}: other units? vshake reads SI columns named as in docs/formats.md)",
+            other_units
+                .iter()
+                .map(|s| format!("`{s}`"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        )
     } else {
         format!(" (columns present: {})", found.join(", "))
     };
-    TableError::MissingColumn { file: file.to_path_buf(), column: column.to_string(), hint }
+    TableError::MissingColumn {
+        file: file.to_path_buf(),
+        column: column.to_string(),
+        hint,
+    }
 }
 
 /// The column names of a CSV (header row) or Parquet file.
@@ -138,40 +194,90 @@ pub fn column_names(path: &Path) -> Result<Vec<String>, TableError> {
 /// bad input, not a crash.
 fn guarded<T>(path: &Path, read: impl FnOnce() -> Result<T, TableError>) -> Result<T, TableError> {
     std::panic::catch_unwind(std::panic::AssertUnwindSafe(read)).unwrap_or_else(|panic| {
-        let what = panic.downcast_ref::<&str>().map(|s| s.to_string()).or_else(|| panic.downcast_ref::<String>().cloned()).unwrap_or_default();
-        Err(TableError::Format { file: path.to_path_buf(), kind: "Parquet", message: format!("the file is corrupt ({what})") })
+        let what = panic
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| panic.downcast_ref::<String>().cloned())
+            .unwrap_or_default();
+        Err(TableError::Format {
+            file: path.to_path_buf(),
+            kind: "Parquet",
+            message: format!("the file is corrupt ({what})"),
+        })
     })
 }
 
 fn column_names_unguarded(path: &Path) -> Result<Vec<String>, TableError> {
     let file = path.to_path_buf();
-    let f = File::open(path).map_err(|e| TableError::Io { file: file.clone(), err: e })?;
-    if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("parquet") || e.eq_ignore_ascii_case("pq")) {
-        let b = ParquetRecordBatchReaderBuilder::try_new(f).map_err(|e| TableError::Format { file, kind: "Parquet", message: e.to_string() })?;
-        Ok(b.schema().fields().iter().map(|f| f.name().clone()).collect())
+    let f = File::open(path).map_err(|e| TableError::Io {
+        file: file.clone(),
+        err: e,
+    })?;
+    if path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("parquet") || e.eq_ignore_ascii_case("pq"))
+    {
+        let b = ParquetRecordBatchReaderBuilder::try_new(f).map_err(|e| TableError::Format {
+            file,
+            kind: "Parquet",
+            message: e.to_string(),
+        })?;
+        Ok(b.schema()
+            .fields()
+            .iter()
+            .map(|f| f.name().clone())
+            .collect())
     } else {
         let mut first = String::new();
-        std::io::BufRead::read_line(&mut std::io::BufReader::new(f), &mut first).map_err(|e| TableError::Io { file: file.clone(), err: e })?;
+        std::io::BufRead::read_line(&mut std::io::BufReader::new(f), &mut first).map_err(|e| {
+            TableError::Io {
+                file: file.clone(),
+                err: e,
+            }
+        })?;
         let first = first.strip_prefix('\u{feff}').unwrap_or(&first);
-        let mut rdr = csv::ReaderBuilder::new().has_headers(true).delimiter(sniff_separator(first)).trim(csv::Trim::All).from_reader(first.as_bytes());
-        let h = rdr.headers().map_err(|e| TableError::Format { file, kind: "CSV", message: e.to_string() })?;
+        let mut rdr = csv::ReaderBuilder::new()
+            .has_headers(true)
+            .delimiter(sniff_separator(first))
+            .trim(csv::Trim::All)
+            .from_reader(first.as_bytes());
+        let h = rdr.headers().map_err(|e| TableError::Format {
+            file,
+            kind: "CSV",
+            message: e.to_string(),
+        })?;
         Ok(h.iter().map(str::to_string).collect())
     }
 }
 
 /// Marks a table error as bad input (exit 2) when it is the user's.
 pub fn input_if_user(e: TableError) -> anyhow::Error {
-    if e.is_input() { super::BadInput(e.to_string()).into() } else { e.into() }
+    if e.is_input() {
+        super::BadInput(e.to_string()).into()
+    } else {
+        e.into()
+    }
 }
 
 /// The reference of one excitation for `model`, reading a record's file relative to `base` (a
 /// PEER `.AT2` file by [`super::at2`]); a generated motion's noise from `seed`.
-pub fn load_reference(excitation: &ExcitationSpec, model: &ModelParams, base: &Path, seed: u64) -> anyhow::Result<Reference> {
+pub fn load_reference(
+    excitation: &ExcitationSpec,
+    model: &ModelParams,
+    base: &Path,
+    seed: u64,
+) -> anyhow::Result<Reference> {
     let record = match excitation {
-        ExcitationSpec::Record { file, column, time_column, .. } => Some(read_record(&base.join(file), column, time_column).map_err(input_if_user)?),
+        ExcitationSpec::Record {
+            file,
+            column,
+            time_column,
+            ..
+        } => Some(read_record(&base.join(file), column, time_column).map_err(input_if_user)?),
         _ => None,
     };
-    sim::reference_for(excitation, model, record.as_ref(), seed).map_err(|p| super::BadInput(p.to_string()).into())
+    sim::reference_for(excitation, model, record.as_ref(), seed)
+        .map_err(|p| super::BadInput(p.to_string()).into())
 }
 
 /// A record's time and value columns: from a CSV or Parquet file, or a PEER `.AT2` file.
@@ -185,7 +291,11 @@ pub fn read_record(path: &Path, column: &str, time_column: &str) -> Result<NumTa
 
 /// Reads the `wanted` columns (all required) plus any of `optional` that are present. Every
 /// cell must be a finite number (measured data: a NaN is an error naming column and row).
-pub fn read_columns(path: &Path, wanted: &[&str], optional: &[&str]) -> Result<NumTable, TableError> {
+pub fn read_columns(
+    path: &Path,
+    wanted: &[&str],
+    optional: &[&str],
+) -> Result<NumTable, TableError> {
     read_columns_impl(path, wanted, optional, false)
 }
 
@@ -195,7 +305,12 @@ pub fn read_columns_allow_nan(path: &Path, wanted: &[&str]) -> Result<NumTable, 
     read_columns_impl(path, wanted, &[], true)
 }
 
-fn read_columns_impl(path: &Path, wanted: &[&str], optional: &[&str], allow_nan: bool) -> Result<NumTable, TableError> {
+fn read_columns_impl(
+    path: &Path,
+    wanted: &[&str],
+    optional: &[&str],
+    allow_nan: bool,
+) -> Result<NumTable, TableError> {
     let (table, bad) = read_columns_lenient_impl(path, wanted, optional, allow_nan)?;
     bad.finish()?;
     Ok(table)
@@ -204,16 +319,33 @@ fn read_columns_impl(path: &Path, wanted: &[&str], optional: &[&str], allow_nan:
 /// Reads like [`read_columns`], but bad cells (empty, not a number, not finite) do not stop the
 /// read: they come back as NaN in the table and as errors beside it (the first of each column,
 /// with a count), so that a caller can add its own checks of the same file to one report.
-pub fn read_columns_lenient(path: &Path, wanted: &[&str], optional: &[&str]) -> Result<(NumTable, Vec<TableError>), TableError> {
+pub fn read_columns_lenient(
+    path: &Path,
+    wanted: &[&str],
+    optional: &[&str],
+) -> Result<(NumTable, Vec<TableError>), TableError> {
     let (table, bad) = read_columns_lenient_impl(path, wanted, optional, false)?;
     Ok((table, bad.errors()))
 }
 
-fn read_columns_lenient_impl(path: &Path, wanted: &[&str], optional: &[&str], allow_nan: bool) -> Result<(NumTable, BadCells), TableError> {
-    let is_parquet = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("parquet") || e.eq_ignore_ascii_case("pq"));
-    let (table, bad) = if is_parquet { guarded(path, || read_parquet(path, wanted, optional, allow_nan))? } else { read_csv(path, wanted, optional)? };
+fn read_columns_lenient_impl(
+    path: &Path,
+    wanted: &[&str],
+    optional: &[&str],
+    allow_nan: bool,
+) -> Result<(NumTable, BadCells), TableError> {
+    let is_parquet = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("parquet") || e.eq_ignore_ascii_case("pq"));
+    let (table, bad) = if is_parquet {
+        guarded(path, || read_parquet(path, wanted, optional, allow_nan))?
+    } else {
+        read_csv(path, wanted, optional)?
+    };
     if table.rows() == 0 {
-        return Err(TableError::Empty { file: path.to_path_buf() });
+        return Err(TableError::Empty {
+            file: path.to_path_buf(),
+        });
     }
     Ok((table, bad))
 }
@@ -221,12 +353,22 @@ fn read_columns_lenient_impl(path: &Path, wanted: &[&str], optional: &[&str], al
 /// The field separator of a CSV file, from its header line: the one of `,`, `;` and tab that
 /// splits it most (a comma when none does).
 fn sniff_separator(header: &str) -> u8 {
-    [b',', b';', b'\t'].into_iter().max_by_key(|&c| (header.bytes().filter(|&b| b == c).count(), c == b',')).unwrap_or(b',')
+    [b',', b';', b'\t']
+        .into_iter()
+        .max_by_key(|&c| (header.bytes().filter(|&b| b == c).count(), c == b','))
+        .unwrap_or(b',')
 }
 
-fn read_csv(path: &Path, wanted: &[&str], optional: &[&str]) -> Result<(NumTable, BadCells), TableError> {
+fn read_csv(
+    path: &Path,
+    wanted: &[&str],
+    optional: &[&str],
+) -> Result<(NumTable, BadCells), TableError> {
     let file = path.to_path_buf();
-    let bytes = std::fs::read(path).map_err(|e| TableError::Io { file: file.clone(), err: e })?;
+    let bytes = std::fs::read(path).map_err(|e| TableError::Io {
+        file: file.clone(),
+        err: e,
+    })?;
     let text = String::from_utf8_lossy(&bytes);
     let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
     if text.trim().is_empty() {
@@ -235,12 +377,23 @@ fn read_csv(path: &Path, wanted: &[&str], optional: &[&str]) -> Result<(NumTable
     let sep = sniff_separator(text.lines().next().unwrap_or(""));
     let mut notes = Vec::new();
     if sep != b',' {
-        notes.push(format!("read as {}-separated values (found from the header)", if sep == b';' { "semicolon" } else { "tab" }));
+        notes.push(format!(
+            "read as {}-separated values (found from the header)",
+            if sep == b';' { "semicolon" } else { "tab" }
+        ));
     }
-    let mut rdr = csv::ReaderBuilder::new().has_headers(true).delimiter(sep).trim(csv::Trim::All).from_reader(text.as_bytes());
+    let mut rdr = csv::ReaderBuilder::new()
+        .has_headers(true)
+        .delimiter(sep)
+        .trim(csv::Trim::All)
+        .from_reader(text.as_bytes());
     let headers: Vec<String> = rdr
         .headers()
-        .map_err(|e| TableError::Format { file: file.clone(), kind: "CSV", message: e.to_string() })?
+        .map_err(|e| TableError::Format {
+            file: file.clone(),
+            kind: "CSV",
+            message: e.to_string(),
+        })?
         .iter()
         .map(str::to_string)
         .collect();
@@ -265,23 +418,43 @@ fn read_csv(path: &Path, wanted: &[&str], optional: &[&str]) -> Result<(NumTable
     let mut bad_cells = BadCells::default();
     for (r, rec) in rdr.records().enumerate() {
         let row = r + 1;
-        let rec = rec.map_err(|e| TableError::Format { file: file.clone(), kind: "CSV", message: format!("row {row} (line {}): {e}", row + 1) })?;
+        let rec = rec.map_err(|e| TableError::Format {
+            file: file.clone(),
+            kind: "CSV",
+            message: format!("row {row} (line {}): {e}", row + 1),
+        })?;
         for (c, ((name, i), col)) in idx.iter().zip(columns.iter_mut()).enumerate() {
             let cell = rec.get(*i).unwrap_or("");
             let file = &file;
-            let bad = |message: String| move || TableError::BadCell { file: file.clone(), column: name.clone(), row, line: format!(" (line {})", row + 1), message };
+            let bad = |message: String| {
+                move || TableError::BadCell {
+                    file: file.clone(),
+                    column: name.clone(),
+                    row,
+                    line: format!(" (line {})", row + 1),
+                    message,
+                }
+            };
             // With another separator than the comma, a decimal comma is unambiguous.
             let v: Result<f64, String> = if cell.is_empty() {
                 Err("empty cell".into())
             } else {
                 match cell.parse::<f64>() {
                     Ok(v) => Ok(v),
-                    Err(_) if sep != b',' && cell.matches(',').count() == 1 && !cell.contains('.') => {
+                    Err(_)
+                        if sep != b',' && cell.matches(',').count() == 1 && !cell.contains('.') =>
+                    {
                         decimal_commas = true;
-                        cell.replace(',', ".").parse().map_err(|_| format!("{cell:?} is not a number"))
+                        cell.replace(',', ".")
+                            .parse()
+                            .map_err(|_| format!("{cell:?} is not a number"))
                     }
                     Err(_) => {
-                        let hint = if sep == b',' && cell.contains(';') { " (the file looks semicolon-separated, but its header is not)" } else { "" };
+                        let hint = if sep == b',' && cell.contains(';') {
+                            " (the file looks semicolon-separated, but its header is not)"
+                        } else {
+                            ""
+                        };
                         Err(format!("{cell:?} is not a number{hint}"))
                     }
                 }
@@ -302,22 +475,57 @@ fn read_csv(path: &Path, wanted: &[&str], optional: &[&str]) -> Result<(NumTable
     if decimal_commas {
         notes.push("decimal commas read as decimal points".into());
     }
-    Ok((NumTable { file, names: idx.into_iter().map(|(n, _)| n).collect(), columns, csv: true, notes }, bad_cells))
+    Ok((
+        NumTable {
+            file,
+            names: idx.into_iter().map(|(n, _)| n).collect(),
+            columns,
+            csv: true,
+            notes,
+        },
+        bad_cells,
+    ))
 }
 
-fn read_parquet(path: &Path, wanted: &[&str], optional: &[&str], allow_nan: bool) -> Result<(NumTable, BadCells), TableError> {
+fn read_parquet(
+    path: &Path,
+    wanted: &[&str],
+    optional: &[&str],
+    allow_nan: bool,
+) -> Result<(NumTable, BadCells), TableError> {
     let file = path.to_path_buf();
-    let fmt = |e: &dyn std::fmt::Display| TableError::Format { file: file.clone(), kind: "Parquet", message: e.to_string() };
-    let f = File::open(path).map_err(|e| TableError::Io { file: file.clone(), err: e })?;
+    let fmt = |e: &dyn std::fmt::Display| TableError::Format {
+        file: file.clone(),
+        kind: "Parquet",
+        message: e.to_string(),
+    };
+    let f = File::open(path).map_err(|e| TableError::Io {
+        file: file.clone(),
+        err: e,
+    })?;
     let builder = ParquetRecordBatchReaderBuilder::try_new(f).map_err(|e| fmt(&e))?;
-    let found: Vec<String> = builder.schema().fields().iter().map(|f| f.name().clone()).collect();
+    let found: Vec<String> = builder
+        .schema()
+        .fields()
+        .iter()
+        .map(|f| f.name().clone())
+        .collect();
     let mut names: Vec<String> = Vec::new();
-    let absent: Vec<TableError> = wanted.iter().filter(|w| !found.iter().any(|f| f == *w)).map(|w| missing(path, w, &found)).collect();
+    let absent: Vec<TableError> = wanted
+        .iter()
+        .filter(|w| !found.iter().any(|f| f == *w))
+        .map(|w| missing(path, w, &found))
+        .collect();
     if !absent.is_empty() {
         return Err(TableError::all(absent));
     }
     names.extend(wanted.iter().map(|w| w.to_string()));
-    names.extend(optional.iter().filter(|o| found.iter().any(|f| f == *o)).map(|s| s.to_string()));
+    names.extend(
+        optional
+            .iter()
+            .filter(|o| found.iter().any(|f| f == *o))
+            .map(|s| s.to_string()),
+    );
     let reader = builder.build().map_err(|e| fmt(&e))?;
     let mut columns: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
     let mut bad_cells = BadCells::default();
@@ -326,14 +534,46 @@ fn read_parquet(path: &Path, wanted: &[&str], optional: &[&str], allow_nan: bool
         for (c, (name, col)) in names.iter().zip(columns.iter_mut()).enumerate() {
             let arr = batch.column_by_name(name).expect("column in schema");
             let base = col.len();
-            let bad = |row: usize, message: String| TableError::BadCell { file: file.clone(), column: name.clone(), row, line: String::new(), message };
+            let bad = |row: usize, message: String| TableError::BadCell {
+                file: file.clone(),
+                column: name.clone(),
+                row,
+                line: String::new(),
+                message,
+            };
             let get: Box<dyn Fn(usize) -> f64> = match arr.data_type() {
-                DataType::Float64 => { let a = arr.as_any().downcast_ref::<Float64Array>().unwrap().clone(); Box::new(move |i| a.value(i)) }
-                DataType::Float32 => { let a = arr.as_any().downcast_ref::<Float32Array>().unwrap().clone(); Box::new(move |i| a.value(i) as f64) }
-                DataType::Int64 => { let a = arr.as_any().downcast_ref::<Int64Array>().unwrap().clone(); Box::new(move |i| a.value(i) as f64) }
-                DataType::Int32 => { let a = arr.as_any().downcast_ref::<Int32Array>().unwrap().clone(); Box::new(move |i| a.value(i) as f64) }
-                DataType::UInt64 => { let a = arr.as_any().downcast_ref::<arrow_array::UInt64Array>().unwrap().clone(); Box::new(move |i| a.value(i) as f64) }
-                DataType::UInt32 => { let a = arr.as_any().downcast_ref::<arrow_array::UInt32Array>().unwrap().clone(); Box::new(move |i| a.value(i) as f64) }
+                DataType::Float64 => {
+                    let a = arr.as_any().downcast_ref::<Float64Array>().unwrap().clone();
+                    Box::new(move |i| a.value(i))
+                }
+                DataType::Float32 => {
+                    let a = arr.as_any().downcast_ref::<Float32Array>().unwrap().clone();
+                    Box::new(move |i| a.value(i) as f64)
+                }
+                DataType::Int64 => {
+                    let a = arr.as_any().downcast_ref::<Int64Array>().unwrap().clone();
+                    Box::new(move |i| a.value(i) as f64)
+                }
+                DataType::Int32 => {
+                    let a = arr.as_any().downcast_ref::<Int32Array>().unwrap().clone();
+                    Box::new(move |i| a.value(i) as f64)
+                }
+                DataType::UInt64 => {
+                    let a = arr
+                        .as_any()
+                        .downcast_ref::<arrow_array::UInt64Array>()
+                        .unwrap()
+                        .clone();
+                    Box::new(move |i| a.value(i) as f64)
+                }
+                DataType::UInt32 => {
+                    let a = arr
+                        .as_any()
+                        .downcast_ref::<arrow_array::UInt32Array>()
+                        .unwrap()
+                        .clone();
+                    Box::new(move |i| a.value(i) as f64)
+                }
                 other => return Err(bad(base + 1, format!("column type {other} is not numeric"))),
             };
             for i in 0..arr.len() {
@@ -351,7 +591,16 @@ fn read_parquet(path: &Path, wanted: &[&str], optional: &[&str], allow_nan: bool
             }
         }
     }
-    Ok((NumTable { file, names, columns, csv: false, notes: Vec::new() }, bad_cells))
+    Ok((
+        NumTable {
+            file,
+            names,
+            columns,
+            csv: false,
+            notes: Vec::new(),
+        },
+        bad_cells,
+    ))
 }
 
 /// A file being written: `path.tmp` until [`AtomicFile::commit`] renames it into place. Dropped
@@ -366,7 +615,11 @@ impl AtomicFile {
     pub fn new(path: &Path) -> Self {
         let mut tmp = path.as_os_str().to_owned();
         tmp.push(".tmp");
-        AtomicFile { path: path.to_path_buf(), tmp: PathBuf::from(tmp), committed: false }
+        AtomicFile {
+            path: path.to_path_buf(),
+            tmp: PathBuf::from(tmp),
+            committed: false,
+        }
     }
     pub fn commit(mut self) -> std::io::Result<()> {
         self.commit_in_place()
@@ -414,8 +667,16 @@ impl Column {
             Column::Str(_) => Field::new(name, DataType::Utf8, false),
             Column::OptStr(_) => Field::new(name, DataType::Utf8, true),
             Column::Bool(_) => Field::new(name, DataType::Boolean, false),
-            Column::StrList(_) => Field::new(name, DataType::List(Arc::new(Field::new("item", DataType::Utf8, true))), false),
-            Column::F64List(_) => Field::new(name, DataType::List(Arc::new(Field::new("item", DataType::Float64, true))), false),
+            Column::StrList(_) => Field::new(
+                name,
+                DataType::List(Arc::new(Field::new("item", DataType::Utf8, true))),
+                false,
+            ),
+            Column::F64List(_) => Field::new(
+                name,
+                DataType::List(Arc::new(Field::new("item", DataType::Float64, true))),
+                false,
+            ),
         }
     }
     fn array(self) -> ArrayRef {
@@ -485,16 +746,35 @@ pub fn checkpoint_path(path: &Path) -> PathBuf {
 
 impl ParquetStream {
     /// Opens `path.tmp` for a table with the columns of `template` (names and types).
-    pub fn create(path: &Path, template: &[(String, Column)], metadata: &[(String, String)]) -> anyhow::Result<Self> {
-        Self::create_with_fields(path, template.iter().map(|(n, c)| c.field(n)).collect(), metadata)
+    pub fn create(
+        path: &Path,
+        template: &[(String, Column)],
+        metadata: &[(String, String)],
+    ) -> anyhow::Result<Self> {
+        Self::create_with_fields(
+            path,
+            template.iter().map(|(n, c)| c.field(n)).collect(),
+            metadata,
+        )
     }
 
     /// Opens `path.tmp` for a table with these Arrow fields.
-    pub fn create_with_fields(path: &Path, fields: Vec<Field>, metadata: &[(String, String)]) -> anyhow::Result<Self> {
+    pub fn create_with_fields(
+        path: &Path,
+        fields: Vec<Field>,
+        metadata: &[(String, String)],
+    ) -> anyhow::Result<Self> {
         use anyhow::Context;
         // The metadata goes into the file's key-value block (DuckDB, polars, pandas) and into the
         // Arrow schema too, so `pyarrow.parquet.read_table(path).schema.metadata` shows it.
-        let schema = Arc::new(Schema::new(fields).with_metadata(metadata.iter().cloned().collect::<std::collections::HashMap<String, String>>()));
+        let schema = Arc::new(
+            Schema::new(fields).with_metadata(
+                metadata
+                    .iter()
+                    .cloned()
+                    .collect::<std::collections::HashMap<String, String>>(),
+            ),
+        );
         // Dictionary encoding only for string columns: float columns of simulation results are
         // nearly all distinct values, and a dictionary per column would hold up to a page each in
         // memory for nothing.
@@ -504,7 +784,10 @@ impl ParquetStream {
                 props = props.set_column_dictionary_enabled(f.name().as_str().into(), true);
             }
         }
-        let kv: Vec<KeyValue> = metadata.iter().map(|(k, v)| KeyValue::new(k.clone(), v.clone())).collect();
+        let kv: Vec<KeyValue> = metadata
+            .iter()
+            .map(|(k, v)| KeyValue::new(k.clone(), v.clone()))
+            .collect();
         let props = props
             .set_compression(Compression::ZSTD(ZstdLevel::default()))
             .set_max_row_group_row_count(Some(16_384))
@@ -512,18 +795,34 @@ impl ParquetStream {
             .build();
         let file = AtomicFile::new(path);
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+            std::fs::create_dir_all(dir)
+                .with_context(|| format!("cannot create {}", dir.display()))?;
         }
-        let f = File::create(&file.tmp).with_context(|| format!("cannot create {}", file.tmp.display()))?;
+        let f = File::create(&file.tmp)
+            .with_context(|| format!("cannot create {}", file.tmp.display()))?;
         let writer = ArrowWriter::try_new(f, schema.clone(), Some(props))?;
-        Ok(ParquetStream { file, writer, schema, kv, checkpoint: None })
+        Ok(ParquetStream {
+            file,
+            writer,
+            schema,
+            kv,
+            checkpoint: None,
+        })
     }
 
     /// Makes the rows recoverable after a hard kill, at most `every` apart (see the type's doc).
     pub fn checkpoints(mut self, every: std::time::Duration) -> Self {
         let mut kv = self.kv.clone();
-        kv.push(KeyValue::new("ARROW:schema".to_string(), parquet::arrow::encode_arrow_schema(&self.schema)));
-        self.checkpoint = Some(Checkpoint { every, last: std::time::Instant::now(), path: checkpoint_path(&self.file.path), kv });
+        kv.push(KeyValue::new(
+            "ARROW:schema".to_string(),
+            parquet::arrow::encode_arrow_schema(&self.schema),
+        ));
+        self.checkpoint = Some(Checkpoint {
+            every,
+            last: std::time::Instant::now(),
+            path: checkpoint_path(&self.file.path),
+            kv,
+        });
         self
     }
 
@@ -536,7 +835,10 @@ impl ParquetStream {
 
     /// Appends rows (columns in the template's order).
     pub fn write(&mut self, columns: Vec<Column>) -> anyhow::Result<()> {
-        let batch = RecordBatch::try_new(self.schema.clone(), columns.into_iter().map(Column::array).collect())?;
+        let batch = RecordBatch::try_new(
+            self.schema.clone(),
+            columns.into_iter().map(Column::array).collect(),
+        )?;
         self.writer.write(&batch)?;
         self.after_write()
     }
@@ -544,8 +846,13 @@ impl ParquetStream {
     /// Bounds the buffered row group by bytes, so memory stays flat however many rows follow;
     /// and, with checkpoints, flushes and checkpoints when one is due.
     fn after_write(&mut self) -> anyhow::Result<()> {
-        let due = self.checkpoint.as_ref().is_some_and(|c| c.last.elapsed() >= c.every);
-        if self.writer.in_progress_size() > ROW_GROUP_BYTES || (due && self.writer.in_progress_rows() > 0) {
+        let due = self
+            .checkpoint
+            .as_ref()
+            .is_some_and(|c| c.last.elapsed() >= c.every);
+        if self.writer.in_progress_size() > ROW_GROUP_BYTES
+            || (due && self.writer.in_progress_rows() > 0)
+        {
             self.writer.flush()?;
         }
         if due && !self.writer.flushed_row_groups().is_empty() {
@@ -558,13 +865,25 @@ impl ParquetStream {
     fn save_checkpoint(&mut self) -> anyhow::Result<()> {
         use parquet::file::metadata::{FileMetaData, ParquetMetaData, ParquetMetaDataWriter};
         use std::io::Write;
-        let Some(c) = self.checkpoint.as_mut() else { return Ok(()) };
+        let Some(c) = self.checkpoint.as_mut() else {
+            return Ok(());
+        };
         self.writer.sync()?;
         let len = self.writer.bytes_written() as u64;
         let groups = self.writer.flushed_row_groups().to_vec();
         let rows = groups.iter().map(|g| g.num_rows()).sum();
         let descr = groups[0].schema_descr_ptr();
-        let meta = ParquetMetaData::new(FileMetaData::new(1, rows, Some("vshake checkpoint".into()), Some(c.kv.clone()), descr, None), groups);
+        let meta = ParquetMetaData::new(
+            FileMetaData::new(
+                1,
+                rows,
+                Some("vshake checkpoint".into()),
+                Some(c.kv.clone()),
+                descr,
+                None,
+            ),
+            groups,
+        );
         let mut bytes = len.to_le_bytes().to_vec();
         ParquetMetaDataWriter::new(&mut bytes, &meta).finish()?;
         let side = AtomicFile::new(&c.path);
@@ -578,7 +897,12 @@ impl ParquetStream {
 
     /// Rows written so far (flushed or buffered).
     pub fn rows(&self) -> usize {
-        self.writer.flushed_row_groups().iter().map(|g| g.num_rows() as usize).sum::<usize>() + self.writer.in_progress_rows()
+        self.writer
+            .flushed_row_groups()
+            .iter()
+            .map(|g| g.num_rows() as usize)
+            .sum::<usize>()
+            + self.writer.in_progress_rows()
     }
 
     /// Closes the file and moves it into place.
@@ -590,11 +914,14 @@ impl ParquetStream {
     pub fn finish_with(mut self, extra: &[(String, String)]) -> anyhow::Result<()> {
         use anyhow::Context;
         for (k, v) in extra {
-            self.writer.append_key_value_metadata(KeyValue::new(k.clone(), v.clone()));
+            self.writer
+                .append_key_value_metadata(KeyValue::new(k.clone(), v.clone()));
         }
         self.writer.finish()?;
         let path = self.file.path.clone();
-        self.file.commit_in_place().with_context(|| format!("cannot move the finished file to {}", path.display()))?;
+        self.file
+            .commit_in_place()
+            .with_context(|| format!("cannot move the finished file to {}", path.display()))?;
         if let Some(c) = &self.checkpoint {
             let _ = std::fs::remove_file(&c.path);
         }
@@ -645,16 +972,30 @@ pub fn recover_killed(path: &Path) -> anyhow::Result<Recovered> {
     if !tmp.exists() {
         return Ok(Recovered::Nothing);
     }
-    let Ok(bytes) = std::fs::read(&side) else { return Ok(Recovered::NoCheckpoint(tmp)) };
+    let Ok(bytes) = std::fs::read(&side) else {
+        return Ok(Recovered::NoCheckpoint(tmp));
+    };
     let bad = || BadCheckpoint(side.clone());
-    let len = u64::from_le_bytes(bytes.get(..8).ok_or_else(bad)?.try_into().map_err(|_| bad())?);
-    let have = std::fs::metadata(&tmp).with_context(|| format!("reading {}", tmp.display()))?.len();
+    let len = u64::from_le_bytes(
+        bytes
+            .get(..8)
+            .ok_or_else(bad)?
+            .try_into()
+            .map_err(|_| bad())?,
+    );
+    let have = std::fs::metadata(&tmp)
+        .with_context(|| format!("reading {}", tmp.display()))?
+        .len();
     if have < len {
         return Err(BadCheckpoint(side).into());
     }
     let killed = killed_path(path);
-    std::fs::rename(&tmp, &killed).with_context(|| format!("cannot move {} to {}", tmp.display(), killed.display()))?;
-    let mut f = std::fs::OpenOptions::new().write(true).open(&killed).with_context(|| format!("cannot open {}", killed.display()))?;
+    std::fs::rename(&tmp, &killed)
+        .with_context(|| format!("cannot move {} to {}", tmp.display(), killed.display()))?;
+    let mut f = std::fs::OpenOptions::new()
+        .write(true)
+        .open(&killed)
+        .with_context(|| format!("cannot open {}", killed.display()))?;
     f.set_len(len)?;
     f.seek(std::io::SeekFrom::End(0))?;
     f.write_all(&bytes[8..])?;
@@ -669,13 +1010,24 @@ pub fn recover_killed(path: &Path) -> anyhow::Result<Recovered> {
 pub struct BadCheckpoint(pub PathBuf);
 
 /// Writes f64 columns as one Parquet file (zstd) with key-value metadata, atomically.
-pub fn write_parquet(path: &Path, columns: &[(&str, &[f64])], metadata: &[(String, String)]) -> anyhow::Result<()> {
-    let cols: Vec<(String, Column)> = columns.iter().map(|(n, v)| (n.to_string(), Column::F64(v.to_vec()))).collect();
+pub fn write_parquet(
+    path: &Path,
+    columns: &[(&str, &[f64])],
+    metadata: &[(String, String)],
+) -> anyhow::Result<()> {
+    let cols: Vec<(String, Column)> = columns
+        .iter()
+        .map(|(n, v)| (n.to_string(), Column::F64(v.to_vec())))
+        .collect();
     write_table(path, cols, metadata)
 }
 
 /// Writes typed columns as one Parquet file, atomically.
-pub fn write_table(path: &Path, columns: Vec<(String, Column)>, metadata: &[(String, String)]) -> anyhow::Result<()> {
+pub fn write_table(
+    path: &Path,
+    columns: Vec<(String, Column)>,
+    metadata: &[(String, String)],
+) -> anyhow::Result<()> {
     let mut s = ParquetStream::create(path, &columns, metadata)?;
     s.write(columns.into_iter().map(|(_, c)| c).collect())?;
     s.finish()
@@ -688,8 +1040,15 @@ pub fn parquet_rows(path: &Path) -> Result<usize, TableError> {
 
 fn parquet_rows_unguarded(path: &Path) -> Result<usize, TableError> {
     let file = path.to_path_buf();
-    let f = File::open(path).map_err(|e| TableError::Io { file: file.clone(), err: e })?;
-    let builder = ParquetRecordBatchReaderBuilder::try_new(f).map_err(|e| TableError::Format { file, kind: "Parquet", message: e.to_string() })?;
+    let f = File::open(path).map_err(|e| TableError::Io {
+        file: file.clone(),
+        err: e,
+    })?;
+    let builder = ParquetRecordBatchReaderBuilder::try_new(f).map_err(|e| TableError::Format {
+        file,
+        kind: "Parquet",
+        message: e.to_string(),
+    })?;
     Ok(builder.metadata().file_metadata().num_rows().max(0) as usize)
 }
 
@@ -700,90 +1059,38 @@ pub fn parquet_metadata(path: &Path) -> Result<Vec<(String, String)>, TableError
 
 fn parquet_metadata_unguarded(path: &Path) -> Result<Vec<(String, String)>, TableError> {
     let file = path.to_path_buf();
-    let f = File::open(path).map_err(|e| TableError::Io { file: file.clone(), err: e })?;
-    let builder = ParquetRecordBatchReaderBuilder::try_new(f).map_err(|e| TableError::Format { file, kind: "Parquet", message: e.to_string() })?;
+    let f = File::open(path).map_err(|e| TableError::Io {
+        file: file.clone(),
+        err: e,
+    })?;
+    let builder = ParquetRecordBatchReaderBuilder::try_new(f).map_err(|e| TableError::Format {
+        file,
+        kind: "Parquet",
+        message: e.to_string(),
+    })?;
     Ok(builder
         .metadata()
         .file_metadata()
         .key_value_metadata()
-        .map(|kv| kv.iter().map(|k| (k.key.clone(), k.value.clone().unwrap_or_default())).collect())
+        .map(|kv| {
+            kv.iter()
+                .map(|k| (k.key.clone(), k.value.clone().unwrap_or_default()))
+                .collect()
+        })
         .unwrap_or_default())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn csv(text: &str) -> (tempfile::TempDir, PathBuf) {
-        let d = tempfile::tempdir().unwrap();
-        let p = d.path().join("t.csv");
-        std::fs::write(&p, text).unwrap();
-        (d, p)
-    }
-
-    #[test]
-    fn nan_and_empty_cells_name_column_and_row() {
-        let (_d, p) = csv("time_s,ref_disp_m\n0,0\n0.001,NaN\n");
-        let e = read_columns(&p, &["time_s", "ref_disp_m"], &[]).unwrap_err().to_string();
-        assert!(e.contains("`ref_disp_m`, row 2 (line 3)") && e.contains("NaN"), "{e}");
-        let (_d, p) = csv("time_s,ref_disp_m\n0,0\n0.001,\n");
-        let e = read_columns(&p, &["time_s", "ref_disp_m"], &[]).unwrap_err().to_string();
-        assert!(e.contains("row 2") && e.contains("empty cell"), "{e}");
-    }
-
-    #[test]
-    fn other_units_and_bad_time_are_named() {
-        let (_d, p) = csv("time_s,ref_disp_mm\n0,0\n");
-        let e = read_columns(&p, &["time_s", "ref_disp_m"], &[]).unwrap_err().to_string();
-        assert!(e.contains("`ref_disp_m` is missing") && e.contains("`ref_disp_mm`: other units?"), "{e}");
-        let (_d, p) = csv("time_s,x\n0,0\n0.0009765625,0\n0.001953125,0\n0.0009765625,0\n0.0029296875,0\n0.00390625,0\n0.0048828125,0\n");
-        let t = read_columns(&p, &["time_s"], &[]).unwrap();
-        let e = t.time_base("time_s").unwrap_err().to_string();
-        assert!(e.contains("row 4 (line 5)") && e.contains("does not increase"), "{e}");
-        let (_d, p) = csv("time_s,x\n0,0\n0.001,0\n0.003,0\n0.004,0\n0.005,0\n");
-        let e = read_columns(&p, &["time_s"], &[]).unwrap().time_base("time_s").unwrap_err().to_string();
-        assert!(e.contains("row 3") && e.contains("1 row(s) missing"), "{e}");
-        let (_d, p) = csv("time_s,x\n");
-        let e = read_columns(&p, &["time_s"], &[]).unwrap_err();
-        assert!(matches!(e, TableError::Empty { .. }) && e.to_string().contains("no data rows"), "{e}");
-        let (_d, p) = csv("");
-        let e = read_columns(&p, &["time_s"], &[]).unwrap_err();
-        assert!(e.to_string().ends_with("the file is empty (no header, no rows)"), "{e}");
-        let e = read_columns(Path::new("/nonexistent/t.csv"), &["time_s"], &[]).unwrap_err();
-        assert!(e.is_input() && e.to_string() == "/nonexistent/t.csv: not found", "{e}");
-    }
-
-    #[test]
-    fn semicolons_tabs_and_decimal_commas_are_read() {
-        for (sep, comma) in [(";", true), ("\t", true), (";", false)] {
-            let num = |x: &str| if comma { x.replace('.', ",") } else { x.to_string() };
-            let text = format!("time_s{sep}disp_m\n0{sep}{}\n{}{sep}{}\n", num("1.5"), num("0.001"), num("-2.25"));
-            let (_d, p) = csv(&text);
-            let t = read_columns(&p, &["time_s", "disp_m"], &[]).unwrap();
-            assert_eq!(t.column("disp_m").unwrap(), &[1.5, -2.25]);
-            assert_eq!(t.column("time_s").unwrap(), &[0.0, 0.001]);
-            assert!(t.notes[0].contains(if sep == ";" { "semicolon" } else { "tab" }), "{:?}", t.notes);
-            assert_eq!(t.notes.len() == 2, comma, "{:?}", t.notes);
-        }
-    }
-
-    #[test]
-    fn parquet_round_trip_with_metadata() {
-        let d = tempfile::tempdir().unwrap();
-        let p = d.path().join("x.parquet");
-        write_parquet(&p, &[("time_s", &[0.0, 0.5]), ("disp_m", &[1.0, 2.0])], &[("k".into(), "v".into())]).unwrap();
-        assert!(!d.path().join("x.parquet.tmp").exists());
-        let t = read_columns(&p, &["time_s", "disp_m"], &["absent"]).unwrap();
-        assert_eq!(t.column("disp_m").unwrap(), &[1.0, 2.0]);
-        assert_eq!(t.time_base("time_s").unwrap().rate_hz, 2.0);
-    }
 }
 
 /// The string column `column` of a Parquet file (null cells as empty strings).
 pub fn read_strings(path: &Path, column: &str) -> Result<Vec<String>, TableError> {
     read_values(path, column, "a string", |arr, out| {
         let s = arr.as_any().downcast_ref::<arrow_array::StringArray>()?;
-        out.extend((0..s.len()).map(|i| if s.is_null(i) { String::new() } else { s.value(i).to_string() }));
+        out.extend((0..s.len()).map(|i| {
+            if s.is_null(i) {
+                String::new()
+            } else {
+                s.value(i).to_string()
+            }
+        }));
         Some(())
     })
 }
@@ -816,16 +1123,27 @@ pub fn read_string_lists(path: &Path, column: &str) -> Result<Vec<Vec<String>>, 
 
 /// A list-of-numbers column of a Parquet file (a null row reads as an empty list).
 pub fn read_f64_lists(path: &Path, column: &str) -> Result<Vec<Vec<f64>>, TableError> {
-    read_lists(path, column, "a list of numbers", |v| Some(v.as_any().downcast_ref::<Float64Array>()?.values().to_vec()))
+    read_lists(path, column, "a list of numbers", |v| {
+        Some(v.as_any().downcast_ref::<Float64Array>()?.values().to_vec())
+    })
 }
 
 /// A list column of a Parquet file, each row's items read by `items` (None: not of the type
 /// `kind` names); a null row reads as an empty list.
-fn read_lists<T>(path: &Path, column: &str, kind: &str, items: impl Fn(&ArrayRef) -> Option<Vec<T>>) -> Result<Vec<Vec<T>>, TableError> {
+fn read_lists<T>(
+    path: &Path,
+    column: &str,
+    kind: &str,
+    items: impl Fn(&ArrayRef) -> Option<Vec<T>>,
+) -> Result<Vec<Vec<T>>, TableError> {
     read_values(path, column, kind, |arr, out| {
         let l = arr.as_any().downcast_ref::<arrow_array::ListArray>()?;
         for i in 0..l.len() {
-            out.push(if l.is_null(i) { Vec::new() } else { items(&l.value(i))? });
+            out.push(if l.is_null(i) {
+                Vec::new()
+            } else {
+                items(&l.value(i))?
+            });
         }
         Some(())
     })
@@ -833,12 +1151,29 @@ fn read_lists<T>(path: &Path, column: &str, kind: &str, items: impl Fn(&ArrayRef
 
 /// One column of a Parquet file, each batch's array appended by `take` (None: not of the type
 /// `kind` names).
-fn read_values<T>(path: &Path, column: &str, kind: &str, take: impl Fn(&ArrayRef, &mut Vec<T>) -> Option<()>) -> Result<Vec<T>, TableError> {
+fn read_values<T>(
+    path: &Path,
+    column: &str,
+    kind: &str,
+    take: impl Fn(&ArrayRef, &mut Vec<T>) -> Option<()>,
+) -> Result<Vec<T>, TableError> {
     let file = path.to_path_buf();
-    let fmt = |e: &dyn std::fmt::Display| TableError::Format { file: file.clone(), kind: "Parquet", message: e.to_string() };
-    let f = File::open(path).map_err(|e| TableError::Io { file: file.clone(), err: e })?;
+    let fmt = |e: &dyn std::fmt::Display| TableError::Format {
+        file: file.clone(),
+        kind: "Parquet",
+        message: e.to_string(),
+    };
+    let f = File::open(path).map_err(|e| TableError::Io {
+        file: file.clone(),
+        err: e,
+    })?;
     let builder = ParquetRecordBatchReaderBuilder::try_new(f).map_err(|e| fmt(&e))?;
-    let found: Vec<String> = builder.schema().fields().iter().map(|f| f.name().clone()).collect();
+    let found: Vec<String> = builder
+        .schema()
+        .fields()
+        .iter()
+        .map(|f| f.name().clone())
+        .collect();
     if !found.iter().any(|f| f == column) {
         return Err(missing(path, column, &found));
     }
@@ -859,11 +1194,149 @@ fn read_values<T>(path: &Path, column: &str, kind: &str, take: impl Fn(&ArrayRef
 }
 
 /// The Arrow fields of a Parquet file, and a reader of its record batches.
-pub fn parquet_batches(path: &Path) -> Result<(Vec<Field>, parquet::arrow::arrow_reader::ParquetRecordBatchReader), TableError> {
+pub fn parquet_batches(
+    path: &Path,
+) -> Result<
+    (
+        Vec<Field>,
+        parquet::arrow::arrow_reader::ParquetRecordBatchReader,
+    ),
+    TableError,
+> {
     let file = path.to_path_buf();
-    let fmt = |e: &dyn std::fmt::Display| TableError::Format { file: file.clone(), kind: "Parquet", message: e.to_string() };
-    let f = File::open(path).map_err(|e| TableError::Io { file: file.clone(), err: e })?;
+    let fmt = |e: &dyn std::fmt::Display| TableError::Format {
+        file: file.clone(),
+        kind: "Parquet",
+        message: e.to_string(),
+    };
+    let f = File::open(path).map_err(|e| TableError::Io {
+        file: file.clone(),
+        err: e,
+    })?;
     let builder = ParquetRecordBatchReaderBuilder::try_new(f).map_err(|e| fmt(&e))?;
-    let fields = builder.schema().fields().iter().map(|f| f.as_ref().clone()).collect();
+    let fields = builder
+        .schema()
+        .fields()
+        .iter()
+        .map(|f| f.as_ref().clone())
+        .collect();
     Ok((fields, builder.build().map_err(|e| fmt(&e))?))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn csv(text: &str) -> (tempfile::TempDir, PathBuf) {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("t.csv");
+        std::fs::write(&p, text).unwrap();
+        (d, p)
+    }
+
+    #[test]
+    fn nan_and_empty_cells_name_column_and_row() {
+        let (_d, p) = csv("time_s,ref_disp_m\n0,0\n0.001,NaN\n");
+        let e = read_columns(&p, &["time_s", "ref_disp_m"], &[])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("`ref_disp_m`, row 2 (line 3)") && e.contains("NaN"),
+            "{e}"
+        );
+        let (_d, p) = csv("time_s,ref_disp_m\n0,0\n0.001,\n");
+        let e = read_columns(&p, &["time_s", "ref_disp_m"], &[])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("row 2") && e.contains("empty cell"), "{e}");
+    }
+
+    #[test]
+    fn other_units_and_bad_time_are_named() {
+        let (_d, p) = csv("time_s,ref_disp_mm\n0,0\n");
+        let e = read_columns(&p, &["time_s", "ref_disp_m"], &[])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("`ref_disp_m` is missing") && e.contains("`ref_disp_mm`: other units?"),
+            "{e}"
+        );
+        let (_d, p) = csv("time_s,x\n0,0\n0.0009765625,0\n0.001953125,0\n0.0009765625,0\n0.0029296875,0\n0.00390625,0\n0.0048828125,0\n");
+        let t = read_columns(&p, &["time_s"], &[]).unwrap();
+        let e = t.time_base("time_s").unwrap_err().to_string();
+        assert!(
+            e.contains("row 4 (line 5)") && e.contains("does not increase"),
+            "{e}"
+        );
+        let (_d, p) = csv("time_s,x\n0,0\n0.001,0\n0.003,0\n0.004,0\n0.005,0\n");
+        let e = read_columns(&p, &["time_s"], &[])
+            .unwrap()
+            .time_base("time_s")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("row 3") && e.contains("1 row(s) missing"), "{e}");
+        let (_d, p) = csv("time_s,x\n");
+        let e = read_columns(&p, &["time_s"], &[]).unwrap_err();
+        assert!(
+            matches!(e, TableError::Empty { .. }) && e.to_string().contains("no data rows"),
+            "{e}"
+        );
+        let (_d, p) = csv("");
+        let e = read_columns(&p, &["time_s"], &[]).unwrap_err();
+        assert!(
+            e.to_string()
+                .ends_with("the file is empty (no header, no rows)"),
+            "{e}"
+        );
+        let e = read_columns(Path::new("/nonexistent/t.csv"), &["time_s"], &[]).unwrap_err();
+        assert!(
+            e.is_input() && e.to_string() == "/nonexistent/t.csv: not found",
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn semicolons_tabs_and_decimal_commas_are_read() {
+        for (sep, comma) in [(";", true), ("\t", true), (";", false)] {
+            let num = |x: &str| {
+                if comma {
+                    x.replace('.', ",")
+                } else {
+                    x.to_string()
+                }
+            };
+            let text = format!(
+                "time_s{sep}disp_m\n0{sep}{}\n{}{sep}{}\n",
+                num("1.5"),
+                num("0.001"),
+                num("-2.25")
+            );
+            let (_d, p) = csv(&text);
+            let t = read_columns(&p, &["time_s", "disp_m"], &[]).unwrap();
+            assert_eq!(t.column("disp_m").unwrap(), &[1.5, -2.25]);
+            assert_eq!(t.column("time_s").unwrap(), &[0.0, 0.001]);
+            assert!(
+                t.notes[0].contains(if sep == ";" { "semicolon" } else { "tab" }),
+                "{:?}",
+                t.notes
+            );
+            assert_eq!(t.notes.len() == 2, comma, "{:?}", t.notes);
+        }
+    }
+
+    #[test]
+    fn parquet_round_trip_with_metadata() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("x.parquet");
+        write_parquet(
+            &p,
+            &[("time_s", &[0.0, 0.5]), ("disp_m", &[1.0, 2.0])],
+            &[("k".into(), "v".into())],
+        )
+        .unwrap();
+        assert!(!d.path().join("x.parquet.tmp").exists());
+        let t = read_columns(&p, &["time_s", "disp_m"], &["absent"]).unwrap();
+        assert_eq!(t.column("disp_m").unwrap(), &[1.0, 2.0]);
+        assert_eq!(t.time_base("time_s").unwrap().rate_hz, 2.0);
+    }
 }

@@ -10,13 +10,34 @@ use vshake::shell::tables::{column_names, read_bools, read_columns_allow_nan, re
 #[allow(dead_code)] // used by compare and diagnose, not by every test crate
 pub fn followed_state(report: &Path) -> (String, String, String, f64) {
     let p = report.join("stateterms.parquet");
-    let (res, states, terms) = (read_strings(&p, "residual").unwrap(), read_strings(&p, "states").unwrap(), read_strings(&p, "term").unwrap());
+    let (res, states, terms) = (
+        read_strings(&p, "residual").unwrap(),
+        read_strings(&p, "states").unwrap(),
+        read_strings(&p, "term").unwrap(),
+    );
     let named = read_bools(&p, "named").unwrap();
-    let r2 = read_columns_allow_nan(&p, &["r2"]).unwrap().column("r2").unwrap().to_vec();
-    let rows = || (0..res.len()).filter(|&i| states[i] != "all" && (res[i] == "platen_force" || res[i] == "valve_flow" || res[i] == "valve_opening"));
+    let r2 = read_columns_allow_nan(&p, &["r2"])
+        .unwrap()
+        .column("r2")
+        .unwrap()
+        .to_vec();
+    let rows = || {
+        (0..res.len()).filter(|&i| {
+            states[i] != "all"
+                && (res[i] == "platen_force" || res[i] == "valve_flow" || res[i] == "valve_opening")
+        })
+    };
     let top = rows().map(|i| r2[i]).fold(f64::NEG_INFINITY, f64::max);
-    let best = (0..res.len()).find(|&i| named[i]).or_else(|| rows().find(|&i| r2[i] == top)).unwrap();
-    (res[best].clone(), states[best].clone(), terms[best].clone(), r2[best])
+    let best = (0..res.len())
+        .find(|&i| named[i])
+        .or_else(|| rows().find(|&i| r2[i] == top))
+        .unwrap();
+    (
+        res[best].clone(),
+        states[best].clone(),
+        terms[best].clone(),
+        r2[best],
+    )
 }
 
 /// A column's cells, comparable: numbers as bit patterns (NaN compares too), strings as text,
@@ -29,16 +50,38 @@ pub type Cells = Vec<String>;
 pub fn content(path: &Path) -> Vec<(String, Cells)> {
     let strings = ["excitation", "status", "fail_reason"];
     let nullable = ["fail_time_s"];
-    let names: Vec<String> = column_names(path).unwrap().into_iter().filter(|n| !strings.contains(&n.as_str()) && !nullable.contains(&n.as_str())).collect();
+    let names: Vec<String> = column_names(path)
+        .unwrap()
+        .into_iter()
+        .filter(|n| !strings.contains(&n.as_str()) && !nullable.contains(&n.as_str()))
+        .collect();
     let refs: Vec<&str> = names.iter().map(String::as_str).collect();
     let t = read_columns_allow_nan(path, &refs).unwrap();
-    let mut out: Vec<(String, Cells)> = names.iter().map(|n| (n.clone(), t.column(n).unwrap().iter().map(|v| v.to_bits().to_string()).collect())).collect();
+    let mut out: Vec<(String, Cells)> = names
+        .iter()
+        .map(|n| {
+            (
+                n.clone(),
+                t.column(n)
+                    .unwrap()
+                    .iter()
+                    .map(|v| v.to_bits().to_string())
+                    .collect(),
+            )
+        })
+        .collect();
     for s in strings {
         out.push((s.into(), read_strings(path, s).unwrap()));
     }
     for n in nullable {
-        out.push((n.into(), vshake::shell::tables::read_opt_f64(path, n).unwrap().iter().map(|v| v.map_or("-".into(), |x| x.to_bits().to_string())).collect()));
+        out.push((
+            n.into(),
+            vshake::shell::tables::read_opt_f64(path, n)
+                .unwrap()
+                .iter()
+                .map(|v| v.map_or("-".into(), |x| x.to_bits().to_string()))
+                .collect(),
+        ));
     }
     out
 }
-

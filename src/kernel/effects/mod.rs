@@ -259,7 +259,11 @@ pub fn effect_set<const N: usize>(sets: &[&ModelParams]) -> EffectSet<N> {
 /// 1.0 where effect `id` is switched on in `m`, 0.0 where it is off: the factor an effect's
 /// coefficients are multiplied by, so an off lane is neutral without a branch in the step.
 pub fn switch(m: &ModelParams, id: EffectId) -> f64 {
-    if m.effects.get(id) { 1.0 } else { 0.0 }
+    if m.effects.get(id) {
+        1.0
+    } else {
+        0.0
+    }
 }
 
 /// [`switch`] of effect `E` for every lane (an effect's constructor calls it with `Self`).
@@ -272,7 +276,10 @@ pub fn lane_mask<const N: usize, E: Named>(p: &[&ModelParams; N]) -> [f64; N] {
 /// # Safety
 /// An implementor is exactly a contiguous sequence of `[f64; N]` (no padding, nothing else), so
 /// that it can be viewed as a slice of lanes ([`Pair`]'s `AsRef`).
-pub unsafe trait LaneStates<const N: usize>: Copy + Send + Sync + AsRef<[[f64; N]]> + AsMut<[[f64; N]]> {}
+pub unsafe trait LaneStates<const N: usize>:
+    Copy + Send + Sync + AsRef<[[f64; N]]> + AsMut<[[f64; N]]>
+{
+}
 
 // SAFETY: an array of `[f64; N]` is such a sequence.
 unsafe impl<const N: usize, const M: usize> LaneStates<N> for [[f64; N]; M] {}
@@ -289,7 +296,9 @@ unsafe impl<const N: usize, A: LaneStates<N>, B: LaneStates<N>> LaneStates<N> fo
 impl<const N: usize, A: LaneStates<N>, B: LaneStates<N>> AsRef<[[f64; N]]> for Pair<A, B> {
     #[inline(always)]
     fn as_ref(&self) -> &[[f64; N]] {
-        let len = std::mem::size_of::<Self>().checked_div(std::mem::size_of::<[f64; N]>()).unwrap_or(0);
+        let len = std::mem::size_of::<Self>()
+            .checked_div(std::mem::size_of::<[f64; N]>())
+            .unwrap_or(0);
         // SAFETY: `Self` is `len` contiguous `[f64; N]` (see `LaneStates`), borrowed for `self`'s life.
         unsafe { std::slice::from_raw_parts(self as *const Self as *const [f64; N], len) }
     }
@@ -298,7 +307,9 @@ impl<const N: usize, A: LaneStates<N>, B: LaneStates<N>> AsRef<[[f64; N]]> for P
 impl<const N: usize, A: LaneStates<N>, B: LaneStates<N>> AsMut<[[f64; N]]> for Pair<A, B> {
     #[inline(always)]
     fn as_mut(&mut self) -> &mut [[f64; N]] {
-        let len = std::mem::size_of::<Self>().checked_div(std::mem::size_of::<[f64; N]>()).unwrap_or(0);
+        let len = std::mem::size_of::<Self>()
+            .checked_div(std::mem::size_of::<[f64; N]>())
+            .unwrap_or(0);
         // SAFETY: as in `as_ref`, borrowed mutably for `self`'s life.
         unsafe { std::slice::from_raw_parts_mut(self as *mut Self as *mut [f64; N], len) }
     }
@@ -372,7 +383,15 @@ pub trait Effect<const N: usize>: Sync {
     /// β/V2) at chamber pressures `p1`, `p2`.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
-    fn chamber_stiffness(&self, _l: usize, _act: usize, b: (f64, f64), _p1: f64, _p2: f64, _s: &Self::State) -> (f64, f64) {
+    fn chamber_stiffness(
+        &self,
+        _l: usize,
+        _act: usize,
+        b: (f64, f64),
+        _p1: f64,
+        _p2: f64,
+        _s: &Self::State,
+    ) -> (f64, f64) {
         b
     }
 
@@ -380,7 +399,16 @@ pub trait Effect<const N: usize>: Sync {
     /// flows `q` (all valves of the actuator).
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
-    fn flows(&self, _l: usize, _act: usize, q: (f64, f64), _p1: f64, _p2: f64, _p_s: f64, _s: &Self::State) -> (f64, f64) {
+    fn flows(
+        &self,
+        _l: usize,
+        _act: usize,
+        q: (f64, f64),
+        _p1: f64,
+        _p2: f64,
+        _p_s: f64,
+        _s: &Self::State,
+    ) -> (f64, f64) {
         q
     }
 
@@ -439,11 +467,13 @@ impl<const N: usize, A: Effect<N>, B: Effect<N>> Effect<N> for Both<A, B> {
     }
     #[inline(always)]
     fn opening(&self, l: usize, act: usize, x_c: f64, s: &Self::State) -> f64 {
-        self.1.opening(l, act, self.0.opening(l, act, x_c, &s.0), &s.1)
+        self.1
+            .opening(l, act, self.0.opening(l, act, x_c, &s.0), &s.1)
     }
     #[inline(always)]
     fn spool_position(&self, l: usize, act: usize, x_c: f64, s: &Self::State) -> f64 {
-        self.1.spool_position(l, act, self.0.spool_position(l, act, x_c, &s.0), &s.1)
+        self.1
+            .spool_position(l, act, self.0.spool_position(l, act, x_c, &s.0), &s.1)
     }
     #[inline(always)]
     fn stroke(&self, l: usize, y: f64, v: f64, s: &Self::State) -> (f64, f64) {
@@ -451,12 +481,44 @@ impl<const N: usize, A: Effect<N>, B: Effect<N>> Effect<N> for Both<A, B> {
         self.1.stroke(l, y, v, &s.1)
     }
     #[inline(always)]
-    fn chamber_stiffness(&self, l: usize, act: usize, b: (f64, f64), p1: f64, p2: f64, s: &Self::State) -> (f64, f64) {
-        self.1.chamber_stiffness(l, act, self.0.chamber_stiffness(l, act, b, p1, p2, &s.0), p1, p2, &s.1)
+    fn chamber_stiffness(
+        &self,
+        l: usize,
+        act: usize,
+        b: (f64, f64),
+        p1: f64,
+        p2: f64,
+        s: &Self::State,
+    ) -> (f64, f64) {
+        self.1.chamber_stiffness(
+            l,
+            act,
+            self.0.chamber_stiffness(l, act, b, p1, p2, &s.0),
+            p1,
+            p2,
+            &s.1,
+        )
     }
     #[inline(always)]
-    fn flows(&self, l: usize, act: usize, q: (f64, f64), p1: f64, p2: f64, p_s: f64, s: &Self::State) -> (f64, f64) {
-        self.1.flows(l, act, self.0.flows(l, act, q, p1, p2, p_s, &s.0), p1, p2, p_s, &s.1)
+    fn flows(
+        &self,
+        l: usize,
+        act: usize,
+        q: (f64, f64),
+        p1: f64,
+        p2: f64,
+        p_s: f64,
+        s: &Self::State,
+    ) -> (f64, f64) {
+        self.1.flows(
+            l,
+            act,
+            self.0.flows(l, act, q, p1, p2, p_s, &s.0),
+            p1,
+            p2,
+            p_s,
+            &s.1,
+        )
     }
     #[inline(always)]
     fn extra_force(&self, l: usize, y: f64, v: f64, s: &Self::State) -> f64 {
@@ -466,8 +528,16 @@ impl<const N: usize, A: Effect<N>, B: Effect<N>> Effect<N> for Both<A, B> {
     fn derivs(&self, plant: &PlantView<'_, N>, s: &Self::State, ds: &mut Self::State) {
         self.0.derivs(plant, &s.0, &mut ds.0);
         // B sees the command as A leaves it (actuator 0's: a command effect acts on all alike).
-        let x_c: [f64; N] = std::array::from_fn(|l| self.0.spool_position(l, 0, plant.x_c[l], &s.0));
-        self.1.derivs(&PlantView { x_c: &x_c, ..*plant }, &s.1, &mut ds.1);
+        let x_c: [f64; N] =
+            std::array::from_fn(|l| self.0.spool_position(l, 0, plant.x_c[l], &s.0));
+        self.1.derivs(
+            &PlantView {
+                x_c: &x_c,
+                ..*plant
+            },
+            &s.1,
+            &mut ds.1,
+        );
     }
 }
 
@@ -500,7 +570,10 @@ pub struct Gated<E> {
 
 impl<const N: usize, E: LibraryEffect<N> + Named> LibraryEffect<N> for Gated<E> {
     fn new(lanes: [&ModelParams; N]) -> Self {
-        Gated { on: lanes.iter().any(|p| p.effects.get(E::ID)), effect: E::new(lanes) }
+        Gated {
+            on: lanes.iter().any(|p| p.effects.get(E::ID)),
+            effect: E::new(lanes),
+        }
     }
 }
 
@@ -515,31 +588,76 @@ impl<const N: usize, E: Effect<N>> Effect<N> for Gated<E> {
     }
     #[inline(always)]
     fn supply(&self, l: usize, p_s: f64, s: &Self::State) -> f64 {
-        if self.on { self.effect.supply(l, p_s, s) } else { p_s }
+        if self.on {
+            self.effect.supply(l, p_s, s)
+        } else {
+            p_s
+        }
     }
     #[inline(always)]
     fn opening(&self, l: usize, act: usize, x_c: f64, s: &Self::State) -> f64 {
-        if self.on { self.effect.opening(l, act, x_c, s) } else { x_c }
+        if self.on {
+            self.effect.opening(l, act, x_c, s)
+        } else {
+            x_c
+        }
     }
     #[inline(always)]
     fn spool_position(&self, l: usize, act: usize, x_c: f64, s: &Self::State) -> f64 {
-        if self.on { self.effect.spool_position(l, act, x_c, s) } else { x_c }
+        if self.on {
+            self.effect.spool_position(l, act, x_c, s)
+        } else {
+            x_c
+        }
     }
     #[inline(always)]
     fn stroke(&self, l: usize, y: f64, v: f64, s: &Self::State) -> (f64, f64) {
-        if self.on { self.effect.stroke(l, y, v, s) } else { (y, v) }
+        if self.on {
+            self.effect.stroke(l, y, v, s)
+        } else {
+            (y, v)
+        }
     }
     #[inline(always)]
-    fn chamber_stiffness(&self, l: usize, act: usize, b: (f64, f64), p1: f64, p2: f64, s: &Self::State) -> (f64, f64) {
-        if self.on { self.effect.chamber_stiffness(l, act, b, p1, p2, s) } else { b }
+    fn chamber_stiffness(
+        &self,
+        l: usize,
+        act: usize,
+        b: (f64, f64),
+        p1: f64,
+        p2: f64,
+        s: &Self::State,
+    ) -> (f64, f64) {
+        if self.on {
+            self.effect.chamber_stiffness(l, act, b, p1, p2, s)
+        } else {
+            b
+        }
     }
     #[inline(always)]
-    fn flows(&self, l: usize, act: usize, q: (f64, f64), p1: f64, p2: f64, p_s: f64, s: &Self::State) -> (f64, f64) {
-        if self.on { self.effect.flows(l, act, q, p1, p2, p_s, s) } else { q }
+    fn flows(
+        &self,
+        l: usize,
+        act: usize,
+        q: (f64, f64),
+        p1: f64,
+        p2: f64,
+        p_s: f64,
+        s: &Self::State,
+    ) -> (f64, f64) {
+        if self.on {
+            self.effect.flows(l, act, q, p1, p2, p_s, s)
+        } else {
+            q
+        }
     }
     #[inline(always)]
     fn extra_force(&self, l: usize, y: f64, v: f64, s: &Self::State) -> f64 {
-        if self.on { self.effect.extra_force(l, y, v, s) } else { 0.0 }
+        if self.on {
+            self.effect.extra_force(l, y, v, s)
+        } else {
+            0.0
+        }
     }
     #[inline(always)]
     fn derivs(&self, plant: &PlantView<'_, N>, s: &Self::State, ds: &mut Self::State) {
@@ -570,13 +688,32 @@ mod tests {
             assert!(std::ptr::eq(id.info(), *e), "{}: registry order", e.name);
             assert!(!e.family.trim().is_empty(), "{}: no family", e.name);
             assert!(!e.summary.trim().is_empty(), "{}: no summary", e.name);
-            assert!(!e.free.is_empty(), "{}: no parameter a diagnosis frees", e.name);
+            assert!(
+                !e.free.is_empty(),
+                "{}: no parameter a diagnosis frees",
+                e.name
+            );
             assert!(!e.params.is_empty(), "{}: no parameters", e.name);
             for f in e.free {
-                assert!(e.params.iter().any(|p| p.name == *f), "{}: frees `{f}`, which it does not have", e.name);
+                assert!(
+                    e.params.iter().any(|p| p.name == *f),
+                    "{}: frees `{f}`, which it does not have",
+                    e.name
+                );
             }
-            assert!(e.params.iter().all(|p| p.component == Component::Effect(id)), "{}: its parameters belong to another component", e.name);
-            assert_eq!(id.module(), e.name, "{}: its module (and so its switch and model-file field) has another name", e.name);
+            assert!(
+                e.params
+                    .iter()
+                    .all(|p| p.component == Component::Effect(id)),
+                "{}: its parameters belong to another component",
+                e.name
+            );
+            assert_eq!(
+                id.module(),
+                e.name,
+                "{}: its module (and so its switch and model-file field) has another name",
+                e.name
+            );
             assert!(!sw.get(id));
             *sw.get_mut(id) = true;
             assert!(sw.get(id));
@@ -585,7 +722,11 @@ mod tests {
         }
         assert!(sw.any());
         assert_eq!(sw.on().count(), LIBRARY.len());
-        assert_eq!(EffectId::parse("seal_fricton"), None, "a misspelt name is not an effect");
+        assert_eq!(
+            EffectId::parse("seal_fricton"),
+            None,
+            "a misspelt name is not an effect"
+        );
     }
 
     /// The composed states are the effects' states side by side: the layout follows the types.
@@ -595,11 +736,27 @@ mod tests {
         let set = effect_set::<4>(&[&p]);
         let s = set.initial_state();
         let n = s.as_ref().len();
-        assert_eq!(n * std::mem::size_of::<[f64; 4]>(), std::mem::size_of_val(&s));
-        assert_eq!(n, transport_delay::STAGES + 2 * crate::kernel::N_ACT + 1 + 2, "delay, spool, supply, reaction mass");
+        assert_eq!(std::mem::size_of_val(s.as_ref()), std::mem::size_of_val(&s));
+        assert_eq!(
+            n,
+            transport_delay::STAGES + 2 * crate::kernel::N_ACT + 1 + 2,
+            "delay, spool, supply, reaction mass"
+        );
         // The supply pressure starts at P_S, every other state at 0.
         let ps = p.servovalve.p_s;
-        assert_eq!(s.as_ref().iter().filter(|lanes| lanes.iter().all(|&v| v == ps)).count(), 1);
-        assert_eq!(s.as_ref().iter().filter(|lanes| lanes.iter().all(|&v| v == 0.0)).count(), n - 1);
+        assert_eq!(
+            s.as_ref()
+                .iter()
+                .filter(|lanes| lanes.iter().all(|&v| v == ps))
+                .count(),
+            1
+        );
+        assert_eq!(
+            s.as_ref()
+                .iter()
+                .filter(|lanes| lanes.iter().all(|&v| v == 0.0))
+                .count(),
+            n - 1
+        );
     }
 }
