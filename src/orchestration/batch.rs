@@ -243,109 +243,128 @@ impl Plan {
         let valid: Vec<usize> = (0..samples.len())
             .filter(|&i| samples[i].model.is_ok())
             .collect();
-        let saltelli = |id: u64| {
-            self.saltelli_dims.map(|d| {
-                let (b, k) = saltelli_block(id as usize, d);
-                (b as u32, k as u32)
-            })
-        };
         for (e, reference) in self.references.iter().enumerate() {
-            // The lanes' references: the excitation's, or each sample's own (a sample whose
-            // motion cannot run is a row that says why).
-            let mut own: Vec<Option<Reference>> = vec![None; samples.len()];
-            let mut runnable = valid.clone();
-            if let Some(exc) = &self.per_sample[e] {
-                runnable.clear();
-                for &i in &valid {
-                    let s = &samples[i];
-                    match super::quake::generated(
-                        exc,
-                        s.model.as_ref().expect("valid"),
-                        self.seed,
-                        s.id,
-                    ) {
-                        Ok(r) => {
-                            own[i] = Some(r.with_spectrum(self.spectrum.clone()));
-                            runnable.push(i);
-                        }
-                        Err(reason) => {
-                            let status = RowStatus::Invalid { reason };
-                            rows[i * n_exc + e] = Some(Row {
-                                sample_id: s.id,
-                                excitation: e as u32,
-                                saltelli: saltelli(s.id),
-                                values: s.values.clone(),
-                                status,
-                                metrics: Metrics::NAN,
-                            });
-                        }
-                    }
-                }
-            }
-            for group in runnable.chunks(LANES) {
-                let models: Vec<&ModelParams> = group
-                    .iter()
-                    .map(|&i| samples[i].model.as_ref().expect("valid"))
-                    .collect();
-                let refs: Vec<&Reference> = group
-                    .iter()
-                    .map(|&i| own[i].as_ref().unwrap_or(reference))
-                    .collect();
-                // Lanes without effects give the same bits in the effect set (it is neutral
-                // there), and a lane's reference is its own, so the kernel `run_lanes_each`
-                // chooses per group does not make a row depend on its neighbours.
-                let results = super::sim::run_lanes_each::<LANES, _>(
-                    &models,
-                    &refs,
-                    &self.solver,
-                    &mut NoObserver,
-                );
-                for (lane, &i) in group.iter().enumerate() {
-                    let (status, metrics) = match &results {
-                        Ok(r) => match r[lane].status {
-                            LaneStatus::Ok => (RowStatus::Ok, r[lane].metrics),
-                            LaneStatus::Failed { time_s, reason } => (
-                                RowStatus::Failed {
-                                    time_s,
-                                    reason: reason.to_string(),
-                                },
-                                Metrics::NAN,
-                            ),
-                        },
-                        Err(e) => (
-                            RowStatus::Invalid {
-                                reason: e.to_string(),
-                            },
-                            Metrics::NAN,
-                        ),
-                    };
-                    let s = &samples[i];
-                    rows[i * n_exc + e] = Some(Row {
-                        sample_id: s.id,
-                        excitation: e as u32,
-                        saltelli: saltelli(s.id),
-                        values: s.values.clone(),
-                        status,
-                        metrics,
-                    });
-                }
-            }
-            for s in samples.iter().enumerate().filter(|(_, s)| s.model.is_err()) {
-                let (i, s) = s;
-                let reason = s.model.as_ref().err().cloned().unwrap_or_default();
-                rows[i * n_exc + e] = Some(Row {
-                    sample_id: s.id,
-                    excitation: e as u32,
-                    saltelli: saltelli(s.id),
-                    values: s.values.clone(),
-                    status: RowStatus::Invalid { reason },
-                    metrics: Metrics::NAN,
-                });
+            let of_e = self.run_excitation(e, reference, &samples, &valid);
+            for (i, row) in of_e.into_iter().enumerate() {
+                rows[i * n_exc + e] = row;
             }
         }
         rows.into_iter()
             .map(|r| r.expect("every row filled"))
             .collect()
+    }
+
+    /// The rows of excitation `e` (its `reference`, unless the samples make their own), one per
+    /// sample: the valid samples run in groups of [`LANES`], the others say why they did not.
+    fn run_excitation(
+        &self,
+        e: usize,
+        reference: &Reference,
+        samples: &[Sample],
+        valid: &[usize],
+    ) -> Vec<Option<Row>> {
+        let mut rows: Vec<Option<Row>> = vec![None; samples.len()];
+        let (own, runnable) = self.own_references(e, samples, valid, &mut rows);
+        for group in runnable.chunks(LANES) {
+            let models: Vec<&ModelParams> = group
+                .iter()
+                .map(|&i| samples[i].model.as_ref().expect("valid"))
+                .collect();
+            let refs: Vec<&Reference> = group
+                .iter()
+                .map(|&i| own[i].as_ref().unwrap_or(reference))
+                .collect();
+            // Lanes without effects give the same bits in the effect set (it is neutral
+            // there), and a lane's reference is its own, so the kernel `run_lanes_each`
+            // chooses per group does not make a row depend on its neighbours.
+            let results = super::sim::run_lanes_each::<LANES, _>(
+                &models,
+                &refs,
+                &self.solver,
+                &mut NoObserver,
+            );
+            for (lane, &i) in group.iter().enumerate() {
+                let (status, metrics) = lane_outcome(&results, lane);
+                rows[i] = Some(self.row(&samples[i], e, status, metrics));
+            }
+        }
+        for s in samples.iter().enumerate().filter(|(_, s)| s.model.is_err()) {
+            let (i, s) = s;
+            let reason = s.model.as_ref().err().cloned().unwrap_or_default();
+            rows[i] = Some(self.row(s, e, RowStatus::Invalid { reason }, Metrics::NAN));
+        }
+        rows
+    }
+
+    /// The lanes' references for excitation `e`: the excitation's (None), or each valid
+    /// sample's own, and the samples that can run; a sample whose own motion cannot run gets
+    /// the row that says why.
+    fn own_references(
+        &self,
+        e: usize,
+        samples: &[Sample],
+        valid: &[usize],
+        rows: &mut [Option<Row>],
+    ) -> (Vec<Option<Reference>>, Vec<usize>) {
+        let mut own: Vec<Option<Reference>> = vec![None; samples.len()];
+        let Some(exc) = &self.per_sample[e] else {
+            return (own, valid.to_vec());
+        };
+        let mut runnable = Vec::new();
+        for &i in valid {
+            let s = &samples[i];
+            match super::quake::generated(exc, s.model.as_ref().expect("valid"), self.seed, s.id) {
+                Ok(r) => {
+                    own[i] = Some(r.with_spectrum(self.spectrum.clone()));
+                    runnable.push(i);
+                }
+                Err(reason) => {
+                    let status = RowStatus::Invalid { reason };
+                    rows[i] = Some(self.row(s, e, status, Metrics::NAN));
+                }
+            }
+        }
+        (own, runnable)
+    }
+
+    /// The row of sample `s` and excitation `e`.
+    fn row(&self, s: &Sample, e: usize, status: RowStatus, metrics: Metrics) -> Row {
+        Row {
+            sample_id: s.id,
+            excitation: e as u32,
+            saltelli: self.saltelli_dims.map(|d| {
+                let (b, k) = saltelli_block(s.id as usize, d);
+                (b as u32, k as u32)
+            }),
+            values: s.values.clone(),
+            status,
+            metrics,
+        }
+    }
+}
+
+/// A lane's status and metrics (NaN unless it ran to the end), or why its group could not run.
+fn lane_outcome(
+    results: &Result<[simulate::LaneResult; LANES], simulate::SetupError>,
+    lane: usize,
+) -> (RowStatus, Metrics) {
+    match results {
+        Ok(r) => match r[lane].status {
+            LaneStatus::Ok => (RowStatus::Ok, r[lane].metrics),
+            LaneStatus::Failed { time_s, reason } => (
+                RowStatus::Failed {
+                    time_s,
+                    reason: reason.to_string(),
+                },
+                Metrics::NAN,
+            ),
+        },
+        Err(e) => (
+            RowStatus::Invalid {
+                reason: e.to_string(),
+            },
+            Metrics::NAN,
+        ),
     }
 }
 

@@ -85,84 +85,17 @@ impl Campaign {
         let table = super::toml_fields::parse(text, file)?;
         let mut issues = Issues::default();
         let mut root = Fields::new("", &table);
-        let (mut name, mut description) = (String::new(), String::new());
-        match root.table("campaign", &mut issues) {
-            Some(mut c) => {
-                name = c.str("name", &mut issues).unwrap_or("").to_string();
-                description = c.str("description", &mut issues).unwrap_or("").to_string();
-                if name.is_empty() {
-                    issues.push("campaign.name", "missing");
-                }
-                c.finish(&CAMPAIGN_KEYS, &mut issues);
-            }
-            None => issues.push("campaign", "missing table ([campaign] name = ...)"),
-        }
+        let (name, description) = read_header(&mut root, &mut issues);
         let mut tests = Vec::new();
         match root.tables("test", &mut issues) {
             Some(list) if list.is_empty() => issues.push("test", "the campaign lists no test"),
             Some(list) => {
-                for mut t in list {
-                    let tname = t.str("name", &mut issues).map(str::to_string);
-                    let data = t.str("data", &mut issues).map(PathBuf::from);
-                    if tname.is_none() {
-                        issues.push(t.path_of("name"), "missing");
-                    }
-                    if data.is_none() {
-                        issues.push(
-                            t.path_of("data"),
-                            "missing (the CSV or Parquet file of the test)",
-                        );
-                    }
-                    let mut model = base_model.clone();
-                    if let Some(m) = t.table("model", &mut issues) {
-                        spec::read_model(m, &mut model, &mut issues);
-                        spec::validate_model(&model, &t.path_of("model"), &mut issues);
-                    }
-                    let mut weights = Weights::default();
-                    if let Some(mut w) = t.table("weights", &mut issues) {
-                        for (key, slot) in [
-                            ("accel", &mut weights.accel),
-                            ("disp", &mut weights.disp),
-                            ("force", &mut weights.force),
-                        ] {
-                            if let Some(v) = w.f64(key, &mut issues) {
-                                if v < 0.0 {
-                                    issues
-                                        .push(w.path_of(key), format!("{v} must not be negative"));
-                                }
-                                *slot = v;
-                            }
+                for t in list {
+                    if let Some(test) = read_test(t, base_model, &mut issues) {
+                        if tests.iter().any(|x: &TestSpec| x.name == test.name) {
+                            issues.push("test", format!("test name {:?} is used twice", test.name));
                         }
-                        w.finish(&WEIGHT_KEYS, &mut issues);
-                    }
-                    let t0_s = t.f64("t0_s", &mut issues);
-                    let (mut window_given, mut duration_given) = (false, false);
-                    let excitation = match t.table("excitation", &mut issues) {
-                        Some(e) => {
-                            window_given = e.has("window_cycles");
-                            duration_given = e.has("duration_s");
-                            spec::read_excitation_in(e, &model, &mut issues, &[], data.as_deref())
-                        }
-                        None => {
-                            issues.push(t.path_of("excitation"), "missing (an inline table: { kind = \"sine\", freq_hz = ..., amp_g = ... })");
-                            None
-                        }
-                    };
-                    t.finish(&TEST_KEYS, &mut issues);
-                    if let (Some(name), Some(data), Some(excitation)) = (tname, data, excitation) {
-                        if tests.iter().any(|x: &TestSpec| x.name == name) {
-                            issues.push("test", format!("test name {name:?} is used twice"));
-                        }
-                        tests.push(TestSpec {
-                            name,
-                            data,
-                            excitation,
-                            model,
-                            weights,
-                            window_given,
-                            duration_given,
-                            t0_s,
-                        });
+                        tests.push(test);
                     }
                 }
             }
@@ -176,6 +109,96 @@ impl Campaign {
             tests,
         })
     }
+}
+
+/// `[campaign]`: its name (required) and description.
+fn read_header(root: &mut Fields<'_>, issues: &mut Issues) -> (String, String) {
+    let (mut name, mut description) = (String::new(), String::new());
+    match root.table("campaign", issues) {
+        Some(mut c) => {
+            name = c.str("name", issues).unwrap_or("").to_string();
+            description = c.str("description", issues).unwrap_or("").to_string();
+            if name.is_empty() {
+                issues.push("campaign.name", "missing");
+            }
+            c.finish(&CAMPAIGN_KEYS, issues);
+        }
+        None => issues.push("campaign", "missing table ([campaign] name = ...)"),
+    }
+    (name, description)
+}
+
+/// One `[[test]]`: its name, data file, model (the base one with the test's overrides), weights,
+/// start and excitation; None where one of name, data or excitation is missing or wrong.
+fn read_test(mut t: Fields<'_>, base_model: &ModelParams, issues: &mut Issues) -> Option<TestSpec> {
+    let tname = t.str("name", issues).map(str::to_string);
+    let data = t.str("data", issues).map(PathBuf::from);
+    if tname.is_none() {
+        issues.push(t.path_of("name"), "missing");
+    }
+    if data.is_none() {
+        issues.push(
+            t.path_of("data"),
+            "missing (the CSV or Parquet file of the test)",
+        );
+    }
+    let mut model = base_model.clone();
+    if let Some(m) = t.table("model", issues) {
+        spec::read_model(m, &mut model, issues);
+        spec::validate_model(&model, &t.path_of("model"), issues);
+    }
+    let weights = read_weights(&mut t, issues);
+    let t0_s = t.f64("t0_s", issues);
+    let (mut window_given, mut duration_given) = (false, false);
+    let excitation = match t.table("excitation", issues) {
+        Some(e) => {
+            window_given = e.has("window_cycles");
+            duration_given = e.has("duration_s");
+            spec::read_excitation_in(e, &model, issues, &[], data.as_deref())
+        }
+        None => {
+            issues.push(
+                t.path_of("excitation"),
+                "missing (an inline table: { kind = \"sine\", freq_hz = ..., amp_g = ... })",
+            );
+            None
+        }
+    };
+    t.finish(&TEST_KEYS, issues);
+    let (Some(name), Some(data), Some(excitation)) = (tname, data, excitation) else {
+        return None;
+    };
+    Some(TestSpec {
+        name,
+        data,
+        excitation,
+        model,
+        weights,
+        window_given,
+        duration_given,
+        t0_s,
+    })
+}
+
+/// A test's `weights` table (accel, disp, force; none negative), else the default weights.
+fn read_weights(t: &mut Fields<'_>, issues: &mut Issues) -> Weights {
+    let mut weights = Weights::default();
+    if let Some(mut w) = t.table("weights", issues) {
+        for (key, slot) in [
+            ("accel", &mut weights.accel),
+            ("disp", &mut weights.disp),
+            ("force", &mut weights.force),
+        ] {
+            if let Some(v) = w.f64(key, issues) {
+                if v < 0.0 {
+                    issues.push(w.path_of(key), format!("{v} must not be negative"));
+                }
+                *slot = v;
+            }
+        }
+        w.finish(&WEIGHT_KEYS, issues);
+    }
+    weights
 }
 
 /// Reads a model file: `[model.<component>]` tables as in run files (other tables are refused).

@@ -261,26 +261,7 @@ fn drift(amps: &[f64]) -> f64 {
 pub fn compare(s: &Samples, measured: &Channels<'_>, model: &Channels<'_>) -> Comparison {
     let n = s.len();
     let ra = |m: &[f64], t: &[f64]| rms((0..n).map(|k| m[k] - t[k])) / rms(t.iter().copied());
-    let rms_meas = rms(measured.accel.iter().copied());
-    let vmax = s.ref_v.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    let xmax = s.ref_x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    let bin = |name: &'static str, pick: &dyn Fn(usize) -> bool| {
-        let ks: Vec<usize> = (0..n).filter(|&k| pick(k)).collect();
-        Bin {
-            name,
-            fraction: ks.len() as f64 / n.max(1) as f64,
-            rms_residual_ratio: if ks.is_empty() {
-                f64::NAN
-            } else {
-                rms(ks.iter().map(|&k| model.accel[k] - measured.accel[k])) / rms_meas
-            },
-        }
-    };
-    let bins = [
-        bin("velocity_reversal", &|k| s.ref_v[k].abs() <= 0.1 * vmax),
-        bin("peak_velocity", &|k| s.ref_v[k].abs() >= 0.95 * vmax),
-        bin("peak_displacement", &|k| s.ref_x[k].abs() >= 0.95 * xmax),
-    ];
+    let bins = residual_bins(s, measured, model);
     let mut c = Comparison {
         amp_ratio_model: f64::NAN,
         amp_ratio_measured: f64::NAN,
@@ -310,17 +291,61 @@ pub fn compare(s: &Samples, measured: &Channels<'_>, model: &Channels<'_>) -> Co
     let hr = proj.apply(&s.ref_a);
     let hm = proj.apply(model.accel);
     let hx = proj.apply(measured.accel);
+    set_harmonics(&mut c, (&hr, &hm, &hx), s.n_harm);
+    cycle_amplitudes(&mut c, s, (measured, model), f);
+    c.drift_model = drift(&c.cycle_amp_model);
+    c.drift_measured = drift(&c.cycle_amp_measured);
+    let w2 = (2.0 * PI * f).powi(2);
+    c.accel_over_disp_model = mag(hm[0]) / (w2 * mag(proj.apply(model.disp)[0]));
+    c.accel_over_disp_measured = mag(hx[0]) / (w2 * mag(proj.apply(measured.disp)[0]));
+    c
+}
+
+/// The acceleration residual's rms (over the measured rms) in the bins of the reference's
+/// motion: velocity reversals, peak velocity, peak displacement.
+fn residual_bins(s: &Samples, measured: &Channels<'_>, model: &Channels<'_>) -> [Bin; 3] {
+    let n = s.len();
+    let rms_meas = rms(measured.accel.iter().copied());
+    let vmax = s.ref_v.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let xmax = s.ref_x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let bin = |name: &'static str, pick: &dyn Fn(usize) -> bool| {
+        let ks: Vec<usize> = (0..n).filter(|&k| pick(k)).collect();
+        Bin {
+            name,
+            fraction: ks.len() as f64 / n.max(1) as f64,
+            rms_residual_ratio: if ks.is_empty() {
+                f64::NAN
+            } else {
+                rms(ks.iter().map(|&k| model.accel[k] - measured.accel[k])) / rms_meas
+            },
+        }
+    };
+    [
+        bin("velocity_reversal", &|k| s.ref_v[k].abs() <= 0.1 * vmax),
+        bin("peak_velocity", &|k| s.ref_v[k].abs() >= 0.95 * vmax),
+        bin("peak_displacement", &|k| s.ref_x[k].abs() >= 0.95 * xmax),
+    ]
+}
+
+/// The fundamental's amplitude ratios and phases, the harmonic ratios and the harmonics (over
+/// the reference's fundamental) of the model (`hm`) and the measurement (`hx`), from the
+/// reference's (`hr`) and their first `n_harm` harmonics.
+fn set_harmonics(
+    c: &mut Comparison,
+    (hr, hm, hx): (&[C64; N_HARM], &[C64; N_HARM], &[C64; N_HARM]),
+    n_harm: usize,
+) {
     let r1 = mag(hr[0]);
     c.amp_ratio_model = mag(hm[0]) / r1;
     c.amp_ratio_measured = mag(hx[0]) / r1;
     c.phase_model_deg = phase_deg(hm[0], hr[0]);
     c.phase_measured_deg = phase_deg(hx[0], hr[0]);
     // Harmonics at or above the file's Nyquist frequency stay NaN.
-    for k in 2..=s.n_harm {
+    for k in 2..=n_harm {
         c.h_model[k - 2] = mag(hm[k - 1]) / mag(hm[0]);
         c.h_measured[k - 2] = mag(hx[k - 1]) / mag(hx[0]);
     }
-    for k in 0..s.n_harm {
+    for k in 0..n_harm {
         c.harm_model[k] = (hm[k].0 / r1, hm[k].1 / r1);
         c.harm_measured[k] = (hx[k].0 / r1, hx[k].1 / r1);
         c.residual[k] = (
@@ -328,7 +353,17 @@ pub fn compare(s: &Samples, measured: &Channels<'_>, model: &Channels<'_>) -> Co
             c.harm_model[k].1 - c.harm_measured[k].1,
         );
     }
-    // Whole cycles of the window: boundaries at round(i·R/f) from the window's start.
+}
+
+/// The fundamental's amplitude ratio of the model and the measurement in each whole cycle of
+/// the window (boundaries at round(i·R/f) from the window's start).
+fn cycle_amplitudes(
+    c: &mut Comparison,
+    s: &Samples,
+    (measured, model): (&Channels<'_>, &Channels<'_>),
+    f: f64,
+) {
+    let n = s.len();
     let per = s.rate_hz / f;
     let cycles = (n as f64 / per + 1e-9).floor() as usize;
     for i in 0..cycles {
@@ -343,12 +378,6 @@ pub fn compare(s: &Samples, measured: &Channels<'_>, model: &Channels<'_>) -> Co
         c.cycle_amp_measured
             .push(mag(cycle.apply(&measured.accel[a..b])[0]) / r);
     }
-    c.drift_model = drift(&c.cycle_amp_model);
-    c.drift_measured = drift(&c.cycle_amp_measured);
-    let w2 = (2.0 * PI * f).powi(2);
-    c.accel_over_disp_model = mag(hm[0]) / (w2 * mag(proj.apply(model.disp)[0]));
-    c.accel_over_disp_measured = mag(hx[0]) / (w2 * mag(proj.apply(measured.disp)[0]));
-    c
 }
 
 /// Share of the measured signal above which a residual is reported as implausible.

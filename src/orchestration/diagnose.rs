@@ -423,15 +423,9 @@ fn forward_selection(
     };
     let mut chosen: Vec<EffectId> = vec![best.effect];
     // The chosen parameters at their estimates, and the evaluation they leave.
-    let mut free: Vec<Free> = best
-        .free
-        .iter()
-        .zip(&best_fit.estimate)
-        .map(|(f, &v)| Free::new(f.info, v))
-        .collect();
+    let mut free = at_estimates(&best.free, &best_fit.estimate);
     let mut at = best_fit.after.clone();
     let mut steps = Vec::new();
-    let model0 = &problem.tests[0].model;
     while chosen.len() < MAX_EFFECTS {
         // Room left: even a perfect further effect of one parameter must beat its penalty, and
         // the χ² left must exceed what noise leaves by more than its own spread (a χ² of n
@@ -439,58 +433,13 @@ fn forward_selection(
         if at.chi2() - n as f64 <= (ln_n + SIGNIFICANT_BIC).max(3.0 * (2.0 * n as f64).sqrt()) {
             break;
         }
-        let rest: Vec<&Candidate> = ranked
-            .iter()
-            .filter(|c| !chosen.contains(&c.effect) && c.fit.is_ok())
-            .collect();
-        let tried: Vec<(EffectId, Vec<Free>, Result<fit::FitResult, fit::FitError>)> = rest
-            .par_iter()
-            .map(|c| {
-                let mut f = free.clone();
-                f.extend(free_of(c.effect, model0));
-                let r = fit::fit_from(problem, &f, MAX_ITER, at.clone());
-                (c.effect, f, r)
-            })
-            .collect();
-        let chi2_at = at.chi2();
-        let rms_at = at.residual_rms();
-        let excess_at = rms_at * rms_at - n2;
-        let next = tried
-            .into_iter()
-            .filter_map(|(effect, f, r)| {
-                let r = r.ok()?;
-                let p_new = (f.len() - free.len()) as f64;
-                let dbic = chi2_at - r.chi2_after() - p_new * ln_n;
-                let removes = (rms_at * rms_at - r.after.residual_rms().powi(2)) / excess_at;
-                (dbic > SIGNIFICANT_BIC
-                    && r.after.residual_rms() <= rms_at
-                    && removes >= ADDS_ENOUGH)
-                    .then_some((effect, f, r, dbic))
-            })
-            .max_by(|a, b| a.3.total_cmp(&b.3));
-        let Some((effect, f, mut r, mut dbic)) = next else {
+        let Some((effect, f, r, dbic)) =
+            best_addition(problem, ranked, (&chosen, &free, &at), (ln_n, n2))
+        else {
             break;
         };
-        if !r.converged {
-            // The chosen set's parameters started where they compensated for the missing effect:
-            // the joint fit may need more iterations than a candidate's screening fit.
-            let restart: Vec<Free> = f
-                .iter()
-                .zip(&r.estimate)
-                .map(|(f, &v)| Free::new(f.info, v))
-                .collect();
-            if let Ok(polished) = fit::fit_from(problem, &restart, 4 * MAX_ITER, r.after.clone()) {
-                if polished.chi2_after() <= r.chi2_after() {
-                    dbic += r.chi2_after() - polished.chi2_after();
-                    r = polished;
-                }
-            }
-        }
-        free = f
-            .iter()
-            .zip(&r.estimate)
-            .map(|(f, &v)| Free::new(f.info, v))
-            .collect();
+        let (r, dbic) = polished(problem, &f, r, dbic);
+        free = at_estimates(&f, &r.estimate);
         at = r.after.clone();
         chosen.push(effect);
         steps.push(Step {
@@ -503,6 +452,75 @@ fn forward_selection(
         });
     }
     steps
+}
+
+/// The parameters `free` at the values `estimate`.
+fn at_estimates(free: &[Free], estimate: &[f64]) -> Vec<Free> {
+    free.iter()
+        .zip(estimate)
+        .map(|(f, &v)| Free::new(f.info, v))
+        .collect()
+}
+
+/// The candidate effect that adds most to the chosen ones (their parameters `free`, leaving the
+/// evaluation `at`): its effect, the joint parameters, their fit and its ΔBIC; None where no
+/// effect is significant, lowers the residual and removes enough of what is left of it.
+fn best_addition(
+    problem: &Problem,
+    ranked: &[Candidate],
+    (chosen, free, at): (&[EffectId], &[Free], &fit::Eval),
+    (ln_n, n2): (f64, f64),
+) -> Option<(EffectId, Vec<Free>, fit::FitResult, f64)> {
+    let model0 = &problem.tests[0].model;
+    let rest: Vec<&Candidate> = ranked
+        .iter()
+        .filter(|c| !chosen.contains(&c.effect) && c.fit.is_ok())
+        .collect();
+    let tried: Vec<(EffectId, Vec<Free>, Result<fit::FitResult, fit::FitError>)> = rest
+        .par_iter()
+        .map(|c| {
+            let mut f = free.to_vec();
+            f.extend(free_of(c.effect, model0));
+            let r = fit::fit_from(problem, &f, MAX_ITER, at.clone());
+            (c.effect, f, r)
+        })
+        .collect();
+    let chi2_at = at.chi2();
+    let rms_at = at.residual_rms();
+    let excess_at = rms_at * rms_at - n2;
+    tried
+        .into_iter()
+        .filter_map(|(effect, f, r)| {
+            let r = r.ok()?;
+            let p_new = (f.len() - free.len()) as f64;
+            let dbic = chi2_at - r.chi2_after() - p_new * ln_n;
+            let removes = (rms_at * rms_at - r.after.residual_rms().powi(2)) / excess_at;
+            (dbic > SIGNIFICANT_BIC && r.after.residual_rms() <= rms_at && removes >= ADDS_ENOUGH)
+                .then_some((effect, f, r, dbic))
+        })
+        .max_by(|a, b| a.3.total_cmp(&b.3))
+}
+
+/// A joint fit `r` (of the parameters `f`, with ΔBIC `dbic`) that did not converge, refitted
+/// from its estimates with more iterations where that lowers its χ², and the ΔBIC it then has.
+fn polished(
+    problem: &Problem,
+    f: &[Free],
+    mut r: fit::FitResult,
+    mut dbic: f64,
+) -> (fit::FitResult, f64) {
+    if !r.converged {
+        // The chosen set's parameters started where they compensated for the missing effect:
+        // the joint fit may need more iterations than a candidate's screening fit.
+        let restart = at_estimates(f, &r.estimate);
+        if let Ok(polished) = fit::fit_from(problem, &restart, 4 * MAX_ITER, r.after.clone()) {
+            if polished.chi2_after() <= r.chi2_after() {
+                dbic += r.chi2_after() - polished.chi2_after();
+                r = polished;
+            }
+        }
+    }
+    (r, dbic)
 }
 
 /// The feature groups (test, harmonic) whose χ² a candidate lowers most: (test, harmonic, χ²

@@ -313,16 +313,8 @@ pub fn align(
     let mut notes = data.notes.clone();
     notes.extend(time.note());
     let mut warnings = Vec::new();
-    let (rate, rows, f_s) = (time.rate_hz, time.rows, test.model.controller.f_s);
-    let located = match &test.excitation {
-        ExcitationSpec::Sine { sine, .. } => locate_sine(test, sine, data, &time, &mut warnings)?,
-        ExcitationSpec::Record {
-            column,
-            time_column,
-            ..
-        } => locate_record(test, (column, time_column), data, record, &time)?,
-        generated => locate_generated(test, generated, data, &time)?,
-    };
+    let (rate, rows) = (time.rate_hz, time.rows);
+    let located = locate(test, data, record, &time, &mut warnings)?;
     let (start_row, start, end_row, cycles) = (
         located.start_row,
         located.start,
@@ -333,40 +325,17 @@ pub fn align(
     let tau: Vec<f64> = (window.0..window.1)
         .map(|n| (n as f64 - start_row) / rate)
         .collect();
-    let n_ticks = (tau[tau.len() - 1] * f_s).floor() as usize + 2;
-    let mut drive = match (&test.excitation, located.record) {
-        (ExcitationSpec::Sine { sine, .. }, _) => Sine {
-            duration_s: n_ticks as f64 / f_s,
-            window_cycles: None,
-            ..*sine
-        }
-        .reference(f_s),
-        (_, Some(r)) => r,
-        (_, None) => unreachable!("a record or a generated motion has its reference"),
-    };
-    drive.hold_to(n_ticks);
-    if let Some(mode) = open_loop {
-        drive.drive = measured_drive(
-            mode,
-            data.column(mode.column()).expect("checked"),
-            start_row,
-            rate,
-            f_s,
-            drive.len(),
-        );
-    }
+    let drive = model_drive(
+        test,
+        data,
+        located.record,
+        &tau,
+        (start_row, rate),
+        open_loop,
+    );
     let (ref_x, ref_v, ref_a) = reference_states(&test.excitation, &drive, &tau);
     let (fundamental_hz, n_harm) = harmonics_in(test, data, rate, &mut notes)?;
-    let slice = |n: &str| data.column(n).map(|c| c[window.0..window.1].to_vec());
-    let measured = Measured {
-        accel: slice("accel_mps2").expect("required"),
-        disp: slice("disp_m").expect("required"),
-        force: slice("force_n"),
-        p1: slice("p1_pa"),
-        p2: slice("p2_pa"),
-        valve_cmd: slice("valve_cmd_v"),
-        spool: slice("spool_m"),
-    };
+    let measured = measured_channels(data, window);
     let alignment = Alignment {
         time,
         start_row,
@@ -406,6 +375,75 @@ pub fn align(
         notes,
         warnings,
     })
+}
+
+/// Where the test's excitation sits in the file, by its kind.
+fn locate(
+    test: &TestSpec,
+    data: &NumTable,
+    record: Option<&NumTable>,
+    time: &TimeBase,
+    warnings: &mut Vec<String>,
+) -> Result<Located, Vec<DataProblem>> {
+    Ok(match &test.excitation {
+        ExcitationSpec::Sine { sine, .. } => locate_sine(test, sine, data, time, warnings)?,
+        ExcitationSpec::Record {
+            column,
+            time_column,
+            ..
+        } => locate_record(test, (column, time_column), data, record, time)?,
+        generated => locate_generated(test, generated, data, time)?,
+    })
+}
+
+/// The model's drive at the controller's ticks, lasting a tick beyond the last sample (`tau`):
+/// the sine's or the located reference, its drive replaced by the measured one in open loop.
+fn model_drive(
+    test: &TestSpec,
+    data: &NumTable,
+    record: Option<Reference>,
+    tau: &[f64],
+    (start_row, rate): (f64, f64),
+    open_loop: Option<OpenLoop>,
+) -> Reference {
+    let f_s = test.model.controller.f_s;
+    let n_ticks = (tau[tau.len() - 1] * f_s).floor() as usize + 2;
+    let mut drive = match (&test.excitation, record) {
+        (ExcitationSpec::Sine { sine, .. }, _) => Sine {
+            duration_s: n_ticks as f64 / f_s,
+            window_cycles: None,
+            ..*sine
+        }
+        .reference(f_s),
+        (_, Some(r)) => r,
+        (_, None) => unreachable!("a record or a generated motion has its reference"),
+    };
+    drive.hold_to(n_ticks);
+    if let Some(mode) = open_loop {
+        drive.drive = measured_drive(
+            mode,
+            data.column(mode.column()).expect("checked"),
+            start_row,
+            rate,
+            f_s,
+            drive.len(),
+        );
+    }
+    drive
+}
+
+/// The measured channels over the analysis window (rows `window.0..window.1`).
+fn measured_channels(data: &NumTable, window: (usize, usize)) -> Measured {
+    let slice = |n: &str| data.column(n).map(|c| c[window.0..window.1].to_vec());
+    Measured {
+        accel: slice("accel_mps2").expect("required"),
+        disp: slice("disp_m").expect("required"),
+        force: slice("force_n"),
+        p1: slice("p1_pa"),
+        p2: slice("p2_pa"),
+        valve_cmd: slice("valve_cmd_v"),
+        spool: slice("spool_m"),
+    }
 }
 
 /// The file's magnitudes, its time base and the column an open loop needs.
@@ -519,12 +557,7 @@ fn locate_record(
     time: &TimeBase,
 ) -> Result<Located, Vec<DataProblem>> {
     let ExcitationSpec::Record {
-        f_ref_hz,
-        scale,
-        unit,
-        pga_g,
-        processing,
-        ..
+        scale, unit, pga_g, ..
     } = &test.excitation
     else {
         unreachable!("a record")
@@ -558,31 +591,14 @@ fn locate_record(
             ),
         )]);
     }
+    let r = record_reference(
+        test,
+        (source, column),
+        first,
+        (rec_t, rec_x),
+        rec_time.rate_hz,
+    )?;
     let f_s = test.model.controller.f_s;
-    let r = if unit.is_acceleration() {
-        super::quake::from_acceleration(
-            &rec_x,
-            0.0,
-            1.0 / rec_time.rate_hz,
-            processing,
-            *f_ref_hz,
-            f_s,
-        )
-    } else {
-        let l = test.model.actuator.l;
-        if let Some((i, v)) = rec_x.iter().enumerate().find(|(_, v)| v.abs() >= l) {
-            return Err(vec![source.problem(Some(column), Some(first + i + 1), format!("displacement {v} m (after unit {} and scale {scale}) exceeds the stroke (half stroke actuator.l = {l} m)", unit.name()))]);
-        }
-        Record {
-            time_s: rec_t,
-            disp_m: rec_x,
-            f_ref_hz: *f_ref_hz,
-        }
-        .reference(f_s)
-    };
-    super::quake::check_limits(&r, &test.model).map_err(|m| {
-        vec![source.problem(Some(column), None, format!("test {:?}: {m}", test.name))]
-    })?;
     let span = (r.len() - 1) as f64 / f_s;
     let rate = time.rate_hz;
     let start_row = ((t0 - time.t0_s) * rate).max(0.0);
@@ -599,6 +615,46 @@ fn locate_record(
         cycles: None,
         record: Some(r),
     })
+}
+
+/// A record's reference at the controller's rate: integrated from an acceleration, or its
+/// displacement samples (each within the stroke, else refused at its row); within the limits.
+fn record_reference(
+    test: &TestSpec,
+    (source, column): (&NumTable, &str),
+    first: usize,
+    (rec_t, rec_x): (Vec<f64>, Vec<f64>),
+    rate_hz: f64,
+) -> Result<Reference, Vec<DataProblem>> {
+    let ExcitationSpec::Record {
+        f_ref_hz,
+        scale,
+        unit,
+        processing,
+        ..
+    } = &test.excitation
+    else {
+        unreachable!("a record")
+    };
+    let f_s = test.model.controller.f_s;
+    let r = if unit.is_acceleration() {
+        super::quake::from_acceleration(&rec_x, 0.0, 1.0 / rate_hz, processing, *f_ref_hz, f_s)
+    } else {
+        let l = test.model.actuator.l;
+        if let Some((i, v)) = rec_x.iter().enumerate().find(|(_, v)| v.abs() >= l) {
+            return Err(vec![source.problem(Some(column), Some(first + i + 1), format!("displacement {v} m (after unit {} and scale {scale}) exceeds the stroke (half stroke actuator.l = {l} m)", unit.name()))]);
+        }
+        Record {
+            time_s: rec_t,
+            disp_m: rec_x,
+            f_ref_hz: *f_ref_hz,
+        }
+        .reference(f_s)
+    };
+    super::quake::check_limits(&r, &test.model).map_err(|m| {
+        vec![source.problem(Some(column), None, format!("test {:?}: {m}", test.name))]
+    })?;
+    Ok(r)
 }
 
 /// A generated motion (stochastic, sweep, random) in a measured test: its reference from the

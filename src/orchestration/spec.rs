@@ -407,8 +407,32 @@ fn read_sine(
     let taper = f.f64("taper_s", issues).unwrap_or(1.0);
     let duration = f.f64("duration_s", issues).unwrap_or(taper + 2.0);
     let cycles = f.int("window_cycles", issues);
-    let nyq = 0.5 * model.controller.f_s;
-    let freq = match freq {
+    let freq = sine_frequency(f, freq, 0.5 * model.controller.f_s, issues);
+    check_sine_timing(f, taper, duration, issues);
+    let x_amp = sine_amplitude(f, model, (amp_g, amp_m), freq, issues);
+    let cycles = sine_window_cycles(f, cycles, issues);
+    let (Some(freq), Some(x_amp)) = (freq, x_amp) else {
+        return None;
+    };
+    let mut sine = Sine {
+        freq_hz: freq,
+        amp_m: x_amp,
+        taper_s: taper,
+        duration_s: duration,
+        window_cycles: cycles,
+    };
+    let n = cycles.unwrap_or_else(|| sine.default_cycles());
+    sine.window_cycles = Some(n);
+    check_sine_window(f, n, freq, duration, issues);
+    Some(ExcitationSpec::Sine {
+        sine,
+        amp_g: amp_g.filter(|_| amp_m.is_none()),
+    })
+}
+
+/// A sine's frequency, Hz: given, and in (0, Nyquist).
+fn sine_frequency(f: &Fields<'_>, freq: Option<f64>, nyq: f64, issues: &mut Issues) -> Option<f64> {
+    match freq {
         Some(x) if x > 0.0 && x < nyq => Some(x),
         Some(x) => {
             issues.push(
@@ -423,7 +447,11 @@ fn read_sine(
             issues.push(f.path_of("freq_hz"), "missing (sine frequency in Hz)");
             None
         }
-    };
+    }
+}
+
+/// A sine's taper is not negative, its duration in (0, 3600] s and longer than the taper.
+fn check_sine_timing(f: &Fields<'_>, taper: f64, duration: f64, issues: &mut Issues) {
     if taper < 0.0 {
         issues.push(
             f.path_of("taper_s"),
@@ -438,8 +466,11 @@ fn read_sine(
     } else if taper >= duration {
         issues.push(f.path_of("taper_s"), format!("{taper} s must be shorter than duration_s = {duration} s (the taper would fill the whole run)"));
     }
-    let x_amp = sine_amplitude(f, model, (amp_g, amp_m), freq, issues);
-    let cycles = match cycles {
+}
+
+/// A sine's `window_cycles`, where given: at least 1.
+fn sine_window_cycles(f: &Fields<'_>, cycles: Option<i64>, issues: &mut Issues) -> Option<u32> {
+    match cycles {
         Some(c) if c >= 1 => Some(c as u32),
         Some(c) => {
             issues.push(
@@ -449,19 +480,11 @@ fn read_sine(
             None
         }
         None => None,
-    };
-    let (Some(freq), Some(x_amp)) = (freq, x_amp) else {
-        return None;
-    };
-    let mut sine = Sine {
-        freq_hz: freq,
-        amp_m: x_amp,
-        taper_s: taper,
-        duration_s: duration,
-        window_cycles: cycles,
-    };
-    let n = cycles.unwrap_or_else(|| sine.default_cycles());
-    sine.window_cycles = Some(n);
+    }
+}
+
+/// A sine's analysis window of `n` cycles is at least one cycle and fits in the run.
+fn check_sine_window(f: &Fields<'_>, n: u32, freq: f64, duration: f64, issues: &mut Issues) {
     if n == 0 {
         issues.push(f.path_of("duration_s"), format!("{duration} s leaves no whole cycle after taper_s + 1 s for the analysis window; lengthen the run or set window_cycles"));
     } else if n as f64 / freq > duration + 1e-9 {
@@ -473,10 +496,6 @@ fn read_sine(
             ),
         );
     }
-    Some(ExcitationSpec::Sine {
-        sine,
-        amp_g: amp_g.filter(|_| amp_m.is_none()),
-    })
 }
 
 /// A sine's displacement amplitude, m, from `amp_g` or `amp_m` (exactly one), positive and below

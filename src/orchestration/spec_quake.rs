@@ -312,105 +312,139 @@ pub fn excitation_table(e: &ExcitationSpec) -> toml::Table {
     let mut put = |k: &str, v: toml::Value| {
         t.insert(k.into(), v);
     };
-    let realisation = |r: &Realisation| match r {
-        Realisation::Fixed(k) => toml::Value::Integer(*k as i64),
-        Realisation::PerSample => "per_sample".into(),
-    };
     match e {
         ExcitationSpec::Sine { .. } => {
             unreachable!("a sine's table is written by spec::resolved_toml")
         }
-        ExcitationSpec::Record {
-            file,
-            column,
-            time_column,
-            f_ref_hz,
-            scale,
-            unit,
-            pga_g,
-            processing,
-        } => {
-            put("kind", "record".into());
-            put("file", file.display().to_string().into());
-            if !super::spec::is_at2(file) {
-                put("column", column.clone().into());
-                put("time_column", time_column.clone().into());
-            }
-            put("unit", unit.name().into());
-            put("f_ref_hz", (*f_ref_hz).into());
-            match pga_g {
-                Some(g) => put("pga_g", (*g).into()),
-                None => put("scale", (*scale).into()),
-            }
-            if unit.is_acceleration() {
-                put("highpass_hz", processing.highpass_hz.into());
-                put("taper_s", processing.taper_s.into());
-            }
-        }
-        ExcitationSpec::Stochastic {
-            duration_s,
-            realisation: r,
-            seed,
-            ground,
-            processing,
-            f_ref_hz,
-        } => {
-            put("kind", "stochastic".into());
-            put("duration_s", (*duration_s).into());
-            put("realisation", realisation(r));
-            if let Some(s) = seed {
-                put("seed", (*s as i64).into());
-            }
-            put("f_ref_hz", (*f_ref_hz).into());
-            put("highpass_hz", processing.highpass_hz.into());
-            put("taper_s", processing.taper_s.into());
-            for (k, v) in ground {
-                put(k, (*v).into());
-            }
-        }
-        ExcitationSpec::Sweep { sweep, amp_g } => {
-            put("kind", "sweep".into());
-            put("f0_hz", sweep.f0_hz.into());
-            put("f1_hz", sweep.f1_hz.into());
-            put("duration_s", sweep.duration_s.into());
-            put("taper_s", sweep.taper_s.into());
-            put(
-                "law",
-                if sweep.law == SweepLaw::Log {
-                    "log"
-                } else {
-                    "linear"
-                }
-                .into(),
-            );
-            match (sweep.amp_m, amp_g) {
-                (Some(m), _) => put("amp_m", m.into()),
-                (None, Some(g)) => put("amp_g", (*g).into()),
-                (None, None) => put("amp_g", (sweep.accel_mps2 / G).into()),
-            }
-        }
-        ExcitationSpec::Random {
-            f_lo_hz,
-            f_hi_hz,
-            rms_g,
-            duration_s,
-            taper_s,
-            realisation: r,
-            seed,
-        } => {
-            put("kind", "random".into());
-            put("f_lo_hz", (*f_lo_hz).into());
-            put("f_hi_hz", (*f_hi_hz).into());
-            put("rms_g", (*rms_g).into());
-            put("duration_s", (*duration_s).into());
-            put("taper_s", (*taper_s).into());
-            put("realisation", realisation(r));
-            if let Some(s) = seed {
-                put("seed", (*s as i64).into());
-            }
-        }
+        ExcitationSpec::Record { .. } => put_record(e, &mut put),
+        ExcitationSpec::Stochastic { .. } => put_stochastic(e, &mut put),
+        ExcitationSpec::Sweep { .. } => put_sweep(e, &mut put),
+        ExcitationSpec::Random { .. } => put_random(e, &mut put),
     }
     t
+}
+
+/// Puts a key and its value into a table being written.
+type Put<'a> = dyn FnMut(&str, toml::Value) + 'a;
+
+/// A realisation as written: its number, or "per_sample".
+fn realisation_value(r: &Realisation) -> toml::Value {
+    match r {
+        Realisation::Fixed(k) => toml::Value::Integer(*k as i64),
+        Realisation::PerSample => "per_sample".into(),
+    }
+}
+
+/// A record's keys: its file (and columns, but for an AT2 file), unit, scale and processing.
+fn put_record(e: &ExcitationSpec, put: &mut Put<'_>) {
+    let ExcitationSpec::Record {
+        file,
+        column,
+        time_column,
+        f_ref_hz,
+        scale,
+        unit,
+        pga_g,
+        processing,
+    } = e
+    else {
+        unreachable!("a record")
+    };
+    put("kind", "record".into());
+    put("file", file.display().to_string().into());
+    if !super::spec::is_at2(file) {
+        put("column", column.clone().into());
+        put("time_column", time_column.clone().into());
+    }
+    put("unit", unit.name().into());
+    put("f_ref_hz", (*f_ref_hz).into());
+    match pga_g {
+        Some(g) => put("pga_g", (*g).into()),
+        None => put("scale", (*scale).into()),
+    }
+    if unit.is_acceleration() {
+        put("highpass_hz", processing.highpass_hz.into());
+        put("taper_s", processing.taper_s.into());
+    }
+}
+
+/// A stochastic motion's keys: its run, realisation, processing and ground parameters.
+fn put_stochastic(e: &ExcitationSpec, put: &mut Put<'_>) {
+    let ExcitationSpec::Stochastic {
+        duration_s,
+        realisation: r,
+        seed,
+        ground,
+        processing,
+        f_ref_hz,
+    } = e
+    else {
+        unreachable!("a stochastic motion")
+    };
+    put("kind", "stochastic".into());
+    put("duration_s", (*duration_s).into());
+    put("realisation", realisation_value(r));
+    if let Some(s) = seed {
+        put("seed", (*s as i64).into());
+    }
+    put("f_ref_hz", (*f_ref_hz).into());
+    put("highpass_hz", processing.highpass_hz.into());
+    put("taper_s", processing.taper_s.into());
+    for (k, v) in ground {
+        put(k, (*v).into());
+    }
+}
+
+/// A sweep's keys: its frequencies, run, law and amplitude.
+fn put_sweep(e: &ExcitationSpec, put: &mut Put<'_>) {
+    let ExcitationSpec::Sweep { sweep, amp_g } = e else {
+        unreachable!("a sweep")
+    };
+    put("kind", "sweep".into());
+    put("f0_hz", sweep.f0_hz.into());
+    put("f1_hz", sweep.f1_hz.into());
+    put("duration_s", sweep.duration_s.into());
+    put("taper_s", sweep.taper_s.into());
+    put(
+        "law",
+        if sweep.law == SweepLaw::Log {
+            "log"
+        } else {
+            "linear"
+        }
+        .into(),
+    );
+    match (sweep.amp_m, amp_g) {
+        (Some(m), _) => put("amp_m", m.into()),
+        (None, Some(g)) => put("amp_g", (*g).into()),
+        (None, None) => put("amp_g", (sweep.accel_mps2 / G).into()),
+    }
+}
+
+/// Band-limited random's keys: its band, rms, run and realisation.
+fn put_random(e: &ExcitationSpec, put: &mut Put<'_>) {
+    let ExcitationSpec::Random {
+        f_lo_hz,
+        f_hi_hz,
+        rms_g,
+        duration_s,
+        taper_s,
+        realisation: r,
+        seed,
+    } = e
+    else {
+        unreachable!("a band-limited random motion")
+    };
+    put("kind", "random".into());
+    put("f_lo_hz", (*f_lo_hz).into());
+    put("f_hi_hz", (*f_hi_hz).into());
+    put("rms_g", (*rms_g).into());
+    put("duration_s", (*duration_s).into());
+    put("taper_s", (*taper_s).into());
+    put("realisation", realisation_value(r));
+    if let Some(s) = seed {
+        put("seed", (*s as i64).into());
+    }
 }
 
 #[cfg(test)]

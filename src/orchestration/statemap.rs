@@ -577,7 +577,51 @@ pub const REGRESSED: [Residual; 4] = [
 
 /// The map and regressions of the compared tests.
 pub fn map(compared: &[Compared]) -> StateMap {
-    // Pool the samples: scaled states and scaled residuals (a residual some test lacks is None).
+    let Pooled {
+        mut states,
+        res,
+        res_scale,
+    } = pool(compared);
+    let n = states[0].len();
+    let memory = memory_fits(compared, &res, &res_scale);
+    let fundamentals = compared
+        .iter()
+        .filter_map(|c| c.test.samples.fundamental_hz);
+    let band = fundamentals
+        .clone()
+        .reduce(f64::min)
+        .zip(fundamentals.reduce(f64::max));
+    let scales = scale_states(&mut states);
+    let bins = State::ALL
+        .iter()
+        .enumerate()
+        .flat_map(|(i, &st)| bins_of(st, scales[i], &states[i], &res))
+        .collect();
+    let (per_state, joint) = regressions(&states, &res);
+    StateMap {
+        bins,
+        per_state,
+        joint,
+        memory,
+        band,
+        samples: n,
+    }
+}
+
+/// The samples of every test, pooled.
+struct Pooled {
+    /// The plant's states.
+    states: [Vec<f64>; 5],
+    /// The residuals over their scales, in the order of [`Residual::ALL`] (one some test lacks
+    /// is None).
+    res: [Option<Vec<f64>>; 5],
+    /// Each residual's scale: the tests' ([`test_residuals`]) pooled as an rms over the samples
+    /// (1 where 0).
+    res_scale: [f64; 5],
+}
+
+/// The tests' samples pooled, the residuals scaled.
+fn pool(compared: &[Compared]) -> Pooled {
     let mut states: [Vec<f64>; 5] = Default::default();
     let mut res: [Option<Vec<f64>>; 5] = std::array::from_fn(|_| Some(Vec::new()));
     let mut scale_sq = [0.0f64; 5];
@@ -604,7 +648,20 @@ pub fn map(compared: &[Compared]) -> StateMap {
             r.iter_mut().for_each(|r| *r /= *out);
         }
     }
-    // The platen's balance on a term with memory, in newtons.
+    Pooled {
+        states,
+        res,
+        res_scale,
+    }
+}
+
+/// The residuals on a term with memory, in their own units: the platen's balance (the residual
+/// force where the files have no force) on a carried oscillator, the missing opening on a lag.
+fn memory_fits(
+    compared: &[Compared],
+    res: &[Option<Vec<f64>>; 5],
+    res_scale: &[f64; 5],
+) -> Vec<(Residual, MemoryFit)> {
     let at = |r: Residual| Residual::ALL.iter().position(|&x| x == r).unwrap_or(0);
     let platen = if res[at(Residual::PlatenForce)].is_some() {
         Residual::PlatenForce
@@ -630,13 +687,11 @@ pub fn map(compared: &[Compared]) -> StateMap {
             memory.push((r, fit));
         }
     }
-    let fundamentals = compared
-        .iter()
-        .filter_map(|c| c.test.samples.fundamental_hz);
-    let band = fundamentals
-        .clone()
-        .reduce(f64::min)
-        .zip(fundamentals.reduce(f64::max));
+    memory
+}
+
+/// Scales each state (the spool opening aside) to its largest magnitude: the scales.
+fn scale_states(states: &mut [Vec<f64>; 5]) -> [f64; 5] {
     let mut scales = [1.0; 5];
     for (i, st) in State::ALL.iter().enumerate() {
         if *st != State::SpoolOpening {
@@ -646,11 +701,15 @@ pub fn map(compared: &[Compared]) -> StateMap {
         let s = scales[i];
         states[i].iter_mut().for_each(|x| *x /= s);
     }
-    let bins = State::ALL
-        .iter()
-        .enumerate()
-        .flat_map(|(i, &st)| bins_of(st, scales[i], &states[i], &res))
-        .collect();
+    scales
+}
+
+/// Each [`REGRESSED`] residual the tests have on the terms of each of its states (largest R²
+/// first) and on all of them together.
+fn regressions(
+    states: &[Vec<f64>; 5],
+    res: &[Option<Vec<f64>>; 5],
+) -> (Vec<Vec<Regression>>, Vec<Regression>) {
     let mut per_state = Vec::new();
     let mut joint = Vec::new();
     for r in REGRESSED {
@@ -670,14 +729,7 @@ pub fn map(compared: &[Compared]) -> StateMap {
             .collect();
         joint.push(stlsq(r, None, &all, y));
     }
-    StateMap {
-        bins,
-        per_state,
-        joint,
-        memory,
-        band,
-        samples: n,
-    }
+    (per_state, joint)
 }
 
 /// A test's input to a term with memory of family `kind` ([`memory::fit`]): the measured

@@ -356,6 +356,36 @@ fn read_spectrum(root: &mut Fields<'_>, issues: &mut Issues) -> SpectrumSpec {
             format!("{damping} must be in (0, 1) (a damping ratio)"),
         );
     }
+    let periods = spectrum_periods(&mut t, damping, issues);
+    let band = spectrum_band(&mut t, &periods, issues);
+    t.finish(
+        &[
+            "damping",
+            "periods_s",
+            "t_min_s",
+            "t_max_s",
+            "count",
+            "band_s",
+        ],
+        issues,
+    );
+    spec = SpectrumSpec {
+        periods,
+        damping,
+        band,
+    };
+    if spec.in_band().next().is_none() {
+        issues.push(
+            "spectrum.band_s",
+            "no period of the spectrum lies in the band",
+        );
+    }
+    spec
+}
+
+/// `[spectrum]`'s periods: `periods_s`, or log-spaced from `t_min_s`, `t_max_s`, `count` (not
+/// both), positive and increasing.
+fn spectrum_periods(t: &mut Fields<'_>, damping: f64, issues: &mut Issues) -> Vec<f64> {
     let (t_min, t_max, count) = (
         t.f64("t_min_s", issues),
         t.f64("t_max_s", issues),
@@ -394,7 +424,12 @@ fn read_spectrum(root: &mut Fields<'_>, issues: &mut Issues) -> SpectrumSpec {
             "the periods must be positive and increasing (at least one)",
         );
     }
-    let band = match t.f64_array("band_s", issues) {
+    periods
+}
+
+/// `[spectrum]`'s error band `band_s = [low, high]`, s (default: the first to the last period).
+fn spectrum_band(t: &mut Fields<'_>, periods: &[f64], issues: &mut Issues) -> (f64, f64) {
+    match t.f64_array("band_s", issues) {
         Some(b) if b.len() == 2 && b[0] <= b[1] => (b[0], b[1]),
         Some(b) => {
             issues.push(
@@ -407,30 +442,7 @@ fn read_spectrum(root: &mut Fields<'_>, issues: &mut Issues) -> SpectrumSpec {
             periods.first().copied().unwrap_or(0.0),
             periods.last().copied().unwrap_or(0.0),
         ),
-    };
-    t.finish(
-        &[
-            "damping",
-            "periods_s",
-            "t_min_s",
-            "t_max_s",
-            "count",
-            "band_s",
-        ],
-        issues,
-    );
-    spec = SpectrumSpec {
-        periods,
-        damping,
-        band,
-    };
-    if spec.in_band().next().is_none() {
-        issues.push(
-            "spectrum.band_s",
-            "no period of the spectrum lies in the band",
-        );
     }
-    spec
 }
 
 /// A `ground.*` variable that a stochastic excitation also sets: the excitation's value would

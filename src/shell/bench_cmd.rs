@@ -16,6 +16,7 @@ use crate::orchestration::spec::{ExcitationSpec, Realisation};
 use anyhow::{bail, Context};
 use rayon::prelude::*;
 use std::io::Write;
+use std::path::Path;
 use std::time::Instant;
 
 /// RK4 stages per step.
@@ -225,6 +226,20 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     }
     let f = measure(args.seconds)?;
     let mut out = std::io::stdout().lock();
+    print_sine(&mut out, &f)?;
+    print_record(&mut out, &f)?;
+    if let Some(path) = &args.write_baseline {
+        write_baseline(&mut out, path, &f)?;
+    }
+    if let Some(path) = &args.gate {
+        gate(&mut out, path, &f)?;
+    }
+    Ok(())
+}
+
+/// The sine's figures: the clock, the scalar path, the batch on one and two threads, and the
+/// limit with the operation count and rates it comes from.
+fn print_sine(out: &mut dyn Write, f: &Figures) -> anyhow::Result<()> {
     let substeps = Solver::default().substeps;
     let h_us = 1e6 / (1024.0 * substeps as f64);
     writeln!(out, "study bench: 3 s sine at 1.73 g, RK4 h = {h_us:.1} µs ({substeps} substeps per 1024 Hz tick; converged: every metric within 1e-5 of the 32-substep answer), {} kernel", Isa::detected())?;
@@ -273,6 +288,11 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         f.rates.divs / 1e9,
         f.rates.sqrts / 1e9
     )?;
+    Ok(())
+}
+
+/// The record's figures (one and two threads) and the ratios the gate reads.
+fn print_record(out: &mut dyn Write, f: &Figures) -> anyhow::Result<()> {
     let spectrum = quake::default_spectrum();
     writeln!(
         out,
@@ -301,39 +321,45 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         f.batch_over_limit(),
         f.batch2 / f.batch1
     )?;
-    if let Some(path) = &args.write_baseline {
-        let text = format!(
-            "# Ratios measured by `study bench` (same run, same machine); the CI gate fails when one falls\n# more than 25 % below these.\nbatch_over_scalar = {:.3}\nbatch_over_limit = {:.3}\n",
-            f.batch_over_scalar(),
-            f.batch_over_limit()
-        );
-        std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))?;
-        writeln!(out, "  wrote baseline {}", path.display())?;
+    Ok(())
+}
+
+/// Writes the ratios measured to the baseline file `path`.
+fn write_baseline(out: &mut dyn Write, path: &Path, f: &Figures) -> anyhow::Result<()> {
+    let text = format!(
+        "# Ratios measured by `study bench` (same run, same machine); the CI gate fails when one falls\n# more than 25 % below these.\nbatch_over_scalar = {:.3}\nbatch_over_limit = {:.3}\n",
+        f.batch_over_scalar(),
+        f.batch_over_limit()
+    );
+    std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))?;
+    writeln!(out, "  wrote baseline {}", path.display())?;
+    Ok(())
+}
+
+/// Fails where a ratio fell more than 25 % below the baseline file `path`'s.
+fn gate(out: &mut dyn Write, path: &Path, f: &Figures) -> anyhow::Result<()> {
+    let (bs, bl) = read_baseline(path)?;
+    let mut bad = Vec::new();
+    for (name, got, base) in [
+        ("batch/scalar", f.batch_over_scalar(), bs),
+        ("batch/limit", f.batch_over_limit(), bl),
+    ] {
+        let floor = 0.75 * base;
+        writeln!(
+            out,
+            "  gate {name}: {got:.3} against baseline {base:.3} (floor {floor:.3}) {}",
+            if got >= floor { "ok" } else { "FAILED" }
+        )?;
+        if got < floor {
+            bad.push(name);
+        }
     }
-    if let Some(path) = &args.gate {
-        let (bs, bl) = read_baseline(path)?;
-        let mut bad = Vec::new();
-        for (name, got, base) in [
-            ("batch/scalar", f.batch_over_scalar(), bs),
-            ("batch/limit", f.batch_over_limit(), bl),
-        ] {
-            let floor = 0.75 * base;
-            writeln!(
-                out,
-                "  gate {name}: {got:.3} against baseline {base:.3} (floor {floor:.3}) {}",
-                if got >= floor { "ok" } else { "FAILED" }
-            )?;
-            if got < floor {
-                bad.push(name);
-            }
-        }
-        if !bad.is_empty() {
-            bail!(
-                "benchmark gate failed: {} fell more than 25 % below the baseline {}",
-                bad.join(", "),
-                path.display()
-            );
-        }
+    if !bad.is_empty() {
+        bail!(
+            "benchmark gate failed: {} fell more than 25 % below the baseline {}",
+            bad.join(", "),
+            path.display()
+        );
     }
     Ok(())
 }

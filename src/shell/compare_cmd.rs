@@ -289,9 +289,17 @@ pub fn write_tables(
 
 /// `tests.parquet`: one row per test.
 fn tests_columns(results: &[Compared]) -> Vec<(String, Column)> {
+    let mut cols = test_alignment_columns(results);
+    cols.extend(test_ratio_columns(results));
+    cols.extend(test_residual_columns(results));
+    cols
+}
+
+/// `tests.parquet`'s test, excitation and where it lies in the file.
+fn test_alignment_columns(results: &[Compared]) -> Vec<(String, Column)> {
     let s = |f: &dyn Fn(&Compared) -> String| Column::Str(results.iter().map(f).collect());
     let x = |f: &dyn Fn(&Compared) -> f64| Column::F64(results.iter().map(f).collect());
-    let mut cols = vec![
+    vec![
         ("test".to_string(), s(&|r| r.test.name.clone())),
         (
             "excitation".to_string(),
@@ -315,6 +323,13 @@ fn tests_columns(results: &[Compared]) -> Vec<(String, Column)> {
                     .collect(),
             ),
         ),
+    ]
+}
+
+/// `tests.parquet`'s fundamental's amplitude ratios and phases, and the harmonic ratios.
+fn test_ratio_columns(results: &[Compared]) -> Vec<(String, Column)> {
+    let x = |f: &dyn Fn(&Compared) -> f64| Column::F64(results.iter().map(f).collect());
+    let mut cols = vec![
         (
             "amp_ratio_measured".to_string(),
             x(&|r| r.comparison.amp_ratio_measured),
@@ -342,9 +357,15 @@ fn tests_columns(results: &[Compared]) -> Vec<(String, Column)> {
             x(&|r| r.comparison.h_model[k - 2]),
         ));
     }
+    cols
+}
+
+/// `tests.parquet`'s residuals, drifts, kinematic ratios, warnings and notes.
+fn test_residual_columns(results: &[Compared]) -> Vec<(String, Column)> {
+    let x = |f: &dyn Fn(&Compared) -> f64| Column::F64(results.iter().map(f).collect());
     let list =
         |f: &dyn Fn(&Compared) -> Vec<String>| Column::StrList(results.iter().map(f).collect());
-    cols.extend([
+    vec![
         (
             "rms_residual_accel_ratio".to_string(),
             x(&|r| r.comparison.rms_residual_accel_ratio),
@@ -390,8 +411,7 @@ fn tests_columns(results: &[Compared]) -> Vec<(String, Column)> {
             }),
         ),
         ("notes".to_string(), list(&|r| r.test.notes.clone())),
-    ]);
-    cols
+    ]
 }
 
 /// `harmonics.parquet`: per test and harmonic, the model's, the measurement's and the residual's

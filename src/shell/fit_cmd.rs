@@ -164,6 +164,16 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         t0.elapsed().as_secs_f64()
     )?;
     writeln!(o)?;
+    print_estimates(&mut o, &free, &r)?;
+    print_residuals(&mut o, problem, &r)?;
+    write_fitted(args, &model, &free, &r)?;
+    writeln!(o, "\n  wrote {} (use it with --model)", args.out.display())?;
+    print_checks(&mut o, &loaded.checks, &implausible)?;
+    Ok(())
+}
+
+/// The estimates with their starts and standard errors, and their correlations.
+fn print_estimates(o: &mut dyn Write, free: &[Free], r: &fit::FitResult) -> std::io::Result<()> {
     writeln!(
         o,
         "  {:<30} {:>12} {:>12} {:>12}  unit",
@@ -187,6 +197,15 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             writeln!(o, "  {:<30} {}", f.info.path(), row.join("  "))?;
         }
     }
+    Ok(())
+}
+
+/// The χ² before and after, and the residual over the measured rms per test and overall.
+fn print_residuals(
+    o: &mut dyn Write,
+    problem: &Problem,
+    r: &fit::FitResult,
+) -> std::io::Result<()> {
     writeln!(o, "\n  chi2 (features scaled by their noise; about n, their degrees of freedom, for a model right to the noise): {:.4e} -> {:.4e} (n = {})", r.chi2_before(), r.chi2_after(), r.n)?;
     writeln!(
         o,
@@ -218,8 +237,18 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     let (b, a) = (r.before.residual_rms(), r.after.residual_rms());
     let noise = problem.noise_rms();
     writeln!(o, "  {:<24} {:>10.3e} -> {:>10.3e} ({:+.0} %) over every test and channel; noise floor {noise:.3e} ({:.2}x after)", "campaign", b, a, 100.0 * (a / b - 1.0), a / noise)?;
-    // The fitted model: the starting model with the fitted parameters (and their effects on).
-    let fitted = fit::apply(&model, &free, &r.u);
+    Ok(())
+}
+
+/// Writes the fitted model (the starting model with the fitted parameters, their effects on),
+/// headed by the command and the estimates, to `--out`.
+fn write_fitted(
+    args: &FitArgs,
+    model: &ModelParams,
+    free: &[Free],
+    r: &fit::FitResult,
+) -> anyhow::Result<()> {
+    let fitted = fit::apply(model, free, &r.u);
     let mut root = toml::Table::new();
     root.insert(
         "model".into(),
@@ -239,7 +268,5 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     let out = super::tables::AtomicFile::new(&args.out);
     std::fs::write(&out.tmp, header + &toml::to_string(&root)?)?;
     out.commit()?;
-    writeln!(o, "\n  wrote {} (use it with --model)", args.out.display())?;
-    print_checks(&mut o, &loaded.checks, &implausible)?;
     Ok(())
 }

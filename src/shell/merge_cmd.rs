@@ -65,6 +65,33 @@ fn same_run(first: &ShardFile, f: &ShardFile) -> anyhow::Result<()> {
 
 /// Reads and checks the shards of `dir` (every .parquet file but `skip`), in shard order.
 fn shards(dir: &Path, skip: &Path) -> anyhow::Result<Vec<ShardFile>> {
+    let files = shard_paths(dir, skip)?;
+    let (mut list, unfinished) = read_shards(files)?;
+    if list.is_empty() {
+        return Err(BadInput(format!(
+            "{}: no complete shard\n{}",
+            dir.display(),
+            unfinished.join("\n")
+        ))
+        .into());
+    }
+    let first = &list[0];
+    for f in &list[1..] {
+        same_run(first, f)?;
+    }
+    let count: usize = get(first, Key::ShardCount)?
+        .parse()
+        .map_err(|_| BadInput(format!("{}: bad {}", first.path.display(), Key::ShardCount)))?;
+    let by_index = index_shards(&list, count)?;
+    check_missing(dir, &by_index, count, &unfinished)?;
+    // The slices must tile the design in order.
+    check_tiling(&by_index, count)?;
+    list.sort_by_key(|f| f.index);
+    Ok(list)
+}
+
+/// The .parquet files of `dir` but `skip`, sorted by path; none is an error.
+fn shard_paths(dir: &Path, skip: &Path) -> anyhow::Result<Vec<PathBuf>> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
         .map_err(|e| BadInput(format!("{}: cannot read the folder: {e}", dir.display())))?
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -77,6 +104,11 @@ fn shards(dir: &Path, skip: &Path) -> anyhow::Result<Vec<ShardFile>> {
     if files.is_empty() {
         return Err(BadInput(format!("{}: no .parquet shard files", dir.display())).into());
     }
+    Ok(files)
+}
+
+/// The shards' metadata and indices: the complete ones, and a line on each incomplete one.
+fn read_shards(files: Vec<PathBuf>) -> anyhow::Result<(Vec<ShardFile>, Vec<String>)> {
     let mut list = Vec::new();
     let mut unfinished = Vec::new();
     for path in files {
@@ -102,23 +134,13 @@ fn shards(dir: &Path, skip: &Path) -> anyhow::Result<Vec<ShardFile>> {
             None => list.push(f),
         }
     }
-    if list.is_empty() {
-        return Err(BadInput(format!(
-            "{}: no complete shard\n{}",
-            dir.display(),
-            unfinished.join("\n")
-        ))
-        .into());
-    }
-    let first = &list[0];
-    for f in &list[1..] {
-        same_run(first, f)?;
-    }
-    let count: usize = get(first, Key::ShardCount)?
-        .parse()
-        .map_err(|_| BadInput(format!("{}: bad {}", first.path.display(), Key::ShardCount)))?;
+    Ok((list, unfinished))
+}
+
+/// The shards by index, each in range and none twice.
+fn index_shards(list: &[ShardFile], count: usize) -> anyhow::Result<BTreeMap<usize, &ShardFile>> {
     let mut by_index: BTreeMap<usize, &ShardFile> = BTreeMap::new();
-    for f in &list {
+    for f in list {
         if f.index >= count {
             return Err(BadInput(format!(
                 "{}: shard {}/{count} is out of range",
@@ -137,6 +159,16 @@ fn shards(dir: &Path, skip: &Path) -> anyhow::Result<Vec<ShardFile>> {
             .into());
         }
     }
+    Ok(by_index)
+}
+
+/// Refuses a set of shards that lacks one of the `count`, naming the incomplete ones too.
+fn check_missing(
+    dir: &Path,
+    by_index: &BTreeMap<usize, &ShardFile>,
+    count: usize,
+    unfinished: &[String],
+) -> anyhow::Result<()> {
     let missing: Vec<String> = (0..count)
         .filter(|i| !by_index.contains_key(i))
         .map(|i| format!("{i}/{count}"))
@@ -160,7 +192,11 @@ fn shards(dir: &Path, skip: &Path) -> anyhow::Result<Vec<ShardFile>> {
         ))
         .into());
     }
-    // The slices must tile the design in order.
+    Ok(())
+}
+
+/// The shards' sample slices, in index order, tile the design from 0.
+fn check_tiling(by_index: &BTreeMap<usize, &ShardFile>, count: usize) -> anyhow::Result<()> {
     let mut at = 0usize;
     for f in by_index.values() {
         let s = get(f, Key::ShardSamples)?;
@@ -178,8 +214,7 @@ fn shards(dir: &Path, skip: &Path) -> anyhow::Result<Vec<ShardFile>> {
         }
         at = b;
     }
-    list.sort_by_key(|f| f.index);
-    Ok(list)
+    Ok(())
 }
 
 pub fn run(args: &MergeArgs) -> anyhow::Result<()> {

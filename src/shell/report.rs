@@ -363,10 +363,22 @@ pub fn html(
     map: &StateMap,
     extra_warnings: &[String],
 ) -> anyhow::Result<String> {
-    let plot = |r: Result<String, Box<dyn std::error::Error>>| {
-        r.map_err(|e| anyhow::anyhow!("drawing a plot: {e}"))
-    };
     let mut h = String::new();
+    page_head(&mut h, title)?;
+    summary_table(&mut h, results)?;
+    warnings_list(&mut h, results, extra_warnings)?;
+    files_table(&mut h, results)?;
+    if let Some(svg) = amplitude_svg(results).map_err(|e| anyhow::anyhow!("drawing a plot: {e}"))? {
+        write!(h, "<h2>Across the campaign</h2>\n<figure class=\"plot\" id=\"amplitude\">{svg}</figure>\n")?;
+    }
+    h.push_str(&state_map_section(map)?);
+    test_sections(&mut h, results)?;
+    h.push_str("<p>The numbers behind every plot are in the Parquet tables beside this page (tests, harmonics, bins, cycles, overlay, statemap, stateterms).</p>\n</body></html>\n");
+    Ok(h)
+}
+
+/// The page's head (title and style), its title and the plots' legend.
+fn page_head(h: &mut String, title: &str) -> anyhow::Result<()> {
     write!(
         h,
         "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>{t}</title><style>\
@@ -376,6 +388,11 @@ figure{{margin:12px 0}} .legend span{{display:inline-block;width:14px;height:4px
 </style></head><body>\n<h1>{t}</h1>\n<p class=\"legend\">measured<span style=\"background:#1f77b4\"></span> model<span style=\"background:#d62728\"></span></p>\n",
         t = esc(title)
     )?;
+    Ok(())
+}
+
+/// The summary table: a row of headline numbers per test.
+fn summary_table(h: &mut String, results: &[Compared]) -> anyhow::Result<()> {
     h.push_str("<h2>Summary</h2>\n<table id=\"summary\"><tr><th>test</th><th>amp. ratio meas.</th><th>model</th><th>phase° meas.</th><th>model</th><th>h3 meas.</th><th>model</th><th>rms resid. a</th><th>x</th><th>F</th><th>drift meas./cycle</th><th>model</th></tr>\n");
     for r in results {
         let c = &r.comparison;
@@ -397,6 +414,15 @@ figure{{margin:12px 0}} .legend span{{display:inline-block;width:14px;height:4px
         )?;
     }
     h.push_str("</table>\n");
+    Ok(())
+}
+
+/// The warnings of every test and the extra ones, where there are any.
+fn warnings_list(
+    h: &mut String,
+    results: &[Compared],
+    extra_warnings: &[String],
+) -> anyhow::Result<()> {
     let warnings: Vec<&String> = results
         .iter()
         .flat_map(|r| r.test.warnings.iter())
@@ -409,6 +435,11 @@ figure{{margin:12px 0}} .legend span{{display:inline-block;width:14px;height:4px
         }
         h.push_str("</ul>\n");
     }
+    Ok(())
+}
+
+/// The data files table: where each test's excitation and window lie in its file.
+fn files_table(h: &mut String, results: &[Compared]) -> anyhow::Result<()> {
     h.push_str("<h2>Data files</h2>\n<table id=\"files\"><tr><th>test</th><th>file</th><th>rate</th><th>excitation starts</th><th>ends</th><th>window</th><th>notes</th></tr>\n");
     for r in results {
         let a = &r.test.alignment;
@@ -425,10 +456,14 @@ figure{{margin:12px 0}} .legend span{{display:inline-block;width:14px;height:4px
         )?;
     }
     h.push_str("</table>\n");
-    if let Some(svg) = amplitude_svg(results).map_err(|e| anyhow::anyhow!("drawing a plot: {e}"))? {
-        write!(h, "<h2>Across the campaign</h2>\n<figure class=\"plot\" id=\"amplitude\">{svg}</figure>\n")?;
-    }
-    h.push_str(&state_map_section(map)?);
+    Ok(())
+}
+
+/// Each test's section: its overlay, and its harmonics where the model has an amplitude ratio.
+fn test_sections(h: &mut String, results: &[Compared]) -> anyhow::Result<()> {
+    let plot = |r: Result<String, Box<dyn std::error::Error>>| {
+        r.map_err(|e| anyhow::anyhow!("drawing a plot: {e}"))
+    };
     for r in results {
         writeln!(h, "<h2 id=\"test-{n}\">{n}</h2>", n = esc(&r.test.name))?;
         writeln!(
@@ -444,6 +479,5 @@ figure{{margin:12px 0}} .legend span{{display:inline-block;width:14px;height:4px
             )?;
         }
     }
-    h.push_str("<p>The numbers behind every plot are in the Parquet tables beside this page (tests, harmonics, bins, cycles, overlay, statemap, stateterms).</p>\n</body></html>\n");
-    Ok(h)
+    Ok(())
 }

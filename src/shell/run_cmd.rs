@@ -427,25 +427,9 @@ fn check_writable(out: &Path) -> anyhow::Result<()> {
 }
 
 pub fn run(args: &RunArgs) -> anyhow::Result<()> {
-    if !(args.checkpoint_secs.is_finite() && args.checkpoint_secs > 0.0) {
-        return Err(BadInput(format!(
-            "--checkpoint-secs {}: must be a positive number of seconds",
-            args.checkpoint_secs
-        ))
-        .into());
-    }
-    let job = match (&args.resume, &args.file) {
-        (Some(f), _) => match super::resume::job(f)? {
-            Some(j) => j,
-            None => return Ok(()),
-        },
-        (None, Some(file)) => Job::fresh(args, file)?,
-        (None, None) => {
-            return Err(BadInput(
-                "give a study file (study run STUDY.toml) or --resume RESULTS.parquet".into(),
-            )
-            .into())
-        }
+    check_checkpoint_secs(args.checkpoint_secs)?;
+    let Some(job) = job_of(args)? else {
+        return Ok(());
     };
     // Chunk size and threads are how the run is scheduled, not what it computes: they stay out of
     // the resolved study in the metadata, so shards (and resumed runs) with other ones still merge.
@@ -457,15 +441,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
         return super::sizing::dry_run(&job, todo, &pool);
     }
     super::sizing::gate_long_run(&job, todo.clone(), &pool, args.yes)?;
-    if !job.spec.histories.is_empty() {
-        let dir = history_dir(&job.out);
-        std::fs::create_dir_all(&dir).map_err(|e| {
-            BadInput(format!(
-                "{}: cannot create the histories folder: {e}",
-                dir.display()
-            ))
-        })?;
-    }
+    create_history_dir(&job)?;
     interrupt::install().context("catching SIGINT and SIGTERM")?;
     let mut sink = ResultsSink::create(&job.out, &job.plan, &job.spec, &job.meta)?
         .checkpoints(Duration::from_secs_f64(args.checkpoint_secs));
@@ -488,13 +464,58 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
         &|| interrupt::requested().is_some(),
     )?;
     progress.finish();
+    finish_results(&job, sink, summary.stopped)?;
+    print_done(&job, &summary, &progress, todo.len())?;
+    write_histories(&job)
+}
+
+/// `--checkpoint-secs` is a positive number of seconds.
+fn check_checkpoint_secs(secs: f64) -> anyhow::Result<()> {
+    if !(secs.is_finite() && secs > 0.0) {
+        return Err(BadInput(format!(
+            "--checkpoint-secs {secs}: must be a positive number of seconds"
+        ))
+        .into());
+    }
+    Ok(())
+}
+
+/// The job to run: a resumed one (none where there is nothing left to resume) or a fresh one.
+fn job_of(args: &RunArgs) -> anyhow::Result<Option<Job>> {
+    match (&args.resume, &args.file) {
+        (Some(f), _) => super::resume::job(f),
+        (None, Some(file)) => Job::fresh(args, file).map(Some),
+        (None, None) => Err(BadInput(
+            "give a study file (study run STUDY.toml) or --resume RESULTS.parquet".into(),
+        )
+        .into()),
+    }
+}
+
+/// Creates the histories folder of a study that records histories.
+fn create_history_dir(job: &Job) -> anyhow::Result<()> {
+    if !job.spec.histories.is_empty() {
+        let dir = history_dir(&job.out);
+        std::fs::create_dir_all(&dir).map_err(|e| {
+            BadInput(format!(
+                "{}: cannot create the histories folder: {e}",
+                dir.display()
+            ))
+        })?;
+    }
+    Ok(())
+}
+
+/// Closes the results file (marked complete or not), drops the kept rows of a resumed run, and
+/// turns a stopped run into the error that says how to continue it.
+fn finish_results(job: &Job, sink: ResultsSink, stopped: bool) -> anyhow::Result<()> {
     let (done, total) = (sink.rows(), job.rows_total());
     sink.finish(&meta::completion(done, total))
         .with_context(|| format!("writing {}", job.out.display()))?;
     if let Some(k) = &job.kept {
         k.discard();
     }
-    if summary.stopped {
+    if stopped {
         let signal = interrupt::requested().unwrap_or(signal_hook::consts::SIGTERM);
         return Err(interrupt::Interrupted {
             signal,
@@ -507,8 +528,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
         }
         .into());
     }
-    print_done(&job, &summary, &progress, todo.len())?;
-    write_histories(&job)
+    Ok(())
 }
 
 fn print_header(

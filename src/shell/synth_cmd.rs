@@ -1,7 +1,7 @@
 //! `study synth`: measurement files (docs/formats.md) made by the model, with hidden parameter changes
 //! and seeded sensor noise, for testing comparisons and diagnoses on data whose truth is known.
 
-use super::campaign_io::{load_campaign, load_model};
+use super::campaign_io::{load_campaign, load_model, LoadedCampaign};
 use super::cli::SynthArgs;
 use super::meta::{self, Key, Kind};
 use super::tables::{self, load_reference, Column};
@@ -10,6 +10,7 @@ use crate::kernel::excitation::Reference;
 use crate::kernel::params::ModelParams;
 use crate::kernel::resample::ch;
 use crate::kernel::simulate::{LaneStatus, Solver};
+use crate::orchestration::campaign::TestSpec;
 use crate::orchestration::sim;
 use crate::orchestration::spec::{ExcitationSpec, SimSpec};
 use anyhow::Context;
@@ -17,7 +18,7 @@ use chacha20::ChaCha8Rng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Channels that take sensor noise, and their column names.
 const NOISY: [(&str, &str); 5] = [
@@ -201,19 +202,7 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
     apply_sets(&mut model, &args.set)?;
     let noise = parse_noise(args.noise.as_deref())?;
     let rate = args.rate.unwrap_or(model.controller.f_s);
-    if !(rate.is_finite() && rate > 0.0 && rate <= 1e6) {
-        return Err(BadInput(format!(
-            "--rate {rate}: must be a sample rate in (0, 1e6] Hz"
-        ))
-        .into());
-    }
-    if !(args.pre_trigger.is_finite() && (0.0..=3600.0).contains(&args.pre_trigger)) {
-        return Err(BadInput(format!(
-            "--pre-trigger {}: must be in [0, 3600] s",
-            args.pre_trigger
-        ))
-        .into());
-    }
+    check_timing(rate, args.pre_trigger)?;
     let pre_rows = (args.pre_trigger * rate).round() as usize;
     let lc = load_campaign(&args.campaign, &model)?;
     std::fs::create_dir_all(&args.out)
@@ -226,63 +215,13 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
         args.out.display()
     )?;
     for (i, test) in lc.campaign.tests.iter().enumerate() {
-        let mut test_model = test.model.clone();
-        apply_effects(&mut test_model, &args.effect)?;
-        apply_sets(&mut test_model, &args.set)?;
-        let mut reference = load_reference(&test.excitation, &test_model, &lc.base, 0)?;
-        let spec = SimSpec {
-            model: test_model,
-            excitation: test.excitation.clone(),
-            solver: Default::default(),
-        };
-        let cols = sample_test(&spec, &mut reference, rate, pre_rows)?
-            .map_err(|e| RunFailed(format!("test {:?}: {e}", test.name)))?;
-        let mut cols: Vec<(&str, Vec<f64>)> = cols;
-        for (c, (_, col)) in NOISY.iter().enumerate() {
-            if noise[c] > 0.0 {
-                let mut rng = ChaCha8Rng::seed_from_u64(args.seed);
-                rng.set_stream((i * NOISY.len() + c) as u64);
-                let dist = Normal::new(0.0, noise[c]).expect("std >= 0");
-                let v = &mut cols
-                    .iter_mut()
-                    .find(|(n, _)| n == col)
-                    .expect("noisy column")
-                    .1;
-                for x in v.iter_mut() {
-                    *x += dist.sample(&mut rng);
-                }
-            }
-        }
-        let path = args.out.join(&test.data);
-        if let Some(dir) = path.parent() {
-            std::fs::create_dir_all(dir)?;
-        }
-        let mut meta = meta::header(Kind::SyntheticMeasurement);
-        if !args.blind {
-            meta.push(meta::pair(Key::Spec, spec.resolved_toml()));
-        }
-        meta.extend([
-            meta::pair(Key::Noise, args.noise.clone().unwrap_or_default()),
-            meta::pair(Key::Seed, args.seed),
-        ]);
-        write_measured(&path, &cols, &meta)?;
-        // A record that lives in its own file is copied along, so the folder is a whole campaign.
-        if let ExcitationSpec::Record { file, .. } = &test.excitation {
-            if file != &test.data {
-                let dst = args.out.join(file);
-                if let Some(dir) = dst.parent() {
-                    std::fs::create_dir_all(dir)?;
-                }
-                std::fs::copy(lc.base.join(file), &dst)
-                    .with_context(|| format!("copying the record {}", file.display()))?;
-            }
-        }
+        let (path, rows) = synth_test(args, &lc, (i, test), &noise, (rate, pre_rows))?;
         writeln!(
             stdout,
             "  {:<24} {} ({} rows)",
             test.name,
             path.display(),
-            cols[0].1.len()
+            rows
         )?;
     }
     let dst = args.out.join(lc.file.file_name().unwrap_or_default());
@@ -291,4 +230,90 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
     }
     writeln!(stdout, "  campaign                 {}", dst.display())?;
     Ok(())
+}
+
+/// `--rate` is a sample rate in (0, 1e6] Hz and `--pre-trigger` in [0, 3600] s.
+fn check_timing(rate: f64, pre_trigger: f64) -> anyhow::Result<()> {
+    if !(rate.is_finite() && rate > 0.0 && rate <= 1e6) {
+        return Err(BadInput(format!(
+            "--rate {rate}: must be a sample rate in (0, 1e6] Hz"
+        ))
+        .into());
+    }
+    if !(pre_trigger.is_finite() && (0.0..=3600.0).contains(&pre_trigger)) {
+        return Err(BadInput(format!(
+            "--pre-trigger {pre_trigger}: must be in [0, 3600] s"
+        ))
+        .into());
+    }
+    Ok(())
+}
+
+/// The `i`-th test's measurement file (and its record's, where that is another file) written
+/// into `--out`: its path and its rows.
+fn synth_test(
+    args: &SynthArgs,
+    lc: &LoadedCampaign,
+    (i, test): (usize, &TestSpec),
+    noise: &[f64; 5],
+    (rate, pre_rows): (f64, usize),
+) -> anyhow::Result<(PathBuf, usize)> {
+    let mut test_model = test.model.clone();
+    apply_effects(&mut test_model, &args.effect)?;
+    apply_sets(&mut test_model, &args.set)?;
+    let mut reference = load_reference(&test.excitation, &test_model, &lc.base, 0)?;
+    let spec = SimSpec {
+        model: test_model,
+        excitation: test.excitation.clone(),
+        solver: Default::default(),
+    };
+    let cols = sample_test(&spec, &mut reference, rate, pre_rows)?
+        .map_err(|e| RunFailed(format!("test {:?}: {e}", test.name)))?;
+    let mut cols: Vec<(&str, Vec<f64>)> = cols;
+    add_noise(&mut cols, noise, args.seed, i);
+    let path = args.out.join(&test.data);
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir)?;
+    }
+    let mut meta = meta::header(Kind::SyntheticMeasurement);
+    if !args.blind {
+        meta.push(meta::pair(Key::Spec, spec.resolved_toml()));
+    }
+    meta.extend([
+        meta::pair(Key::Noise, args.noise.clone().unwrap_or_default()),
+        meta::pair(Key::Seed, args.seed),
+    ]);
+    write_measured(&path, &cols, &meta)?;
+    // A record that lives in its own file is copied along, so the folder is a whole campaign.
+    if let ExcitationSpec::Record { file, .. } = &test.excitation {
+        if file != &test.data {
+            let dst = args.out.join(file);
+            if let Some(dir) = dst.parent() {
+                std::fs::create_dir_all(dir)?;
+            }
+            std::fs::copy(lc.base.join(file), &dst)
+                .with_context(|| format!("copying the record {}", file.display()))?;
+        }
+    }
+    Ok((path, cols[0].1.len()))
+}
+
+/// Seeded Gaussian sensor noise added to the `i`-th test's noisy channels: one stream per test
+/// and channel.
+fn add_noise(cols: &mut [(&str, Vec<f64>)], noise: &[f64; 5], seed: u64, i: usize) {
+    for (c, (_, col)) in NOISY.iter().enumerate() {
+        if noise[c] > 0.0 {
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            rng.set_stream((i * NOISY.len() + c) as u64);
+            let dist = Normal::new(0.0, noise[c]).expect("std >= 0");
+            let v = &mut cols
+                .iter_mut()
+                .find(|(n, _)| n == col)
+                .expect("noisy column")
+                .1;
+            for x in v.iter_mut() {
+                *x += dist.sample(&mut rng);
+            }
+        }
+    }
 }

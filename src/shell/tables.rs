@@ -359,6 +359,8 @@ fn sniff_separator(header: &str) -> u8 {
         .unwrap_or(b',')
 }
 
+/// Reads the `wanted` (and those of the `optional` present) columns of a CSV file, its
+/// separator found from the header.
 fn read_csv(
     path: &Path,
     wanted: &[&str],
@@ -397,81 +399,8 @@ fn read_csv(
         .iter()
         .map(str::to_string)
         .collect();
-    let mut idx = Vec::new();
-    let mut absent = Vec::new();
-    for w in wanted {
-        match headers.iter().position(|h| h == w) {
-            Some(i) => idx.push((w.to_string(), i)),
-            None => absent.push(missing(path, w, &headers)),
-        }
-    }
-    if !absent.is_empty() {
-        return Err(TableError::all(absent));
-    }
-    for o in optional {
-        if let Some(i) = headers.iter().position(|h| h == o) {
-            idx.push((o.to_string(), i));
-        }
-    }
-    let mut columns: Vec<Vec<f64>> = vec![Vec::new(); idx.len()];
-    let mut decimal_commas = false;
-    let mut bad_cells = BadCells::default();
-    for (r, rec) in rdr.records().enumerate() {
-        let row = r + 1;
-        let rec = rec.map_err(|e| TableError::Format {
-            file: file.clone(),
-            kind: "CSV",
-            message: format!("row {row} (line {}): {e}", row + 1),
-        })?;
-        for (c, ((name, i), col)) in idx.iter().zip(columns.iter_mut()).enumerate() {
-            let cell = rec.get(*i).unwrap_or("");
-            let file = &file;
-            let bad = |message: String| {
-                move || TableError::BadCell {
-                    file: file.clone(),
-                    column: name.clone(),
-                    row,
-                    line: format!(" (line {})", row + 1),
-                    message,
-                }
-            };
-            // With another separator than the comma, a decimal comma is unambiguous.
-            let v: Result<f64, String> = if cell.is_empty() {
-                Err("empty cell".into())
-            } else {
-                match cell.parse::<f64>() {
-                    Ok(v) => Ok(v),
-                    Err(_)
-                        if sep != b',' && cell.matches(',').count() == 1 && !cell.contains('.') =>
-                    {
-                        decimal_commas = true;
-                        cell.replace(',', ".")
-                            .parse()
-                            .map_err(|_| format!("{cell:?} is not a number"))
-                    }
-                    Err(_) => {
-                        let hint = if sep == b',' && cell.contains(';') {
-                            " (the file looks semicolon-separated, but its header is not)"
-                        } else {
-                            ""
-                        };
-                        Err(format!("{cell:?} is not a number{hint}"))
-                    }
-                }
-            };
-            match v {
-                Ok(v) if v.is_finite() => col.push(v),
-                Ok(_) => {
-                    bad_cells.push(c, bad(format!("{cell} is not a finite number")));
-                    col.push(f64::NAN);
-                }
-                Err(m) => {
-                    bad_cells.push(c, bad(m));
-                    col.push(f64::NAN);
-                }
-            }
-        }
-    }
+    let idx = csv_columns(path, &headers, wanted, optional)?;
+    let (columns, bad_cells, decimal_commas) = read_csv_records(&mut rdr, &file, &idx, sep)?;
     if decimal_commas {
         notes.push("decimal commas read as decimal points".into());
     }
@@ -487,6 +416,105 @@ fn read_csv(
     ))
 }
 
+/// The columns read from a CSV file with `headers`: each wanted one (every one missing is an
+/// error), then each optional one present, with its position.
+fn csv_columns(
+    path: &Path,
+    headers: &[String],
+    wanted: &[&str],
+    optional: &[&str],
+) -> Result<Vec<(String, usize)>, TableError> {
+    let mut idx = Vec::new();
+    let mut absent = Vec::new();
+    for w in wanted {
+        match headers.iter().position(|h| h == w) {
+            Some(i) => idx.push((w.to_string(), i)),
+            None => absent.push(missing(path, w, headers)),
+        }
+    }
+    if !absent.is_empty() {
+        return Err(TableError::all(absent));
+    }
+    for o in optional {
+        if let Some(i) = headers.iter().position(|h| h == o) {
+            idx.push((o.to_string(), i));
+        }
+    }
+    Ok(idx)
+}
+
+/// The `idx` columns of a CSV file's records: their values (NaN at a bad cell), the bad cells,
+/// and whether a decimal comma was read.
+fn read_csv_records(
+    rdr: &mut csv::Reader<&[u8]>,
+    file: &Path,
+    idx: &[(String, usize)],
+    sep: u8,
+) -> Result<(Vec<Vec<f64>>, BadCells, bool), TableError> {
+    let mut columns: Vec<Vec<f64>> = vec![Vec::new(); idx.len()];
+    let mut decimal_commas = false;
+    let mut bad_cells = BadCells::default();
+    for (r, rec) in rdr.records().enumerate() {
+        let row = r + 1;
+        let rec = rec.map_err(|e| TableError::Format {
+            file: file.to_path_buf(),
+            kind: "CSV",
+            message: format!("row {row} (line {}): {e}", row + 1),
+        })?;
+        for (c, ((name, i), col)) in idx.iter().zip(columns.iter_mut()).enumerate() {
+            let cell = rec.get(*i).unwrap_or("");
+            let bad = |message: String| {
+                move || TableError::BadCell {
+                    file: file.to_path_buf(),
+                    column: name.clone(),
+                    row,
+                    line: format!(" (line {})", row + 1),
+                    message,
+                }
+            };
+            match csv_number(cell, sep, &mut decimal_commas) {
+                Ok(v) if v.is_finite() => col.push(v),
+                Ok(_) => {
+                    bad_cells.push(c, bad(format!("{cell} is not a finite number")));
+                    col.push(f64::NAN);
+                }
+                Err(m) => {
+                    bad_cells.push(c, bad(m));
+                    col.push(f64::NAN);
+                }
+            }
+        }
+    }
+    Ok((columns, bad_cells, decimal_commas))
+}
+
+/// A CSV cell's number, or why it is none; a decimal comma (read where the separator is not the
+/// comma, and so unambiguous) sets `decimal_commas`.
+fn csv_number(cell: &str, sep: u8, decimal_commas: &mut bool) -> Result<f64, String> {
+    if cell.is_empty() {
+        return Err("empty cell".into());
+    }
+    match cell.parse::<f64>() {
+        Ok(v) => Ok(v),
+        Err(_) if sep != b',' && cell.matches(',').count() == 1 && !cell.contains('.') => {
+            *decimal_commas = true;
+            cell.replace(',', ".")
+                .parse()
+                .map_err(|_| format!("{cell:?} is not a number"))
+        }
+        Err(_) => {
+            let hint = if sep == b',' && cell.contains(';') {
+                " (the file looks semicolon-separated, but its header is not)"
+            } else {
+                ""
+            };
+            Err(format!("{cell:?} is not a number{hint}"))
+        }
+    }
+}
+
+/// Reads the `wanted` (and those of the `optional` present) numeric columns of a Parquet file;
+/// NaN is a bad cell unless `allow_nan`.
 fn read_parquet(
     path: &Path,
     wanted: &[&str],
@@ -510,22 +538,7 @@ fn read_parquet(
         .iter()
         .map(|f| f.name().clone())
         .collect();
-    let mut names: Vec<String> = Vec::new();
-    let absent: Vec<TableError> = wanted
-        .iter()
-        .filter(|w| !found.iter().any(|f| f == *w))
-        .map(|w| missing(path, w, &found))
-        .collect();
-    if !absent.is_empty() {
-        return Err(TableError::all(absent));
-    }
-    names.extend(wanted.iter().map(|w| w.to_string()));
-    names.extend(
-        optional
-            .iter()
-            .filter(|o| found.iter().any(|f| f == *o))
-            .map(|s| s.to_string()),
-    );
+    let names = parquet_columns(path, &found, wanted, optional)?;
     let reader = builder.build().map_err(|e| fmt(&e))?;
     let mut columns: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
     let mut bad_cells = BadCells::default();
@@ -533,62 +546,7 @@ fn read_parquet(
         let batch = batch.map_err(|e| fmt(&e))?;
         for (c, (name, col)) in names.iter().zip(columns.iter_mut()).enumerate() {
             let arr = batch.column_by_name(name).expect("column in schema");
-            let base = col.len();
-            let bad = |row: usize, message: String| TableError::BadCell {
-                file: file.clone(),
-                column: name.clone(),
-                row,
-                line: String::new(),
-                message,
-            };
-            let get: Box<dyn Fn(usize) -> f64> = match arr.data_type() {
-                DataType::Float64 => {
-                    let a = arr.as_any().downcast_ref::<Float64Array>().unwrap().clone();
-                    Box::new(move |i| a.value(i))
-                }
-                DataType::Float32 => {
-                    let a = arr.as_any().downcast_ref::<Float32Array>().unwrap().clone();
-                    Box::new(move |i| a.value(i) as f64)
-                }
-                DataType::Int64 => {
-                    let a = arr.as_any().downcast_ref::<Int64Array>().unwrap().clone();
-                    Box::new(move |i| a.value(i) as f64)
-                }
-                DataType::Int32 => {
-                    let a = arr.as_any().downcast_ref::<Int32Array>().unwrap().clone();
-                    Box::new(move |i| a.value(i) as f64)
-                }
-                DataType::UInt64 => {
-                    let a = arr
-                        .as_any()
-                        .downcast_ref::<arrow_array::UInt64Array>()
-                        .unwrap()
-                        .clone();
-                    Box::new(move |i| a.value(i) as f64)
-                }
-                DataType::UInt32 => {
-                    let a = arr
-                        .as_any()
-                        .downcast_ref::<arrow_array::UInt32Array>()
-                        .unwrap()
-                        .clone();
-                    Box::new(move |i| a.value(i) as f64)
-                }
-                other => return Err(bad(base + 1, format!("column type {other} is not numeric"))),
-            };
-            for i in 0..arr.len() {
-                let row = base + i + 1;
-                if arr.is_null(i) {
-                    bad_cells.push(c, || bad(row, "empty (null) cell".into()));
-                    col.push(f64::NAN);
-                    continue;
-                }
-                let v = get(i);
-                if !(v.is_finite() || allow_nan && v.is_nan()) {
-                    bad_cells.push(c, || bad(row, format!("{v} is not a finite number")));
-                }
-                col.push(v);
-            }
+            append_parquet_cells((&file, name), arr, col, (c, &mut bad_cells), allow_nan)?;
         }
     }
     Ok((
@@ -601,6 +559,110 @@ fn read_parquet(
         },
         bad_cells,
     ))
+}
+
+/// The columns read from a Parquet file whose schema has the columns `found`: the wanted ones
+/// (every one missing is an error), then the optional ones present.
+fn parquet_columns(
+    path: &Path,
+    found: &[String],
+    wanted: &[&str],
+    optional: &[&str],
+) -> Result<Vec<String>, TableError> {
+    let mut names: Vec<String> = Vec::new();
+    let absent: Vec<TableError> = wanted
+        .iter()
+        .filter(|w| !found.iter().any(|f| f == *w))
+        .map(|w| missing(path, w, found))
+        .collect();
+    if !absent.is_empty() {
+        return Err(TableError::all(absent));
+    }
+    names.extend(wanted.iter().map(|w| w.to_string()));
+    names.extend(
+        optional
+            .iter()
+            .filter(|o| found.iter().any(|f| f == *o))
+            .map(|s| s.to_string()),
+    );
+    Ok(names)
+}
+
+/// Appends a batch's cells of column `c` (`name` in `file`) to `col`: a null is NaN and a bad
+/// cell, as is NaN unless `allow_nan` (and any other value that is not finite); a column of
+/// another type than a number is an error.
+fn append_parquet_cells(
+    (file, name): (&Path, &str),
+    arr: &ArrayRef,
+    col: &mut Vec<f64>,
+    (c, bad_cells): (usize, &mut BadCells),
+    allow_nan: bool,
+) -> Result<(), TableError> {
+    let base = col.len();
+    let bad = |row: usize, message: String| TableError::BadCell {
+        file: file.to_path_buf(),
+        column: name.to_string(),
+        row,
+        line: String::new(),
+        message,
+    };
+    let Some(get) = numeric_values(arr) else {
+        let other = arr.data_type();
+        return Err(bad(base + 1, format!("column type {other} is not numeric")));
+    };
+    for i in 0..arr.len() {
+        let row = base + i + 1;
+        if arr.is_null(i) {
+            bad_cells.push(c, || bad(row, "empty (null) cell".into()));
+            col.push(f64::NAN);
+            continue;
+        }
+        let v = get(i);
+        if !(v.is_finite() || allow_nan && v.is_nan()) {
+            bad_cells.push(c, || bad(row, format!("{v} is not a finite number")));
+        }
+        col.push(v);
+    }
+    Ok(())
+}
+
+/// The values of a numeric Arrow array (floats and integers) as f64; None for another type.
+fn numeric_values(arr: &ArrayRef) -> Option<Box<dyn Fn(usize) -> f64>> {
+    Some(match arr.data_type() {
+        DataType::Float64 => {
+            let a = arr.as_any().downcast_ref::<Float64Array>().unwrap().clone();
+            Box::new(move |i| a.value(i))
+        }
+        DataType::Float32 => {
+            let a = arr.as_any().downcast_ref::<Float32Array>().unwrap().clone();
+            Box::new(move |i| a.value(i) as f64)
+        }
+        DataType::Int64 => {
+            let a = arr.as_any().downcast_ref::<Int64Array>().unwrap().clone();
+            Box::new(move |i| a.value(i) as f64)
+        }
+        DataType::Int32 => {
+            let a = arr.as_any().downcast_ref::<Int32Array>().unwrap().clone();
+            Box::new(move |i| a.value(i) as f64)
+        }
+        DataType::UInt64 => {
+            let a = arr
+                .as_any()
+                .downcast_ref::<arrow_array::UInt64Array>()
+                .unwrap()
+                .clone();
+            Box::new(move |i| a.value(i) as f64)
+        }
+        DataType::UInt32 => {
+            let a = arr
+                .as_any()
+                .downcast_ref::<arrow_array::UInt32Array>()
+                .unwrap()
+                .clone();
+            Box::new(move |i| a.value(i) as f64)
+        }
+        _ => return None,
+    })
 }
 
 /// A file being written: `path.tmp` until [`AtomicFile::commit`] renames it into place. Dropped
