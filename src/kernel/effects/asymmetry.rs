@@ -4,7 +4,7 @@
 //! displacement, from a table that extends and retracts differently.
 
 use super::{Effect, EffectInfo, LibraryEffect};
-use crate::kernel::params::{params, ModelParams, Range, Component};
+use crate::kernel::params::{params, Component, ModelParams, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
@@ -57,8 +57,18 @@ impl<const N: usize> Effect<N> for Asymmetry<N> {
 
     /// Valve flows of actuator `act`, scaled.
     #[inline(always)]
-    fn flows(&self, l: usize, act: usize, q: (f64, f64), _p1: f64, _p2: f64, _p_s: f64, _s: &Self::State) -> (f64, f64) {
-        let g = (if q.0 > 0.0 { self.extend[l] } else { 1.0 }) * (if act == 1 { self.act2[l] } else { 1.0 });
+    fn flows(
+        &self,
+        l: usize,
+        act: usize,
+        q: (f64, f64),
+        _p1: f64,
+        _p2: f64,
+        _p_s: f64,
+        _s: &Self::State,
+    ) -> (f64, f64) {
+        let g = (if q.0 > 0.0 { self.extend[l] } else { 1.0 })
+            * (if act == 1 { self.act2[l] } else { 1.0 });
         (g * q.0, g * q.1)
     }
 }

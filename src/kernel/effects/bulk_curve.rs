@@ -17,7 +17,7 @@
 //! parameters also keep a diagnosis's fit of it cheap. b ≡ 1 is the baseline.]
 
 use super::{Effect, EffectInfo, LibraryEffect};
-use crate::kernel::params::{params, ModelParams, Range, Component};
+use crate::kernel::params::{params, Component, ModelParams, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
@@ -72,7 +72,11 @@ impl<const N: usize> BulkCurve<N> {
             // Linear between knots k and k+1 where r lies there (a select, no early exit).
             let w = (r - KNOTS[k]) / (KNOTS[k + 1] - KNOTS[k]);
             let inside = r >= KNOTS[k] && r < KNOTS[k + 1];
-            g = if inside { self.b[k][l] + w * (self.b[k + 1][l] - self.b[k][l]) } else { g };
+            g = if inside {
+                self.b[k][l] + w * (self.b[k + 1][l] - self.b[k][l])
+            } else {
+                g
+            };
         }
         g
     }
@@ -87,7 +91,15 @@ impl<const N: usize> Effect<N> for BulkCurve<N> {
 
     /// β_e/V of both chambers (cap, rod): the baseline's (or an earlier effect's) β/V times b(p).
     #[inline(always)]
-    fn chamber_stiffness(&self, l: usize, _act: usize, b: (f64, f64), p1: f64, p2: f64, _s: &Self::State) -> (f64, f64) {
+    fn chamber_stiffness(
+        &self,
+        l: usize,
+        _act: usize,
+        b: (f64, f64),
+        p1: f64,
+        p2: f64,
+        _s: &Self::State,
+    ) -> (f64, f64) {
         (b.0 * self.gain(l, p1), b.1 * self.gain(l, p2))
     }
 }
@@ -101,15 +113,34 @@ mod tests {
     fn the_gain_interpolates_the_knots() {
         let mut m = ModelParams::default();
         m.effects.bulk_curve = true;
-        m.effect_params.bulk_curve = Params { b0: 0.2, b1: 1.0, b2: 1.5 };
+        m.effect_params.bulk_curve = Params {
+            b0: 0.2,
+            b1: 1.0,
+            b2: 1.5,
+        };
         let e = BulkCurve::<1>::new([&m]);
         let p_s = m.servovalve.p_s;
-        for (r, want) in [(-0.1, 0.2), (0.0, 0.2), (0.25, 0.6), (0.5, 1.0), (0.75, 1.25), (1.0, 1.5), (1.3, 1.5)] {
-            assert!((e.gain(0, r * p_s) - want).abs() < 1e-12, "b({r}) = {} not {want}", e.gain(0, r * p_s));
+        for (r, want) in [
+            (-0.1, 0.2),
+            (0.0, 0.2),
+            (0.25, 0.6),
+            (0.5, 1.0),
+            (0.75, 1.25),
+            (1.0, 1.5),
+            (1.3, 1.5),
+        ] {
+            assert!(
+                (e.gain(0, r * p_s) - want).abs() < 1e-12,
+                "b({r}) = {} not {want}",
+                e.gain(0, r * p_s)
+            );
         }
         // Off: neutral whatever its parameters.
         m.effects.bulk_curve = false;
         let off = BulkCurve::<1>::new([&m]);
-        assert_eq!(off.chamber_stiffness(0, 0, (3.0, 5.0), 1e6, 9e6, &[]), (3.0, 5.0));
+        assert_eq!(
+            off.chamber_stiffness(0, 0, (3.0, 5.0), 1e6, 9e6, &[]),
+            (3.0, 5.0)
+        );
     }
 }

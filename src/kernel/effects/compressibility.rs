@@ -14,7 +14,7 @@
 //! it avoids a `powf` in the step.
 
 use super::{Effect, EffectInfo, LibraryEffect};
-use crate::kernel::params::{params, ModelParams, Range, Component};
+use crate::kernel::params::{params, Component, ModelParams, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
@@ -87,7 +87,15 @@ impl<const N: usize> Effect<N> for Compressibility<N> {
 
     /// β_e/V of both chambers (cap, rod) of an actuator, from the baseline's β/V1, β/V2.
     #[inline(always)]
-    fn chamber_stiffness(&self, l: usize, _act: usize, b: (f64, f64), p1: f64, p2: f64, _s: &Self::State) -> (f64, f64) {
+    fn chamber_stiffness(
+        &self,
+        l: usize,
+        _act: usize,
+        b: (f64, f64),
+        p1: f64,
+        p2: f64,
+        _s: &Self::State,
+    ) -> (f64, f64) {
         (self.one(l, b.0, p1), self.one(l, b.1, p2))
     }
 }

@@ -16,7 +16,7 @@
 //! of eight tests to determine; g ≡ 1 is the baseline.]
 
 use super::{Effect, EffectInfo, LibraryEffect};
-use crate::kernel::params::{params, ModelParams, Range, Component};
+use crate::kernel::params::{params, Component, ModelParams, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
@@ -83,7 +83,11 @@ impl<const N: usize> Effect<N> for FlowGain<N> {
             // Linear between knots k and k+1 where r lies there (a select, no early exit).
             let w = (r - KNOTS[k]) / (KNOTS[k + 1] - KNOTS[k]);
             let inside = r < KNOTS[k + 1];
-            g = if inside { self.g[k][l] + w * (self.g[k + 1][l] - self.g[k][l]) } else { g };
+            g = if inside {
+                self.g[k][l] + w * (self.g[k + 1][l] - self.g[k][l])
+            } else {
+                g
+            };
         }
         x * g
     }

@@ -4,7 +4,7 @@
 //! small amplitude.
 
 use super::{Effect, EffectInfo, LibraryEffect};
-use crate::kernel::params::{params, ModelParams, Range, Component};
+use crate::kernel::params::{params, Component, ModelParams, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {

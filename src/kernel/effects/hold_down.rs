@@ -3,7 +3,7 @@
 //! displacement is large (low frequency, large amplitude), nothing at small displacement.
 
 use super::{Effect, EffectInfo, LibraryEffect};
-use crate::kernel::params::{params, ModelParams, Range, Component};
+use crate::kernel::params::{params, Component, ModelParams, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
@@ -30,7 +30,15 @@ pub struct HoldDown<const N: usize> {
 impl<const N: usize> LibraryEffect<N> for HoldDown<N> {
     fn new(p: [&ModelParams; N]) -> Self {
         let on = super::lane_mask::<N, Self>(&p);
-        HoldDown { k3: std::array::from_fn(|l| if on[l] > 0.0 { Params::of(p[l]).k3 } else { 0.0 }) }
+        HoldDown {
+            k3: std::array::from_fn(|l| {
+                if on[l] > 0.0 {
+                    Params::of(p[l]).k3
+                } else {
+                    0.0
+                }
+            }),
+        }
     }
 }
 

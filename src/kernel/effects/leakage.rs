@@ -5,7 +5,7 @@
 //! (both coefficients 0).
 
 use super::{Effect, EffectInfo, LibraryEffect};
-use crate::kernel::params::{params, ModelParams, Range, Component};
+use crate::kernel::params::{params, Component, ModelParams, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
@@ -52,8 +52,20 @@ impl<const N: usize> Effect<N> for Leakage<N> {
 
     /// Net (into chamber 1, out of chamber 2) from the valve flows `q`.
     #[inline(always)]
-    fn flows(&self, l: usize, _act: usize, q: (f64, f64), p1: f64, p2: f64, _p_s: f64, _s: &Self::State) -> (f64, f64) {
+    fn flows(
+        &self,
+        l: usize,
+        _act: usize,
+        q: (f64, f64),
+        p1: f64,
+        p2: f64,
+        _p_s: f64,
+        _s: &Self::State,
+    ) -> (f64, f64) {
         let cross = self.c_int[l] * (p1 - p2);
-        (q.0 - cross - self.c_ext[l] * p1, q.1 - cross + self.c_ext[l] * p2)
+        (
+            q.0 - cross - self.c_ext[l] * p1,
+            q.1 - cross + self.c_ext[l] * p2,
+        )
     }
 }

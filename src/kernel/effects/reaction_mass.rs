@@ -12,7 +12,7 @@
 //! stop being one body's (a₁ ≠ −ω²·x₁), increasingly with frequency, as (m/m_r)·(f/f_r)²/(1 − (f/f_r)²).
 
 use super::{Effect, EffectInfo, LibraryEffect, PlantView};
-use crate::kernel::params::{params, ModelParams, Range, Component};
+use crate::kernel::params::{params, Component, ModelParams, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
@@ -79,7 +79,8 @@ impl<const N: usize> Effect<N> for ReactionMass<N> {
     fn derivs(&self, plant: &PlantView<'_, N>, s: &Self::State, ds: &mut Self::State) {
         for l in 0..N {
             ds[YR][l] = s[VR][l];
-            ds[VR][l] = self.inv_m[l] * (-plant.f_act[l] - self.k[l] * s[YR][l] - self.c[l] * s[VR][l]);
+            ds[VR][l] =
+                self.inv_m[l] * (-plant.f_act[l] - self.k[l] * s[YR][l] - self.c[l] * s[VR][l]);
         }
     }
 }

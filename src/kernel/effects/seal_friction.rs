@@ -4,7 +4,7 @@
 //! and a residual concentrated near velocity reversal; neutral when off (forces 0).
 
 use super::{Effect, EffectInfo, LibraryEffect};
-use crate::kernel::params::{params, ModelParams, Range, Component};
+use crate::kernel::params::{params, Component, ModelParams, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
@@ -66,6 +66,7 @@ impl<const N: usize> Effect<N> for SealFriction<N> {
     #[inline(always)]
     fn extra_force(&self, l: usize, _y: f64, v: f64, _s: &Self::State) -> f64 {
         let r = v * self.inv_vs[l];
-        -(v * self.inv_eps[l]).tanh() * (self.f_c[l] + self.df[l] * (-r * r).exp()) - self.sigma[l] * v
+        -(v * self.inv_eps[l]).tanh() * (self.f_c[l] + self.df[l] * (-r * r).exp())
+            - self.sigma[l] * v
     }
 }

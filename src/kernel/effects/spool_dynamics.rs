@@ -3,7 +3,7 @@
 //! frequency, and a smaller amplitude ratio at higher frequencies.
 
 use super::{Effect, EffectInfo, LibraryEffect, PlantView};
-use crate::kernel::params::{params, ModelParams, Range, Component};
+use crate::kernel::params::{params, Component, ModelParams, Range};
 use crate::kernel::N_ACT;
 
 /// The effect's entry in the library.
@@ -66,7 +66,8 @@ impl<const N: usize> Effect<N> for SpoolDynamics<N> {
         for act in 0..N_ACT {
             for l in 0..N {
                 ds[X[act]][l] = s[V[act]][l];
-                ds[V[act]][l] = self.w2[l] * (plant.x_c[l] - s[X[act]][l]) - self.two_zw[l] * s[V[act]][l];
+                ds[V[act]][l] =
+                    self.w2[l] * (plant.x_c[l] - s[X[act]][l]) - self.two_zw[l] * s[V[act]][l];
             }
         }
     }

@@ -5,7 +5,7 @@
 //! of the acceleration sinks from cycle to cycle.
 
 use super::{Effect, EffectInfo, LibraryEffect, PlantView};
-use crate::kernel::params::{params, ModelParams, Range, Component};
+use crate::kernel::params::{params, Component, ModelParams, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
@@ -68,7 +68,8 @@ impl<const N: usize> Effect<N> for Supply<N> {
     #[inline(always)]
     fn derivs(&self, plant: &PlantView<'_, N>, s: &Self::State, ds: &mut Self::State) {
         for l in 0..N {
-            let q_p = self.q_pump[l] * ((self.p_s0[l] - s[0][l]) * self.inv_band[l]).clamp(0.0, 1.0);
+            let q_p =
+                self.q_pump[l] * ((self.p_s0[l] - s[0][l]) * self.inv_band[l]).clamp(0.0, 1.0);
             // Off: the state is held at P_S (derivative 0), so it never drifts.
             ds[0][l] = self.on[l] * (q_p - plant.q_supply[l]) * self.inv_c[l];
         }

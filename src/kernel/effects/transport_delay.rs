@@ -12,7 +12,7 @@
 //! README's effects table).
 
 use super::{Effect, EffectInfo, LibraryEffect, PlantView};
-use crate::kernel::params::{params, ModelParams, Range, Component};
+use crate::kernel::params::{params, Component, ModelParams, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
@@ -46,7 +46,17 @@ impl<const N: usize> LibraryEffect<N> for TransportDelay<N> {
     fn new(p: [&ModelParams; N]) -> Self {
         let on = super::lane_mask::<N, Self>(&p);
         let default_tau = Params::default().tau;
-        TransportDelay { on, rate: std::array::from_fn(|l| STAGES as f64 / if on[l] > 0.0 { Params::of(p[l]).tau } else { default_tau }) }
+        TransportDelay {
+            on,
+            rate: std::array::from_fn(|l| {
+                STAGES as f64
+                    / if on[l] > 0.0 {
+                        Params::of(p[l]).tau
+                    } else {
+                        default_tau
+                    }
+            }),
+        }
     }
 }
 
