@@ -9,8 +9,9 @@
 //!   evidence; fitting p parameters to noise alone lowers χ² by about p, far below p·ln n) and its
 //!   fit does not leave a larger residual than the baseline's (the χ² weighs each channel by its
 //!   noise, the residual by its signal, so a fit may trade one channel against another; a
-//!   candidate that makes what the user sees worse is never called significant). Significant
-//!   candidates rank first, each group by ΔBIC;
+//!   candidate that makes what the user sees worse is never called significant), and it explains
+//!   at least [`EXPLAINS_SOME`] of the residual beyond noise. Significant candidates rank first,
+//!   each group by ΔBIC;
 //! - the share of the residual it *explains* is 1 − (R_c² − N²)/(R_b² − N²), with R the residual
 //!   rms over every test and channel (what a user sees fall) of the baseline and the candidate and
 //!   N the noise floor of that rms: the part of the baseline's residual beyond noise that the
@@ -39,6 +40,11 @@ use rayon::prelude::*;
 
 /// ΔBIC above which a candidate counts as significant.
 pub const SIGNIFICANT_BIC: f64 = 10.0;
+/// Share of the residual beyond noise a candidate must explain to be called significant at all
+/// [chosen: 1 %. Over thousands of features a flexible effect lowers χ² by more than the BIC
+/// penalty by absorbing a sliver of the misfit (a numerical floor, an unmodelled detail); a
+/// candidate that removes under a hundredth of what the user sees is not evidence of anything.]
+pub const EXPLAINS_SOME: f64 = 0.01;
 /// Share of the residual beyond noise a candidate must explain to be named the missing effect.
 pub const EXPLAINS_ENOUGH: f64 = 0.5;
 /// Share of the residual beyond noise several effects must explain together to be named
@@ -73,8 +79,10 @@ pub struct Candidate {
 }
 
 impl Candidate {
+    /// ΔBIC above [`SIGNIFICANT_BIC`], a residual no larger than the baseline's, and at least
+    /// [`EXPLAINS_SOME`] of the residual beyond noise explained.
     pub fn significant(&self) -> bool {
-        self.delta_bic > SIGNIFICANT_BIC && self.lowers_residual
+        self.delta_bic > SIGNIFICANT_BIC && self.lowers_residual && self.explained >= EXPLAINS_SOME
     }
     pub fn chi2(&self) -> f64 {
         self.fit.as_ref().map_or(f64::INFINITY, |f| f.chi2_after())
@@ -217,10 +225,18 @@ impl Diagnosis {
         let best = self.candidates.first();
         match self.verdict() {
             Verdict::NothingSignificant => match best {
-                Some(c) if c.delta_bic > SIGNIFICANT_BIC => format!(
+                Some(c) if c.delta_bic > SIGNIFICANT_BIC && !c.lowers_residual => format!(
                     "no candidate explains the residual significantly (best: {}, dBIC = {:.1}, but its fit leaves a larger residual than the baseline's); no significant missing effect{}",
                     c.effect,
                     c.delta_bic,
+                    self.where_it_fails()
+                ),
+                Some(c) if c.delta_bic > SIGNIFICANT_BIC => format!(
+                    "no candidate explains the residual significantly (best: {}, dBIC = {:.1}, but it explains {:.1} % of the residual beyond noise, under {:.0} %); no significant missing effect{}",
+                    c.effect,
+                    c.delta_bic,
+                    100.0 * c.explained,
+                    100.0 * EXPLAINS_SOME,
                     self.where_it_fails()
                 ),
                 _ => format!(

@@ -902,6 +902,7 @@ mod tests {
             time_s,
             disp_m,
             f_ref_hz: 50.0,
+            signal: crate::kernel::excitation::Signal::Command,
         }
         .reference(1024.0);
         // Compared at 500 Hz, every sample of the record's span.

@@ -631,6 +631,7 @@ fn record_reference(
         scale,
         unit,
         processing,
+        signal,
         ..
     } = &test.excitation
     else {
@@ -638,7 +639,8 @@ fn record_reference(
     };
     let f_s = test.model.controller.f_s;
     let r = if unit.is_acceleration() {
-        super::quake::from_acceleration(&rec_x, 0.0, 1.0 / rate_hz, processing, *f_ref_hz, f_s)
+        let filter = (*f_ref_hz, *signal);
+        super::quake::from_acceleration(&rec_x, 0.0, 1.0 / rate_hz, processing, filter, f_s)
     } else {
         let l = test.model.actuator.l;
         if let Some((i, v)) = rec_x.iter().enumerate().find(|(_, v)| v.abs() >= l) {
@@ -648,6 +650,7 @@ fn record_reference(
             time_s: rec_t,
             disp_m: rec_x,
             f_ref_hz: *f_ref_hz,
+            signal: *signal,
         }
         .reference(f_s)
     };

@@ -14,7 +14,7 @@
 //! closed forms (kernel::ground::Jet).
 
 use super::spec::{ExcitationSpec, RecordUnit};
-use crate::kernel::excitation::{Record, Reference};
+use crate::kernel::excitation::{Record, Reference, Signal};
 use crate::kernel::ground::{self, GroundParams, Multisine, Processing};
 use crate::kernel::params::{ModelParams, G};
 use crate::kernel::spectrum::SpectrumSpec;
@@ -78,7 +78,9 @@ pub fn generated(
             let n = (duration_s * f_s).round() as usize;
             let white = noise(own.unwrap_or(seed), realisation.stream(sample), n);
             let accel = ground::filtered_noise(&g, &white, 1.0 / f_s);
-            from_acceleration(&accel, 0.0, 1.0 / f_s, processing, *f_ref_hz, f_s)
+            // A generated motion is fed to the table's reference generator: a command.
+            let filter = (*f_ref_hz, Signal::Command);
+            from_acceleration(&accel, 0.0, 1.0 / f_s, processing, filter, f_s)
         }
         ExcitationSpec::Sweep { sweep, .. } => {
             closed_form(f_s, sweep.duration_s, |t| sweep.states(t))
@@ -120,20 +122,22 @@ fn closed_form(f_s: f64, duration: f64, states: impl Fn(f64) -> [f64; 4]) -> Ref
 }
 
 /// A displacement reference from a ground acceleration (m/s², every `dt` s from `t0`): processed
-/// into a displacement, then the record filter.
+/// into a displacement, then made into reference states as a record of what `filter` says
+/// (its corner, Hz, and whether it is a command or the tracked reference).
 pub fn from_acceleration(
     accel: &[f64],
     t0: f64,
     dt: f64,
     p: &Processing,
-    f_ref_hz: f64,
+    filter: (f64, Signal),
     f_s: f64,
 ) -> Reference {
     let d = ground::to_displacement(accel, dt, p);
     let rec = Record {
         time_s: (0..d.disp_m.len()).map(|k| t0 + k as f64 * dt).collect(),
         disp_m: d.disp_m,
-        f_ref_hz,
+        f_ref_hz: filter.0,
+        signal: filter.1,
     };
     rec.reference(f_s)
 }

@@ -239,6 +239,7 @@ pub fn reference_for(
                 unit,
                 pga_g,
                 processing,
+                signal,
                 ..
             },
             Some(t),
@@ -256,7 +257,7 @@ pub fn reference_for(
                     grid.time(0.0),
                     1.0 / grid.rate_hz,
                     processing,
-                    *f_ref_hz,
+                    (*f_ref_hz, *signal),
                     f_s,
                 )
             } else {
@@ -268,6 +269,7 @@ pub fn reference_for(
                     time_s: (0..t.rows()).map(|i| grid.time(i as f64)).collect(),
                     disp_m: values,
                     f_ref_hz: *f_ref_hz,
+                    signal: *signal,
                 }
                 .reference(f_s)
             };

@@ -31,7 +31,7 @@
 //! Every problem is reported at once with its key path.
 
 use super::toml_fields::{Fields, InputError, Issues};
-use crate::kernel::excitation::Sine;
+use crate::kernel::excitation::{Signal, Sine};
 use crate::kernel::ground::{Processing, Sweep};
 use crate::kernel::params::{Component, ModelParams, ValveLaw};
 use crate::kernel::simulate::Solver;
@@ -57,6 +57,9 @@ pub enum ExcitationSpec {
         pga_g: Option<f64>,
         /// How an acceleration becomes a displacement.
         processing: Processing,
+        /// What the record is: the reference the controller tracked, or a command into its
+        /// reference generator (docs/model.md §4).
+        signal: Signal,
     },
     /// A Kanai–Tajimi / Clough–Penzien ground motion (kernel::ground), its parameters the
     /// model's `ground.*` with `ground` overriding them.
@@ -220,17 +223,42 @@ impl ExcitationSpec {
                     sine.window_cycles.unwrap_or_else(|| sine.default_cycles())
                 )
             }
-            ExcitationSpec::Record { file, column, f_ref_hz, unit, .. } if !unit.is_acceleration() => {
-                format!("record {}:{column}, state-variable filter {f_ref_hz} Hz", file.display())
+            ExcitationSpec::Record {
+                file,
+                column,
+                f_ref_hz,
+                unit,
+                signal,
+                ..
+            } if !unit.is_acceleration() => {
+                format!(
+                    "record {}:{column}, {}",
+                    file.display(),
+                    filter_words(*signal, *f_ref_hz)
+                )
             }
-            ExcitationSpec::Record { file, column, f_ref_hz, unit, pga_g, processing, .. } => format!(
-                "acceleration record {}:{column} ({}){}, high-pass {} Hz, state-variable filter {f_ref_hz} Hz",
+            ExcitationSpec::Record {
+                file,
+                column,
+                f_ref_hz,
+                unit,
+                pga_g,
+                processing,
+                signal,
+                ..
+            } => format!(
+                "acceleration record {}:{column} ({}){}, high-pass {} Hz, {}",
                 file.display(),
                 unit.name(),
                 pga_g.map_or(String::new(), |g| format!(" scaled to {g} g")),
-                processing.highpass_hz
+                processing.highpass_hz,
+                filter_words(*signal, *f_ref_hz)
             ),
-            ExcitationSpec::Stochastic { duration_s, realisation, .. } => format!("stochastic ground motion, {duration_s} s, realisation {realisation:?}"),
+            ExcitationSpec::Stochastic {
+                duration_s,
+                realisation,
+                ..
+            } => format!("stochastic ground motion, {duration_s} s, realisation {realisation:?}"),
             ExcitationSpec::Sweep { sweep, amp_g } => format!(
                 "{:?} sweep {}-{} Hz over {} s, {}",
                 sweep.law,
@@ -243,7 +271,15 @@ impl ExcitationSpec {
                     (None, None) => format!("{} m/s²", sweep.accel_mps2),
                 }
             ),
-            ExcitationSpec::Random { f_lo_hz, f_hi_hz, rms_g, duration_s, .. } => format!("band-limited random {f_lo_hz}-{f_hi_hz} Hz, {rms_g} g rms, {duration_s} s"),
+            ExcitationSpec::Random {
+                f_lo_hz,
+                f_hi_hz,
+                rms_g,
+                duration_s,
+                ..
+            } => {
+                format!("band-limited random {f_lo_hz}-{f_hi_hz} Hz, {rms_g} g rms, {duration_s} s")
+            }
         }
     }
 }
@@ -335,22 +371,20 @@ pub fn read_excitation_with_extra(
     read_excitation_in(f, model, issues, extra, None)
 }
 
-/// [`read_excitation`] with extra keys and, for a record without `file`, a default file (a
-/// campaign test's own data file).
+/// [`read_excitation`] with extra keys and, for a campaign test, its data file: a record
+/// without `file` is a column of it, and a record is by default the reference the controller
+/// tracked (`signal = "reference"`; elsewhere the default is `"command"`, docs/model.md §4).
 pub fn read_excitation_in(
     mut f: Fields<'_>,
     model: &ModelParams,
     issues: &mut Issues,
     extra: &[&str],
-    default_file: Option<&std::path::Path>,
+    test_data: Option<&std::path::Path>,
 ) -> Option<ExcitationSpec> {
     let kind = f.str("kind", issues);
     let (out, expected): (_, &[&str]) = match kind {
         Some("sine") => (read_sine(&mut f, model, issues), &SINE_KEYS),
-        Some("record") => (
-            read_record(&mut f, model, issues, default_file),
-            &RECORD_KEYS,
-        ),
+        Some("record") => (read_record(&mut f, model, issues, test_data), &RECORD_KEYS),
         Some("stochastic") => (
             super::spec_quake::read_stochastic(&mut f, model, issues),
             &super::spec_quake::STOCHASTIC_KEYS[..],
@@ -539,13 +573,16 @@ fn sine_amplitude(
 }
 
 /// A record: its file (or the campaign test's own data file), columns, the reference filter's
-/// cut-off and a scale.
+/// cut-off, a scale and what it is (`signal`: the tracked reference by default in a campaign
+/// test, whose data file `test_data` is; a command elsewhere).
 fn read_record(
     f: &mut Fields<'_>,
     model: &ModelParams,
     issues: &mut Issues,
-    default_file: Option<&std::path::Path>,
+    test_data: Option<&std::path::Path>,
 ) -> Option<ExcitationSpec> {
+    let signal = read_signal(f, issues, test_data.is_some());
+    let default_file = test_data;
     let file = f.str("file", issues);
     let column = f.str("column", issues).unwrap_or("ref_disp_m");
     let time_column = f.str("time_column", issues).unwrap_or("time_s");
@@ -614,7 +651,38 @@ fn read_record(
         unit,
         pga_g,
         processing,
+        signal,
     })
+}
+
+/// How a record's reference states are made, in words.
+fn filter_words(signal: Signal, f_ref_hz: f64) -> String {
+    match signal {
+        Signal::Command => format!("a command through the state-variable filter {f_ref_hz} Hz"),
+        Signal::Reference => format!("the tracked reference, zero-phase derivatives {f_ref_hz} Hz"),
+    }
+}
+
+/// The `signal` key of a record: "reference" or "command" (docs/model.md §4); the default is the
+/// tracked reference for a measured test, the command elsewhere.
+fn read_signal(f: &mut Fields<'_>, issues: &mut Issues, measured: bool) -> Signal {
+    match f.str("signal", issues) {
+        None if measured => Signal::Reference,
+        None => Signal::Command,
+        Some("reference") => Signal::Reference,
+        Some("command") => Signal::Command,
+        Some(other) => {
+            issues.push(
+                f.path_of("signal"),
+                format!(
+                    "{other:?}: expected \"reference\" (the reference the controller tracked, as a \
+                     data-acquisition system records it) or \"command\" (the command into the \
+                     controller's reference generator)"
+                ),
+            );
+            Signal::Command
+        }
+    }
 }
 
 /// Whether `file` is a PEER NGA acceleration file (extension `.AT2`, any case).
@@ -634,7 +702,7 @@ pub const SINE_KEYS: [&str; 7] = [
     "window_cycles",
 ];
 /// The keys of a record excitation; docs/formats.md lists each.
-pub const RECORD_KEYS: [&str; 10] = [
+pub const RECORD_KEYS: [&str; 11] = [
     "kind",
     "file",
     "column",
@@ -645,6 +713,7 @@ pub const RECORD_KEYS: [&str; 10] = [
     "pga_g",
     "highpass_hz",
     "taper_s",
+    "signal",
 ];
 
 /// Reads `[solver]`; `extra` names keys of the same table read by the caller.

@@ -346,11 +346,13 @@ fn put_record(e: &ExcitationSpec, put: &mut Put<'_>) {
         unit,
         pga_g,
         processing,
+        signal,
     } = e
     else {
         unreachable!("a record")
     };
     put("kind", "record".into());
+    put("signal", signal.name().into());
     put("file", file.display().to_string().into());
     if !super::spec::is_at2(file) {
         put("column", column.clone().into());

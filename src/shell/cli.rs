@@ -430,7 +430,9 @@ A record excitation drives the table with a sampled displacement:
   file = \"quake.csv\"        # CSV or Parquet, relative to the run file
   column = \"ref_disp_m\"     # default ref_disp_m
   time_column = \"time_s\"    # default time_s; uniform, increasing
-  f_ref_hz = 50.0           # state-variable filter corner (default 50 Hz)
+  signal = \"command\"        # default: the command into the reference generator (causal, lagged);
+                            # \"reference\": the reference the controller tracked (no lag)
+  f_ref_hz = 50.0           # the generator's corner, or the reference's derivative filter's
   scale = 1.0
 
 With --out, the time history (time_s, ref_disp_m, ref_accel_mps2, disp_m, accel_mps2, valve_cmd_v, force_n, \

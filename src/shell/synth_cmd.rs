@@ -174,11 +174,9 @@ fn sample_test(
         let v = rs.channel(c, 0);
         std::iter::repeat_n(v[0], pre_rows).chain(v).collect()
     };
-    let ref_disp: Vec<f64> = std::iter::repeat_n(0.0, pre_rows)
-        .chain(
-            tau.iter()
-                .map(|&t| reference.at_time(&reference.command, t)),
-        )
+    // What a data-acquisition system records: the reference the controller tracked, x_r.
+    let ref_disp: Vec<f64> = std::iter::repeat_n(reference.x[0], pre_rows)
+        .chain(tau.iter().map(|&t| reference.at_time(&reference.x, t)))
         .collect();
     Ok(Ok(vec![
         (
@@ -225,11 +223,68 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
         )?;
     }
     let dst = args.out.join(lc.file.file_name().unwrap_or_default());
-    if std::fs::canonicalize(&lc.file).ok() != std::fs::canonicalize(&dst).ok() {
-        std::fs::copy(&lc.file, &dst).with_context(|| format!("copying {}", lc.file.display()))?;
-    }
+    let records = write_campaign(&lc, &dst)?;
     writeln!(stdout, "  campaign                 {}", dst.display())?;
+    writeln!(
+        stdout,
+        "  ref_disp_m holds the reference the controller tracked (x_r), as a data-acquisition \
+         system records it{}",
+        if records > 0 {
+            format!(
+                "; the campaign reads it as the record of its {records} record test(s), \
+                 signal = \"reference\""
+            )
+        } else {
+            String::new()
+        }
+    )?;
     Ok(())
+}
+
+/// Writes the campaign of the synthesised files to `dst`: a copy of the campaign, with each
+/// record test's excitation made the record of its own file's `ref_disp_m` (the tracked
+/// reference, `signal = "reference"`, docs/model.md §4), since that column now holds what the
+/// controller tracked; returns how many tests that changed.
+fn write_campaign(lc: &LoadedCampaign, dst: &Path) -> anyhow::Result<usize> {
+    let records: Vec<(usize, f64)> = (lc.campaign.tests.iter().enumerate())
+        .filter_map(|(i, t)| match &t.excitation {
+            ExcitationSpec::Record { f_ref_hz, .. } => Some((i, *f_ref_hz)),
+            _ => None,
+        })
+        .collect();
+    if records.is_empty() {
+        if std::fs::canonicalize(&lc.file).ok() != std::fs::canonicalize(dst).ok() {
+            std::fs::copy(&lc.file, dst)
+                .with_context(|| format!("copying {}", lc.file.display()))?;
+        }
+        return Ok(0);
+    }
+    let text = std::fs::read_to_string(&lc.file)
+        .with_context(|| format!("reading {}", lc.file.display()))?;
+    let mut table: toml::Table = text.parse().context("the campaign was read before")?;
+    let tests = table
+        .get_mut("test")
+        .and_then(toml::Value::as_array_mut)
+        .context("the campaign's tests")?;
+    for &(i, f_ref_hz) in &records {
+        let mut e = toml::Table::new();
+        e.insert("kind".into(), "record".into());
+        e.insert("signal".into(), "reference".into());
+        e.insert("f_ref_hz".into(), f_ref_hz.into());
+        if let Some(t) = tests[i].as_table_mut() {
+            t.insert("excitation".into(), e.into());
+        }
+    }
+    let out = format!(
+        "# Written by study synth from {}: the record tests' data files hold in `ref_disp_m` the\n\
+         # reference the controller tracked (x_r), read as each test's record with\n\
+         # signal = \"reference\" (docs/model.md §4).\n{table}",
+        lc.file.display()
+    );
+    let file = tables::AtomicFile::new(dst);
+    std::fs::write(&file.tmp, out).with_context(|| format!("writing {}", file.tmp.display()))?;
+    file.commit()?;
+    Ok(records.len())
 }
 
 /// `--rate` is a sample rate in (0, 1e6] Hz and `--pre-trigger` in [0, 3600] s.
