@@ -556,6 +556,7 @@ fn rhs<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N>>(
     let mut q_supply = [0.0; N];
     let mut p_s = [0.0; N];
     let mut f_act = [0.0; N];
+    let mut stroke = [0.0; N];
     for l in 0..N {
         let valve = lp.valve.lane(l);
         let act = lp.act.lane(l);
@@ -564,6 +565,7 @@ fn rhs<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N>>(
         p_s[l] = ps;
         // The chambers follow the actuator stroke (the platen's motion unless an effect says so).
         let (y_s, v_s) = effect.stroke(l, y, v, es);
+        stroke[l] = y_s;
         let b = actuator::stiffness_factors(&act, y_s);
         let mut f = 0.0;
         let mut qs = 0.0;
@@ -609,6 +611,8 @@ fn rhs<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N>>(
         q_out2: &q_out2,
         p_s: &p_s,
         f_act: &f_act,
+        accel: &ds[VEL],
+        stroke: &stroke,
     };
     effect.derivs(&view, es, des);
 }
@@ -697,7 +701,8 @@ impl<const N: usize, E: Effect<N>> Probe<N, E> {
             x[l] = effect.stroke(l, self.s[Y][l], self.s[VEL][l], &self.es).0;
             spool[l] = effect.spool_position(l, 0, x_c[l], &self.es);
         }
-        let a = self.k[3][VEL];
+        let mut a = self.k[3][VEL];
+        recorded(effect, &self.es, &mut a, &mut x, &mut f);
         obs.sample(&TickView {
             k: held.k,
             sub: held.sub,
@@ -711,6 +716,21 @@ impl<const N: usize, E: Effect<N>> Probe<N, E> {
             f: &f,
             state: &self.s,
         });
+    }
+}
+
+/// The channels as the data-acquisition system records them ([`Effect::sensed`]): the
+/// acceleration, displacement and force of every lane, changed in place.
+#[inline(always)]
+fn recorded<const N: usize, E: Effect<N>>(
+    effect: &E,
+    es: &E::State,
+    a: &mut [f64; N],
+    x: &mut [f64; N],
+    f: &mut [f64; N],
+) {
+    for l in 0..N {
+        [a[l], x[l], f[l]] = effect.sensed(l, [a[l], x[l], f[l]], es);
     }
 }
 
@@ -877,17 +897,21 @@ fn integrate<
         for l in 0..N {
             spool[l] = effect.spool_position(l, 0, x_c[l], &es);
         }
+        // Observers and the metrics see the channels as recorded (a measurement chain changes
+        // them); the controller, the plant's.
+        let (mut a_rec, mut x_rec, mut f_rec) = (a, x, f);
+        recorded(effect, &es, &mut a_rec, &mut x_rec, &mut f_rec);
         obs.tick(&TickView {
             k,
             sub: 0,
             t,
             r: &r,
-            x: &x,
-            a: &a,
+            x: &x_rec,
+            a: &a_rec,
             u: &u,
             x_c: &x_c,
             spool: &spool,
-            f: &f,
+            f: &f_rec,
             state: &s,
         });
         acc.every_tick(&u);
@@ -902,9 +926,9 @@ fn integrate<
                     a_r: &a_r,
                     v_r: &v_r,
                     x_r: &x_r,
-                    a: &a,
+                    a: &a_rec,
                     v: &v,
-                    x: &x,
+                    x: &x_rec,
                 },
             );
         }

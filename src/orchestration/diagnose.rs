@@ -345,7 +345,7 @@ fn state_map(aligned: &[AlignedTest]) -> Option<StateMap> {
 pub fn free_of(effect: EffectId, model: &ModelParams) -> Vec<Free> {
     effect
         .info()
-        .free
+        .free()
         .iter()
         .map(|n| {
             let info = ModelParams::lookup(&format!("{effect}.{n}"))

@@ -20,7 +20,7 @@ pub fn run(args: &ParamsArgs) -> anyhow::Result<()> {
                 "{:<18} {:<26} {:<28} {}",
                 e.name,
                 e.family,
-                e.free.join(", "),
+                e.free().join(", "),
                 e.summary
             )?;
         }

@@ -3,7 +3,7 @@
 //! by `act2_gain` against actuator 1's. Its signature: even harmonics (h2) and a shifted
 //! displacement, from a table that extends and retracts differently.
 
-use super::{Effect, EffectInfo, LibraryEffect};
+use super::{Effect, EffectInfo, LibraryEffect, Stage};
 use crate::kernel::params::{params, Component, ModelParams, Range};
 
 /// The effect's entry in the library.
@@ -12,7 +12,7 @@ pub const INFO: EffectInfo = EffectInfo {
     family: "asymmetry",
     summary: "the valve flows of extension and retraction, or of the two actuators, differ",
     params: Params::PARAMS,
-    free: &["extend_gain"],
+    stages: &[Stage::free(&["extend_gain"])],
     moves_spool: false,
 };
 

@@ -16,7 +16,7 @@
 //! campaign of sine tests determines a level, a slope and a bend of the curve, not more; three
 //! parameters also keep a diagnosis's fit of it cheap. b ≡ 1 is the baseline.]
 
-use super::{Effect, EffectInfo, LibraryEffect};
+use super::{Effect, EffectInfo, LibraryEffect, Stage};
 use crate::kernel::params::{params, Component, ModelParams, Range};
 
 /// The effect's entry in the library.
@@ -25,7 +25,7 @@ pub const INFO: EffectInfo = EffectInfo {
     family: "compressibility",
     summary: "a bulk modulus of unknown form: its gain against chamber pressure at three knots",
     params: Params::PARAMS,
-    free: &["b0", "b1", "b2"],
+    stages: &[Stage::free(&["b0", "b1", "b2"])],
     moves_spool: false,
 };
 

@@ -13,7 +13,7 @@
 //! Isothermal air (polytropic exponent 1) is a choice: bubbles in oil exchange heat quickly, and
 //! it avoids a `powf` in the step.
 
-use super::{Effect, EffectInfo, LibraryEffect};
+use super::{Effect, EffectInfo, LibraryEffect, Stage};
 use crate::kernel::params::{params, Component, ModelParams, Range};
 
 /// The effect's entry in the library.
@@ -22,7 +22,7 @@ pub const INFO: EffectInfo = EffectInfo {
     family: "compressibility",
     summary: "a softer oil column: dead volume, entrained air, hose compliance",
     params: Params::PARAMS,
-    free: &["dead_volume", "air_fraction"],
+    stages: &[Stage::free(&["dead_volume", "air_fraction"])],
     moves_spool: false,
 };
 

@@ -15,7 +15,7 @@
 //! linear between them — enough for a monotone or a null-region shape, few enough for a campaign
 //! of eight tests to determine; g ≡ 1 is the baseline.]
 
-use super::{Effect, EffectInfo, LibraryEffect};
+use super::{Effect, EffectInfo, LibraryEffect, Stage};
 use crate::kernel::params::{params, Component, ModelParams, Range};
 
 /// The effect's entry in the library.
@@ -24,7 +24,7 @@ pub const INFO: EffectInfo = EffectInfo {
     family: "valve flow nonlinearity",
     summary: "a flow-gain curve of unknown form: gain against spool opening at five knots",
     params: Params::PARAMS,
-    free: &["g0", "g1", "g2", "g3", "g4"],
+    stages: &[Stage::free(&["g0", "g1", "g2", "g3", "g4"])],
     moves_spool: false,
 };
 

@@ -3,7 +3,7 @@
 //! velocity, so a lower amplitude ratio and more odd distortion at large amplitude, nothing at
 //! small amplitude.
 
-use super::{Effect, EffectInfo, LibraryEffect};
+use super::{Effect, EffectInfo, LibraryEffect, Stage};
 use crate::kernel::params::{params, Component, ModelParams, Range};
 
 /// The effect's entry in the library.
@@ -12,7 +12,7 @@ pub const INFO: EffectInfo = EffectInfo {
     family: "valve flow nonlinearity",
     summary: "the metering area of the valves saturates toward large openings",
     params: Params::PARAMS,
-    free: &["x_sat"],
+    stages: &[Stage::free(&["x_sat"])],
     moves_spool: false,
 };
 

@@ -2,7 +2,7 @@
 //! −K·y of the baseline. Its signature: odd harmonics and a changed amplitude ratio where the
 //! displacement is large (low frequency, large amplitude), nothing at small displacement.
 
-use super::{Effect, EffectInfo, LibraryEffect};
+use super::{Effect, EffectInfo, LibraryEffect, Stage};
 use crate::kernel::params::{params, Component, ModelParams, Range};
 
 /// The effect's entry in the library.
@@ -11,7 +11,7 @@ pub const INFO: EffectInfo = EffectInfo {
     family: "hold-down stiffness",
     summary: "a cubic hardening of the hold-down struts",
     params: Params::PARAMS,
-    free: &["k3"],
+    stages: &[Stage::free(&["k3"])],
     moves_spool: false,
 };
 

@@ -4,7 +4,7 @@
 //! that are largest where the force is (low frequency, large amplitude); neutral when off
 //! (both coefficients 0).
 
-use super::{Effect, EffectInfo, LibraryEffect};
+use super::{Effect, EffectInfo, LibraryEffect, Stage};
 use crate::kernel::params::{params, Component, ModelParams, Range};
 
 /// The effect's entry in the library.
@@ -13,7 +13,7 @@ pub const INFO: EffectInfo = EffectInfo {
     family: "leakage",
     summary: "internal leakage across the piston and external leakage to drain",
     params: Params::PARAMS,
-    free: &["c_int"],
+    stages: &[Stage::free(&["c_int"])],
     moves_spool: false,
 };
 

@@ -38,7 +38,7 @@
 //! struts, F = −k3·y³:
 //!
 //! ```ignore
-//! use super::{Effect, EffectInfo, LibraryEffect};
+//! use super::{Effect, EffectInfo, LibraryEffect, Stage};
 //! use crate::kernel::params::{params, Component, ModelParams, Range};
 //!
 //! pub const INFO: EffectInfo = EffectInfo {
@@ -46,7 +46,7 @@
 //!     family: "hold-down stiffness",
 //!     summary: "a cubic hardening of the hold-down struts",
 //!     params: Params::PARAMS,
-//!     free: &["k3"],
+//!     stages: &[Stage::free(&["k3"])],
 //!     moves_spool: false,
 //! };
 //!
@@ -100,14 +100,50 @@ pub struct EffectInfo {
     pub summary: &'static str,
     /// Its parameters (unit, default, range, source), from its `params!` table.
     pub params: &'static [ParamInfo],
-    /// The parameters a fit or a diagnosis frees by default: the ones its signature determines;
+    /// What a fit or a diagnosis frees, in stages: the first stage is the effect itself (a fit's
+    /// default `--free`), each further one a part a diagnosis may add on top once the effect is
+    /// chosen (a specimen's second mode). Each frees the parameters its signature determines;
     /// parameters that only shape it (a smoothing velocity, a damping ratio that trades off
     /// against a frequency) stay fixed unless `--free` names them.
-    pub free: &'static [&'static str],
+    pub stages: &'static [Stage],
     /// Whether it changes the spool position a spool LVDT reads (a delay or the spool's own
     /// dynamics); such effects are switched off when the plant is driven by a measured spool.
     pub moves_spool: bool,
 }
+
+/// A set of an effect's parameters fitted together ([`EffectInfo::stages`]).
+#[derive(Debug, Clone, Copy)]
+pub struct Stage {
+    /// What the stage adds, in words ("mode 2"); empty for an effect of one stage.
+    pub label: &'static str,
+    /// The parameters it frees.
+    pub free: &'static [&'static str],
+    /// A parameter whose start a fit scans over these values, keeping the best, before it
+    /// iterates: one that makes the misfit non-convex (a resonance's frequency).
+    pub scan: Option<(&'static str, &'static [f64])>,
+}
+
+impl Stage {
+    /// A stage that frees `free`, without a scan.
+    pub const fn free(free: &'static [&'static str]) -> Stage {
+        Stage {
+            label: "",
+            free,
+            scan: None,
+        }
+    }
+}
+
+impl EffectInfo {
+    /// The parameters a fit frees by default: the first stage's.
+    pub fn free(&self) -> &'static [&'static str] {
+        self.stages[0].free
+    }
+}
+
+/// The recorded channels an effect's [`Effect::sensed`] may change, by index: acceleration,
+/// displacement (the LVDT's stroke), total actuator force.
+pub const SENSED: [&str; 3] = ["accel", "disp", "force"];
 
 /// An effect of the library: built per batch from the lanes' parameter sets.
 pub trait LibraryEffect<const N: usize>: Effect<N> + Sized {
@@ -230,7 +266,14 @@ library! {
     bulk_curve::BulkCurve,
     reaction_mass::ReactionMass,
     hold_down::HoldDown,
+    specimen::Specimen,
+    accel_sensor::AccelSensor,
+    disp_sensor::DispSensor,
+    force_sensor::ForceSensor,
 }
+
+/// The measurement chain shared by the sensor effects.
+mod sensor_chain;
 
 impl EffectId {
     /// The effect called `name` (its model-file table, `--effect` name and parameter prefix);
@@ -333,6 +376,10 @@ pub struct PlantView<'a, const N: usize> {
     pub p_s: &'a [f64; N],
     /// Total actuator force on the platen, N.
     pub f_act: &'a [f64; N],
+    /// Platen acceleration dv/dt, m/s² (with every effect's force).
+    pub accel: &'a [f64; N],
+    /// Actuator stroke (what the LVDT reads, after [`Effect::stroke`]), m.
+    pub stroke: &'a [f64; N],
 }
 
 /// An optional physical effect plugged into the lane kernel.
@@ -421,6 +468,15 @@ pub trait Effect<const N: usize>: Sync {
     /// Derivatives of the extra states.
     #[inline(always)]
     fn derivs(&self, _plant: &PlantView<'_, N>, _s: &Self::State, _ds: &mut Self::State) {}
+
+    /// The channels as recorded in lane `l` ([`SENSED`]: acceleration, displacement, force), from
+    /// the plant's values `raw`: a measurement chain changes what is recorded (the histories, the
+    /// samples compared with a measurement, the metrics), not the plant (the controller's
+    /// feedback is `raw`).
+    #[inline(always)]
+    fn sensed(&self, _l: usize, raw: [f64; 3], _s: &Self::State) -> [f64; 3] {
+        raw
+    }
 }
 
 /// The baseline model: no extra effect.
@@ -523,6 +579,10 @@ impl<const N: usize, A: Effect<N>, B: Effect<N>> Effect<N> for Both<A, B> {
     #[inline(always)]
     fn extra_force(&self, l: usize, y: f64, v: f64, s: &Self::State) -> f64 {
         self.0.extra_force(l, y, v, &s.0) + self.1.extra_force(l, y, v, &s.1)
+    }
+    #[inline(always)]
+    fn sensed(&self, l: usize, raw: [f64; 3], s: &Self::State) -> [f64; 3] {
+        self.1.sensed(l, self.0.sensed(l, raw, &s.0), &s.1)
     }
     #[inline(always)]
     fn derivs(&self, plant: &PlantView<'_, N>, s: &Self::State, ds: &mut Self::State) {
@@ -660,6 +720,14 @@ impl<const N: usize, E: Effect<N>> Effect<N> for Gated<E> {
         }
     }
     #[inline(always)]
+    fn sensed(&self, l: usize, raw: [f64; 3], s: &Self::State) -> [f64; 3] {
+        if self.on {
+            self.effect.sensed(l, raw, s)
+        } else {
+            raw
+        }
+    }
+    #[inline(always)]
     fn derivs(&self, plant: &PlantView<'_, N>, s: &Self::State, ds: &mut Self::State) {
         if self.on {
             self.effect.derivs(plant, s, ds);
@@ -689,12 +757,12 @@ mod tests {
             assert!(!e.family.trim().is_empty(), "{}: no family", e.name);
             assert!(!e.summary.trim().is_empty(), "{}: no summary", e.name);
             assert!(
-                !e.free.is_empty(),
+                !e.free().is_empty(),
                 "{}: no parameter a diagnosis frees",
                 e.name
             );
             assert!(!e.params.is_empty(), "{}: no parameters", e.name);
-            for f in e.free {
+            for f in e.stages.iter().flat_map(|st| st.free) {
                 assert!(
                     e.params.iter().any(|p| p.name == *f),
                     "{}: frees `{f}`, which it does not have",
@@ -739,8 +807,13 @@ mod tests {
         assert_eq!(std::mem::size_of_val(s.as_ref()), std::mem::size_of_val(&s));
         assert_eq!(
             n,
-            transport_delay::STAGES + 2 * crate::kernel::N_ACT + 1 + 2,
-            "delay, spool, supply, reaction mass"
+            transport_delay::STAGES
+                + 2 * crate::kernel::N_ACT
+                + 1
+                + 2
+                + 2 * specimen::MODES
+                + 3 * 4,
+            "delay, spool, supply, reaction mass, specimen, three sensor chains"
         );
         // The supply pressure starts at P_S, every other state at 0.
         let ps = p.servovalve.p_s;

@@ -11,7 +11,7 @@
 //! reaction path is not in docs/model.md). Its signature: the measured acceleration and displacement
 //! stop being one body's (a₁ ≠ −ω²·x₁), increasingly with frequency, as (m/m_r)·(f/f_r)²/(1 − (f/f_r)²).
 
-use super::{Effect, EffectInfo, LibraryEffect, PlantView};
+use super::{Effect, EffectInfo, LibraryEffect, PlantView, Stage};
 use crate::kernel::params::{params, Component, ModelParams, Range};
 
 /// The effect's entry in the library.
@@ -20,7 +20,7 @@ pub const INFO: EffectInfo = EffectInfo {
     family: "reaction mass",
     summary: "the actuators push against a reaction mass on a compliant foundation",
     params: Params::PARAMS,
-    free: &["m_r", "f_r"],
+    stages: &[Stage::free(&["m_r", "f_r"])],
     moves_spool: false,
 };
 

@@ -3,7 +3,7 @@
 //! every velocity reversal, so relative odd harmonics (h3) that are largest at small amplitude,
 //! and a residual concentrated near velocity reversal; neutral when off (forces 0).
 
-use super::{Effect, EffectInfo, LibraryEffect};
+use super::{Effect, EffectInfo, LibraryEffect, Stage};
 use crate::kernel::params::{params, Component, ModelParams, Range};
 
 /// The effect's entry in the library.
@@ -12,7 +12,7 @@ pub const INFO: EffectInfo = EffectInfo {
     family: "friction",
     summary: "actuator seal friction with a Stribeck term",
     params: Params::PARAMS,
-    free: &["f_c", "f_s"],
+    stages: &[Stage::free(&["f_c", "f_s"])],
     moves_spool: false,
 };
 

@@ -2,7 +2,7 @@
 //! ẍ_s = ω²(x_c − x_s) − 2ζω ẋ_s, ω = 2π·freq_hz. Its signature: a phase lag that grows with
 //! frequency, and a smaller amplitude ratio at higher frequencies.
 
-use super::{Effect, EffectInfo, LibraryEffect, PlantView};
+use super::{Effect, EffectInfo, LibraryEffect, PlantView, Stage};
 use crate::kernel::params::{params, Component, ModelParams, Range};
 use crate::kernel::N_ACT;
 
@@ -12,7 +12,7 @@ pub const INFO: EffectInfo = EffectInfo {
     family: "valve dynamics",
     summary: "a second-order lag between the valve command and the spool",
     params: Params::PARAMS,
-    free: &["freq_hz"],
+    stages: &[Stage::free(&["freq_hz"])],
     moves_spool: true,
 };
 

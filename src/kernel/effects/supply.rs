@@ -4,7 +4,7 @@
 //! draw of a test exceeds the pump, the supply droops, more at large amplitude, and the envelope
 //! of the acceleration sinks from cycle to cycle.
 
-use super::{Effect, EffectInfo, LibraryEffect, PlantView};
+use super::{Effect, EffectInfo, LibraryEffect, PlantView, Stage};
 use crate::kernel::params::{params, Component, ModelParams, Range};
 
 /// The effect's entry in the library.
@@ -13,7 +13,7 @@ pub const INFO: EffectInfo = EffectInfo {
     family: "supply pressure",
     summary: "supply pressure droop: a pump of limited flow and an accumulator",
     params: Params::PARAMS,
-    free: &["q_pump", "c_acc"],
+    stages: &[Stage::free(&["q_pump", "c_acc"])],
     moves_spool: false,
 };
 

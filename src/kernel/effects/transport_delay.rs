@@ -11,7 +11,7 @@
 //! phase is within 0.01 % of −ωτ and the magnitude within 0.02 % of 1 (a choice; documented in the
 //! README's effects table).
 
-use super::{Effect, EffectInfo, LibraryEffect, PlantView};
+use super::{Effect, EffectInfo, LibraryEffect, PlantView, Stage};
 use crate::kernel::params::{params, Component, ModelParams, Range};
 
 /// The effect's entry in the library.
@@ -20,7 +20,7 @@ pub const INFO: EffectInfo = EffectInfo {
     family: "valve dynamics",
     summary: "a pure delay between the valve command and the spool",
     params: Params::PARAMS,
-    free: &["tau"],
+    stages: &[Stage::free(&["tau"])],
     moves_spool: true,
 };
 
