@@ -1,6 +1,6 @@
 //! Effect `spool_overlap`: lands that overlap their ports by δ, a dead band around null:
 //! no flow while |x| ≤ δ, then x_eff = sign(x)·(|x| − δ).
-use super::{Effect, EffectInfo, LibraryEffect};
+use super::{Effect, EffectInfo, LibraryEffect, Stage};
 use crate::kernel::params::{params, Component, ModelParams, Range};
 
 pub const INFO: EffectInfo = EffectInfo {
@@ -8,7 +8,7 @@ pub const INFO: EffectInfo = EffectInfo {
     family: "valve flow nonlinearity",
     summary: "spool lands that overlap their ports: a dead band around null",
     params: Params::PARAMS,
-    free: &["delta"],
+    stages: &[Stage::free(&["delta"])],
     moves_spool: false,
 };
 params! {
