@@ -78,7 +78,25 @@ pub struct Candidate {
     pub lowers_residual: bool,
 }
 
+impl Step {
+    /// What it adds.
+    pub fn part(&self) -> Part {
+        Part {
+            effect: self.effect,
+            stage: self.stage,
+        }
+    }
+}
+
 impl Candidate {
+    /// What it names: its effect.
+    pub fn part(&self) -> Part {
+        Part {
+            effect: self.effect,
+            stage: 0,
+        }
+    }
+
     /// ΔBIC above [`SIGNIFICANT_BIC`], a residual no larger than the baseline's, and at least
     /// [`EXPLAINS_SOME`] of the residual beyond noise explained.
     pub fn significant(&self) -> bool {
@@ -89,9 +107,34 @@ impl Candidate {
     }
 }
 
-/// One effect added by forward selection on top of those chosen before it.
+/// A part of the model a diagnosis names: an effect (stage 0), or a further stage of one (a
+/// specimen's second mode, [`crate::kernel::effects::EffectInfo::stages`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Part {
+    pub effect: EffectId,
+    pub stage: usize,
+}
+
+impl std::fmt::Display for Part {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.stage {
+            0 => write!(f, "{}", self.effect),
+            k => write!(
+                f,
+                "{}'s {}",
+                self.effect,
+                self.effect.info().stages[k].label
+            ),
+        }
+    }
+}
+
+/// One effect (or a further stage of a chosen one) added by forward selection on top of those
+/// chosen before it.
 pub struct Step {
     pub effect: EffectId,
+    /// The stage of the effect it adds (0: the effect itself).
+    pub stage: usize,
     pub family: &'static str,
     /// The joint fit: the parameters of every chosen effect so far, this one's last.
     pub free: Vec<Free>,
@@ -115,6 +158,8 @@ pub struct Diagnosis {
     /// Effects forward selection added on top of the best candidate, in order.
     pub more: Vec<Step>,
     pub features: Vec<FeatureInfo>,
+    /// Each test's sample rate, Hz: a record's evidence is split by frequency band.
+    pub rates_hz: Vec<f64>,
     /// The starting model's residual mapped onto the plant's states, when the caller made it
     /// ([`super::statemap`]): a verdict of "not in the library" then names the state and term
     /// the residual follows.
@@ -131,24 +176,18 @@ pub enum Verdict {
     NothingSignificant,
     /// The best candidate (and those forward selection added to it) is significant and explains
     /// most of the residual.
-    Missing {
-        effects: Vec<EffectId>,
-        explained: f64,
-    },
+    Missing { effects: Vec<Part>, explained: f64 },
     /// The best candidate (with those added to it) is significant but explains little of the
     /// residual.
-    Unexplained {
-        effects: Vec<EffectId>,
-        explained: f64,
-    },
+    Unexplained { effects: Vec<Part>, explained: f64 },
 }
 
 impl Diagnosis {
     pub fn verdict(&self) -> Verdict {
         match self.candidates.first() {
             Some(c) if c.significant() => {
-                let effects: Vec<EffectId> = std::iter::once(c.effect)
-                    .chain(self.more.iter().map(|s| s.effect))
+                let effects: Vec<Part> = std::iter::once(c.part())
+                    .chain(self.more.iter().map(Step::part))
                     .collect();
                 let explained = self.more.last().map_or(c.explained, |s| s.explained);
                 if self.more.is_empty() || explained >= EXPLAINS_TOGETHER {
@@ -160,7 +199,7 @@ impl Diagnosis {
                 } else if c.explained >= EXPLAINS_ENOUGH {
                     // The effects added to it do not close the gap to the noise: name the first only.
                     Verdict::Missing {
-                        effects: vec![c.effect],
+                        effects: vec![c.part()],
                         explained: c.explained,
                     }
                 } else {
@@ -249,14 +288,17 @@ impl Diagnosis {
             Verdict::Missing { effects, explained } if effects.len() == 1 => format!(
                 "most likely missing: {} ({}); it explains {:.0} % of the residual beyond noise (dBIC = {:.0}){}",
                 effects[0],
-                effects[0].info().family,
+                effects[0].effect.info().family,
                 100.0 * explained,
                 best.map_or(f64::NAN, |c| c.delta_bic),
                 self.short_of_noise()
             ),
             Verdict::Missing { effects, explained } => format!(
                 "most likely missing: {}; together they explain {:.0} % of the residual beyond noise ({}){}",
-                effects.iter().map(|e| format!("{e} ({})", e.info().family)).collect::<Vec<_>>().join(" + "),
+                effects.iter().map(|e| match e.stage {
+                    0 => format!("{e} ({})", e.effect.info().family),
+                    _ => e.to_string(),
+                }).collect::<Vec<_>>().join(" + "),
                 100.0 * explained,
                 self.shares(),
                 self.short_of_noise()
@@ -269,7 +311,7 @@ impl Diagnosis {
             ),
             Verdict::Unexplained { effects, explained } => format!(
                 "the best candidates together, {}, explain only {:.0} % of the residual beyond noise ({}): the missing effect is probably not in the library{}",
-                effects.iter().map(|e| e.name()).collect::<Vec<_>>().join(" + "),
+                effects.iter().map(|e| e.to_string()).collect::<Vec<_>>().join(" + "),
                 100.0 * explained,
                 self.shares(),
                 self.where_it_fails()
@@ -303,7 +345,7 @@ impl Diagnosis {
         for s in &self.more {
             parts.push(format!(
                 "+ {} {:.0} %",
-                s.effect,
+                s.part(),
                 100.0 * (s.explained - prev)
             ));
             prev = s.explained;
@@ -343,16 +385,30 @@ fn state_map(aligned: &[AlignedTest]) -> Option<StateMap> {
 
 /// The free parameters of `effect` at their values in `model`.
 pub fn free_of(effect: EffectId, model: &ModelParams) -> Vec<Free> {
-    effect
-        .info()
-        .free()
+    free_of_stage(effect, 0, model)
+}
+
+/// The free parameters of stage `stage` of `effect` at their values in `model` (where that is 0,
+/// at the stage's start value, if it has one).
+pub fn free_of_stage(effect: EffectId, stage: usize, model: &ModelParams) -> Vec<Free> {
+    let s = &effect.info().stages[stage];
+    s.free
         .iter()
         .map(|n| {
             let info = ModelParams::lookup(&format!("{effect}.{n}"))
                 .expect("default free parameters are registered");
-            Free::new(info, (info.get)(model))
+            let v = (info.get)(model);
+            let start = s.start.iter().find(|(name, _)| name == n).map(|x| x.1);
+            Free::new(info, start.filter(|_| v == 0.0).unwrap_or(v))
         })
         .collect()
+}
+
+/// `free` with the scanned start of stage `stage` of `effect` (see [`fit::scanned`]).
+fn scanned(problem: &Problem, free: &[Free], effect: EffectId, stage: usize) -> Vec<Free> {
+    let scan = effect.info().stages[stage].scan;
+    let path = scan.map(|(name, _)| format!("{effect}.{name}"));
+    fit::scanned(problem, free, path.as_deref().zip(scan.map(|(_, v)| v)))
 }
 
 /// Fits every candidate and ranks them.
@@ -366,7 +422,7 @@ pub fn diagnose(problem: &Problem, candidates: &[EffectId]) -> Diagnosis {
     let mut out: Vec<Candidate> = candidates
         .par_iter()
         .map(|&effect| {
-            let free = free_of(effect, model0);
+            let free = scanned(problem, &free_of(effect, model0), effect, 0);
             let fit = fit::fit_from(problem, &free, MAX_ITER, baseline.clone());
             let p = free.len() as f64;
             let lowers_residual = fit.as_ref().is_ok_and(|f| f.after.residual_rms() <= rb);
@@ -408,6 +464,7 @@ pub fn diagnose(problem: &Problem, candidates: &[EffectId]) -> Diagnosis {
         candidates: out,
         more,
         features: problem.features(),
+        rates_hz: problem.tests.iter().map(|t| t.samples.rate_hz).collect(),
         state_map: None,
         state_map_after: None,
     }
@@ -437,7 +494,7 @@ fn forward_selection(
     let Ok(best_fit) = &best.fit else {
         return Vec::new();
     };
-    let mut chosen: Vec<EffectId> = vec![best.effect];
+    let mut chosen: Vec<Part> = vec![best.part()];
     // The chosen parameters at their estimates, and the evaluation they leave.
     let mut free = at_estimates(&best.free, &best_fit.estimate);
     let mut at = best_fit.after.clone();
@@ -449,7 +506,7 @@ fn forward_selection(
         if at.chi2() - n as f64 <= (ln_n + SIGNIFICANT_BIC).max(3.0 * (2.0 * n as f64).sqrt()) {
             break;
         }
-        let Some((effect, f, r, dbic)) =
+        let Some((part, f, r, dbic)) =
             best_addition(problem, ranked, (&chosen, &free, &at), (ln_n, n2))
         else {
             break;
@@ -457,10 +514,11 @@ fn forward_selection(
         let (r, dbic) = polished(problem, &f, r, dbic);
         free = at_estimates(&f, &r.estimate);
         at = r.after.clone();
-        chosen.push(effect);
+        chosen.push(part);
         steps.push(Step {
-            effect,
-            family: effect.info().family,
+            effect: part.effect,
+            stage: part.stage,
+            family: part.effect.info().family,
             free: f,
             explained: share(&r.after),
             fit: r,
@@ -478,27 +536,49 @@ fn at_estimates(free: &[Free], estimate: &[f64]) -> Vec<Free> {
         .collect()
 }
 
-/// The candidate effect that adds most to the chosen ones (their parameters `free`, leaving the
-/// evaluation `at`): its effect, the joint parameters, their fit and its ΔBIC; None where no
-/// effect is significant, lowers the residual and removes enough of what is left of it.
+/// What forward selection may add to the `chosen` parts: every other candidate that could be
+/// fitted, and the next stage of each chosen effect that has one.
+fn additions(ranked: &[Candidate], chosen: &[Part]) -> Vec<Part> {
+    let has = |e: EffectId| chosen.iter().any(|p| p.effect == e);
+    let mut out: Vec<Part> = ranked
+        .iter()
+        .filter(|c| !has(c.effect) && c.fit.is_ok())
+        .map(Candidate::part)
+        .collect();
+    for p in chosen {
+        let next = p.stage + 1;
+        let last = !chosen
+            .iter()
+            .any(|q| q.effect == p.effect && q.stage > p.stage);
+        if last && next < p.effect.info().stages.len() {
+            out.push(Part {
+                effect: p.effect,
+                stage: next,
+            });
+        }
+    }
+    out
+}
+
+/// The candidate that adds most to the chosen parts (their parameters `free`, leaving the
+/// evaluation `at`): what it adds, the joint parameters, their fit and its ΔBIC; None where no
+/// addition is significant, lowers the residual and removes enough of what is left of it.
 fn best_addition(
     problem: &Problem,
     ranked: &[Candidate],
-    (chosen, free, at): (&[EffectId], &[Free], &fit::Eval),
+    (chosen, free, at): (&[Part], &[Free], &fit::Eval),
     (ln_n, n2): (f64, f64),
-) -> Option<(EffectId, Vec<Free>, fit::FitResult, f64)> {
+) -> Option<(Part, Vec<Free>, fit::FitResult, f64)> {
     let model0 = &problem.tests[0].model;
-    let rest: Vec<&Candidate> = ranked
-        .iter()
-        .filter(|c| !chosen.contains(&c.effect) && c.fit.is_ok())
-        .collect();
-    let tried: Vec<(EffectId, Vec<Free>, Result<fit::FitResult, fit::FitError>)> = rest
+    let rest = additions(ranked, chosen);
+    let tried: Vec<(Part, Vec<Free>, Result<fit::FitResult, fit::FitError>)> = rest
         .par_iter()
-        .map(|c| {
+        .map(|&part| {
             let mut f = free.to_vec();
-            f.extend(free_of(c.effect, model0));
+            f.extend(free_of_stage(part.effect, part.stage, model0));
+            let f = scanned(problem, &f, part.effect, part.stage);
             let r = fit::fit_from(problem, &f, MAX_ITER, at.clone());
-            (c.effect, f, r)
+            (part, f, r)
         })
         .collect();
     let chi2_at = at.chi2();
@@ -506,13 +586,13 @@ fn best_addition(
     let excess_at = rms_at * rms_at - n2;
     tried
         .into_iter()
-        .filter_map(|(effect, f, r)| {
+        .filter_map(|(part, f, r)| {
             let r = r.ok()?;
             let p_new = (f.len() - free.len()) as f64;
             let dbic = chi2_at - r.chi2_after() - p_new * ln_n;
             let removes = (rms_at * rms_at - r.after.residual_rms().powi(2)) / excess_at;
             (dbic > SIGNIFICANT_BIC && r.after.residual_rms() <= rms_at && removes >= ADDS_ENOUGH)
-                .then_some((effect, f, r, dbic))
+                .then_some((part, f, r, dbic))
         })
         .max_by(|a, b| a.3.total_cmp(&b.3))
 }
@@ -543,8 +623,8 @@ fn polished(
 /// baseline, χ² candidate), largest reduction first.
 pub fn evidence(d: &Diagnosis, c: &Candidate, top: usize) -> Vec<(usize, usize, f64, f64)> {
     let Ok(f) = &c.fit else { return Vec::new() };
-    let b = fit::grouped(&d.features, &d.baseline.r);
-    let a = fit::grouped(&d.features, &f.after.r);
+    let b = fit::grouped(&d.features, &d.rates_hz, &d.baseline.r);
+    let a = fit::grouped(&d.features, &d.rates_hz, &f.after.r);
     let mut v: Vec<(usize, usize, f64, f64)> = b
         .iter()
         .map(|(&(t, k), &x)| (t, k, x, a.get(&(t, k)).copied().unwrap_or(f64::NAN)))

@@ -12,8 +12,13 @@
 //!   frequency, harmonics above the 9th, an envelope that drifts). Without the last two a fit could
 //!   lower χ² while leaving a static offset or a limit cycle that the time-domain residual shows;
 //!   with them χ² is the time-domain χ² of the window, split into its parts;
-//! - a record test: the residual of each channel averaged over blocks of 1/64 s
-//!   ([`block_len`] samples; 16 at 1024 Hz).
+//! - a record test: the residual of each channel at every sample of the window. There are no
+//!   harmonics to average the noise into, and any summary (block means, a band of the spectrum)
+//!   hides part of the residual a user sees: block means of 1/64 s pass nothing above 32 Hz, so
+//!   a fit could lower their χ² while raising the residual's rms. With every sample, χ² is the
+//!   time-domain χ² of the window (Σ e²/σ², channel by channel), which falls exactly when each
+//!   channel's residual rms falls; the evidence by frequency band is its split by Parseval
+//!   ([`super::fourier::band_energy`]).
 //!
 //! Each feature is divided by its noise standard deviation, so the sum of squares χ² is a
 //! chi-square when the model is right. The noise of a channel is estimated from the measured data
@@ -22,13 +27,16 @@
 //!   up to 0.45 of the file's rate (at most 60), a quadratic trend and a linearly drifting
 //!   fundamental, over the window: σ² = RSS/(n − p). It holds at any sample rate (third
 //!   differences, which keep (2πf/R)³ of a smooth signal, do not at 256 Hz);
-//! - a record test: σ = rms(Δ³x)/√20 (the third difference removes a smooth signal, while white
-//!   noise keeps variance 20σ²).
+//! - a record test: the level of the spectrum's top band, 0.4 to 0.5 of the rate
+//!   ([`super::fourier::noise_sigma`]): the motion is band-limited, the sensors' noise is not
+//!   (third differences, σ = rms(Δ³x)/√20, keep (2πf/R)³ of the motion and overstate it at the
+//!   rates where a table's broadband motion reaches 50 Hz; they remain the fallback for a record
+//!   too short for the band to hold 16 bins).
 //!
 //! Both are floored at 1e-6 of the channel's rms so noise-free synthetic data stays finite. A
-//! harmonic of white noise over W samples has σ·√(2/W) per component, a mean σ/√W, a block mean
-//! σ/√B; the remainder's square has W − p degrees of freedom (p functions fitted), so a model
-//! right to the noise leaves χ² ≈ n, the features' degrees of freedom ([`Problem::dof`]).
+//! harmonic of white noise over W samples has σ·√(2/W) per component, a mean σ/√W, a sample σ;
+//! the remainder's square has W − p degrees of freedom (p functions fitted), so a model right to
+//! the noise leaves χ² ≈ n, the features' degrees of freedom ([`Problem::dof`]).
 //! Campaign channel weights multiply.
 //!
 //! **Solver.** Levenberg–Marquardt on u, the free parameters in scaled coordinates (log of the
@@ -53,12 +61,6 @@ use rayon::prelude::*;
 /// Forward-difference step in the scaled coordinates.
 const H: f64 = 1e-3;
 
-/// Samples per block of a record test's time-domain features: 1/64 s [chosen: 16 ticks at the
-/// controller's 1024 Hz, as before files had other rates].
-pub fn block_len(rate_hz: f64) -> usize {
-    ((rate_hz / 64.0).round() as usize).max(1)
-}
-
 /// Which channel a feature comes from.
 pub const CHANNELS: [&str; 3] = ["accel", "disp", "force"];
 
@@ -68,7 +70,7 @@ pub const MEAN: usize = 100;
 /// the mean nor the harmonics hold.
 pub const REMAINDER: usize = 101;
 
-/// What one feature is: its test, channel (index into [`CHANNELS`]) and harmonic (0 for a block,
+/// What one feature is: its test, channel (index into [`CHANNELS`]) and harmonic (0 for a sample,
 /// [`MEAN`], [`REMAINDER`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FeatureInfo {
@@ -120,7 +122,10 @@ pub fn noise_sigma_differences(x: &[f64]) -> f64 {
 /// a fundamental `f`, the residual of the periodic fit; without, third differences.
 pub fn noise_sigma(x: &[f64], tau: &[f64], rate_hz: f64, f: Option<f64>) -> f64 {
     let Some(f) = f else {
-        return noise_sigma_differences(x);
+        return super::fourier::noise_sigma(x)
+            .unwrap_or_else(|| noise_sigma_differences(x))
+            .max(1e-6 * rms_slice(x))
+            .max(f64::MIN_POSITIVE);
     };
     let n = x.len();
     let k_max = ((0.45 * rate_hz / f).floor() as usize).min(60);
@@ -164,13 +169,8 @@ pub fn noise_sigma(x: &[f64], tau: &[f64], rate_hz: f64, f: Option<f64>) -> f64 
 
 /// The unweighted linear features of channel `c` at the samples `s`: the harmonics below the
 /// Nyquist frequency and, for displacement and force, the mean (a sine, `proj` of the samples);
-/// or block means (a record).
-fn channel_features(
-    s: &Samples,
-    proj: Option<&super::compare::Projector>,
-    c: usize,
-    x: &[f64],
-) -> Vec<f64> {
+/// or every sample (a record).
+fn channel_features(proj: Option<&super::compare::Projector>, c: usize, x: &[f64]) -> Vec<f64> {
     match proj {
         Some(p) => {
             let h = p.apply(x);
@@ -180,13 +180,7 @@ fn channel_features(
             }
             f
         }
-        None => {
-            let b = block_len(s.rate_hz);
-            x.chunks(b)
-                .filter(|c| c.len() == b)
-                .map(|c| c.iter().sum::<f64>() / b as f64)
-                .collect()
-        }
+        None => x.to_vec(),
     }
 }
 
@@ -242,11 +236,11 @@ impl TestData {
             }
             let sigma = noise_sigma(x, &s.tau, s.rate_hz, s.fundamental_hz);
             t.sigma[c] = sigma;
-            let fs = channel_features(s, t.proj.as_ref(), c, x);
+            let fs = channel_features(t.proj.as_ref(), c, x);
             let sd = if sine {
                 sigma * (2.0 / n as f64).sqrt()
             } else {
-                sigma / (block_len(s.rate_hz) as f64).sqrt()
+                sigma
             };
             let n_harm = t.proj.as_ref().map_or(0, |p| 2 * p.n_harm());
             for (i, v) in fs.iter().enumerate() {
@@ -357,7 +351,7 @@ impl TestData {
             if self.measured[c].is_none() || !(self.sigma[c] > 0.0) {
                 continue;
             }
-            for v in channel_features(&self.samples, self.proj.as_ref(), c, &model_ch[c]) {
+            for v in channel_features(self.proj.as_ref(), c, &model_ch[c]) {
                 r.push((v - self.meas[at]) / self.scale[at]);
                 at += 1;
             }
@@ -571,6 +565,14 @@ impl Free {
         };
         v.clamp(lo, hi)
     }
+    /// The scaled coordinate of `value` (the inverse of [`Free::value`] inside the range).
+    pub fn u_of(&self, value: f64) -> f64 {
+        if self.log {
+            (value / self.start).ln()
+        } else {
+            (value - self.start) / self.start.abs().max(1.0)
+        }
+    }
     /// d value / d u at u.
     pub fn slope(&self, u: f64) -> f64 {
         if self.log {
@@ -591,6 +593,36 @@ pub fn apply(model: &ModelParams, free: &[Free], u: &[f64]) -> ModelParams {
         (f.info.set)(&mut m, f.value(x));
     }
     m
+}
+
+/// `free` with the start of the parameter `scan` names (its path, `effect.name`) moved to the one of its values (or its
+/// own start) at which the model, the other parameters at their starts, has the lowest χ²: one
+/// batch of evaluations. A resonance's frequency or a lag makes χ² non-convex in the parameter,
+/// and Levenberg–Marquardt from a start in another valley stays there. Values outside the
+/// parameter's range are skipped; without a scan, or when `free` lacks the parameter, `free` as
+/// it is.
+pub fn scanned(problem: &Problem, free: &[Free], scan: Option<(&str, &[f64])>) -> Vec<Free> {
+    let mut out = free.to_vec();
+    let Some((name, values)) = scan else {
+        return out;
+    };
+    let Some(i) = free.iter().position(|f| f.info.path() == name) else {
+        return out;
+    };
+    let f = free[i];
+    let points: Vec<f64> = std::iter::once(f.start)
+        .chain(values.iter().copied().filter(|&v| f.info.range.contains(v)))
+        .collect();
+    let ev = problem.evaluate(points.len(), &|k, m| {
+        let mut u = vec![0.0; free.len()];
+        u[i] = f.u_of(points[k]);
+        apply(m, free, &u)
+    });
+    let best = (0..points.len())
+        .min_by(|&a, &b| ev[a].chi2().total_cmp(&ev[b].chi2()))
+        .unwrap_or(0);
+    out[i] = Free::new(f.info, points[best]);
+    out
 }
 
 /// The outcome of a fit.
@@ -830,12 +862,7 @@ fn damped_step(a: &[Vec<f64>], g: &[f64], l: f64, u: &[f64], free: &[Free]) -> V
                 0.0
             };
             // Keep u where the clamp to the valid range puts the value.
-            let v = f.value(x + dx);
-            if f.log {
-                (v / f.start).ln()
-            } else {
-                (v - f.start) / f.start.abs().max(1.0)
-            }
+            f.u_of(f.value(x + dx))
         })
         .collect()
 }
@@ -865,14 +892,35 @@ fn uncertainty(j: &[Vec<f64>], after: &Eval, n: usize) -> (Vec<f64>, Vec<Vec<f64
     (se_u, corr)
 }
 
-/// χ² contributions grouped by (test, harmonic) — what a candidate explains.
+/// [`FeatureInfo::harmonic`] of a record's residual in octave band `b` of
+/// [`super::fourier::octave_edges`], in [`grouped`]: `BAND + b`.
+pub const BAND: usize = 200;
+
+/// χ² contributions grouped by (test, harmonic) — what a candidate explains. A record test's
+/// samples (harmonic 0; `rates_hz` per test) are split by octave band (Parseval,
+/// [`super::fourier::band_energy`]): key `BAND + b`.
 pub fn grouped(
     features: &[FeatureInfo],
+    rates_hz: &[f64],
     r: &[f64],
 ) -> std::collections::BTreeMap<(usize, usize), f64> {
     let mut g = std::collections::BTreeMap::new();
-    for (f, v) in features.iter().zip(r) {
-        *g.entry((f.test, f.harmonic)).or_insert(0.0) += v * v;
+    let mut i = 0;
+    while i < features.len().min(r.len()) {
+        let f = features[i];
+        if f.harmonic != 0 {
+            *g.entry((f.test, f.harmonic)).or_insert(0.0) += r[i] * r[i];
+            i += 1;
+            continue;
+        }
+        // One channel's samples of a record test: a contiguous run.
+        let end = i + features[i..].iter().take_while(|&&h| h == f).count();
+        let edges = super::fourier::octave_edges(rates_hz[f.test]);
+        let e = super::fourier::band_energy(&r[i..end], rates_hz[f.test], &edges);
+        for (b, v) in e.into_iter().enumerate() {
+            *g.entry((f.test, BAND + b)).or_insert(0.0) += v;
+        }
+        i = end;
     }
     g
 }
@@ -883,7 +931,7 @@ mod tests {
     use crate::kernel::excitation::Record;
     use crate::orchestration::sim::run_sampled;
 
-    /// A record test (block features) with a hidden baseline-parameter change: the fit of that
+    /// A record test (time-domain features) with a hidden baseline-parameter change: the fit of that
     /// parameter from its default finds it, within its standard error's reach.
     #[test]
     fn a_record_campaign_recovers_a_baseline_parameter() {
@@ -936,10 +984,9 @@ mod tests {
             [ch(ch::ACCEL), ch(ch::DISP), ch(ch::FORCE)],
             Weights::default(),
         );
-        assert_eq!(block_len(500.0), 8);
         assert!(
-            test.samples.fundamental_hz.is_none() && test.len() == 3 * (1500 / 8),
-            "block features: {}",
+            test.samples.fundamental_hz.is_none() && test.len() == 3 * 1500,
+            "time-domain features: {}",
             test.len()
         );
         let problem = Problem::new(vec![test]);

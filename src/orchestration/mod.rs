@@ -6,6 +6,7 @@ pub mod campaign;
 pub mod compare;
 pub mod diagnose;
 pub mod fit;
+pub mod fourier;
 pub mod measured;
 pub mod memory;
 pub mod quake;

@@ -310,3 +310,23 @@ pub fn run_sampled(
     let [result] = run_lanes::<1, _>(&[model], reference, solver, &mut rs)?;
     Ok((result, rs))
 }
+
+/// What a data-acquisition system records of `reference` at `rate` Hz after `pre_rows` rows at
+/// rest, read back as the tracked reference (`signal = "reference"`, docs/model.md §4): x_r at
+/// the file's times is the record, its derivatives the zero-phase filter's with corner
+/// `f_ref_hz`. A model run on it and the same record read from the file agree at the numerical
+/// floor, whatever generator made x_r.
+pub fn tracked_record(reference: &Reference, rate: f64, pre_rows: usize, f_ref_hz: f64) -> Record {
+    let f_s = reference.f_s;
+    let n = (reference.len() as f64 / f_s * rate).round() as usize;
+    let x0 = reference.x[0];
+    let disp_m: Vec<f64> = std::iter::repeat_n(x0, pre_rows)
+        .chain((0..n).map(|i| reference.at_time(&reference.x, i as f64 / rate)))
+        .collect();
+    Record {
+        time_s: (0..disp_m.len()).map(|i| i as f64 / rate).collect(),
+        disp_m,
+        f_ref_hz,
+        signal: crate::kernel::excitation::Signal::Reference,
+    }
+}

@@ -52,9 +52,12 @@ pub const RANDOM_KEYS: [&str; 8] = [
     "seed",
 ];
 
-/// `f_ref_hz`: the corner of the reference's state-variable filter (default 50 Hz), below f_s/2.
+/// Default corner of a record's reference filter, Hz [chosen: docs/model.md §4].
+pub const F_REF_DEFAULT: f64 = 50.0;
+
+/// `f_ref_hz`: the corner of the reference's filter (default 50 Hz), below f_s/2.
 pub fn read_f_ref(f: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues) -> f64 {
-    let f_ref = f.f64("f_ref_hz", issues).unwrap_or(50.0);
+    let f_ref = f.f64("f_ref_hz", issues).unwrap_or(F_REF_DEFAULT);
     if !(f_ref > 0.0 && f_ref < 0.5 * model.controller.f_s) {
         issues.push(
             f.path_of("f_ref_hz"),

@@ -244,7 +244,8 @@ pub struct SynthArgs {
     /// Hidden parameter change, component.name=value (repeatable), e.g. seal_friction.f_c=8000.
     #[arg(long = "set")]
     pub set: Vec<String>,
-    /// Sensor noise, standard deviations in SI units: accel=0.05,disp=1e-5,force=2000,p1=1e4,p2=1e4.
+    /// Sensor noise, standard deviations in SI units (accel=0.05,disp=1e-5,force=2000,p1=1e4,
+    /// p2=1e4) or in percent of each test's rms of that channel (accel=1%).
     #[arg(long)]
     pub noise: Option<String>,
     /// Seed of the noise (one stream per test and channel).
@@ -261,6 +262,11 @@ pub struct SynthArgs {
     /// Seconds of recording at rest before the excitation starts (a pre-trigger).
     #[arg(long, default_value_t = 0.0)]
     pub pre_trigger: f64,
+    /// Write every test that is not a sine (a stochastic motion, a sweep, random) as a record
+    /// test of its file's `ref_disp_m`, as a lab's campaign has it: the files, not the
+    /// generator that made them.
+    #[arg(long)]
+    pub as_records: bool,
 }
 
 #[derive(Debug, clap::Args)]

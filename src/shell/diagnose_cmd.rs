@@ -13,11 +13,18 @@ use plotters::prelude::*;
 use std::fmt::Write as _;
 use std::io::Write;
 
-fn harmonic_label(k: usize) -> String {
+/// What a feature group is: a sine's harmonic, mean or remainder, or a record's frequency band
+/// (`rate_hz`: the test's sample rate).
+fn harmonic_label(k: usize, rate_hz: f64) -> String {
+    use crate::orchestration::{fit, fourier};
     match k {
-        0 => "time blocks".into(),
-        crate::orchestration::fit::MEAN => "mean".into(),
-        crate::orchestration::fit::REMAINDER => "beyond h1-h9".into(),
+        fit::MEAN => "mean".into(),
+        fit::REMAINDER => "beyond h1-h9".into(),
+        k if k >= fit::BAND => {
+            let e = fourier::octave_edges(rate_hz);
+            let b = (k - fit::BAND).min(e.len() - 2);
+            format!("{}-{} Hz", e[b], e[b + 1])
+        }
         k => format!("h{k}"),
     }
 }
@@ -145,7 +152,7 @@ fn print_evidence(o: &mut dyn Write, problem: &Problem, d: &Diagnosis) -> std::i
             writeln!(
                 o,
                 "      {} of {:<16} {:>11.4e} -> {:.4e}",
-                harmonic_label(k),
+                harmonic_label(k, problem.tests[t].samples.rate_hz),
                 problem.tests[t].name,
                 b,
                 a
@@ -202,7 +209,7 @@ fn print_selection(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
         writeln!(
             o,
             "  + {:<20} {:>4} {:>11.4e} {:>11.4e} {:>8.1}% {:>11.3e}  {}",
-            s.effect.name(),
+            s.part().to_string(),
             format!(
                 "{}{}",
                 s.fit.iterations,
@@ -338,7 +345,7 @@ fn candidates_columns(d: &Diagnosis) -> Vec<(String, Column)> {
 fn selection_columns(d: &Diagnosis) -> Vec<(String, Column)> {
     let cs = &d.candidates;
     let mut steps: Vec<(
-        &str,
+        String,
         &[crate::orchestration::fit::Free],
         &crate::orchestration::fit::FitResult,
         f64,
@@ -346,12 +353,12 @@ fn selection_columns(d: &Diagnosis) -> Vec<(String, Column)> {
     )> = Vec::new();
     if let Some(c) = cs.first().filter(|c| c.significant()) {
         if let Ok(f) = &c.fit {
-            steps.push((c.effect.name(), &c.free, f, c.delta_bic, c.explained));
+            steps.push((c.effect.to_string(), &c.free, f, c.delta_bic, c.explained));
         }
     }
     for st in &d.more {
         steps.push((
-            st.effect.name(),
+            st.part().to_string(),
             &st.free,
             &st.fit,
             st.delta_bic,
@@ -365,7 +372,7 @@ fn selection_columns(d: &Diagnosis) -> Vec<(String, Column)> {
         ),
         (
             "effect".into(),
-            Column::Str(steps.iter().map(|s| s.0.to_string()).collect()),
+            Column::Str(steps.iter().map(|s| s.0.clone()).collect()),
         ),
         (
             "params".into(),
@@ -478,6 +485,14 @@ fn evidence_columns(problem: &Problem, d: &Diagnosis) -> Vec<(String, Column)> {
         (
             "harmonic".into(),
             Column::U32(ev.iter().map(|e| e.2 as u32).collect()),
+        ),
+        (
+            "feature".into(),
+            Column::Str(
+                ev.iter()
+                    .map(|e| harmonic_label(e.2, problem.tests[e.1].samples.rate_hz))
+                    .collect(),
+            ),
         ),
         (
             "chi2_baseline".into(),
@@ -618,7 +633,7 @@ td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}} th{{background:#
             writeln!(
                 h,
                 "<tr><td>{}</td><td>{}</td><td>{b:.4e}</td><td>{a:.4e}</td></tr>",
-                harmonic_label(k),
+                harmonic_label(k, problem.tests[t].samples.rate_hz),
                 esc(&problem.tests[t].name)
             )?;
         }

@@ -70,9 +70,30 @@ pub fn apply_sets(model: &mut ModelParams, sets: &[String]) -> anyhow::Result<()
     Ok(())
 }
 
-/// Parses `--noise accel=0.05,disp=1e-5` (standard deviations in SI units).
-pub fn parse_noise(spec: Option<&str>) -> anyhow::Result<[f64; 5]> {
-    let mut out = [0.0; 5];
+/// A channel's noise: a standard deviation in SI units, or a fraction of the channel's rms in
+/// each test (`accel=1%`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Noise {
+    Absolute(f64),
+    OfRms(f64),
+}
+
+impl Noise {
+    /// The standard deviation for a channel whose values are `v`.
+    fn sd(self, v: &[f64]) -> f64 {
+        match self {
+            Noise::Absolute(s) => s,
+            Noise::OfRms(k) => {
+                k * (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt()
+            }
+        }
+    }
+}
+
+/// Parses `--noise accel=0.05,disp=1e-5` (standard deviations in SI units) or `accel=1%` (of
+/// each test's rms of the channel).
+pub fn parse_noise(spec: Option<&str>) -> anyhow::Result<[Noise; 5]> {
+    let mut out = [Noise::Absolute(0.0); 5];
     let Some(spec) = spec else { return Ok(out) };
     for item in spec.split(',').filter(|s| !s.trim().is_empty()) {
         let (k, v) = item
@@ -88,8 +109,11 @@ pub fn parse_noise(spec: Option<&str>) -> anyhow::Result<[f64; 5]> {
                     NOISY.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
                 ))
             })?;
-        let v: f64 = v
-            .trim()
+        let (text, percent) = match v.trim().strip_suffix('%') {
+            Some(t) => (t.trim(), true),
+            None => (v.trim(), false),
+        };
+        let v: f64 = text
             .parse()
             .map_err(|_| BadInput(format!("--noise {item:?}: not a number")))?;
         if !(v >= 0.0 && v.is_finite()) {
@@ -98,7 +122,11 @@ pub fn parse_noise(spec: Option<&str>) -> anyhow::Result<[f64; 5]> {
             ))
             .into());
         }
-        out[i] = v;
+        out[i] = if percent {
+            Noise::OfRms(v / 100.0)
+        } else {
+            Noise::Absolute(v)
+        };
     }
     Ok(out)
 }
@@ -223,7 +251,7 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
         )?;
     }
     let dst = args.out.join(lc.file.file_name().unwrap_or_default());
-    let records = write_campaign(&lc, &dst)?;
+    let records = write_campaign(&lc, &dst, args.as_records)?;
     writeln!(stdout, "  campaign                 {}", dst.display())?;
     writeln!(
         stdout,
@@ -241,16 +269,27 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The reference filter's corner of a test that the synthesised campaign reads as a record
+/// test: a record test, and, `as_records`, every other test that is not a sine.
+fn read_as_record(e: &ExcitationSpec, as_records: bool) -> Option<f64> {
+    match e {
+        ExcitationSpec::Record { f_ref_hz, .. } => Some(*f_ref_hz),
+        ExcitationSpec::Stochastic { f_ref_hz, .. } if as_records => Some(*f_ref_hz),
+        ExcitationSpec::Sweep { .. } | ExcitationSpec::Random { .. } if as_records => {
+            Some(crate::orchestration::spec_quake::F_REF_DEFAULT)
+        }
+        _ => None,
+    }
+}
+
 /// Writes the campaign of the synthesised files to `dst`: a copy of the campaign, with each
 /// record test's excitation made the record of its own file's `ref_disp_m` (the tracked
 /// reference, `signal = "reference"`, docs/model.md §4), since that column now holds what the
-/// controller tracked; returns how many tests that changed.
-fn write_campaign(lc: &LoadedCampaign, dst: &Path) -> anyhow::Result<usize> {
+/// controller tracked — and, `as_records`, every other test that is not a sine; returns how many
+/// tests that changed.
+fn write_campaign(lc: &LoadedCampaign, dst: &Path, as_records: bool) -> anyhow::Result<usize> {
     let records: Vec<(usize, f64)> = (lc.campaign.tests.iter().enumerate())
-        .filter_map(|(i, t)| match &t.excitation {
-            ExcitationSpec::Record { f_ref_hz, .. } => Some((i, *f_ref_hz)),
-            _ => None,
-        })
+        .filter_map(|(i, t)| Some((i, read_as_record(&t.excitation, as_records)?)))
         .collect();
     if records.is_empty() {
         if std::fs::canonicalize(&lc.file).ok() != std::fs::canonicalize(dst).ok() {
@@ -310,13 +349,21 @@ fn synth_test(
     args: &SynthArgs,
     lc: &LoadedCampaign,
     (i, test): (usize, &TestSpec),
-    noise: &[f64; 5],
+    noise: &[Noise; 5],
     (rate, pre_rows): (f64, usize),
 ) -> anyhow::Result<(PathBuf, usize)> {
     let mut test_model = test.model.clone();
     apply_effects(&mut test_model, &args.effect)?;
     apply_sets(&mut test_model, &args.set)?;
     let mut reference = load_reference(&test.excitation, &test_model, &lc.base, 0)?;
+    let mut pre_rows = pre_rows;
+    if let Some(f_ref_hz) = read_as_record(&test.excitation, args.as_records) {
+        // The campaign reads this test's x_r as the tracked reference: the truth tracks that
+        // reference too, its derivatives the zero-phase filter's (docs/model.md §4).
+        let record = sim::tracked_record(&reference, rate, pre_rows, f_ref_hz);
+        reference = record.reference(test_model.controller.f_s);
+        pre_rows = 0;
+    }
     let spec = SimSpec {
         model: test_model,
         excitation: test.excitation.clone(),
@@ -355,17 +402,18 @@ fn synth_test(
 
 /// Seeded Gaussian sensor noise added to the `i`-th test's noisy channels: one stream per test
 /// and channel.
-fn add_noise(cols: &mut [(&str, Vec<f64>)], noise: &[f64; 5], seed: u64, i: usize) {
+fn add_noise(cols: &mut [(&str, Vec<f64>)], noise: &[Noise; 5], seed: u64, i: usize) {
     for (c, (_, col)) in NOISY.iter().enumerate() {
-        if noise[c] > 0.0 {
+        let v = &mut cols
+            .iter_mut()
+            .find(|(n, _)| n == col)
+            .expect("noisy column")
+            .1;
+        let sd = noise[c].sd(v);
+        if sd > 0.0 {
             let mut rng = ChaCha8Rng::seed_from_u64(seed);
             rng.set_stream((i * NOISY.len() + c) as u64);
-            let dist = Normal::new(0.0, noise[c]).expect("std >= 0");
-            let v = &mut cols
-                .iter_mut()
-                .find(|(n, _)| n == col)
-                .expect("noisy column")
-                .1;
+            let dist = Normal::new(0.0, sd).expect("std >= 0");
             for x in v.iter_mut() {
                 *x += dist.sample(&mut rng);
             }

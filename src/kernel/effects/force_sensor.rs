@@ -18,6 +18,7 @@ pub const INFO: EffectInfo = EffectInfo {
         label: "",
         free: &["f_c", "delay"],
         scan: Some(("f_c", &[15.0, 30.0, 60.0, 120.0, 240.0])),
+        start: &[],
     }],
     moves_spool: false,
 };

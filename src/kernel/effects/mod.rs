@@ -121,6 +121,9 @@ pub struct Stage {
     /// A parameter whose start a fit scans over these values, keeping the best, before it
     /// iterates: one that makes the misfit non-convex (a resonance's frequency).
     pub scan: Option<(&'static str, &'static [f64])>,
+    /// Values a diagnosis starts this stage's parameters from where the model has them at 0
+    /// (a second mode's mass: at 0 the mode is absent and its frequency has no effect to scan).
+    pub start: &'static [(&'static str, f64)],
 }
 
 impl Stage {
@@ -130,6 +133,7 @@ impl Stage {
             label: "",
             free,
             scan: None,
+            start: &[],
         }
     }
 }

@@ -20,7 +20,13 @@ pub const INFO: EffectInfo = EffectInfo {
     family: "reaction mass",
     summary: "the actuators push against a reaction mass on a compliant foundation",
     params: Params::PARAMS,
-    stages: &[Stage::free(&["m_r", "f_r"])],
+    stages: &[Stage {
+        label: "",
+        free: &["m_r", "f_r"],
+        // [chosen] Starts a fit scans for `f_r` (a resonance).
+        scan: Some(("f_r", &[3.0, 6.0, 12.0, 25.0, 50.0, 100.0])),
+        start: &[],
+    }],
     moves_spool: false,
 };
 

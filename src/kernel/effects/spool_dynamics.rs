@@ -12,7 +12,13 @@ pub const INFO: EffectInfo = EffectInfo {
     family: "valve dynamics",
     summary: "a second-order lag between the valve command and the spool",
     params: Params::PARAMS,
-    stages: &[Stage::free(&["freq_hz"])],
+    stages: &[Stage {
+        label: "",
+        free: &["freq_hz"],
+        // [chosen] Starts a fit scans for `freq_hz` (a spool slow enough to matter can drive the loop into a limit cycle, whose misfit has other valleys).
+        scan: Some(("freq_hz", &[15.0, 25.0, 40.0, 60.0, 90.0, 140.0, 220.0])),
+        start: &[],
+    }],
     moves_spool: true,
 };
 

@@ -20,7 +20,13 @@ pub const INFO: EffectInfo = EffectInfo {
     family: "valve dynamics",
     summary: "a pure delay between the valve command and the spool",
     params: Params::PARAMS,
-    stages: &[Stage::free(&["tau"])],
+    stages: &[Stage {
+        label: "",
+        free: &["tau"],
+        // [chosen] Starts a fit scans for `tau` (a lag a whole period off a harmonic fits it as well).
+        scan: Some(("tau", &[0.5e-3, 1.0e-3, 2.0e-3, 4.0e-3, 8.0e-3, 15.0e-3])),
+        start: &[],
+    }],
     moves_spool: true,
 };
 
