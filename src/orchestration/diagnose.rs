@@ -38,6 +38,9 @@ use super::statemap::StateMap;
 use crate::kernel::params::{EffectId, ModelParams};
 use rayon::prelude::*;
 
+/// The family of the sensors' effects: a verdict naming it says which channel's measurement.
+pub const MEASUREMENT_FAMILY: &str = "measurement chain";
+
 /// ΔBIC above which a candidate counts as significant.
 pub const SIGNIFICANT_BIC: f64 = 10.0;
 /// Share of the residual beyond noise a candidate must explain to be called significant at all
@@ -52,6 +55,8 @@ pub const EXPLAINS_ENOUGH: f64 = 0.5;
 /// so they must take the residual (nearly) to the noise; otherwise two wrong effects could each
 /// mimic part of an effect the library does not have.
 pub const EXPLAINS_TOGETHER: f64 = 0.9;
+/// Leading candidates whose fits go on when they stop at [`MAX_ITER`] ([`polish_leaders`]).
+pub const POLISHED: usize = 3;
 /// Iterations of each candidate's fit.
 pub const MAX_ITER: usize = 25;
 /// Most effects forward selection names together.
@@ -153,6 +158,8 @@ pub struct Diagnosis {
     pub n: usize,
     /// Noise floor of the residual rms.
     pub noise_rms: f64,
+    /// Noise floor of each channel's residual rms (acceleration, displacement, force).
+    pub channel_noise: [f64; 3],
     /// Candidates, best first.
     pub candidates: Vec<Candidate>,
     /// Effects forward selection added on top of the best candidate, in order.
@@ -259,6 +266,29 @@ impl Diagnosis {
         format!(", but leaves a residual {ratio:.1}x the noise floor: its form is probably not quite the plant's{left}")
     }
 
+    /// The channels whose starting residual exceeds [`NOISE_FACTOR`] times their noise floor.
+    pub fn channels_off(&self) -> Vec<usize> {
+        (0..3)
+            .filter(|&c| self.baseline.channel_rms(c) > NOISE_FACTOR * self.channel_noise[c])
+            .collect()
+    }
+
+    /// "; the residual sits in the acceleration channel alone …" when the named effects are the
+    /// measurement chain and one channel alone misfits; empty otherwise.
+    fn measurement_note(&self, effects: &[Part]) -> String {
+        let off = self.channels_off();
+        let chain = effects
+            .iter()
+            .all(|p| p.effect.info().family == MEASUREMENT_FAMILY);
+        match off.as_slice() {
+            [c] if chain => {
+                let ch = ["acceleration", "displacement", "force"][*c];
+                format!("; the residual sits in the {ch} channel alone (the others agree with the model to the noise): it is the {ch} channel's measurement, not the plant")
+            }
+            _ => String::new(),
+        }
+    }
+
     /// The verdict in plain words.
     pub fn summary(&self) -> String {
         let best = self.candidates.first();
@@ -286,22 +316,24 @@ impl Diagnosis {
                 ),
             },
             Verdict::Missing { effects, explained } if effects.len() == 1 => format!(
-                "most likely missing: {} ({}); it explains {:.0} % of the residual beyond noise (dBIC = {:.0}){}",
+                "most likely missing: {} ({}); it explains {:.0} % of the residual beyond noise (dBIC = {:.0}){}{}",
                 effects[0],
                 effects[0].effect.info().family,
                 100.0 * explained,
                 best.map_or(f64::NAN, |c| c.delta_bic),
-                self.short_of_noise()
+                self.short_of_noise(),
+                self.measurement_note(&effects)
             ),
             Verdict::Missing { effects, explained } => format!(
-                "most likely missing: {}; together they explain {:.0} % of the residual beyond noise ({}){}",
+                "most likely missing: {}; together they explain {:.0} % of the residual beyond noise ({}){}{}",
                 effects.iter().map(|e| match e.stage {
                     0 => format!("{e} ({})", e.effect.info().family),
                     _ => e.to_string(),
                 }).collect::<Vec<_>>().join(" + "),
                 100.0 * explained,
                 self.shares(),
-                self.short_of_noise()
+                self.short_of_noise(),
+                self.measurement_note(&effects)
             ),
             Verdict::Unexplained { effects, explained } if effects.len() == 1 => format!(
                 "the best candidate, {}, explains only {:.0} % of the residual beyond noise: the missing effect is probably not in the library{}",
@@ -411,6 +443,94 @@ fn scanned(problem: &Problem, free: &[Free], effect: EffectId, stage: usize) -> 
     fit::scanned(problem, free, path.as_deref().zip(scan.map(|(_, v)| v)))
 }
 
+/// How a candidate's fit is scored against the baseline (χ², residual rms, its noise floor²).
+struct Scoring {
+    chi2_b: f64,
+    rb: f64,
+    n2: f64,
+    ln_n: f64,
+}
+
+impl Scoring {
+    /// The candidate `effect` with its parameters `free` and their fit: its ΔBIC, the share of
+    /// the residual beyond noise it explains, and whether it lowers the residual.
+    fn candidate(
+        &self,
+        effect: EffectId,
+        free: Vec<Free>,
+        fit: Result<fit::FitResult, fit::FitError>,
+    ) -> Candidate {
+        let p = free.len() as f64;
+        let lowers_residual = fit
+            .as_ref()
+            .is_ok_and(|f| f.after.residual_rms() <= self.rb);
+        let (delta_bic, explained) = match &fit {
+            Ok(f) => {
+                let rc = f.after.residual_rms();
+                let excess = self.rb * self.rb - self.n2;
+                // A candidate that fits the features worse than the baseline explains nothing.
+                let e = if excess > 0.0 && f.chi2_after() < self.chi2_b {
+                    (1.0 - (rc * rc - self.n2) / excess).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+                (self.chi2_b - f.chi2_after() - p * self.ln_n, e)
+            }
+            Err(_) => (f64::NEG_INFINITY, 0.0),
+        };
+        Candidate {
+            effect,
+            family: effect.info().family,
+            free,
+            fit,
+            delta_bic,
+            explained,
+            lowers_residual,
+        }
+    }
+}
+
+/// Significant candidates first, each group by ΔBIC.
+fn rank(out: &mut [Candidate]) {
+    out.sort_by(|a, b| {
+        b.significant()
+            .cmp(&a.significant())
+            .then(b.delta_bic.total_cmp(&a.delta_bic))
+    });
+}
+
+/// The leading [`POLISHED`] significant candidates whose fits stopped at [`MAX_ITER`] go on from
+/// their estimates (up to 4 × [`MAX_ITER`] more), and the candidates are ranked again: two
+/// effects of one family may both explain nearly all, and the one whose parameters are
+/// correlated (a dead volume and an air fraction) converges slowly; stopping it early would rank
+/// the other first.
+fn polish_leaders(problem: &Problem, out: &mut [Candidate], baseline: &fit::Eval, s: &Scoring) {
+    let slow: Vec<usize> = (0..out.len().min(POLISHED))
+        .filter(|&i| out[i].significant() && out[i].fit.as_ref().is_ok_and(|f| !f.converged))
+        .collect();
+    let again: Vec<(usize, Candidate)> = slow
+        .par_iter()
+        .filter_map(|&i| {
+            let c = &out[i];
+            let f = c.fit.as_ref().ok()?;
+            let restart = at_estimates(&c.free, &f.estimate);
+            let r = fit::fit_from(problem, &restart, 4 * MAX_ITER, baseline.clone()).ok()?;
+            (r.chi2_after() < f.chi2_after()).then(|| (i, s.candidate(c.effect, restart, Ok(r))))
+        })
+        .collect();
+    for (i, c) in again {
+        out[i] = c;
+    }
+    rank(out);
+}
+
+/// `free` with the start scan of stage 0 of each of `effects` applied in turn (`study fit`).
+pub fn scan_starts(problem: &Problem, free: &[Free], effects: &[EffectId]) -> Vec<Free> {
+    effects
+        .iter()
+        .fold(free.to_vec(), |f, &e| scanned(problem, &f, e, 0))
+}
+
 /// Fits every candidate and ranks them.
 pub fn diagnose(problem: &Problem, candidates: &[EffectId]) -> Diagnosis {
     let baseline = problem.evaluate(1, &|_, m| m.clone()).remove(0);
@@ -419,48 +539,28 @@ pub fn diagnose(problem: &Problem, candidates: &[EffectId]) -> Diagnosis {
     let noise = problem.noise_rms();
     let (rb, n2) = (baseline.residual_rms(), noise * noise);
     let model0 = &problem.tests[0].model;
+    let score = Scoring {
+        chi2_b,
+        rb,
+        n2,
+        ln_n: (n as f64).ln(),
+    };
     let mut out: Vec<Candidate> = candidates
         .par_iter()
         .map(|&effect| {
             let free = scanned(problem, &free_of(effect, model0), effect, 0);
             let fit = fit::fit_from(problem, &free, MAX_ITER, baseline.clone());
-            let p = free.len() as f64;
-            let lowers_residual = fit.as_ref().is_ok_and(|f| f.after.residual_rms() <= rb);
-            let (delta_bic, explained) = match &fit {
-                Ok(f) => {
-                    let rc = f.after.residual_rms();
-                    let excess = rb * rb - n2;
-                    // A candidate that fits the features worse than the baseline explains nothing.
-                    let e = if excess > 0.0 && f.chi2_after() < chi2_b {
-                        (1.0 - (rc * rc - n2) / excess).clamp(0.0, 1.0)
-                    } else {
-                        0.0
-                    };
-                    (chi2_b - f.chi2_after() - p * (n as f64).ln(), e)
-                }
-                Err(_) => (f64::NEG_INFINITY, 0.0),
-            };
-            Candidate {
-                effect,
-                family: effect.info().family,
-                free,
-                fit,
-                delta_bic,
-                explained,
-                lowers_residual,
-            }
+            score.candidate(effect, free, fit)
         })
         .collect();
-    out.sort_by(|a, b| {
-        b.significant()
-            .cmp(&a.significant())
-            .then(b.delta_bic.total_cmp(&a.delta_bic))
-    });
+    rank(&mut out);
+    polish_leaders(problem, &mut out, &baseline, &score);
     let more = forward_selection(problem, &out, n, (rb, n2));
     Diagnosis {
         baseline,
         n,
         noise_rms: noise,
+        channel_noise: std::array::from_fn(|c| problem.channel_noise_rms(c)),
         candidates: out,
         more,
         features: problem.features(),

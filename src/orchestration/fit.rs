@@ -33,7 +33,9 @@
 //!   rates where a table's broadband motion reaches 50 Hz; they remain the fallback for a record
 //!   too short for the band to hold 16 bins).
 //!
-//! Both are floored at 1e-6 of the channel's rms so noise-free synthetic data stays finite. A
+//! Both are floored at [`NUMERICAL_FLOOR`] of the channel's rms: a channel recorded without
+//! noise (a synthetic force) is still only as exact as the model is, and a weight beyond that
+//! would make its standard errors claim a precision no implementation of the model has. A
 //! harmonic of white noise over W samples has σ·√(2/W) per component, a mean σ/√W, a sample σ;
 //! the remainder's square has W − p degrees of freedom (p functions fitted), so a model right to
 //! the noise leaves χ² ≈ n, the features' degrees of freedom ([`Problem::dof`]).
@@ -60,6 +62,11 @@ use rayon::prelude::*;
 
 /// Forward-difference step in the scaled coordinates.
 const H: f64 = 1e-3;
+
+/// The least noise σ a channel is given, as a share of its rms [chosen: 1e-4, the numerical floor
+/// of the model against data made by another implementation of it, or at another sample rate:
+/// the round trips of tests/roundtrip.rs agree to that order, 1e-4 of the rms at 500 Hz].
+pub const NUMERICAL_FLOOR: f64 = 1e-4;
 
 /// Which channel a feature comes from.
 pub const CHANNELS: [&str; 3] = ["accel", "disp", "force"];
@@ -107,14 +114,14 @@ fn rms_slice(v: &[f64]) -> f64 {
     (v.iter().map(|a| a * a).sum::<f64>() / v.len().max(1) as f64).sqrt()
 }
 
-/// σ of white noise in `x` from its third differences, floored at 1e-6 of its rms.
+/// σ of white noise in `x` from its third differences, floored at [`NUMERICAL_FLOOR`] of its rms.
 pub fn noise_sigma_differences(x: &[f64]) -> f64 {
     let d3: Vec<f64> = x
         .windows(4)
         .map(|w| w[3] - 3.0 * w[2] + 3.0 * w[1] - w[0])
         .collect();
     (rms_slice(&d3) / 20f64.sqrt())
-        .max(1e-6 * rms_slice(x))
+        .max(NUMERICAL_FLOOR * rms_slice(x))
         .max(f64::MIN_POSITIVE)
 }
 
@@ -124,7 +131,7 @@ pub fn noise_sigma(x: &[f64], tau: &[f64], rate_hz: f64, f: Option<f64>) -> f64 
     let Some(f) = f else {
         return super::fourier::noise_sigma(x)
             .unwrap_or_else(|| noise_sigma_differences(x))
-            .max(1e-6 * rms_slice(x))
+            .max(NUMERICAL_FLOOR * rms_slice(x))
             .max(f64::MIN_POSITIVE);
     };
     let n = x.len();
@@ -163,7 +170,7 @@ pub fn noise_sigma(x: &[f64], tau: &[f64], rate_hz: f64, f: Option<f64>) -> f64 
     let rss: f64 = (0..n).map(|i| (x[i] - fitted[(i, 0)]).powi(2)).sum();
     (rss / (n - p) as f64)
         .sqrt()
-        .max(1e-6 * rms_slice(x))
+        .max(NUMERICAL_FLOOR * rms_slice(x))
         .max(f64::MIN_POSITIVE)
 }
 
@@ -306,6 +313,20 @@ impl Eval {
     pub fn test_rms(&self, t: usize) -> f64 {
         rms_of(self.rms[t].iter().copied())
     }
+    /// The residual rms of channel `c` over the tests (NaN where no test has it).
+    pub fn channel_rms(&self, c: usize) -> f64 {
+        let v: Vec<f64> = self
+            .rms
+            .iter()
+            .map(|r| r[c])
+            .filter(|x| !x.is_nan())
+            .collect();
+        if v.is_empty() {
+            f64::NAN
+        } else {
+            rms_of(v.into_iter())
+        }
+    }
     /// The campaign's residual rms: over every test and channel.
     pub fn residual_rms(&self) -> f64 {
         rms_of(self.rms.iter().flat_map(|r| r.iter().copied()))
@@ -404,6 +425,22 @@ impl Problem {
                 _ => f64::NAN,
             })
         }))
+    }
+
+    /// [`Problem::noise_rms`] of one channel (0 acceleration, 1 displacement, 2 force): over the
+    /// tests that have it; NaN where none does.
+    pub fn channel_noise_rms(&self, c: usize) -> f64 {
+        let v: Vec<f64> = (self.tests.iter())
+            .filter_map(|t| match &t.measured[c] {
+                Some(x) if t.sigma[c] > 0.0 => Some(t.sigma[c] / rms_slice(x)),
+                _ => None,
+            })
+            .collect();
+        if v.is_empty() {
+            f64::NAN
+        } else {
+            rms_of(v.into_iter())
+        }
     }
 
     /// Per test: the phase of the acceleration's fundamental, model minus measured, in degrees,

@@ -263,8 +263,8 @@ pub struct SynthArgs {
     #[arg(long, default_value_t = 0.0)]
     pub pre_trigger: f64,
     /// Write every test that is not a sine (a stochastic motion, a sweep, random) as a record
-    /// test of its file's `ref_disp_m`, as a lab's campaign has it: the files, not the
-    /// generator that made them.
+    /// test of its file's `ref_disp_m` (`signal = "reference"`), as a lab's campaign has it: the
+    /// files, not the generator that made them. The truth tracks that reference as read back.
     #[arg(long)]
     pub as_records: bool,
 }

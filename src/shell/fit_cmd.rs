@@ -137,7 +137,14 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     let loaded = load_problem(&args.campaign, &model, args.strict)?;
     let problem = &loaded.problem;
     let t0 = std::time::Instant::now();
-    let r = super::run_cmd::pool(args.threads)?
+    let effects: Vec<EffectId> = (args.effect.iter())
+        .map(|e| check_effect(e, "--effect"))
+        .collect::<anyhow::Result<_>>()?;
+    let pool = super::run_cmd::pool(args.threads)?;
+    // Each effect's start scan (a resonance's frequency, a lag), as a diagnosis makes it.
+    let free =
+        pool.install(|| crate::orchestration::diagnose::scan_starts(problem, &free, &effects));
+    let r = pool
         .install(|| fit::fit(problem, &free, args.max_iter))
         .map_err(|e| RunFailed(format!("the fit failed: {e}")))?;
     if let Some(f) = &r.before.failure {
