@@ -1,7 +1,9 @@
 //! Diagnosis: which physical effect is most likely missing from the model.
 //!
-//! Every candidate effect of the library is fitted to the campaign (its default free parameters,
-//! the `free` list of its `EffectInfo`; the candidates in parallel) and ranked by the Bayesian
+//! Every candidate effect of the library is fitted to the campaign (the free parameters of the
+//! first of its `EffectInfo::stages`, from the best point of the stage's start scan where it has
+//! one; the candidates in parallel; the leading ones whose fits stop at [`MAX_ITER`] go on,
+//! [`polish_leaders`]) and ranked by the Bayesian
 //! information criterion: ΔBIC = χ²_baseline − χ²_candidate − p·ln n (n the features' degrees of
 //! freedom, p parameters added). With the features scaled by their noise, χ² of a right model is
 //! ≈ n − p, so:
