@@ -54,7 +54,12 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
     if let Some(f) = &d.baseline.failure {
         return Err(RunFailed(format!("the starting model fails: {f}")).into());
     }
-    let implausible = residual_warnings(&problem, &d.baseline);
+    let best = (d.named_fit().map(|(_, f)| &f.after)).or_else(|| {
+        d.candidates
+            .first()
+            .and_then(|c| c.fit.as_ref().ok().map(|f| &f.after))
+    });
+    let implausible = residual_warnings(&problem, &d.baseline, best);
     if args.strict && !implausible.is_empty() {
         return Err(BadInput(format!("{} (--strict)", implausible.join("\n"))).into());
     }

@@ -38,14 +38,22 @@ pub fn load_problem(campaign: &Path, model: &ModelParams, strict: bool) -> anyho
     })
 }
 
-/// Warnings for tests whose baseline residual is above half the signal (the evaluation `e`).
-pub fn residual_warnings(problem: &Problem, e: &fit::Eval) -> Vec<String> {
-    problem
-        .tests
-        .iter()
-        .enumerate()
-        .filter(|(t, _)| e.rms.get(*t).is_some_and(|r| r[0] > crate::orchestration::compare::IMPLAUSIBLE_RESIDUAL))
-        .map(|(t, test)| format!("test {:?}: the starting model's residual is {:.0} % of the measured acceleration: the file of another test, a channel in other units, or a test that did not run as the campaign says?", test.name, 100.0 * e.rms[t][0]))
+/// Warnings for tests whose acceleration residual is above half the signal both in the starting
+/// model `start` and in the best model the command found (`best`: a fit's result; none where it
+/// found nothing). A specimen or a missing effect the fit explains is not a wrong file.
+pub fn residual_warnings(
+    problem: &Problem,
+    start: &fit::Eval,
+    best: Option<&fit::Eval>,
+) -> Vec<String> {
+    let limit = crate::orchestration::compare::IMPLAUSIBLE_RESIDUAL;
+    let accel = |e: &fit::Eval, t: usize| e.rms.get(t).map_or(0.0, |r| r[0]);
+    (problem.tests.iter().enumerate())
+        .filter(|(t, _)| accel(start, *t) > limit && best.is_none_or(|b| accel(b, *t) > limit))
+        .map(|(t, test)| {
+            let after = best.map_or(String::new(), |b| format!(", {:.0} % after the fit", 100.0 * accel(b, t)));
+            format!("test {:?}: the starting model's residual is {:.0} % of the measured acceleration{after}: the file of another test, a channel in other units, or a test that did not run as the campaign says?", test.name, 100.0 * accel(start, t))
+        })
         .collect()
 }
 
@@ -150,7 +158,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     if let Some(f) = &r.before.failure {
         return Err(RunFailed(format!("the starting model fails: {f}")).into());
     }
-    let implausible = residual_warnings(problem, &r.before);
+    let implausible = residual_warnings(problem, &r.before, Some(&r.after));
     if args.strict && !implausible.is_empty() {
         return Err(BadInput(format!("{} (--strict)", implausible.join("\n"))).into());
     }
