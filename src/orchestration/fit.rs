@@ -47,7 +47,8 @@
 //! 1e-3 in u); the base point, the perturbed points and the trial steps of one iteration are lanes
 //! of one batch on the lane kernel, and the tests run in parallel. Linear algebra by faer.
 //! Standard errors: Cov(u) = s²·(JᵀJ)⁻¹ with s² = max(1, χ²/(n − p)) (inflated when the model
-//! still misfits), mapped to the parameters' units.
+//! still misfits), checked along each parameter by direct evaluation ([`profiled`]: never smaller
+//! than χ²'s own curvature where it rises by 4s²), mapped to the parameters' units.
 
 use super::campaign::Weights;
 use super::measured::{wrap_deg, AlignedTest, Samples};
