@@ -255,16 +255,16 @@ fn malformed_measured_files_name_file_column_and_row() {
         (
             header_ok.replace(
                 "time_s,ref_disp_m,disp_m,accel_mps2",
-                "time_s,ref_disp_m,disp_m,acc",
+                "time_s,ref_disp_m,disp_m,velocity",
             ),
             vec!["`accel_mps2` is missing"],
         ),
         (
             header_ok.replace(
                 "time_s,ref_disp_m,disp_m,accel_mps2",
-                "time_s,ref_disp_m,disp_mm,accel_mps2",
+                "time_s,ref_disp_m,disp_furlongs,accel_mps2",
             ),
-            vec!["`disp_m` is missing", "`disp_mm`: other units?"],
+            vec!["column `disp_furlongs`: unknown unit `furlongs`"],
         ),
         (
             header_ok.replacen("\n0.0009765625,0,0,0\n", "\n0.0009765625,0,NaN,0\n", 1),

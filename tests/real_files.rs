@@ -612,3 +612,186 @@ fn diagnosis_of_a_re_exported_campaign_is_the_clean_ones() {
         );
     }
 }
+
+/// Issue 27: column names and units as a lab's system writes them. Each variant is read to the
+/// clean file's results (within the rounding of the unit conversion), with a note saying what
+/// was read: units in brackets and parentheses, upper case, MATLAB `writetable` names, a units
+/// row, a preamble, space, tab and semicolon separators, g, mm, ms, kN, bar.
+#[test]
+fn lab_headers_and_units_are_read_to_the_si_results() {
+    let d = tempfile::tempdir().unwrap();
+    let clean_dir = d.path().join("clean");
+    let base = compare(&synth(&clean_dir, &[]), &[]);
+    let g = 9.80665;
+    // (folder, separator, header per SI column, factor SI → file unit, units row, preamble lines)
+    type Variant = (
+        &'static str,
+        &'static str,
+        [&'static str; 5],
+        [f64; 5],
+        Option<&'static str>,
+        usize,
+    );
+    let variants: [Variant; 8] = [
+        (
+            "brackets",
+            ",",
+            [
+                "Time (s)",
+                "Ref Disp [mm]",
+                "Disp (mm)",
+                "Accel (g)",
+                "P1 (bar)",
+            ],
+            [1.0, 1e3, 1e3, 1.0 / g, 1e-5],
+            None,
+            0,
+        ),
+        (
+            "upper",
+            ",",
+            ["TIME_S", "REF_DISP_M", "DISP_M", "ACCEL_MPS2", "P1_PA"],
+            [1.0; 5],
+            None,
+            0,
+        ),
+        (
+            "matlab",
+            ",",
+            ["Time", "RefDisp", "Disp", "Accel", "p1"],
+            [1.0; 5],
+            None,
+            0,
+        ),
+        (
+            "unitsrow",
+            ",",
+            [
+                "Time",
+                "Reference Displacement",
+                "Displacement",
+                "Acceleration",
+                "Pressure 1",
+            ],
+            [1.0, 1e3, 1e3, 1.0 / g, 1e-5],
+            Some("s,mm,mm,g,bar"),
+            0,
+        ),
+        (
+            "preamble",
+            ",",
+            [
+                "Time (s)",
+                "Command Position (mm)",
+                "Position (mm)",
+                "Accel (m/s^2)",
+                "P1 (MPa)",
+            ],
+            [1.0, 1e3, 1e3, 1.0, 1e-6],
+            None,
+            5,
+        ),
+        (
+            "space",
+            " ",
+            ["time_s", "ref_disp_mm", "disp_mm", "accel_g", "p1_bar"],
+            [1.0, 1e3, 1e3, 1.0 / g, 1e-5],
+            None,
+            0,
+        ),
+        (
+            "tab",
+            "\t",
+            [
+                "Time (ms)",
+                "Ref Disp (mm)",
+                "Disp (mm)",
+                "Accel (g)",
+                "P1 (psi)",
+            ],
+            [1e3, 1e3, 1e3, 1.0 / g, 1.0 / 6894.757293168361],
+            None,
+            0,
+        ),
+        (
+            "semicolon",
+            ";",
+            [
+                "Time [s]",
+                "Target Disp [mm]",
+                "Table Disp [mm]",
+                "Table Accel [g]",
+                "P1 [kPa]",
+            ],
+            [1.0, 1e3, 1e3, 1.0 / g, 1e-3],
+            None,
+            0,
+        ),
+    ];
+    let si = ["time_s", "ref_disp_m", "disp_m", "accel_mps2", "p1_pa"];
+    for (dir, sep, header, k, units, preamble) in variants {
+        let to = d.path().join(dir);
+        std::fs::create_dir_all(&to).unwrap();
+        std::fs::copy(clean_dir.join("real.toml"), to.join("real.toml")).unwrap();
+        for name in FILES {
+            let csv = Csv::read(&clean_dir.join(name));
+            let mut text = String::new();
+            for i in 0..preamble {
+                text.push_str(&format!(
+                    "Export line {i}: lab DAQ v2, channel list below\n"
+                ));
+            }
+            text.push_str(&(header.join(sep) + "\n"));
+            if let Some(u) = units {
+                text.push_str(&(u.replace(',', sep) + "\n"));
+            }
+            let cols: Vec<usize> = si.iter().map(|c| csv.col(c)).collect();
+            for r in &csv.rows {
+                let cells: Vec<String> = (cols.iter().zip(&k))
+                    .map(|(&c, f)| format!("{:e}", r[c].parse::<f64>().unwrap() * f))
+                    .collect();
+                text.push_str(&(cells.join(sep) + "\n"));
+            }
+            std::fs::write(to.join(name), text).unwrap();
+        }
+        let r = compare(&to.join("real.toml"), &[]);
+        assert_same(&r, &base, 1e-9, dir);
+        if dir != "upper" {
+            assert!(
+                r.stdout.contains("read as accel_mps2"),
+                "{dir}: {}",
+                r.stdout
+            );
+        }
+    }
+}
+
+/// Issue 27: a unit vshake does not know, or of another quantity, is refused with one line
+/// naming the file, the column and the cause.
+#[test]
+fn unknown_units_are_refused_naming_file_and_column() {
+    let d = tempfile::tempdir().unwrap();
+    let clean_dir = d.path().join("clean");
+    synth(&clean_dir, &[]);
+    for (header, needle) in [
+        (
+            "Accel (furlongs/s^2)",
+            "column `Accel (furlongs/s^2)`: unknown unit `furlongs/s^2`",
+        ),
+        (
+            "Accel (mm)",
+            "column `Accel (mm)` read as `accel_mps2`, but its unit `mm` is not one of m/s²",
+        ),
+    ] {
+        let c = transform(&clean_dir, &d.path().join("bad"), |csv| {
+            let i = csv.col("accel_mps2");
+            csv.header[i] = header.to_string();
+        });
+        let (code, _, stderr) = study(&["compare", c.to_str().unwrap()]);
+        assert_eq!(code, 2, "{stderr}");
+        assert!(
+            stderr.contains("sine_3hz_1p73g.csv: ") && stderr.contains(needle),
+            "{stderr}"
+        );
+    }
+}

@@ -68,8 +68,8 @@ pub struct NumTable {
     pub file: PathBuf,
     pub names: Vec<String>,
     pub columns: Vec<Vec<f64>>,
-    /// Rows are lines of a text file after one header line (messages then give the line too).
-    pub csv: bool,
+    /// The 1-based line of data row 1 in a text file (messages then give the line too).
+    pub first_line: Option<usize>,
     /// What the reader noticed (another separator, decimal commas).
     pub notes: Vec<String>,
 }
@@ -100,8 +100,8 @@ impl NumTable {
                 "{}row {r}",
                 if place.is_empty() { "" } else { ", " }
             ));
-            if self.csv {
-                place.push_str(&format!(" (line {})", r + 1));
+            if let Some(l) = self.first_line {
+                place.push_str(&format!(" (line {})", r + l - 1));
             }
         }
         DataProblem {

@@ -3,6 +3,7 @@
 
 pub mod batch;
 pub mod campaign;
+pub mod columns;
 pub mod compare;
 pub mod diagnose;
 pub mod fit;

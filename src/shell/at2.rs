@@ -33,7 +33,7 @@ pub fn read(path: &Path) -> Result<NumTable, TableError> {
             file: path.to_path_buf(),
             names: vec![AT2_TIME.into(), AT2_COLUMN.into()],
             columns: vec![t, a],
-            csv: false,
+            first_line: None,
             notes,
         })
         .map_err(|message| TableError::Format {

@@ -7,6 +7,7 @@
 
 use crate::kernel::excitation::Reference;
 use crate::kernel::params::ModelParams;
+use crate::orchestration::columns;
 use crate::orchestration::sim;
 use crate::orchestration::spec::ExcitationSpec;
 use arrow_array::builder::{Float64Builder, ListBuilder, StringBuilder};
@@ -50,6 +51,8 @@ pub enum TableError {
         line: String,
         message: String,
     },
+    #[error("{file}: {message}")]
+    Column { file: PathBuf, message: String },
     #[error("{file}: the file has a header but no data rows")]
     Empty { file: PathBuf },
     #[error("{file}: the file is empty (no header, no rows)")]
@@ -228,25 +231,12 @@ fn column_names_unguarded(path: &Path) -> Result<Vec<String>, TableError> {
             .map(|f| f.name().clone())
             .collect())
     } else {
-        let mut first = String::new();
-        std::io::BufRead::read_line(&mut std::io::BufReader::new(f), &mut first).map_err(|e| {
-            TableError::Io {
-                file: file.clone(),
-                err: e,
-            }
-        })?;
-        let first = first.strip_prefix('\u{feff}').unwrap_or(&first);
-        let mut rdr = csv::ReaderBuilder::new()
-            .has_headers(true)
-            .delimiter(sniff_separator(first))
-            .trim(csv::Trim::All)
-            .from_reader(first.as_bytes());
-        let h = rdr.headers().map_err(|e| TableError::Format {
-            file,
-            kind: "CSV",
-            message: e.to_string(),
-        })?;
-        Ok(h.iter().map(str::to_string).collect())
+        let bytes = std::fs::read(path).map_err(|e| TableError::Io { file, err: e })?;
+        let text = String::from_utf8_lossy(&bytes);
+        let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
+        let lay = columns::layout(text);
+        let lines: Vec<&str> = text.lines().collect();
+        Ok(csv_header(&lines, &lay).0)
     }
 }
 
@@ -350,17 +340,9 @@ fn read_columns_lenient_impl(
     Ok((table, bad))
 }
 
-/// The field separator of a CSV file, from its header line: the one of `,`, `;` and tab that
-/// splits it most (a comma when none does).
-fn sniff_separator(header: &str) -> u8 {
-    [b',', b';', b'\t']
-        .into_iter()
-        .max_by_key(|&c| (header.bytes().filter(|&b| b == c).count(), c == b','))
-        .unwrap_or(b',')
-}
-
-/// Reads the `wanted` (and those of the `optional` present) columns of a CSV file, its
-/// separator found from the header.
+/// Reads the `wanted` (and those of the `optional` present) columns of a CSV file: its layout
+/// (separator, preamble, header, units row) found from its lines, its columns by name and unit
+/// ([`columns::resolve`]), converted to SI.
 fn read_csv(
     path: &Path,
     wanted: &[&str],
@@ -376,71 +358,139 @@ fn read_csv(
     if text.trim().is_empty() {
         return Err(TableError::EmptyFile { file });
     }
-    let sep = sniff_separator(text.lines().next().unwrap_or(""));
-    let mut notes = Vec::new();
-    if sep != b',' {
-        notes.push(format!(
-            "read as {}-separated values (found from the header)",
-            if sep == b';' { "semicolon" } else { "tab" }
-        ));
-    }
+    let lay = columns::layout(text);
+    let lines: Vec<&str> = text.lines().collect();
+    let (headers, units) = csv_header(&lines, &lay);
+    let idx = csv_columns(
+        path,
+        &headers,
+        units.as_deref(),
+        lay.header.is_some(),
+        (wanted, optional),
+    )?;
+    let mut notes = layout_notes(&lay);
+    notes.extend(columns_note(&idx));
+    let (sep, body) = csv_body(&lines[lay.data.min(lines.len())..], lay.sep);
     let mut rdr = csv::ReaderBuilder::new()
-        .has_headers(true)
+        .has_headers(false)
         .delimiter(sep)
         .trim(csv::Trim::All)
-        .from_reader(text.as_bytes());
-    let headers: Vec<String> = rdr
-        .headers()
-        .map_err(|e| TableError::Format {
-            file: file.clone(),
-            kind: "CSV",
-            message: e.to_string(),
-        })?
-        .iter()
-        .map(str::to_string)
-        .collect();
-    let idx = csv_columns(path, &headers, wanted, optional)?;
-    let (columns, bad_cells, decimal_commas) = read_csv_records(&mut rdr, &file, &idx, sep)?;
+        .flexible(true)
+        .from_reader(body.as_bytes());
+    let (mut columns, bad_cells, decimal_commas) =
+        read_csv_records(&mut rdr, &file, &idx, (sep, lay.data + 1))?;
     if decimal_commas {
         notes.push("decimal commas read as decimal points".into());
+    }
+    for (c, r) in columns.iter_mut().zip(&idx) {
+        c.iter_mut().for_each(|v| *v *= r.to_si);
     }
     Ok((
         NumTable {
             file,
-            names: idx.into_iter().map(|(n, _)| n).collect(),
+            names: idx.into_iter().map(|r| r.name).collect(),
             columns,
-            csv: true,
+            first_line: Some(lay.data + 1),
             notes,
         },
         bad_cells,
     ))
 }
 
-/// The columns read from a CSV file with `headers`: each wanted one (every one missing is an
-/// error), then each optional one present, with its position.
+/// The header's fields (`column 1`, ... where the file has none) and the units row's.
+fn csv_header(lines: &[&str], lay: &columns::Layout) -> (Vec<String>, Option<Vec<String>>) {
+    let headers = match lay.header {
+        Some(h) => columns::fields(lines[h], lay.sep),
+        None => {
+            let n = lines
+                .get(lay.data)
+                .map_or(0, |l| columns::fields(l, lay.sep).len());
+            (1..=n).map(|k| format!("column {k}")).collect()
+        }
+    };
+    let units = lay.units.map(|u| {
+        (columns::fields(lines[u], lay.sep).iter())
+            .map(|c| columns::strip_brackets(c).to_string())
+            .collect()
+    });
+    (headers, units)
+}
+
+/// One note for the columns read under another name or unit than vshake's.
+fn columns_note(idx: &[columns::Resolved]) -> Option<String> {
+    let notes: Vec<&str> = idx.iter().filter_map(|r| r.note.as_deref()).collect();
+    (!notes.is_empty()).then(|| notes.join("; "))
+}
+
+/// What the layout shows that a plain CSV file would not.
+fn layout_notes(lay: &columns::Layout) -> Vec<String> {
+    let mut notes = Vec::new();
+    match lay.sep {
+        b';' => notes.push("read as semicolon-separated values".to_string()),
+        b'\t' => notes.push("read as tab-separated values".to_string()),
+        b' ' => notes.push("read as space-separated values".to_string()),
+        _ => {}
+    }
+    if let Some(h) = lay.header.filter(|&h| h > 0) {
+        notes.push(format!("{h} line(s) before the header skipped"));
+    }
+    if let Some(u) = lay.units {
+        notes.push(format!(
+            "units read from the row under the header (line {})",
+            u + 1
+        ));
+    }
+    notes
+}
+
+/// The data lines as the CSV reader takes them: white-space separated ones re-joined by tabs.
+fn csv_body(lines: &[&str], sep: u8) -> (u8, String) {
+    if sep != b' ' {
+        return (sep, lines.join("\n"));
+    }
+    let body = lines
+        .iter()
+        .map(|l| l.split_whitespace().collect::<Vec<_>>().join("\t"));
+    (b'\t', body.collect::<Vec<_>>().join("\n"))
+}
+
+/// The columns read from a CSV file with `headers` (and a units row): each wanted one (every
+/// one missing is an error), then each optional one present, with its position and factor to SI.
 fn csv_columns(
     path: &Path,
     headers: &[String],
-    wanted: &[&str],
-    optional: &[&str],
-) -> Result<Vec<(String, usize)>, TableError> {
-    let mut idx = Vec::new();
-    let mut absent = Vec::new();
-    for w in wanted {
-        match headers.iter().position(|h| h == w) {
-            Some(i) => idx.push((w.to_string(), i)),
-            None => absent.push(missing(path, w, headers)),
-        }
+    units: Option<&[String]>,
+    has_header: bool,
+    (wanted, optional): (&[&str], &[&str]),
+) -> Result<Vec<columns::Resolved>, TableError> {
+    columns::resolve(headers, units, wanted, optional, &[]).map_err(|problems| {
+        TableError::all(
+            (problems.into_iter())
+                .map(|p| column_error(path, headers, has_header, p))
+                .collect(),
+        )
+    })
+}
+
+/// A column problem as a table error naming the file.
+fn column_error(
+    path: &Path,
+    headers: &[String],
+    has_header: bool,
+    p: columns::ColumnProblem,
+) -> TableError {
+    match p {
+        columns::ColumnProblem::Missing(c) if !has_header => TableError::MissingColumn {
+            file: path.to_path_buf(),
+            column: c,
+            hint: " (the file has no header row, its first line is numbers: add a header naming the columns, docs/formats.md)".into(),
+        },
+        columns::ColumnProblem::Missing(c) => missing(path, &c, headers),
+        p => TableError::Column {
+            file: path.to_path_buf(),
+            message: p.to_string(),
+        },
     }
-    if !absent.is_empty() {
-        return Err(TableError::all(absent));
-    }
-    for o in optional {
-        if let Some(i) = headers.iter().position(|h| h == o) {
-            idx.push((o.to_string(), i));
-        }
-    }
-    Ok(idx)
 }
 
 /// The `idx` columns of a CSV file's records: their values (NaN at a bad cell), the bad cells,
@@ -448,8 +498,8 @@ fn csv_columns(
 fn read_csv_records(
     rdr: &mut csv::Reader<&[u8]>,
     file: &Path,
-    idx: &[(String, usize)],
-    sep: u8,
+    idx: &[columns::Resolved],
+    (sep, first_line): (u8, usize),
 ) -> Result<(Vec<Vec<f64>>, BadCells, bool), TableError> {
     let mut columns: Vec<Vec<f64>> = vec![Vec::new(); idx.len()];
     let mut decimal_commas = false;
@@ -459,16 +509,16 @@ fn read_csv_records(
         let rec = rec.map_err(|e| TableError::Format {
             file: file.to_path_buf(),
             kind: "CSV",
-            message: format!("row {row} (line {}): {e}", row + 1),
+            message: format!("row {row} (line {}): {e}", row + first_line - 1),
         })?;
-        for (c, ((name, i), col)) in idx.iter().zip(columns.iter_mut()).enumerate() {
-            let cell = rec.get(*i).unwrap_or("");
+        for (c, (r, col)) in idx.iter().zip(columns.iter_mut()).enumerate() {
+            let (name, cell) = (&r.name, rec.get(r.index).unwrap_or(""));
             let bad = |message: String| {
                 move || TableError::BadCell {
                     file: file.to_path_buf(),
                     column: name.clone(),
                     row,
-                    line: format!(" (line {})", row + 1),
+                    line: format!(" (line {})", row + first_line - 1),
                     message,
                 }
             };
@@ -538,54 +588,36 @@ fn read_parquet(
         .iter()
         .map(|f| f.name().clone())
         .collect();
-    let names = parquet_columns(path, &found, wanted, optional)?;
+    let idx = columns::resolve(&found, None, wanted, optional, &[]).map_err(|problems| {
+        TableError::all(
+            (problems.into_iter())
+                .map(|p| column_error(path, &found, true, p))
+                .collect(),
+        )
+    })?;
     let reader = builder.build().map_err(|e| fmt(&e))?;
-    let mut columns: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
+    let mut columns: Vec<Vec<f64>> = vec![Vec::new(); idx.len()];
     let mut bad_cells = BadCells::default();
     for batch in reader {
         let batch = batch.map_err(|e| fmt(&e))?;
-        for (c, (name, col)) in names.iter().zip(columns.iter_mut()).enumerate() {
-            let arr = batch.column_by_name(name).expect("column in schema");
-            append_parquet_cells((&file, name), arr, col, (c, &mut bad_cells), allow_nan)?;
+        for (c, (r, col)) in idx.iter().zip(columns.iter_mut()).enumerate() {
+            let arr = batch.column(r.index);
+            append_parquet_cells((&file, &r.name), arr, col, (c, &mut bad_cells), allow_nan)?;
         }
+    }
+    for (c, r) in columns.iter_mut().zip(&idx) {
+        c.iter_mut().for_each(|v| *v *= r.to_si);
     }
     Ok((
         NumTable {
             file,
-            names,
+            notes: columns_note(&idx).into_iter().collect(),
+            names: idx.into_iter().map(|r| r.name).collect(),
             columns,
-            csv: false,
-            notes: Vec::new(),
+            first_line: None,
         },
         bad_cells,
     ))
-}
-
-/// The columns read from a Parquet file whose schema has the columns `found`: the wanted ones
-/// (every one missing is an error), then the optional ones present.
-fn parquet_columns(
-    path: &Path,
-    found: &[String],
-    wanted: &[&str],
-    optional: &[&str],
-) -> Result<Vec<String>, TableError> {
-    let mut names: Vec<String> = Vec::new();
-    let absent: Vec<TableError> = wanted
-        .iter()
-        .filter(|w| !found.iter().any(|f| f == *w))
-        .map(|w| missing(path, w, found))
-        .collect();
-    if !absent.is_empty() {
-        return Err(TableError::all(absent));
-    }
-    names.extend(wanted.iter().map(|w| w.to_string()));
-    names.extend(
-        optional
-            .iter()
-            .filter(|o| found.iter().any(|f| f == *o))
-            .map(|s| s.to_string()),
-    );
-    Ok(names)
 }
 
 /// Appends a batch's cells of column `c` (`name` in `file`) to `col`: a null is NaN and a bad
@@ -1315,12 +1347,25 @@ mod tests {
 
     #[test]
     fn other_units_and_bad_time_are_named() {
-        let (_d, p) = csv("time_s,ref_disp_mm\n0,0\n");
+        // Issue 27: a unit written in the header is read and converted, with a note.
+        let (_d, p) = csv("time_s,ref_disp_mm\n0,1.5\n");
+        let t = read_columns(&p, &["time_s", "ref_disp_m"], &[]).unwrap();
+        assert_eq!(t.column("ref_disp_m").unwrap(), &[1.5e-3]);
+        assert_eq!(t.notes, ["`ref_disp_mm` read as ref_disp_m (mm → m)"]);
+        let (_d, p) = csv("time_s,ref_disp_furlongs\n0,0\n");
         let e = read_columns(&p, &["time_s", "ref_disp_m"], &[])
             .unwrap_err()
             .to_string();
         assert!(
-            e.contains("`ref_disp_m` is missing") && e.contains("`ref_disp_mm`: other units?"),
+            e.contains("`ref_disp_furlongs`: unknown unit `furlongs`"),
+            "{e}"
+        );
+        let (_d, p) = csv("time_s,Ref Disp (furlongs)\n0,0\n");
+        let e = read_columns(&p, &["time_s", "ref_disp_m"], &[])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("t.csv: column `Ref Disp (furlongs)`: unknown unit `furlongs`"),
             "{e}"
         );
         let (_d, p) = csv("time_s,x\n0,0\n0.0009765625,0\n0.001953125,0\n0.0009765625,0\n0.0029296875,0\n0.00390625,0\n0.0048828125,0\n");
