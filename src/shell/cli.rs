@@ -238,7 +238,7 @@ pub struct SynthArgs {
     /// Model file to start from ([model.<component>] tables).
     #[arg(long)]
     pub model: Option<PathBuf>,
-    /// Hidden effect(s) to switch on (spool_dynamics, leakage, supply, seal_friction); repeatable.
+    /// Hidden effect(s) to switch on, any of the library (`study params` lists them); repeatable.
     #[arg(long = "effect", value_delimiter = ',')]
     pub effect: Vec<String>,
     /// Hidden parameter change, component.name=value (repeatable), e.g. seal_friction.f_c=8000.
