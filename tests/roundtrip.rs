@@ -1,6 +1,7 @@
 //! Issue 26, record semantics (docs/model.md §4): the model's own output, written as a
 //! data-acquisition system writes it — `ref_disp_m` the reference the controller tracked, at
-//! 1024 Hz and at 500 Hz, time rounded to 10 µs — and compared as measured tests of the right
+//! 1024 Hz with time rounded to 1 ms (coarser than a step: two rows print the same time every
+//! 43 rows) and at 500 Hz to 10 µs — and compared as measured tests of the right
 //! kind, is at the numerical floor: sine, sweep, stochastic, a record run as a command (its
 //! tracked reference read back with `signal = "reference"`, the campaign default) and a record
 //! run as a reference. A diagnosis of it finds nothing missing.
@@ -65,9 +66,9 @@ data = "reference_run.csv"
 excitation = { kind = "record", file = "drive_100.csv", column = "disp_m", signal = "reference" }
 "#;
 
-/// Rewrites the time column of a CSV written by synth with 5 decimals (10 µs), as an export
+/// Rewrites the time column of a CSV written by synth with `decimals` decimals, as an export
 /// with a fixed number of decimals does.
-fn round_time(path: &Path) {
+fn round_time(path: &Path, decimals: usize) {
     let text = std::fs::read_to_string(path).unwrap();
     let mut out = String::new();
     for (i, line) in text.lines().enumerate() {
@@ -75,14 +76,16 @@ fn round_time(path: &Path) {
         if i == 0 {
             out.push_str(line);
         } else {
-            out.push_str(&format!("{:.5},{rest}", t.parse::<f64>().unwrap()));
+            let t: f64 = t.parse().unwrap();
+            out.push_str(&format!("{t:.decimals$},{rest}"));
         }
         out.push('\n');
     }
     std::fs::write(path, out).unwrap();
 }
 
-/// The campaign synthesised at `rate` Hz with rounded time, in `dir`.
+/// The campaign synthesised at `rate` Hz with rounded time (1 ms at 1024 Hz, else 10 µs), in
+/// `dir`.
 fn synthesise(dir: &Path, rate: &str) -> PathBuf {
     let src = dir.join("src");
     std::fs::create_dir_all(&src).unwrap();
@@ -111,7 +114,8 @@ fn synthesise(dir: &Path, rate: &str) -> PathBuf {
         "command_run",
         "reference_run",
     ] {
-        round_time(&out.join(format!("{t}.csv")));
+        let decimals = if rate == "1024" { 3 } else { 5 };
+        round_time(&out.join(format!("{t}.csv")), decimals);
     }
     out.join("campaign.toml")
 }

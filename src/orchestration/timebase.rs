@@ -39,10 +39,14 @@ pub struct TimeBase {
     pub rows: usize,
     /// Largest |t_n − grid(n)|, s.
     pub max_jitter_s: f64,
-    /// Coarsest printed resolution among the rows, s (0 for a column of exact binary values).
+    /// Printed resolution of the latest rows (the coarsest, with significant digits), s (0 for
+    /// a column of exact values).
     pub resolution_s: f64,
     /// Significant digits of the most finely printed row (17 at full precision).
     pub digits: u32,
+    /// Decimal places, where the column is printed with a fixed number of them (the latest rows
+    /// are printed as finely as the earliest), else None.
+    pub decimals: Option<u32>,
     /// Whether the rate was snapped to a whole number of hertz.
     pub whole_hz: bool,
     /// The printed resolution is too coarse to detect dropped rows from time alone.
@@ -69,10 +73,13 @@ impl TimeBase {
             return None;
         }
         let mut s = format!(
-            "time_s jitters by up to ±{:.2e} s ({:.1} % of a step) around a uniform grid, consistent with rounding to {} significant digits; the grid was rebuilt from the row index at {} Hz",
+            "time_s jitters by up to ±{:.2e} s ({:.1} % of a step) around a uniform grid, consistent with rounding to {}; the grid was rebuilt from the row index at {} Hz",
             self.max_jitter_s,
             100.0 * self.max_jitter_s * self.rate_hz,
-            self.digits,
+            match self.decimals {
+                Some(d) => format!("{d} decimal place(s)"),
+                None => format!("{} significant digits", self.digits),
+            },
             fmt_rate(self.rate_hz)
         );
         if self.unresolved {
@@ -186,8 +193,9 @@ pub fn rebuild(t: &[f64]) -> Result<TimeBase, TimeProblem> {
     let q = |i: usize| quanta[i].0;
     let d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
     let step = nominal_step(t, &d)?;
-    let (jittery, unreliable) = check_steps(t, &d, step, &q)?;
     let line = Line::fit(t);
+    let printable = printable_step(1.0 / line.rate_hz, &quanta);
+    let (jittery, unreliable) = check_steps(t, &d, step, &q, printable)?;
     let (a, rate_hz, b, whole_hz) = (line.a, line.rate_hz, line.b, line.whole_hz);
     let grid = |i: usize| a + i as f64 / rate_hz;
     // The grid itself is uncertain by the fit's standard errors (rounding averages out).
@@ -212,12 +220,20 @@ pub fn rebuild(t: &[f64]) -> Result<TimeBase, TimeProblem> {
     }
     // On the grid to the last bit of each value: the column was exact, nothing was rebuilt.
     let exact = (0..n).all(|i| (t[i] - grid(i)).abs() <= 4.0 * f64::EPSILON * t[i].abs().max(b));
-    let resolution_s = if jittery {
-        quanta.iter().map(|x| x.0).fold(0.0, f64::max)
-    } else {
-        0.0
-    };
     let digits = quanta.iter().map(|x| x.1).max().unwrap_or(17);
+    let decimals = fixed_decimals(&quanta);
+    let resolution_s = match (jittery, decimals) {
+        (false, _) => 0.0,
+        (true, Some(d)) => 10f64.powi(-(d as i32)),
+        // The latest rows' typical quantum (one printed with trailing zeros dropped, `20`, says
+        // nothing of the digits).
+        (true, None) => median(
+            &mut quanta[n - n.div_ceil(10)..]
+                .iter()
+                .map(|x| x.0)
+                .collect::<Vec<_>>(),
+        ),
+    };
     Ok(TimeBase {
         rate_hz,
         t0_s: if exact { t[0] } else { a },
@@ -225,6 +241,7 @@ pub fn rebuild(t: &[f64]) -> Result<TimeBase, TimeProblem> {
         max_jitter_s: if exact { 0.0 } else { max_jitter },
         resolution_s,
         digits,
+        decimals,
         whole_hz,
         unresolved: jittery && unreliable * 2 > n,
     })
@@ -244,6 +261,39 @@ fn quanta_of(t: &[f64]) -> Vec<(f64, u32)> {
         }
     }
     quanta
+}
+
+/// Decimal places of a column printed with a fixed number of them: its last tenth of rows
+/// (the largest times) printed as finely as the whole column, to 1e-1 s or finer, and coarser
+/// than full precision. With significant digits the largest times are printed the coarsest.
+fn fixed_decimals(quanta: &[(f64, u32)]) -> Option<u32> {
+    let finest = |q: &[(f64, u32)]| {
+        q.iter()
+            .map(|x| x.0)
+            .filter(|q| *q > 0.0)
+            .fold(f64::INFINITY, f64::min)
+    };
+    let all = finest(quanta);
+    let last = finest(&quanta[quanta.len() - quanta.len().div_ceil(10)..]);
+    let places = -all.log10().round();
+    (all == last && (1.0..=12.0).contains(&places)).then_some(places as u32)
+}
+
+/// Whether the file's step (from the fitted rate) is a whole number of the column's finest
+/// printed quantum, so that an exact column is possible at all: at 1024 Hz printed to 1 ms two
+/// rows print the same time every 43 rows, while every difference is a whole millisecond, which
+/// alone would look like an exact column with rows that do not advance.
+fn printable_step(step: f64, quanta: &[(f64, u32)]) -> bool {
+    let finest = quanta
+        .iter()
+        .map(|x| x.0)
+        .filter(|q| *q > 0.0)
+        .fold(f64::INFINITY, f64::min);
+    if !finest.is_finite() {
+        return true;
+    }
+    let k = step / finest;
+    (k - k.round()).abs() <= 0.01 * k.round().max(1.0)
 }
 
 /// The step between rows: the median difference `d` (it resists gaps), or the mean where
@@ -268,8 +318,8 @@ fn nominal_step(t: &[f64], d: &[f64]) -> Result<f64, TimeProblem> {
     Ok(step)
 }
 
-/// Whole steps between rows. An exact column (every difference a multiple of the step) tells
-/// gaps whatever its digits; a rounded one where its rows' digits resolve a step. Returns
+/// Whole steps between rows. An exact column (every difference a multiple of the step, and the
+/// file's rate printable at its digits: [`printable_step`]) tells gaps whatever its digits; a rounded one where its rows' digits resolve a step. Returns
 /// whether the column jitters and how many differences its digits cannot resolve; the first
 /// problem in row order is refused (after a gap, only further gaps are counted).
 fn check_steps(
@@ -277,12 +327,13 @@ fn check_steps(
     d: &[f64],
     step: f64,
     q: &dyn Fn(usize) -> f64,
+    printable: bool,
 ) -> Result<(bool, usize), TimeProblem> {
     let steps: Vec<f64> = d.iter().map(|di| (di / step).round()).collect();
-    let jittery = d
-        .iter()
-        .zip(&steps)
-        .any(|(di, m)| (di - m * step).abs() > 1e-6 * step);
+    let jittery = !printable
+        || d.iter()
+            .zip(&steps)
+            .any(|(di, m)| (di - m * step).abs() > 1e-6 * step);
     let reliable = |i: usize| !jittery || 0.5 * (q(i) + q(i - 1)) < 0.5 * step;
     let mut first: Option<TimeProblem> = None;
     let mut gaps = 0;
@@ -526,5 +577,38 @@ mod tests {
         let tb = rebuild(&t).unwrap();
         assert_eq!(tb.rate_hz, 2048.0);
         assert!(tb.unresolved && tb.note().unwrap().contains("cannot be detected"));
+    }
+
+    #[test]
+    fn fixed_decimals_coarser_than_a_rate_are_rounding_not_repeated_rows() {
+        // 1024 Hz printed to 1 ms: every difference is a whole millisecond, and every 43rd is 0.
+        let decimals = |rate: f64, scale: f64| -> Vec<f64> {
+            grid(rate, 20480, 0.0)
+                .iter()
+                .map(|x| (x * scale).round() / scale)
+                .collect()
+        };
+        for (rate, scale) in [(1024.0, 1e3), (512.0, 1e3), (1024.0, 1e4), (4096.0, 1e4)] {
+            let tb = rebuild(&decimals(rate, scale))
+                .unwrap_or_else(|e| panic!("{rate} Hz to {}: {e}", 1.0 / scale));
+            assert_eq!(tb.rate_hz, rate);
+            let places = scale.log10() as u32;
+            assert_eq!(tb.decimals, Some(places));
+            let note = tb.note().unwrap();
+            assert!(
+                note.contains(&format!("{places} decimal place(s)")),
+                "{note}"
+            );
+        }
+        // At 1000 Hz the same printing is exact, and a repeated time is still refused.
+        let mut t = decimals(1000.0, 1e3);
+        assert!(!rebuild(&t).unwrap().rounded());
+        t[5000] = t[4999];
+        t.remove(5001);
+        assert!(
+            matches!(rebuild(&t), Err(TimeProblem::GoesBack { row: 5001, .. })),
+            "{:?}",
+            rebuild(&t)
+        );
     }
 }
