@@ -28,4 +28,19 @@ assert n == rows and distinct == rows, f"duckdb: {n} rows, {distinct} distinct (
 assert ok > 0, "no run succeeded"
 bad = con.execute(f"select count(*) from '{path}' where status = 'ok' and (amp_ratio is null or isnan(amp_ratio))").fetchone()[0]
 assert bad == 0, f"{bad} ok rows without an amplitude ratio"
-print(f"{path}: {n} rows, {len(table.column_names)} columns, metadata ok (pyarrow {pq.__name__}, duckdb {duckdb.__version__})")
+# A run that did not end has null metrics (not NaN): aggregates over the column are numbers.
+failed = con.execute(f"select count(*) from '{path}' where status <> 'ok'").fetchone()[0]
+nan_failed = con.execute(
+    f"select count(*) from '{path}' where status <> 'ok' and amp_ratio is not null"
+).fetchone()[0]
+assert nan_failed == 0, f"{nan_failed} rows of runs that did not end carry a metric value"
+top = con.execute(f"select max(thd_odd_ratio), avg(amp_ratio) from '{path}'").fetchone()
+assert all(v is not None and v == v for v in top), f"duckdb max/avg over the metrics: {top}"
+# fail_reason is a fixed category to group on; its value and words are in their own columns.
+groups = con.execute(
+    f"select fail_reason, count(*) from '{path}' where status <> 'ok' group by fail_reason"
+).fetchall()
+known = {"diverged", "stroke_limit", "pressure_limit", "invalid_parameters", "invalid_motion", "invalid_setup"}
+assert all(g in known for g, _ in groups), f"fail_reason categories {groups}"
+assert sum(c for _, c in groups) == failed, f"{groups} do not count the {failed} failed rows"
+print(f"{path}: {n} rows ({failed} failed: {dict(groups)}), {len(table.column_names)} columns, metadata ok (pyarrow {pq.__name__}, duckdb {duckdb.__version__})")

@@ -73,11 +73,14 @@ fn diagnose(dir: &Path) -> Diagnosis {
 /// Diagnoses the campaign `toml`, with its report in `report/` beside it.
 fn diagnose_file(toml: &Path) -> Diagnosis {
     let report = toml.parent().unwrap().join("report");
+    let fitted = toml.parent().unwrap().join("fitted.toml");
     let (code, stdout, stderr) = study(&[
         "diagnose",
         toml.to_str().unwrap(),
         "--report",
         report.to_str().unwrap(),
+        "--out",
+        fitted.to_str().unwrap(),
     ]);
     assert_eq!(code, 0, "{stdout}{stderr}");
     let c = report.join("candidates.parquet");
@@ -468,7 +471,7 @@ fn write_hidden<E: vshake::kernel::effects::Effect<1>>(dir: &Path, effect: &E) {
     for (test, at) in lc.campaign.tests.iter().zip(&aligned) {
         let path = lc.base.join(&test.data);
         // synth writes at the controller's rate from t = 0: the file's rows are the drive's ticks.
-        let rows = vshake::shell::campaign_io::read_measured(&path)
+        let rows = vshake::shell::campaign_io::read_measured(&path, &[])
             .unwrap()
             .rows();
         let mut reference = at.drive.clone();
@@ -792,6 +795,18 @@ type Hidden<'a> = (&'a str, &'a str, &'a [(&'a str, f64)]);
 /// a residual within 1.5× the noise floor. Returns the diagnosis.
 fn accepted(campaign: &str, extra: &[&str], hidden: &[Hidden], parts: &[&str]) -> Diagnosis {
     let d = tempfile::tempdir().unwrap();
+    accepted_in(d.path(), campaign, extra, hidden, parts)
+}
+
+/// [`accepted`] in `dir`, which keeps the campaign, the report and `fitted.toml`.
+fn accepted_in(
+    dir: &Path,
+    campaign: &str,
+    extra: &[&str],
+    hidden: &[Hidden],
+    parts: &[&str],
+) -> Diagnosis {
+    let d = dir;
     let c = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("studies/campaigns")
         .join(campaign);
@@ -804,8 +819,8 @@ fn accepted(campaign: &str, extra: &[&str], hidden: &[Hidden], parts: &[&str]) -
         }
     }
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    synth_from(&c, NOISE_ACCEPTANCE, d.path(), &args);
-    let r = diagnose_file(&d.path().join(campaign));
+    synth_from(&c, NOISE_ACCEPTANCE, d, &args);
+    let r = diagnose_file(&d.join(campaign));
     println!("{}", r.stdout);
     let verdict = r
         .stdout
@@ -822,7 +837,7 @@ fn accepted(campaign: &str, extra: &[&str], hidden: &[Hidden], parts: &[&str]) -
     for p in parts {
         assert!(verdict.contains(p), "{p}: {verdict}");
     }
-    let (names, est, se, after, noise) = named_fit(d.path(), &r, hidden[0].0);
+    let (names, est, se, after, noise) = named_fit(d, &r, hidden[0].0);
     assert!(
         after <= 1.5 * noise,
         "the fit leaves {after}, noise floor {noise}\n{}",
@@ -940,12 +955,81 @@ fn a_one_mode_specimen_on_sines_and_on_records() {
 #[ignore = "issue 26 acceptance, a CI step: cargo test --release --test diagnose -- --ignored"]
 fn a_two_mode_specimen_on_sines_and_on_records() {
     let t = [("specimen", "specimen", &SPECIMEN_2[..])];
-    accepted("diagnosis.toml", &[], &t, &["specimen's mode 2"]);
+    let d = tempfile::tempdir().unwrap();
+    accepted_in(d.path(), "diagnosis.toml", &[], &t, &["specimen's mode 2"]);
+    the_user_closes_the_loop(d.path(), "diagnosis.toml");
     accepted(
         "broadband.toml",
         &["--as-records"],
         &t,
         &["specimen's mode 2"],
+    );
+}
+
+/// After a diagnosis naming a two-mode specimen, as a user goes on: `compare --model` with the
+/// model diagnose wrote (`--out`) leaves the noise, and `study fit` of both modes (the second
+/// freed with `--free`, started as a diagnosis starts it) recovers the truth.
+fn the_user_closes_the_loop(dir: &Path, campaign: &str) {
+    let (c, fitted) = (dir.join(campaign), dir.join("fitted.toml"));
+    let written = std::fs::read_to_string(&fitted).expect("diagnose --out wrote the model");
+    assert!(written.contains("m2 = "), "{written}");
+    let report = dir.join("compare_fitted");
+    let (code, out, err) = study(&[
+        "compare",
+        c.to_str().unwrap(),
+        "--model",
+        fitted.to_str().unwrap(),
+        "--report",
+        report.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{out}{err}");
+    let t = report.join("tests.parquet");
+    let resid = read_columns_allow_nan(&t, &["rms_residual_accel_ratio"]).unwrap();
+    for r in resid.column("rms_residual_accel_ratio").unwrap() {
+        // The noise is 1 % of each test's acceleration rms.
+        assert!(
+            *r <= 0.015,
+            "acceleration residual {r} with the fitted model\n{out}"
+        );
+    }
+    let again = dir.join("fit2.toml");
+    let free = "specimen.m2,specimen.f2,specimen.zeta2";
+    let (code, out, err) = study(&[
+        "fit",
+        c.to_str().unwrap(),
+        "--effect",
+        "specimen",
+        "--free",
+        free,
+        "--out",
+        again.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{out}{err}");
+    println!("{out}");
+    // The estimates at full precision: the fitted model's first line.
+    let head = std::fs::read_to_string(&again).unwrap();
+    let head = head.lines().next().unwrap().split("): ").nth(1).unwrap();
+    for (p, v) in SPECIMEN_2 {
+        let item = (head.split(", "))
+            .find(|l| l.starts_with(&format!("specimen.{p} = ")))
+            .unwrap_or_else(|| panic!("specimen.{p} not fitted: {head}\n{out}"));
+        let f: Vec<f64> = (item.split(" = ").nth(1).unwrap().split(" ± "))
+            .map(|x| x.parse().unwrap())
+            .collect();
+        assert!(
+            (f[0] - v).abs() <= 2.0 * f[1],
+            "specimen.{p}: {item} (truth {v})\n{out}"
+        );
+    }
+    let after: f64 = (out.split("x after)").next().unwrap())
+        .rsplit('(')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap_or_else(|_| panic!("{out}"));
+    assert!(
+        after <= 1.5,
+        "study fit leaves {after}x the noise floor\n{out}"
     );
 }
 

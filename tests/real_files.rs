@@ -316,6 +316,41 @@ fn pre_trigger_extra_length_and_time_origin_are_found() {
     );
 }
 
+/// Issue 27: a table homed 10 mm off zero (`ref_disp_m` and `disp_m` offset by 10 mm, 1 s at
+/// rest before the excitation, sensor noise): the same start, phases within 0.1° of the clean
+/// file's, and a note naming the offset of each column.
+#[test]
+fn a_static_offset_is_found_removed_and_named() {
+    let d = tempfile::tempdir().unwrap();
+    let noise = ["--pre-trigger", "1.0", "--noise", "accel=0.05,disp=2e-5"];
+    let base = compare(&synth(&d.path().join("clean"), &noise), &[]);
+    let off = transform(&d.path().join("clean"), &d.path().join("off"), |csv| {
+        for c in ["ref_disp_m", "disp_m"] {
+            csv.map(c, |x| format!("{:?}", x + 0.010));
+        }
+    });
+    let off = compare(&off, &[]);
+    assert_eq!(off.col("start_row"), base.col("start_row"));
+    assert_eq!(base.col("start_s"), vec![1.0, 1.0]);
+    for c in ["phase_measured_deg", "phase_model_deg"] {
+        for (x, y) in off.col(c).iter().zip(base.col(c)) {
+            assert!(
+                (x - y).abs() <= 0.1,
+                "{c}: {x}° with the offset, {y}° clean"
+            );
+        }
+    }
+    for c in ["ref_disp_m rests at +10.0", "disp_m rests at +10.0"] {
+        assert!(
+            off.stdout.contains(c) && off.stdout.contains("a static offset"),
+            "{c}:\n{}",
+            off.stdout
+        );
+    }
+    // The clean files have none to remove.
+    assert!(!base.stdout.contains("static offset"), "{}", base.stdout);
+}
+
 /// Columns in another order, columns vshake does not read, `;` with decimal commas and tabs:
 /// the clean results exactly, and a note on the separator.
 #[test]
@@ -510,6 +545,7 @@ fn the_docs_describe_every_campaign_key() {
         .iter()
         .chain(&campaign::TEST_KEYS)
         .chain(&campaign::WEIGHT_KEYS)
+        .chain(&campaign::COLUMN_KEYS)
         .chain(&spec::SINE_KEYS)
         .chain(&spec::RECORD_KEYS)
     {
@@ -764,6 +800,78 @@ fn lab_headers_and_units_are_read_to_the_si_results() {
             );
         }
     }
+}
+
+/// Issue 27: names the reader does not recognise, mapped by the campaign's `columns` table (by
+/// header, with their units), and a MATLAB `save -ascii` file (no header, columns separated by
+/// runs of spaces, 8 significant digits) mapped by position: read to the clean file's results
+/// (within the digits written), with a note naming what was read.
+#[test]
+fn a_columns_table_maps_headers_and_positions() {
+    let d = tempfile::tempdir().unwrap();
+    let clean_dir = d.path().join("clean");
+    let base = compare(&synth(&clean_dir, &[]), &[]);
+    let g = 9.80665;
+    let si = ["time_s", "ref_disp_m", "disp_m", "accel_mps2"];
+    let k = [1.0, 1e3, 1e3, 1.0 / g];
+    let by_name = "columns = { time = \"Zeit\", ref_disp = { name = \"Soll\", unit = \"mm\" }, \
+                   disp = { name = \"Ist\", unit = \"mm\" }, accel = { name = \"A1 Table X\", unit = \"g\" } }";
+    let by_position = "columns = { time = { column = 1, unit = \"s\" }, \
+                       ref_disp = { column = 2, unit = \"mm\" }, disp = { column = 3, unit = \"mm\" }, \
+                       accel = { column = 4, unit = \"g\" } }";
+    let variants = [
+        ("mapped", Some("Zeit,Soll,Ist,A1 Table X"), by_name, 1e-9),
+        ("ascii", None, by_position, 1e-6),
+    ];
+    for (dir, header, columns, tol) in variants {
+        let to = d.path().join(dir);
+        std::fs::create_dir_all(&to).unwrap();
+        let campaign = CAMPAIGN.replace(
+            "name = \"real\"\n",
+            &format!("name = \"real\"\n{columns}\n"),
+        );
+        std::fs::write(to.join("real.toml"), campaign).unwrap();
+        for name in FILES {
+            let csv = Csv::read(&clean_dir.join(name));
+            let mut text = header.map_or(String::new(), |h| format!("{h}\n"));
+            let cols: Vec<usize> = si.iter().map(|c| csv.col(c)).collect();
+            for r in &csv.rows {
+                let cells: Vec<String> = (cols.iter().zip(&k))
+                    .map(|(&c, f)| {
+                        let v = r[c].parse::<f64>().unwrap() * f;
+                        if header.is_some() {
+                            format!("{v:e}")
+                        } else {
+                            format!("{v:15.7e}")
+                        }
+                    })
+                    .collect();
+                text.push_str(&(cells.join(if header.is_some() { "," } else { " " }) + "\n"));
+            }
+            std::fs::write(to.join(name), text).unwrap();
+        }
+        let r = compare(&to.join("real.toml"), &[]);
+        assert_same(&r, &base, tol, dir);
+        assert!(
+            r.stdout.contains("read as accel_mps2"),
+            "{dir}: {}",
+            r.stdout
+        );
+    }
+    // A channel the file does not have, a key that is no channel, a unit vshake does not know:
+    // each named.
+    let to = d.path().join("mapped");
+    let bad = CAMPAIGN.replace(
+        "name = \"real\"\n",
+        "name = \"real\"\ncolumns = { accel = { name = \"A9\", unit = \"g\" }, acel = \"x\", disp = { name = \"Ist\", unit = \"furlongs\" } }\n",
+    );
+    std::fs::write(to.join("bad.toml"), bad).unwrap();
+    let (code, _, err) = study(&["compare", to.join("bad.toml").to_str().unwrap()]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("campaign.columns.acel") && err.contains("furlongs"),
+        "{err}"
+    );
 }
 
 /// Issue 27: a unit vshake does not know, or of another quantity, is refused with one line

@@ -94,7 +94,7 @@ echo "-- a task stopped before its time limit requeues itself and resumes its sh
 # signal is sent at once with scancel, while shard 0 of the gains sweep is running.
 "$study" slurm studies/gains_sweep.toml --shards 2 --partition ci --cpus 1 --time 00:10:00 --dir "$work/requeue"
 bash "$work/requeue/submit.sh"
-tmp0="$work/requeue/shards/gains_sweep.shard-0-of-2.parquet.tmp"
+tmp0="$work/requeue/shards/gains_sweep.shard-0-of-2.partial.parquet.tmp"
 for i in $(seq 1 120); do [ -e "$tmp0" ] && break; sleep 0.5; done
 sleep 2
 task0=$(squeue -h -o "%i %T" | awk '$1 ~ /_0$/ && $2 == "RUNNING" {print $1}')

@@ -207,7 +207,9 @@ fn expect_refused(text: &str, needle: &str) {
         "expected {needle:?} in {stderr}"
     );
     assert!(
-        !out.exists() && !d.path().join("out.parquet.tmp").exists(),
+        !out.exists()
+            && !d.path().join("out.partial.parquet").exists()
+            && !d.path().join("out.partial.parquet.tmp").exists(),
         "no output file"
     );
 }

@@ -194,6 +194,26 @@ pub enum Failure {
     },
 }
 
+impl Failure {
+    /// A fixed category, to group on (a results table's `fail_reason`).
+    pub fn category(&self) -> &'static str {
+        match self {
+            Failure::NonFinite => "diverged",
+            Failure::StrokeLimit { .. } => "stroke_limit",
+            Failure::Pressure { .. } => "pressure_limit",
+        }
+    }
+    /// The value that left its bound, SI (m for the stroke, Pa for a pressure; None when the
+    /// state diverged).
+    pub fn value(&self) -> Option<f64> {
+        match self {
+            Failure::NonFinite => None,
+            Failure::StrokeLimit { disp_m } => Some(*disp_m),
+            Failure::Pressure { pa, .. } => Some(*pa),
+        }
+    }
+}
+
 impl fmt::Display for Failure {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {

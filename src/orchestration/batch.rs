@@ -16,7 +16,7 @@ use super::study::{Method, StudySpec};
 use crate::kernel::excitation::Reference;
 use crate::kernel::metrics::Metrics;
 use crate::kernel::params::{ModelParams, ParamInfo};
-use crate::kernel::simulate::{self, LaneStatus, NoObserver};
+use crate::kernel::simulate::{self, Failure, LaneStatus, NoObserver};
 use crate::kernel::spectrum::SpectrumSpec;
 use crate::kernel::LANES;
 use rayon::prelude::*;
@@ -72,13 +72,23 @@ pub enum RowStatus {
     /// The run failed (diverged, stroke or pressure limit) at a time.
     Failed {
         time_s: f64,
-        reason: String,
+        failure: Failure,
     },
-    /// The sample's parameters are outside their valid ranges; it was not run.
+    /// The sample could not be run: its parameters are outside their valid ranges
+    /// ([`INVALID_PARAMETERS`]), its own motion could not be made ([`INVALID_MOTION`]), or its
+    /// group could not be set up ([`INVALID_SETUP`]).
     Invalid {
+        category: &'static str,
         reason: String,
     },
 }
+
+/// `fail_reason` of a sample whose parameters are outside their valid ranges.
+pub const INVALID_PARAMETERS: &str = "invalid_parameters";
+/// `fail_reason` of a sample whose own ground motion could not be generated.
+pub const INVALID_MOTION: &str = "invalid_motion";
+/// `fail_reason` of a group of lanes the kernel could not set up.
+pub const INVALID_SETUP: &str = "invalid_setup";
 
 impl RowStatus {
     pub fn label(&self) -> &'static str {
@@ -86,6 +96,30 @@ impl RowStatus {
             RowStatus::Ok => "ok",
             RowStatus::Failed { .. } => "failed",
             RowStatus::Invalid { .. } => "invalid",
+        }
+    }
+    /// A fixed category to group on: the guard that stopped the run (`diverged`,
+    /// `stroke_limit`, `pressure_limit`) or why it was not run; None for a run that ended.
+    pub fn category(&self) -> Option<&'static str> {
+        match self {
+            RowStatus::Ok => None,
+            RowStatus::Failed { failure, .. } => Some(failure.category()),
+            RowStatus::Invalid { category, .. } => Some(category),
+        }
+    }
+    /// The value that left its bound, SI (see [`Failure::value`]).
+    pub fn value(&self) -> Option<f64> {
+        match self {
+            RowStatus::Failed { failure, .. } => failure.value(),
+            _ => None,
+        }
+    }
+    /// What happened, in words.
+    pub fn detail(&self) -> Option<String> {
+        match self {
+            RowStatus::Ok => None,
+            RowStatus::Failed { failure, .. } => Some(failure.to_string()),
+            RowStatus::Invalid { reason, .. } => Some(reason.clone()),
         }
     }
 }
@@ -291,7 +325,11 @@ impl Plan {
         for s in samples.iter().enumerate().filter(|(_, s)| s.model.is_err()) {
             let (i, s) = s;
             let reason = s.model.as_ref().err().cloned().unwrap_or_default();
-            rows[i] = Some(self.row(s, e, RowStatus::Invalid { reason }, Metrics::NAN));
+            let status = RowStatus::Invalid {
+                category: INVALID_PARAMETERS,
+                reason,
+            };
+            rows[i] = Some(self.row(s, e, status, Metrics::NAN));
         }
         rows
     }
@@ -319,7 +357,10 @@ impl Plan {
                     runnable.push(i);
                 }
                 Err(reason) => {
-                    let status = RowStatus::Invalid { reason };
+                    let status = RowStatus::Invalid {
+                        category: INVALID_MOTION,
+                        reason,
+                    };
                     rows[i] = Some(self.row(s, e, status, Metrics::NAN));
                 }
             }
@@ -354,13 +395,14 @@ fn lane_outcome(
             LaneStatus::Failed { time_s, reason } => (
                 RowStatus::Failed {
                     time_s,
-                    reason: reason.to_string(),
+                    failure: reason,
                 },
                 Metrics::NAN,
             ),
         },
         Err(e) => (
             RowStatus::Invalid {
+                category: INVALID_SETUP,
                 reason: e.to_string(),
             },
             Metrics::NAN,

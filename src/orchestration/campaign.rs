@@ -19,6 +19,7 @@
 //! (a sine) or is the first row (a record), unless `t0_s` says; a sine lasts until `ref_disp_m`
 //! leaves it, or `duration_s` when given ([`super::measured`]).
 
+use super::columns::{self, Mapped};
 use super::spec::{self, ExcitationSpec};
 use super::toml_fields::{Fields, InputError, Issues};
 use crate::kernel::params::ModelParams;
@@ -26,8 +27,18 @@ use std::path::PathBuf;
 
 /// The keys of `[campaign]`, of each `[[test]]` and of a test's `weights`; docs/formats.md
 /// describes each (a test checks it).
-pub const CAMPAIGN_KEYS: [&str; 2] = ["name", "description"];
-pub const TEST_KEYS: [&str; 6] = ["name", "data", "excitation", "model", "weights", "t0_s"];
+pub const CAMPAIGN_KEYS: [&str; 3] = ["name", "description", "columns"];
+pub const TEST_KEYS: [&str; 7] = [
+    "name",
+    "data",
+    "excitation",
+    "model",
+    "weights",
+    "t0_s",
+    "columns",
+];
+/// The keys of an entry of a `columns` table.
+pub const COLUMN_KEYS: [&str; 3] = ["name", "column", "unit"];
 pub const WEIGHT_KEYS: [&str; 3] = ["accel", "disp", "force"];
 
 /// Channel weights of a test (used by fits; 1 by default).
@@ -64,6 +75,10 @@ pub struct TestSpec {
     pub duration_given: bool,
     /// Where the excitation starts, in the file's time (`t0_s`), s; found from the data if None.
     pub t0_s: Option<f64>,
+    /// The file's columns of channels vshake does not recognise by name: the campaign's
+    /// `columns` table with the test's own entries over it (channel key → header or position,
+    /// and unit).
+    pub columns: Vec<(String, Mapped)>,
 }
 
 /// A parsed campaign.
@@ -85,13 +100,13 @@ impl Campaign {
         let table = super::toml_fields::parse(text, file)?;
         let mut issues = Issues::default();
         let mut root = Fields::new("", &table);
-        let (name, description) = read_header(&mut root, &mut issues);
+        let (name, description, columns) = read_header(&mut root, &mut issues);
         let mut tests = Vec::new();
         match root.tables("test", &mut issues) {
             Some(list) if list.is_empty() => issues.push("test", "the campaign lists no test"),
             Some(list) => {
                 for t in list {
-                    if let Some(test) = read_test(t, base_model, &mut issues) {
+                    if let Some(test) = read_test(t, (base_model, &columns), &mut issues) {
                         if tests.iter().any(|x: &TestSpec| x.name == test.name) {
                             issues.push("test", format!("test name {:?} is used twice", test.name));
                         }
@@ -111,13 +126,17 @@ impl Campaign {
     }
 }
 
-/// `[campaign]`: its name (required) and description.
-fn read_header(root: &mut Fields<'_>, issues: &mut Issues) -> (String, String) {
-    let (mut name, mut description) = (String::new(), String::new());
+/// `[campaign]`: its name (required), description and `columns` table.
+fn read_header(
+    root: &mut Fields<'_>,
+    issues: &mut Issues,
+) -> (String, String, Vec<(String, Mapped)>) {
+    let (mut name, mut description, mut columns) = (String::new(), String::new(), Vec::new());
     match root.table("campaign", issues) {
         Some(mut c) => {
             name = c.str("name", issues).unwrap_or("").to_string();
             description = c.str("description", issues).unwrap_or("").to_string();
+            columns = read_columns(&mut c, &[], issues);
             if name.is_empty() {
                 issues.push("campaign.name", "missing");
             }
@@ -125,12 +144,87 @@ fn read_header(root: &mut Fields<'_>, issues: &mut Issues) -> (String, String) {
         }
         None => issues.push("campaign", "missing table ([campaign] name = ...)"),
     }
-    (name, description)
+    (name, description, columns)
+}
+
+/// A `columns` table (`accel = "A1 Table X"`, or `accel = { name = "A1 Table X", unit = "g" }`,
+/// or `{ column = 4, unit = "g" }` by 1-based position for a file without a header) over the
+/// entries `base` (the campaign's), each key a channel, each unit one vshake knows.
+fn read_columns(
+    t: &mut Fields<'_>,
+    base: &[(String, Mapped)],
+    issues: &mut Issues,
+) -> Vec<(String, Mapped)> {
+    let mut out = base.to_vec();
+    let Some(mut c) = t.table("columns", issues) else {
+        return out;
+    };
+    let keys: Vec<String> = c.keys().cloned().collect();
+    let channels: Vec<&str> = columns::CHANNELS.iter().map(|ch| ch.1).collect();
+    for key in keys {
+        if columns::channel(&key).is_none() {
+            continue; // reported by finish below
+        }
+        let Some(m) = read_mapped(&mut c, &key, issues) else {
+            continue;
+        };
+        let key = columns::channel(&key).map_or(key, |ch| ch.1.to_string());
+        out.retain(|(k, _)| *k != key);
+        out.push((key, m));
+    }
+    c.finish(&channels, issues);
+    out
+}
+
+/// One entry of a `columns` table (see [`read_columns`]).
+fn read_mapped(c: &mut Fields<'_>, key: &str, issues: &mut Issues) -> Option<Mapped> {
+    let path = c.path_of(key);
+    let mut m = Mapped::default();
+    match c.value(key)? {
+        toml::Value::String(name) => m.name = Some(name.clone()),
+        toml::Value::Table(t) => {
+            let mut f = Fields::new(path.clone(), t);
+            m.name = f.str("name", issues).map(str::to_string);
+            m.index = match f.int("column", issues) {
+                Some(k) if k >= 1 => Some(k as usize),
+                Some(k) => {
+                    issues.push(f.path_of("column"), format!("{k}: columns count from 1"));
+                    None
+                }
+                None => None,
+            };
+            m.unit = f.str("unit", issues).map(str::to_string);
+            f.finish(&COLUMN_KEYS, issues);
+        }
+        other => {
+            let found = other.type_str();
+            issues.push(path, format!("expected the column's header or a table {{ name = \"...\", unit = \"...\" }}, found {found}"));
+            return None;
+        }
+    }
+    if let Some(u) = m.unit.as_deref().filter(|u| columns::unit(u).is_none()) {
+        issues.push(
+            format!("{path}.unit"),
+            format!("unknown unit {u:?}; vshake knows {}", columns::unit_list()),
+        );
+    }
+    if m.name.is_some() == m.index.is_some() {
+        issues.push(
+            path,
+            "give the column's header (`name`) or its 1-based position (`column`), one of them",
+        );
+        return None;
+    }
+    Some(m)
 }
 
 /// One `[[test]]`: its name, data file, model (the base one with the test's overrides), weights,
 /// start and excitation; None where one of name, data or excitation is missing or wrong.
-fn read_test(mut t: Fields<'_>, base_model: &ModelParams, issues: &mut Issues) -> Option<TestSpec> {
+fn read_test(
+    mut t: Fields<'_>,
+    (base_model, base_columns): (&ModelParams, &[(String, Mapped)]),
+    issues: &mut Issues,
+) -> Option<TestSpec> {
     let tname = t.str("name", issues).map(str::to_string);
     let data = t.str("data", issues).map(PathBuf::from);
     if tname.is_none() {
@@ -148,6 +242,7 @@ fn read_test(mut t: Fields<'_>, base_model: &ModelParams, issues: &mut Issues) -
         spec::validate_model(&model, &t.path_of("model"), issues);
     }
     let weights = read_weights(&mut t, issues);
+    let columns = read_columns(&mut t, base_columns, issues);
     let t0_s = t.f64("t0_s", issues);
     let (mut window_given, mut duration_given) = (false, false);
     let excitation = match t.table("excitation", issues) {
@@ -177,6 +272,7 @@ fn read_test(mut t: Fields<'_>, base_model: &ModelParams, issues: &mut Issues) -
         window_given,
         duration_given,
         t0_s,
+        columns,
     })
 }
 

@@ -398,7 +398,7 @@ impl Diagnosis {
             let fitted: Vec<AlignedTest> = aligned
                 .iter()
                 .map(|t| AlignedTest {
-                    model: fit::apply(&t.model, free, &fit.u),
+                    model: fit::apply_estimates(&t.model, free, &fit.estimate),
                     ..t.clone()
                 })
                 .collect();
@@ -526,11 +526,32 @@ fn polish_leaders(problem: &Problem, out: &mut [Candidate], baseline: &fit::Eval
     rank(out);
 }
 
-/// `free` with the start scan of stage 0 of each of `effects` applied in turn (`study fit`).
-pub fn scan_starts(problem: &Problem, free: &[Free], effects: &[EffectId]) -> Vec<Free> {
-    effects
-        .iter()
-        .fold(free.to_vec(), |f, &e| scanned(problem, &f, e, 0))
+/// `free` (`study fit`'s parameters) started as a diagnosis starts them: for every stage of an
+/// effect one of whose parameters is free, in order, the stage's start values where the
+/// parameter is 0 (a second mode's mass: at 0 the mode is absent and its frequency has no effect)
+/// and then the stage's start scan (a resonance's frequency).
+pub fn scan_starts(problem: &Problem, free: &[Free]) -> Vec<Free> {
+    let mut out = free.to_vec();
+    for effect in EffectId::ALL {
+        for (k, stage) in effect.info().stages.iter().enumerate() {
+            let path = |n: &str| format!("{effect}.{n}");
+            let touched = stage
+                .free
+                .iter()
+                .any(|n| out.iter().any(|f| f.info.path() == path(n)));
+            if !touched {
+                continue;
+            }
+            for f in out.iter_mut() {
+                let start = stage.start.iter().find(|(n, _)| f.info.path() == path(n));
+                if let (Some(&(_, v)), true) = (start, f.start == 0.0) {
+                    *f = Free::new(f.info, v);
+                }
+            }
+            out = scanned(problem, &out, effect, k);
+        }
+    }
+    out
 }
 
 /// Fits every candidate and ranks them.
@@ -613,7 +634,7 @@ fn forward_selection(
         else {
             break;
         };
-        let (r, dbic) = polished(problem, &f, r, dbic);
+        let (f, r, dbic) = polished(problem, f, r, dbic);
         free = at_estimates(&f, &r.estimate);
         at = r.after.clone();
         chosen.push(part);
@@ -700,25 +721,28 @@ fn best_addition(
 }
 
 /// A joint fit `r` (of the parameters `f`, with ΔBIC `dbic`) that did not converge, refitted
-/// from its estimates with more iterations where that lowers its χ², and the ΔBIC it then has.
+/// from its estimates with more iterations where that lowers its χ²: the parameters (started
+/// where the fit returned was started: its scaled coordinates are relative to them), the fit
+/// and the ΔBIC it then has.
 fn polished(
     problem: &Problem,
-    f: &[Free],
+    mut f: Vec<Free>,
     mut r: fit::FitResult,
     mut dbic: f64,
-) -> (fit::FitResult, f64) {
+) -> (Vec<Free>, fit::FitResult, f64) {
     if !r.converged {
         // The chosen set's parameters started where they compensated for the missing effect:
         // the joint fit may need more iterations than a candidate's screening fit.
-        let restart = at_estimates(f, &r.estimate);
+        let restart = at_estimates(&f, &r.estimate);
         if let Ok(polished) = fit::fit_from(problem, &restart, 4 * MAX_ITER, r.after.clone()) {
             if polished.chi2_after() <= r.chi2_after() {
                 dbic += r.chi2_after() - polished.chi2_after();
                 r = polished;
+                f = restart;
             }
         }
     }
-    (r, dbic)
+    (f, r, dbic)
 }
 
 /// The feature groups (test, harmonic) whose χ² a candidate lowers most: (test, harmonic, χ²

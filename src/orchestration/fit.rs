@@ -633,6 +633,19 @@ pub fn apply(model: &ModelParams, free: &[Free], u: &[f64]) -> ModelParams {
     m
 }
 
+/// `model` with the parameters `free` at the values `estimate` (in their units), their effects
+/// switched on: a fit's model, whatever start its scaled coordinates are relative to.
+pub fn apply_estimates(model: &ModelParams, free: &[Free], estimate: &[f64]) -> ModelParams {
+    let mut m = model.clone();
+    for (f, &v) in free.iter().zip(estimate) {
+        if let Some(e) = f.info.component.effect() {
+            *m.effects.get_mut(e) = true;
+        }
+        (f.info.set)(&mut m, v);
+    }
+    m
+}
+
 /// `free` with the start of the parameter `scan` names (its path, `effect.name`) moved to the one of its values (or its
 /// own start) at which the model, the other parameters at their starts, has the lowest χ²: one
 /// batch of evaluations. A resonance's frequency or a lag makes χ² non-convex in the parameter,

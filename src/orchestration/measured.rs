@@ -310,8 +310,11 @@ pub fn align(
     open_loop: Option<OpenLoop>,
 ) -> Result<AlignedTest, Vec<DataProblem>> {
     let time = check_file(data, open_loop)?;
+    let mut data = data.clone();
+    let data = &mut data;
     let mut notes = data.notes.clone();
     notes.extend(time.note());
+    notes.extend(remove_static_offsets(data, time.rate_hz));
     let mut warnings = Vec::new();
     let (rate, rows) = (time.rate_hz, time.rows);
     let located = locate(test, data, record, &time, &mut warnings)?;
@@ -375,6 +378,61 @@ pub fn align(
         notes,
         warnings,
     })
+}
+
+/// Rows at rest that a static offset is measured over at least [chosen: a quiet lead shorter
+/// than this cannot tell an offset from the first samples of the motion].
+pub const OFFSET_MIN_LEAD_S: f64 = 0.05;
+
+/// Removes a static offset of `ref_disp_m` and `disp_m` (a table homed off zero, a transducer
+/// not zeroed): the mean over the file's quiet lead, the rows before the column first leaves its
+/// starting level by more than its noise, where that lead lasts [`OFFSET_MIN_LEAD_S`] or more and
+/// the offset exceeds both its noise and 0.1 % of the column's motion about it. The model starts
+/// at rest at zero (docs/model.md §4), so an offset would otherwise read as motion: the start of
+/// the excitation found at the first row, the phase of a sine off. Returns a note per column.
+fn remove_static_offsets(data: &mut NumTable, rate_hz: f64) -> Vec<String> {
+    let mut notes = Vec::new();
+    for name in ["ref_disp_m", "disp_m"] {
+        let Some(i) = data.names.iter().position(|n| n == name) else {
+            continue;
+        };
+        let Some((offset, lead)) = static_offset(&data.columns[i], rate_hz) else {
+            continue;
+        };
+        data.columns[i].iter_mut().for_each(|x| *x -= offset);
+        notes.push(format!(
+            "{name} rests at {:+.4} mm for the first {:.3} s (a static offset: the table homed off zero, or the transducer not zeroed); removed, so that the column starts from zero as the model does",
+            offset * 1e3,
+            lead as f64 / rate_hz
+        ));
+    }
+    notes
+}
+
+/// The static offset of column `x` and the rows of its quiet lead (see
+/// [`remove_static_offsets`]), or None where there is none to remove.
+fn static_offset(x: &[f64], rate_hz: f64) -> Option<(f64, usize)> {
+    let n = x.len();
+    let head = &x[..n.min(16)];
+    let mut sorted = head.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let level = sorted[sorted.len() / 2];
+    // The noise from the first differences of the first rows (robust: their median absolute
+    // value; a difference of white noise has √2 its standard deviation).
+    let mut d: Vec<f64> = (x[..n.min(64)].windows(2))
+        .map(|w| (w[1] - w[0]).abs())
+        .collect();
+    d.sort_by(f64::total_cmp);
+    let sigma = d.get(d.len() / 2).map_or(0.0, |m| 1.4826 * m / 2f64.sqrt());
+    let amplitude = x.iter().map(|v| (v - level).abs()).fold(0.0, f64::max);
+    let band = (8.0 * sigma).max(1e-6 * amplitude);
+    let lead = x.iter().position(|v| (v - level).abs() > band).unwrap_or(n);
+    if (lead as f64) < OFFSET_MIN_LEAD_S * rate_hz || lead == n {
+        return None;
+    }
+    let offset = x[..lead].iter().sum::<f64>() / lead as f64;
+    let motion = x.iter().map(|v| (v - offset).abs()).fold(0.0, f64::max);
+    (offset.abs() > (10.0 * sigma).max(1e-3 * motion)).then_some((offset, lead))
 }
 
 /// Where the test's excitation sits in the file, by its kind.

@@ -194,7 +194,9 @@ pub fn rebuild(t: &[f64]) -> Result<TimeBase, TimeProblem> {
     let d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
     let step = nominal_step(t, &d)?;
     let line = Line::fit(t);
-    let printable = printable_step(1.0 / line.rate_hz, &quanta);
+    // Rows printing the same time are rounding only where the rate cannot be printed exactly.
+    let repeats = d.iter().any(|&x| x <= 0.0);
+    let printable = !repeats || printable_step(1.0 / line.rate_hz, &quanta);
     let (jittery, unreliable) = check_steps(t, &d, step, &q, printable)?;
     let (a, rate_hz, b, whole_hz) = (line.a, line.rate_hz, line.b, line.whole_hz);
     let grid = |i: usize| a + i as f64 / rate_hz;
@@ -343,36 +345,8 @@ fn check_steps(
             unreliable += 1;
             continue;
         }
-        let m = steps[i - 1];
         let allowed = 0.5 * (q(i) + q(i - 1)) + STEP_TOLERANCE * step;
-        let problem = if (d[i - 1] - m * step).abs() > allowed {
-            // Neither one step nor a whole number of them: an edited or stray row.
-            Some(TimeProblem::OffGrid {
-                row: i + 1,
-                t: t[i],
-                grid: t[i - 1] + m.max(1.0) * step,
-                allowed,
-                rate_hz: 1.0 / step,
-            })
-        } else if m <= 0.0 {
-            Some(TimeProblem::GoesBack {
-                row: i + 1,
-                t: t[i],
-                prev: t[i - 1],
-            })
-        } else if m >= 2.0 {
-            Some(TimeProblem::Gap {
-                row: i + 1,
-                t: t[i],
-                prev: t[i - 1],
-                missing: m as usize - 1,
-                step,
-                more: 0,
-            })
-        } else {
-            None
-        };
-        match (&first, problem) {
+        match (&first, step_problem(t, i, (steps[i - 1], step), allowed)) {
             (_, None) => {}
             (None, Some(p @ TimeProblem::Gap { .. })) => {
                 first = Some(p);
@@ -402,6 +376,35 @@ fn check_steps(
         });
     }
     Ok((jittery, unreliable))
+}
+
+/// What the difference into row `i` (0-based) is, `m` whole steps of `step` within `allowed`:
+/// one step (None), a gap, time that does not increase, or a stray row.
+fn step_problem(t: &[f64], i: usize, (m, step): (f64, f64), allowed: f64) -> Option<TimeProblem> {
+    let (row, ti, prev) = (i + 1, t[i], t[i - 1]);
+    if (ti - prev - m * step).abs() > allowed {
+        // Neither one step nor a whole number of them: an edited or stray row.
+        Some(TimeProblem::OffGrid {
+            row,
+            t: ti,
+            grid: prev + m.max(1.0) * step,
+            allowed,
+            rate_hz: 1.0 / step,
+        })
+    } else if m <= 0.0 {
+        Some(TimeProblem::GoesBack { row, t: ti, prev })
+    } else if m >= 2.0 {
+        Some(TimeProblem::Gap {
+            row,
+            t: ti,
+            prev,
+            missing: m as usize - 1,
+            step,
+            more: 0,
+        })
+    } else {
+        None
+    }
 }
 
 /// The least-squares line t_i = a + b·i through the times, snapped to a whole rate in Hz when

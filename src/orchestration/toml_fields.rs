@@ -130,6 +130,11 @@ impl<'a> Fields<'a> {
         Some(v)
     }
 
+    /// The value of `key` as it is, marked as read (for a key of more than one form).
+    pub fn value(&mut self, key: &str) -> Option<&'a toml::Value> {
+        self.take(key)
+    }
+
     /// A number (integer or float), finite.
     pub fn f64(&mut self, key: &str, issues: &mut Issues) -> Option<f64> {
         let v = self.take(key)?;

@@ -42,8 +42,12 @@ pub fn load_campaign(file: &Path, model: &ModelParams) -> anyhow::Result<LoadedC
 /// Reads a measured test: the required columns and the optional ones present, every cell a
 /// finite number within physical range ([`NumTable::check_limits`]). Every bad cell and every
 /// value out of range comes back at once.
-pub fn read_measured(path: &Path) -> Result<NumTable, Vec<String>> {
-    match tables::read_columns_lenient(path, &REQUIRED, &OPTIONAL) {
+/// `map` is the test's `columns` table.
+pub fn read_measured(
+    path: &Path,
+    map: &[(String, crate::orchestration::columns::Mapped)],
+) -> Result<NumTable, Vec<String>> {
+    match tables::read_columns_lenient(path, &REQUIRED, &OPTIONAL, map) {
         Ok((table, bad)) if bad.is_empty() => Ok(table),
         Ok((table, bad)) => Err(bad
             .iter()
@@ -74,7 +78,7 @@ fn load_test(
             lc.file.display()
         )]));
     }
-    let data = match read_measured(&path) {
+    let data = match read_measured(&path, &test.columns) {
         Ok(t) => t,
         Err(problems) => return Ok(Err(problems)),
     };

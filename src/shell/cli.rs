@@ -187,8 +187,9 @@ pub struct FitArgs {
     /// Where to write the fitted model (a model file the other commands accept with --model).
     #[arg(long, default_value = "fitted.toml")]
     pub out: PathBuf,
-    /// Iterations of Levenberg-Marquardt at most.
-    #[arg(long, default_value_t = 40)]
+    /// Iterations of Levenberg-Marquardt at most (it stops where it converges; six correlated
+    /// parameters, two modes of a specimen, may need over a hundred).
+    #[arg(long, default_value_t = 200)]
     pub max_iter: usize,
     /// Treat every warning about the data as an error (exit code 2).
     #[arg(long)]
@@ -211,6 +212,11 @@ pub struct DiagnoseArgs {
     /// Folder for the report (report.html and Parquet tables: candidates, tests, evidence).
     #[arg(long)]
     pub report: Option<PathBuf>,
+    /// Write the model of the named effects' fit (the starting model with their fitted
+    /// parameters, every stage the verdict names, e.g. a specimen's second mode) to this file,
+    /// for --model of the other commands. Nothing is written when the verdict names nothing.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
     /// Treat every warning about the data as an error (exit code 2).
     #[arg(long)]
     pub strict: bool,
@@ -267,6 +273,9 @@ pub struct SynthArgs {
     /// files, not the generator that made them. The truth tracks that reference as read back.
     #[arg(long)]
     pub as_records: bool,
+    /// Replace existing files in --out (without it, synth refuses and writes nothing).
+    #[arg(long)]
+    pub force: bool,
 }
 
 #[derive(Debug, clap::Args)]

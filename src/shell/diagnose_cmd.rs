@@ -59,7 +59,8 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
             .first()
             .and_then(|c| c.fit.as_ref().ok().map(|f| &f.after))
     });
-    let implausible = residual_warnings(&problem, &d.baseline, best);
+    let mut implausible = residual_warnings(&problem, &d.baseline, best);
+    implausible.extend(super::fit_cmd::noise_warnings(&problem, best));
     if args.strict && !implausible.is_empty() {
         return Err(BadInput(format!("{} (--strict)", implausible.join("\n"))).into());
     }
@@ -93,7 +94,40 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
         write_report(dir, &args.campaign.display().to_string(), &problem, &d)?;
         writeln!(o, "\n  wrote {} and its tables (candidates, selection, tests, evidence, statemap, stateterms .parquet)", dir.join("report.html").display())?;
     }
+    if let Some(out) = &args.out {
+        write_named(&mut o, out, &args.campaign, &model, &d)?;
+    }
     print_checks(&mut o, &loaded.checks, &implausible)?;
+    Ok(())
+}
+
+/// `--out`: the named effects' fitted model, or a line saying there is none.
+fn write_named(
+    o: &mut dyn Write,
+    out: &std::path::Path,
+    campaign: &std::path::Path,
+    model: &crate::kernel::params::ModelParams,
+    d: &Diagnosis,
+) -> anyhow::Result<()> {
+    let Some((free, fit)) = d.named_fit() else {
+        writeln!(
+            o,
+            "\n  {} not written: the verdict names no effect",
+            out.display()
+        )?;
+        return Ok(());
+    };
+    let command = format!("diagnose {}", campaign.display());
+    super::fit_cmd::write_fitted(out, &command, model, free, fit)?;
+    writeln!(
+        o,
+        "\n  wrote {} (the named effects fitted: {}; use it with --model)",
+        out.display(),
+        free.iter()
+            .map(|f| f.info.path())
+            .collect::<Vec<_>>()
+            .join(", ")
+    )?;
     Ok(())
 }
 

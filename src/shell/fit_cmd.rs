@@ -57,6 +57,30 @@ pub fn residual_warnings(
         .collect()
 }
 
+/// χ²/n of a test above which, where the whole campaign is within [`NOISE_MISMATCH`] / 2 of its
+/// noise, the test's noise is taken to be misjudged [chosen: a χ² of n degrees of freedom stays
+/// within a few √(2n) of n; 4 n is far beyond for any test of more than a few features].
+pub const NOISE_MISMATCH: f64 = 4.0;
+
+/// Warnings for tests whose residual after the best model found (`best`) is far above the noise
+/// their features were scaled by (χ²/n > [`NOISE_MISMATCH`]) while the campaign as a whole is near
+/// its noise: that test's noise is underestimated (a sensor noisier than its quiet rows show, a
+/// filter), or something is missing there only. Its standard errors are then too small.
+pub fn noise_warnings(problem: &Problem, best: Option<&fit::Eval>) -> Vec<String> {
+    let Some(b) = best else { return Vec::new() };
+    let mut chi2 = vec![0.0; problem.tests.len()];
+    for (f, r) in problem.features().iter().zip(&b.r) {
+        chi2[f.test] += r * r;
+    }
+    if b.chi2() > 0.5 * NOISE_MISMATCH * problem.dof() {
+        return Vec::new();
+    }
+    (problem.tests.iter().enumerate())
+        .filter(|(t, test)| chi2[*t] > NOISE_MISMATCH * test.dof().max(1.0))
+        .map(|(t, test)| format!("test {:?}: after the fit its chi2 is {:.1}x its degrees of freedom, while the campaign's is {:.2}x: its noise is larger than estimated from the file, or something is missing in this test only; its share of the standard errors is too small (weights = {{ ... }} can lower a channel)", test.name, chi2[t] / test.dof().max(1.0), b.chi2() / problem.dof()))
+        .collect()
+}
+
 /// The library effect a command-line name means.
 pub fn check_effect(e: &str, flag: &str) -> anyhow::Result<EffectId> {
     EffectId::parse(e.trim()).ok_or_else(|| {
@@ -145,20 +169,18 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     let loaded = load_problem(&args.campaign, &model, args.strict)?;
     let problem = &loaded.problem;
     let t0 = std::time::Instant::now();
-    let effects: Vec<EffectId> = (args.effect.iter())
-        .map(|e| check_effect(e, "--effect"))
-        .collect::<anyhow::Result<_>>()?;
     let pool = super::run_cmd::pool(args.threads)?;
-    // Each effect's start scan (a resonance's frequency, a lag), as a diagnosis makes it.
-    let free =
-        pool.install(|| crate::orchestration::diagnose::scan_starts(problem, &free, &effects));
+    // Each freed stage's start and scan (a mode's mass, a resonance's frequency, a lag), as a
+    // diagnosis makes them.
+    let free = pool.install(|| crate::orchestration::diagnose::scan_starts(problem, &free));
     let r = pool
         .install(|| fit::fit(problem, &free, args.max_iter))
         .map_err(|e| RunFailed(format!("the fit failed: {e}")))?;
     if let Some(f) = &r.before.failure {
         return Err(RunFailed(format!("the starting model fails: {f}")).into());
     }
-    let implausible = residual_warnings(problem, &r.before, Some(&r.after));
+    let mut implausible = residual_warnings(problem, &r.before, Some(&r.after));
+    implausible.extend(noise_warnings(problem, Some(&r.after)));
     if args.strict && !implausible.is_empty() {
         return Err(BadInput(format!("{} (--strict)", implausible.join("\n"))).into());
     }
@@ -181,7 +203,8 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     writeln!(o)?;
     print_estimates(&mut o, &free, &r)?;
     print_residuals(&mut o, problem, &r)?;
-    write_fitted(args, &model, &free, &r)?;
+    let command = format!("fit {}", args.campaign.display());
+    write_fitted(&args.out, &command, &model, &free, &r)?;
     writeln!(o, "\n  wrote {} (use it with --model)", args.out.display())?;
     print_checks(&mut o, &loaded.checks, &implausible)?;
     Ok(())
@@ -256,22 +279,22 @@ fn print_residuals(
 }
 
 /// Writes the fitted model (the starting model with the fitted parameters, their effects on),
-/// headed by the command and the estimates, to `--out`.
-fn write_fitted(
-    args: &FitArgs,
+/// headed by the command (`fit CAMPAIGN`) and the estimates, to `out`.
+pub fn write_fitted(
+    out: &Path,
+    command: &str,
     model: &ModelParams,
     free: &[Free],
     r: &fit::FitResult,
 ) -> anyhow::Result<()> {
-    let fitted = fit::apply(model, free, &r.u);
+    let fitted = fit::apply_estimates(model, free, &r.estimate);
     let mut root = toml::Table::new();
     root.insert(
         "model".into(),
         toml::Value::Table(crate::orchestration::spec::model_table(&fitted)),
     );
     let header = format!(
-        "# Fitted by `study fit {}` (vshake {}): {}\n",
-        args.campaign.display(),
+        "# Fitted by `study {command}` (vshake {}): {}\n",
         env!("CARGO_PKG_VERSION"),
         free.iter()
             .zip(&r.estimate)
@@ -280,7 +303,7 @@ fn write_fitted(
             .collect::<Vec<_>>()
             .join(", ")
     );
-    let out = super::tables::AtomicFile::new(&args.out);
+    let out = super::tables::AtomicFile::new(out);
     std::fs::write(&out.tmp, header + &toml::to_string(&root)?)?;
     out.commit()?;
     Ok(())

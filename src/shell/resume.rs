@@ -1,5 +1,5 @@
-//! `study run --resume FILE`: continue a run that was stopped (SIGINT, SIGTERM: the file is
-//! closed and marked incomplete) or killed (SIGKILL, a crash: the temp file and its checkpoint
+//! `study run --resume FILE`: continue a run that was stopped (SIGINT, SIGTERM: the rows are
+//! closed in `NAME.partial.parquet`, marked incomplete) or killed (SIGKILL, a crash: the temp file and its checkpoint
 //! are turned back into a readable file). The study comes from the file's own metadata (the
 //! resolved study, the study file's folder for relative paths, the shard), so the resumed run
 //! computes exactly what the first one would have; every sample depends only on (seed, sample
@@ -67,24 +67,29 @@ impl Kept {
     }
 }
 
-/// The job that continues `file`, or None when it is already complete (said on stdout).
+/// The job that continues `file` (the results table, `NAME.parquet`, or its partial one,
+/// `NAME.partial.parquet`), or None when it is already complete (said on stdout).
 pub fn job(file: &Path) -> anyhow::Result<Option<Job>> {
-    let killed = tables::killed_path(file);
-    let (source, temporary) = match tables::recover_killed(file)? {
+    let out = tables::final_path(file);
+    let partial = tables::partial_path(&out);
+    let killed = tables::killed_path(&partial);
+    let (source, temporary) = match tables::recover_killed(&partial)? {
         Recovered::File(p) => (p, true),
         // A resume of a killed run, itself killed before its first checkpoint: the rows recovered
         // the first time are still in FILE.killed.
-        Recovered::NoCheckpoint(_) | Recovered::Nothing if !file.exists() && killed.exists() => (killed, true),
-        Recovered::NoCheckpoint(tmp) if !file.exists() => {
+        Recovered::NoCheckpoint(_) | Recovered::Nothing if !partial.exists() && killed.exists() => (killed, true),
+        Recovered::NoCheckpoint(tmp) if !partial.exists() && !out.exists() => {
             return Err(BadInput(format!(
                 "{}: the run was killed before its first checkpoint (no rows were safely written), so there is nothing to resume; start it again",
                 tmp.display()
             ))
             .into())
         }
-        // A temp file without a checkpoint beside a stopped file: a resumed run killed before its
-        // first checkpoint; the stopped file still holds every row it had.
-        Recovered::NoCheckpoint(_) | Recovered::Nothing => (file.to_path_buf(), false),
+        // A stopped run's rows (beside them, perhaps, the temp file of a resumed run killed
+        // before its first checkpoint: the stopped file still holds every row it had).
+        _ if partial.exists() => (partial, false),
+        // The complete table (or one stopped by an older vshake, under its final name).
+        _ => (out.clone(), false),
     };
     if !source.exists() {
         return Err(BadInput(format!("{}: not found (nothing to resume)", file.display())).into());
@@ -139,7 +144,7 @@ pub fn job(file: &Path) -> anyhow::Result<Option<Job>> {
         plan,
         shard,
         range,
-        out: file.to_path_buf(),
+        out,
         meta,
         kept,
     }))

@@ -18,8 +18,10 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-/// Version of the results table layout (docs/formats.md "Results").
-pub const SCHEMA_VERSION: &str = "1";
+/// Version of the results table layout (docs/formats.md "Results"). 2: a metric of a run that did
+/// not end is null (was NaN); `fail_reason` is a fixed category, with `fail_value` and
+/// `fail_detail` beside it.
+pub const SCHEMA_VERSION: &str = "2";
 
 /// Reads and validates a study file.
 pub fn load_study(file: &Path) -> anyhow::Result<StudySpec> {
@@ -111,7 +113,8 @@ pub struct ResultsSink {
 
 impl ResultsSink {
     /// Column layout: sample_id, excitation_id, excitation, [design_base, design_block],
-    /// one column per parameter, one per metric, status, fail_time_s, fail_reason.
+    /// one column per parameter, one per metric (null where the run did not end), status,
+    /// fail_time_s, fail_reason (a fixed category), fail_value (SI), fail_detail (in words).
     pub fn create(
         path: &Path,
         plan: &Plan,
@@ -141,10 +144,16 @@ impl ResultsSink {
             t.push(("design_block".into(), Column::U32(vec![])));
         }
         t.extend(columns.iter().map(|c| (c.clone(), Column::F64(vec![]))));
-        t.extend(metrics.iter().map(|m| (m.to_string(), Column::F64(vec![]))));
+        t.extend(
+            metrics
+                .iter()
+                .map(|m| (m.to_string(), Column::OptF64(vec![]))),
+        );
         t.push(("status".into(), Column::Str(vec![])));
         t.push(("fail_time_s".into(), Column::OptF64(vec![])));
         t.push(("fail_reason".into(), Column::OptStr(vec![])));
+        t.push(("fail_value".into(), Column::OptF64(vec![])));
+        t.push(("fail_detail".into(), Column::OptStr(vec![])));
         t
     }
 
@@ -204,7 +213,11 @@ impl RowSink for ResultsSink {
                 .iter()
                 .position(|n| n == m)
                 .expect("metric names are validated");
-            cols.push(Column::F64(values.iter().map(|v| v[k].1).collect()));
+            // A metric of a run that did not end, or one the run does not define, is null.
+            let cell = |v: f64| v.is_finite().then_some(v);
+            cols.push(Column::OptF64(
+                values.iter().map(|v| cell(v[k].1)).collect(),
+            ));
         }
         cols.push(Column::Str(
             rows.iter().map(|r| r.status.label().to_string()).collect(),
@@ -221,14 +234,15 @@ impl RowSink for ResultsSink {
                 .collect(),
         ));
         cols.push(Column::OptStr(
-            rows.iter()
-                .map(|r| match &r.status {
-                    RowStatus::Ok => None,
-                    RowStatus::Failed { reason, .. } | RowStatus::Invalid { reason } => {
-                        Some(reason.clone())
-                    }
-                })
+            (rows.iter())
+                .map(|r| r.status.category().map(str::to_string))
                 .collect(),
+        ));
+        cols.push(Column::OptF64(
+            rows.iter().map(|r| r.status.value()).collect(),
+        ));
+        cols.push(Column::OptStr(
+            rows.iter().map(|r| r.status.detail()).collect(),
         ));
         self.stream.write(cols)
     }
@@ -386,7 +400,41 @@ fn output_path(
         .into());
     }
     check_writable(&out)?;
+    check_replaceable(&out)?;
     Ok(out)
+}
+
+/// A new run may replace a table vshake wrote (its metadata says so), never another file, and
+/// never the rows of an interrupted run of it (those are `--resume`'s).
+fn check_replaceable(out: &Path) -> anyhow::Result<()> {
+    let partial = tables::partial_path(out);
+    let interrupted = [
+        partial.clone(),
+        tables::killed_path(&partial),
+        tables::checkpoint_path(&partial),
+    ];
+    if let Some(p) = interrupted.iter().find(|p| p.exists()) {
+        return Err(BadInput(format!(
+            "{}: an interrupted run of this table left its rows in {}; continue it with: study run --resume {}, or remove that file to start again",
+            out.display(),
+            p.display(),
+            partial.display()
+        ))
+        .into());
+    }
+    let Ok(md) = std::fs::symlink_metadata(out) else {
+        return Ok(());
+    };
+    let ours = md.is_file()
+        && tables::parquet_metadata(out).is_ok_and(|m| meta::get(&m, Key::Kind).is_some());
+    if !ours {
+        return Err(BadInput(format!(
+            "{}: exists and is not a table vshake wrote (no vshake.kind in its Parquet metadata); nothing was replaced: choose another --out, or remove it",
+            out.display()
+        ))
+        .into());
+    }
+    Ok(())
 }
 
 /// Checks that the results file's folder (or the nearest existing ancestor of it, which the run
@@ -443,7 +491,8 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
     super::sizing::gate_long_run(&job, todo.clone(), &pool, args.yes)?;
     create_history_dir(&job)?;
     interrupt::install().context("catching SIGINT and SIGTERM")?;
-    let mut sink = ResultsSink::create(&job.out, &job.plan, &job.spec, &job.meta)?
+    let partial = tables::partial_path(&job.out);
+    let mut sink = ResultsSink::create(&partial, &job.plan, &job.spec, &job.meta)?
         .checkpoints(Duration::from_secs_f64(args.checkpoint_secs));
     if let Some(k) = &job.kept {
         k.copy_into(&mut sink, &job)?;
@@ -510,10 +559,16 @@ fn create_history_dir(job: &Job) -> anyhow::Result<()> {
 /// turns a stopped run into the error that says how to continue it.
 fn finish_results(job: &Job, sink: ResultsSink, stopped: bool) -> anyhow::Result<()> {
     let (done, total) = (sink.rows(), job.rows_total());
+    let partial = tables::partial_path(&job.out);
     sink.finish(&meta::completion(done, total))
-        .with_context(|| format!("writing {}", job.out.display()))?;
+        .with_context(|| format!("writing {}", partial.display()))?;
     if let Some(k) = &job.kept {
         k.discard();
+    }
+    if !stopped {
+        // Complete: the table takes its name.
+        std::fs::rename(&partial, &job.out)
+            .with_context(|| format!("renaming {} to {}", partial.display(), job.out.display()))?;
     }
     if stopped {
         let signal = interrupt::requested().unwrap_or(signal_hook::consts::SIGTERM);
@@ -522,8 +577,8 @@ fn finish_results(job: &Job, sink: ResultsSink, stopped: bool) -> anyhow::Result
             message: format!(
                 "stopped by {}: {done} of {total} rows written to {}, marked incomplete; continue with: study run --resume {}",
                 interrupt::name(signal),
-                job.out.display(),
-                job.out.display()
+                partial.display(),
+                partial.display()
             ),
         }
         .into());

@@ -191,8 +191,9 @@ fn array_script(job: &Job<'_>) -> String {
 {common}#SBATCH --output={logs}/shard-%a.out\n\
 set -uo pipefail\n\
 out=\"{shard_out}\"\n\
+partial=\"${{out%.parquet}}.partial.parquet\"\n\
 threads=\"${{SLURM_CPUS_PER_TASK:-{cpus}}}\"\n\
-if [ -e \"$out\" ] || [ -e \"$out.tmp.checkpoint\" ]; then\n\
+if [ -e \"$out\" ] || [ -e \"$partial\" ] || [ -e \"$partial.tmp.checkpoint\" ] || [ -e \"$partial.killed\" ]; then\n\
   {bin} run --resume \"$out\" --threads \"$threads\" --log-progress &\n\
 else\n\
   {bin} run {study_q} --shard \"${{SLURM_ARRAY_TASK_ID}}/{n}\" --threads \"$threads\" --log-progress --out \"$out\" &\n\

@@ -231,6 +231,9 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
     check_timing(rate, args.pre_trigger)?;
     let pre_rows = (args.pre_trigger * rate).round() as usize;
     let lc = load_campaign(&args.campaign, &model)?;
+    if !args.force {
+        refuse_overwrite(args, &lc)?;
+    }
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     let mut stdout = std::io::stdout().lock();
@@ -267,6 +270,56 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
         }
     )?;
     Ok(())
+}
+
+/// Every file synth would write in `--out` (the tests' data files, the records they read from
+/// files of their own, the campaign): any that exists is refused, naming them, before anything
+/// is written.
+fn refuse_overwrite(args: &SynthArgs, lc: &LoadedCampaign) -> anyhow::Result<()> {
+    let mut targets: Vec<PathBuf> = Vec::new();
+    for t in &lc.campaign.tests {
+        targets.push(args.out.join(&t.data));
+        if let ExcitationSpec::Record { file, .. } = &t.excitation {
+            targets.push(args.out.join(file));
+        }
+    }
+    // The campaign itself, where synth writes it into its own folder, is left as it is unless a
+    // test is made a record test.
+    let dst = args.out.join(lc.file.file_name().unwrap_or_default());
+    let itself = std::fs::canonicalize(&lc.file).ok() == std::fs::canonicalize(&dst).ok();
+    let rewritten = (lc.campaign.tests.iter())
+        .any(|t| read_as_record(&t.excitation, args.as_records).is_some());
+    if !itself || rewritten {
+        targets.push(dst);
+    }
+    targets.sort();
+    targets.dedup();
+    let existing: Vec<String> = (targets.iter())
+        .filter(|p| std::fs::symlink_metadata(p).is_ok())
+        .map(|p| p.display().to_string())
+        .collect();
+    if existing.is_empty() {
+        return Ok(());
+    }
+    let shown = existing
+        .iter()
+        .take(5)
+        .cloned()
+        .collect::<Vec<_>>()
+        .join(", ");
+    let more = existing.len().saturating_sub(5);
+    Err(BadInput(format!(
+        "--out {}: {} file(s) synth would write exist already ({shown}{}); nothing was written: \
+         choose another folder, or pass --force to replace them",
+        args.out.display(),
+        existing.len(),
+        if more > 0 {
+            format!(" and {more} more")
+        } else {
+            String::new()
+        }
+    ))
+    .into())
 }
 
 /// The reference filter's corner of a test that the synthesised campaign reads as a record

@@ -289,8 +289,8 @@ pub fn read_columns(
     read_columns_impl(path, wanted, optional, false)
 }
 
-/// Reads the `wanted` columns of a Parquet results table, where NaN marks a metric of a failed
-/// run (nulls are still errors).
+/// Reads the `wanted` columns of a Parquet results table, where a null (or NaN, in files
+/// written before metrics were null) marks a metric of a run that did not end; both read as NaN.
 pub fn read_columns_allow_nan(path: &Path, wanted: &[&str]) -> Result<NumTable, TableError> {
     read_columns_impl(path, wanted, &[], true)
 }
@@ -301,7 +301,7 @@ fn read_columns_impl(
     optional: &[&str],
     allow_nan: bool,
 ) -> Result<NumTable, TableError> {
-    let (table, bad) = read_columns_lenient_impl(path, wanted, optional, allow_nan)?;
+    let (table, bad) = read_columns_lenient_impl(path, (wanted, optional, &[]), allow_nan)?;
     bad.finish()?;
     Ok(table)
 }
@@ -309,28 +309,37 @@ fn read_columns_impl(
 /// Reads like [`read_columns`], but bad cells (empty, not a number, not finite) do not stop the
 /// read: they come back as NaN in the table and as errors beside it (the first of each column,
 /// with a count), so that a caller can add its own checks of the same file to one report.
+/// `map` is a campaign's `columns` table (channel key → the file's header or position, unit).
 pub fn read_columns_lenient(
     path: &Path,
     wanted: &[&str],
     optional: &[&str],
+    map: &[(String, columns::Mapped)],
 ) -> Result<(NumTable, Vec<TableError>), TableError> {
-    let (table, bad) = read_columns_lenient_impl(path, wanted, optional, false)?;
+    let (table, bad) = read_columns_lenient_impl(path, (wanted, optional, map), false)?;
     Ok((table, bad.errors()))
 }
 
+type Wanted<'a> = (
+    &'a [&'a str],
+    &'a [&'a str],
+    &'a [(String, columns::Mapped)],
+);
+
 fn read_columns_lenient_impl(
     path: &Path,
-    wanted: &[&str],
-    optional: &[&str],
+    (wanted, optional, map): Wanted<'_>,
     allow_nan: bool,
 ) -> Result<(NumTable, BadCells), TableError> {
     let is_parquet = path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("parquet") || e.eq_ignore_ascii_case("pq"));
     let (table, bad) = if is_parquet {
-        guarded(path, || read_parquet(path, wanted, optional, allow_nan))?
+        guarded(path, || {
+            read_parquet(path, (wanted, optional, map), allow_nan)
+        })?
     } else {
-        read_csv(path, wanted, optional)?
+        read_csv(path, (wanted, optional, map))?
     };
     if table.rows() == 0 {
         return Err(TableError::Empty {
@@ -343,11 +352,7 @@ fn read_columns_lenient_impl(
 /// Reads the `wanted` (and those of the `optional` present) columns of a CSV file: its layout
 /// (separator, preamble, header, units row) found from its lines, its columns by name and unit
 /// ([`columns::resolve`]), converted to SI.
-fn read_csv(
-    path: &Path,
-    wanted: &[&str],
-    optional: &[&str],
-) -> Result<(NumTable, BadCells), TableError> {
+fn read_csv(path: &Path, wanted: Wanted<'_>) -> Result<(NumTable, BadCells), TableError> {
     let file = path.to_path_buf();
     let bytes = std::fs::read(path).map_err(|e| TableError::Io {
         file: file.clone(),
@@ -366,7 +371,7 @@ fn read_csv(
         &headers,
         units.as_deref(),
         lay.header.is_some(),
-        (wanted, optional),
+        wanted,
     )?;
     let mut notes = layout_notes(&lay);
     notes.extend(columns_note(&idx));
@@ -461,9 +466,9 @@ fn csv_columns(
     headers: &[String],
     units: Option<&[String]>,
     has_header: bool,
-    (wanted, optional): (&[&str], &[&str]),
+    (wanted, optional, map): Wanted<'_>,
 ) -> Result<Vec<columns::Resolved>, TableError> {
-    columns::resolve(headers, units, wanted, optional, &[]).map_err(|problems| {
+    columns::resolve(headers, units, wanted, optional, map).map_err(|problems| {
         TableError::all(
             (problems.into_iter())
                 .map(|p| column_error(path, headers, has_header, p))
@@ -483,7 +488,7 @@ fn column_error(
         columns::ColumnProblem::Missing(c) if !has_header => TableError::MissingColumn {
             file: path.to_path_buf(),
             column: c,
-            hint: " (the file has no header row, its first line is numbers: add a header naming the columns, docs/formats.md)".into(),
+            hint: " (the file has no header row, its first line is numbers: add a header naming the columns, or give each channel's position in the campaign's `columns` table, e.g. columns = { time = { column = 1, unit = \"s\" } }, docs/formats.md)".into(),
         },
         columns::ColumnProblem::Missing(c) => missing(path, &c, headers),
         p => TableError::Column {
@@ -567,8 +572,7 @@ fn csv_number(cell: &str, sep: u8, decimal_commas: &mut bool) -> Result<f64, Str
 /// NaN is a bad cell unless `allow_nan`.
 fn read_parquet(
     path: &Path,
-    wanted: &[&str],
-    optional: &[&str],
+    (wanted, optional, map): Wanted<'_>,
     allow_nan: bool,
 ) -> Result<(NumTable, BadCells), TableError> {
     let file = path.to_path_buf();
@@ -588,7 +592,7 @@ fn read_parquet(
         .iter()
         .map(|f| f.name().clone())
         .collect();
-    let idx = columns::resolve(&found, None, wanted, optional, &[]).map_err(|problems| {
+    let idx = columns::resolve(&found, None, wanted, optional, map).map_err(|problems| {
         TableError::all(
             (problems.into_iter())
                 .map(|p| column_error(path, &found, true, p))
@@ -620,8 +624,8 @@ fn read_parquet(
     ))
 }
 
-/// Appends a batch's cells of column `c` (`name` in `file`) to `col`: a null is NaN and a bad
-/// cell, as is NaN unless `allow_nan` (and any other value that is not finite); a column of
+/// Appends a batch's cells of column `c` (`name` in `file`) to `col`: a null is NaN, and a bad
+/// cell unless `allow_nan`, as is NaN (and any other value that is not finite); a column of
 /// another type than a number is an error.
 fn append_parquet_cells(
     (file, name): (&Path, &str),
@@ -645,7 +649,9 @@ fn append_parquet_cells(
     for i in 0..arr.len() {
         let row = base + i + 1;
         if arr.is_null(i) {
-            bad_cells.push(c, || bad(row, "empty (null) cell".into()));
+            if !allow_nan {
+                bad_cells.push(c, || bad(row, "empty (null) cell".into()));
+            }
             col.push(f64::NAN);
             continue;
         }
@@ -1044,6 +1050,31 @@ pub enum Recovered {
     NoCheckpoint(PathBuf),
     /// The checkpointed rows, now a readable Parquet file at this path (`path.killed`).
     File(PathBuf),
+}
+
+/// Where a results table is written until it is complete: `NAME.partial.parquet` for
+/// `NAME.parquet` (`NAME.partial` for another name), so that no reader takes a stopped run for
+/// a finished one.
+pub fn partial_path(out: &Path) -> PathBuf {
+    let name = out.file_name().unwrap_or_default().to_string_lossy();
+    let partial = match name.strip_suffix(".parquet") {
+        Some(stem) => format!("{stem}.partial.parquet"),
+        None => format!("{name}.partial"),
+    };
+    out.with_file_name(partial)
+}
+
+/// The results table a partial one becomes (see [`partial_path`]); any other path as it is.
+pub fn final_path(p: &Path) -> PathBuf {
+    let name = p.file_name().unwrap_or_default().to_string_lossy();
+    match (
+        name.strip_suffix(".partial.parquet"),
+        name.strip_suffix(".partial"),
+    ) {
+        (Some(stem), _) => p.with_file_name(format!("{stem}.parquet")),
+        (None, Some(stem)) if !stem.is_empty() => p.with_file_name(stem),
+        _ => p.to_path_buf(),
+    }
 }
 
 /// Where a killed run's rows go when they are recovered: `FILE.killed`.

@@ -48,8 +48,8 @@ pub type Cells = Vec<String>;
 /// nullable fail_time_s.
 #[allow(dead_code)] // not every test crate compares results files
 pub fn content(path: &Path) -> Vec<(String, Cells)> {
-    let strings = ["excitation", "status", "fail_reason"];
-    let nullable = ["fail_time_s"];
+    let strings = ["excitation", "status", "fail_reason", "fail_detail"];
+    let nullable = ["fail_time_s", "fail_value"];
     let names: Vec<String> = column_names(path)
         .unwrap()
         .into_iter()
