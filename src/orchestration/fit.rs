@@ -623,14 +623,8 @@ impl Free {
 
 /// Sets the free parameters at `u` on `model` (switching on the effects they belong to).
 pub fn apply(model: &ModelParams, free: &[Free], u: &[f64]) -> ModelParams {
-    let mut m = model.clone();
-    for (f, &x) in free.iter().zip(u) {
-        if let Some(e) = f.info.component.effect() {
-            *m.effects.get_mut(e) = true;
-        }
-        (f.info.set)(&mut m, f.value(x));
-    }
-    m
+    let values: Vec<f64> = free.iter().zip(u).map(|(f, &x)| f.value(x)).collect();
+    apply_estimates(model, free, &values)
 }
 
 /// `model` with the parameters `free` at the values `estimate` (in their units), their effects

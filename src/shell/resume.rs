@@ -1,6 +1,6 @@
 //! `study run --resume FILE`: continue a run that was stopped (SIGINT, SIGTERM: the rows are
-//! closed in `NAME.partial.parquet`, marked incomplete) or killed (SIGKILL, a crash: the temp file and its checkpoint
-//! are turned back into a readable file). The study comes from the file's own metadata (the
+//! closed in `NAME.partial.parquet`, marked incomplete) or killed (SIGKILL, a crash: the temp
+//! file and its checkpoint are turned back into a readable file). The study comes from the file's own metadata (the
 //! resolved study, the study file's folder for relative paths, the shard), so the resumed run
 //! computes exactly what the first one would have; every sample depends only on (seed, sample
 //! id), so the finished file equals an uninterrupted run's row for row, bit for bit.

@@ -331,9 +331,11 @@ fn read_columns_lenient_impl(
     (wanted, optional, map): Wanted<'_>,
     allow_nan: bool,
 ) -> Result<(NumTable, BadCells), TableError> {
+    // A Parquet file is recognised by its magic bytes whatever its name, and by its extension.
     let is_parquet = path
         .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("parquet") || e.eq_ignore_ascii_case("pq"));
+        .is_some_and(|e| e.eq_ignore_ascii_case("parquet") || e.eq_ignore_ascii_case("pq"))
+        || starts_with(path, b"PAR1");
     let (table, bad) = if is_parquet {
         guarded(path, || {
             read_parquet(path, (wanted, optional, map), allow_nan)
@@ -358,6 +360,12 @@ fn read_csv(path: &Path, wanted: Wanted<'_>) -> Result<(NumTable, BadCells), Tab
         file: file.clone(),
         err: e,
     })?;
+    if let Some((what, advice)) = binary_kind(&bytes) {
+        return Err(TableError::Column {
+            file,
+            message: format!("{what}, not CSV text (vshake reads CSV and Parquet files){advice}"),
+        });
+    }
     let text = String::from_utf8_lossy(&bytes);
     let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
     if text.trim().is_empty() {
@@ -399,6 +407,46 @@ fn read_csv(path: &Path, wanted: Wanted<'_>) -> Result<(NumTable, BadCells), Tab
             notes,
         },
         bad_cells,
+    ))
+}
+
+/// Whether the file at `path` begins with `magic`.
+fn starts_with(path: &Path, magic: &[u8]) -> bool {
+    use std::io::Read;
+    let mut head = vec![0u8; magic.len()];
+    File::open(path)
+        .and_then(|mut f| f.read_exact(&mut head))
+        .is_ok_and(|_| head == magic)
+}
+
+/// One line to save MATLAB variables as a file vshake reads.
+const MATLAB_CSV: &str = "writetable(table(t, ref_disp, disp, accel, 'VariableNames', \
+     {'time_s', 'ref_disp_m', 'disp_m', 'accel_mps2'}), 'test.csv')";
+
+/// What a file that is not text is, by its first bytes (never printed), and what to do: a
+/// MATLAB MAT-file, a zip archive (an Excel workbook), or other binary (a NUL byte in its first
+/// 8 KiB); None for text.
+fn binary_kind(bytes: &[u8]) -> Option<(String, String)> {
+    let head = &bytes[..bytes.len().min(8192)];
+    let mat = |v: &str| {
+        let advice = format!("; in MATLAB, save its variables as CSV with their names in one line, e.g. {MATLAB_CSV}");
+        Some((format!("a MATLAB MAT-file ({v})"), advice))
+    };
+    if head.starts_with(b"MATLAB 7.3 MAT-file") || head.get(512..520) == Some(b"\x89HDF\r\n\x1a\n")
+    {
+        return mat("v7.3, HDF5");
+    }
+    if head.starts_with(b"MATLAB 5.0 MAT-file") {
+        return mat("v5/v7");
+    }
+    if head.starts_with(b"PK\x03\x04") {
+        let advice = "; save the sheet as CSV".to_string();
+        return Some(("a zip archive (an Excel .xlsx workbook?)".into(), advice));
+    }
+    let nul = head.iter().position(|&b| b == 0)?;
+    Some((
+        format!("binary content (a NUL byte at byte {nul})"),
+        String::new(),
     ))
 }
 
@@ -1357,6 +1405,44 @@ mod tests {
         let p = d.path().join("t.csv");
         std::fs::write(&p, text).unwrap();
         (d, p)
+    }
+
+    #[test]
+    fn files_are_recognised_by_content_and_binary_is_never_printed() {
+        let d = tempfile::tempdir().unwrap();
+        let mut mat = b"MATLAB 5.0 MAT-file, Platform: GLNXA64".to_vec();
+        mat.resize(128, b' ');
+        mat.extend((0..2000u32).map(|i| (i * 37 % 251) as u8));
+        for (name, bytes, says) in [
+            ("m.csv", mat.clone(), "MATLAB MAT-file (v5/v7)"),
+            ("x.csv", b"PK\x03\x04\x14\x00junk".to_vec(), "zip archive"),
+            (
+                "b.csv",
+                b"time_s,x\n0\x00\x01,2\n".to_vec(),
+                "NUL byte at byte 10",
+            ),
+        ] {
+            let p = d.path().join(name);
+            std::fs::write(&p, &bytes).unwrap();
+            let e = read_columns(&p, &["time_s"], &[]).unwrap_err().to_string();
+            assert!(
+                e.contains(name) && e.contains(says) && e.contains("not CSV text"),
+                "{e}"
+            );
+            assert!(
+                !e.contains('\u{fffd}') && !e.contains('\0'),
+                "binary printed: {e}"
+            );
+        }
+        let e = read_columns(&d.path().join("m.csv"), &["time_s"], &[]).unwrap_err();
+        assert!(e.to_string().contains("writetable("), "{e}");
+        // A Parquet file under a .csv name is read as Parquet.
+        let pq = d.path().join("p.parquet");
+        write_parquet(&pq, &[("time_s", &[0.0, 1.0][..])], &[]).unwrap();
+        let renamed = d.path().join("p.csv");
+        std::fs::rename(&pq, &renamed).unwrap();
+        let t = read_columns(&renamed, &["time_s"], &[]).unwrap();
+        assert_eq!(t.column("time_s").unwrap(), &[0.0, 1.0]);
     }
 
     #[test]
