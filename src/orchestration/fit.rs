@@ -623,15 +623,24 @@ impl Free {
 
 /// Sets the free parameters at `u` on `model` (switching on the effects they belong to).
 pub fn apply(model: &ModelParams, free: &[Free], u: &[f64]) -> ModelParams {
-    let values: Vec<f64> = free.iter().zip(u).map(|(f, &x)| f.value(x)).collect();
-    apply_estimates(model, free, &values)
+    with_values(model, free, free.iter().zip(u).map(|(f, &x)| f.value(x)))
 }
 
 /// `model` with the parameters `free` at the values `estimate` (in their units), their effects
 /// switched on: a fit's model, whatever start its scaled coordinates are relative to.
 pub fn apply_estimates(model: &ModelParams, free: &[Free], estimate: &[f64]) -> ModelParams {
+    with_values(model, free, estimate.iter().copied())
+}
+
+/// `model` with the parameters `free` at `values` (in their units), their effects switched on;
+/// no allocation beyond the model's clone (a batch makes one per lane).
+fn with_values(
+    model: &ModelParams,
+    free: &[Free],
+    values: impl Iterator<Item = f64>,
+) -> ModelParams {
     let mut m = model.clone();
-    for (f, &v) in free.iter().zip(estimate) {
+    for (f, v) in free.iter().zip(values) {
         if let Some(e) = f.info.component.effect() {
             *m.effects.get_mut(e) = true;
         }
