@@ -1,7 +1,8 @@
 //! Property tests of every parser a user's file meets: the study TOML, the campaign TOML, and
-//! measured tests as CSV and as Parquet. Random bytes, random byte mutations of valid files and
-//! random values put into valid files never panic; each ends either accepted or refused as bad
-//! input (exit code 2) with a message that names the file.
+//! measured tests as CSV, Parquet and MATLAB MAT-files (SciPy-written v5 and v7 seeds). Random
+//! bytes, random byte mutations of valid files and random values put into valid files never
+//! panic; each ends either accepted or refused as bad input (exit code 2) with a message that
+//! names the file.
 //!
 //! `cargo test` runs 256 cases per property; CI's property step runs 50 000
 //! (`PROPTEST_CASES=50000 cargo test --release --test parsers`): 50 000 random headers of up to
@@ -257,6 +258,13 @@ proptest! {
     fn parquet_tests_of_random_bytes(bytes in proptest::collection::vec(any::<u8>(), 0..2000)) {
         let d = tempfile::tempdir().unwrap();
         try_campaign(d.path(), CAMPAIGN.replace("DATA", "t.parquet").as_bytes(), "t.parquet", &bytes)?;
+    }
+
+    #[test]
+    fn mat_tests_with_mutated_bytes(v7 in any::<bool>(), e in edits()) {
+        let d = tempfile::tempdir().unwrap();
+        let seed = std::fs::read(repo(if v7 { "tests/data/mat/v7_units.mat" } else { "tests/data/mat/v5_names.mat" })).unwrap();
+        try_campaign(d.path(), CAMPAIGN.replace("DATA", "t.mat").as_bytes(), "t.mat", &mutate(&seed, &e))?;
     }
 
     #[test]

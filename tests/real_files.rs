@@ -903,3 +903,107 @@ fn unknown_units_are_refused_naming_file_and_column() {
         );
     }
 }
+
+/// A level 5 MAT-file of double column vectors, as MATLAB's `save -v6` (uncompressed) or
+/// `save -v7` (each variable zlib-compressed) writes it [MathWorks, "MAT-File Format", R2024b,
+/// ch. 1: a 128-byte header, then one miMATRIX element per variable].
+fn write_mat(path: &Path, vars: &[(&str, Vec<f64>)], compress: bool) {
+    fn element(kind: u32, body: &[u8]) -> Vec<u8> {
+        let mut e = kind.to_le_bytes().to_vec();
+        e.extend((body.len() as u32).to_le_bytes());
+        e.extend(body);
+        e.resize(e.len().div_ceil(8) * 8, 0);
+        e
+    }
+    let mut out =
+        b"MATLAB 5.0 MAT-file, Platform: GLNXA64, written by tests/real_files.rs".to_vec();
+    out.resize(124, b' ');
+    out.extend(0x0100u16.to_le_bytes());
+    out.extend(b"IM");
+    for (name, v) in vars {
+        let flags: Vec<u8> = [6u32, 0].iter().flat_map(|x| x.to_le_bytes()).collect();
+        let dims: Vec<u8> = [v.len() as i32, 1]
+            .iter()
+            .flat_map(|x| x.to_le_bytes())
+            .collect();
+        let data: Vec<u8> = v.iter().flat_map(|x| x.to_le_bytes()).collect();
+        let mut body = element(6, &flags);
+        body.extend(element(5, &dims));
+        body.extend(element(1, name.as_bytes()));
+        body.extend(element(9, &data));
+        let matrix = element(14, &body);
+        if compress {
+            use std::io::Write;
+            let mut z = libflate::zlib::Encoder::new(Vec::new()).unwrap();
+            z.write_all(&matrix).unwrap();
+            let packed = z.finish().into_result().unwrap();
+            out.extend(15u32.to_le_bytes());
+            out.extend((packed.len() as u32).to_le_bytes());
+            out.extend(packed);
+        } else {
+            out.extend(matrix);
+        }
+    }
+    std::fs::write(path, out).unwrap();
+}
+
+/// Issue 27: the campaign's files saved as MATLAB MAT-files, v5 (MATLAB names, SI) and v7
+/// (compressed; units in the names: mm, g): read to the clean file's results, with a note.
+#[test]
+fn matlab_files_are_read_to_the_si_results() {
+    let d = tempfile::tempdir().unwrap();
+    let clean_dir = d.path().join("clean");
+    let base = compare(&synth(&clean_dir, &[]), &[]);
+    let g = 9.80665;
+    let si = ["time_s", "ref_disp_m", "disp_m", "accel_mps2"];
+    let variants = [
+        (
+            "v5",
+            ["Time", "RefDisp", "Disp", "Accel"],
+            [1.0; 4],
+            false,
+            0.0,
+        ),
+        (
+            "v7",
+            ["t", "ref_disp_mm", "disp_mm", "accel_g"],
+            [1.0, 1e3, 1e3, 1.0 / g],
+            true,
+            1e-9,
+        ),
+    ];
+    for (dir, names, k, compress, tol) in variants {
+        let to = d.path().join(dir);
+        std::fs::create_dir_all(&to).unwrap();
+        std::fs::write(to.join("real.toml"), CAMPAIGN.replace(".csv", ".mat")).unwrap();
+        for name in FILES {
+            let csv = Csv::read(&clean_dir.join(name));
+            let vars: Vec<(&str, Vec<f64>)> = (si.iter().zip(names).zip(k))
+                .map(|((c, n), f)| {
+                    let i = csv.col(c);
+                    (
+                        n,
+                        csv.rows
+                            .iter()
+                            .map(|r| r[i].parse::<f64>().unwrap() * f)
+                            .collect(),
+                    )
+                })
+                .collect();
+            write_mat(&to.join(name.replace(".csv", ".mat")), &vars, compress);
+        }
+        let r = compare(&to.join("real.toml"), &[]);
+        assert_same(&r, &base, tol, dir);
+        let says = if compress {
+            "MAT-file (v7, compressed)"
+        } else {
+            "MAT-file (v5)"
+        };
+        assert!(r.stdout.contains(says), "{dir}: {}", r.stdout);
+        assert!(
+            r.stdout.contains("read as accel_mps2"),
+            "{dir}: {}",
+            r.stdout
+        );
+    }
+}

@@ -10,6 +10,7 @@ pub mod compare_cmd;
 pub mod diagnose_cmd;
 pub mod fit_cmd;
 pub mod interrupt;
+pub mod matlab;
 pub mod merge_cmd;
 pub mod meta;
 pub mod params_cmd;

@@ -10,6 +10,7 @@ use crate::kernel::params::ModelParams;
 use crate::orchestration::columns;
 use crate::orchestration::sim;
 use crate::orchestration::spec::ExcitationSpec;
+use crate::shell::matlab;
 use arrow_array::builder::{Float64Builder, ListBuilder, StringBuilder};
 use arrow_array::{
     Array, ArrayRef, Float32Array, Float64Array, Int32Array, Int64Array, RecordBatch,
@@ -162,6 +163,10 @@ fn stem(name: &str) -> &str {
     name.rsplit_once('_').map_or(name, |(s, _)| s)
 }
 
+/// A `columns` table that maps channels by position (the start of one).
+const BY_POSITION: &str =
+    "columns = { time = { column = 1, unit = \"s\" }, accel = { column = 4, unit = \"g\" }, ... }";
+
 fn missing(file: &Path, column: &str, found: &[String]) -> TableError {
     let other_units: Vec<&String> = found
         .iter()
@@ -175,6 +180,12 @@ fn missing(file: &Path, column: &str, found: &[String]) -> TableError {
                 .map(|s| format!("`{s}`"))
                 .collect::<Vec<_>>()
                 .join(", ")
+        )
+    } else if !found.is_empty() && found.iter().all(|f| f.ends_with(')') && f.contains("(:,")) {
+        format!(
+            " (the MAT-file's matrix columns are {}: give each channel's position in the \
+             campaign's `columns` table, e.g. {BY_POSITION}, docs/formats.md)",
+            found.join(", ")
         )
     } else {
         format!(" (columns present: {})", found.join(", "))
@@ -230,6 +241,8 @@ fn column_names_unguarded(path: &Path) -> Result<Vec<String>, TableError> {
             .iter()
             .map(|f| f.name().clone())
             .collect())
+    } else if matlab::is_v5(path) {
+        Ok(mat_columns(path)?.names)
     } else {
         let bytes = std::fs::read(path).map_err(|e| TableError::Io { file, err: e })?;
         let text = String::from_utf8_lossy(&bytes);
@@ -340,6 +353,8 @@ fn read_columns_lenient_impl(
         guarded(path, || {
             read_parquet(path, (wanted, optional, map), allow_nan)
         })?
+    } else if matlab::is_v5(path) {
+        read_mat(path, (wanted, optional, map))?
     } else {
         read_csv(path, (wanted, optional, map))?
     };
@@ -363,7 +378,9 @@ fn read_csv(path: &Path, wanted: Wanted<'_>) -> Result<(NumTable, BadCells), Tab
     if let Some((what, advice)) = binary_kind(&bytes) {
         return Err(TableError::Column {
             file,
-            message: format!("{what}, not CSV text (vshake reads CSV and Parquet files){advice}"),
+            message: format!(
+                "{what}, not CSV text (vshake reads CSV, Parquet and MATLAB v5/v7 files){advice}"
+            ),
         });
     }
     let text = String::from_utf8_lossy(&bytes);
@@ -410,6 +427,110 @@ fn read_csv(path: &Path, wanted: Wanted<'_>) -> Result<(NumTable, BadCells), Tab
     ))
 }
 
+/// The numeric variables of the MAT-file at `path` as columns ([`matlab::columns`]).
+fn mat_columns(path: &Path) -> Result<matlab::MatColumns, TableError> {
+    let file = path.to_path_buf();
+    let bytes = std::fs::read(path).map_err(|e| TableError::Io {
+        file: file.clone(),
+        err: e,
+    })?;
+    matlab::columns(&bytes).map_err(|message| TableError::Format {
+        file,
+        kind: "MATLAB .mat",
+        message,
+    })
+}
+
+/// Reads the `wanted` (and those of the `optional` present) columns of a MATLAB MAT-file (v5,
+/// v7): its variables are the header, mapped and converted as a CSV header is; the columns read
+/// must be equally long.
+fn read_mat(path: &Path, wanted: Wanted<'_>) -> Result<(NumTable, BadCells), TableError> {
+    let file = path.to_path_buf();
+    let mat = mat_columns(path)?;
+    let idx = csv_columns(path, &mat.names, None, true, wanted).map_err(|e| {
+        if mat.names.is_empty() {
+            let mut found: Vec<String> = mat.skipped.clone();
+            found.extend(
+                (mat.other > 0)
+                    .then(|| format!("{} text, struct, cell or table variable(s)", mat.other)),
+            );
+            let found = if found.is_empty() {
+                "nothing".into()
+            } else {
+                found.join(", ")
+            };
+            TableError::Column {
+                file: file.clone(),
+                message: format!(
+                    "the MAT-file holds no numeric vector or matrix, only {found} (a MATLAB \
+                     table, struct or cell is not read: save each channel as a numeric \
+                     variable, e.g. save('test.mat', 't', 'ref_disp', 'disp', 'accel'), or as \
+                     CSV: {MATLAB_CSV})"
+                ),
+            }
+        } else {
+            e
+        }
+    })?;
+    mat_lengths(path, &mat, &idx)?;
+    let mut bad_cells = BadCells::default();
+    let mut columns = Vec::with_capacity(idx.len());
+    for (c, r) in idx.iter().enumerate() {
+        let values = &mat.values[r.index];
+        for (i, v) in values.iter().enumerate().filter(|(_, v)| !v.is_finite()) {
+            bad_cells.push(c, || TableError::BadCell {
+                file: file.clone(),
+                column: mat.names[r.index].clone(),
+                row: i + 1,
+                line: String::new(),
+                message: format!("{v} is not a finite number"),
+            });
+        }
+        columns.push(values.iter().map(|v| v * r.to_si).collect());
+    }
+    let mut notes = vec![format!(
+        "read as a MATLAB MAT-file ({})",
+        if mat.compressed {
+            "v7, compressed"
+        } else {
+            "v5"
+        }
+    )];
+    notes.extend(columns_note(&idx));
+    Ok((
+        NumTable {
+            file,
+            names: idx.into_iter().map(|r| r.name).collect(),
+            columns,
+            first_line: None,
+            notes,
+        },
+        bad_cells,
+    ))
+}
+
+/// The columns `idx` of a MAT-file must have as many samples each.
+fn mat_lengths(
+    path: &Path,
+    mat: &matlab::MatColumns,
+    idx: &[columns::Resolved],
+) -> Result<(), TableError> {
+    let lens: Vec<(String, usize)> = (idx.iter())
+        .map(|r| (mat.names[r.index].clone(), mat.values[r.index].len()))
+        .collect();
+    if lens.iter().all(|(_, n)| *n == lens[0].1) {
+        return Ok(());
+    }
+    let list: Vec<String> = lens.iter().map(|(v, n)| format!("`{v}` {n}")).collect();
+    Err(TableError::Column {
+        file: path.to_path_buf(),
+        message: format!(
+            "the variables read have different lengths ({}): each channel needs one value per sample",
+            list.join(", ")
+        ),
+    })
+}
+
 /// Whether the file at `path` begins with `magic`.
 fn starts_with(path: &Path, magic: &[u8]) -> bool {
     use std::io::Read;
@@ -424,20 +545,17 @@ const MATLAB_CSV: &str = "writetable(table(t, ref_disp, disp, accel, 'VariableNa
      {'time_s', 'ref_disp_m', 'disp_m', 'accel_mps2'}), 'test.csv')";
 
 /// What a file that is not text is, by its first bytes (never printed), and what to do: a
-/// MATLAB MAT-file, a zip archive (an Excel workbook), or other binary (a NUL byte in its first
+/// MATLAB v7.3 MAT-file (v5 and v7 are read by [`read_mat`]), a zip archive (an Excel workbook), or other binary (a NUL byte in its first
 /// 8 KiB); None for text.
 fn binary_kind(bytes: &[u8]) -> Option<(String, String)> {
     let head = &bytes[..bytes.len().min(8192)];
-    let mat = |v: &str| {
-        let advice = format!("; in MATLAB, save its variables as CSV with their names in one line, e.g. {MATLAB_CSV}");
-        Some((format!("a MATLAB MAT-file ({v})"), advice))
-    };
     if head.starts_with(b"MATLAB 7.3 MAT-file") || head.get(512..520) == Some(b"\x89HDF\r\n\x1a\n")
     {
-        return mat("v7.3, HDF5");
-    }
-    if head.starts_with(b"MATLAB 5.0 MAT-file") {
-        return mat("v5/v7");
+        let advice = format!(
+            "; vshake reads MAT-files up to v7: in MATLAB, load it and save('test.mat', '-v7') \
+             saves it readably (or as CSV: {MATLAB_CSV})"
+        );
+        return Some(("a MATLAB MAT-file (v7.3, HDF5)".into(), advice));
     }
     if head.starts_with(b"PK\x03\x04") {
         let advice = "; save the sheet as CSV".to_string();
@@ -1410,11 +1528,12 @@ mod tests {
     #[test]
     fn files_are_recognised_by_content_and_binary_is_never_printed() {
         let d = tempfile::tempdir().unwrap();
-        let mut mat = b"MATLAB 5.0 MAT-file, Platform: GLNXA64".to_vec();
-        mat.resize(128, b' ');
+        let mut mat = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, HDF5 schema 1.00".to_vec();
+        mat.resize(512, b' ');
+        mat.extend(b"\x89HDF\r\n\x1a\n");
         mat.extend((0..2000u32).map(|i| (i * 37 % 251) as u8));
         for (name, bytes, says) in [
-            ("m.csv", mat.clone(), "MATLAB MAT-file (v5/v7)"),
+            ("m.csv", mat.clone(), "MATLAB MAT-file (v7.3, HDF5)"),
             ("x.csv", b"PK\x03\x04\x14\x00junk".to_vec(), "zip archive"),
             (
                 "b.csv",
@@ -1436,6 +1555,21 @@ mod tests {
         }
         let e = read_columns(&d.path().join("m.csv"), &["time_s"], &[]).unwrap_err();
         assert!(e.to_string().contains("writetable("), "{e}");
+        // A v5 header over garbage is a corrupt MAT-file, by its content whatever the name.
+        let mut v5 = b"MATLAB 5.0 MAT-file, Platform: GLNXA64".to_vec();
+        v5.resize(128, b' ');
+        v5.extend((0..2000u32).map(|i| (i * 37 % 251) as u8));
+        let p = d.path().join("v5.csv");
+        std::fs::write(&p, &v5).unwrap();
+        let e = read_columns(&p, &["time_s"], &[]).unwrap_err().to_string();
+        assert!(
+            e.contains("v5.csv: not a readable MATLAB .mat file: the file is corrupt"),
+            "{e}"
+        );
+        assert!(
+            !e.contains('\u{fffd}') && !e.contains('\0'),
+            "binary printed: {e}"
+        );
         // A Parquet file under a .csv name is read as Parquet.
         let pq = d.path().join("p.parquet");
         write_parquet(&pq, &[("time_s", &[0.0, 1.0][..])], &[]).unwrap();
