@@ -156,6 +156,10 @@ pub fn split(header: &str) -> (String, Option<String>) {
     for (open, close) in [('(', ')'), ('[', ']'), ('{', '}')] {
         if let Some(body) = h.strip_suffix(close) {
             if let Some(i) = body.rfind(open) {
+                if body[i + 1..].trim_start().starts_with(':') {
+                    // A MATLAB column index (`data(:,2)`, a MAT-file matrix's column), no unit.
+                    return split(&body[..i]);
+                }
                 return (
                     body[..i].trim().to_string(),
                     Some(body[i + 1..].trim().to_string()),
@@ -274,6 +278,11 @@ pub enum ColumnProblem {
         column: String,
         headers: Vec<String>,
     },
+    /// One column of the file read as two channels.
+    Twice {
+        header: String,
+        columns: [String; 2],
+    },
     /// A `columns` entry names a header or position the file lacks.
     NotInFile { column: String, what: String },
 }
@@ -295,6 +304,11 @@ impl std::fmt::Display for ColumnProblem {
                 f,
                 "columns {} all look like `{column}`: rename the one to read `{column}` (docs/formats.md)",
                 headers.iter().map(|h| format!("`{h}`")).collect::<Vec<_>>().join(", ")
+            ),
+            ColumnProblem::Twice { header, columns } => write!(
+                f,
+                "column `{header}` would be read as both `{}` and `{}`: give each channel its own column in the campaign's `columns` table (positions count every column of the file, in order; docs/formats.md)",
+                columns[0], columns[1]
             ),
             ColumnProblem::NotInFile { column, what } => {
                 write!(f, "the campaign's `columns` table maps `{column}` to {what}, which the file does not have")
@@ -444,11 +458,27 @@ pub fn resolve(
             Err(p) => problems.push(p),
         }
     }
+    problems.extend(read_twice(headers, &out));
     if problems.is_empty() {
         Ok(out)
     } else {
         Err(problems)
     }
+}
+
+/// One file column read as two channels (a `columns` table's position or name that another
+/// channel takes too): a problem naming both.
+fn read_twice(headers: &[String], out: &[Resolved]) -> Vec<ColumnProblem> {
+    let mut problems = Vec::new();
+    for (k, a) in out.iter().enumerate() {
+        if let Some(b) = out[..k].iter().find(|b| b.index == a.index) {
+            problems.push(ColumnProblem::Twice {
+                header: headers[a.index].clone(),
+                columns: [b.name.clone(), a.name.clone()],
+            });
+        }
+    }
+    problems
 }
 
 /// Whether every cell of `row` is a unit (or empty), with at least one unit: a units row.
@@ -605,6 +635,9 @@ mod tests {
         assert_eq!(split("TIME_S"), ("TIME".into(), Some("S".into())));
         assert_eq!(split("RefDisp"), ("RefDisp".into(), None));
         assert_eq!(split("p1"), ("p1".into(), None));
+        // A MAT-file matrix's column: an index, not a unit.
+        assert_eq!(split("data(:,2)"), ("data".into(), None));
+        assert_eq!(split("accel_g(:,1)"), ("accel".into(), Some("g".into())));
     }
 
     #[test]
@@ -720,6 +753,20 @@ mod tests {
         .unwrap();
         assert_eq!(r[1].to_si, 1e-3);
         assert!(!is_units_row(&s(&["0.0", "1.5"])));
+        // A position another channel takes already (`t` is time by its name): both named.
+        let twice = vec![(
+            "disp".to_string(),
+            Mapped {
+                name: None,
+                index: Some(1),
+                unit: Some("mm".into()),
+            },
+        )];
+        let p = resolve(&s(&["t", "x"]), None, &["time_s", "disp_m"], &[], &twice).unwrap_err();
+        assert_eq!(p.len(), 1);
+        assert!(p[0]
+            .to_string()
+            .starts_with("column `t` would be read as both `time_s` and `disp_m`"));
     }
 
     #[test]

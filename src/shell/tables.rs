@@ -187,6 +187,12 @@ fn missing(file: &Path, column: &str, found: &[String]) -> TableError {
              campaign's `columns` table, e.g. {BY_POSITION}, docs/formats.md)",
             found.join(", ")
         )
+    } else if columns::channel(column).is_some() {
+        format!(
+            " (columns present: {}; a column named otherwise is mapped to it by the campaign's \
+             `columns` table, docs/formats.md)",
+            found.join(", ")
+        )
     } else {
         format!(" (columns present: {})", found.join(", "))
     };
@@ -452,17 +458,17 @@ fn read_mat(path: &Path, wanted: Wanted<'_>) -> Result<(NumTable, BadCells), Tab
             let mut found: Vec<String> = mat.skipped.clone();
             found.extend(
                 (mat.other > 0)
-                    .then(|| format!("{} text, struct, cell or table variable(s)", mat.other)),
+                    .then(|| format!("{} struct, cell, text or table variable(s)", mat.other)),
             );
             let found = if found.is_empty() {
-                "nothing".into()
+                "no variable at all".into()
             } else {
-                found.join(", ")
+                format!("only {}", found.join(", "))
             };
             TableError::Column {
                 file: file.clone(),
                 message: format!(
-                    "the MAT-file holds no numeric vector or matrix, only {found} (a MATLAB \
+                    "the MAT-file holds no numeric vector or matrix, {found} (a MATLAB \
                      table, struct or cell is not read: save each channel as a numeric \
                      variable, e.g. save('test.mat', 't', 'ref_disp', 'disp', 'accel'), or as \
                      CSV: {MATLAB_CSV})"
