@@ -424,3 +424,42 @@ metrics = ["amp_ratio"]
     assert_eq!(st[1], 0.0, "the constant dimension has no effect: {st:?}");
     assert!(st[2] > 10.0 * st[0], "l_v outranks g_d at 3 Hz: {st:?}");
 }
+
+/// Issue 28: `--backend cuda` where no GPU can run the work is refused before any work (exit 2,
+/// one line with the cause, nothing written); `auto` runs on the CPU and says why; `cpu` says
+/// nothing about GPUs. (On a GPU machine the cause is that this version has no CUDA kernel.)
+#[test]
+fn the_backend_is_chosen_and_a_gpu_that_cannot_run_is_named() {
+    let d = tempfile::tempdir().unwrap();
+    let smoke = studies_dir().join("smoke.toml");
+    let out = d.path().join("s.parquet");
+    let args = |b: &'static str| {
+        let mut v = vec![
+            "run",
+            smoke.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        v.extend(["-q", "--backend", b]);
+        v
+    };
+    let (code, stdout, stderr) = study(&args("cuda"));
+    assert_eq!(code, 2, "{stdout}{stderr}");
+    assert!(stderr.starts_with("error: --backend cuda: "), "{stderr}");
+    assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
+    assert!(std::fs::read_dir(d.path()).unwrap().next().is_none());
+    let cause = stderr
+        .trim()
+        .trim_start_matches("error: --backend cuda: ")
+        .to_string();
+    let (code, stdout, stderr) = study(&args("auto"));
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stdout.contains(&format!("backend     CPU (no GPU used: {cause})")),
+        "{stdout}"
+    );
+    std::fs::remove_file(&out).unwrap();
+    let (code, stdout, _) = study(&args("cpu"));
+    assert_eq!(code, 0);
+    assert!(stdout.contains("backend     CPU\n"), "{stdout}");
+}

@@ -221,6 +221,8 @@ fn bench_diagnose(campaign: &std::path::Path, max_seconds: Option<f64>) -> anyho
 }
 
 pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
+    let engine = super::gpu::choose(args.backend)?;
+    println!("study bench: backend {}", engine.describe());
     if let Some(c) = &args.diagnose {
         return bench_diagnose(c, args.max_seconds);
     }

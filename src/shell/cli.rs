@@ -1,5 +1,6 @@
 //! Command-line arguments (what the user typed), before they are resolved into specs.
 
+use crate::shell::gpu::Backend;
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 
@@ -91,6 +92,10 @@ pub struct RunArgs {
     /// contiguous slice of the design. `study merge` joins the shards.
     #[arg(long, value_name = "I/N")]
     pub shard: Option<String>,
+    /// Engine: `auto` (a GPU when one is found and the work is covered, else the CPU, saying
+    /// why), `cpu`, or `cuda` (refused with the cause where no GPU can run it).
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    pub backend: Backend,
 }
 
 #[derive(Debug, clap::Args)]
@@ -197,6 +202,10 @@ pub struct FitArgs {
     /// Worker threads (0 = every core).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
+    /// Engine: `auto` (a GPU when one is found and the work is covered, else the CPU, saying
+    /// why), `cpu`, or `cuda` (refused with the cause where no GPU can run it).
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    pub backend: Backend,
 }
 
 #[derive(Debug, clap::Args)]
@@ -223,6 +232,10 @@ pub struct DiagnoseArgs {
     /// Worker threads (0 = every core).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
+    /// Engine: `auto` (a GPU when one is found and the work is covered, else the CPU, saying
+    /// why), `cpu`, or `cuda` (refused with the cause where no GPU can run it).
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    pub backend: Backend,
 }
 
 /// The measured column an open-loop comparison drives the plant with.
@@ -296,6 +309,10 @@ pub struct BenchArgs {
     /// Wall-time limit of the diagnosis benchmark, s.
     #[arg(long, requires = "diagnose")]
     pub max_seconds: Option<f64>,
+    /// Engine: `auto` (a GPU when one is found and the work is covered, else the CPU, saying
+    /// why), `cpu`, or `cuda` (refused with the cause where no GPU can run it).
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    pub backend: Backend,
 }
 
 #[derive(Debug, clap::Args)]

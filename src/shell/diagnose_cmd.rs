@@ -30,6 +30,7 @@ fn harmonic_label(k: usize, rate_hz: f64) -> String {
 }
 
 pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
+    let engine = super::gpu::choose(args.backend)?;
     let model = load_model(args.model.as_deref())?;
     let candidates: Vec<EffectId> = if args.candidates.is_empty() {
         EffectId::ALL
@@ -74,6 +75,7 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
         d.candidates.len(),
         secs
     )?;
+    writeln!(o, "  backend {}", engine.describe())?;
     print_candidates(&mut o, &d)?;
     print_evidence(&mut o, &problem, &d)?;
     print_selection(&mut o, &d)?;

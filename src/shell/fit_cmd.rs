@@ -164,6 +164,7 @@ pub fn print_checks(
 }
 
 pub fn run(args: &FitArgs) -> anyhow::Result<()> {
+    let engine = super::gpu::choose(args.backend)?;
     let model = load_model(args.model.as_deref())?;
     let free = free_parameters(&args.effect, &args.free, &model)?;
     let loaded = load_problem(&args.campaign, &model, args.strict)?;
@@ -200,6 +201,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         },
         t0.elapsed().as_secs_f64()
     )?;
+    writeln!(o, "  backend {}", engine.describe())?;
     writeln!(o)?;
     print_estimates(&mut o, &free, &r)?;
     print_residuals(&mut o, problem, &r)?;

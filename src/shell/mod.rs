@@ -9,6 +9,7 @@ pub mod cli;
 pub mod compare_cmd;
 pub mod diagnose_cmd;
 pub mod fit_cmd;
+pub mod gpu;
 pub mod interrupt;
 pub mod matlab;
 pub mod merge_cmd;

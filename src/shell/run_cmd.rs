@@ -476,6 +476,7 @@ fn check_writable(out: &Path) -> anyhow::Result<()> {
 
 pub fn run(args: &RunArgs) -> anyhow::Result<()> {
     check_checkpoint_secs(args.checkpoint_secs)?;
+    let engine = super::gpu::choose(args.backend)?;
     let Some(job) = job_of(args)? else {
         return Ok(());
     };
@@ -485,6 +486,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
     let pool = pool(args.threads)?;
     let todo = (job.range.start + job.samples_kept())..job.range.end;
     print_header(&job, args, &pool, chunk)?;
+    print_engine(&engine)?;
     if args.dry_run {
         return super::sizing::dry_run(&job, todo, &pool);
     }
@@ -516,6 +518,16 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
     finish_results(&job, sink, summary.stopped)?;
     print_done(&job, &summary, &progress, todo.len())?;
     write_histories(&job)
+}
+
+/// The backend that runs the batch, and why a GPU does not (`--backend auto`).
+fn print_engine(engine: &super::gpu::Engine) -> anyhow::Result<()> {
+    writeln!(
+        std::io::stdout().lock(),
+        "  backend     {}",
+        engine.describe()
+    )?;
+    Ok(())
 }
 
 /// `--checkpoint-secs` is a positive number of seconds.
