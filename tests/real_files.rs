@@ -351,6 +351,47 @@ fn a_static_offset_is_found_removed_and_named() {
     assert!(!base.stdout.contains("static offset"), "{}", base.stdout);
 }
 
+/// The same offset in files that start with the excitation (no quiet lead to measure it over):
+/// found from the reference's departure from the campaign's sine, removed from both columns,
+/// named; the start, the phases and the displacement residual as in the clean files.
+#[test]
+fn a_static_offset_without_a_quiet_lead_is_found_from_the_sine() {
+    let d = tempfile::tempdir().unwrap();
+    let noise = ["--noise", "accel=0.05,disp=2e-5"];
+    let base = compare(&synth(&d.path().join("clean"), &noise), &[]);
+    let off = transform(&d.path().join("clean"), &d.path().join("off"), |csv| {
+        for c in ["ref_disp_m", "disp_m"] {
+            csv.map(c, |x| format!("{:?}", x - 0.010));
+        }
+    });
+    let off = compare(&off, &[]);
+    assert_eq!(off.col("start_row"), base.col("start_row"));
+    for c in ["phase_measured_deg", "phase_model_deg"] {
+        for (x, y) in off.col(c).iter().zip(base.col(c)) {
+            assert!(
+                (x - y).abs() <= 0.1,
+                "{c}: {x}° with the offset, {y}° clean"
+            );
+        }
+    }
+    for (x, y) in off
+        .col("rms_residual_disp_ratio")
+        .iter()
+        .zip(base.col("rms_residual_disp_ratio"))
+    {
+        assert!(
+            (x / y - 1.0).abs() < 0.01,
+            "residual x {x} with the offset, {y} clean"
+        );
+    }
+    assert!(
+        off.stdout.contains("ref_disp_m is offset by -10.0"),
+        "{}",
+        off.stdout
+    );
+    assert!(!base.stdout.contains("static offset"), "{}", base.stdout);
+}
+
 /// Columns in another order, columns vshake does not read, `;` with decimal commas and tabs:
 /// the clean results exactly, and a note on the separator.
 #[test]

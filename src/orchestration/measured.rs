@@ -314,7 +314,7 @@ pub fn align(
     let data = &mut data;
     let mut notes = data.notes.clone();
     notes.extend(time.note());
-    notes.extend(remove_static_offsets(data, time.rate_hz));
+    notes.extend(remove_offsets(test, data, &time));
     let mut warnings = Vec::new();
     let (rate, rows) = (time.rate_hz, time.rows);
     let located = locate(test, data, record, &time, &mut warnings)?;
@@ -407,6 +407,74 @@ fn remove_static_offsets(data: &mut NumTable, rate_hz: f64) -> Vec<String> {
         ));
     }
     notes
+}
+
+/// Removes static offsets of `ref_disp_m` and `disp_m`: measured over the file's quiet lead
+/// where the reference has one ([`remove_static_offsets`]); else, for a sine test, the
+/// reference's offset from the campaign's sine, removed from both columns
+/// ([`remove_sine_offset`]; a lead of `disp_m` alone, shorter than the reference's, holds the
+/// first motion too); else a lead of `disp_m` alone. Returns the notes.
+fn remove_offsets(test: &TestSpec, data: &mut NumTable, time: &TimeBase) -> Vec<String> {
+    let ref_lead = (data.column("ref_disp_m")).and_then(|r| static_offset(r, time.rate_hz));
+    if let (None, ExcitationSpec::Sine { sine, .. }) = (ref_lead, &test.excitation) {
+        if let Some(note) = remove_sine_offset(test, sine, data, time) {
+            return vec![note];
+        }
+    }
+    remove_static_offsets(data, time.rate_hz)
+}
+
+/// Removes a static offset of a sine test's `ref_disp_m` (and the same from `disp_m`: the table
+/// homed off zero moves both) where the file has no quiet lead to measure it over (the recording
+/// starts with the excitation): the mean of the column less the campaign's sine over the
+/// excitation as aligned, refined by aligning again without it (the mean over whole cycles hardly
+/// depends on the start, so a few passes converge). Removed where it exceeds 0.1 % of the sine's
+/// amplitude and ten standard errors of that mean. Returns the note.
+fn remove_sine_offset(
+    test: &TestSpec,
+    sine: &Sine,
+    data: &mut NumTable,
+    time: &TimeBase,
+) -> Option<String> {
+    let i = data.names.iter().position(|n| n == "ref_disp_m")?;
+    let rate_hz = time.rate_hz;
+    // The excitation's end as the column shows it, not its duration_s: a start misplaced by the
+    // offset could put that past the file's end.
+    let given = test.t0_s.map(|t| (t - time.t0_s) * rate_hz);
+    let mut r = data.columns[i].clone();
+    let mut total = 0.0;
+    for _ in 0..4 {
+        let fit = align_sine(sine, &r, rate_hz, given, None);
+        if fit.error.is_some() {
+            return None;
+        }
+        let (lo, hi) = (fit.start_row.ceil().max(0.0) as usize, fit.end_row);
+        if hi <= lo + 1 {
+            return None;
+        }
+        let e: Vec<f64> = (lo..hi)
+            .map(|k| r[k] - sine.displacement((k as f64 - fit.start_row) / rate_hz))
+            .collect();
+        let mean = e.iter().sum::<f64>() / e.len() as f64;
+        let spread = (e.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / e.len() as f64).sqrt();
+        if mean.abs() <= (1e-3 * sine.amp_m).max(10.0 * spread / (e.len() as f64).sqrt()) {
+            break;
+        }
+        total += mean;
+        r.iter_mut().for_each(|v| *v -= mean);
+    }
+    if total == 0.0 {
+        return None;
+    }
+    for name in ["ref_disp_m", "disp_m"] {
+        if let Some(k) = data.names.iter().position(|n| n == name) {
+            data.columns[k].iter_mut().for_each(|v| *v -= total);
+        }
+    }
+    Some(format!(
+        "ref_disp_m is offset by {:+.4} mm from the campaign's sine over the excitation (a static offset: the table homed off zero; the file has no quiet lead to measure it over); removed from ref_disp_m and disp_m",
+        total * 1e3
+    ))
 }
 
 /// The static offset of column `x` and the rows of its quiet lead (see
