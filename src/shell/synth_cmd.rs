@@ -131,7 +131,8 @@ pub fn parse_noise(spec: Option<&str>) -> anyhow::Result<[Noise; 5]> {
     Ok(out)
 }
 
-/// Writes a measured-test table as CSV (shortest round-trip digits) or Parquet, by extension.
+/// Writes a measured-test table as CSV (shortest round-trip digits), Parquet or a MATLAB MAT-file
+/// (v5, `.mat`), by extension.
 pub fn write_measured(
     path: &Path,
     cols: &[(&str, Vec<f64>)],
@@ -150,6 +151,16 @@ pub fn write_measured(
         );
     }
     let out = tables::AtomicFile::new(path);
+    if path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("mat"))
+    {
+        let vars: Vec<(&str, &[f64])> = cols.iter().map(|(n, v)| (*n, v.as_slice())).collect();
+        std::fs::write(&out.tmp, super::matlab::v5_bytes(&vars))
+            .with_context(|| format!("cannot write {}", out.tmp.display()))?;
+        out.commit()?;
+        return Ok(());
+    }
     let file = std::fs::File::create(&out.tmp)
         .with_context(|| format!("cannot create {}", out.tmp.display()))?;
     let mut w = csv::Writer::from_writer(file);
