@@ -474,6 +474,17 @@ fn read_mat(path: &Path, wanted: Wanted<'_>) -> Result<(NumTable, BadCells), Tab
                      CSV: {MATLAB_CSV})"
                 ),
             }
+        } else if !mat.skipped.is_empty() {
+            // Say what was not read: a channel saved complex, or as a scalar, is among them.
+            let mut all: Vec<TableError> = match e {
+                TableError::Many(v) => v,
+                e => vec![e],
+            };
+            all.push(TableError::Column {
+                file: file.clone(),
+                message: format!("variables not read: {}", mat.skipped.join(", ")),
+            });
+            TableError::Many(all)
         } else {
             e
         }
