@@ -945,45 +945,28 @@ fn unknown_units_are_refused_naming_file_and_column() {
     }
 }
 
-/// A level 5 MAT-file of double column vectors, as MATLAB's `save -v6` (uncompressed) or
-/// `save -v7` (each variable zlib-compressed) writes it [MathWorks, "MAT-File Format", R2024b,
-/// ch. 1: a 128-byte header, then one miMATRIX element per variable].
+/// A level 5 MAT-file of double column vectors: vshake's writer (`study synth`, as MATLAB's
+/// `save -v6`), or with each variable zlib-compressed as MATLAB's `save -v7` writes it
+/// [MathWorks, "MAT-File Format": an miCOMPRESSED element (15) holding the miMATRIX one]. (The
+/// reader is checked against SciPy-written files in tests/matlab.rs.)
 fn write_mat(path: &Path, vars: &[(&str, Vec<f64>)], compress: bool) {
-    fn element(kind: u32, body: &[u8]) -> Vec<u8> {
-        let mut e = kind.to_le_bytes().to_vec();
-        e.extend((body.len() as u32).to_le_bytes());
-        e.extend(body);
-        e.resize(e.len().div_ceil(8) * 8, 0);
-        e
+    let v: Vec<(&str, &[f64])> = vars.iter().map(|(n, v)| (*n, v.as_slice())).collect();
+    let v5 = vshake::shell::matlab::v5_bytes(&v);
+    if !compress {
+        return std::fs::write(path, v5).unwrap();
     }
-    let mut out =
-        b"MATLAB 5.0 MAT-file, Platform: GLNXA64, written by tests/real_files.rs".to_vec();
-    out.resize(124, b' ');
-    out.extend(0x0100u16.to_le_bytes());
-    out.extend(b"IM");
-    for (name, v) in vars {
-        let flags: Vec<u8> = [6u32, 0].iter().flat_map(|x| x.to_le_bytes()).collect();
-        let dims: Vec<u8> = [v.len() as i32, 1]
-            .iter()
-            .flat_map(|x| x.to_le_bytes())
-            .collect();
-        let data: Vec<u8> = v.iter().flat_map(|x| x.to_le_bytes()).collect();
-        let mut body = element(6, &flags);
-        body.extend(element(5, &dims));
-        body.extend(element(1, name.as_bytes()));
-        body.extend(element(9, &data));
-        let matrix = element(14, &body);
-        if compress {
-            use std::io::Write;
-            let mut z = libflate::zlib::Encoder::new(Vec::new()).unwrap();
-            z.write_all(&matrix).unwrap();
-            let packed = z.finish().into_result().unwrap();
-            out.extend(15u32.to_le_bytes());
-            out.extend((packed.len() as u32).to_le_bytes());
-            out.extend(packed);
-        } else {
-            out.extend(matrix);
-        }
+    let mut out = v5[..128].to_vec();
+    let mut at = 128;
+    while at < v5.len() {
+        let size = u32::from_le_bytes(v5[at + 4..at + 8].try_into().unwrap()) as usize;
+        use std::io::Write;
+        let mut z = libflate::zlib::Encoder::new(Vec::new()).unwrap();
+        z.write_all(&v5[at..at + 8 + size]).unwrap();
+        let packed = z.finish().into_result().unwrap();
+        out.extend(15u32.to_le_bytes());
+        out.extend((packed.len() as u32).to_le_bytes());
+        out.extend(packed);
+        at += 8 + size;
     }
     std::fs::write(path, out).unwrap();
 }
