@@ -302,8 +302,10 @@ impl std::fmt::Display for ColumnProblem {
             }
             ColumnProblem::Ambiguous { column, headers } => write!(
                 f,
-                "columns {} all look like `{column}`: rename the one to read `{column}` (docs/formats.md)",
-                headers.iter().map(|h| format!("`{h}`")).collect::<Vec<_>>().join(", ")
+                "columns {} all look like `{column}`: name the one to read in the campaign's `columns` table, e.g. columns = {{ {} = \"{}\" }}, or rename it to `{column}` (docs/formats.md)",
+                headers.iter().map(|h| format!("`{h}`")).collect::<Vec<_>>().join(", "),
+                channel(column).map_or(column.as_str(), |c| c.1),
+                headers.first().map_or("", |h| h.as_str())
             ),
             ColumnProblem::Twice { header, columns } => write!(
                 f,
