@@ -6,8 +6,6 @@
 //! and named in the note where nothing else was found. A v7.3 file (HDF5) is refused by
 //! [`super::tables`] with the MATLAB line that saves it readably.
 
-use std::path::Path;
-
 /// The columns of a MAT-file: names, values (every one as f64) and what was read or skipped.
 #[derive(Debug, Default)]
 pub struct MatColumns {
@@ -28,12 +26,12 @@ pub const V5_MAGIC: &[u8] = b"MATLAB 5.0 MAT-file";
 /// Reads the numeric variables of the level 5 MAT-file `bytes` as columns, or says why it cannot
 /// be read. A parser panic on a corrupt file is caught and reported as such.
 pub fn columns(bytes: &[u8]) -> Result<MatColumns, String> {
-    let elements = elements(bytes)?;
+    let (elements, compressed) = elements(bytes)?;
     let parsed = std::panic::catch_unwind(|| matfile::MatFile::parse(bytes))
         .map_err(|_| "the file is corrupt (the MAT-file parser stopped)".to_string())?
         .map_err(|e| format!("the file is corrupt or truncated ({})", short(&e)))?;
     let mut out = MatColumns {
-        compressed: compressed(bytes),
+        compressed,
         ..MatColumns::default()
     };
     for a in parsed.arrays() {
@@ -54,9 +52,10 @@ fn short(e: &matfile::Error) -> String {
     }
 }
 
-/// The number of variables (top-level data elements) of a level 5 MAT-file, each one's extent
-/// checked against the file's length: a truncated file is an error saying where it ends.
-fn elements(bytes: &[u8]) -> Result<usize, String> {
+/// The number of variables (top-level data elements) of a level 5 MAT-file and whether any is
+/// compressed (a v7 file), each one's extent checked against the file's length: a truncated file
+/// is an error saying where it ends.
+fn elements(bytes: &[u8]) -> Result<(usize, bool), String> {
     let big = bytes.get(126..128) == Some(b"MI");
     let word = |at: usize| {
         let b: [u8; 4] = bytes.get(at..at + 4)?.try_into().ok()?;
@@ -66,7 +65,7 @@ fn elements(bytes: &[u8]) -> Result<usize, String> {
             u32::from_le_bytes(b)
         } as usize)
     };
-    let (mut at, mut n) = (128usize, 0usize);
+    let (mut at, mut n, mut compressed) = (128usize, 0usize, false);
     while at < bytes.len() {
         let (Some(kind), Some(size)) = (word(at), word(at + 4)) else {
             return Err(format!(
@@ -99,25 +98,10 @@ fn elements(bytes: &[u8]) -> Result<usize, String> {
             ));
         }
         n += 1;
+        compressed |= kind == 15;
         at = end;
     }
-    Ok(n)
-}
-
-/// Whether the first data element after the 128-byte header is miCOMPRESSED (type 15).
-fn compressed(bytes: &[u8]) -> bool {
-    let Some(tag) = bytes.get(128..132) else {
-        return false;
-    };
-    let t = [tag[0], tag[1], tag[2], tag[3]];
-    // The header's endian indicator at bytes 126..128: "IM" little endian, "MI" big endian.
-    let big = bytes.get(126..128) == Some(b"MI");
-    let v = if big {
-        u32::from_be_bytes(t)
-    } else {
-        u32::from_le_bytes(t)
-    };
-    v == 15
+    Ok((n, compressed))
 }
 
 /// One array as columns (a vector: one; a samples × channels matrix: one per channel), or as a
@@ -179,15 +163,6 @@ fn real_values(d: &matfile::NumericData) -> Option<Vec<f64>> {
             .is_none()
             .then(|| real.iter().map(|&x| x as f64).collect()),
     }
-}
-
-/// Whether the file at `path` is a level 5 MAT-file (v5 or v7), by its header.
-pub fn is_v5(path: &Path) -> bool {
-    use std::io::Read;
-    let mut head = [0u8; 19];
-    std::fs::File::open(path)
-        .and_then(|mut f| f.read_exact(&mut head))
-        .is_ok_and(|_| head == V5_MAGIC)
 }
 
 /// A level 5 MAT-file (uncompressed, as MATLAB's `save -v6`; MATLAB, SciPy and this reader load

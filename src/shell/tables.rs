@@ -247,7 +247,7 @@ fn column_names_unguarded(path: &Path) -> Result<Vec<String>, TableError> {
             .iter()
             .map(|f| f.name().clone())
             .collect())
-    } else if matlab::is_v5(path) {
+    } else if starts_with(path, matlab::V5_MAGIC) {
         Ok(mat_columns(path)?.names)
     } else {
         let bytes = std::fs::read(path).map_err(|e| TableError::Io { file, err: e })?;
@@ -359,7 +359,7 @@ fn read_columns_lenient_impl(
         guarded(path, || {
             read_parquet(path, (wanted, optional, map), allow_nan)
         })?
-    } else if matlab::is_v5(path) {
+    } else if starts_with(path, matlab::V5_MAGIC) {
         read_mat(path, (wanted, optional, map))?
     } else {
         read_csv(path, (wanted, optional, map))?
