@@ -199,6 +199,58 @@ pub struct WindowTick<'a, const N: usize> {
     pub x: &'a [f64; N],
 }
 
+/// One lane's sums of [`MetricsAcc`], as another engine returns them (the CUDA kernel,
+/// `src/kernel/cuda/lane.cu`): the metrics are then finished by [`MetricsAcc::finish`] here.
+#[derive(Debug, Clone, Default)]
+pub struct LaneSums {
+    pub n: usize,
+    pub a_re: [f64; N_HARM],
+    pub a_im: [f64; N_HARM],
+    pub x_re: f64,
+    pub x_im: f64,
+    pub err_a2: f64,
+    pub err_x2: f64,
+    pub peak_err_a: f64,
+    pub peak_err_x: f64,
+    pub max_u: f64,
+    /// Peaks of |a|, |v|, |x| and of the reference's.
+    pub peak: [f64; 3],
+    pub peak_r: [f64; 3],
+    pub ar_re: f64,
+    pub ar_im: f64,
+    pub xr_re: f64,
+    pub xr_im: f64,
+    pub ar2: f64,
+    pub xr2: f64,
+    /// The response-spectrum oscillators' peak displacements, m (empty: no spectrum).
+    pub osc_peak: Vec<f64>,
+}
+
+impl MetricsAcc<1> {
+    /// The accumulator holding one lane's sums (`spectrum` as in [`MetricsAcc::new`]).
+    pub fn from_sums(s: &LaneSums, spectrum: Option<(&SpectrumSpec, f64)>) -> Self {
+        let mut acc = MetricsAcc::<1>::new(spectrum);
+        acc.n = s.n;
+        for h in 0..N_HARM {
+            acc.a_re[h] = [s.a_re[h]];
+            acc.a_im[h] = [s.a_im[h]];
+        }
+        (acc.x_re, acc.x_im) = ([s.x_re], [s.x_im]);
+        (acc.err_a2, acc.err_x2) = ([s.err_a2], [s.err_x2]);
+        (acc.peak_err_a, acc.peak_err_x) = ([s.peak_err_a], [s.peak_err_x]);
+        acc.max_u = [s.max_u];
+        acc.peak = s.peak.map(|p| [p]);
+        acc.peak_r = s.peak_r.map(|p| [p]);
+        (acc.ar_re, acc.ar_im) = ([s.ar_re], [s.ar_im]);
+        (acc.xr_re, acc.xr_im) = ([s.xr_re], [s.xr_im]);
+        (acc.ar2, acc.xr2) = ([s.ar2], [s.xr2]);
+        if let Some(sp) = &mut acc.spectrum {
+            sp.set_peaks(0, &s.osc_peak);
+        }
+        acc
+    }
+}
+
 impl<const N: usize> Default for MetricsAcc<N> {
     fn default() -> Self {
         Self::new(None)

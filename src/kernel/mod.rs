@@ -15,6 +15,7 @@ pub mod controller;
 pub mod effects;
 pub mod excitation;
 pub mod friction;
+pub mod gpu_lanes;
 pub mod ground;
 pub mod metrics;
 pub mod params;

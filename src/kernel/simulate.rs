@@ -457,7 +457,7 @@ pub fn run_usual<const N: usize, E: Effect<N>, O: Observer<N>>(
 
 /// The checks before a run: the reference's rate is the controller's, substeps ≥ 1, a drive as
 /// long as the reference.
-fn check<const N: usize>(
+pub fn check<const N: usize>(
     lp: &LaneParams<N>,
     refs: &[&Reference; N],
     solver: &Solver,

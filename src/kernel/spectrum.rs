@@ -184,6 +184,14 @@ impl<const N: usize> SpectrumAcc<N> {
     }
 
     /// Lane `l`'s PSA at every period.
+    /// Sets lane `l`'s peak oscillator displacements (m), one per period: what another engine
+    /// accumulated (the CUDA kernel), for [`SpectrumAcc::psa`].
+    pub fn set_peaks(&mut self, l: usize, peaks: &[f64]) {
+        for (p, &v) in self.peak.iter_mut().zip(peaks) {
+            p[l] = v;
+        }
+    }
+
     pub fn psa(&self, l: usize) -> Vec<f64> {
         self.osc
             .iter()

@@ -1,0 +1,240 @@
+//! The flat records of the CUDA lane kernel (`src/kernel/cuda/lane.cu`): the parameters it reads,
+//! the run it shares between lanes, and the sums it returns, turned back into [`LaneResult`]s.
+//!
+//! Pure data: no device, no I/O. The device engine (`shell::gpu`) uploads these arrays; the
+//! kernel's host build in `tests/cuda_host.rs` takes the same arrays, so what is tested without
+//! a GPU is what the GPU runs. The CUDA kernel covers the baseline model (both valve laws, every
+//! damping exponent), every drive and every reference shared by the lanes, with the harmonic,
+//! error, peak, valve and response-spectrum metrics; [`unsupported`] names what it does not.
+
+use super::effects::EffectId;
+use super::excitation::{Drive, Reference};
+use super::metrics::{Basis, LaneSums, Metrics, MetricsAcc, N_HARM};
+use super::params::{ModelParams, ValveLaw};
+use super::simulate::{self, Failure, LaneParams, LaneResult, LaneStatus, SetupError, Solver};
+use super::spectrum::oscillators;
+
+/// The kernel's CUDA C++ source.
+pub const SOURCE: &str = include_str!("cuda/lane.cu");
+
+/// Float64 fields per lane in the parameter record (lane.cu: `VS_LANE_FIELDS`).
+pub const LANE_FIELDS: usize = 60;
+
+/// Most response-spectrum periods a lane accumulates (lane.cu: `VS_MAX_OSC`).
+pub const MAX_OSC: usize = 128;
+
+/// Output fields before the oscillator peaks (lane.cu: `VS_OSC_PEAK`).
+const OUT_FIXED: usize = 42;
+
+/// Output fields per lane for a run with `n_osc` response-spectrum periods.
+pub fn out_fields(n_osc: usize) -> usize {
+    OUT_FIXED + n_osc
+}
+
+/// Why the CUDA kernel cannot run these models on this reference, or `None` when it can.
+pub fn unsupported(models: &[&ModelParams], reference: &Reference) -> Option<String> {
+    let on: Vec<&str> = EffectId::ALL
+        .into_iter()
+        .filter(|&e| models.iter().any(|m| m.effects.get(e)))
+        .map(EffectId::name)
+        .collect();
+    if !on.is_empty() {
+        return Some(format!(
+            "the effect{} {} (the CUDA kernel runs the baseline model only)",
+            if on.len() > 1 { "s" } else { "" },
+            on.join(", ")
+        ));
+    }
+    let periods = reference
+        .spectrum
+        .as_ref()
+        .map_or(0, |(s, _)| s.periods.len());
+    if periods > MAX_OSC {
+        return Some(format!(
+            "a response spectrum of {periods} periods (the CUDA kernel takes up to {MAX_OSC})"
+        ));
+    }
+    None
+}
+
+/// The parameter records of `models`, field-major (field f of lane l at `f * n + l`).
+pub fn pack_params(models: &[&ModelParams]) -> Result<Vec<f64>, SetupError> {
+    let n = models.len();
+    let mut p = vec![0.0; LANE_FIELDS * n];
+    for (l, m) in models.iter().enumerate() {
+        if m.controller.f_s != models[0].controller.f_s || m.valve_law != models[0].valve_law {
+            return Err(SetupError::NotUniform { lane: l });
+        }
+        for (f, v) in lane_record(&LaneParams::<1>::new(&[m])?)
+            .into_iter()
+            .enumerate()
+        {
+            p[f * n + l] = v;
+        }
+    }
+    Ok(p)
+}
+
+/// One lane's record, in lane.cu's field order.
+fn lane_record(lp: &LaneParams<1>) -> [f64; LANE_FIELDS] {
+    let (v, a, pl, fr, c) = (
+        lp.valve.lane(0),
+        lp.act.lane(0),
+        lp.platen.lane(0),
+        lp.friction.lane(0),
+        &lp.ctrl[0],
+    );
+    let mut r = Vec::with_capacity(LANE_FIELDS);
+    r.extend([
+        v.kw1, v.kw2, v.kw3, v.kw4, v.p_r, v.p_tr2, v.kq1, v.kq2, lp.p_s[0],
+    ]);
+    r.extend([a.beta, a.a1, a.a2, a.l, a.vd1, a.vd2]);
+    r.extend([pl.inv_m, pl.k, pl.c, pl.alpha, pl.mu]);
+    r.extend([fr.inv_y, fr.kappa, fr.kappa_neg]);
+    r.extend([c.c_fb, c.c_d, c.c_v, c.c_a, c.c_j, c.c_f, c.hp_b, c.hp_a]);
+    r.extend(c.notches.iter().flatten());
+    r.extend([c.u_lim, c.k_sp, lp.p0[0].0, lp.p0[0].1]);
+    r.try_into().expect("LANE_FIELDS fields")
+}
+
+/// The run every lane shares: its integers (in the kernel's argument order), rate and arrays.
+#[derive(Debug, Clone)]
+pub struct Shared {
+    /// ticks, substeps, window start, window end, has basis, drive, linear valve, oscillators.
+    pub ints: [i64; 8],
+    pub f_s: f64,
+    /// The reference x, v, a, j per tick.
+    pub refs: [Vec<f64>; 4],
+    /// The open-loop drive per tick (one zero in closed loop).
+    pub drive: Vec<f64>,
+    /// Per window tick: cos and sin of harmonics 1..9 (one zero without a fundamental).
+    pub basis: Vec<f64>,
+    /// Per period: the oscillator's [a00, a01, a10, a11, b00, b01, b10, b11] (one zero: none).
+    pub osc: Vec<f64>,
+}
+
+impl Shared {
+    /// The shared run of `reference` for lanes whose first model is `first`; the checks of
+    /// [`simulate::check`] first.
+    pub fn new(
+        first: &ModelParams,
+        reference: &Reference,
+        solver: &Solver,
+    ) -> Result<Self, SetupError> {
+        simulate::check(&LaneParams::<1>::new(&[first])?, &[reference], solver)?;
+        let (w0, w1) = reference.window;
+        let (drive_code, drive) = match &reference.drive {
+            Drive::ClosedLoop => (0, vec![0.0]),
+            Drive::ValveCommand(d) => (1, d.clone()),
+            Drive::Spool(d) => (2, d.clone()),
+        };
+        let mut basis = Vec::new();
+        if let Some(f0) = reference.fundamental_hz {
+            for k in w0..w1 {
+                let b = Basis::at(k, reference.f_s, f0);
+                basis.extend(b.cos.iter().chain(&b.sin));
+            }
+        }
+        let mut osc = Vec::new();
+        if let Some((spec, _)) = &reference.spectrum {
+            for o in oscillators(spec, 1.0 / reference.f_s) {
+                osc.extend(o.a.iter().flatten().chain(o.b.iter().flatten()));
+            }
+        }
+        let n_osc = osc.len() / 8;
+        let linear = first.valve_law == ValveLaw::Linear;
+        Ok(Shared {
+            ints: [
+                reference.len() as i64,
+                solver.substeps as i64,
+                w0 as i64,
+                w1 as i64,
+                i64::from(reference.fundamental_hz.is_some()),
+                drive_code,
+                i64::from(linear),
+                n_osc as i64,
+            ],
+            f_s: reference.f_s,
+            refs: [
+                reference.x.clone(),
+                reference.v.clone(),
+                reference.a.clone(),
+                reference.j.clone(),
+            ],
+            drive,
+            basis: non_empty(basis),
+            osc: non_empty(osc),
+        })
+    }
+
+    /// Response-spectrum periods accumulated.
+    pub fn n_osc(&self) -> usize {
+        self.ints[7] as usize
+    }
+}
+
+/// A device buffer cannot be empty: one zero stands for none.
+fn non_empty(v: Vec<f64>) -> Vec<f64> {
+    if v.is_empty() {
+        vec![0.0]
+    } else {
+        v
+    }
+}
+
+/// Lane `l`'s result from the kernel's output `out` (n lanes), finished as the CPU kernel does.
+pub fn unpack(out: &[f64], n: usize, l: usize, reference: &Reference, n_osc: usize) -> LaneResult {
+    let o = |f: usize| out[f * n + l];
+    let status = match o(0) as u8 {
+        0 => LaneStatus::Ok,
+        code => LaneStatus::Failed {
+            time_s: reference.time(o(1) as usize),
+            reason: match code {
+                1 => Failure::NonFinite,
+                2 => Failure::StrokeLimit { disp_m: o(2) },
+                _ => Failure::Pressure {
+                    actuator: 0,
+                    chamber: o(3) as usize,
+                    pa: o(2),
+                },
+            },
+        },
+    };
+    if status != LaneStatus::Ok {
+        return LaneResult {
+            status,
+            metrics: Metrics::NAN,
+        };
+    }
+    let sums = LaneSums {
+        n: o(4) as usize,
+        max_u: o(5),
+        err_a2: o(6),
+        err_x2: o(7),
+        peak_err_a: o(8),
+        peak_err_x: o(9),
+        peak: [o(10), o(11), o(12)],
+        peak_r: [o(13), o(14), o(15)],
+        ar_re: o(16),
+        ar_im: o(17),
+        xr_re: o(18),
+        xr_im: o(19),
+        ar2: o(20),
+        xr2: o(21),
+        x_re: o(22),
+        x_im: o(23),
+        a_re: std::array::from_fn(|h| o(24 + h)),
+        a_im: std::array::from_fn(|h| o(24 + N_HARM + h)),
+        osc_peak: (0..n_osc).map(|i| o(OUT_FIXED + i)).collect(),
+    };
+    let spectrum = reference.spectrum.as_ref();
+    let acc = MetricsAcc::<1>::from_sums(&sums, spectrum.map(|(s, _)| (s, 1.0 / reference.f_s)));
+    let harmonics = reference
+        .fundamental_hz
+        .map(|f0| Metrics::highest_harmonic(f0, reference.f_s));
+    let target = spectrum.map(|(s, psa)| (s, psa.as_slice()));
+    LaneResult {
+        status,
+        metrics: acc.finish(0, harmonics, target),
+    }
+}
