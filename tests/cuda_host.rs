@@ -9,19 +9,29 @@ use chacha20::ChaCha8Rng as StdRng;
 use rand::{RngExt, SeedableRng};
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::sync::Arc;
 use vshake::kernel::effects::EffectId;
 use vshake::kernel::excitation::{Drive, Record, Reference, Signal, Sine};
 use vshake::kernel::gpu_lanes::{self, Shared};
 use vshake::kernel::ground::{Sweep, SweepLaw};
 use vshake::kernel::params::{ModelParams, ValveLaw};
+use vshake::kernel::simulate::SetupError;
 use vshake::kernel::simulate::{LaneResult, LaneStatus, Solver};
 use vshake::kernel::spectrum::SpectrumSpec;
+use vshake::orchestration::batch::{LaneEngine, RowStatus};
 use vshake::orchestration::sim::run_lanes_each;
+use vshake::orchestration::study::StudySpec;
+use vshake::shell::run_cmd;
 
 const LANES: usize = 8;
 
-/// The harness built once into the test's scratch folder, or why it cannot be.
+/// The harness built once (per test process) into the test's scratch folder, or why it cannot be.
 fn harness() -> Result<PathBuf, String> {
+    static BUILT: std::sync::OnceLock<Result<PathBuf, String>> = std::sync::OnceLock::new();
+    BUILT.get_or_init(build_harness).clone()
+}
+
+fn build_harness() -> Result<PathBuf, String> {
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR"));
     let exe = dir.join("cuda_host");
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/cuda_host.cpp");
@@ -228,16 +238,21 @@ fn assert_same(what: &str, lane: usize, got: &LaneResult, want: &LaneResult) {
     }
 }
 
-#[test]
-fn the_cuda_kernel_built_for_the_host_gives_the_rust_kernels_metrics() {
-    let exe = match harness() {
-        Ok(exe) => exe,
+/// The harness, or `None` after saying why there is none (a failure with `VSHAKE_REQUIRE_CXX`).
+fn harness_or_skip() -> Option<PathBuf> {
+    match harness() {
+        Ok(exe) => Some(exe),
         Err(why) if std::env::var_os("VSHAKE_REQUIRE_CXX").is_none() => {
             eprintln!("skipped: {why}");
-            return;
+            None
         }
         Err(why) => panic!("{why} (VSHAKE_REQUIRE_CXX is set)"),
-    };
+    }
+}
+
+#[test]
+fn the_cuda_kernel_built_for_the_host_gives_the_rust_kernels_metrics() {
+    let Some(exe) = harness_or_skip() else { return };
     let mut rng = StdRng::seed_from_u64(28);
     let solver = Solver { substeps: 4 };
     let (mut ok, mut failed, mut identical) = (0, 0, 0);
@@ -285,4 +300,87 @@ fn what_the_cuda_kernel_does_not_cover_is_named() {
     let many = r.with_spectrum(SpectrumSpec::log_spaced(0.05, 4.0, 200, 0.05));
     let why = gpu_lanes::unsupported(&[&ModelParams::default()], &many).expect("too many periods");
     assert!(why.contains("200 periods"), "{why}");
+}
+
+/// The host build as the plan's lane engine: what `study run --backend cuda` does on a GPU, with
+/// the launch replaced by the host harness.
+struct HostEngine(PathBuf);
+
+impl LaneEngine for HostEngine {
+    fn run(
+        &self,
+        models: &[&ModelParams],
+        reference: &Reference,
+        solver: &Solver,
+    ) -> anyhow::Result<Result<Vec<LaneResult>, SetupError>> {
+        Ok(Ok(host_run(&self.0, models, reference, solver)))
+    }
+}
+
+/// A study's rows on the CPU kernel and through the engine, for `samples` spread over its design:
+/// the same status and every metric within 1e-12 (the GPU acceptance asks 1e-9).
+fn same_rows_through_the_engine(study: &str, samples: usize) {
+    let Some(exe) = harness_or_skip() else { return };
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(study);
+    let text = std::fs::read_to_string(&path).unwrap();
+    let spec = StudySpec::from_toml(&text, study).unwrap();
+    let mut plan = run_cmd::plan_for(&spec, path.parent().unwrap()).unwrap();
+    let names: Vec<String> = spec.excitations.iter().map(|e| e.name.clone()).collect();
+    assert_eq!(plan.engine_unsupported(&names), None, "{study} is covered");
+    let step = (plan.samples() / samples).max(1);
+    let ids: Vec<usize> = (0..plan.samples()).step_by(step).take(samples).collect();
+    let cpu = plan.run_samples(ids.iter().copied()).unwrap();
+    plan.engine = Some(Arc::new(HostEngine(exe)));
+    let gpu = plan.run_samples(ids.iter().copied()).unwrap();
+    assert_eq!(cpu.len(), gpu.len());
+    let mut ok = 0;
+    for (c, g) in cpu.iter().zip(&gpu) {
+        assert_eq!((c.sample_id, c.excitation), (g.sample_id, g.excitation));
+        assert_eq!(c.status, g.status, "{study}, sample {}", c.sample_id);
+        ok += usize::from(c.status == RowStatus::Ok);
+        for ((name, a), (_, b)) in c.metrics.columns().into_iter().zip(g.metrics.columns()) {
+            assert!(
+                close(a, b),
+                "{study}, sample {}, {name}: CPU {a:e}, engine {b:e}",
+                c.sample_id
+            );
+        }
+    }
+    assert!(
+        ok * 2 > cpu.len(),
+        "{study}: most rows run ({ok} of {})",
+        cpu.len()
+    );
+}
+
+#[test]
+fn the_gains_sweep_through_the_host_kernel_equals_the_cpu_backend() {
+    same_rows_through_the_engine("studies/gains_sweep.toml", 48);
+}
+
+#[test]
+fn the_record_sweep_through_the_host_kernel_equals_the_cpu_backend() {
+    same_rows_through_the_engine("studies/record_sweep.toml", 8);
+}
+
+/// A device failure ends the run with its message (no rows are made up).
+#[test]
+fn a_device_failure_ends_the_run() {
+    struct Broken;
+    impl LaneEngine for Broken {
+        fn run(
+            &self,
+            _: &[&ModelParams],
+            _: &Reference,
+            _: &Solver,
+        ) -> anyhow::Result<Result<Vec<LaneResult>, SetupError>> {
+            anyhow::bail!("the GPU (test) failed: an illegal address")
+        }
+    }
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("studies/smoke.toml");
+    let spec = StudySpec::from_toml(&std::fs::read_to_string(&path).unwrap(), "smoke").unwrap();
+    let mut plan = run_cmd::plan_for(&spec, path.parent().unwrap()).unwrap();
+    plan.engine = Some(Arc::new(Broken));
+    let err = plan.run_samples(0..4).unwrap_err();
+    assert!(err.to_string().contains("illegal address"), "{err}");
 }

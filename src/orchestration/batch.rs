@@ -16,11 +16,26 @@ use super::study::{Method, StudySpec};
 use crate::kernel::excitation::Reference;
 use crate::kernel::metrics::Metrics;
 use crate::kernel::params::{ModelParams, ParamInfo};
-use crate::kernel::simulate::{self, Failure, LaneStatus, NoObserver};
+use crate::kernel::simulate::{self, Failure, LaneResult, LaneStatus, NoObserver, SetupError};
 use crate::kernel::spectrum::SpectrumSpec;
 use crate::kernel::LANES;
 use rayon::prelude::*;
 use std::ops::Range;
+use std::sync::Arc;
+
+/// An engine that runs any number of lanes at once on one shared reference (the CUDA kernel of
+/// `shell::gpu`): set on a plan ([`Plan::engine`]), it takes the CPU lane kernel's place. Only
+/// what [`Plan::engine_unsupported`] allows reaches it.
+pub trait LaneEngine: Send + Sync {
+    /// A result per model, or the setup error of the whole group; `Err` is a device failure,
+    /// which ends the run.
+    fn run(
+        &self,
+        models: &[&ModelParams],
+        reference: &Reference,
+        solver: &simulate::Solver,
+    ) -> anyhow::Result<Result<Vec<LaneResult>, SetupError>>;
+}
 
 /// Where the sample points come from.
 #[derive(Debug, Clone)]
@@ -51,6 +66,8 @@ pub struct Plan {
     pub spectrum: SpectrumSpec,
     pub solver: simulate::Solver,
     pub saltelli_dims: Option<usize>,
+    /// The engine that runs the lanes instead of the CPU kernel (None: the CPU kernel).
+    pub engine: Option<Arc<dyn LaneEngine>>,
 }
 
 /// Which excitations of `spec` need a reference per sample, given the varied parameter paths.
@@ -182,6 +199,7 @@ impl Plan {
             seed: spec.seed,
             spectrum: spec.spectrum.clone(),
             solver: spec.solver,
+            engine: None,
         }
     }
 
@@ -205,6 +223,7 @@ impl Plan {
             references,
             solver: spec.solver,
             saltelli_dims: None,
+            engine: None,
         }
     }
 
@@ -264,13 +283,32 @@ impl Plan {
         }
     }
 
-    /// Runs samples `range` for every excitation: rows in (sample, excitation) order.
-    pub fn run_chunk(&self, range: Range<usize>) -> Vec<Row> {
+    /// Why the CUDA kernel cannot run this plan (a motion made per sample, an effect, too long
+    /// a spectrum), naming the excitation; `None` when it can.
+    pub fn engine_unsupported(&self, names: &[String]) -> Option<String> {
+        for (e, r) in self.references.iter().enumerate() {
+            let name = names.get(e).map_or("?", |n| n.as_str());
+            if self.per_sample[e].is_some() {
+                return Some(format!(
+                    "excitation `{name}` makes its motion per sample (the CUDA kernel takes one \
+                     motion shared by the lanes)"
+                ));
+            }
+            if let Some(why) = crate::kernel::gpu_lanes::unsupported(&[&self.base], r) {
+                return Some(format!("excitation `{name}`: {why}"));
+            }
+        }
+        None
+    }
+
+    /// Runs samples `range` for every excitation: rows in (sample, excitation) order; `Err` only
+    /// when the engine's device fails.
+    pub fn run_chunk(&self, range: Range<usize>) -> anyhow::Result<Vec<Row>> {
         self.run_samples(range)
     }
 
     /// Runs the samples `ids` for every excitation: rows in (sample, excitation) order.
-    pub fn run_samples(&self, ids: impl IntoIterator<Item = usize>) -> Vec<Row> {
+    pub fn run_samples(&self, ids: impl IntoIterator<Item = usize>) -> anyhow::Result<Vec<Row>> {
         let samples: Vec<Sample> = ids.into_iter().map(|i| self.sample(i)).collect();
         let n_exc = self.references.len();
         let mut rows: Vec<Option<Row>> = vec![None; samples.len() * n_exc];
@@ -278,14 +316,15 @@ impl Plan {
             .filter(|&i| samples[i].model.is_ok())
             .collect();
         for (e, reference) in self.references.iter().enumerate() {
-            let of_e = self.run_excitation(e, reference, &samples, &valid);
+            let of_e = self.run_excitation(e, reference, &samples, &valid)?;
             for (i, row) in of_e.into_iter().enumerate() {
                 rows[i * n_exc + e] = row;
             }
         }
-        rows.into_iter()
+        Ok(rows
+            .into_iter()
             .map(|r| r.expect("every row filled"))
-            .collect()
+            .collect())
     }
 
     /// The rows of excitation `e` (its `reference`, unless the samples make their own), one per
@@ -296,10 +335,28 @@ impl Plan {
         reference: &Reference,
         samples: &[Sample],
         valid: &[usize],
-    ) -> Vec<Option<Row>> {
+    ) -> anyhow::Result<Vec<Option<Row>>> {
         let mut rows: Vec<Option<Row>> = vec![None; samples.len()];
         let (own, runnable) = self.own_references(e, samples, valid, &mut rows);
-        for group in runnable.chunks(LANES) {
+        if let Some(engine) = &self.engine {
+            let models: Vec<&ModelParams> = runnable
+                .iter()
+                .map(|&i| samples[i].model.as_ref().expect("valid"))
+                .collect();
+            if !models.is_empty() {
+                let results = engine.run(&models, reference, &self.solver)?;
+                for (lane, &i) in runnable.iter().enumerate() {
+                    let (status, metrics) = lane_outcome(results.as_deref(), lane);
+                    rows[i] = Some(self.row(&samples[i], e, status, metrics));
+                }
+            }
+        }
+        let on_cpu = if self.engine.is_some() {
+            &[][..]
+        } else {
+            &runnable[..]
+        };
+        for group in on_cpu.chunks(LANES) {
             let models: Vec<&ModelParams> = group
                 .iter()
                 .map(|&i| samples[i].model.as_ref().expect("valid"))
@@ -318,7 +375,7 @@ impl Plan {
                 &mut NoObserver,
             );
             for (lane, &i) in group.iter().enumerate() {
-                let (status, metrics) = lane_outcome(&results, lane);
+                let (status, metrics) = lane_outcome(results.as_ref().map(|r| &r[..]), lane);
                 rows[i] = Some(self.row(&samples[i], e, status, metrics));
             }
         }
@@ -331,7 +388,7 @@ impl Plan {
             };
             rows[i] = Some(self.row(s, e, status, Metrics::NAN));
         }
-        rows
+        Ok(rows)
     }
 
     /// The lanes' references for excitation `e`: the excitation's (None), or each valid
@@ -385,10 +442,7 @@ impl Plan {
 }
 
 /// A lane's status and metrics (NaN unless it ran to the end), or why its group could not run.
-fn lane_outcome(
-    results: &Result<[simulate::LaneResult; LANES], simulate::SetupError>,
-    lane: usize,
-) -> (RowStatus, Metrics) {
+fn lane_outcome(results: Result<&[LaneResult], &SetupError>, lane: usize) -> (RowStatus, Metrics) {
     match results {
         Ok(r) => match r[lane].status {
             LaneStatus::Ok => (RowStatus::Ok, r[lane].metrics),
@@ -449,7 +503,7 @@ pub fn calibrate(
     range: Range<usize>,
     pool: &rayon::ThreadPool,
     round: std::time::Duration,
-) -> Calibration {
+) -> anyhow::Result<Calibration> {
     let len = range.len();
     let mut n = (2 * LANES * pool.current_num_threads()).min(len).max(1);
     loop {
@@ -458,18 +512,20 @@ pub fn calibrate(
             .map(|i| range.start + ((2 * i + 1) * len) / (2 * n))
             .collect();
         let t = std::time::Instant::now();
-        let rows: Vec<Row> = pool.install(|| {
-            ids.par_chunks(LANES)
-                .flat_map_iter(|g| plan.run_samples(g.iter().copied()))
-                .collect()
-        });
+        let group = if plan.engine.is_some() { n } else { LANES };
+        let rows: Vec<Vec<Row>> = pool.install(|| {
+            ids.par_chunks(group)
+                .map(|g| plan.run_samples(g.iter().copied()))
+                .collect::<anyhow::Result<_>>()
+        })?;
+        let rows = rows.concat();
         let secs = t.elapsed().as_secs_f64();
         if secs >= round.as_secs_f64() || n >= len {
-            return Calibration {
+            return Ok(Calibration {
                 samples: n,
                 secs,
                 rows,
-            };
+            });
         }
         n = (2 * n).min(len);
     }
@@ -527,7 +583,7 @@ pub fn run_plan(
             .step_by(chunk)
             .take(wave)
             .collect();
-        let results: Vec<Option<Vec<Row>>> = pool.install(|| {
+        let results: Vec<Option<anyhow::Result<Vec<Row>>>> = pool.install(|| {
             starts
                 .par_iter()
                 .map(|&s| {
@@ -535,18 +591,19 @@ pub fn run_plan(
                         return None;
                     }
                     let rows = plan.run_chunk(s..(s + chunk).min(range.end));
-                    progress(rows.len());
+                    progress(rows.as_ref().map_or(0, |r| r.len()));
                     Some(rows)
                 })
                 .collect()
         });
-        for (rows, &s) in results.iter().zip(&starts) {
+        for (rows, &s) in results.into_iter().zip(&starts) {
             let Some(rows) = rows else {
                 summary.stopped = true;
                 return Ok(summary);
             };
-            summary.count(rows);
-            sink.write(rows)?;
+            let rows = rows?;
+            summary.count(&rows);
+            sink.write(&rows)?;
             summary.next = (s + chunk).min(range.end);
         }
         if stop() && summary.next < range.end {

@@ -221,10 +221,16 @@ fn bench_diagnose(campaign: &std::path::Path, max_seconds: Option<f64>) -> anyho
 }
 
 pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
-    let engine = super::gpu::choose(args.backend)?;
+    let mut engine = super::gpu::choose(args.backend)?;
+    if args.diagnose.is_some() {
+        engine = engine.not_covering("the diagnosis screens effects one by one")?;
+    }
     println!("study bench: backend {}", engine.describe());
     if let Some(c) = &args.diagnose {
         return bench_diagnose(c, args.max_seconds);
+    }
+    if let Some(cuda) = engine.cuda() {
+        bench_cuda(&mut std::io::stdout().lock(), cuda)?;
     }
     let f = measure(args.seconds)?;
     let mut out = std::io::stdout().lock();
@@ -364,4 +370,71 @@ fn gate(out: &mut dyn Write, path: &Path, f: &Figures) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// Lanes of the GPU benchmark: the work unit of `benches/peers` at the size the issue's figures
+/// were taken (65 536 gain sets).
+const GPU_LANES: usize = 1 << 16;
+
+/// The GPU's figure on the peers' work unit (random gain sets of the gains sweep, a 3 s sine at
+/// 3 Hz 1.73 g, 1 s taper, harmonics over the last 4 cycles, 8 RK4 substeps per tick), after a
+/// warm-up launch, with the largest difference from the CPU kernel on 256 of the lanes.
+fn bench_cuda(out: &mut dyn Write, cuda: &super::gpu::Cuda) -> anyhow::Result<()> {
+    use crate::orchestration::batch::LaneEngine;
+    let reference = Sine {
+        freq_hz: 3.0,
+        amp_m: Sine::amp_from_g(1.73, 3.0),
+        taper_s: 1.0,
+        duration_s: 3.0,
+        window_cycles: Some(4),
+    }
+    .reference(1024.0);
+    let solver = Solver { substeps: 8 };
+    let models = gain_sets(GPU_LANES);
+    let refs: Vec<&ModelParams> = models.iter().collect();
+    cuda.run(&refs[..1024], &reference, &solver)?
+        .context("warm-up launch")?;
+    let t = Instant::now();
+    let got = cuda.run(&refs, &reference, &solver)?.context("GPU batch")?;
+    let secs = t.elapsed().as_secs_f64();
+    let mut worst = 0.0f64;
+    for (c, group) in refs[..256].chunks(LANES).enumerate() {
+        let lp = LaneParams::<LANES>::new(group)?;
+        let want = simulate::run(&lp, &Baseline, &reference, &solver, &mut NoObserver)?;
+        for (l, w) in want.iter().enumerate().take(group.len()) {
+            let g = got[c * LANES + l].metrics.columns();
+            for ((_, a), (_, b)) in g.into_iter().zip(w.metrics.columns()) {
+                if a.to_bits() != b.to_bits() {
+                    worst = worst.max((a - b).abs() / a.abs().max(b.abs()).max(1e-300));
+                }
+            }
+        }
+    }
+    writeln!(
+        out,
+        "  GPU: {GPU_LANES} gain sets × 3 s sine (3 Hz, 1.73 g), 8 substeps: {:.3} s, {:.0} \
+         sim-s/wall-s; CPU kernel vs GPU on 256 sets: largest relative difference {worst:.1e}",
+        secs,
+        GPU_LANES as f64 * 3.0 / secs
+    )?;
+    Ok(())
+}
+
+/// `n` gain sets drawn uniformly over the gains sweep's ranges (a fixed seed).
+fn gain_sets(n: usize) -> Vec<ModelParams> {
+    use rand::{RngExt, SeedableRng};
+    let mut rng = chacha20::ChaCha8Rng::seed_from_u64(7);
+    (0..n)
+        .map(|_| {
+            let mut p = ModelParams::default();
+            let c = &mut p.controller;
+            c.g_d = rng.random_range(1.1..1.9);
+            c.l_v = rng.random_range(0.29..0.47);
+            c.l_a = rng.random_range(0.39..0.65);
+            c.l_j = rng.random_range(0.0..0.01);
+            c.g_f = rng.random_range(-1.9..-1.1);
+            c.l_d = rng.random_range(0.0..0.1);
+            p
+        })
+        .collect()
 }

@@ -30,7 +30,8 @@ fn harmonic_label(k: usize, rate_hz: f64) -> String {
 }
 
 pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
-    let engine = super::gpu::choose(args.backend)?;
+    let engine = super::gpu::choose(args.backend)?
+        .not_covering("a diagnosis compares time histories and screens effects (the CUDA kernel returns metrics of the baseline only)")?;
     let model = load_model(args.model.as_deref())?;
     let candidates: Vec<EffectId> = if args.candidates.is_empty() {
         EffectId::ALL

@@ -164,7 +164,8 @@ pub fn print_checks(
 }
 
 pub fn run(args: &FitArgs) -> anyhow::Result<()> {
-    let engine = super::gpu::choose(args.backend)?;
+    let engine = super::gpu::choose(args.backend)?
+        .not_covering("a fit compares time histories at the measured samples (the CUDA kernel returns metrics only)")?;
     let model = load_model(args.model.as_deref())?;
     let free = free_parameters(&args.effect, &args.free, &model)?;
     let loaded = load_problem(&args.campaign, &model, args.strict)?;

@@ -3,10 +3,20 @@
 //! needs no CUDA toolkit and runs everywhere; their presence is checked before any call (cudarc's
 //! loader panics when a library is missing).
 //!
-//! This version finds the GPU and says what it found, but has no CUDA kernel yet: `auto` runs on
-//! the CPU and says why, `cuda` is refused (exit 2) with the cause, never silently run on the CPU.
+//! The kernel is `src/kernel/cuda/lane.cu` (CUDA C++), compiled at run time by NVRTC and cached
+//! as PTX; [`Cuda`] runs a plan's lanes with it ([`crate::orchestration::batch::LaneEngine`]).
+//! `auto` uses it where a GPU is found and the work is covered, else runs on the CPU and says
+//! why; `cuda` refuses (exit 2) with the cause, never silently running on the CPU.
 
 use super::BadInput;
+use crate::kernel::excitation::Reference;
+use crate::kernel::gpu_lanes::{self, Shared};
+use crate::kernel::params::ModelParams;
+use crate::kernel::simulate::{LaneResult, SetupError, Solver};
+use crate::orchestration::batch::LaneEngine;
+use cudarc::driver::{CudaContext, CudaFunction, CudaStream, LaunchConfig, PushKernelArg};
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
 
 /// The engine asked for on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
@@ -45,37 +55,233 @@ pub fn probe() -> Result<String, String> {
 }
 
 /// The engine that runs: the CPU, with the reason where another was possible or asked for
-/// (`auto`), or an error (exit 2) for `cuda` that cannot run.
+/// (`auto`), or the GPU; an error (exit 2) for `cuda` that cannot run.
 pub fn choose(backend: Backend) -> anyhow::Result<Engine> {
     if backend == Backend::Cpu {
-        return Ok(Engine { why_cpu: None });
+        return Ok(Engine::cpu(backend, None));
     }
-    let cause = match probe() {
-        Ok(gpu) => format!("{gpu} found, but this version of vshake has no CUDA kernel yet"),
-        Err(cause) => cause,
-    };
-    match backend {
-        Backend::Cuda => Err(BadInput(format!("--backend cuda: {cause}")).into()),
-        _ => Ok(Engine {
-            why_cpu: Some(cause),
+    match probe().and_then(|name| Cuda::open(&name)) {
+        Ok(cuda) => Ok(Engine {
+            backend,
+            why_cpu: None,
+            cuda: Some(Arc::new(cuda)),
         }),
+        Err(cause) if backend == Backend::Cuda => {
+            Err(BadInput(format!("--backend cuda: {cause}")).into())
+        }
+        Err(cause) => Ok(Engine::cpu(backend, Some(cause))),
     }
 }
 
-/// The engine chosen (today always the CPU kernel) and why a GPU is not used, for the engine line.
-#[derive(Debug, Clone)]
+/// The engine chosen: the CPU kernel (and why a GPU is not used), or the CUDA kernel.
+#[derive(Clone)]
 pub struct Engine {
+    backend: Backend,
     pub why_cpu: Option<String>,
+    cuda: Option<Arc<Cuda>>,
+}
+
+impl std::fmt::Debug for Engine {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.describe())
+    }
 }
 
 impl Engine {
-    /// `"CPU"`, or `"CPU (no GPU: <cause>)"` when `auto` looked for one.
-    pub fn describe(&self) -> String {
-        match &self.why_cpu {
-            Some(c) => format!("CPU (no GPU used: {c})"),
-            None => "CPU".into(),
+    fn cpu(backend: Backend, why_cpu: Option<String>) -> Engine {
+        Engine {
+            backend,
+            why_cpu,
+            cuda: None,
         }
     }
+
+    /// `"CUDA on <GPU>"`, `"CPU"`, or `"CPU (no GPU used: <cause>)"` when `auto` looked for one.
+    pub fn describe(&self) -> String {
+        match (&self.cuda, &self.why_cpu) {
+            (Some(c), _) => format!("CUDA on {} (float64, one thread per lane)", c.name),
+            (None, Some(c)) => format!("CPU (no GPU used: {c})"),
+            (None, None) => "CPU".into(),
+        }
+    }
+
+    /// The engine for work the GPU cannot take (`why`): the CPU, saying why under `auto`; an
+    /// error (exit 2) naming what is not covered under `cuda`.
+    pub fn not_covering(self, why: &str) -> anyhow::Result<Engine> {
+        if self.cuda.is_none() {
+            return Ok(self);
+        }
+        if self.backend == Backend::Cuda {
+            return Err(
+                BadInput(format!("--backend cuda: not supported on the GPU: {why}")).into(),
+            );
+        }
+        Ok(Engine::cpu(
+            self.backend,
+            Some(format!("not supported on the GPU: {why}")),
+        ))
+    }
+
+    /// The lane engine for a plan (None: the CPU kernel), given the GPU's coverage `unsupported`.
+    pub fn for_plan(
+        self,
+        unsupported: Option<String>,
+    ) -> anyhow::Result<(Engine, Option<Arc<dyn LaneEngine>>)> {
+        let engine = match unsupported {
+            Some(why) => self.not_covering(&why)?,
+            None => self,
+        };
+        let lanes = engine.cuda.clone().map(|c| c as Arc<dyn LaneEngine>);
+        Ok((engine, lanes))
+    }
+
+    /// The CUDA engine, when one runs.
+    pub fn cuda(&self) -> Option<&Arc<Cuda>> {
+        self.cuda.as_ref()
+    }
+}
+
+/// Threads per block of the launch: few enough that float64 lanes with their whole state in
+/// registers fit the register file of every CUDA GPU.
+const BLOCK: u32 = 128;
+
+/// The CUDA kernel loaded on GPU 0.
+pub struct Cuda {
+    pub name: String,
+    stream: Arc<CudaStream>,
+    func: CudaFunction,
+    /// One batch on the device at a time (worker threads share the GPU).
+    busy: Mutex<()>,
+}
+
+impl Cuda {
+    /// Compiles (or takes from the cache) and loads the kernel on GPU 0, named `name`.
+    fn open(name: &str) -> Result<Cuda, String> {
+        let ptx = ptx()?;
+        let ctx = CudaContext::new(0).map_err(|e| format!("{name}: no CUDA context ({e})"))?;
+        let module = ctx
+            .load_module(cudarc::nvrtc::Ptx::from_src(ptx))
+            .map_err(|e| format!("{name}: the kernel did not load ({e})"))?;
+        let func = module
+            .load_function("vs_lanes")
+            .map_err(|e| format!("{name}: the kernel did not load ({e})"))?;
+        Ok(Cuda {
+            name: name.into(),
+            stream: ctx.default_stream(),
+            func,
+            busy: Mutex::new(()),
+        })
+    }
+
+    /// Runs the lanes on the device: the shared run and the parameters up, the sums back.
+    fn launch(&self, shared: &Shared, params: &[f64], n: usize) -> anyhow::Result<Vec<f64>> {
+        let _one = self.busy.lock().unwrap_or_else(|e| e.into_inner());
+        let s = &self.stream;
+        let [x, v, a, j] = [0, 1, 2, 3].map(|i| s.clone_htod(&shared.refs[i]));
+        let (x, v, a, j) = (x?, v?, a?, j?);
+        let (drive, basis, osc) = (
+            s.clone_htod(&shared.drive)?,
+            s.clone_htod(&shared.basis)?,
+            s.clone_htod(&shared.osc)?,
+        );
+        let p = s.clone_htod(params)?;
+        let mut out = s.alloc_zeros::<f64>(gpu_lanes::out_fields(shared.n_osc()) * n)?;
+        let lanes = n as i64;
+        let mut b = s.launch_builder(&self.func);
+        for i in &shared.ints {
+            b.arg(i);
+        }
+        b.arg(&shared.f_s);
+        for d in [&x, &v, &a, &j, &drive, &basis, &osc, &p] {
+            b.arg(d);
+        }
+        b.arg(&mut out).arg(&lanes);
+        let cfg = LaunchConfig {
+            grid_dim: ((n as u32).div_ceil(BLOCK), 1, 1),
+            block_dim: (BLOCK, 1, 1),
+            shared_mem_bytes: 0,
+        };
+        // SAFETY: the arguments match `vs_lanes` in lane.cu (8 int64, a float64, 9 device
+        // pointers of the sizes gpu_lanes.rs gives, the output, the lane count).
+        unsafe { b.launch(cfg) }?;
+        Ok(s.clone_dtoh(&out)?)
+    }
+}
+
+impl LaneEngine for Cuda {
+    fn run(
+        &self,
+        models: &[&ModelParams],
+        reference: &Reference,
+        solver: &Solver,
+    ) -> anyhow::Result<Result<Vec<LaneResult>, SetupError>> {
+        let setup = Shared::new(models[0], reference, solver)
+            .and_then(|shared| Ok((shared, gpu_lanes::pack_params(models)?)));
+        let (shared, params) = match setup {
+            Ok(s) => s,
+            Err(e) => return Ok(Err(e)),
+        };
+        let n = models.len();
+        let out = self
+            .launch(&shared, &params, n)
+            .map_err(|e| anyhow::anyhow!("the GPU ({}) failed: {e}", self.name))?;
+        Ok(Ok((0..n)
+            .map(|l| gpu_lanes::unpack(&out, n, l, reference, shared.n_osc()))
+            .collect()))
+    }
+}
+
+/// The kernel's PTX: from the cache (`$XDG_CACHE_HOME/vshake` or `~/.cache/vshake`, keyed by the
+/// source and the options), else compiled by NVRTC (about a second) and cached.
+pub fn ptx() -> Result<String, String> {
+    let path = cache_dir().map(|d| d.join(format!("lane-{:016x}.ptx", fnv1a(gpu_lanes::SOURCE))));
+    if let Some(text) = path.as_ref().and_then(|p| std::fs::read_to_string(p).ok()) {
+        return Ok(text);
+    }
+    let text = compile_ptx()?;
+    if let Some(p) = path {
+        // A cache that cannot be written costs a compile next time, nothing else.
+        let tmp = p.with_extension(format!("tmp{}", std::process::id()));
+        let _ = std::fs::create_dir_all(p.parent().unwrap_or(&p))
+            .and_then(|_| std::fs::write(&tmp, &text))
+            .and_then(|_| std::fs::rename(&tmp, &p));
+    }
+    Ok(text)
+}
+
+/// Compiles the kernel with NVRTC. No FMA contraction (`--fmad=false`): the CPU kernel rounds
+/// every multiply and add, and so does the GPU, which keeps the two within 1e-9 of each other.
+pub fn compile_ptx() -> Result<String, String> {
+    // SAFETY: only tries to open the shared library.
+    if !unsafe { cudarc::nvrtc::sys::is_culib_present() } {
+        return Err(
+            "no NVRTC (libnvrtc.so not found: `pip install nvidia-cuda-nvrtc` and add its \
+                    nvidia/cu13/lib folder to LD_LIBRARY_PATH)"
+                .into(),
+        );
+    }
+    let opts = cudarc::nvrtc::CompileOptions {
+        fmad: Some(false),
+        name: Some("lane.cu".into()),
+        ..Default::default()
+    };
+    cudarc::nvrtc::compile_ptx_with_opts(gpu_lanes::SOURCE, opts)
+        .map(|p| p.to_src())
+        .map_err(|e| format!("NVRTC did not compile the kernel: {e}"))
+}
+
+fn cache_dir() -> Option<PathBuf> {
+    let base = std::env::var_os("XDG_CACHE_HOME")
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))?;
+    Some(base.join("vshake"))
+}
+
+/// FNV-1a, 64 bits: a hash that stays the same across builds (the cache key).
+fn fnv1a(text: &str) -> u64 {
+    text.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+    })
 }
 
 #[cfg(test)]
@@ -89,15 +295,56 @@ mod tests {
     }
 
     /// On a machine without a usable GPU (this one, CI): auto says why, cuda is bad input naming
-    /// the same cause. On a GPU machine both say that the kernel is not in this version.
+    /// the same cause.
     #[test]
     fn auto_says_why_and_cuda_is_refused_with_the_cause() {
         let auto = choose(Backend::Auto).unwrap();
+        if auto.cuda().is_some() {
+            eprintln!(
+                "skipped: this machine has a usable GPU ({})",
+                auto.describe()
+            );
+            return;
+        }
         let why = auto.why_cpu.clone().unwrap();
         assert!(auto.describe().contains(&why));
         let err = choose(Backend::Cuda).unwrap_err();
         assert_eq!(super::super::exit_code(&err), 2);
         assert_eq!(err.to_string(), format!("--backend cuda: {why}"));
         assert_eq!(err.to_string().lines().count(), 1);
+    }
+
+    /// NVRTC compiles the kernel to PTX with its entry point. Where no NVRTC is found the test
+    /// says so and passes, unless `VSHAKE_REQUIRE_NVRTC` is set (CI installs the NVRTC wheel and
+    /// sets it, so a kernel that does not compile fails CI).
+    #[test]
+    fn the_kernel_compiles_to_ptx() {
+        // SAFETY: only tries to open the shared library.
+        if !unsafe { cudarc::nvrtc::sys::is_culib_present() } {
+            assert!(
+                std::env::var_os("VSHAKE_REQUIRE_NVRTC").is_none(),
+                "VSHAKE_REQUIRE_NVRTC is set but no libnvrtc is found (LD_LIBRARY_PATH?)"
+            );
+            eprintln!("skipped: no NVRTC on this machine");
+            return;
+        }
+        let t = std::time::Instant::now();
+        let ptx = compile_ptx().unwrap_or_else(|e| panic!("{e}"));
+        eprintln!(
+            "NVRTC: {} bytes of PTX in {:.2} s",
+            ptx.len(),
+            t.elapsed().as_secs_f64()
+        );
+        assert!(
+            ptx.contains(".entry vs_lanes"),
+            "no vs_lanes entry in the PTX"
+        );
+        assert!(ptx.contains(".f64"), "the kernel is float64");
+    }
+
+    #[test]
+    fn the_cache_key_is_stable() {
+        assert_eq!(fnv1a(""), 0xcbf2_9ce4_8422_2325);
+        assert_eq!(fnv1a("a"), 0xaf63_dc4c_8601_ec8c);
     }
 }

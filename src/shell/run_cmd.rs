@@ -474,15 +474,32 @@ fn check_writable(out: &Path) -> anyhow::Result<()> {
     }
 }
 
+/// Samples per chunk on a GPU (one kernel launch each): about twice the lanes an H100 holds at
+/// once (132 SMs; float64 lanes use many registers), while the next chunk's samples are drawn.
+const GPU_CHUNK: usize = 1 << 17;
+
 pub fn run(args: &RunArgs) -> anyhow::Result<()> {
     check_checkpoint_secs(args.checkpoint_secs)?;
     let engine = super::gpu::choose(args.backend)?;
-    let Some(job) = job_of(args)? else {
+    let Some(mut job) = job_of(args)? else {
         return Ok(());
     };
+    let names: Vec<String> = job
+        .spec
+        .excitations
+        .iter()
+        .map(|e| e.name.clone())
+        .collect();
+    let (engine, lanes) = engine.for_plan(job.plan.engine_unsupported(&names))?;
     // Chunk size and threads are how the run is scheduled, not what it computes: they stay out of
     // the resolved study in the metadata, so shards (and resumed runs) with other ones still merge.
-    let chunk = args.chunk.map_or(job.spec.chunk, |c| c.max(1));
+    // A GPU takes big chunks: one launch of up to GPU_CHUNK lanes per chunk.
+    let chunk = match (args.chunk, &lanes) {
+        (Some(c), _) => c.max(1),
+        (None, Some(_)) => GPU_CHUNK,
+        (None, None) => job.spec.chunk,
+    };
+    job.plan.engine = lanes;
     let pool = pool(args.threads)?;
     let todo = (job.range.start + job.samples_kept())..job.range.end;
     print_header(&job, args, &pool, chunk)?;

@@ -65,7 +65,7 @@ pub fn gate_long_run(
     if yes || simulated_s(job, &todo) < LONG_RUN_S * 1_000.0 * pool.current_num_threads() as f64 {
         return Ok(());
     }
-    let c = batch::calibrate(&job.plan, todo.clone(), pool, CALIBRATION_ROUND);
+    let c = batch::calibrate(&job.plan, todo.clone(), pool, CALIBRATION_ROUND)?;
     match long_run_decision(c.wall_s(todo.len()), yes, std::io::stderr().is_terminal()) {
         Decision::Go => Ok(()),
         Decision::Warn(w) => {
@@ -79,7 +79,7 @@ pub fn gate_long_run(
 /// Prints what a run would do and cost, without writing anything.
 pub fn dry_run(job: &Job, todo: Range<usize>, pool: &rayon::ThreadPool) -> anyhow::Result<()> {
     let runs = todo.len() * job.plan.references.len();
-    let c = batch::calibrate(&job.plan, todo.clone(), pool, CALIBRATION_ROUND);
+    let c = batch::calibrate(&job.plan, todo.clone(), pool, CALIBRATION_ROUND)?;
     let wall = c.wall_s(todo.len());
     let bytes = output_bytes(job, &c, runs)?;
     let mut o = std::io::stdout().lock();
