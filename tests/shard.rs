@@ -219,8 +219,38 @@ fn slurm_scripts_wire_the_array_to_the_shards() {
         merge.contains(" merge ") && merge.contains("smoke.parquet"),
         "{merge}"
     );
+    assert!(
+        !array.contains("--gpus-per-task") && !array.contains("--backend"),
+        "{array}"
+    );
     let submit = std::fs::read_to_string(dir.join("submit.sh")).unwrap();
     assert!(submit.contains("--dependency=afterok:${array}"), "{submit}");
+    // A GPU array: each task asks for a GPU and runs (and resumes) with --backend cuda.
+    let gpu_dir = d.path().join("gpu");
+    let out = ok(&[
+        "slurm",
+        s.to_str().unwrap(),
+        "--shards",
+        "2",
+        "--gpus-per-task",
+        "1",
+        "--dir",
+        gpu_dir.to_str().unwrap(),
+    ]);
+    assert!(out.contains("2 CPUs and 1 GPU"), "{out}");
+    let array = std::fs::read_to_string(gpu_dir.join("array.sbatch")).unwrap();
+    assert!(array.contains("#SBATCH --gpus-per-task=1\n"), "{array}");
+    assert_eq!(array.matches("--backend cuda").count(), 2, "{array}");
+    let (code, _, e) = study(&[
+        "slurm",
+        s.to_str().unwrap(),
+        "--shards",
+        "2",
+        "--gpus-per-task",
+        "2",
+    ]);
+    assert_eq!(code, 2);
+    assert!(e.contains("one GPU per task"), "{e}");
     let (code, _, e) = study(&[
         "slurm",
         s.to_str().unwrap(),

@@ -123,6 +123,11 @@ pub struct SlurmArgs {
     /// CPUs per array task (the worker threads of each shard).
     #[arg(long, default_value_t = 2)]
     pub cpus: usize,
+    /// GPUs per array task: 1 asks Slurm for a GPU and runs each shard with `--backend cuda`
+    /// (a task that lands without a usable GPU fails, never crawling on its CPUs); 0 (the
+    /// default) runs on the CPUs. vshake uses one GPU per task: for more, use more shards.
+    #[arg(long, default_value_t = 0)]
+    pub gpus_per_task: usize,
     /// Slurm account to charge (default: the user's default).
     #[arg(long)]
     pub account: Option<String>,

@@ -74,9 +74,14 @@ pub fn run(args: &SlurmArgs) -> anyhow::Result<()> {
     )?;
     writeln!(
         o,
-        "  {}  the job array (task I = shard I/{n}, {} CPUs, {} each)",
+        "  {}  the job array (task I = shard I/{n}, {} CPUs{}, {} each)",
         dir.join("array.sbatch").display(),
         args.cpus,
+        if args.gpus_per_task > 0 {
+            " and 1 GPU"
+        } else {
+            ""
+        },
         args.time
     )?;
     writeln!(o, "  {}  the merge job", dir.join("merge.sbatch").display())?;
@@ -106,6 +111,23 @@ fn prepare(args: &SlurmArgs) -> anyhow::Result<Job<'_>> {
     .map_err(|e| BadInput(e.to_string().replace("--shard", "--shards")))?;
     if args.cpus == 0 {
         return Err(BadInput("--cpus must be at least 1".into()).into());
+    }
+    if args.gpus_per_task > 1 {
+        return Err(BadInput(format!(
+            "--gpus-per-task {}: vshake runs one GPU per task; for more GPUs use more --shards \
+             with --gpus-per-task 1",
+            args.gpus_per_task
+        ))
+        .into());
+    }
+    if args.gpus_per_task == 1 {
+        let names: Vec<String> = spec.excitations.iter().map(|e| e.name.clone()).collect();
+        if let Some(why) = plan.engine_unsupported(&names) {
+            return Err(BadInput(format!(
+                "--gpus-per-task 1: this study cannot run on the GPU: {why}"
+            ))
+            .into());
+        }
     }
     slurm_value("time", &args.time)?;
     let mut common = String::new();
@@ -184,7 +206,7 @@ fn array_script(job: &Job<'_>) -> String {
 #SBATCH --array=0-{last}\n\
 #SBATCH --ntasks=1\n\
 #SBATCH --cpus-per-task={cpus}\n\
-#SBATCH --time={time}\n\
+{gpus}#SBATCH --time={time}\n\
 #SBATCH --signal=B:TERM@300\n\
 #SBATCH --requeue\n\
 #SBATCH --open-mode=append\n\
@@ -194,9 +216,9 @@ out=\"{shard_out}\"\n\
 partial=\"${{out%.parquet}}.partial.parquet\"\n\
 threads=\"${{SLURM_CPUS_PER_TASK:-{cpus}}}\"\n\
 if [ -e \"$out\" ] || [ -e \"$partial\" ] || [ -e \"$partial.tmp.checkpoint\" ] || [ -e \"$partial.killed\" ]; then\n\
-  {bin} run --resume \"$out\" --threads \"$threads\" --log-progress &\n\
+  {bin} run --resume \"$out\" --threads \"$threads\"{backend} --log-progress &\n\
 else\n\
-  {bin} run {study_q} --shard \"${{SLURM_ARRAY_TASK_ID}}/{n}\" --threads \"$threads\" --log-progress --out \"$out\" &\n\
+  {bin} run {study_q} --shard \"${{SLURM_ARRAY_TASK_ID}}/{n}\" --threads \"$threads\"{backend} --log-progress --out \"$out\" &\n\
 fi\n\
 pid=$!\n\
 trap 'kill -TERM \"$pid\" 2>/dev/null' TERM\n\
@@ -214,6 +236,11 @@ exit \"$status\"\n",
         study = job.study.display(),
         last = n - 1,
         cpus = args.cpus,
+        gpus = match args.gpus_per_task {
+            0 => String::new(),
+            g => format!("#SBATCH --gpus-per-task={g}\n"),
+        },
+        backend = if args.gpus_per_task > 0 { " --backend cuda" } else { "" },
         time = args.time,
         logs = dir.join("logs").display(),
         bin = q(&job.bin),
