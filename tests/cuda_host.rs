@@ -56,10 +56,10 @@ fn build_harness() -> Result<PathBuf, String> {
 fn host_run(
     exe: &Path,
     models: &[&ModelParams],
-    reference: &Reference,
+    refs: &[&Reference],
     solver: &Solver,
 ) -> Vec<LaneResult> {
-    let shared = Shared::new(models[0], reference, solver).expect("valid run");
+    let shared = Shared::new(models[0], refs, solver).expect("valid run");
     let params = gpu_lanes::pack_params(models).expect("uniform lanes");
     let mut bytes = Vec::new();
     let mut put = |v: &[u8]| bytes.extend_from_slice(v);
@@ -99,7 +99,15 @@ fn host_run(
         gpu_lanes::out_fields(shared.n_osc()) * models.len()
     );
     (0..models.len())
-        .map(|l| gpu_lanes::unpack(&out, models.len(), l, reference, shared.n_osc()))
+        .map(|l| {
+            gpu_lanes::unpack(
+                &out,
+                models.len(),
+                l,
+                refs[l.min(refs.len() - 1)],
+                shared.n_osc(),
+            )
+        })
         .collect()
 }
 
@@ -270,7 +278,7 @@ fn the_cuda_kernel_built_for_the_host_gives_the_rust_kernels_metrics() {
                 &mut vshake::kernel::simulate::NoObserver,
             )
             .unwrap();
-            let got = host_run(&exe, &refs, &reference, &solver);
+            let got = host_run(&exe, &refs, &[&reference], &solver);
             for l in 0..LANES {
                 assert_same(&format!("{what}, {law:?} valve"), l, &got[l], &want[l]);
                 match want[l].status {
@@ -310,20 +318,26 @@ impl LaneEngine for HostEngine {
     fn run(
         &self,
         models: &[&ModelParams],
-        reference: &Reference,
+        refs: &[&Reference],
         solver: &Solver,
     ) -> anyhow::Result<Result<Vec<LaneResult>, SetupError>> {
-        Ok(Ok(host_run(&self.0, models, reference, solver)))
+        Ok(Ok(host_run(&self.0, models, refs, solver)))
     }
 }
 
 /// A study's rows on the CPU kernel and through the engine, for `samples` spread over its design:
 /// the same status and every metric within 1e-12 (the GPU acceptance asks 1e-9).
 fn same_rows_through_the_engine(study: &str, samples: usize) {
-    let Some(exe) = harness_or_skip() else { return };
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(study);
-    let text = std::fs::read_to_string(&path).unwrap();
-    let spec = StudySpec::from_toml(&text, study).unwrap();
+    same_rows_of_text(&std::fs::read_to_string(&path).unwrap(), study, samples);
+}
+
+fn same_rows_of_text(text: &str, study: &str, samples: usize) {
+    let Some(exe) = harness_or_skip() else { return };
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("studies")
+        .join("x.toml");
+    let spec = StudySpec::from_toml(text, study).unwrap();
     let mut plan = run_cmd::plan_for(&spec, path.parent().unwrap()).unwrap();
     let names: Vec<String> = spec.excitations.iter().map(|e| e.name.clone()).collect();
     assert_eq!(plan.engine_unsupported(&names), None, "{study} is covered");
@@ -363,6 +377,18 @@ fn the_record_sweep_through_the_host_kernel_equals_the_cpu_backend() {
     same_rows_through_the_engine("studies/record_sweep.toml", 8);
 }
 
+/// A motion made per sample (its own realisation of the noise): each lane takes its own
+/// reference, and its spectral error is against its own target.
+#[test]
+fn motions_made_per_sample_through_the_host_kernel_equal_the_cpu_backend() {
+    let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("studies/record_sweep.toml");
+    let text = std::fs::read_to_string(file)
+        .unwrap()
+        .replace("realisation = 1", "realisation = \"per_sample\"");
+    assert!(text.contains("per_sample"));
+    same_rows_of_text(&text, "per_sample.toml", 6);
+}
+
 /// A device failure ends the run with its message (no rows are made up).
 #[test]
 fn a_device_failure_ends_the_run() {
@@ -371,7 +397,7 @@ fn a_device_failure_ends_the_run() {
         fn run(
             &self,
             _: &[&ModelParams],
-            _: &Reference,
+            _: &[&Reference],
             _: &Solver,
         ) -> anyhow::Result<Result<Vec<LaneResult>, SetupError>> {
             anyhow::bail!("the GPU (test) failed: an illegal address")

@@ -100,10 +100,11 @@ fn lane_record(lp: &LaneParams<1>) -> [f64; LANE_FIELDS] {
 /// The run every lane shares: its integers (in the kernel's argument order), rate and arrays.
 #[derive(Debug, Clone)]
 pub struct Shared {
-    /// ticks, substeps, window start, window end, has basis, drive, linear valve, oscillators.
-    pub ints: [i64; 8],
+    /// ticks, substeps, window start, window end, has basis, drive, linear valve, oscillators,
+    /// reference stride (0: one reference for every lane; else the ticks: one per lane).
+    pub ints: [i64; 9],
     pub f_s: f64,
-    /// The reference x, v, a, j per tick.
+    /// The reference x, v, a, j per tick (lane after lane when each has its own).
     pub refs: [Vec<f64>; 4],
     /// The open-loop drive per tick (one zero in closed loop).
     pub drive: Vec<f64>,
@@ -114,14 +115,16 @@ pub struct Shared {
 }
 
 impl Shared {
-    /// The shared run of `reference` for lanes whose first model is `first`; the checks of
-    /// [`simulate::check`] first.
+    /// The run of lanes whose first model is `first` on `refs` (one for every lane, or one per
+    /// lane, which must agree in rate, length, window, fundamental and spectrum, in closed loop);
+    /// the checks of [`simulate::check`] first.
     pub fn new(
         first: &ModelParams,
-        reference: &Reference,
+        refs: &[&Reference],
         solver: &Solver,
     ) -> Result<Self, SetupError> {
-        simulate::check(&LaneParams::<1>::new(&[first])?, &[reference], solver)?;
+        simulate::check(first.controller.f_s, refs, solver)?;
+        let reference = refs[0];
         let (w0, w1) = reference.window;
         let (drive_code, drive) = match &reference.drive {
             Drive::ClosedLoop => (0, vec![0.0]),
@@ -153,13 +156,18 @@ impl Shared {
                 drive_code,
                 i64::from(linear),
                 n_osc as i64,
+                if refs.len() > 1 {
+                    reference.len() as i64
+                } else {
+                    0
+                },
             ],
             f_s: reference.f_s,
             refs: [
-                reference.x.clone(),
-                reference.v.clone(),
-                reference.a.clone(),
-                reference.j.clone(),
+                refs.iter().flat_map(|r| r.x.iter().copied()).collect(),
+                refs.iter().flat_map(|r| r.v.iter().copied()).collect(),
+                refs.iter().flat_map(|r| r.a.iter().copied()).collect(),
+                refs.iter().flat_map(|r| r.j.iter().copied()).collect(),
             ],
             drive,
             basis: non_empty(basis),
@@ -182,7 +190,8 @@ fn non_empty(v: Vec<f64>) -> Vec<f64> {
     }
 }
 
-/// Lane `l`'s result from the kernel's output `out` (n lanes), finished as the CPU kernel does.
+/// Lane `l`'s result from the kernel's output `out` (n lanes) on its `reference`, finished as the
+/// CPU kernel does.
 pub fn unpack(out: &[f64], n: usize, l: usize, reference: &Reference, n_osc: usize) -> LaneResult {
     let o = |f: usize| out[f * n + l];
     let status = match o(0) as u8 {

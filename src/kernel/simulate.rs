@@ -404,7 +404,7 @@ pub fn run_each_on<const N: usize, E: Effect<N>, O: Observer<N>>(
     solver: &Solver,
     obs: &mut O,
 ) -> Result<[LaneResult; N], SetupError> {
-    check(lp, refs, solver)?;
+    check(lp.f_s, refs, solver)?;
     // AVX2 only where the CPU has it: asking for it elsewhere runs the portable build.
     let wide = isa == Isa::Avx2 && Isa::detected() == Isa::Avx2;
     Ok(match (lp.valve_law, lp.alpha_half) {
@@ -437,7 +437,7 @@ pub fn run_usual<const N: usize, E: Effect<N>, O: Observer<N>>(
     #[cfg(target_arch = "x86_64")]
     if matches!(lp.valve_law, ValveLaw::Orifice) && lp.alpha_half && Isa::detected() == Isa::Avx2 {
         let refs = &[reference; N];
-        if let Err(e) = check(lp, refs, solver) {
+        if let Err(e) = check(lp.f_s, refs, solver) {
             return Some(Err(e));
         }
         // SAFETY: the CPU reports AVX2 and FMA (`Isa::detected`).
@@ -457,11 +457,7 @@ pub fn run_usual<const N: usize, E: Effect<N>, O: Observer<N>>(
 
 /// The checks before a run: the reference's rate is the controller's, substeps ≥ 1, a drive as
 /// long as the reference.
-pub fn check<const N: usize>(
-    lp: &LaneParams<N>,
-    refs: &[&Reference; N],
-    solver: &Solver,
-) -> Result<(), SetupError> {
+pub fn check(f_s: f64, refs: &[&Reference], solver: &Solver) -> Result<(), SetupError> {
     let reference = refs[0];
     for r in &refs[1..] {
         let same = std::ptr::eq(*r, reference)
@@ -476,10 +472,10 @@ pub fn check<const N: usize>(
             return Err(SetupError::LaneReferences);
         }
     }
-    if reference.f_s != lp.f_s {
+    if reference.f_s != f_s {
         return Err(SetupError::RateMismatch {
             reference: reference.f_s,
-            controller: lp.f_s,
+            controller: f_s,
         });
     }
     if solver.substeps == 0 {

@@ -27,12 +27,12 @@ use std::sync::Arc;
 /// `shell::gpu`): set on a plan ([`Plan::engine`]), it takes the CPU lane kernel's place. Only
 /// what [`Plan::engine_unsupported`] allows reaches it.
 pub trait LaneEngine: Send + Sync {
-    /// A result per model, or the setup error of the whole group; `Err` is a device failure,
-    /// which ends the run.
+    /// A result per model on `refs` (one reference for every model, or one per model), or the
+    /// setup error of the whole group; `Err` is a device failure, which ends the run.
     fn run(
         &self,
         models: &[&ModelParams],
-        reference: &Reference,
+        refs: &[&Reference],
         solver: &simulate::Solver,
     ) -> anyhow::Result<Result<Vec<LaneResult>, SetupError>>;
 }
@@ -283,17 +283,11 @@ impl Plan {
         }
     }
 
-    /// Why the CUDA kernel cannot run this plan (a motion made per sample, an effect, too long
-    /// a spectrum), naming the excitation; `None` when it can.
+    /// Why the CUDA kernel cannot run this plan (an effect, too long a spectrum), naming the
+    /// excitation; `None` when it can.
     pub fn engine_unsupported(&self, names: &[String]) -> Option<String> {
         for (e, r) in self.references.iter().enumerate() {
             let name = names.get(e).map_or("?", |n| n.as_str());
-            if self.per_sample[e].is_some() {
-                return Some(format!(
-                    "excitation `{name}` makes its motion per sample (the CUDA kernel takes one \
-                     motion shared by the lanes)"
-                ));
-            }
             if let Some(why) = crate::kernel::gpu_lanes::unsupported(&[&self.base], r) {
                 return Some(format!("excitation `{name}`: {why}"));
             }
@@ -343,8 +337,15 @@ impl Plan {
                 .iter()
                 .map(|&i| samples[i].model.as_ref().expect("valid"))
                 .collect();
+            let refs: Vec<&Reference> = match self.per_sample[e] {
+                Some(_) => runnable
+                    .iter()
+                    .map(|&i| own[i].as_ref().expect("made"))
+                    .collect(),
+                None => vec![reference],
+            };
             if !models.is_empty() {
-                let results = engine.run(&models, reference, &self.solver)?;
+                let results = engine.run(&models, &refs, &self.solver)?;
                 for (lane, &i) in runnable.iter().enumerate() {
                     let (status, metrics) = lane_outcome(results.as_deref(), lane);
                     rows[i] = Some(self.row(&samples[i], e, status, metrics));

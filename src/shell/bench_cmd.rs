@@ -392,10 +392,12 @@ fn bench_cuda(out: &mut dyn Write, cuda: &super::gpu::Cuda) -> anyhow::Result<()
     let solver = Solver { substeps: 8 };
     let models = gain_sets(GPU_LANES);
     let refs: Vec<&ModelParams> = models.iter().collect();
-    cuda.run(&refs[..1024], &reference, &solver)?
+    cuda.run(&refs[..1024], &[&reference], &solver)?
         .context("warm-up launch")?;
     let t = Instant::now();
-    let got = cuda.run(&refs, &reference, &solver)?.context("GPU batch")?;
+    let got = cuda
+        .run(&refs, &[&reference], &solver)?
+        .context("GPU batch")?;
     let secs = t.elapsed().as_secs_f64();
     let mut worst = 0.0f64;
     for (c, group) in refs[..256].chunks(LANES).enumerate() {

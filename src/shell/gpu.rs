@@ -201,21 +201,49 @@ impl Cuda {
             block_dim: (BLOCK, 1, 1),
             shared_mem_bytes: 0,
         };
-        // SAFETY: the arguments match `vs_lanes` in lane.cu (8 int64, a float64, 9 device
+        // SAFETY: the arguments match `vs_lanes` in lane.cu (9 int64, a float64, 8 device
         // pointers of the sizes gpu_lanes.rs gives, the output, the lane count).
         unsafe { b.launch(cfg) }?;
         Ok(s.clone_dtoh(&out)?)
     }
 }
 
+/// Most bytes of per-lane references in one launch: lanes that each bring their own motion go in
+/// launches of at most this much (a 15 s motion is 0.5 MB a lane).
+const REFS_PER_LAUNCH: usize = 1 << 30;
+
 impl LaneEngine for Cuda {
     fn run(
         &self,
         models: &[&ModelParams],
-        reference: &Reference,
+        refs: &[&Reference],
         solver: &Solver,
     ) -> anyhow::Result<Result<Vec<LaneResult>, SetupError>> {
-        let setup = Shared::new(models[0], reference, solver)
+        if refs.len() == 1 {
+            return self.run_group(models, refs, solver);
+        }
+        let per_lane = 32 * refs[0].len().max(1);
+        let lanes = (REFS_PER_LAUNCH / per_lane).max(1);
+        let mut all = Vec::with_capacity(models.len());
+        for (m, r) in models.chunks(lanes).zip(refs.chunks(lanes)) {
+            match self.run_group(m, r, solver)? {
+                Ok(done) => all.extend(done),
+                Err(e) => return Ok(Err(e)),
+            }
+        }
+        Ok(Ok(all))
+    }
+}
+
+impl Cuda {
+    /// One launch: `models` on `refs` (one, or one per model).
+    fn run_group(
+        &self,
+        models: &[&ModelParams],
+        refs: &[&Reference],
+        solver: &Solver,
+    ) -> anyhow::Result<Result<Vec<LaneResult>, SetupError>> {
+        let setup = Shared::new(models[0], refs, solver)
             .and_then(|shared| Ok((shared, gpu_lanes::pack_params(models)?)));
         let (shared, params) = match setup {
             Ok(s) => s,
@@ -225,8 +253,9 @@ impl LaneEngine for Cuda {
         let out = self
             .launch(&shared, &params, n)
             .map_err(|e| anyhow::anyhow!("the GPU ({}) failed: {e}", self.name))?;
+        let lane_ref = |l: usize| refs[l.min(refs.len() - 1)];
         Ok(Ok((0..n)
-            .map(|l| gpu_lanes::unpack(&out, n, l, reference, shared.n_osc()))
+            .map(|l| gpu_lanes::unpack(&out, n, l, lane_ref(l), shared.n_osc()))
             .collect()))
     }
 }

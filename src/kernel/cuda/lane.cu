@@ -65,6 +65,7 @@ struct VsRun {
   long long drive;               // 0 closed loop, 1 valve command (V), 2 spool position (m)
   long long linear_valve;        // 0 orifice law, 1 linear law
   long long n_osc;               // response-spectrum oscillators (0: none)
+  long long ref_stride;          // 0: one reference for every lane; else lane l's at l × stride
   double f_s;
   const double *x, *v, *a, *j;   // reference per tick
   const double *drive_signal;    // per tick (drive 1 or 2)
@@ -189,8 +190,9 @@ struct VsAcc {
   double osc_u[VS_MAX_OSC], osc_v[VS_MAX_OSC], osc_peak[VS_MAX_OSC], prev;
 };
 
-VS_FN void vs_window(const VsRun &r, long long k, VsAcc &c, double a, double v, double x) {
-  double a_r = r.a[k], v_r = r.v[k], x_r = r.x[k];
+VS_FN void vs_window(const VsRun &r, long long k, long long at, VsAcc &c, double a, double v,
+                     double x) {
+  double a_r = r.a[at], v_r = r.v[at], x_r = r.x[at];
   c.n += 1.0;
   c.ar2 += a_r * a_r;
   c.xr2 += x_r * x_r;
@@ -266,7 +268,8 @@ VS_FN double vs_command(const double *P, long long n, long long l, const VsRun &
                         VsCtrl &m, const VsState &s, double f, double &u) {
   double k_sp = P[VS_K_SP * n + l];
   if (r.drive == 0) {
-    u = vs_tick(P, n, l, m, r.x[k], r.v[k], r.a[k], r.j[k], s.y, f);
+    long long at = l * r.ref_stride + k;
+    u = vs_tick(P, n, l, m, r.x[at], r.v[at], r.a[at], r.j[at], s.y, f);
     return k_sp * u;
   }
   if (r.drive == 1) {
@@ -317,7 +320,7 @@ VS_FN void vs_lane(const VsRun &r, const double *P, double *out, long long n, lo
     double x_c = vs_command(P, n, l, r, k, m, s, f0 + f0, u);
     vs_rhs(P, n, l, linear, x_c, s, k1);
     c.max_u = fmax(c.max_u, fabs(u));
-    if (k >= r.w0 && k < r.w1) vs_window(r, k, c, k1.v, s.v, s.y);
+    if (k >= r.w0 && k < r.w1) vs_window(r, k, l * r.ref_stride + k, c, k1.v, s.v, s.y);
     vs_substeps(P, n, l, r, x_c, s, k1);
     int why = vs_guard(P, n, l, s, value, chamber);
     if (why != 0) {
@@ -337,13 +340,14 @@ VS_FN void vs_lane(const VsRun &r, const double *P, double *out, long long n, lo
 // The launch: the run's integers in the order of gpu_lanes.rs `Shared::ints`, then its arrays.
 extern "C" __global__ void vs_lanes(long long ticks, long long substeps, long long w0,
                                     long long w1, long long has_basis, long long drive,
-                                    long long linear_valve, long long n_osc, double f_s,
+                                    long long linear_valve, long long n_osc,
+                                    long long ref_stride, double f_s,
                                     const double *x, const double *v, const double *a,
                                     const double *j, const double *drive_signal,
                                     const double *basis, const double *osc, const double *P,
                                     double *out, long long n) {
   long long l = (long long)blockIdx.x * blockDim.x + threadIdx.x;
-  VsRun r = {ticks, substeps, w0, w1, has_basis, drive, linear_valve, n_osc, f_s,
+  VsRun r = {ticks, substeps, w0, w1, has_basis, drive, linear_valve, n_osc, ref_stride, f_s,
              x, v, a, j, drive_signal, basis, osc};
   if (l < n) vs_lane(r, P, out, n, l);
 }
