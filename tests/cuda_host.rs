@@ -59,7 +59,7 @@ fn host_run(
     refs: &[&Reference],
     solver: &Solver,
 ) -> Vec<LaneResult> {
-    let shared = Shared::new(models[0], refs, solver).expect("valid run");
+    let shared = Shared::new(models, refs, solver).expect("valid run");
     let params = gpu_lanes::pack_params(models).expect("uniform lanes");
     let mut bytes = Vec::new();
     let mut put = |v: &[u8]| bytes.extend_from_slice(v);
@@ -109,6 +109,25 @@ fn host_run(
             )
         })
         .collect()
+}
+
+/// Switches on, at random, each effect the CUDA kernel has, with random parameters.
+fn random_effects(rng: &mut StdRng, p: &mut ModelParams) {
+    let mut u = |lo: f64, hi: f64| rng.random_range(lo..hi);
+    let e = &mut p.effect_params;
+    e.flow_saturation.x_sat = u(0.004, 0.02);
+    (e.flow_gain.g0, e.flow_gain.g1, e.flow_gain.g2) = (u(0.3, 1.5), u(0.5, 1.5), u(0.7, 1.3));
+    (e.flow_gain.g3, e.flow_gain.g4) = (u(0.8, 1.2), u(0.8, 1.2));
+    (e.leakage.c_int, e.leakage.c_ext) = (u(0.0, 6e-11), u(0.0, 1e-11));
+    (e.seal_friction.f_c, e.seal_friction.f_s) = (u(0.0, 2e4), u(2e4, 4e4));
+    (e.seal_friction.sigma, e.seal_friction.v_s) = (u(0.0, 1e5), u(0.005, 0.05));
+    e.compressibility.dead_volume = u(0.0, 0.05);
+    (e.compressibility.beta_ratio, e.compressibility.air_fraction) = (u(0.5, 1.0), u(0.0, 0.03));
+    (e.bulk_curve.b0, e.bulk_curve.b1, e.bulk_curve.b2) = (u(0.3, 1.0), u(0.6, 1.2), u(0.9, 1.1));
+    e.hold_down.k3 = u(-5e8, 5e8);
+    for (id, _) in gpu_lanes::EFFECT_BITS {
+        *p.effects.get_mut(id) = u(0.0, 1.0) < 0.4;
+    }
 }
 
 /// A random parameter set of the baseline: gains, valve, actuator, platen, friction, notches.
@@ -263,11 +282,17 @@ fn the_cuda_kernel_built_for_the_host_gives_the_rust_kernels_metrics() {
     let Some(exe) = harness_or_skip() else { return };
     let mut rng = StdRng::seed_from_u64(28);
     let solver = Solver { substeps: 4 };
-    let (mut ok, mut failed, mut identical) = (0, 0, 0);
+    let (mut ok, mut failed, mut identical, mut with_effects) = (0, 0, 0, 0);
     for law in [ValveLaw::Orifice, ValveLaw::Linear] {
         for (what, reference) in references() {
             let mut models: Vec<ModelParams> =
                 (0..LANES).map(|_| random_model(&mut rng, law)).collect();
+            // Half the batches with effects (the first lane without: an off lane in an effect set).
+            if rng.random_range(0.0..1.0) < 0.5 {
+                for m in &mut models[1..] {
+                    random_effects(&mut rng, m);
+                }
+            }
             models[LANES - 1].actuator.l = 0.02; // a lane that reaches its stroke limit on most runs
             models[LANES - 2].servovalve.p_s *= 3.0; // and one whose pressure may leave its band
             let refs: Vec<&ModelParams> = models.iter().collect();
@@ -286,10 +311,19 @@ fn the_cuda_kernel_built_for_the_host_gives_the_rust_kernels_metrics() {
                     _ => failed += 1,
                 }
                 identical += usize::from(got[l].metrics.bits() == want[l].metrics.bits());
+                with_effects +=
+                    usize::from(models[l].effects.any() && want[l].status == LaneStatus::Ok);
             }
         }
     }
-    eprintln!("{ok} lanes ran, {failed} failed, {identical} of them bit for bit identical");
+    eprintln!(
+        "{ok} lanes ran ({with_effects} with effects), {failed} failed, {identical} of them bit \
+         for bit identical"
+    );
+    assert!(
+        with_effects >= 20,
+        "only {with_effects} lanes with effects ran to the end"
+    );
     // Both outcomes are compared, and most lanes run to the end (their metrics compared).
     assert!(
         ok >= 2 * 8 * (LANES - 2) && failed >= 8,
@@ -303,8 +337,13 @@ fn what_the_cuda_kernel_does_not_cover_is_named() {
     let r = sine(1.0, 3.0);
     assert_eq!(gpu_lanes::unsupported(&[&p], &r), None);
     *p.effects.get_mut(EffectId::parse("leakage").unwrap()) = true;
+    assert_eq!(gpu_lanes::unsupported(&[&p], &r), None);
+    *p.effects.get_mut(EffectId::parse("specimen").unwrap()) = true;
     let why = gpu_lanes::unsupported(&[&p], &r).expect("an effect is refused");
-    assert!(why.contains("leakage"), "{why}");
+    assert!(
+        why.contains("specimen") && !why.starts_with("the effects leakage"),
+        "{why}"
+    );
     let many = r.with_spectrum(SpectrumSpec::log_spaced(0.05, 4.0, 200, 0.05));
     let why = gpu_lanes::unsupported(&[&ModelParams::default()], &many).expect("too many periods");
     assert!(why.contains("200 periods"), "{why}");

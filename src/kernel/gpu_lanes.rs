@@ -7,7 +7,7 @@
 //! damping exponent), every drive and every reference shared by the lanes, with the harmonic,
 //! error, peak, valve and response-spectrum metrics; [`unsupported`] names what it does not.
 
-use super::effects::EffectId;
+use super::effects::{self, EffectId, LibraryEffect};
 use super::excitation::{Drive, Reference};
 use super::metrics::{Basis, LaneSums, Metrics, MetricsAcc, N_HARM};
 use super::params::{ModelParams, ValveLaw};
@@ -18,7 +18,27 @@ use super::spectrum::oscillators;
 pub const SOURCE: &str = include_str!("cuda/lane.cu");
 
 /// Float64 fields per lane in the parameter record (lane.cu: `VS_LANE_FIELDS`).
-pub const LANE_FIELDS: usize = 60;
+pub const LANE_FIELDS: usize = 86;
+
+/// The library effects the CUDA kernel has, with their bit in its `effects` argument (lane.cu:
+/// `VS_E_*`).
+pub const EFFECT_BITS: [(EffectId, i64); 7] = [
+    (EffectId::FlowSaturation, 1),
+    (EffectId::FlowGain, 2),
+    (EffectId::Leakage, 4),
+    (EffectId::SealFriction, 8),
+    (EffectId::Compressibility, 16),
+    (EffectId::BulkCurve, 32),
+    (EffectId::HoldDown, 64),
+];
+
+/// The `effects` bits of a launch: every covered effect some lane switches on.
+pub fn effect_bits(models: &[&ModelParams]) -> i64 {
+    EFFECT_BITS
+        .iter()
+        .filter(|(id, _)| models.iter().any(|m| m.effects.get(*id)))
+        .fold(0, |bits, (_, b)| bits | b)
+}
 
 /// Most response-spectrum periods a lane accumulates (lane.cu: `VS_MAX_OSC`).
 pub const MAX_OSC: usize = 128;
@@ -33,16 +53,19 @@ pub fn out_fields(n_osc: usize) -> usize {
 
 /// Why the CUDA kernel cannot run these models on this reference, or `None` when it can.
 pub fn unsupported(models: &[&ModelParams], reference: &Reference) -> Option<String> {
+    let covered = |e: EffectId| EFFECT_BITS.iter().any(|(id, _)| *id == e);
     let on: Vec<&str> = EffectId::ALL
         .into_iter()
-        .filter(|&e| models.iter().any(|m| m.effects.get(e)))
+        .filter(|&e| !covered(e) && models.iter().any(|m| m.effects.get(e)))
         .map(EffectId::name)
         .collect();
     if !on.is_empty() {
+        let has: Vec<&str> = EFFECT_BITS.iter().map(|(id, _)| id.name()).collect();
         return Some(format!(
-            "the effect{} {} (the CUDA kernel runs the baseline model only)",
+            "the effect{} {} (the CUDA kernel has the baseline and {})",
             if on.len() > 1 { "s" } else { "" },
-            on.join(", ")
+            on.join(", "),
+            has.join(", ")
         ));
     }
     let periods = reference
@@ -65,7 +88,7 @@ pub fn pack_params(models: &[&ModelParams]) -> Result<Vec<f64>, SetupError> {
         if m.controller.f_s != models[0].controller.f_s || m.valve_law != models[0].valve_law {
             return Err(SetupError::NotUniform { lane: l });
         }
-        for (f, v) in lane_record(&LaneParams::<1>::new(&[m])?)
+        for (f, v) in lane_record(&LaneParams::<1>::new(&[m])?, m)
             .into_iter()
             .enumerate()
         {
@@ -75,8 +98,9 @@ pub fn pack_params(models: &[&ModelParams]) -> Result<Vec<f64>, SetupError> {
     Ok(p)
 }
 
-/// One lane's record, in lane.cu's field order.
-fn lane_record(lp: &LaneParams<1>) -> [f64; LANE_FIELDS] {
+/// One lane's record, in lane.cu's field order: the baseline's, then the covered effects'
+/// coefficients (each effect's own `lane`, neutral where it is off).
+fn lane_record(lp: &LaneParams<1>, m: &ModelParams) -> [f64; LANE_FIELDS] {
     let (v, a, pl, fr, c) = (
         lp.valve.lane(0),
         lp.act.lane(0),
@@ -94,6 +118,13 @@ fn lane_record(lp: &LaneParams<1>) -> [f64; LANE_FIELDS] {
     r.extend([c.c_fb, c.c_d, c.c_v, c.c_a, c.c_j, c.c_f, c.hp_b, c.hp_a]);
     r.extend(c.notches.iter().flatten());
     r.extend([c.u_lim, c.k_sp, lp.p0[0].0, lp.p0[0].1]);
+    r.extend(effects::flow_saturation::FlowSaturation::<1>::new([m]).lane(0));
+    r.extend(effects::flow_gain::FlowGain::<1>::new([m]).lane(0));
+    r.extend(effects::leakage::Leakage::<1>::new([m]).lane(0));
+    r.extend(effects::seal_friction::SealFriction::<1>::new([m]).lane(0));
+    r.extend(effects::compressibility::Compressibility::<1>::new([m]).lane(0));
+    r.extend(effects::bulk_curve::BulkCurve::<1>::new([m]).lane(0));
+    r.extend(effects::hold_down::HoldDown::<1>::new([m]).lane(0));
     r.try_into().expect("LANE_FIELDS fields")
 }
 
@@ -101,8 +132,9 @@ fn lane_record(lp: &LaneParams<1>) -> [f64; LANE_FIELDS] {
 #[derive(Debug, Clone)]
 pub struct Shared {
     /// ticks, substeps, window start, window end, has basis, drive, linear valve, oscillators,
-    /// reference stride (0: one reference for every lane; else the ticks: one per lane).
-    pub ints: [i64; 9],
+    /// reference stride (0: one reference for every lane; else the ticks: one per lane), the
+    /// effects' bits ([`EFFECT_BITS`]).
+    pub ints: [i64; 10],
     pub f_s: f64,
     /// The reference x, v, a, j per tick (lane after lane when each has its own).
     pub refs: [Vec<f64>; 4],
@@ -115,14 +147,15 @@ pub struct Shared {
 }
 
 impl Shared {
-    /// The run of lanes whose first model is `first` on `refs` (one for every lane, or one per
-    /// lane, which must agree in rate, length, window, fundamental and spectrum, in closed loop);
-    /// the checks of [`simulate::check`] first.
+    /// The run of `models` on `refs` (one for every lane, or one per lane, which must agree in
+    /// rate, length, window, fundamental and spectrum, in closed loop); the checks of
+    /// [`simulate::check`] first.
     pub fn new(
-        first: &ModelParams,
+        models: &[&ModelParams],
         refs: &[&Reference],
         solver: &Solver,
     ) -> Result<Self, SetupError> {
+        let first = models[0];
         simulate::check(first.controller.f_s, refs, solver)?;
         let reference = refs[0];
         let (w0, w1) = reference.window;
@@ -161,6 +194,7 @@ impl Shared {
                 } else {
                     0
                 },
+                effect_bits(models),
             ],
             f_s: reference.f_s,
             refs: [

@@ -201,7 +201,7 @@ impl Cuda {
             block_dim: (BLOCK, 1, 1),
             shared_mem_bytes: 0,
         };
-        // SAFETY: the arguments match `vs_lanes` in lane.cu (9 int64, a float64, 8 device
+        // SAFETY: the arguments match `vs_lanes` in lane.cu (10 int64, a float64, 8 device
         // pointers of the sizes gpu_lanes.rs gives, the output, the lane count).
         unsafe { b.launch(cfg) }?;
         Ok(s.clone_dtoh(&out)?)
@@ -243,7 +243,7 @@ impl Cuda {
         refs: &[&Reference],
         solver: &Solver,
     ) -> anyhow::Result<Result<Vec<LaneResult>, SetupError>> {
-        let setup = Shared::new(models[0], refs, solver)
+        let setup = Shared::new(models, refs, solver)
             .and_then(|shared| Ok((shared, gpu_lanes::pack_params(models)?)));
         let (shared, params) = match setup {
             Ok(s) => s,

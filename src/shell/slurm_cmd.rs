@@ -4,6 +4,8 @@
 use super::cli::SlurmArgs;
 use super::run_cmd::{load_study, plan_for, Shard};
 use super::BadInput;
+use crate::orchestration::batch::Plan;
+use crate::orchestration::study::StudySpec;
 use anyhow::Context;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -95,6 +97,25 @@ pub fn run(args: &SlurmArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `--gpus-per-task`: 0, or 1 for a study the CUDA kernel covers.
+fn check_gpus(gpus: usize, spec: &StudySpec, plan: &Plan) -> anyhow::Result<()> {
+    if gpus > 1 {
+        return Err(BadInput(format!(
+            "--gpus-per-task {gpus}: vshake runs one GPU per task; for more GPUs use more \
+             --shards with --gpus-per-task 1"
+        ))
+        .into());
+    }
+    let names: Vec<String> = spec.excitations.iter().map(|e| e.name.clone()).collect();
+    match plan.engine_unsupported(&names) {
+        Some(why) if gpus == 1 => Err(BadInput(format!(
+            "--gpus-per-task 1: this study cannot run on the GPU: {why}"
+        ))
+        .into()),
+        _ => Ok(()),
+    }
+}
+
 /// Checks the study and the options, and makes the job's folders.
 fn prepare(args: &SlurmArgs) -> anyhow::Result<Job<'_>> {
     let spec = load_study(&args.file)?;
@@ -112,23 +133,7 @@ fn prepare(args: &SlurmArgs) -> anyhow::Result<Job<'_>> {
     if args.cpus == 0 {
         return Err(BadInput("--cpus must be at least 1".into()).into());
     }
-    if args.gpus_per_task > 1 {
-        return Err(BadInput(format!(
-            "--gpus-per-task {}: vshake runs one GPU per task; for more GPUs use more --shards \
-             with --gpus-per-task 1",
-            args.gpus_per_task
-        ))
-        .into());
-    }
-    if args.gpus_per_task == 1 {
-        let names: Vec<String> = spec.excitations.iter().map(|e| e.name.clone()).collect();
-        if let Some(why) = plan.engine_unsupported(&names) {
-            return Err(BadInput(format!(
-                "--gpus-per-task 1: this study cannot run on the GPU: {why}"
-            ))
-            .into());
-        }
-    }
+    check_gpus(args.gpus_per_task, &spec, &plan)?;
     slurm_value("time", &args.time)?;
     let mut common = String::new();
     for (flag, v) in [("partition", &args.partition), ("account", &args.account)] {

@@ -1,7 +1,7 @@
 // The CUDA lane kernel built for the host (tests/cuda_host.rs): reads a run and its lanes'
 // parameters from a binary file, runs `vs_lane` on every lane, writes the sums.
 //
-// Input, little-endian: 9 int64 (gpu_lanes.rs `Shared::ints`), float64 f_s, int64 lanes, then
+// Input, little-endian: 10 int64 (gpu_lanes.rs `Shared::ints`), float64 f_s, int64 lanes, then
 // eight arrays, each an int64 length and its float64s: x, v, a, j, drive, basis, osc, params.
 // Output: lanes × out_fields float64s, field-major.
 #include "../../src/kernel/cuda/lane.cu"
@@ -25,7 +25,7 @@ int main(int argc, char **argv) {
   if (argc != 3) { fprintf(stderr, "usage: cuda_host IN OUT\n"); return 2; }
   FILE *in = fopen(argv[1], "rb");
   if (!in) { perror(argv[1]); return 2; }
-  long long ints[9];
+  long long ints[10];
   for (long long &i : ints) i = read_i64(in);
   double f_s;
   if (fread(&f_s, 8, 1, in) != 1) return 2;
@@ -33,7 +33,7 @@ int main(int argc, char **argv) {
   std::vector<double> arr[8];
   for (auto &a : arr) a = read_array(in);
   fclose(in);
-  VsRun r = {ints[0], ints[1], ints[2], ints[3], ints[4], ints[5], ints[6], ints[7], ints[8], f_s,
+  VsRun r = {ints[0], ints[1], ints[2], ints[3], ints[4], ints[5], ints[6], ints[7], ints[8], ints[9], f_s,
              arr[0].data(), arr[1].data(), arr[2].data(), arr[3].data(), arr[4].data(),
              arr[5].data(), arr[6].data()};
   std::vector<double> out((size_t)((VS_OSC_PEAK + ints[7]) * n));

@@ -45,7 +45,22 @@ enum {
   VS_C_FB, VS_C_D, VS_C_V, VS_C_A, VS_C_J, VS_C_F, VS_HP_B, VS_HP_A,
   VS_NOTCH,                      // 5 biquads × [b0, b1, b2, a1, a2]
   VS_U_LIM = VS_NOTCH + 25, VS_K_SP, VS_P0_1, VS_P0_2,
+  // Library effects (coefficients from each effect's `lane`, off lanes neutral):
+  VS_FSAT,                       // flow_saturation: on, x_sat, 1/x_sat
+  VS_FGAIN = VS_FSAT + 3,        // flow_gain: g at the 5 knots, 1/x_ref
+  VS_LEAK = VS_FGAIN + 6,        // leakage: c_int, c_ext
+  VS_SEAL = VS_LEAK + 2,         // seal_friction: f_c, f_s − f_c, 1/v_s, sigma, 1/v_eps
+  VS_COMP = VS_SEAL + 5,         // compressibility: on, beta, 1/beta_e, air·p_atm, dead volume
+  VS_BULK = VS_COMP + 5,         // bulk_curve: gain at the 3 knots, 1/P_S
+  VS_HOLD = VS_BULK + 4,         // hold_down: k3
   VS_LANE_FIELDS
+};
+
+// Which effects a launch applies (gpu_lanes.rs: EFFECT_BITS), in registry order where they act
+// on the same quantity.
+enum {
+  VS_E_FSAT = 1, VS_E_FGAIN = 2, VS_E_LEAK = 4, VS_E_SEAL = 8, VS_E_COMP = 16, VS_E_BULK = 32,
+  VS_E_HOLD = 64
 };
 
 // Output record (gpu_lanes.rs: OUT_*). Status: 0 ok, 1 non-finite, 2 stroke, 3 pressure.
@@ -66,6 +81,7 @@ struct VsRun {
   long long linear_valve;        // 0 orifice law, 1 linear law
   long long n_osc;               // response-spectrum oscillators (0: none)
   long long ref_stride;          // 0: one reference for every lane; else lane l's at l × stride
+  long long effects;             // VS_E_* bits
   double f_s;
   const double *x, *v, *a, *j;   // reference per tick
   const double *drive_signal;    // per tick (drive 1 or 2)
@@ -91,13 +107,66 @@ VS_FN double vs_sq(double dp, double p_tr2) { return dp * vs_inv_fourth_root(dp 
 
 VS_FN bool vs_finite(double x) { return x - x == 0.0; }
 
+#define F(i) P[(i) * n + l]
+
+// effects/flow_saturation.rs and flow_gain.rs `opening`: the command through the metering.
+VS_FN double vs_opening(const double *P, long long n, long long l, long long e, double x) {
+  if (e & VS_E_FSAT) x = x + F(VS_FSAT) * (F(VS_FSAT + 1) * tanh(x * F(VS_FSAT + 2)) - x);
+  if (e & VS_E_FGAIN) {
+    const double knots[5] = {0.0, 0.05, 0.15, 0.35, 0.7};
+    double r = fabs(x) * F(VS_FGAIN + 5), g = F(VS_FGAIN + 4);
+    for (int k = 3; k >= 0; --k) {
+      double w = (r - knots[k]) / (knots[k + 1] - knots[k]);
+      if (r < knots[k + 1]) g = F(VS_FGAIN + k) + w * (F(VS_FGAIN + k + 1) - F(VS_FGAIN + k));
+    }
+    x = x * g;
+  }
+  return x;
+}
+
+// effects/compressibility.rs `one`: a chamber's β/V with dead volume and entrained air.
+VS_FN double vs_compress(const double *P, long long n, long long l, double b, double p) {
+  double pa = fmax(p + 101325.0, 0.1 * 101325.0);
+  double beta_e = 1.0 / (F(VS_COMP + 2) + F(VS_COMP + 3) / (pa * pa));
+  double volume = F(VS_COMP + 1) / b + F(VS_COMP + 4);
+  return b + F(VS_COMP) * (beta_e / volume - b);
+}
+
+// effects/bulk_curve.rs `gain`: the bulk modulus's gain at gauge pressure p.
+VS_FN double vs_bulk_gain(const double *P, long long n, long long l, double p) {
+  const double knots[3] = {0.0, 0.5, 1.0};
+  double r = p * F(VS_BULK + 3);
+  double g = r < 0.0 ? F(VS_BULK) : F(VS_BULK + 2);
+  for (int k = 1; k >= 0; --k) {
+    double w = (r - knots[k]) / (knots[k + 1] - knots[k]);
+    if (r >= knots[k] && r < knots[k + 1]) g = F(VS_BULK + k) + w * (F(VS_BULK + k + 1) - F(VS_BULK + k));
+  }
+  return g;
+}
+
+// effects/seal_friction.rs and hold_down.rs `extra_force`.
+VS_FN double vs_extra_force(const double *P, long long n, long long l, long long e, double y,
+                            double v) {
+  double fe = 0.0;
+  if (e & VS_E_SEAL) {
+    double r = v * F(VS_SEAL + 2);
+    fe = fe + (-tanh(v * F(VS_SEAL + 4)) * (F(VS_SEAL) + F(VS_SEAL + 1) * exp(-r * r)) -
+               F(VS_SEAL + 3) * v);
+  }
+  if (e & VS_E_HOLD) fe = fe + -F(VS_HOLD) * y * y * y;
+  return fe;
+}
+
+#undef F
+
 // simulate.rs `rhs` with the baseline effect and one actuator standing for two.
-VS_FN void vs_rhs(const double *P, long long n, long long l, bool linear, double x_c,
-                  const VsState &s, VsState &d) {
+VS_FN void vs_rhs(const double *P, long long n, long long l, bool linear, long long e,
+                  double x_c, const VsState &s, VsState &d) {
 #define F(i) P[(i) * n + l]
   double ps = F(VS_P_S);
   double b1 = F(VS_BETA) / (F(VS_A1) * (F(VS_L) + s.y) + F(VS_VD1));
   double b2 = F(VS_BETA) / (F(VS_A2) * (F(VS_L) - s.y) + F(VS_VD2));
+  x_c = vs_opening(P, n, l, e, x_c);
   double q1, q2;
   if (linear) {
     q1 = F(VS_KQ1) * x_c;
@@ -111,13 +180,27 @@ VS_FN void vs_rhs(const double *P, long long n, long long l, bool linear, double
     q1 = k1 * x_c * vs_sq(dp1, F(VS_P_TR2));
     q2 = k2 * x_c * vs_sq(dp2, F(VS_P_TR2));
   }
+  if (e & VS_E_LEAK) {
+    double cross = F(VS_LEAK) * (s.p1 - s.p2);
+    q1 = q1 - cross - F(VS_LEAK + 1) * s.p1;
+    q2 = q2 - cross + F(VS_LEAK + 1) * s.p2;
+  }
+  if (e & VS_E_COMP) {
+    b1 = vs_compress(P, n, l, b1, s.p1);
+    b2 = vs_compress(P, n, l, b2, s.p2);
+  }
+  if (e & VS_E_BULK) {
+    b1 = b1 * vs_bulk_gain(P, n, l, s.p1);
+    b2 = b2 * vs_bulk_gain(P, n, l, s.p2);
+  }
   d.p1 = b1 * (q1 - F(VS_A1) * s.v);
   d.p2 = b2 * (F(VS_A2) * s.v - q2);
   double f = s.p1 * F(VS_A1) - s.p2 * F(VS_A2);
   f = f + f;
   double alpha = F(VS_ALPHA), va = fabs(s.v);
   double damp = alpha == 0.5 ? sqrt(va) : pow(va, alpha);
-  d.v = (f + 0.0 - F(VS_K) * s.y - (F(VS_C) * damp + F(VS_MU)) * s.z) * F(VS_INV_M);
+  double fe = vs_extra_force(P, n, l, e, s.y, s.v);
+  d.v = (f + fe - F(VS_K) * s.y - (F(VS_C) * damp + F(VS_MU)) * s.z) * F(VS_INV_M);
   d.y = s.v;
   double zv = s.z * s.v;
   double bracket = zv > 0.0 ? 1.0 : (zv < 0.0 ? F(VS_KAPPA_NEG) : F(VS_KAPPA));
@@ -290,13 +373,13 @@ VS_FN void vs_substeps(const double *P, long long n, long long l, const VsRun &r
   double h = 1.0 / (r.f_s * (double)r.substeps);
   VsState k2, k3, k4, t;
   for (long long sub = 0; sub < r.substeps; ++sub) {
-    if (sub > 0) vs_rhs(P, n, l, linear, x_c, s, k1);
+    if (sub > 0) vs_rhs(P, n, l, linear, r.effects, x_c, s, k1);
     vs_axpy(t, s, 0.5 * h, k1);
-    vs_rhs(P, n, l, linear, x_c, t, k2);
+    vs_rhs(P, n, l, linear, r.effects, x_c, t, k2);
     vs_axpy(t, s, 0.5 * h, k2);
-    vs_rhs(P, n, l, linear, x_c, t, k3);
+    vs_rhs(P, n, l, linear, r.effects, x_c, t, k3);
     vs_axpy(t, s, h, k3);
-    vs_rhs(P, n, l, linear, x_c, t, k4);
+    vs_rhs(P, n, l, linear, r.effects, x_c, t, k4);
     double h6 = h / 6.0;
     s.p1 = vs_rk4(s.p1, h6, k1.p1, k2.p1, k3.p1, k4.p1);
     s.p2 = vs_rk4(s.p2, h6, k1.p2, k2.p2, k3.p2, k4.p2);
@@ -318,7 +401,7 @@ VS_FN void vs_lane(const VsRun &r, const double *P, double *out, long long n, lo
   for (long long k = 0; k < r.ticks; ++k) {
     double f0 = s.p1 * a1 - s.p2 * a2, u = 0.0;
     double x_c = vs_command(P, n, l, r, k, m, s, f0 + f0, u);
-    vs_rhs(P, n, l, linear, x_c, s, k1);
+    vs_rhs(P, n, l, linear, r.effects, x_c, s, k1);
     c.max_u = fmax(c.max_u, fabs(u));
     if (k >= r.w0 && k < r.w1) vs_window(r, k, l * r.ref_stride + k, c, k1.v, s.v, s.y);
     vs_substeps(P, n, l, r, x_c, s, k1);
@@ -341,13 +424,13 @@ VS_FN void vs_lane(const VsRun &r, const double *P, double *out, long long n, lo
 extern "C" __global__ void vs_lanes(long long ticks, long long substeps, long long w0,
                                     long long w1, long long has_basis, long long drive,
                                     long long linear_valve, long long n_osc,
-                                    long long ref_stride, double f_s,
+                                    long long ref_stride, long long effects, double f_s,
                                     const double *x, const double *v, const double *a,
                                     const double *j, const double *drive_signal,
                                     const double *basis, const double *osc, const double *P,
                                     double *out, long long n) {
   long long l = (long long)blockIdx.x * blockDim.x + threadIdx.x;
-  VsRun r = {ticks, substeps, w0, w1, has_basis, drive, linear_valve, n_osc, ref_stride, f_s,
+  VsRun r = {ticks, substeps, w0, w1, has_basis, drive, linear_valve, n_osc, ref_stride, effects, f_s,
              x, v, a, j, drive_signal, basis, osc};
   if (l < n) vs_lane(r, P, out, n, l);
 }

@@ -82,6 +82,13 @@ impl<const N: usize> BulkCurve<N> {
     }
 }
 
+impl<const N: usize> BulkCurve<N> {
+    /// Lane `l`'s coefficients in the order the CUDA kernel reads them (`src/kernel/cuda/lane.cu`).
+    pub fn lane(&self, l: usize) -> [f64; 4] {
+        [self.b[0][l], self.b[1][l], self.b[2][l], self.inv_p_s[l]]
+    }
+}
+
 impl<const N: usize> Effect<N> for BulkCurve<N> {
     type State = [[f64; N]; 0];
 

@@ -78,6 +78,19 @@ impl<const N: usize> Compressibility<N> {
     }
 }
 
+impl<const N: usize> Compressibility<N> {
+    /// Lane `l`'s coefficients in the order the CUDA kernel reads them (`src/kernel/cuda/lane.cu`).
+    pub fn lane(&self, l: usize) -> [f64; 5] {
+        [
+            self.on[l],
+            self.beta[l],
+            self.inv_beta_e[l],
+            self.air[l],
+            self.v_x[l],
+        ]
+    }
+}
+
 impl<const N: usize> Effect<N> for Compressibility<N> {
     type State = [[f64; N]; 0];
 

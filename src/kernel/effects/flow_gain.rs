@@ -67,6 +67,20 @@ impl<const N: usize> LibraryEffect<N> for FlowGain<N> {
     }
 }
 
+impl<const N: usize> FlowGain<N> {
+    /// Lane `l`'s coefficients in the order the CUDA kernel reads them (`src/kernel/cuda/lane.cu`).
+    pub fn lane(&self, l: usize) -> [f64; 6] {
+        [
+            self.g[0][l],
+            self.g[1][l],
+            self.g[2][l],
+            self.g[3][l],
+            self.g[4][l],
+            self.inv_x_ref[l],
+        ]
+    }
+}
+
 impl<const N: usize> Effect<N> for FlowGain<N> {
     type State = [[f64; N]; 0];
 

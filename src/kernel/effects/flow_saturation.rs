@@ -41,6 +41,13 @@ impl<const N: usize> LibraryEffect<N> for FlowSaturation<N> {
     }
 }
 
+impl<const N: usize> FlowSaturation<N> {
+    /// Lane `l`'s coefficients in the order the CUDA kernel reads them (`src/kernel/cuda/lane.cu`).
+    pub fn lane(&self, l: usize) -> [f64; 3] {
+        [self.on[l], self.x_sat[l], self.inv_x_sat[l]]
+    }
+}
+
 impl<const N: usize> Effect<N> for FlowSaturation<N> {
     type State = [[f64; N]; 0];
 

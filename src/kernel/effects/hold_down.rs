@@ -42,6 +42,13 @@ impl<const N: usize> LibraryEffect<N> for HoldDown<N> {
     }
 }
 
+impl<const N: usize> HoldDown<N> {
+    /// Lane `l`'s coefficients in the order the CUDA kernel reads them (`src/kernel/cuda/lane.cu`).
+    pub fn lane(&self, l: usize) -> [f64; 1] {
+        [self.k3[l]]
+    }
+}
+
 impl<const N: usize> Effect<N> for HoldDown<N> {
     type State = [[f64; N]; 0];
 

@@ -43,6 +43,13 @@ impl<const N: usize> LibraryEffect<N> for Leakage<N> {
     }
 }
 
+impl<const N: usize> Leakage<N> {
+    /// Lane `l`'s coefficients in the order the CUDA kernel reads them (`src/kernel/cuda/lane.cu`).
+    pub fn lane(&self, l: usize) -> [f64; 2] {
+        [self.c_int[l], self.c_ext[l]]
+    }
+}
+
 impl<const N: usize> Effect<N> for Leakage<N> {
     type State = [[f64; N]; 0];
 

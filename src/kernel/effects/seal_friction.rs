@@ -55,6 +55,19 @@ impl<const N: usize> LibraryEffect<N> for SealFriction<N> {
     }
 }
 
+impl<const N: usize> SealFriction<N> {
+    /// Lane `l`'s coefficients in the order the CUDA kernel reads them (`src/kernel/cuda/lane.cu`).
+    pub fn lane(&self, l: usize) -> [f64; 5] {
+        [
+            self.f_c[l],
+            self.df[l],
+            self.inv_vs[l],
+            self.sigma[l],
+            self.inv_eps[l],
+        ]
+    }
+}
+
 impl<const N: usize> Effect<N> for SealFriction<N> {
     type State = [[f64; N]; 0];
 
