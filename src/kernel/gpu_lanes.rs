@@ -4,8 +4,9 @@
 //! Pure data: no device, no I/O. The device engine (`shell::gpu`) uploads these arrays; the
 //! kernel's host build in `tests/cuda_host.rs` takes the same arrays, so what is tested without
 //! a GPU is what the GPU runs. The CUDA kernel covers the baseline model (both valve laws, every
-//! damping exponent), every drive and every reference shared by the lanes, with the harmonic,
-//! error, peak, valve and response-spectrum metrics; [`unsupported`] names what it does not.
+//! damping exponent), the stateless library effects of [`EFFECT_BITS`], every drive, one
+//! reference for every lane or one per lane, with the harmonic, error, peak, valve and
+//! response-spectrum metrics; [`unsupported`] names what it does not.
 
 use super::effects::{self, EffectId, LibraryEffect};
 use super::excitation::{Drive, Reference};

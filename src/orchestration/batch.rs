@@ -23,9 +23,9 @@ use rayon::prelude::*;
 use std::ops::Range;
 use std::sync::Arc;
 
-/// An engine that runs any number of lanes at once on one shared reference (the CUDA kernel of
-/// `shell::gpu`): set on a plan ([`Plan::engine`]), it takes the CPU lane kernel's place. Only
-/// what [`Plan::engine_unsupported`] allows reaches it.
+/// An engine that runs any number of lanes at once, on one reference or one per lane (the CUDA
+/// kernel of `shell::gpu`): set on a plan ([`Plan::engine`]), it takes the CPU lane kernel's
+/// place. Only what [`Plan::engine_unsupported`] allows reaches it.
 pub trait LaneEngine: Send + Sync {
     /// A result per model on `refs` (one reference for every model, or one per model), or the
     /// setup error of the whole group; `Err` is a device failure, which ends the run.

@@ -1,13 +1,14 @@
 // vshake's lane kernel in CUDA C++: one thread integrates one parameter set (a lane) of the
-// baseline model of docs/model.md, float64, the whole run in registers, and accumulates the
-// metrics online, so that only the sums of `src/kernel/metrics.rs` come back.
+// baseline model of docs/model.md, with the library's stateless effects (gpu_lanes.rs:
+// EFFECT_BITS), float64, the whole run in registers, and accumulates the metrics online, so that
+// only the sums of `src/kernel/metrics.rs` come back.
 //
 // It transcribes `src/kernel/simulate.rs` (the tick, RK4 substeps, the §3 guard) and the parts it
 // calls (controller.rs, servovalve.rs, actuator.rs, platen.rs, friction.rs, metrics.rs and
 // spectrum.rs's oscillators) operation for operation, in the same order, so that the host build
 // of this file gives the Rust kernel's numbers to rounding (`tests/cuda_host.rs` checks 1e-12).
-// The two actuators of the baseline are identical, so one stands for both, as the Rust kernel's
-// equivalent actuator does (A = 1: force and flows doubled, bit for bit the same).
+// The two actuators are identical (no covered effect tells them apart), so one stands for both,
+// as the Rust kernel's equivalent actuator does (A = 1: force and flows doubled, bit for bit).
 //
 // Compiled two ways:
 // - at run time by NVRTC for the GPU (`src/shell/gpu.rs`; `__CUDACC_RTC__` defined);
