@@ -98,16 +98,9 @@ fn host_run(
         out.len(),
         gpu_lanes::out_fields(shared.n_osc()) * models.len()
     );
+    let finish = gpu_lanes::Finisher::new(refs[0], shared.n_osc());
     (0..models.len())
-        .map(|l| {
-            gpu_lanes::unpack(
-                &out,
-                models.len(),
-                l,
-                refs[l.min(refs.len() - 1)],
-                shared.n_osc(),
-            )
-        })
+        .map(|l| finish.lane(&out, models.len(), l, refs[l.min(refs.len() - 1)]))
         .collect()
 }
 

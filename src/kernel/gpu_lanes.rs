@@ -225,60 +225,82 @@ fn non_empty(v: Vec<f64>) -> Vec<f64> {
     }
 }
 
-/// Lane `l`'s result from the kernel's output `out` (n lanes) on its `reference`, finished as the
-/// CPU kernel does.
-pub fn unpack(out: &[f64], n: usize, l: usize, reference: &Reference, n_osc: usize) -> LaneResult {
-    let o = |f: usize| out[f * n + l];
-    let status = match o(0) as u8 {
-        0 => LaneStatus::Ok,
-        code => LaneStatus::Failed {
-            time_s: reference.time(o(1) as usize),
-            reason: match code {
-                1 => Failure::NonFinite,
-                2 => Failure::StrokeLimit { disp_m: o(2) },
-                _ => Failure::Pressure {
-                    actuator: 0,
-                    chamber: o(3) as usize,
-                    pa: o(2),
-                },
-            },
+/// Turns the kernel's output into [`LaneResult`]s, finished as the CPU kernel does: made once per
+/// launch (the response-spectrum oscillators are built here, not per lane).
+pub struct Finisher {
+    template: MetricsAcc<1>,
+    n_osc: usize,
+}
+
+impl Finisher {
+    /// For a launch on references like `reference` (they share rate and spectrum).
+    pub fn new(reference: &Reference, n_osc: usize) -> Self {
+        let spectrum = reference.spectrum.as_ref();
+        Finisher {
+            template: MetricsAcc::<1>::new(spectrum.map(|(s, _)| (s, 1.0 / reference.f_s))),
+            n_osc,
+        }
+    }
+
+    /// Lane `l`'s result from the output `out` (n lanes) on its own `reference`.
+    pub fn lane(&self, out: &[f64], n: usize, l: usize, reference: &Reference) -> LaneResult {
+        let o = |f: usize| out[f * n + l];
+        let status = lane_status(o(0), o(1), o(2), o(3), reference);
+        if status != LaneStatus::Ok {
+            return LaneResult {
+                status,
+                metrics: Metrics::NAN,
+            };
+        }
+        let sums = LaneSums {
+            n: o(4) as usize,
+            max_u: o(5),
+            err_a2: o(6),
+            err_x2: o(7),
+            peak_err_a: o(8),
+            peak_err_x: o(9),
+            peak: [o(10), o(11), o(12)],
+            peak_r: [o(13), o(14), o(15)],
+            ar_re: o(16),
+            ar_im: o(17),
+            xr_re: o(18),
+            xr_im: o(19),
+            ar2: o(20),
+            xr2: o(21),
+            x_re: o(22),
+            x_im: o(23),
+            a_re: std::array::from_fn(|h| o(24 + h)),
+            a_im: std::array::from_fn(|h| o(24 + N_HARM + h)),
+            osc_peak: (0..self.n_osc).map(|i| o(OUT_FIXED + i)).collect(),
+        };
+        let harmonics = reference
+            .fundamental_hz
+            .map(|f0| Metrics::highest_harmonic(f0, reference.f_s));
+        let target = reference
+            .spectrum
+            .as_ref()
+            .map(|(s, psa)| (s, psa.as_slice()));
+        LaneResult {
+            status,
+            metrics: self.template.with_sums(&sums).finish(0, harmonics, target),
+        }
+    }
+}
+
+/// A lane's status from the kernel's status code, failure tick, value and chamber.
+fn lane_status(code: f64, tick: f64, value: f64, chamber: f64, r: &Reference) -> LaneStatus {
+    let reason = match code as u8 {
+        0 => return LaneStatus::Ok,
+        1 => Failure::NonFinite,
+        2 => Failure::StrokeLimit { disp_m: value },
+        _ => Failure::Pressure {
+            actuator: 0,
+            chamber: chamber as usize,
+            pa: value,
         },
     };
-    if status != LaneStatus::Ok {
-        return LaneResult {
-            status,
-            metrics: Metrics::NAN,
-        };
-    }
-    let sums = LaneSums {
-        n: o(4) as usize,
-        max_u: o(5),
-        err_a2: o(6),
-        err_x2: o(7),
-        peak_err_a: o(8),
-        peak_err_x: o(9),
-        peak: [o(10), o(11), o(12)],
-        peak_r: [o(13), o(14), o(15)],
-        ar_re: o(16),
-        ar_im: o(17),
-        xr_re: o(18),
-        xr_im: o(19),
-        ar2: o(20),
-        xr2: o(21),
-        x_re: o(22),
-        x_im: o(23),
-        a_re: std::array::from_fn(|h| o(24 + h)),
-        a_im: std::array::from_fn(|h| o(24 + N_HARM + h)),
-        osc_peak: (0..n_osc).map(|i| o(OUT_FIXED + i)).collect(),
-    };
-    let spectrum = reference.spectrum.as_ref();
-    let acc = MetricsAcc::<1>::from_sums(&sums, spectrum.map(|(s, _)| (s, 1.0 / reference.f_s)));
-    let harmonics = reference
-        .fundamental_hz
-        .map(|f0| Metrics::highest_harmonic(f0, reference.f_s));
-    let target = spectrum.map(|(s, psa)| (s, psa.as_slice()));
-    LaneResult {
-        status,
-        metrics: acc.finish(0, harmonics, target),
+    LaneStatus::Failed {
+        time_s: r.time(tick as usize),
+        reason,
     }
 }

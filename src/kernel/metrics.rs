@@ -227,9 +227,10 @@ pub struct LaneSums {
 }
 
 impl MetricsAcc<1> {
-    /// The accumulator holding one lane's sums (`spectrum` as in [`MetricsAcc::new`]).
-    pub fn from_sums(s: &LaneSums, spectrum: Option<(&SpectrumSpec, f64)>) -> Self {
-        let mut acc = MetricsAcc::<1>::new(spectrum);
+    /// The accumulator holding one lane's sums: `template` (a [`MetricsAcc::new`] made once for
+    /// every lane, so its oscillators are not rebuilt per lane) with the sums in place.
+    pub fn with_sums(&self, s: &LaneSums) -> Self {
+        let mut acc = self.clone();
         acc.n = s.n;
         for h in 0..N_HARM {
             acc.a_re[h] = [s.a_re[h]];

@@ -381,14 +381,7 @@ const GPU_LANES: usize = 1 << 16;
 /// warm-up launch, with the largest difference from the CPU kernel on 256 of the lanes.
 fn bench_cuda(out: &mut dyn Write, cuda: &super::gpu::Cuda) -> anyhow::Result<()> {
     use crate::orchestration::batch::LaneEngine;
-    let reference = Sine {
-        freq_hz: 3.0,
-        amp_m: Sine::amp_from_g(1.73, 3.0),
-        taper_s: 1.0,
-        duration_s: 3.0,
-        window_cycles: Some(4),
-    }
-    .reference(1024.0);
+    let reference = reference();
     let solver = Solver { substeps: 8 };
     let models = gain_sets(GPU_LANES);
     let refs: Vec<&ModelParams> = models.iter().collect();

@@ -254,8 +254,9 @@ impl Cuda {
             .launch(&shared, &params, n)
             .map_err(|e| anyhow::anyhow!("the GPU ({}) failed: {e}", self.name))?;
         let lane_ref = |l: usize| refs[l.min(refs.len() - 1)];
+        let finish = gpu_lanes::Finisher::new(refs[0], shared.n_osc());
         Ok(Ok((0..n)
-            .map(|l| gpu_lanes::unpack(&out, n, l, lane_ref(l), shared.n_osc()))
+            .map(|l| finish.lane(&out, n, l, lane_ref(l)))
             .collect()))
     }
 }
