@@ -4,11 +4,11 @@
 //! Pure data: no device, no I/O. The device engine (`shell::gpu`) uploads these arrays; the
 //! kernel's host build in `tests/cuda_host.rs` takes the same arrays, so what is tested without
 //! a GPU is what the GPU runs. The CUDA kernel covers the baseline model (both valve laws, every
-//! damping exponent), the stateless library effects of [`EFFECT_BITS`], every drive, one
+//! damping exponent), every library effect ([`EFFECT_BITS`]), every drive, one
 //! reference for every lane or one per lane, with the harmonic, error, peak, valve and
 //! response-spectrum metrics; [`unsupported`] names what it does not.
 
-use super::effects::{self, EffectId, LibraryEffect};
+use super::effects::{self, Effect, EffectId, LibraryEffect};
 use super::excitation::{Drive, Reference};
 use super::metrics::{Basis, LaneSums, Metrics, MetricsAcc, N_HARM};
 use super::params::{ModelParams, ValveLaw};
@@ -19,26 +19,43 @@ use super::spectrum::oscillators;
 pub const SOURCE: &str = include_str!("cuda/lane.cu");
 
 /// Float64 fields per lane in the parameter record (lane.cu: `VS_LANE_FIELDS`).
-pub const LANE_FIELDS: usize = 86;
+pub const LANE_FIELDS: usize = 131;
 
-/// The library effects the CUDA kernel has, with their bit in its `effects` argument (lane.cu:
-/// `VS_E_*`).
-pub const EFFECT_BITS: [(EffectId, i64); 7] = [
-    (EffectId::FlowSaturation, 1),
-    (EffectId::FlowGain, 2),
-    (EffectId::Leakage, 4),
-    (EffectId::SealFriction, 8),
-    (EffectId::Compressibility, 16),
-    (EffectId::BulkCurve, 32),
-    (EffectId::HoldDown, 64),
+/// The library effects the CUDA kernel has, with their bit in its `effects` argument and build
+/// (lane.cu: `VS_E_*`): bit i for registry line i.
+pub const EFFECT_BITS: [(EffectId, i64); 16] = [
+    (EffectId::TransportDelay, 1),
+    (EffectId::SpoolDynamics, 1 << 1),
+    (EffectId::FlowSaturation, 1 << 2),
+    (EffectId::FlowGain, 1 << 3),
+    (EffectId::Asymmetry, 1 << 4),
+    (EffectId::Leakage, 1 << 5),
+    (EffectId::Supply, 1 << 6),
+    (EffectId::SealFriction, 1 << 7),
+    (EffectId::Compressibility, 1 << 8),
+    (EffectId::BulkCurve, 1 << 9),
+    (EffectId::ReactionMass, 1 << 10),
+    (EffectId::HoldDown, 1 << 11),
+    (EffectId::Specimen, 1 << 12),
+    (EffectId::AccelSensor, 1 << 13),
+    (EffectId::DispSensor, 1 << 14),
+    (EffectId::ForceSensor, 1 << 15),
 ];
 
-/// The `effects` bits of a launch: every covered effect some lane switches on.
+/// The bit saying that the two actuators differ in some lane (lane.cu: `VS_E_TWO`): the kernel
+/// then integrates both, else one stands for both.
+pub const TWO_ACTUATORS: i64 = 1 << 16;
+
+/// The `effects` bits of a launch: every covered effect some lane switches on, and
+/// [`TWO_ACTUATORS`] where some lane's actuators differ.
 pub fn effect_bits(models: &[&ModelParams]) -> i64 {
+    let two = models
+        .iter()
+        .any(|m| !effects::asymmetry::Asymmetry::<1>::new([m]).symmetric());
     EFFECT_BITS
         .iter()
         .filter(|(id, _)| models.iter().any(|m| m.effects.get(*id)))
-        .fold(0, |bits, (_, b)| bits | b)
+        .fold(if two { TWO_ACTUATORS } else { 0 }, |bits, (_, b)| bits | b)
 }
 
 /// Most response-spectrum periods a lane accumulates (lane.cu: `VS_MAX_OSC`).
@@ -119,13 +136,23 @@ fn lane_record(lp: &LaneParams<1>, m: &ModelParams) -> [f64; LANE_FIELDS] {
     r.extend([c.c_fb, c.c_d, c.c_v, c.c_a, c.c_j, c.c_f, c.hp_b, c.hp_a]);
     r.extend(c.notches.iter().flatten());
     r.extend([c.u_lim, c.k_sp, lp.p0[0].0, lp.p0[0].1]);
-    r.extend(effects::flow_saturation::FlowSaturation::<1>::new([m]).lane(0));
-    r.extend(effects::flow_gain::FlowGain::<1>::new([m]).lane(0));
-    r.extend(effects::leakage::Leakage::<1>::new([m]).lane(0));
-    r.extend(effects::seal_friction::SealFriction::<1>::new([m]).lane(0));
-    r.extend(effects::compressibility::Compressibility::<1>::new([m]).lane(0));
-    r.extend(effects::bulk_curve::BulkCurve::<1>::new([m]).lane(0));
-    r.extend(effects::hold_down::HoldDown::<1>::new([m]).lane(0));
+    use effects::*;
+    r.extend(transport_delay::TransportDelay::<1>::new([m]).lane(0));
+    r.extend(spool_dynamics::SpoolDynamics::<1>::new([m]).lane(0));
+    r.extend(flow_saturation::FlowSaturation::<1>::new([m]).lane(0));
+    r.extend(flow_gain::FlowGain::<1>::new([m]).lane(0));
+    r.extend(asymmetry::Asymmetry::<1>::new([m]).lane(0));
+    r.extend(leakage::Leakage::<1>::new([m]).lane(0));
+    r.extend(supply::Supply::<1>::new([m]).lane(0));
+    r.extend(seal_friction::SealFriction::<1>::new([m]).lane(0));
+    r.extend(compressibility::Compressibility::<1>::new([m]).lane(0));
+    r.extend(bulk_curve::BulkCurve::<1>::new([m]).lane(0));
+    r.extend(reaction_mass::ReactionMass::<1>::new([m]).lane(0));
+    r.extend(hold_down::HoldDown::<1>::new([m]).lane(0));
+    r.extend(specimen::Specimen::<1>::new([m]).lane(0));
+    r.extend(accel_sensor::AccelSensor::<1>::new([m]).lane(0));
+    r.extend(disp_sensor::DispSensor::<1>::new([m]).lane(0));
+    r.extend(force_sensor::ForceSensor::<1>::new([m]).lane(0));
     r.try_into().expect("LANE_FIELDS fields")
 }
 
@@ -293,14 +320,35 @@ fn lane_status(code: f64, tick: f64, value: f64, chamber: f64, r: &Reference) ->
         0 => return LaneStatus::Ok,
         1 => Failure::NonFinite,
         2 => Failure::StrokeLimit { disp_m: value },
+        // Chambers 1, 2 of actuator 0, then 3, 4 of actuator 1.
         _ => Failure::Pressure {
-            actuator: 0,
-            chamber: chamber as usize,
+            actuator: (chamber as usize - 1) / 2,
+            chamber: (chamber as usize - 1) % 2 + 1,
             pa: value,
         },
     };
     LaneStatus::Failed {
         time_s: r.time(tick as usize),
         reason,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every library effect has its bit, bit i for registry line i (lane.cu's `VS_E_*` and the
+    /// order its hooks compose in), and the record's length is what lane.cu says.
+    #[test]
+    fn every_effect_has_its_bit_in_registry_order() {
+        for (i, id) in EffectId::ALL.into_iter().enumerate() {
+            assert_eq!(EFFECT_BITS[i], (id, 1 << i), "{id}");
+        }
+        assert_eq!(TWO_ACTUATORS, 1 << EffectId::ALL.len());
+        let source = SOURCE.replace(' ', "");
+        assert!(source.contains(&format!("VS_E_TWO={TWO_ACTUATORS}")));
+        assert!(source.contains("VS_LANE_FIELDS=VS_SENSOR+21"));
+        let m = ModelParams::default();
+        assert_eq!(pack_params(&[&m]).unwrap().len(), LANE_FIELDS);
     }
 }

@@ -15,6 +15,7 @@ use crate::kernel::params::ModelParams;
 use crate::kernel::simulate::{LaneResult, SetupError, Solver};
 use crate::orchestration::batch::LaneEngine;
 use cudarc::driver::{CudaContext, CudaFunction, CudaStream, LaunchConfig, PushKernelArg};
+use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 
@@ -145,36 +146,55 @@ impl Engine {
 /// registers fit the register file of every CUDA GPU.
 const BLOCK: u32 = 128;
 
-/// The CUDA kernel loaded on GPU 0.
+/// The CUDA kernel on GPU 0: one build per set of effects (lane.cu's `VS_EFFECTS`), loaded when a
+/// launch first needs it.
 pub struct Cuda {
     pub name: String,
+    ctx: Arc<CudaContext>,
     stream: Arc<CudaStream>,
-    func: CudaFunction,
+    /// The loaded builds, by effect bits ([`gpu_lanes::effect_bits`]).
+    builds: Mutex<HashMap<i64, CudaFunction>>,
     /// One batch on the device at a time (worker threads share the GPU).
     busy: Mutex<()>,
 }
 
 impl Cuda {
-    /// Compiles (or takes from the cache) and loads the kernel on GPU 0, named `name`.
+    /// Opens GPU 0, named `name`, and loads the baseline's build (compiled, or from the cache),
+    /// so that a kernel or driver that cannot work is found before any work.
     fn open(name: &str) -> Result<Cuda, String> {
-        let ptx = ptx()?;
         let ctx = CudaContext::new(0).map_err(|e| format!("{name}: no CUDA context ({e})"))?;
-        let module = ctx
-            .load_module(cudarc::nvrtc::Ptx::from_src(ptx))
+        let cuda = Cuda {
+            name: name.into(),
+            stream: ctx.default_stream(),
+            ctx,
+            builds: Mutex::new(HashMap::new()),
+            busy: Mutex::new(()),
+        };
+        cuda.build(0)?;
+        Ok(cuda)
+    }
+
+    /// The kernel built for the effects `bits`.
+    fn build(&self, bits: i64) -> Result<CudaFunction, String> {
+        let mut builds = self.builds.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(f) = builds.get(&bits) {
+            return Ok(f.clone());
+        }
+        let name = &self.name;
+        let module = self
+            .ctx
+            .load_module(cudarc::nvrtc::Ptx::from_src(ptx(bits)?))
             .map_err(|e| format!("{name}: the kernel did not load ({e})"))?;
         let func = module
             .load_function("vs_lanes")
             .map_err(|e| format!("{name}: the kernel did not load ({e})"))?;
-        Ok(Cuda {
-            name: name.into(),
-            stream: ctx.default_stream(),
-            func,
-            busy: Mutex::new(()),
-        })
+        builds.insert(bits, func.clone());
+        Ok(func)
     }
 
     /// Runs the lanes on the device: the shared run and the parameters up, the sums back.
     fn launch(&self, shared: &Shared, params: &[f64], n: usize) -> anyhow::Result<Vec<f64>> {
+        let func = self.build(shared.ints[9]).map_err(anyhow::Error::msg)?;
         let _one = self.busy.lock().unwrap_or_else(|e| e.into_inner());
         let s = &self.stream;
         let [x, v, a, j] = [0, 1, 2, 3].map(|i| s.clone_htod(&shared.refs[i]));
@@ -187,7 +207,7 @@ impl Cuda {
         let p = s.clone_htod(params)?;
         let mut out = s.alloc_zeros::<f64>(gpu_lanes::out_fields(shared.n_osc()) * n)?;
         let lanes = n as i64;
-        let mut b = s.launch_builder(&self.func);
+        let mut b = s.launch_builder(&func);
         for i in &shared.ints {
             b.arg(i);
         }
@@ -261,14 +281,16 @@ impl Cuda {
     }
 }
 
-/// The kernel's PTX: from the cache (`$XDG_CACHE_HOME/vshake` or `~/.cache/vshake`, keyed by the
-/// source and the options), else compiled by NVRTC (about a second) and cached.
-pub fn ptx() -> Result<String, String> {
-    let path = cache_dir().map(|d| d.join(format!("lane-{:016x}.ptx", fnv1a(gpu_lanes::SOURCE))));
+/// The kernel's PTX for the effects `bits`: from the cache (`$XDG_CACHE_HOME/vshake` or
+/// `~/.cache/vshake`, keyed by the source and the effects), else compiled by NVRTC (about a
+/// second) and cached.
+pub fn ptx(bits: i64) -> Result<String, String> {
+    let key = fnv1a(&format!("{}\n{bits}", gpu_lanes::SOURCE));
+    let path = cache_dir().map(|d| d.join(format!("lane-{key:016x}.ptx")));
     if let Some(text) = path.as_ref().and_then(|p| std::fs::read_to_string(p).ok()) {
         return Ok(text);
     }
-    let text = compile_ptx()?;
+    let text = compile_ptx(bits)?;
     if let Some(p) = path {
         // A cache that cannot be written costs a compile next time, nothing else.
         let tmp = p.with_extension(format!("tmp{}", std::process::id()));
@@ -279,9 +301,10 @@ pub fn ptx() -> Result<String, String> {
     Ok(text)
 }
 
-/// Compiles the kernel with NVRTC. No FMA contraction (`--fmad=false`): the CPU kernel rounds
-/// every multiply and add, and so does the GPU, which keeps the two within 1e-9 of each other.
-pub fn compile_ptx() -> Result<String, String> {
+/// Compiles the kernel with NVRTC for the effects `bits` (`-DVS_EFFECTS`: a build carries only
+/// the states of its effects). No FMA contraction (`--fmad=false`): the CPU kernel rounds every
+/// multiply and add, and so does the GPU, which keeps the two within 1e-9 of each other.
+pub fn compile_ptx(bits: i64) -> Result<String, String> {
     // SAFETY: only tries to open the shared library.
     if !unsafe { cudarc::nvrtc::sys::is_culib_present() } {
         return Err(
@@ -293,6 +316,7 @@ pub fn compile_ptx() -> Result<String, String> {
     let opts = cudarc::nvrtc::CompileOptions {
         fmad: Some(false),
         name: Some("lane.cu".into()),
+        options: vec![format!("-DVS_EFFECTS={bits}")],
         ..Default::default()
     };
     cudarc::nvrtc::compile_ptx_with_opts(gpu_lanes::SOURCE, opts)
@@ -344,7 +368,7 @@ mod tests {
         assert_eq!(err.to_string().lines().count(), 1);
     }
 
-    /// NVRTC compiles the kernel to PTX with its entry point. Where no NVRTC is found the test
+    /// NVRTC compiles the kernel to PTX with its entry point, without effects and with all. Where no NVRTC is found the test
     /// says so and passes, unless `VSHAKE_REQUIRE_NVRTC` is set (CI installs the NVRTC wheel and
     /// sets it, so a kernel that does not compile fails CI).
     #[test]
@@ -358,18 +382,24 @@ mod tests {
             eprintln!("skipped: no NVRTC on this machine");
             return;
         }
-        let t = std::time::Instant::now();
-        let ptx = compile_ptx().unwrap_or_else(|e| panic!("{e}"));
-        eprintln!(
-            "NVRTC: {} bytes of PTX in {:.2} s",
-            ptx.len(),
-            t.elapsed().as_secs_f64()
-        );
-        assert!(
-            ptx.contains(".entry vs_lanes"),
-            "no vs_lanes entry in the PTX"
-        );
-        assert!(ptx.contains(".f64"), "the kernel is float64");
+        // The baseline's build and the one with every effect and both actuators.
+        let all = gpu_lanes::EFFECT_BITS
+            .iter()
+            .fold(gpu_lanes::TWO_ACTUATORS, |b, (_, bit)| b | bit);
+        for bits in [0, all] {
+            let t = std::time::Instant::now();
+            let ptx = compile_ptx(bits).unwrap_or_else(|e| panic!("{e}"));
+            eprintln!(
+                "NVRTC, effects {bits:#x}: {} bytes of PTX in {:.2} s",
+                ptx.len(),
+                t.elapsed().as_secs_f64()
+            );
+            assert!(
+                ptx.contains(".entry vs_lanes"),
+                "no vs_lanes entry in the PTX"
+            );
+            assert!(ptx.contains(".f64"), "the kernel is float64");
+        }
     }
 
     #[test]

@@ -33,6 +33,7 @@ int main(int argc, char **argv) {
   std::vector<double> arr[8];
   for (auto &a : arr) a = read_array(in);
   fclose(in);
+  vs_effects = ints[9];
   VsRun r = {ints[0], ints[1], ints[2], ints[3], ints[4], ints[5], ints[6], ints[7], ints[8], ints[9], f_s,
              arr[0].data(), arr[1].data(), arr[2].data(), arr[3].data(), arr[4].data(),
              arr[5].data(), arr[6].data()};

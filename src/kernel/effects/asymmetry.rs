@@ -43,6 +43,13 @@ impl<const N: usize> LibraryEffect<N> for Asymmetry<N> {
     }
 }
 
+impl<const N: usize> Asymmetry<N> {
+    /// Lane `l`'s coefficients in the order the CUDA kernel reads them (`src/kernel/cuda/lane.cu`).
+    pub fn lane(&self, l: usize) -> [f64; 2] {
+        [self.extend[l], self.act2[l]]
+    }
+}
+
 impl<const N: usize> Effect<N> for Asymmetry<N> {
     type State = [[f64; N]; 0];
 

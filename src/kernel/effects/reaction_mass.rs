@@ -68,6 +68,13 @@ impl<const N: usize> LibraryEffect<N> for ReactionMass<N> {
     }
 }
 
+impl<const N: usize> ReactionMass<N> {
+    /// Lane `l`'s coefficients in the order the CUDA kernel reads them (`src/kernel/cuda/lane.cu`).
+    pub fn lane(&self, l: usize) -> [f64; 3] {
+        [self.inv_m[l], self.k[l], self.c[l]]
+    }
+}
+
 impl<const N: usize> Effect<N> for ReactionMass<N> {
     type State = [[f64; N]; 2];
 

@@ -68,6 +68,19 @@ impl<const N: usize> Chain<N> {
     }
 
     /// The derivatives of the chain's states driven by the plant's channel `u`.
+    /// Lane `l`'s coefficients in the order the CUDA kernel reads them (`src/kernel/cuda/lane.cu`).
+    pub fn lane(&self, l: usize) -> [f64; 7] {
+        [
+            self.on[l],
+            self.w2[l],
+            self.two_zw[l],
+            self.tau[l],
+            self.pade[l],
+            self.k12[l],
+            self.k6[l],
+        ]
+    }
+
     #[inline(always)]
     pub fn derivs(&self, u: &[f64; N], s: &State<N>, ds: &mut State<N>) {
         for l in 0..N {
@@ -115,6 +128,13 @@ macro_rules! sensor_effect {
                     (q.f_c, q.zeta, q.delay)
                 });
                 $Type(super::sensor_chain::Chain::new(on, lanes))
+            }
+        }
+
+        impl<const N: usize> $Type<N> {
+            /// Lane `l`'s coefficients in the order the CUDA kernel reads them.
+            pub fn lane(&self, l: usize) -> [f64; 7] {
+                self.0.lane(l)
             }
         }
 

@@ -117,6 +117,14 @@ impl<const N: usize> LibraryEffect<N> for Specimen<N> {
     }
 }
 
+impl<const N: usize> Specimen<N> {
+    /// Lane `l`'s coefficients in the order the CUDA kernel reads them (`src/kernel/cuda/lane.cu`):
+    /// per mode, the modal mass (0 where the effect is off), ω² and 2ζω.
+    pub fn lane(&self, l: usize) -> [f64; 3 * MODES] {
+        std::array::from_fn(|f| [self.m, self.w2, self.two_zw][f % 3][f / 3][l])
+    }
+}
+
 impl<const N: usize> Effect<N> for Specimen<N> {
     type State = [[f64; N]; 2 * MODES];
 

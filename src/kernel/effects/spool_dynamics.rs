@@ -55,6 +55,13 @@ impl<const N: usize> LibraryEffect<N> for SpoolDynamics<N> {
     }
 }
 
+impl<const N: usize> SpoolDynamics<N> {
+    /// Lane `l`'s coefficients in the order the CUDA kernel reads them (`src/kernel/cuda/lane.cu`).
+    pub fn lane(&self, l: usize) -> [f64; 3] {
+        [self.on[l], self.w2[l], self.two_zw[l]]
+    }
+}
+
 impl<const N: usize> Effect<N> for SpoolDynamics<N> {
     type State = [[f64; N]; 2 * N_ACT];
 

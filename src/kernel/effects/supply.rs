@@ -52,6 +52,19 @@ impl<const N: usize> LibraryEffect<N> for Supply<N> {
     }
 }
 
+impl<const N: usize> Supply<N> {
+    /// Lane `l`'s coefficients in the order the CUDA kernel reads them (`src/kernel/cuda/lane.cu`).
+    pub fn lane(&self, l: usize) -> [f64; 5] {
+        [
+            self.on[l],
+            self.p_s0[l],
+            self.q_pump[l],
+            self.inv_c[l],
+            self.inv_band[l],
+        ]
+    }
+}
+
 impl<const N: usize> Effect<N> for Supply<N> {
     /// The supply pressure P_s the valves see, Pa.
     type State = [[f64; N]; 1];

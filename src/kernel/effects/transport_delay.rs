@@ -66,6 +66,13 @@ impl<const N: usize> LibraryEffect<N> for TransportDelay<N> {
     }
 }
 
+impl<const N: usize> TransportDelay<N> {
+    /// Lane `l`'s coefficients in the order the CUDA kernel reads them (`src/kernel/cuda/lane.cu`).
+    pub fn lane(&self, l: usize) -> [f64; 2] {
+        [self.on[l], self.rate[l]]
+    }
+}
+
 impl<const N: usize> Effect<N> for TransportDelay<N> {
     /// The outputs of the stages; the last is the delayed command.
     type State = [[f64; N]; STAGES];
