@@ -3,9 +3,11 @@
 
 pub mod batch;
 pub mod campaign;
+pub mod cmaes;
 pub mod columns;
 pub mod compare;
 pub mod diagnose;
+pub mod drive_iteration;
 pub mod fit;
 pub mod fourier;
 pub mod measured;
