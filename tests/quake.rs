@@ -268,7 +268,7 @@ fn the_record_sweep_writes_spectral_columns_duckdb_reads_and_sensitivity_ranks_t
         "-q",
     ]);
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/check_spectral.py");
-    let py = Command::new("python3")
+    let py = common::python3()
         .arg(&script)
         .arg(&out)
         .arg("192")

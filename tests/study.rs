@@ -2,6 +2,8 @@
 //! any thread count and chunk size, bad study files are refused with their key path, and a real
 //! reader (pyarrow, DuckDB) opens the results.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use vshake::orchestration::batch::{self, Plan, Row};
@@ -271,7 +273,7 @@ fn smoke_study_results_open_in_pyarrow_and_duckdb() {
         .exists());
     let columns = "sample_id,excitation_id,excitation,design_base,design_block,g_d,l_a,mu_coef,amp_ratio,phase_err_deg,h3_ratio,thd_odd_ratio,rms_err_accel_ratio,status,fail_time_s,fail_reason";
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/check_results.py");
-    let py = Command::new("python3")
+    let py = common::python3()
         .arg(&script)
         .arg(&out)
         .arg("64")
@@ -280,7 +282,7 @@ fn smoke_study_results_open_in_pyarrow_and_duckdb() {
         .expect("python3");
     assert!(
         py.status.success(),
-        "the results file must open in pyarrow and DuckDB (install them with `python3 -m pip install pyarrow duckdb`):\n{}{}",
+        "the results file must open in pyarrow and DuckDB (install them with `python3 tests/pydeps.py`):\n{}{}",
         String::from_utf8_lossy(&py.stdout),
         String::from_utf8_lossy(&py.stderr)
     );

@@ -1,6 +1,7 @@
 //! Helpers shared by the integration tests.
 
 use std::path::Path;
+use std::process::Command;
 use vshake::shell::tables::{column_names, read_bools, read_columns_allow_nan, read_strings};
 
 /// The state and term a report's residual follows, from its `stateterms.parquet`: the row the
@@ -84,4 +85,19 @@ pub fn content(path: &Path) -> Vec<(String, Cells)> {
         ));
     }
     out
+}
+
+/// `python3` with the repository's `.pydeps/` (where `tests/pydeps.py` installs pyarrow and DuckDB
+/// on a PEP 668 system) in front of its `PYTHONPATH`.
+#[allow(dead_code)] // used by the tests that open results in Python
+pub fn python3() -> Command {
+    let deps = Path::new(env!("CARGO_MANIFEST_DIR")).join(".pydeps");
+    let mut path = deps.into_os_string();
+    if let Some(old) = std::env::var_os("PYTHONPATH") {
+        path.push(":");
+        path.push(old);
+    }
+    let mut c = Command::new("python3");
+    c.env("PYTHONPATH", path);
+    c
 }
