@@ -43,6 +43,9 @@ pub enum Command {
     Merge(MergeArgs),
     /// Write a Slurm job array (one task per shard) and a dependent merge job for a study.
     Slurm(SlurmArgs),
+    /// Iterate the drive of an earthquake test on the virtual table until it reproduces the target acceleration.
+    #[command(long_about = ITERATE_HELP)]
+    Iterate(IterateArgs),
     /// Benchmark the kernel (simulated seconds per wall second) and optionally gate on a baseline.
     Bench(BenchArgs),
     /// List every model parameter: name, unit, default, valid range, source and meaning.
@@ -334,6 +337,44 @@ pub struct SimArgs {
     /// Print only the metrics table (no header lines).
     #[arg(long, short)]
     pub quiet: bool,
+}
+
+const ITERATE_HELP: &str = "Iterate the drive of an earthquake test on the virtual table (offline iteration, as a \
+shake-table controller's transfer-function iteration does before the real test).
+
+The run file is the one `study sim` takes: [model.<component>] overrides (a fitted model, a specimen), the \
+target [excitation] (a record, a stochastic motion, a sweep) and [solver]. The target is the acceleration of \
+the excitation's reference. A band-limited random run (0.2-50 Hz, the target's rms) measures the table's \
+frequency response H; then, from the target itself as the drive, each iteration runs the drive and corrects \
+it, d <- d + gain * H^-1 (target - achieved), H inverted with Tikhonov regularisation, until the rms error over \
+the target's window reaches --goal, stops falling, or --iterations have run. Each iteration is printed; --out \
+writes iterations.parquet (the error of each), frf.parquet (H), history.parquet (per tick: the target and the \
+achieved acceleration, the drive) and drive.csv (the final drive's displacement at the controller rate, a \
+record a controller can take: kind = \"record\", column = \"drive_disp_m\", signal = \"reference\").";
+
+#[derive(Debug, clap::Args)]
+pub struct IterateArgs {
+    /// The run file (TOML), as `study sim` takes it.
+    pub file: PathBuf,
+    /// Folder for iterations.parquet, frf.parquet, history.parquet and drive.csv (created; files
+    /// already there are refused unless --force).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Most iterations (updates of the drive).
+    #[arg(long, default_value_t = 6)]
+    pub iterations: usize,
+    /// Gain of each update, in (0, 1].
+    #[arg(long, default_value_t = 0.8)]
+    pub gain: f64,
+    /// Stop when the rms acceleration error is below this fraction of the target's rms.
+    #[arg(long, default_value_t = 0.01)]
+    pub goal: f64,
+    /// Seed of the random run that measures the frequency response.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Overwrite outputs already in --out.
+    #[arg(long)]
+    pub force: bool,
 }
 
 #[derive(Debug, clap::Args)]

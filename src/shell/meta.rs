@@ -100,6 +100,8 @@ pub enum Kind {
     Sensitivity,
     SyntheticMeasurement,
     Spectrum,
+    DriveIteration,
+    FrequencyResponse,
 }
 
 impl Kind {
@@ -112,6 +114,8 @@ impl Kind {
             Kind::Sensitivity => "sensitivity",
             Kind::SyntheticMeasurement => "synthetic_measurement",
             Kind::Spectrum => "response_spectrum",
+            Kind::DriveIteration => "drive_iteration",
+            Kind::FrequencyResponse => "frequency_response",
         }
     }
 }

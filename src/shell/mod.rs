@@ -11,6 +11,7 @@ pub mod diagnose_cmd;
 pub mod fit_cmd;
 pub mod gpu;
 pub mod interrupt;
+pub mod iterate_cmd;
 pub mod matlab;
 pub mod merge_cmd;
 pub mod meta;
@@ -62,5 +63,6 @@ pub fn dispatch(cli: cli::Cli) -> anyhow::Result<()> {
         cli::Command::Diagnose(a) => diagnose_cmd::run(&a),
         cli::Command::Merge(a) => merge_cmd::run(&a),
         cli::Command::Slurm(a) => slurm_cmd::run(&a),
+        cli::Command::Iterate(a) => iterate_cmd::run(&a),
     }
 }
