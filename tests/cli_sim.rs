@@ -310,3 +310,62 @@ fn iterate_reaches_five_percent_and_writes_its_outputs() {
         assert!(stderr.contains(says), "{stderr}");
     }
 }
+
+/// `--model` (a model file, e.g. `study fit`'s output) on `sim`, `run` and `iterate`: the same
+/// numbers as the same tables written into the run file, the run file's own tables applied on
+/// top; a missing model file refused naming it.
+#[test]
+fn a_model_file_is_taken_by_sim_and_run() {
+    let d = tempfile::tempdir().unwrap();
+    let model = write(
+        d.path(),
+        "fitted.toml",
+        "[model.platen]\nm = 160000.0\n\n[model.specimen]\nm1 = 15000.0\nf1 = 4.0\n",
+    );
+    let with_tables = format!(
+        "{SINE}\n[model.platen]\nm = 160000.0\n\n[model.specimen]\nm1 = 15000.0\nf1 = 4.0\n"
+    );
+    let inline = write(d.path(), "inline.toml", &with_tables);
+    let bare = write(d.path(), "bare.toml", SINE);
+    let (m, b, i) = (
+        model.to_str().unwrap(),
+        bare.to_str().unwrap(),
+        inline.to_str().unwrap(),
+    );
+    let metrics = |out: &str| {
+        out.lines()
+            .skip_while(|l| !l.contains("metric"))
+            .collect::<Vec<_>>()
+            .join("\n")
+    };
+    let (c1, via_model, e1) = study(&["sim", b, "--model", m, "-q"]);
+    let (c2, via_tables, _) = study(&["sim", i, "-q"]);
+    let (c3, plain, _) = study(&["sim", b, "-q"]);
+    assert_eq!((c1, c2, c3), (0, 0, 0), "{e1}");
+    assert_eq!(metrics(&via_model), metrics(&via_tables));
+    assert_ne!(metrics(&via_model), metrics(&plain));
+    // The run file's tables on top of the model file's.
+    let over = write(
+        d.path(),
+        "over.toml",
+        &format!("{SINE}\n[model.platen]\nm = 144000.0\n"),
+    );
+    let (_, on_top, _) = study(&["sim", over.to_str().unwrap(), "--model", m, "-q"]);
+    assert_ne!(metrics(&on_top), metrics(&via_model));
+
+    let smoke = Path::new(env!("CARGO_MANIFEST_DIR")).join("studies/smoke.toml");
+    let out = d.path().join("smoke.parquet");
+    let (code, stdout, stderr) = study(&[
+        "run",
+        smoke.to_str().unwrap(),
+        "--model",
+        m,
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
+    assert_eq!(code, 0, "{stdout}{stderr}");
+    let (code, _, stderr) = study(&["sim", b, "--model", "no_such_model.toml"]);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("no_such_model.toml"), "{stderr}");
+}

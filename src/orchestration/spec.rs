@@ -733,10 +733,16 @@ pub fn read_solver(mut f: Fields<'_>, issues: &mut Issues, extra: &[&str]) -> So
 impl SimSpec {
     /// Parses a sim file's text; `file` names it in errors.
     pub fn from_toml(text: &str, file: &str) -> Result<SimSpec, InputError> {
+        Self::from_toml_on(text, file, ModelParams::default())
+    }
+
+    /// [`SimSpec::from_toml`] from the parameters `base` (a model file's, `--model`) instead of
+    /// the defaults: the run file's `[model.*]` tables change them further.
+    pub fn from_toml_on(text: &str, file: &str, base: ModelParams) -> Result<SimSpec, InputError> {
         let table = super::toml_fields::parse(text, file)?;
         let mut issues = Issues::default();
         let mut root = Fields::new("", &table);
-        let mut model = ModelParams::default();
+        let mut model = base;
         if let Some(m) = root.table("model", &mut issues) {
             read_model(m, &mut model, &mut issues);
         }

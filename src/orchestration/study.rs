@@ -834,14 +834,24 @@ fn check_support(f: &Fields<'_>, info: &ParamInfo, d: &Distribution, issues: &mu
 }
 
 impl StudySpec {
-    /// Parses a study file's text; `file` names it in errors; `base` resolves relative paths.
+    /// Parses a study file's text; `file` names it in errors.
     pub fn from_toml(text: &str, file: &str) -> Result<StudySpec, InputError> {
+        Self::from_toml_on(text, file, ModelParams::default())
+    }
+
+    /// [`StudySpec::from_toml`] from the parameters `base` (a model file's, `--model`) instead of
+    /// the defaults: the study's `[model.*]` tables change them further, its variables vary them.
+    pub fn from_toml_on(
+        text: &str,
+        file: &str,
+        base: ModelParams,
+    ) -> Result<StudySpec, InputError> {
         let table = super::toml_fields::parse(text, file)?;
         let mut issues = Issues::default();
         let mut root = Fields::new("", &table);
         let header = read_header(&mut root, &mut issues);
         let method = read_method(&mut root, &mut issues);
-        let mut model = ModelParams::default();
+        let mut model = base;
         if let Some(m) = root.table("model", &mut issues) {
             spec::read_model(m, &mut model, &mut issues);
         }

@@ -60,8 +60,12 @@ pub struct RunArgs {
     /// Continue a results file that a stop (Ctrl-C, SIGTERM) left incomplete, or that a kill left
     /// as FILE.tmp with a checkpoint; the study, shard and seed come from the file. The result
     /// equals an uninterrupted run's. A complete file is left as it is.
-    #[arg(long, value_name = "FILE", conflicts_with_all = ["file", "samples", "shard", "out"])]
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["file", "samples", "shard", "out", "model"])]
     pub resume: Option<PathBuf>,
+    /// A model file ([model.<component>] tables, e.g. `study fit`'s output) the study starts
+    /// from instead of the defaults; the study's own [model.*] tables and variables change it.
+    #[arg(long)]
+    pub model: Option<PathBuf>,
     /// Print the samples, the runs, the estimated wall time (from a short timed run) and the
     /// output size, and stop; nothing is written.
     #[arg(long)]
@@ -327,6 +331,10 @@ pub struct BenchArgs {
 pub struct SimArgs {
     /// The run file (TOML): [model.<component>] overrides, [excitation], optional [solver].
     pub file: PathBuf,
+    /// A model file ([model.<component>] tables, e.g. `study fit`'s output) to run instead of
+    /// the defaults; the run file's [model.*] tables change it further.
+    #[arg(long)]
+    pub model: Option<PathBuf>,
     /// Write the time history of every channel to this Parquet file.
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -356,6 +364,10 @@ record a controller can take: kind = \"record\", column = \"drive_disp_m\", sign
 pub struct IterateArgs {
     /// The run file (TOML), as `study sim` takes it.
     pub file: PathBuf,
+    /// A model file (e.g. `study fit`'s output, a specimen included) to iterate on instead of
+    /// the defaults; the run file's [model.*] tables change it further.
+    #[arg(long)]
+    pub model: Option<PathBuf>,
     /// Folder for iterations.parquet, frf.parquet, history.parquet and drive.csv (created; files
     /// already there are refused unless --force).
     #[arg(long)]

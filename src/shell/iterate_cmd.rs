@@ -20,12 +20,19 @@ const OUTPUTS: [&str; 4] = [
 
 pub fn run(args: &IterateArgs) -> anyhow::Result<()> {
     let settings = settings(args)?;
-    let spec = sim_cmd::load_spec(&args.file)?;
+    let spec = sim_cmd::load_spec(&args.file, args.model.as_deref())?;
     let targets = outputs(args)?;
     let base = args.file.parent().unwrap_or(Path::new("."));
     let target = sim_cmd::build_reference(&spec, base)?;
     let mut o = std::io::stdout().lock();
     writeln!(o, "study iterate {}", args.file.display())?;
+    if let Some(m) = &args.model {
+        writeln!(
+            o,
+            "  model       {} (the run file's [model.*] on top)",
+            m.display()
+        )?;
+    }
     writeln!(o, "  target      {}", spec.excitation.describe())?;
     writeln!(
         o,

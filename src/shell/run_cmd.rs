@@ -25,9 +25,19 @@ pub const SCHEMA_VERSION: &str = "2";
 
 /// Reads and validates a study file.
 pub fn load_study(file: &Path) -> anyhow::Result<StudySpec> {
+    load_study_on(file, None)
+}
+
+/// Reads and validates a study file on the model file `model` (`--model`; None: the defaults).
+pub fn load_study_on(file: &Path, model: Option<&Path>) -> anyhow::Result<StudySpec> {
+    let base = super::campaign_io::load_model(model)?;
     let text = std::fs::read_to_string(file)
         .map_err(|e| BadInput(format!("{}: cannot read: {e}", file.display())))?;
-    Ok(StudySpec::from_toml(&text, &file.display().to_string())?)
+    Ok(StudySpec::from_toml_on(
+        &text,
+        &file.display().to_string(),
+        base,
+    )?)
 }
 
 /// Builds the plan of a study: references of its excitations and its design.
@@ -314,7 +324,7 @@ pub struct Job {
 impl Job {
     /// A new run of `args.file`: everything it needs is read and checked here, before any work.
     fn fresh(args: &RunArgs, file: &Path) -> anyhow::Result<Job> {
-        let mut spec = load_study(file)?;
+        let mut spec = load_study_on(file, args.model.as_deref())?;
         if let Some(n) = args.samples {
             if n == 0 {
                 return Err(BadInput("--samples must be at least 1".into()).into());
@@ -635,6 +645,13 @@ fn print_header(
             "study run {}",
             args.file.as_deref().unwrap_or(Path::new("?")).display()
         )?,
+    }
+    if let Some(m) = &args.model {
+        writeln!(
+            o,
+            "  model       {} (the study's [model.*] on top)",
+            m.display()
+        )?;
     }
     writeln!(
         o,

@@ -19,15 +19,20 @@ pub fn build_reference(spec: &SimSpec, base: &Path) -> anyhow::Result<Reference>
     tables::load_reference(&spec.excitation, &spec.model, base, 0)
 }
 
-/// Reads and validates a run file.
-pub fn load_spec(file: &Path) -> anyhow::Result<SimSpec> {
+/// Reads and validates a run file on the model file `model` (`--model`; None: the defaults).
+pub fn load_spec(file: &Path, model: Option<&Path>) -> anyhow::Result<SimSpec> {
+    let base = super::campaign_io::load_model(model)?;
     let text = std::fs::read_to_string(file)
         .map_err(|e| BadInput(format!("{}: cannot read: {e}", file.display())))?;
-    Ok(SimSpec::from_toml(&text, &file.display().to_string())?)
+    Ok(SimSpec::from_toml_on(
+        &text,
+        &file.display().to_string(),
+        base,
+    )?)
 }
 
 pub fn run(args: &SimArgs) -> anyhow::Result<()> {
-    let spec = load_spec(&args.file)?;
+    let spec = load_spec(&args.file, args.model.as_deref())?;
     let base = args.file.parent().unwrap_or(Path::new("."));
     let reference = build_reference(&spec, base)?;
     let out = sim::run_sim(&spec, &reference)?;
@@ -35,6 +40,13 @@ pub fn run(args: &SimArgs) -> anyhow::Result<()> {
     let h = 1.0 / (spec.model.controller.f_s * spec.solver.substeps as f64);
     if !args.quiet {
         writeln!(stdout, "study sim {}", args.file.display())?;
+        if let Some(m) = &args.model {
+            writeln!(
+                stdout,
+                "  model       {} (the run file's [model.*] on top)",
+                m.display()
+            )?;
+        }
         writeln!(stdout, "  excitation  {}", spec.excitation.describe())?;
         writeln!(
             stdout,
