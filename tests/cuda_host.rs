@@ -1,7 +1,7 @@
 //! The CUDA lane kernel (`src/kernel/cuda/lane.cu`) built for the host by a C++ compiler and
 //! compared with the Rust kernel on random parameter sets of the baseline model and every library
-//! effect, every drive and
-//! every kind of shared reference: every metric within 1e-12 relative, the same failures.
+//! effect, every drive and every kind of shared reference: every metric within 1e-12 relative,
+//! the same failures.
 //!
 //! Without a C++ compiler (`$CXX`, else `c++`) the test says so and passes; CI sets
 //! `VSHAKE_REQUIRE_CXX=1`, which makes a missing compiler a failure.
