@@ -357,7 +357,7 @@ frequency response H; then, from the target itself as the drive, each iteration 
 it, d <- d + gain * H^-1 (target - achieved), H inverted with Tikhonov regularisation, until the rms error over \
 the target's window reaches --goal, stops falling, or --iterations have run. Each iteration is printed; --out \
 writes iterations.parquet (the error of each), frf.parquet (H), history.parquet (per tick: the target and the \
-achieved acceleration, the drive) and drive.csv (the final drive's displacement at the controller rate, a \
+achieved acceleration, the drive), iteration.svg (the error per iteration, target against achieved) and drive.csv (the final drive's displacement at the controller rate, a \
 record a controller can take: kind = \"record\", column = \"drive_disp_m\", signal = \"reference\").";
 
 #[derive(Debug, clap::Args)]
@@ -368,8 +368,8 @@ pub struct IterateArgs {
     /// the defaults; the run file's [model.*] tables change it further.
     #[arg(long)]
     pub model: Option<PathBuf>,
-    /// Folder for iterations.parquet, frf.parquet, history.parquet and drive.csv (created; files
-    /// already there are refused unless --force).
+    /// Folder for iterations.parquet, frf.parquet, history.parquet, iteration.svg and drive.csv
+    /// (created; files already there are refused unless --force).
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Most iterations (updates of the drive).

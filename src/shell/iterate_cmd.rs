@@ -11,11 +11,12 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 /// The files `--out` receives.
-const OUTPUTS: [&str; 4] = [
+const OUTPUTS: [&str; 5] = [
     "iterations.parquet",
     "frf.parquet",
     "drive.csv",
     "history.parquet",
+    "iteration.svg",
 ];
 
 pub fn run(args: &IterateArgs) -> anyhow::Result<()> {
@@ -138,7 +139,8 @@ fn summary(o: &mut impl Write, done: &TableIteration) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// iterations.parquet, frf.parquet and drive.csv (each written whole, then renamed).
+/// iterations.parquet, frf.parquet, drive.csv, history.parquet and iteration.svg (each written
+/// whole, then renamed).
 fn write_outputs(
     dir: &Path,
     paths: &[PathBuf],
@@ -168,7 +170,84 @@ fn write_outputs(
     tables::write_parquet(&paths[1], &cols, &m)
         .with_context(|| format!("writing {}", paths[1].display()))?;
     write_drive(&paths[2], done)?;
-    write_history(&paths[3], done)
+    write_history(&paths[3], done)?;
+    let svg = plot(done).map_err(|e| anyhow::anyhow!("drawing {}: {e}", paths[4].display()))?;
+    let tmp = paths[4].with_extension("svg.tmp");
+    std::fs::write(&tmp, svg)
+        .and_then(|_| std::fs::rename(&tmp, &paths[4]))
+        .with_context(|| format!("writing {}", paths[4].display()))
+}
+
+/// The error of each iteration (left) and the target against the achieved acceleration with the
+/// kept drive (right), as SVG.
+fn plot(done: &TableIteration) -> Result<String, Box<dyn std::error::Error>> {
+    use plotters::prelude::*;
+    let mut s = String::new();
+    {
+        let root = SVGBackend::with_string(&mut s, (960, 360)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let (left, right) = root.split_horizontally(320);
+        let last = done.rows.len() as f64 - 1.0;
+        let top = done
+            .rows
+            .iter()
+            .map(|r| 100.0 * r.rms_error_ratio)
+            .fold(1.0, f64::max);
+        let mut c = ChartBuilder::on(&left)
+            .caption("rms acceleration error", ("sans-serif", 16))
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(45)
+            .build_cartesian_2d(-0.2..last.max(1.0) + 0.2, 0.0..1.05 * top)?;
+        c.configure_mesh()
+            .x_desc("iteration")
+            .y_desc("% of the target's rms")
+            .draw()?;
+        let pts: Vec<(f64, f64)> = done
+            .rows
+            .iter()
+            .map(|r| (r.iteration as f64, 100.0 * r.rms_error_ratio))
+            .collect();
+        c.draw_series(LineSeries::new(pts.clone(), BLUE.stroke_width(2)))?;
+        c.draw_series(pts.iter().map(|&p| Circle::new(p, 3, BLUE.filled())))?;
+        let f_s = done.drive.f_s;
+        let (w0, w1) = done.drive.window;
+        let t = |k: usize| k as f64 / f_s;
+        let peak = done.target[w0..w1]
+            .iter()
+            .chain(&done.achieved[w0..w1])
+            .fold(0.0, |m: f64, v| m.max(v.abs()));
+        let mut c = ChartBuilder::on(&right)
+            .caption(
+                "target and achieved acceleration (kept drive)",
+                ("sans-serif", 16),
+            )
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(45)
+            .build_cartesian_2d(t(w0)..t(w1), -1.05 * peak..1.05 * peak)?;
+        c.configure_mesh().x_desc("t (s)").y_desc("m/s²").draw()?;
+        // At most about 4 000 points a line (every step-th tick).
+        let step = ((w1 - w0) / 4000).max(1);
+        let line = |v: &[f64]| {
+            (w0..w1)
+                .step_by(step)
+                .map(|k| (t(k), v[k]))
+                .collect::<Vec<_>>()
+        };
+        c.draw_series(LineSeries::new(line(&done.target), BLACK.stroke_width(2)))?
+            .label("target")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLACK.stroke_width(2)));
+        c.draw_series(LineSeries::new(line(&done.achieved), RED.stroke_width(1)))?
+            .label("achieved")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], RED.stroke_width(1)));
+        c.configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()?;
+        root.present()?;
+    }
+    Ok(s)
 }
 
 /// Per tick: the target acceleration, the one achieved with the final drive, the drive.
