@@ -304,6 +304,13 @@ fn iterate_reaches_five_percent_and_writes_its_outputs() {
     let (code, _, stderr) = study(&["iterate", file, "--out", out_s]);
     assert_eq!(code, 2, "{stderr}");
     assert!(stderr.contains("iterations.parquet: exists"), "{stderr}");
+    let short = write(d.path(), "short.toml", SINE);
+    let (code, _, stderr) = study(&["iterate", short.to_str().unwrap()]);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains("short.toml") && stderr.contains("at least 4.0 s"),
+        "{stderr}"
+    );
     for (flag, value, says) in [("--gain", "1.5", "--gain 1.5"), ("--goal", "0", "--goal 0")] {
         let (code, _, stderr) = study(&["iterate", file, flag, value]);
         assert_eq!(code, 2, "{stderr}");

@@ -353,6 +353,13 @@ pub fn iterate_on_model(
     seed: u64,
     progress: impl FnMut(&IterationRow),
 ) -> Result<TableIteration, String> {
+    if target.len() < 2 * FRF_SEGMENT {
+        return Err(format!(
+            "the target is {:.2} s long; the frequency response needs at least {:.1} s",
+            target.len() as f64 / target.f_s,
+            (2 * FRF_SEGMENT) as f64 / target.f_s
+        ));
+    }
     let a_star = &target.a;
     let rms = (a_star.iter().map(|v| v * v).sum::<f64>() / a_star.len() as f64).sqrt();
     let noise = random_drive(target, rms, seed);

@@ -4,7 +4,7 @@ use super::cli::IterateArgs;
 use super::meta::{self, Key, Kind};
 use super::{sim_cmd, tables, BadInput, RunFailed};
 use crate::orchestration::drive_iteration::{
-    iterate_on_model, IterationRow, IterationSettings, TableIteration,
+    iterate_on_model, IterationRow, IterationSettings, TableIteration, FRF_SEGMENT,
 };
 use anyhow::Context;
 use std::io::Write;
@@ -25,6 +25,15 @@ pub fn run(args: &IterateArgs) -> anyhow::Result<()> {
     let targets = outputs(args)?;
     let base = args.file.parent().unwrap_or(Path::new("."));
     let target = sim_cmd::build_reference(&spec, base)?;
+    if target.len() < 2 * FRF_SEGMENT {
+        return Err(BadInput(format!(
+            "{}: the excitation is {:.2} s long; the frequency response needs at least {:.1} s",
+            args.file.display(),
+            target.len() as f64 / target.f_s,
+            (2 * FRF_SEGMENT) as f64 / target.f_s
+        ))
+        .into());
+    }
     let mut o = std::io::stdout().lock();
     writeln!(o, "study iterate {}", args.file.display())?;
     if let Some(m) = &args.model {
