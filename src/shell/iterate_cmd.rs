@@ -181,15 +181,21 @@ fn write_outputs(
     write_drive(&paths[2], done)?;
     write_history(&paths[3], done)?;
     let svg = plot(done).map_err(|e| anyhow::anyhow!("drawing {}: {e}", paths[4].display()))?;
-    let tmp = paths[4].with_extension("svg.tmp");
-    std::fs::write(&tmp, svg)
-        .and_then(|_| std::fs::rename(&tmp, &paths[4]))
-        .with_context(|| format!("writing {}", paths[4].display()))
+    write_whole(&paths[4], svg.as_bytes())
+}
+
+/// `bytes` written to `path.tmp`, then renamed into place (removed if the write fails).
+fn write_whole(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+    let file = tables::AtomicFile::new(path);
+    std::fs::write(&file.tmp, bytes)
+        .and_then(|_| file.commit())
+        .with_context(|| format!("writing {}", path.display()))
 }
 
 /// The error of each iteration (left) and the target against the achieved acceleration with the
 /// kept drive (right), as SVG.
 fn plot(done: &TableIteration) -> Result<String, Box<dyn std::error::Error>> {
+    use super::report::draw_line;
     use plotters::prelude::*;
     let mut s = String::new();
     {
@@ -244,12 +250,10 @@ fn plot(done: &TableIteration) -> Result<String, Box<dyn std::error::Error>> {
                 .map(|k| (t(k), v[k]))
                 .collect::<Vec<_>>()
         };
-        c.draw_series(LineSeries::new(line(&done.target), BLACK.stroke_width(2)))?
-            .label("target")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLACK.stroke_width(2)));
-        c.draw_series(LineSeries::new(line(&done.achieved), RED.stroke_width(1)))?
-            .label("achieved")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], RED.stroke_width(1)));
+        let target = line(&done.target).into_iter();
+        draw_line(&mut c, target, BLACK.stroke_width(2), Some("target"))?;
+        let achieved = line(&done.achieved).into_iter();
+        draw_line(&mut c, achieved, RED.stroke_width(1), Some("achieved"))?;
         c.configure_series_labels()
             .background_style(WHITE.mix(0.8))
             .border_style(BLACK)
@@ -281,8 +285,5 @@ fn write_drive(path: &Path, done: &TableIteration) -> anyhow::Result<()> {
     for k in 0..d.len() {
         text.push_str(&format!("{:.6},{:.9e}\n", d.time(k), d.x[k]));
     }
-    let tmp = path.with_extension("csv.tmp");
-    std::fs::write(&tmp, text)
-        .and_then(|_| std::fs::rename(&tmp, path))
-        .with_context(|| format!("writing {}", path.display()))
+    write_whole(path, text.as_bytes())
 }

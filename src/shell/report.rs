@@ -42,9 +42,9 @@ pub fn finite_runs(pts: impl Iterator<Item = (f64, f64)>) -> Vec<Vec<(f64, f64)>
     runs
 }
 
-/// Draws a line of possibly non-finite points as its finite runs; returns the first run's series
-/// annotation target, if any.
-fn draw_line<DB: DrawingBackend>(
+/// Draws a line of possibly non-finite points as its finite runs, the first run labelled `label`
+/// in the legend.
+pub(crate) fn draw_line<DB: DrawingBackend>(
     c: &mut ChartContext<
         '_,
         DB,
