@@ -43,6 +43,14 @@ fn every_bundled_file_parses_and_validates() {
             let plan = run_cmd::plan_for(&spec, &studies_dir())
                 .unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
             assert!(plan.rows() > 0);
+        } else if table.contains_key("tune") {
+            let spec = vshake::orchestration::tune_spec::TuneSpec::from_toml_on(
+                &text,
+                &path.display().to_string(),
+                Default::default(),
+            )
+            .unwrap_or_else(|e| panic!("{e}"));
+            assert!(!spec.gains.is_empty() && !spec.objective.is_empty());
         } else {
             vshake::orchestration::spec::SimSpec::from_toml(&text, &path.display().to_string())
                 .unwrap_or_else(|e| panic!("{e}"));
@@ -53,6 +61,23 @@ fn every_bundled_file_parses_and_validates() {
         n >= 4,
         "studies/ holds the sim example, smoke, gains_sweep and port_width ({n} found)"
     );
+    // The tutorial's tuning files and its test (studies/tuning/).
+    for entry in std::fs::read_dir(studies_dir().join("tuning")).unwrap() {
+        let path = entry.unwrap().path();
+        let text = std::fs::read_to_string(&path).unwrap();
+        let name = path.display().to_string();
+        if text.contains("[tune]") {
+            vshake::orchestration::tune_spec::TuneSpec::from_toml_on(
+                &text,
+                &name,
+                Default::default(),
+            )
+            .unwrap_or_else(|e| panic!("{e}"));
+        } else {
+            vshake::orchestration::spec::SimSpec::from_toml(&text, &name)
+                .unwrap_or_else(|e| panic!("{e}"));
+        }
+    }
     // Campaign definitions (their data is made by `study synth`).
     let mut c = 0;
     for entry in std::fs::read_dir(studies_dir().join("campaigns")).unwrap() {

@@ -22,3 +22,5 @@ pub mod statemap;
 pub mod study;
 pub mod timebase;
 pub mod toml_fields;
+pub mod tune;
+pub mod tune_spec;

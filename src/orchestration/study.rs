@@ -272,8 +272,19 @@ fn read_variables(
     model: &ModelParams,
     issues: &mut Issues,
 ) -> Vec<Variable> {
+    read_variables_at(root, "variables", model, issues)
+}
+
+/// The array of variable tables under `key` (`[[variables]]` of a study, `[[uncertain]]` of a
+/// tuning): each a parameter that may vary, listed once, its effect switched on.
+pub(crate) fn read_variables_at(
+    root: &mut Fields<'_>,
+    key: &str,
+    model: &ModelParams,
+    issues: &mut Issues,
+) -> Vec<Variable> {
     let variables: Vec<Variable> = root
-        .tables("variables", issues)
+        .tables(key, issues)
         .unwrap_or_default()
         .into_iter()
         .filter_map(|v| read_variable(v, issues))
@@ -282,13 +293,13 @@ fn read_variables(
         let comp = v.info.component;
         if comp.effect().is_some_and(|e| !model.effects.get(e)) {
             issues.push(
-                format!("variables[{i}].name"),
+                format!("{key}[{i}].name"),
                 format!("effect `{comp}` is not switched on: add a [model.{comp}] table"),
             );
         }
         if variables[..i].iter().any(|w| std::ptr::eq(w.info, v.info)) {
             issues.push(
-                format!("variables[{i}].name"),
+                format!("{key}[{i}].name"),
                 format!("{} is listed twice", v.path()),
             );
         }
@@ -301,6 +312,18 @@ fn read_excitations(
     root: &mut Fields<'_>,
     model: &ModelParams,
     issues: &mut Issues,
+) -> Vec<NamedExcitation> {
+    read_excitations_with(root, model, issues, &[], |_, _| {})
+}
+
+/// `[[excitations]]` whose tables also hold the `extra` keys, each read by `take` (called with
+/// every table, in order, before its excitation keys are read).
+pub(crate) fn read_excitations_with(
+    root: &mut Fields<'_>,
+    model: &ModelParams,
+    issues: &mut Issues,
+    extra: &[&str],
+    mut take: impl FnMut(&mut Fields<'_>, &mut Issues),
 ) -> Vec<NamedExcitation> {
     let mut excitations: Vec<NamedExcitation> = Vec::new();
     match root.tables("excitations", issues) {
@@ -318,8 +341,9 @@ fn read_excitations(
                 if !is_word(&ename) {
                     issues.push(path.clone(), format!("{ename:?} must be a non-empty word of letters, digits, _ - . (it names history files and is listed in the results' metadata)"));
                 }
+                take(&mut e, issues);
                 // Read the excitation keys from the same table (name is consumed above).
-                if let Some(x) = read_named_excitation(e, model, issues) {
+                if let Some(x) = read_named_excitation(e, model, issues, extra) {
                     if excitations.iter().any(|n| n.name == ename) {
                         issues.push(path, format!("excitation name {ename:?} is used twice"));
                     }
@@ -344,7 +368,7 @@ fn read_excitations(
 /// `[spectrum]`: the response spectrum of the earthquake-type metrics — `damping` (default 0.05),
 /// the periods (`periods_s = [...]`, or `t_min_s`, `t_max_s`, `count`: log-spaced, default
 /// 0.05–4 s, 20) and the error band `band_s = [low, high]` (default every period).
-fn read_spectrum(root: &mut Fields<'_>, issues: &mut Issues) -> SpectrumSpec {
+pub(crate) fn read_spectrum(root: &mut Fields<'_>, issues: &mut Issues) -> SpectrumSpec {
     let mut spec = super::quake::default_spectrum();
     let Some(mut t) = root.table("spectrum", issues) else {
         return spec;
@@ -534,7 +558,7 @@ fn read_output(root: &mut Fields<'_>, issues: &mut Issues) -> (Option<PathBuf>, 
 }
 
 /// `[solver]`: the solver and the samples per work item.
-fn read_study_solver(root: &mut Fields<'_>, issues: &mut Issues) -> (Solver, usize) {
+pub(crate) fn read_study_solver(root: &mut Fields<'_>, issues: &mut Issues) -> (Solver, usize) {
     let Some(mut s) = root.table("solver", issues) else {
         return (Solver::default(), 64);
     };
@@ -686,7 +710,10 @@ fn read_variable(mut f: Fields<'_>, issues: &mut Issues) -> Option<Variable> {
 }
 
 /// A variable's `name`: a registered parameter that may vary.
-fn read_parameter(f: &mut Fields<'_>, issues: &mut Issues) -> Option<&'static ParamInfo> {
+pub(crate) fn read_parameter(
+    f: &mut Fields<'_>,
+    issues: &mut Issues,
+) -> Option<&'static ParamInfo> {
     let Some(n) = f.str("name", issues) else {
         issues.push(
             f.path_of("name"),
@@ -1068,9 +1095,14 @@ fn read_named_excitation(
     f: Fields<'_>,
     model: &ModelParams,
     issues: &mut Issues,
+    extra: &[&str],
 ) -> Option<ExcitationSpec> {
-    // The excitation reader reports unknown keys; `name` was already consumed from this table.
-    spec::read_excitation_with_extra(f, model, issues, &["name"])
+    // The excitation reader reports unknown keys; `name` (and `extra`) were already consumed
+    // from this table.
+    let known: Vec<&str> = std::iter::once("name")
+        .chain(extra.iter().copied())
+        .collect();
+    spec::read_excitation_with_extra(f, model, issues, &known)
 }
 
 #[cfg(test)]

@@ -46,6 +46,9 @@ pub enum Command {
     /// Iterate the drive of an earthquake test on the virtual table until it reproduces the target acceleration.
     #[command(long_about = ITERATE_HELP)]
     Iterate(IterateArgs),
+    /// Choose the controller's gains that give the best fidelity on a test plan (CMA-ES on the virtual table).
+    #[command(long_about = TUNE_HELP)]
+    Tune(TuneArgs),
     /// Benchmark the kernel (simulated seconds per wall second) and optionally gate on a baseline.
     Bench(BenchArgs),
     /// List every model parameter: name, unit, default, valid range, source and meaning.
@@ -387,6 +390,49 @@ pub struct IterateArgs {
     /// Overwrite outputs already in --out.
     #[arg(long)]
     pub force: bool,
+}
+
+const TUNE_HELP: &str = "Choose the controller's gains (the TVC gains and leads, optionally the notches) that give \
+the best fidelity on a test plan, at full scale, on the virtual table: CMA-ES (Hansen 2016) over the gains' \
+box, each generation's candidates x uncertain draws x motions run as one batch on every core.
+
+The tuning file (TOML; docs/formats.md \"Tuning files\"): [tune] name, seed, generations; [[gains]] name, \
+low, high (start: the model's value); [objective] metric = weight (any result metric as an error: |ln r| for \
+a ratio whose ideal is 1, |phase| for a phase error); [constraints] valve_cmd_fraction (max |u| / u_lim, \
+default 0.9; every run must also end: the stroke and pressure guard); [[excitations]] as a study's, with a \
+weight; [[uncertain]] as a study's variables and [robust] draws, statistic = \"mean\" | \"quantile\", \
+quantile; [model.*], [spectrum], [solver] as a study's; [output] dir.
+
+The same seed gives the same gains bit for bit on any --threads. Writes, into the output folder: tuned.toml \
+(the model with the tuned gains: `--model` of run, sim, iterate, tune), evaluations.parquet (every run of \
+every candidate: generation, candidate, draw, gains, uncertain values, excitation, metrics, objective), \
+generations.parquet (a row per generation) and report.html (the objective per generation, published \
+against tuned gains per motion: response spectra overlaid, errors, the margin to valve saturation).
+
+  study tune studies/tune_record.toml
+  study tune studies/tune_record.toml --model fitted.toml --out tuned_fitted";
+
+#[derive(Debug, clap::Args)]
+pub struct TuneArgs {
+    /// The tuning file (TOML).
+    pub file: PathBuf,
+    /// A model file (e.g. `study fit`'s output, a specimen included) to tune on instead of the
+    /// defaults; the tuning file's [model.*] tables change it further.
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Output folder (default: the file's [output] dir, else the tuning's name); files already
+    /// there are refused unless --force.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Worker threads (0 = all cores); the result does not depend on it.
+    #[arg(long, default_value_t = 0)]
+    pub threads: usize,
+    /// Overwrite outputs already in the output folder.
+    #[arg(long)]
+    pub force: bool,
+    /// Print only the result (no line per generation).
+    #[arg(long, short)]
+    pub quiet: bool,
 }
 
 #[derive(Debug, clap::Args)]

@@ -185,7 +185,7 @@ fn write_outputs(
 }
 
 /// `bytes` written to `path.tmp`, then renamed into place (removed if the write fails).
-fn write_whole(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+pub(crate) fn write_whole(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
     let file = tables::AtomicFile::new(path);
     std::fs::write(&file.tmp, bytes)
         .and_then(|_| file.commit())

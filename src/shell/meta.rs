@@ -102,6 +102,8 @@ pub enum Kind {
     Spectrum,
     DriveIteration,
     FrequencyResponse,
+    TuneEvaluations,
+    TuneGenerations,
 }
 
 impl Kind {
@@ -116,6 +118,8 @@ impl Kind {
             Kind::Spectrum => "response_spectrum",
             Kind::DriveIteration => "drive_iteration",
             Kind::FrequencyResponse => "frequency_response",
+            Kind::TuneEvaluations => "tune_evaluations",
+            Kind::TuneGenerations => "tune_generations",
         }
     }
 }

@@ -27,6 +27,8 @@ pub mod slurm_cmd;
 pub mod state_map;
 pub mod synth_cmd;
 pub mod tables;
+pub mod tune_cmd;
+pub mod tune_report;
 
 use crate::orchestration::toml_fields::InputError;
 
@@ -64,5 +66,6 @@ pub fn dispatch(cli: cli::Cli) -> anyhow::Result<()> {
         cli::Command::Merge(a) => merge_cmd::run(&a),
         cli::Command::Slurm(a) => slurm_cmd::run(&a),
         cli::Command::Iterate(a) => iterate_cmd::run(&a),
+        cli::Command::Tune(a) => tune_cmd::run(&a),
     }
 }

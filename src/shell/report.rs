@@ -341,7 +341,7 @@ pub fn state_map_section(map: &StateMap) -> anyhow::Result<String> {
     Ok(h)
 }
 
-fn esc(s: &str) -> String {
+pub(crate) fn esc(s: &str) -> String {
     s.replace('&', "&amp;")
         .replace('<', "&lt;")
         .replace('>', "&gt;")

@@ -66,7 +66,7 @@ pub fn plan_for(spec: &StudySpec, base: &Path) -> anyhow::Result<Plan> {
 /// The excitations' references: each made once, with the study's spectrum where it is not a
 /// sine; one that depends on the sample (`varied` paths) is made per sample by the plan, and
 /// gets an empty placeholder here.
-fn references(
+pub fn references(
     spec: &StudySpec,
     base: &Path,
     varied: &[String],

@@ -101,3 +101,17 @@ pub fn python3() -> Command {
     c.env("PYTHONPATH", path);
     c
 }
+
+/// Runs the `study` binary of this build with `args`: (exit code, stdout, stderr).
+#[allow(dead_code)] // used by the command-line tests
+pub fn study(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_study"))
+        .args(args)
+        .output()
+        .expect("run study");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into(),
+        String::from_utf8_lossy(&out.stderr).into(),
+    )
+}

@@ -1,0 +1,379 @@
+//! `study tune`: CMA-ES over the controller's gains on a test plan; the tuned model file, every
+//! evaluation in Parquet and an HTML report.
+
+use super::cli::TuneArgs;
+use super::meta::{self, Key, Kind};
+use super::tables::{self, Column};
+use super::{run_cmd, tune_report, BadInput};
+use crate::kernel::excitation::Reference;
+use crate::kernel::metrics::Metrics;
+use crate::kernel::params::ModelParams;
+use crate::orchestration::batch::Row;
+use crate::orchestration::sim::{self, SimOutcome};
+use crate::orchestration::spec::SimSpec;
+use crate::orchestration::tune::{self, Evaluation, GenerationSummary, Tuned, Tuner};
+use crate::orchestration::tune_spec::TuneSpec;
+use anyhow::Context;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// The files the output folder receives.
+const OUTPUTS: [&str; 4] = [
+    "tuned.toml",
+    "evaluations.parquet",
+    "generations.parquet",
+    "report.html",
+];
+
+pub fn run(args: &TuneArgs) -> anyhow::Result<()> {
+    let text = std::fs::read_to_string(&args.file)
+        .map_err(|e| BadInput(format!("{}: cannot read: {e}", args.file.display())))?;
+    let base_model = super::campaign_io::load_model(args.model.as_deref())?;
+    let spec = TuneSpec::from_toml_on(&text, &args.file.display().to_string(), base_model)?;
+    let dir = args.out.clone().unwrap_or_else(|| spec.output.clone());
+    let paths = outputs(&dir, args.force)?;
+    let base = args.file.parent().unwrap_or(Path::new("."));
+    let references = run_cmd::references(&tune::study_of(&spec), base, &[])?;
+    let pool = run_cmd::pool(args.threads)?;
+    // stdout is not held while the search runs: its lines are printed from a pool thread.
+    header(
+        &mut std::io::stdout().lock(),
+        args,
+        &spec,
+        pool.current_num_threads(),
+    )?;
+    let mut tuner = Tuner::new(spec, references.clone());
+    let t0 = Instant::now();
+    let quiet = args.quiet;
+    let tuned = pool.install(|| {
+        tuner.run(|g, _| {
+            if !quiet {
+                print_generation(g);
+            }
+        })
+    })?;
+    let wall = t0.elapsed().as_secs_f64();
+    let mut o = std::io::stdout().lock();
+    result(&mut o, &tuner, &tuned, wall)?;
+    let nominal = nominal_runs(&tuner, &tuned, &references)?;
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    write_model(&paths[0], &args.file, &tuner, &tuned)?;
+    write_evaluations(&paths[1], &tuner, &tuned, &text)?;
+    write_generations(&paths[2], &tuned.generations)?;
+    let page = tune_report::html(&tuner, &tuned, &nominal, &references, wall)?;
+    super::iterate_cmd::write_whole(&paths[3], page.as_bytes())?;
+    let list: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
+    writeln!(o, "\n  wrote       {}", list.join(", "))?;
+    writeln!(
+        o,
+        "  use it      study run STUDY.toml --model {}",
+        paths[0].display()
+    )?;
+    Ok(())
+}
+
+/// The output paths, refused before any work where one exists and --force is not given.
+fn outputs(dir: &Path, force: bool) -> anyhow::Result<Vec<PathBuf>> {
+    if dir.exists() && !dir.is_dir() {
+        return Err(BadInput(format!("{}: exists and is not a folder", dir.display())).into());
+    }
+    let paths: Vec<PathBuf> = OUTPUTS.iter().map(|f| dir.join(f)).collect();
+    if let Some(p) = paths.iter().find(|p| p.exists()) {
+        if !force {
+            return Err(
+                BadInput(format!("{}: exists (--force overwrites it)", p.display())).into(),
+            );
+        }
+    }
+    Ok(paths)
+}
+
+fn header(
+    o: &mut impl Write,
+    args: &TuneArgs,
+    spec: &TuneSpec,
+    threads: usize,
+) -> anyhow::Result<()> {
+    writeln!(o, "study tune {}", args.file.display())?;
+    if let Some(m) = &args.model {
+        writeln!(
+            o,
+            "  model       {} (the tuning file's [model.*] on top)",
+            m.display()
+        )?;
+    }
+    let gains: Vec<String> = spec
+        .gains
+        .iter()
+        .map(|g| {
+            format!(
+                "{} in [{}, {}] from {}",
+                g.info.path(),
+                g.low,
+                g.high,
+                g.start
+            )
+        })
+        .collect();
+    writeln!(o, "  gains       {}", gains.join("; "))?;
+    for (e, w) in spec.excitations.iter().zip(&spec.weights) {
+        writeln!(
+            o,
+            "  plan        {} (weight {w}): {}",
+            e.name,
+            e.spec.describe()
+        )?;
+    }
+    let terms: Vec<String> = spec
+        .objective
+        .iter()
+        .map(|(m, w)| format!("{w} x {m}"))
+        .collect();
+    writeln!(o, "  objective   {}", terms.join(" + "))?;
+    writeln!(o, "  constraints every run ends (stroke, pressure, divergence guard); max |u| <= {:.0} % of u_lim", 100.0 * spec.valve_cmd_fraction)?;
+    if !spec.uncertain.is_empty() {
+        let names: Vec<String> = spec.uncertain.iter().map(|v| v.path()).collect();
+        writeln!(
+            o,
+            "  robust      {:?} over {} draws of {}",
+            spec.statistic,
+            spec.draws,
+            names.join(", ")
+        )?;
+    }
+    let s = spec.search;
+    let lambda = s
+        .population
+        .unwrap_or_else(|| crate::orchestration::cmaes::default_population(spec.gains.len()));
+    writeln!(o, "  search      CMA-ES, population {lambda}, sigma0 {}, at most {} generations, seed {}, {threads} threads", s.sigma0, s.generations, spec.seed)?;
+    if !args.quiet {
+        writeln!(
+            o,
+            "\n  {:>10} {:>5} {:>8} {:>12} {:>12} {:>8}",
+            "generation", "runs", "feasible", "best", "best so far", "sigma"
+        )?;
+    }
+    Ok(())
+}
+
+fn print_generation(g: &GenerationSummary) {
+    let v = |x: f64| {
+        if x.is_nan() {
+            "-".to_string()
+        } else {
+            format!("{x:.5}")
+        }
+    };
+    println!(
+        "  {:>10} {:>5} {:>8} {:>12} {:>12} {:>8.4}",
+        g.generation,
+        g.evaluated,
+        g.feasible,
+        v(g.best),
+        v(g.best_so_far),
+        g.sigma
+    );
+}
+
+/// The tuned gains against the start, and the objective's fall.
+fn result(o: &mut impl Write, tuner: &Tuner, t: &Tuned, wall: f64) -> anyhow::Result<()> {
+    let runs: usize = t.evaluations.iter().map(|e| e.rows.len()).sum();
+    writeln!(
+        o,
+        "\n  stopped     {} after {:.1} s ({} runs)",
+        t.stopped, wall, runs
+    )?;
+    writeln!(o, "\n  {:<22} {:>12} {:>12}", "gain", "start", "tuned")?;
+    for (i, g) in tuner.spec.gains.iter().enumerate() {
+        writeln!(
+            o,
+            "  {:<22} {:>12.6} {:>12.6}",
+            g.info.path(),
+            t.start.gains[i],
+            t.best.gains[i]
+        )?;
+    }
+    let q = tuner.reported_quantile();
+    let row = |o: &mut dyn Write, name: &str, a: f64, b: f64| {
+        writeln!(
+            o,
+            "  {:<22} {:>12.5} {:>12.5} {:>+8.1} %",
+            name,
+            a,
+            b,
+            100.0 * (b / a - 1.0)
+        )
+    };
+    row(o, "objective", t.start.objective, t.best.objective)?;
+    if tuner.draws.len() > 1 {
+        row(o, "mean over draws", t.start.mean, t.best.mean)?;
+        row(
+            o,
+            &format!("{:.0}th percentile", 100.0 * q),
+            t.start.quantile,
+            t.best.quantile,
+        )?;
+    }
+    row(
+        o,
+        "max |u| / u_lim",
+        t.start.valve_fraction,
+        t.best.valve_fraction,
+    )?;
+    if let Some(why) = &t.start.infeasible {
+        writeln!(o, "  the start is infeasible: {why}")?;
+    }
+    Ok(())
+}
+
+/// The start and the tuned gains on the nominal model (no uncertain draw), each excitation with
+/// its history: for the report's spectra and errors.
+pub struct Nominal {
+    pub start: Vec<SimOutcome>,
+    pub tuned: Vec<SimOutcome>,
+}
+
+fn nominal_runs(tuner: &Tuner, t: &Tuned, refs: &[Reference]) -> anyhow::Result<Nominal> {
+    let run = |gains: &[f64]| -> anyhow::Result<Vec<SimOutcome>> {
+        let model = with_gains(tuner, gains);
+        tuner
+            .spec
+            .excitations
+            .iter()
+            .zip(refs)
+            .map(|(e, r)| {
+                let spec = SimSpec {
+                    model: model.clone(),
+                    excitation: e.spec.clone(),
+                    solver: tuner.spec.solver,
+                };
+                sim::run_sim(&spec, r)
+                    .map_err(|err| anyhow::anyhow!("excitation {}: {err}", e.name))
+            })
+            .collect()
+    };
+    let (start, tuned) = rayon::join(|| run(&t.start.gains), || run(&t.best.gains));
+    Ok(Nominal {
+        start: start?,
+        tuned: tuned?,
+    })
+}
+
+/// The tuning's model with `gains` set.
+pub fn with_gains(tuner: &Tuner, gains: &[f64]) -> ModelParams {
+    let mut m = tuner.spec.model.clone();
+    for (g, v) in tuner.spec.gains.iter().zip(gains) {
+        (g.info.set)(&mut m, *v);
+    }
+    m
+}
+
+/// tuned.toml: the model with the tuned gains, headed by what was tuned and how much it gained.
+fn write_model(path: &Path, file: &Path, tuner: &Tuner, t: &Tuned) -> anyhow::Result<()> {
+    let mut root = toml::Table::new();
+    let model = with_gains(tuner, &t.best.gains);
+    root.insert(
+        "model".into(),
+        toml::Value::Table(crate::orchestration::spec::model_table(&model)),
+    );
+    let gains: Vec<String> = tuner
+        .spec
+        .gains
+        .iter()
+        .zip(&t.best.gains)
+        .map(|(g, v)| format!("# {} = {v:?}", g.info.path()))
+        .collect();
+    let head = format!(
+        "# Tuned by `study tune {}` (vshake {}): objective {:.6} -> {:.6} ({:+.1} %)\n{}\n",
+        file.display(),
+        env!("CARGO_PKG_VERSION"),
+        t.start.objective,
+        t.best.objective,
+        100.0 * (t.best.objective / t.start.objective - 1.0),
+        gains.join("\n")
+    );
+    let text = head + &toml::to_string(&root)?;
+    super::iterate_cmd::write_whole(path, text.as_bytes())
+}
+
+/// evaluations.parquet: a row per run (generation, candidate, draw, excitation).
+fn write_evaluations(path: &Path, tuner: &Tuner, t: &Tuned, text: &str) -> anyhow::Result<()> {
+    let mut cols = run_columns(tuner, t);
+    let runs: Vec<(&Evaluation, usize)> = t
+        .evaluations
+        .iter()
+        .flat_map(|e| (0..e.rows.len()).map(move |i| (e, i)))
+        .collect();
+    let metrics: Vec<&str> = Metrics::NAN.columns().iter().map(|c| c.0).collect();
+    for (k, m) in metrics.iter().enumerate() {
+        let v = runs.iter().map(|(e, i)| e.rows[*i].metrics.columns()[k].1);
+        cols.push((m.to_string(), Column::F64(v.collect())));
+    }
+    let n_e = tuner.spec.excitations.len();
+    let draw_objective = runs.iter().map(|(e, i)| e.per_draw[i / n_e]);
+    cols.push((
+        "draw_objective".into(),
+        Column::F64(draw_objective.collect()),
+    ));
+    let objective = runs.iter().map(|(e, _)| e.objective);
+    cols.push(("objective".into(), Column::F64(objective.collect())));
+    let feasible = runs.iter().map(|(e, _)| e.infeasible.is_none());
+    cols.push(("feasible".into(), Column::Bool(feasible.collect())));
+    let mut m = meta::header(Kind::TuneEvaluations);
+    m.push(meta::pair(Key::Spec, text));
+    m.push(meta::pair(Key::Seed, tuner.spec.seed));
+    tables::write_table(path, cols, &m).with_context(|| format!("writing {}", path.display()))
+}
+
+/// The columns that say which run a row is: generation, candidate, draw, the gains and the
+/// uncertain parameters, the excitation, the status.
+fn run_columns(tuner: &Tuner, t: &Tuned) -> Vec<(String, Column)> {
+    let n_e = tuner.spec.excitations.len();
+    let runs: Vec<(&Evaluation, usize, &Row)> = t
+        .evaluations
+        .iter()
+        .flat_map(|e| e.rows.iter().enumerate().map(move |(i, r)| (e, i, r)))
+        .collect();
+    let int = |f: &dyn Fn(&(&Evaluation, usize, &Row)) -> usize| {
+        Column::U32(runs.iter().map(|x| f(x) as u32).collect())
+    };
+    let mut cols = vec![
+        ("generation".to_string(), int(&|x| x.0.generation)),
+        ("candidate".into(), int(&|x| x.0.candidate)),
+        ("draw".into(), int(&|x| x.1 / n_e)),
+    ];
+    for (c, info) in tuner.columns().iter().enumerate() {
+        let v = runs.iter().map(|x| x.2.values[c]);
+        cols.push((info.column_name(), Column::F64(v.collect())));
+    }
+    let names = &tuner.spec.excitations;
+    let name = runs
+        .iter()
+        .map(|x| names[x.2.excitation as usize].name.clone());
+    cols.push(("excitation".into(), Column::Str(name.collect())));
+    let status = runs.iter().map(|x| x.2.status.label().to_string());
+    cols.push(("status".into(), Column::Str(status.collect())));
+    let reason = runs.iter().map(|x| x.2.status.detail());
+    cols.push(("fail_reason".into(), Column::OptStr(reason.collect())));
+    cols
+}
+
+/// generations.parquet: a row per generation.
+fn write_generations(path: &Path, gens: &[GenerationSummary]) -> anyhow::Result<()> {
+    let int = |f: &dyn Fn(&GenerationSummary) -> usize| {
+        Column::U32(gens.iter().map(|g| f(g) as u32).collect())
+    };
+    let num = |f: &dyn Fn(&GenerationSummary) -> f64| Column::F64(gens.iter().map(f).collect());
+    let cols = vec![
+        ("generation".to_string(), int(&|g| g.generation)),
+        ("candidates".into(), int(&|g| g.evaluated)),
+        ("feasible".into(), int(&|g| g.feasible)),
+        ("best_objective".into(), num(&|g| g.best)),
+        ("best_so_far".into(), num(&|g| g.best_so_far)),
+        ("sigma".into(), num(&|g| g.sigma)),
+        ("spread".into(), num(&|g| g.spread)),
+    ];
+    let m = meta::header(Kind::TuneGenerations);
+    tables::write_table(path, cols, &m).with_context(|| format!("writing {}", path.display()))
+}
