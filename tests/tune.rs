@@ -75,7 +75,8 @@ fn the_evaluations_table_holds_every_run_and_its_objective() {
     let d = tempfile::tempdir().unwrap();
     let text = std::fs::read_to_string(example("tune_record.toml"))
         .unwrap()
-        .replace("generations = 100", "generations = 3");
+        .replace("generations = 100", "generations = 3")
+        .replace("records/", &example("records/"));
     let file = d.path().join("short.toml");
     std::fs::write(&file, text).unwrap();
     let out = d.path().join("o");
