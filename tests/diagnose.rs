@@ -1079,3 +1079,31 @@ fn records_hiding_nothing_stay_none() {
         r.stdout
     );
 }
+
+/// compare, fit and diagnose report their progress with --log-progress (a plain line every 5 s
+/// and a last one for an open count); without it, when stderr is not a terminal, nothing.
+#[test]
+fn progress_lines_for_batch_logs() {
+    let d = tempfile::tempdir().unwrap();
+    let c = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/studies/tutorial/campaign.toml"
+    );
+    let out = d.path().join("f.toml");
+    let o = out.to_str().unwrap();
+    let fit = ["fit", c, "--effect", "seal_friction", "--out", o];
+    let (code, _, stderr) = study(&[&fit[..], &["--log-progress"]].concat());
+    assert_eq!(code, 0, "{stderr}");
+    let last = stderr.lines().last().unwrap_or_default();
+    let runs: usize = last
+        .strip_prefix("fit: ")
+        .and_then(|l| l.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no progress line in {stderr:?}"));
+    assert!(runs >= 8, "{last}");
+    let (_, _, quiet) = study(&fit);
+    assert!(!quiet.contains("model runs"), "{quiet}");
+    let (code, _, stderr) = study(&["compare", c, "--log-progress"]);
+    assert_eq!(code, 0);
+    assert!(stderr.contains("compare: 8/8 runs (100%)"), "{stderr}");
+}

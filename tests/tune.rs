@@ -170,6 +170,40 @@ fn the_robust_tuning_lowers_the_90th_percentile() {
 }
 
 #[test]
+fn no_feasible_candidate_writes_no_tuned_model() {
+    let d = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(example("tune_record.toml"))
+        .unwrap()
+        .replace("generations = 100", "generations = 2")
+        .replace("valve_cmd_fraction = 0.9", "valve_cmd_fraction = 0.01")
+        .replace("records/", &example("records/"));
+    let file = d.path().join("tight.toml");
+    std::fs::write(&file, text).unwrap();
+    let out = d.path().join("o");
+    let (code, stdout, stderr) = study(&[
+        "tune",
+        file.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
+    assert_eq!(code, 1, "{stdout}\n{stderr}");
+    assert!(
+        stderr.contains("no candidate met the constraints") && stderr.contains("limit 1.0 %"),
+        "{stderr}"
+    );
+    assert!(stdout.contains("infeasible"), "{stdout}");
+    assert!(!out.join("tuned.toml").exists() && !out.join("gains.toml").exists());
+    let why =
+        vshake::shell::tables::read_strings(&out.join("evaluations.parquet"), "infeasible_reason")
+            .unwrap();
+    assert!(
+        why.iter().all(|w| w.starts_with("valve command")),
+        "{why:?}"
+    );
+}
+
+#[test]
 fn bad_tuning_files_are_refused_before_any_work() {
     let d = tempfile::tempdir().unwrap();
     let good = std::fs::read_to_string(example("tune_record.toml")).unwrap();
@@ -223,7 +257,7 @@ fn tuning_at_reduced_amplitude_fails_at_full_scale() {
         let mut args = vec!["sim", test.as_str(), "-q"];
         let m;
         if let Some(p) = model {
-            m = p.join("tuned.toml").to_str().unwrap().to_string();
+            m = p.join("gains.toml").to_str().unwrap().to_string();
             args.extend(["--model", m.as_str()]);
         }
         let (code, stdout, stderr) = study(&args);

@@ -520,9 +520,18 @@ impl CompareSpec {
     /// Compares every test, in parallel on the current thread pool; a model failure stops the
     /// comparison with its test and reason.
     pub fn run(&self) -> Result<Vec<Compared>, String> {
+        self.run_with(&|| {})
+    }
+
+    /// [`CompareSpec::run`], calling `done` as each test is compared (from any thread).
+    pub fn run_with(&self, done: &(dyn Fn() + Sync)) -> Result<Vec<Compared>, String> {
         self.tests
             .par_iter()
-            .map(|t| compare_test(t, &self.solver))
+            .map(|t| {
+                let c = compare_test(t, &self.solver);
+                done();
+                c
+            })
             .collect()
     }
 }

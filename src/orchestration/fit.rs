@@ -355,6 +355,9 @@ pub struct Problem {
     pub tests: Vec<TestData>,
     /// The integrator's settings for every evaluation.
     pub solver: Solver,
+    /// Told the number of model runs (test × parameter set) each time a group of them finishes,
+    /// from any thread: the shell's progress display.
+    pub progress: Option<std::sync::Arc<dyn Fn(usize) + Send + Sync>>,
 }
 
 impl TestData {
@@ -409,6 +412,7 @@ impl Problem {
         Problem {
             tests,
             solver: Solver::default(),
+            progress: None,
         }
     }
 
@@ -518,6 +522,9 @@ impl Problem {
                     Ok(r) => r,
                     Err(e) => return vec![Err(format!("test {:?}: {e}", t.name)); hi - lo],
                 };
+                if let Some(p) = &self.progress {
+                    p(hi - lo);
+                }
                 (0..hi - lo)
                     .map(|l| match res[l].status {
                         LaneStatus::Failed { time_s, reason } => Err(format!(

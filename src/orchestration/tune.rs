@@ -278,7 +278,7 @@ impl Tuner {
                     ok = false;
                     violation += frac - spec.valve_cmd_fraction;
                     why.get_or_insert(format!(
-                        "valve command {:.1} % of u_lim on {name}, draw {d} (limit {:.0} %)",
+                        "valve command {:.1} % of u_lim on {name}, draw {d} (limit {:.1} %)",
                         100.0 * frac,
                         100.0 * spec.valve_cmd_fraction
                     ));

@@ -46,7 +46,7 @@
 //! `[model.*]`, `[spectrum]`, `[solver]` are a study's; `[output] dir` is the folder of results
 //! (default: the tuning's name).
 
-use super::spec;
+use super::spec::{self, ExcitationSpec};
 use super::study::{self, NamedExcitation, Variable};
 use super::toml_fields::{Fields, InputError, Issues};
 use crate::kernel::params::{Component, ModelParams, ParamInfo};
@@ -134,6 +134,25 @@ pub fn applies(metric: &str, sine: bool) -> bool {
     }
 }
 
+/// Whether `metric` is measured on `e` at the controller rate `f_s`: [`applies`], and for a sine
+/// a harmonic (or the THD that sums them) below the Nyquist frequency.
+pub fn measures(metric: &str, e: &ExcitationSpec, f_s: f64) -> bool {
+    let ExcitationSpec::Sine { sine, .. } = e else {
+        return applies(metric, false);
+    };
+    let top = crate::kernel::metrics::Metrics::highest_harmonic(sine.freq_hz, f_s);
+    let lowest = match metric {
+        "thd_odd_ratio" => 3,
+        "thd_even_ratio" => 2,
+        m => m
+            .strip_prefix('h')
+            .and_then(|r| r.strip_suffix("_ratio"))
+            .and_then(|k| k.parse().ok())
+            .unwrap_or(1),
+    };
+    applies(metric, true) && lowest <= top
+}
+
 const ROOT_KEYS: [&str; 11] = [
     "tune",
     "gains",
@@ -170,7 +189,7 @@ impl TuneSpec {
             &["weight"],
             |f, issues| weights.push(read_weight(f, issues)),
         );
-        let objective = read_objective(&mut root, &excitations, &mut issues);
+        let objective = read_objective(&mut root, &excitations, model.controller.f_s, &mut issues);
         let valve_cmd_fraction = read_constraints(&mut root, &mut issues);
         let uncertain = study::read_variables_at(&mut root, "uncertain", &model, &mut issues);
         let (draws, statistic) = read_robust(&mut root, !uncertain.is_empty(), &mut issues);
@@ -231,13 +250,20 @@ fn read_header(root: &mut Fields<'_>, issues: &mut Issues) -> Header {
         _ => {}
     }
     let description = t.str("description", issues).unwrap_or("").to_string();
-    let seed = t.int("seed", issues).unwrap_or(0).max(0) as u64;
+    let seed = t.int("seed", issues).unwrap_or(0);
+    if seed < 0 {
+        issues.push(t.path_of("seed"), "must not be negative");
+    }
+    let seed = seed.max(0) as u64;
     if let Some(g) = positive_int(&mut t, "generations", 100_000, issues) {
         search.generations = g;
     }
     search.population = positive_int(&mut t, "population", 100_000, issues);
-    if search.population.is_some_and(|p| p < 4) {
-        issues.push(t.path_of("population"), "at least 4");
+    if let Some(p) = search.population.filter(|p| *p < 4) {
+        issues.push(
+            t.path_of("population"),
+            format!("{p} must be in 4..=100000"),
+        );
     }
     if let Some(s) = t.f64("sigma0", issues) {
         if !(s > 0.0 && s <= 1.0) {
@@ -350,6 +376,7 @@ fn read_weight(f: &mut Fields<'_>, issues: &mut Issues) -> f64 {
 fn read_objective(
     root: &mut Fields<'_>,
     excitations: &[NamedExcitation],
+    f_s: f64,
     issues: &mut Issues,
 ) -> Vec<(&'static str, f64)> {
     let Some(mut t) = root.table("objective", issues) else {
@@ -370,16 +397,15 @@ fn read_objective(
         if !(w.is_finite() && w > 0.0) {
             issues.push(t.path_of(&k), format!("{w} must be a positive weight"));
         }
-        let sine = |e: &NamedExcitation| e.spec.is_sine();
-        if !excitations.is_empty() && !excitations.iter().any(|e| applies(metric, sine(e))) {
-            let kind = if SINE_ONLY.contains(&metric) {
-                "a sine"
+        if !excitations.is_empty() && !excitations.iter().any(|e| measures(metric, &e.spec, f_s)) {
+            let why = if SINE_ONLY.contains(&metric) {
+                "is measured only on a sine (and a harmonic only below the Nyquist frequency f_s/2)"
             } else {
-                "a record"
+                "is measured only on a motion that is not a sine (a record, stochastic, sweep, random)"
             };
             issues.push(
                 t.path_of(&k),
-                format!("{metric} is measured only on {kind}, and the plan has none"),
+                format!("{metric} {why}, and the plan has no excitation where it is"),
             );
         }
         objective.push((metric, w));
@@ -583,7 +609,10 @@ weight = 2.0
     #[test]
     fn a_metric_the_plan_does_not_measure_is_refused() {
         let p = problems(&TUNE.replace("spectral_err_mean = 1.0", "thd_odd_ratio = 1.0"));
-        assert_eq!(p, vec!["objective.thd_odd_ratio: thd_odd_ratio is measured only on a sine, and the plan has none"]);
+        assert!(
+            p[0].starts_with("objective.thd_odd_ratio: thd_odd_ratio is measured only on a sine"),
+            "{p:?}"
+        );
         let p = problems(&TUNE.replace("rms_err_accel_ratio", "rms_err_acel_ratio"));
         assert!(
             p[0].starts_with(
@@ -591,6 +620,21 @@ weight = 2.0
             ),
             "{p:?}"
         );
+    }
+
+    #[test]
+    fn a_harmonic_above_nyquist_is_not_measured() {
+        let sine = "[[excitations]]\nname = \"s\"\nkind = \"sine\"\nfreq_hz = 60.0\namp_g = 0.1\n";
+        let cut = TUNE.find("[[excitations]]").unwrap();
+        let text =
+            format!("{}{sine}", &TUNE[..cut]).replace("spectral_err_mean = 1.0", "h9_ratio = 1.0");
+        let p = problems(&text);
+        assert!(p[0].starts_with("objective.h9_ratio: h9_ratio is measured only on a sine (and a harmonic only below"), "{p:?}");
+        // 60 Hz at 1024 Hz: h8 (480 Hz) is below Nyquist, and so is the odd THD (h3 … h7).
+        let ok = text
+            .replace("h9_ratio", "h8_ratio")
+            .replace("rms_err_accel_ratio", "thd_odd_ratio");
+        assert_eq!(problems(&ok), Vec::<String>::new());
     }
 
     #[test]

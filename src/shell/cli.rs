@@ -189,6 +189,10 @@ pub struct CompareArgs {
     /// Worker threads (0 = every core).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
+    /// Progress as a plain line every 5 s on stderr (for batch-job logs) instead of the
+    /// terminal's progress line.
+    #[arg(long)]
+    pub log_progress: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -221,6 +225,10 @@ pub struct FitArgs {
     /// why), `cpu`, or `cuda` (refused with the cause where no GPU can run it).
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     pub backend: Backend,
+    /// Progress as a plain line every 5 s on stderr (for batch-job logs) instead of the
+    /// terminal's progress line.
+    #[arg(long)]
+    pub log_progress: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -251,6 +259,10 @@ pub struct DiagnoseArgs {
     /// why), `cpu`, or `cuda` (refused with the cause where no GPU can run it).
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     pub backend: Backend,
+    /// Progress as a plain line every 5 s on stderr (for batch-job logs) instead of the
+    /// terminal's progress line.
+    #[arg(long)]
+    pub log_progress: bool,
 }
 
 /// The measured column an open-loop comparison drives the plant with.

@@ -4,6 +4,7 @@
 use super::campaign_io::{load_campaign, load_model, load_tests, report_checks};
 use super::cli::{CompareArgs, OpenLoop};
 use super::meta::{self, Key, Kind};
+use super::progress::Progress;
 use super::state_map;
 use super::tables::{self, Column};
 use super::RunFailed;
@@ -42,9 +43,11 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<()> {
         open_loop,
         solver: Default::default(),
     };
+    let progress = Progress::new("compare", spec.tests.len(), false, args.log_progress);
     let results = super::run_cmd::pool(args.threads)?
-        .install(|| spec.run())
+        .install(|| spec.run_with(&|| progress.inc(1)))
         .map_err(RunFailed)?;
+    progress.finish();
     let residual_warnings: Vec<String> = results
         .iter()
         .filter_map(Compared::residual_warning)

@@ -44,7 +44,9 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
             .map(|c| check_effect(c, "--candidates"))
             .collect::<anyhow::Result<_>>()?
     };
-    let loaded = load_problem(&args.campaign, &model, args.strict)?;
+    let mut loaded = load_problem(&args.campaign, &model, args.strict)?;
+    let progress =
+        super::fit_cmd::with_progress(&mut loaded.problem, "diagnose", args.log_progress);
     let problem = loaded.problem;
     let t0 = std::time::Instant::now();
     let d = super::run_cmd::pool(args.threads)?.install(|| {
@@ -52,6 +54,7 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
         d.map_states(&loaded.aligned);
         d
     });
+    progress.finish();
     let secs = t0.elapsed().as_secs_f64();
     if let Some(f) = &d.baseline.failure {
         return Err(RunFailed(format!("the starting model fails: {f}")).into());

@@ -2,12 +2,14 @@
 
 use super::campaign_io::{load_campaign, load_model, load_tests, report_checks, LoadedCampaign};
 use super::cli::FitArgs;
+use super::progress::Progress;
 use super::{BadInput, RunFailed};
 use crate::kernel::params::{EffectId, ModelParams, EFFECTS};
 use crate::orchestration::fit::{self, Free, Problem, TestData};
 use crate::orchestration::toml_fields::suggest;
 use std::io::Write;
 use std::path::Path;
+use std::sync::Arc;
 
 /// A campaign's measured tests as a fitting problem, with what was noticed reading them.
 pub struct Loaded {
@@ -163,12 +165,22 @@ pub fn print_checks(
     Ok(())
 }
 
+/// A progress display counting `problem`'s model runs (on a terminal's stderr, or a line every
+/// 5 s with `log_lines`); finish it when the work is done.
+pub fn with_progress(problem: &mut Problem, label: &str, log_lines: bool) -> Arc<Progress> {
+    let progress = Arc::new(Progress::new(label, 0, false, log_lines));
+    let p = progress.clone();
+    problem.progress = Some(Arc::new(move |n| p.inc(n)));
+    progress
+}
+
 pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     let engine = super::gpu::choose(args.backend)?
         .not_covering("a fit compares time histories at the measured samples (the CUDA kernel returns metrics only)")?;
     let model = load_model(args.model.as_deref())?;
     let free = free_parameters(&args.effect, &args.free, &model)?;
-    let loaded = load_problem(&args.campaign, &model, args.strict)?;
+    let mut loaded = load_problem(&args.campaign, &model, args.strict)?;
+    let progress = with_progress(&mut loaded.problem, "fit", args.log_progress);
     let problem = &loaded.problem;
     let t0 = std::time::Instant::now();
     let pool = super::run_cmd::pool(args.threads)?;
@@ -178,6 +190,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     let r = pool
         .install(|| fit::fit(problem, &free, args.max_iter))
         .map_err(|e| RunFailed(format!("the fit failed: {e}")))?;
+    progress.finish();
     if let Some(f) = &r.before.failure {
         return Err(RunFailed(format!("the starting model fails: {f}")).into());
     }

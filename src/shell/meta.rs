@@ -65,6 +65,8 @@ keys! {
     /// How the model was driven in a comparison (closed loop, open loop on a measured channel).
     Drive = "drive",
     Campaign = "campaign",
+    /// The command that made the file (`tune FILE --model M`).
+    Command = "command",
     /// A diagnosis's verdict in one sentence.
     Verdict = "verdict",
     /// The results file a sensitivity analysis read.

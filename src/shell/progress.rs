@@ -22,13 +22,20 @@ impl Progress {
         let terminal = std::io::stderr().is_terminal() && !log_lines;
         let bar = (!quiet && terminal).then(|| {
             let b = ProgressBar::new(total as u64);
+            // A total of 0: the count of runs is open (a fit stops where it converges).
+            let template = if total == 0 {
+                "{msg} {spinner} {pos} model runs  {per_sec}  {elapsed}"
+            } else {
+                "{msg} [{bar:30}] {pos}/{len} runs  {per_sec}  ETA {eta}"
+            };
             b.set_style(
-                ProgressStyle::with_template(
-                    "{msg} [{bar:30}] {pos}/{len} runs  {per_sec}  ETA {eta}",
-                )
-                .expect("template")
-                .progress_chars("=> "),
+                ProgressStyle::with_template(template)
+                    .expect("template")
+                    .progress_chars("=> "),
             );
+            if total == 0 {
+                b.enable_steady_tick(Duration::from_millis(200));
+            }
             b.set_message(label.to_string());
             b
         });
@@ -55,6 +62,13 @@ impl Progress {
                 *last = Instant::now();
                 let t = self.start.elapsed().as_secs_f64();
                 let rate = done as f64 / t.max(1e-9);
+                if self.total == 0 {
+                    eprintln!(
+                        "{}: {done} model runs, {rate:.0} runs/s, elapsed {t:.0} s",
+                        self.label
+                    );
+                    return;
+                }
                 let eta = (self.total - done) as f64 / rate.max(1e-9);
                 eprintln!(
                     "{}: {done}/{} runs ({:.0}%), {rate:.0} runs/s, elapsed {t:.0} s, ETA {eta:.0} s",
@@ -69,6 +83,13 @@ impl Progress {
     pub fn finish(&self) {
         if let Some(b) = &self.bar {
             b.finish_and_clear();
+        }
+        // An open count's last line: how many runs in all (a fixed total's last line is printed
+        // when the count reaches it).
+        if self.plain.is_some() && self.total == 0 {
+            let done = self.done.load(Ordering::Relaxed);
+            let t = self.start.elapsed().as_secs_f64();
+            eprintln!("{}: {done} model runs in {t:.1} s, done", self.label);
         }
     }
 

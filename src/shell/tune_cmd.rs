@@ -4,23 +4,24 @@
 use super::cli::TuneArgs;
 use super::meta::{self, Key, Kind};
 use super::tables::{self, Column};
-use super::{run_cmd, tune_report, BadInput};
+use super::{run_cmd, tune_report, BadInput, RunFailed};
 use crate::kernel::excitation::Reference;
 use crate::kernel::metrics::Metrics;
 use crate::kernel::params::ModelParams;
-use crate::orchestration::batch::Row;
+use crate::orchestration::batch::{Row, RowStatus};
 use crate::orchestration::sim::{self, SimOutcome};
 use crate::orchestration::spec::SimSpec;
 use crate::orchestration::tune::{self, Evaluation, GenerationSummary, Tuned, Tuner};
-use crate::orchestration::tune_spec::TuneSpec;
+use crate::orchestration::tune_spec::{Statistic, TuneSpec};
 use anyhow::Context;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// The files the output folder receives.
-const OUTPUTS: [&str; 4] = [
+const OUTPUTS: [&str; 5] = [
     "tuned.toml",
+    "gains.toml",
     "evaluations.parquet",
     "generations.parquet",
     "report.html",
@@ -36,6 +37,12 @@ pub fn run(args: &TuneArgs) -> anyhow::Result<()> {
     let base = args.file.parent().unwrap_or(Path::new("."));
     let references = run_cmd::references(&tune::study_of(&spec), base, &[])?;
     let pool = run_cmd::pool(args.threads)?;
+    std::fs::create_dir_all(&dir).map_err(|e| {
+        BadInput(format!(
+            "{}: cannot create the output folder: {e}",
+            dir.display()
+        ))
+    })?;
     // stdout is not held while the search runs: its lines are printed from a pool thread.
     header(
         &mut std::io::stdout().lock(),
@@ -57,18 +64,30 @@ pub fn run(args: &TuneArgs) -> anyhow::Result<()> {
     let mut o = std::io::stdout().lock();
     result(&mut o, &tuner, &tuned, wall)?;
     let nominal = nominal_runs(&tuner, &tuned, &references)?;
-    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    write_model(&paths[0], &args.file, &tuner, &tuned)?;
-    write_evaluations(&paths[1], &tuner, &tuned, &text)?;
-    write_generations(&paths[2], &tuned.generations)?;
+    let command = match &args.model {
+        Some(m) => format!("tune {} --model {}", args.file.display(), m.display()),
+        None => format!("tune {}", args.file.display()),
+    };
+    write_evaluations(&paths[2], &tuner, &tuned, &text, &command)?;
+    write_generations(&paths[3], &tuned.generations)?;
     let page = tune_report::html(&tuner, &tuned, &nominal, &references, wall)?;
-    super::iterate_cmd::write_whole(&paths[3], page.as_bytes())?;
+    super::iterate_cmd::write_whole(&paths[4], page.as_bytes())?;
+    if let Some(why) = &tuned.best.infeasible {
+        return Err(RunFailed(format!(
+            "no candidate met the constraints (the start: {why}); nothing tuned is written: {} says why each failed; loosen [constraints], the gains' bounds or the uncertain parameters",
+            paths[2].display()
+        ))
+        .into());
+    }
+    write_model(&paths[0], &command, &tuner, &tuned, false)?;
+    write_model(&paths[1], &command, &tuner, &tuned, true)?;
     let list: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
     writeln!(o, "\n  wrote       {}", list.join(", "))?;
     writeln!(
         o,
-        "  use it      study run STUDY.toml --model {}",
-        paths[0].display()
+        "  use it      study run STUDY.toml --model {} (the model tuned on, with the tuned gains), or --model {} (the gains alone, on the defaults)",
+        paths[0].display(),
+        paths[1].display()
     )?;
     Ok(())
 }
@@ -134,10 +153,13 @@ fn header(
     writeln!(o, "  constraints every run ends (stroke, pressure, divergence guard); max |u| <= {:.0} % of u_lim", 100.0 * spec.valve_cmd_fraction)?;
     if !spec.uncertain.is_empty() {
         let names: Vec<String> = spec.uncertain.iter().map(|v| v.path()).collect();
+        let statistic = match spec.statistic {
+            Statistic::Mean => "the mean".to_string(),
+            Statistic::Quantile(q) => format!("the {:.0}th percentile", 100.0 * q),
+        };
         writeln!(
             o,
-            "  robust      {:?} over {} draws of {}",
-            spec.statistic,
+            "  robust      {statistic} of the objective over {} draws of {}",
             spec.draws,
             names.join(", ")
         )?;
@@ -146,12 +168,12 @@ fn header(
     let lambda = s
         .population
         .unwrap_or_else(|| crate::orchestration::cmaes::default_population(spec.gains.len()));
-    writeln!(o, "  search      CMA-ES, population {lambda}, sigma0 {}, at most {} generations, seed {}, {threads} threads", s.sigma0, s.generations, spec.seed)?;
+    writeln!(o, "  search      CMA-ES, population {lambda}, sigma0 {}, at most {} generations, seed {}, {threads} thread{}", s.sigma0, s.generations, spec.seed, if threads == 1 { "" } else { "s" })?;
     if !args.quiet {
         writeln!(
             o,
             "\n  {:>10} {:>5} {:>8} {:>12} {:>12} {:>8}",
-            "generation", "runs", "feasible", "best", "best so far", "sigma"
+            "generation", "candidates", "feasible", "best", "best so far", "sigma"
         )?;
     }
     Ok(())
@@ -166,7 +188,7 @@ fn print_generation(g: &GenerationSummary) {
         }
     };
     println!(
-        "  {:>10} {:>5} {:>8} {:>12} {:>12} {:>8.4}",
+        "  {:>10} {:>10} {:>8} {:>12} {:>12} {:>8.4}",
         g.generation,
         g.evaluated,
         g.feasible,
@@ -196,14 +218,19 @@ fn result(o: &mut impl Write, tuner: &Tuner, t: &Tuned, wall: f64) -> anyhow::Re
     }
     let q = tuner.reported_quantile();
     let row = |o: &mut dyn Write, name: &str, a: f64, b: f64| {
-        writeln!(
-            o,
-            "  {:<22} {:>12.5} {:>12.5} {:>+8.1} %",
-            name,
-            a,
-            b,
-            100.0 * (b / a - 1.0)
-        )
+        let v = |x: f64| {
+            if x.is_finite() {
+                format!("{x:.5}")
+            } else {
+                "infeasible".into()
+            }
+        };
+        let change = if a.is_finite() && b.is_finite() && a != 0.0 {
+            format!(" {:>+8.1} %", 100.0 * (b / a - 1.0))
+        } else {
+            String::new()
+        };
+        writeln!(o, "  {:<22} {:>12} {:>12}{change}", name, v(a), v(b))
     };
     row(o, "objective", t.start.objective, t.best.objective)?;
     if tuner.draws.len() > 1 {
@@ -269,14 +296,29 @@ pub fn with_gains(tuner: &Tuner, gains: &[f64]) -> ModelParams {
     m
 }
 
-/// tuned.toml: the model with the tuned gains, headed by what was tuned and how much it gained.
-fn write_model(path: &Path, file: &Path, tuner: &Tuner, t: &Tuned) -> anyhow::Result<()> {
-    let mut root = toml::Table::new();
+/// tuned.toml: the model tuned on (the defaults, `--model`, the tuning file's `[model.*]`) with
+/// the tuned gains; gains.toml (`gains_only`): the tuned gains alone, to put on any other model.
+fn write_model(
+    path: &Path,
+    command: &str,
+    tuner: &Tuner,
+    t: &Tuned,
+    gains_only: bool,
+) -> anyhow::Result<()> {
     let model = with_gains(tuner, &t.best.gains);
-    root.insert(
-        "model".into(),
-        toml::Value::Table(crate::orchestration::spec::model_table(&model)),
-    );
+    let table = if gains_only {
+        let mut c = toml::Table::new();
+        for (g, v) in tuner.spec.gains.iter().zip(&t.best.gains) {
+            c.insert(g.info.name.into(), (*v).into());
+        }
+        let mut m = toml::Table::new();
+        m.insert("controller".into(), c.into());
+        m
+    } else {
+        crate::orchestration::spec::model_table(&model)
+    };
+    let mut root = toml::Table::new();
+    root.insert("model".into(), toml::Value::Table(table));
     let gains: Vec<String> = tuner
         .spec
         .gains
@@ -284,9 +326,13 @@ fn write_model(path: &Path, file: &Path, tuner: &Tuner, t: &Tuned) -> anyhow::Re
         .zip(&t.best.gains)
         .map(|(g, v)| format!("# {} = {v:?}", g.info.path()))
         .collect();
+    let what = if gains_only {
+        "the tuned gains alone (every other parameter: the defaults, or the --model it is given with)"
+    } else {
+        "the model tuned on, every [model.*] table of the tuning file and its --model included, with the tuned gains"
+    };
     let head = format!(
-        "# Tuned by `study tune {}` (vshake {}): objective {:.6} -> {:.6} ({:+.1} %)\n{}\n",
-        file.display(),
+        "# Tuned by `study {command}` (vshake {}): objective {:.6} -> {:.6} ({:+.1} %)\n# This file: {what}.\n{}\n",
         env!("CARGO_PKG_VERSION"),
         t.start.objective,
         t.best.objective,
@@ -298,7 +344,13 @@ fn write_model(path: &Path, file: &Path, tuner: &Tuner, t: &Tuned) -> anyhow::Re
 }
 
 /// evaluations.parquet: a row per run (generation, candidate, draw, excitation).
-fn write_evaluations(path: &Path, tuner: &Tuner, t: &Tuned, text: &str) -> anyhow::Result<()> {
+fn write_evaluations(
+    path: &Path,
+    tuner: &Tuner,
+    t: &Tuned,
+    text: &str,
+    command: &str,
+) -> anyhow::Result<()> {
     let mut cols = run_columns(tuner, t);
     let runs: Vec<(&Evaluation, usize)> = t
         .evaluations
@@ -307,23 +359,30 @@ fn write_evaluations(path: &Path, tuner: &Tuner, t: &Tuned, text: &str) -> anyho
         .collect();
     let metrics: Vec<&str> = Metrics::NAN.columns().iter().map(|c| c.0).collect();
     for (k, m) in metrics.iter().enumerate() {
+        // A metric of a run that did not end, or one the run does not define, is null.
         let v = runs.iter().map(|(e, i)| e.rows[*i].metrics.columns()[k].1);
-        cols.push((m.to_string(), Column::F64(v.collect())));
+        cols.push((m.to_string(), Column::OptF64(v.map(finite).collect())));
     }
     let n_e = tuner.spec.excitations.len();
-    let draw_objective = runs.iter().map(|(e, i)| e.per_draw[i / n_e]);
-    cols.push((
-        "draw_objective".into(),
-        Column::F64(draw_objective.collect()),
-    ));
-    let objective = runs.iter().map(|(e, _)| e.objective);
-    cols.push(("objective".into(), Column::F64(objective.collect())));
+    let draw_objective = runs.iter().map(|(e, i)| finite(e.per_draw[i / n_e]));
+    let draw_objective = Column::OptF64(draw_objective.collect());
+    cols.push(("draw_objective".into(), draw_objective));
+    let objective = runs.iter().map(|(e, _)| finite(e.objective));
+    cols.push(("objective".into(), Column::OptF64(objective.collect())));
     let feasible = runs.iter().map(|(e, _)| e.infeasible.is_none());
     cols.push(("feasible".into(), Column::Bool(feasible.collect())));
+    let why = runs.iter().map(|(e, _)| e.infeasible.clone());
+    cols.push(("infeasible_reason".into(), Column::OptStr(why.collect())));
     let mut m = meta::header(Kind::TuneEvaluations);
     m.push(meta::pair(Key::Spec, text));
     m.push(meta::pair(Key::Seed, tuner.spec.seed));
+    m.push(meta::pair(Key::Command, command));
     tables::write_table(path, cols, &m).with_context(|| format!("writing {}", path.display()))
+}
+
+/// A value, or null where it is not finite.
+fn finite(v: f64) -> Option<f64> {
+    v.is_finite().then_some(v)
 }
 
 /// The columns that say which run a row is: generation, candidate, draw, the gains and the
@@ -354,8 +413,19 @@ fn run_columns(tuner: &Tuner, t: &Tuned) -> Vec<(String, Column)> {
     cols.push(("excitation".into(), Column::Str(name.collect())));
     let status = runs.iter().map(|x| x.2.status.label().to_string());
     cols.push(("status".into(), Column::Str(status.collect())));
-    let reason = runs.iter().map(|x| x.2.status.detail());
+    let time = runs.iter().map(|x| match x.2.status {
+        RowStatus::Failed { time_s, .. } => Some(time_s),
+        _ => None,
+    });
+    cols.push(("fail_time_s".into(), Column::OptF64(time.collect())));
+    let reason = runs
+        .iter()
+        .map(|x| x.2.status.category().map(str::to_string));
     cols.push(("fail_reason".into(), Column::OptStr(reason.collect())));
+    let value = runs.iter().map(|x| x.2.status.value());
+    cols.push(("fail_value".into(), Column::OptF64(value.collect())));
+    let detail = runs.iter().map(|x| x.2.status.detail());
+    cols.push(("fail_detail".into(), Column::OptStr(detail.collect())));
     cols
 }
 
