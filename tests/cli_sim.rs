@@ -1,20 +1,10 @@
 //! `study sim` as a user meets it: the bundled example, the written history, and every kind of
 //! bad input (exit 2, naming the key or row), and a diverging run (exit 1, time and reason).
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+mod common;
+use common::study;
 
-fn study(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_study"))
-        .args(args)
-        .output()
-        .expect("run study");
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into(),
-        String::from_utf8_lossy(&out.stderr).into(),
-    )
-}
+use std::path::{Path, PathBuf};
 
 fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
     let p = dir.join(name);

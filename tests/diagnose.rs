@@ -6,29 +6,15 @@
 //! whose hidden effect is not in the library must not get a confident wrong answer.
 
 mod common;
-use common::followed_state;
+use common::{followed_state, study};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use vshake::shell::tables::{
     read_bools, read_columns_allow_nan, read_f64_lists, read_string_lists, read_strings,
 };
 
 /// Sensor noise of the synthetic campaigns: about 1 % of the smallest test's rms per channel.
 const NOISE: &str = "accel=0.02,disp=1e-5,force=2000";
-
-fn study(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_study"))
-        .args(args)
-        .env("RUST_BACKTRACE", "0")
-        .output()
-        .expect("run study");
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into(),
-        String::from_utf8_lossy(&out.stderr).into(),
-    )
-}
 
 fn campaign() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("studies/campaigns/diagnosis.toml")

@@ -1,21 +1,11 @@
 //! Each effect of the library leaves its signature in the comparison of a synthetic campaign
 //! made with it hidden against the baseline model (`study synth --effect`, `study compare`).
 
+mod common;
+use common::study;
+
 use std::collections::HashMap;
 use std::path::Path;
-use std::process::Command;
-
-fn study(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_study"))
-        .args(args)
-        .output()
-        .expect("run study");
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into(),
-        String::from_utf8_lossy(&out.stderr).into(),
-    )
-}
 
 /// Per test: the columns of the compare report's tests table, and the residual bins.
 struct Report {

@@ -5,26 +5,14 @@
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use vshake::kernel::ground::{self, GroundParams, Processing};
 use vshake::kernel::params::G;
 use vshake::orchestration::quake;
 use vshake::orchestration::spec::RecordUnit;
 mod common;
 use common::content;
+use common::study;
 use vshake::shell::tables::read_columns_allow_nan;
-
-fn study(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_study"))
-        .args(args)
-        .output()
-        .expect("run study");
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into(),
-        String::from_utf8_lossy(&out.stderr).into(),
-    )
-}
 
 fn ok(args: &[&str]) -> String {
     let (code, out, err) = study(args);

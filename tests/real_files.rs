@@ -4,20 +4,10 @@
 //! flipped sign, corrupt cells. Each variant is either read to the clean file's results or gets
 //! its specific warning or error.
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+mod common;
+use common::study;
 
-fn study(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_study"))
-        .args(args)
-        .output()
-        .expect("run study");
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into(),
-        String::from_utf8_lossy(&out.stderr).into(),
-    )
-}
+use std::path::{Path, PathBuf};
 
 /// Two sine tests (3 Hz 1.73 g and 4 Hz 1 g), CSV files.
 const CAMPAIGN: &str = r#"[campaign]

@@ -2,21 +2,9 @@
 //! unsharded run, and merging refuses a missing, a duplicated or a foreign shard.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 mod common;
 use common::content;
-
-fn study(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_study"))
-        .args(args)
-        .output()
-        .expect("run study");
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into(),
-        String::from_utf8_lossy(&out.stderr).into(),
-    )
-}
+use common::study;
 
 fn smoke() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("studies/smoke.toml")

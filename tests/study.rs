@@ -3,24 +3,12 @@
 //! reader (pyarrow, DuckDB) opens the results.
 
 mod common;
+use common::study;
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use vshake::orchestration::batch::{self, Plan, Row};
 use vshake::orchestration::study::StudySpec;
 use vshake::shell::run_cmd;
-
-fn study(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_study"))
-        .args(args)
-        .output()
-        .expect("run study");
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into(),
-        String::from_utf8_lossy(&out.stderr).into(),
-    )
-}
 
 fn studies_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("studies")

@@ -11,6 +11,7 @@ use crate::kernel::resample::Resampler;
 use crate::kernel::simulate::{
     self, LaneParams, LaneResult, Observer, SetupError, Solver, TickView,
 };
+use crate::kernel::spectrum::SpectrumSpec;
 use crate::kernel::state::idx;
 
 /// A channel of a time history: its column name (the docs/formats.md measured-test name where
@@ -98,6 +99,23 @@ pub struct History {
 }
 
 impl History {
+    /// The response spectrum of the achieved acceleration (`accel_mps2`) over the reference's
+    /// window, as the kernel's online spectrum takes it.
+    pub fn accel_psa(&self, reference: &Reference, spectrum: &SpectrumSpec) -> Vec<f64> {
+        let cols = self.named_columns();
+        let accel = cols
+            .iter()
+            .find(|(n, _)| *n == "accel_mps2")
+            .expect("a history has accel_mps2")
+            .1;
+        let (w0, w1) = reference.window;
+        crate::kernel::spectrum::psa(
+            &accel[w0..w1.min(accel.len())],
+            1.0 / reference.f_s,
+            spectrum,
+        )
+    }
+
     pub fn with_capacity(n: usize) -> Self {
         History {
             columns: (0..CHANNELS.len()).map(|_| Vec::with_capacity(n)).collect(),

@@ -3,6 +3,7 @@
 use super::cli::DiagnoseArgs;
 use super::fit_cmd::{check_effect, load_problem, print_checks, residual_warnings};
 use super::meta::{self, Key, Kind};
+use super::report::esc;
 use super::tables::{self, Column};
 use super::BadInput;
 use super::{campaign_io::load_model, RunFailed};
@@ -619,12 +620,6 @@ fn error_falls_svg(problem: &Problem, d: &Diagnosis) -> Result<String, Box<dyn s
         root.present()?;
     }
     Ok(s)
-}
-
-fn esc(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
 }
 
 fn html(campaign: &str, problem: &Problem, d: &Diagnosis) -> anyhow::Result<String> {

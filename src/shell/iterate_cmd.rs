@@ -111,19 +111,25 @@ fn settings(args: &IterateArgs) -> anyhow::Result<IterationSettings> {
 
 /// The output paths, refused before any work where one exists and --force is not given.
 fn outputs(args: &IterateArgs) -> anyhow::Result<Vec<PathBuf>> {
-    let Some(dir) = &args.out else {
-        return Ok(Vec::new());
-    };
-    if dir.exists() && !dir.is_dir() {
-        return Err(BadInput(format!(
-            "--out {}: exists and is not a folder",
-            dir.display()
-        ))
-        .into());
+    match &args.out {
+        Some(dir) => output_paths(dir, &OUTPUTS, args.force),
+        None => Ok(Vec::new()),
     }
-    let paths: Vec<PathBuf> = OUTPUTS.iter().map(|f| dir.join(f)).collect();
+}
+
+/// The files `names` in the folder `dir`: refused before any work where `dir` is not a folder,
+/// or one of them exists and `force` is not given.
+pub(crate) fn output_paths(
+    dir: &Path,
+    names: &[&str],
+    force: bool,
+) -> anyhow::Result<Vec<PathBuf>> {
+    if dir.exists() && !dir.is_dir() {
+        return Err(BadInput(format!("{}: exists and is not a folder", dir.display())).into());
+    }
+    let paths: Vec<PathBuf> = names.iter().map(|f| dir.join(f)).collect();
     if let Some(p) = paths.iter().find(|p| p.exists()) {
-        if !args.force {
+        if !force {
             return Err(
                 BadInput(format!("{}: exists (--force overwrites it)", p.display())).into(),
             );

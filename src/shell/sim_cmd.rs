@@ -7,7 +7,7 @@ use super::{BadInput, RunFailed};
 use crate::kernel::excitation::Reference;
 use crate::kernel::params::G;
 use crate::kernel::simulate::LaneStatus;
-use crate::kernel::spectrum::{psa, SpectrumSpec};
+use crate::kernel::spectrum::SpectrumSpec;
 use crate::orchestration::sim::{self, CHANNELS};
 use crate::orchestration::spec::SimSpec;
 use anyhow::Context;
@@ -117,18 +117,7 @@ fn write_spectrum(
     spectrum: &SpectrumSpec,
     target: &[f64],
 ) -> anyhow::Result<()> {
-    let cols = history.named_columns();
-    let accel = cols
-        .iter()
-        .find(|(n, _)| *n == "accel_mps2")
-        .expect("a history has accel_mps2")
-        .1;
-    let (w0, w1) = reference.window;
-    let got = psa(
-        &accel[w0..w1.min(accel.len())],
-        1.0 / reference.f_s,
-        spectrum,
-    );
+    let got = history.accel_psa(reference, spectrum);
     writeln!(
         o,
         "

@@ -15,7 +15,7 @@ use crate::orchestration::tune::{self, Evaluation, GenerationSummary, Tuned, Tun
 use crate::orchestration::tune_spec::{Statistic, TuneSpec};
 use anyhow::Context;
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Instant;
 
 /// The files the output folder receives.
@@ -33,7 +33,7 @@ pub fn run(args: &TuneArgs) -> anyhow::Result<()> {
     let base_model = super::campaign_io::load_model(args.model.as_deref())?;
     let spec = TuneSpec::from_toml_on(&text, &args.file.display().to_string(), base_model)?;
     let dir = args.out.clone().unwrap_or_else(|| spec.output.clone());
-    let paths = outputs(&dir, args.force)?;
+    let paths = super::iterate_cmd::output_paths(&dir, &OUTPUTS, args.force)?;
     let base = args.file.parent().unwrap_or(Path::new("."));
     let references = run_cmd::references(&tune::study_of(&spec), base, &[])?;
     let pool = run_cmd::pool(args.threads)?;
@@ -90,22 +90,6 @@ pub fn run(args: &TuneArgs) -> anyhow::Result<()> {
         paths[1].display()
     )?;
     Ok(())
-}
-
-/// The output paths, refused before any work where one exists and --force is not given.
-fn outputs(dir: &Path, force: bool) -> anyhow::Result<Vec<PathBuf>> {
-    if dir.exists() && !dir.is_dir() {
-        return Err(BadInput(format!("{}: exists and is not a folder", dir.display())).into());
-    }
-    let paths: Vec<PathBuf> = OUTPUTS.iter().map(|f| dir.join(f)).collect();
-    if let Some(p) = paths.iter().find(|p| p.exists()) {
-        if !force {
-            return Err(
-                BadInput(format!("{}: exists (--force overwrites it)", p.display())).into(),
-            );
-        }
-    }
-    Ok(paths)
 }
 
 fn header(

@@ -6,7 +6,6 @@
 use super::report::{draw_line, esc};
 use super::tune_cmd::Nominal;
 use crate::kernel::excitation::Reference;
-use crate::kernel::spectrum::psa;
 use crate::orchestration::sim::SimOutcome;
 use crate::orchestration::tune::{error_term, Tuned, Tuner};
 use plotters::prelude::*;
@@ -201,22 +200,6 @@ fn errors_table(
     Ok(())
 }
 
-/// The achieved acceleration's PSA over the reference's window.
-fn achieved_psa(
-    spec: &crate::kernel::spectrum::SpectrumSpec,
-    r: &Reference,
-    out: &SimOutcome,
-) -> Vec<f64> {
-    let cols = out.history.named_columns();
-    let accel = cols
-        .iter()
-        .find(|(n, _)| *n == "accel_mps2")
-        .expect("a history has accel_mps2")
-        .1;
-    let (w0, w1) = r.window;
-    psa(&accel[w0..w1.min(accel.len())], 1.0 / r.f_s, spec)
-}
-
 /// Target, start and tuned response spectra (PSA in g against period, log period).
 fn spectrum_svg(
     spec: &crate::kernel::spectrum::SpectrumSpec,
@@ -225,7 +208,7 @@ fn spectrum_svg(
     a: &SimOutcome,
     b: &SimOutcome,
 ) -> Plot {
-    let (pa, pb) = (achieved_psa(spec, r, a), achieved_psa(spec, r, b));
+    let (pa, pb) = (a.history.accel_psa(r, spec), b.history.accel_psa(r, spec));
     let periods = &spec.periods;
     let top = target
         .iter()

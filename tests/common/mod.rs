@@ -107,6 +107,7 @@ pub fn python3() -> Command {
 pub fn study(args: &[&str]) -> (i32, String, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_study"))
         .args(args)
+        .env("RUST_BACKTRACE", "0")
         .output()
         .expect("run study");
     (
