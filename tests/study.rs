@@ -478,3 +478,91 @@ fn the_backend_is_chosen_and_a_gpu_that_cannot_run_is_named() {
     assert_eq!(code, 0);
     assert!(stdout.contains("backend     CPU\n"), "{stdout}");
 }
+
+/// Two parameters of the same name in different components (two sensors' delays) get columns
+/// qualified by their component, so the table opens in pyarrow (which refuses a duplicate name);
+/// a design file may name them so.
+#[test]
+fn same_named_parameters_get_qualified_columns() {
+    let d = tempfile::tempdir().unwrap();
+    let text = r#"
+[study]
+name = "two_delays"
+seed = 1
+samples = 2
+[method]
+sampling = "monte_carlo"
+[model.accel_sensor]
+delay = 0.001
+[model.disp_sensor]
+delay = 0.001
+[[variables]]
+name = "accel_sensor.delay"
+distribution = "uniform"
+low = 0.0
+high = 0.002
+[[variables]]
+name = "disp_sensor.delay"
+distribution = "uniform"
+low = 0.0
+high = 0.002
+[[excitations]]
+name = "s"
+kind = "sine"
+freq_hz = 3.0
+amp_g = 0.5
+"#;
+    let file = d.path().join("two.toml");
+    std::fs::write(&file, text).unwrap();
+    let out = d.path().join("two.parquet");
+    let (code, _, stderr) = study(&[
+        "run",
+        file.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let names = vshake::shell::tables::column_names(&out).unwrap();
+    assert!(
+        names.contains(&"accel_sensor_delay_s".to_string())
+            && names.contains(&"disp_sensor_delay_s".to_string()),
+        "{names:?}"
+    );
+    let py = common::python3()
+        .args(["-c", &format!("import pyarrow.parquet as pq; t = pq.read_table({:?}); print(t.column('disp_sensor_delay_s')[0])", out.display().to_string())])
+        .output()
+        .expect("python3");
+    assert!(
+        py.status.success(),
+        "{}",
+        String::from_utf8_lossy(&py.stderr)
+    );
+    // A design file naming the qualified columns is read back onto the same parameters.
+    let design = d.path().join("design.csv");
+    std::fs::write(
+        &design,
+        "accel_sensor_delay_s,disp_sensor_delay_s\n0.001,0.0005\n",
+    )
+    .unwrap();
+    let (head, tail) = (
+        text.find("[[variables]]").unwrap(),
+        text.find("[[excitations]]").unwrap(),
+    );
+    let from_file = format!("{}{}", &text[..head], &text[tail..]).replace(
+        "sampling = \"monte_carlo\"",
+        "sampling = \"file\"\nfile = \"design.csv\"",
+    );
+    std::fs::write(&file, from_file).unwrap();
+    let out2 = d.path().join("file.parquet");
+    let (code, _, stderr) = study(&[
+        "run",
+        file.to_str().unwrap(),
+        "--out",
+        out2.to_str().unwrap(),
+        "-q",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let t = vshake::shell::tables::read_columns(&out2, &["disp_sensor_delay_s"], &[]).unwrap();
+    assert_eq!(t.columns[0], vec![0.0005]);
+}

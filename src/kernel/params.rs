@@ -149,6 +149,30 @@ impl ParamInfo {
             format!("{}_{}", self.name, self.unit_suffix)
         }
     }
+
+    /// The column name qualified by its component (`accel_sensor_delay_s`), for a table where
+    /// two parameters would share [`ParamInfo::column_name`].
+    pub fn qualified_column_name(&self) -> String {
+        format!("{}_{}", self.component.name(), self.column_name())
+    }
+}
+
+/// The column names of `params` in one table: each [`ParamInfo::column_name`], qualified by its
+/// component where two would otherwise be the same (`accel_sensor.delay` and `disp_sensor.delay`
+/// give `accel_sensor_delay_s` and `disp_sensor_delay_s`).
+pub fn column_names(params: &[&ParamInfo]) -> Vec<String> {
+    let plain: Vec<String> = params.iter().map(|p| p.column_name()).collect();
+    params
+        .iter()
+        .zip(&plain)
+        .map(|(p, n)| {
+            if plain.iter().filter(|m| *m == n).count() > 1 {
+                p.qualified_column_name()
+            } else {
+                n.clone()
+            }
+        })
+        .collect()
 }
 
 impl fmt::Debug for ParamInfo {

@@ -96,6 +96,7 @@ fn design_columns(path: &Path) -> anyhow::Result<Vec<&'static ParamInfo>> {
     let mut infos: Vec<&'static ParamInfo> = Vec::new();
     for n in &names {
         let info = ModelParams::lookup(n)
+            .or_else(|| ModelParams::registry().find(|p| p.qualified_column_name() == *n))
             .or_else(|| ModelParams::registry().find(|p| p.column_name() == *n || p.name == n));
         match info.map(|i| (i, cannot_vary(i))) {
             Some((_, Some(why))) => return Err(BadInput(format!("{}: column `{n}`: {why}", path.display())).into()),
@@ -132,7 +133,7 @@ impl ResultsSink {
         metadata: &[(String, String)],
     ) -> anyhow::Result<Self> {
         let saltelli = plan.saltelli_dims.is_some();
-        let columns: Vec<String> = plan.columns.iter().map(|c| c.column_name()).collect();
+        let columns: Vec<String> = crate::kernel::params::column_names(&plan.columns);
         let template = Self::template(saltelli, &columns, &spec.metrics);
         Ok(ResultsSink {
             stream: ParquetStream::create(path, &template, metadata)?,
@@ -281,7 +282,7 @@ pub fn results_metadata(
         ),
         meta::pair(
             Key::ParameterColumns,
-            meta::list(plan.columns.iter().map(|c| c.column_name())),
+            meta::list(crate::kernel::params::column_names(&plan.columns)),
         ),
         meta::pair(Key::Metrics, meta::list(&spec.metrics)),
         meta::pair(

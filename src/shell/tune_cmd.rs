@@ -386,9 +386,10 @@ fn run_columns(tuner: &Tuner, t: &Tuned) -> Vec<(String, Column)> {
         ("candidate".into(), int(&|x| x.0.candidate)),
         ("draw".into(), int(&|x| x.1 / n_e)),
     ];
-    for (c, info) in tuner.columns().iter().enumerate() {
+    let names = crate::kernel::params::column_names(tuner.columns());
+    for (c, name) in names.into_iter().enumerate() {
         let v = runs.iter().map(|x| x.2.values[c]);
-        cols.push((info.column_name(), Column::F64(v.collect())));
+        cols.push((name, Column::F64(v.collect())));
     }
     let names = &tuner.spec.excitations;
     let name = runs
