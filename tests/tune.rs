@@ -194,6 +194,18 @@ fn no_feasible_candidate_writes_no_tuned_model() {
     );
     assert!(stdout.contains("infeasible"), "{stdout}");
     assert!(!out.join("tuned.toml").exists() && !out.join("gains.toml").exists());
+    // Over an earlier run's results (--force), its tuned model does not stay behind.
+    std::fs::write(out.join("tuned.toml"), "[model.controller]\ng_d = 1.0\n").unwrap();
+    let (code, _, _) = study(&[
+        "tune",
+        file.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+        "--force",
+    ]);
+    assert_eq!(code, 1);
+    assert!(!out.join("tuned.toml").exists());
     let why =
         vshake::shell::tables::read_strings(&out.join("evaluations.parquet"), "infeasible_reason")
             .unwrap();

@@ -73,6 +73,13 @@ pub fn run(args: &TuneArgs) -> anyhow::Result<()> {
     let page = tune_report::html(&tuner, &tuned, &nominal, &references, wall)?;
     super::iterate_cmd::write_whole(&paths[4], page.as_bytes())?;
     if let Some(why) = &tuned.best.infeasible {
+        // A model left by an earlier run (--force) would pass for this one's.
+        for stale in &paths[..2] {
+            if stale.exists() {
+                std::fs::remove_file(stale)
+                    .with_context(|| format!("removing {}", stale.display()))?;
+            }
+        }
         return Err(RunFailed(format!(
             "no candidate met the constraints (the start: {why}); nothing tuned is written: {} says why each failed; loosen [constraints], the gains' bounds or the uncertain parameters",
             paths[2].display()
