@@ -30,6 +30,8 @@ pub enum Command {
     Run(RunArgs),
     /// Sensitivity of each metric to each parameter: Sobol' indices (Saltelli designs), SRC and PRCC.
     Sensitivity(SensitivityArgs),
+    /// Draw a study's results: Sobol' indices with their intervals, each metric against each parameter, failed runs.
+    Plot(PlotArgs),
     /// Compare the model with a campaign of measured tests: harmonics, amplitude, part of the cycle, envelope.
     #[command(long_about = COMPARE_HELP)]
     Compare(CompareArgs),
@@ -165,6 +167,22 @@ pub struct SensitivityArgs {
     /// Worker threads (0 = every core).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct PlotArgs {
+    /// The results file of `study run` (or `study merge`).
+    pub file: PathBuf,
+    /// Folder for the plots (SVG) and index.html (default: RESULTS_plots beside the file). A
+    /// folder holding other files is refused.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Metrics to draw (comma-separated; default: every metric of the file).
+    #[arg(long, value_delimiter = ',')]
+    pub metrics: Option<Vec<String>>,
+    /// Bootstrap resamples for the Sobol' indices' 95 % intervals (as `study sensitivity`).
+    #[arg(long, default_value_t = 200)]
+    pub bootstrap: usize,
 }
 
 #[derive(Debug, clap::Args)]

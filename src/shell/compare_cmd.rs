@@ -35,6 +35,11 @@ fn cell(v: f64, f: impl Fn(f64) -> String) -> String {
 }
 
 pub fn run(args: &CompareArgs) -> anyhow::Result<()> {
+    run_to(args, &mut std::io::stdout())
+}
+
+/// The command, its report printed to `o` (the Python package keeps it as text).
+pub fn run_to(args: &CompareArgs, o: &mut dyn Write) -> anyhow::Result<()> {
     let model = load_model(args.model.as_deref())?;
     let lc = load_campaign(&args.campaign, &model)?;
     let open_loop = args.open_loop.map(measured::OpenLoop::from);
@@ -53,7 +58,6 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<()> {
         .filter_map(Compared::residual_warning)
         .collect();
     let state_map = statemap::map(&results);
-    let mut o = std::io::stdout().lock();
     let model_name = args
         .model
         .as_ref()
@@ -66,13 +70,13 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<()> {
         spec.drive_label()
     )?;
     writeln!(o)?;
-    print_tests(&mut o, &results)?;
-    print_files(&mut o, &results)?;
-    print_bins(&mut o, &results)?;
-    print_amplitudes(&mut o, &results)?;
-    state_map::print(&mut o, &state_map)?;
+    print_tests(o, &results)?;
+    print_files(o, &results)?;
+    print_bins(o, &results)?;
+    print_amplitudes(o, &results)?;
+    state_map::print(o, &state_map)?;
     report_checks(
-        &mut o,
+        o,
         &args.campaign,
         &spec.tests,
         &residual_warnings,

@@ -31,6 +31,11 @@ fn harmonic_label(k: usize, rate_hz: f64) -> String {
 }
 
 pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
+    run_to(args, &mut std::io::stdout())
+}
+
+/// The command, its report printed to `o` (the Python package keeps it as text).
+pub fn run_to(args: &DiagnoseArgs, o: &mut dyn Write) -> anyhow::Result<()> {
     let engine = super::gpu::choose(args.backend)?
         .not_covering("a diagnosis compares time histories and screens effects (the CUDA kernel returns metrics of the baseline only)")?;
     let model = load_model(args.model.as_deref())?;
@@ -70,7 +75,6 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
     if args.strict && !implausible.is_empty() {
         return Err(BadInput(format!("{} (--strict)", implausible.join("\n"))).into());
     }
-    let mut o = std::io::stdout().lock();
     writeln!(
         o,
         "study diagnose {} ({} tests, {} features, {} candidates, {:.1} s)",
@@ -81,12 +85,12 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
         secs
     )?;
     writeln!(o, "  backend {}", engine.describe())?;
-    print_candidates(&mut o, &d)?;
-    print_evidence(&mut o, &problem, &d)?;
-    print_selection(&mut o, &d)?;
+    print_candidates(o, &d)?;
+    print_evidence(o, &problem, &d)?;
+    print_selection(o, &d)?;
     if let Some(map) = &d.state_map {
         writeln!(o, "\n  the starting model's residual:")?;
-        super::state_map::print(&mut o, map)?;
+        super::state_map::print(o, map)?;
     }
     if let (Some(map), Some(true)) = (
         &d.state_map_after,
@@ -94,7 +98,7 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
             .map(|(_, f)| f.after.residual_rms() > diagnose::NOISE_FACTOR * d.noise_rms),
     ) {
         writeln!(o, "\n  the residual the named effects leave:")?;
-        super::state_map::print(&mut o, map)?;
+        super::state_map::print(o, map)?;
     }
     writeln!(o, "\n  verdict: {}", d.summary())?;
     if let Some(dir) = &args.report {
@@ -102,9 +106,9 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
         writeln!(o, "\n  wrote {} and its tables (candidates, selection, tests, evidence, statemap, stateterms .parquet)", dir.join("report.html").display())?;
     }
     if let Some(out) = &args.out {
-        write_named(&mut o, out, &args.campaign, &model, &d)?;
+        write_named(o, out, &args.campaign, &model, &d)?;
     }
-    print_checks(&mut o, &loaded.checks, &implausible)?;
+    print_checks(o, &loaded.checks, &implausible)?;
     Ok(())
 }
 

@@ -175,6 +175,11 @@ pub fn with_progress(problem: &mut Problem, label: &str, log_lines: bool) -> Arc
 }
 
 pub fn run(args: &FitArgs) -> anyhow::Result<()> {
+    run_to(args, &mut std::io::stdout())
+}
+
+/// The command, its report printed to `o` (the Python package keeps it as text).
+pub fn run_to(args: &FitArgs, o: &mut dyn Write) -> anyhow::Result<()> {
     let engine = super::gpu::choose(args.backend)?
         .not_covering("a fit compares time histories at the measured samples (the CUDA kernel returns metrics only)")?;
     let model = load_model(args.model.as_deref())?;
@@ -199,7 +204,6 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     if args.strict && !implausible.is_empty() {
         return Err(BadInput(format!("{} (--strict)", implausible.join("\n"))).into());
     }
-    let mut o = std::io::stdout().lock();
     writeln!(
         o,
         "study fit {} ({} tests, {} features, {} free parameters; {} iterations, {}, {:.1} s)",
@@ -217,12 +221,12 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     )?;
     writeln!(o, "  backend {}", engine.describe())?;
     writeln!(o)?;
-    print_estimates(&mut o, &free, &r)?;
-    print_residuals(&mut o, problem, &r)?;
+    print_estimates(o, &free, &r)?;
+    print_residuals(o, problem, &r)?;
     let command = format!("fit {}", args.campaign.display());
     write_fitted(&args.out, &command, &model, &free, &r)?;
     writeln!(o, "\n  wrote {} (use it with --model)", args.out.display())?;
-    print_checks(&mut o, &loaded.checks, &implausible)?;
+    print_checks(o, &loaded.checks, &implausible)?;
     Ok(())
 }
 

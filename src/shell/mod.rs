@@ -1,6 +1,7 @@
 //! The shell: command line, files, printing. Errors are `anyhow` chains here; [`exit_code`]
 //! maps them to the documented exit codes.
 
+pub mod api;
 pub mod at2;
 pub mod bench_cmd;
 pub mod calibrate;
@@ -16,6 +17,7 @@ pub mod matlab;
 pub mod merge_cmd;
 pub mod meta;
 pub mod params_cmd;
+pub mod plot_cmd;
 pub mod progress;
 pub mod report;
 pub mod resume;
@@ -58,6 +60,7 @@ pub fn dispatch(cli: cli::Cli) -> anyhow::Result<()> {
         cli::Command::Params(a) => params_cmd::run(&a),
         cli::Command::Run(a) => run_cmd::run(&a),
         cli::Command::Sensitivity(a) => sensitivity_cmd::run(&a),
+        cli::Command::Plot(a) => plot_cmd::run(&a),
         cli::Command::Bench(a) => bench_cmd::run(&a),
         cli::Command::Compare(a) => compare_cmd::run(&a),
         cli::Command::Synth(a) => synth_cmd::run(&a),

@@ -364,7 +364,11 @@ pub fn html(
     extra_warnings: &[String],
 ) -> anyhow::Result<String> {
     let mut h = String::new();
-    page_head(&mut h, title)?;
+    page_head(
+        &mut h,
+        title,
+        &[("measured", "#1f77b4"), ("model", "#d62728")],
+    )?;
     summary_table(&mut h, results)?;
     warnings_list(&mut h, results, extra_warnings)?;
     files_table(&mut h, results)?;
@@ -377,17 +381,31 @@ pub fn html(
     Ok(h)
 }
 
-/// The page's head (title and style), its title and the plots' legend.
-fn page_head(h: &mut String, title: &str) -> anyhow::Result<()> {
+/// A report page's head (title and the house style), its title and the plots' legend: each entry
+/// a label and its CSS colour.
+pub(crate) fn page_head(
+    h: &mut String,
+    title: &str,
+    legend: &[(&str, &str)],
+) -> anyhow::Result<()> {
     write!(
         h,
         "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>{t}</title><style>\
 body{{font-family:sans-serif;margin:24px;color:#222}} table{{border-collapse:collapse;font-size:13px}}\
 td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}} th{{background:#f2f2f2}} td:first-child{{text-align:left}}\
 figure{{margin:12px 0}} .legend span{{display:inline-block;width:14px;height:4px;margin:0 4px 2px 12px}}\
-</style></head><body>\n<h1>{t}</h1>\n<p class=\"legend\">measured<span style=\"background:#1f77b4\"></span> model<span style=\"background:#d62728\"></span></p>\n",
+</style></head><body>\n<h1>{t}</h1>\n<p class=\"legend\">",
         t = esc(title)
     )?;
+    for (label, colour) in legend {
+        write!(
+            h,
+            "{}<span style=\"background:{colour}\"></span> ",
+            esc(label)
+        )?;
+    }
+    h.truncate(h.trim_end().len());
+    h.push_str("</p>\n");
     Ok(())
 }
 

@@ -93,18 +93,27 @@ pub fn references(
 /// name such as g_d), refused when unknown or not variable.
 fn design_columns(path: &Path) -> anyhow::Result<Vec<&'static ParamInfo>> {
     let names = tables::column_names(path).map_err(input_if_user)?;
+    parameters_of_columns(&names, &path.display().to_string())
+}
+
+/// The parameters that columns name (a path such as controller.g_d, a qualified column name, or
+/// a column name such as g_d), refused when unknown or not variable; `source` names the columns'
+/// file in errors.
+pub fn parameters_of_columns(
+    names: &[String],
+    source: &str,
+) -> anyhow::Result<Vec<&'static ParamInfo>> {
     let mut infos: Vec<&'static ParamInfo> = Vec::new();
-    for n in &names {
+    for n in names {
         let info = ModelParams::lookup(n)
             .or_else(|| ModelParams::registry().find(|p| p.qualified_column_name() == *n))
             .or_else(|| ModelParams::registry().find(|p| p.column_name() == *n || p.name == n));
         match info.map(|i| (i, cannot_vary(i))) {
-            Some((_, Some(why))) => return Err(BadInput(format!("{}: column `{n}`: {why}", path.display())).into()),
+            Some((_, Some(why))) => return Err(BadInput(format!("{source}: column `{n}`: {why}")).into()),
             Some((i, None)) => infos.push(i),
             None => {
                 return Err(BadInput(format!(
-                    "{}: column `{n}` is not a model parameter (use a path such as controller.g_d, or a column name such as g_d; `study params` lists them)",
-                    path.display()
+                    "{source}: column `{n}` is not a model parameter (use a path such as controller.g_d, or a column name such as g_d; `study params` lists them)"
                 ))
                 .into())
             }
@@ -325,7 +334,20 @@ pub struct Job {
 impl Job {
     /// A new run of `args.file`: everything it needs is read and checked here, before any work.
     fn fresh(args: &RunArgs, file: &Path) -> anyhow::Result<Job> {
-        let mut spec = load_study_on(file, args.model.as_deref())?;
+        let spec = load_study_on(file, args.model.as_deref())?;
+        let study_file = std::fs::canonicalize(file).unwrap_or_else(|_| file.to_path_buf());
+        let base = file.parent().unwrap_or(Path::new("."));
+        Job::of_spec(args, spec, base, &study_file.display().to_string())
+    }
+
+    /// A new run of a read study: `base` is the folder its relative paths start from,
+    /// `study_file` the file (or the words) the metadata names it by.
+    pub fn of_spec(
+        args: &RunArgs,
+        mut spec: StudySpec,
+        base: &Path,
+        study_file: &str,
+    ) -> anyhow::Result<Job> {
         if let Some(n) = args.samples {
             if n == 0 {
                 return Err(BadInput("--samples must be at least 1".into()).into());
@@ -334,7 +356,17 @@ impl Job {
             spec.check_design_size()
                 .map_err(|why| BadInput(format!("--samples {n}: {why}")))?;
         }
-        let plan = plan_for(&spec, file.parent().unwrap_or(Path::new(".")))?;
+        let plan = plan_for(&spec, base)?;
+        Job::of_plan(args, spec, plan, study_file)
+    }
+
+    /// A new run of a study's plan (its design made or given), named `study_file` in the metadata.
+    pub fn of_plan(
+        args: &RunArgs,
+        spec: StudySpec,
+        plan: Plan,
+        study_file: &str,
+    ) -> anyhow::Result<Job> {
         let shard = args
             .shard
             .as_deref()
@@ -345,12 +377,11 @@ impl Job {
             .map_or(0..plan.samples(), |s| s.range.clone());
         for (i, &id) in spec.histories.iter().enumerate() {
             if id as usize >= plan.samples() {
-                return Err(BadInput(format!("{}: output.histories[{i}]: sample {id} does not exist (the study has samples 0 to {})", file.display(), plan.samples() - 1)).into());
+                return Err(BadInput(format!("{study_file}: output.histories[{i}]: sample {id} does not exist (the study has samples 0 to {})", plan.samples() - 1)).into());
             }
         }
         let out = output_path(args.out.as_deref(), &spec, shard.as_ref())?;
-        let study_file = std::fs::canonicalize(file).unwrap_or_else(|_| file.to_path_buf());
-        let mut extra = vec![meta::pair(Key::StudyFile, study_file.display())];
+        let mut extra = vec![meta::pair(Key::StudyFile, study_file)];
         extra.extend(shard.as_ref().map_or_else(Vec::new, |s| s.metadata()));
         let meta = results_metadata(&spec, &plan, &extra);
         Ok(Job {
@@ -491,10 +522,22 @@ const GPU_CHUNK: usize = 1 << 17;
 
 pub fn run(args: &RunArgs) -> anyhow::Result<()> {
     check_checkpoint_secs(args.checkpoint_secs)?;
-    let engine = super::gpu::choose(args.backend)?;
-    let Some(mut job) = job_of(args)? else {
+    let Some(job) = job_of(args)? else {
         return Ok(());
     };
+    execute(args, job, &mut std::io::stdout(), true)
+}
+
+/// Runs a job as `args` say (engine, threads, chunk, dry run, progress), printing its header and
+/// summary to `o`; with `signals`, SIGINT and SIGTERM stop it cleanly ([`interrupt`]; an embedding
+/// program, the Python package, keeps its own handlers).
+pub fn execute(
+    args: &RunArgs,
+    mut job: Job,
+    o: &mut dyn Write,
+    signals: bool,
+) -> anyhow::Result<()> {
+    let engine = super::gpu::choose(args.backend)?;
     let names: Vec<String> = job
         .spec
         .excitations
@@ -513,14 +556,16 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
     job.plan.engine = lanes;
     let pool = pool(args.threads)?;
     let todo = (job.range.start + job.samples_kept())..job.range.end;
-    print_header(&job, args, &pool, chunk)?;
-    print_engine(&engine)?;
+    print_header(o, &job, args, &pool, chunk)?;
+    writeln!(o, "  backend     {}", engine.describe())?;
     if args.dry_run {
         return super::sizing::dry_run(&job, todo, &pool);
     }
     super::sizing::gate_long_run(&job, todo.clone(), &pool, args.yes)?;
     create_history_dir(&job)?;
-    interrupt::install().context("catching SIGINT and SIGTERM")?;
+    if signals {
+        interrupt::install().context("catching SIGINT and SIGTERM")?;
+    }
     let partial = tables::partial_path(&job.out);
     let mut sink = ResultsSink::create(&partial, &job.plan, &job.spec, &job.meta)?
         .checkpoints(Duration::from_secs_f64(args.checkpoint_secs));
@@ -544,18 +589,8 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
     )?;
     progress.finish();
     finish_results(&job, sink, summary.stopped)?;
-    print_done(&job, &summary, &progress, todo.len())?;
-    write_histories(&job)
-}
-
-/// The backend that runs the batch, and why a GPU does not (`--backend auto`).
-fn print_engine(engine: &super::gpu::Engine) -> anyhow::Result<()> {
-    writeln!(
-        std::io::stdout().lock(),
-        "  backend     {}",
-        engine.describe()
-    )?;
-    Ok(())
+    print_done(o, &job, &summary, &progress, todo.len())?;
+    write_histories(o, &job)
 }
 
 /// `--checkpoint-secs` is a positive number of seconds.
@@ -627,6 +662,7 @@ fn finish_results(job: &Job, sink: ResultsSink, stopped: bool) -> anyhow::Result
 }
 
 fn print_header(
+    o: &mut dyn Write,
     job: &Job,
     args: &RunArgs,
     pool: &rayon::ThreadPool,
@@ -638,7 +674,6 @@ fn print_header(
     } else {
         spec.varied().len()
     };
-    let mut o = std::io::stdout().lock();
     match &args.resume {
         Some(f) => writeln!(o, "study run --resume {}", f.display())?,
         None => writeln!(
@@ -703,6 +738,7 @@ fn print_header(
 }
 
 fn print_done(
+    o: &mut dyn Write,
     job: &Job,
     summary: &batch::Summary,
     progress: &Progress,
@@ -716,7 +752,6 @@ fn print_done(
         .map(|r| r.len() as f64 / r.f_s)
         .sum::<f64>()
         * samples as f64;
-    let mut o = std::io::stdout().lock();
     writeln!(
         o,
         "  done        {} rows in {secs:.1} s ({:.0} simulated s per wall s): {} ok, {} failed, {} invalid",
@@ -731,10 +766,9 @@ fn print_done(
 }
 
 /// The full histories the study asks for (`[output] histories`) that fall in this file's slice.
-fn write_histories(job: &Job) -> anyhow::Result<()> {
+fn write_histories(o: &mut dyn Write, job: &Job) -> anyhow::Result<()> {
     let (spec, plan) = (&job.spec, &job.plan);
     let dir = history_dir(&job.out);
-    let mut o = std::io::stdout().lock();
     for &id in spec
         .histories
         .iter()

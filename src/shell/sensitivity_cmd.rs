@@ -12,22 +12,22 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 /// A results file as the analysis needs it.
-struct Loaded {
-    design: String,
+pub(crate) struct Loaded {
+    pub(crate) design: String,
     /// The varied parameters' paths and columns, in design order.
-    paths: Vec<String>,
-    columns: Vec<String>,
-    metrics: Vec<String>,
-    excitations: Vec<String>,
-    table: NumTable,
+    pub(crate) paths: Vec<String>,
+    pub(crate) columns: Vec<String>,
+    pub(crate) metrics: Vec<String>,
+    pub(crate) excitations: Vec<String>,
+    pub(crate) table: NumTable,
 }
 
 impl Loaded {
-    fn saltelli(&self) -> bool {
+    pub(crate) fn saltelli(&self) -> bool {
         self.design == "saltelli"
     }
 
-    fn col(&self, name: &str) -> &[f64] {
+    pub(crate) fn col(&self, name: &str) -> &[f64] {
         self.table.column(name).expect("column read")
     }
 
@@ -44,7 +44,7 @@ impl Loaded {
 
 /// Reads the metadata and the columns the analysis needs; refuses a file that is not a complete
 /// results file, unknown `--metrics`, and a design where nothing varies.
-fn load(file: &Path, wanted_metrics: Option<&[String]>) -> anyhow::Result<Loaded> {
+pub(crate) fn load(file: &Path, wanted_metrics: Option<&[String]>) -> anyhow::Result<Loaded> {
     let pairs = tables::parquet_metadata(file).map_err(input_if_user)?;
     let get = |k: Key| {
         meta::get(&pairs, k).ok_or_else(|| {
@@ -120,7 +120,7 @@ fn load(file: &Path, wanted_metrics: Option<&[String]>) -> anyhow::Result<Loaded
 }
 
 /// The indices of every (excitation, metric), in parallel on `threads` workers.
-fn analyse(
+pub(crate) fn analyse(
     l: &Loaded,
     bootstrap: usize,
     threads: usize,

@@ -57,10 +57,7 @@ pub fn run(args: &SimArgs) -> anyhow::Result<()> {
             spec.model.valve_law
         )?;
     }
-    let status = match out.result.status {
-        LaneStatus::Ok => "ok".to_string(),
-        LaneStatus::Failed { time_s, reason } => format!("failed at t = {time_s:.4} s: {reason}"),
-    };
+    let status = status_text(&out.result.status);
     writeln!(stdout, "  status      {status}")?;
     writeln!(stdout)?;
     writeln!(stdout, "  {:<22} {:>12}", "metric", "value")?;
@@ -78,18 +75,7 @@ pub fn run(args: &SimArgs) -> anyhow::Result<()> {
         )?;
     }
     if let Some(path) = &args.out {
-        let cols = out.history.named_columns();
-        let meta = {
-            let mut m = meta::header(Kind::TimeHistory);
-            m.extend([
-                meta::pair(Key::Spec, spec.resolved_toml()),
-                meta::pair(Key::SchemaVersion, super::run_cmd::SCHEMA_VERSION),
-                meta::pair(Key::Status, &status),
-            ]);
-            m
-        };
-        tables::write_parquet(path, &cols, &meta)
-            .with_context(|| format!("writing {}", path.display()))?;
+        write_history(path, &spec, &out, &status)?;
         writeln!(
             stdout,
             "\nwrote {} ({} rows x {} channels)",
@@ -104,6 +90,31 @@ pub fn run(args: &SimArgs) -> anyhow::Result<()> {
             Err(RunFailed(format!("{}: run {status}", args.file.display())).into())
         }
     }
+}
+
+/// A run's status in words: `ok`, or where and why it failed.
+pub fn status_text(status: &LaneStatus) -> String {
+    match *status {
+        LaneStatus::Ok => "ok".to_string(),
+        LaneStatus::Failed { time_s, reason } => format!("failed at t = {time_s:.4} s: {reason}"),
+    }
+}
+
+/// Writes a run's time history (every channel) with the resolved run and its status as metadata.
+pub fn write_history(
+    path: &Path,
+    spec: &SimSpec,
+    out: &sim::SimOutcome,
+    status: &str,
+) -> anyhow::Result<()> {
+    let cols = out.history.named_columns();
+    let mut meta = meta::header(Kind::TimeHistory);
+    meta.extend([
+        meta::pair(Key::Spec, spec.resolved_toml()),
+        meta::pair(Key::SchemaVersion, super::run_cmd::SCHEMA_VERSION),
+        meta::pair(Key::Status, status),
+    ]);
+    tables::write_parquet(path, &cols, &meta).with_context(|| format!("writing {}", path.display()))
 }
 
 /// The response spectra of the achieved and the target acceleration, printed and (with

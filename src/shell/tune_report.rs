@@ -3,7 +3,7 @@
 //! response spectra of the target, the start and the tuned gains overlaid. The numbers behind it
 //! are in evaluations.parquet and generations.parquet beside it.
 
-use super::report::{draw_line, esc};
+use super::report::{draw_line, esc, page_head};
 use super::tune_cmd::Nominal;
 use crate::kernel::excitation::Reference;
 use crate::orchestration::sim::SimOutcome;
@@ -59,16 +59,12 @@ pub fn html(
 }
 
 fn head(h: &mut String, name: &str) -> anyhow::Result<()> {
-    write!(
-        h,
-        "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>study tune: {t}</title><style>\
-body{{font-family:sans-serif;margin:24px;color:#222}} table{{border-collapse:collapse;font-size:13px}}\
-td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}} th{{background:#f2f2f2}} td:first-child{{text-align:left}}\
-figure{{margin:12px 0}} .legend span{{display:inline-block;width:14px;height:4px;margin:0 4px 2px 12px}}\
-</style></head><body>\n<h1>study tune: {t}</h1>\n<p class=\"legend\">start (published) gains<span style=\"background:#1f77b4\"></span> tuned gains<span style=\"background:#d62728\"></span> target<span style=\"background:#000\"></span></p>\n",
-        t = esc(name)
-    )?;
-    Ok(())
+    let legend = [
+        ("start (published) gains", "#1f77b4"),
+        ("tuned gains", "#d62728"),
+        ("target", "#000"),
+    ];
+    page_head(h, &format!("study tune: {name}"), &legend)
 }
 
 fn fmt(v: f64) -> String {

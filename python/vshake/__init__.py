@@ -1,0 +1,482 @@
+"""vshake: the virtual shake table (a nonlinear servo-hydraulic model of the UCSD-NEES LHPOST)
+from Python.
+
+Every function runs the same engine as the ``study`` command line, on all cores with the GIL
+released, and raises :class:`VshakeError` (:class:`InputError` for bad input, naming the file,
+key, column or row) with the command line's message.
+
+- :func:`run`: a study (file, TOML text or dict) -> a ``pyarrow.Table``, as ``study run`` writes it;
+- :func:`evaluate`: parameter sets (a dict of arrays, a DataFrame, or a 2-D array with names)
+  against a study's excitations -> a DataFrame of metrics: SALib's ``Y = model(X)``;
+- :func:`simulate`: one run -> a DataFrame of time histories (``.attrs["metrics"]``);
+- :func:`compare`, :func:`diagnose`, :func:`fit`: a measured campaign -> an object holding the
+  tables and the verdict, shown as HTML in a notebook;
+- :func:`params`, :func:`effects`: the parameters (unit, default, range, source) and the effect
+  library;
+- :func:`plot_study`: the plots of ``study plot`` (Sobol' indices, metric against each parameter,
+  failed runs) from a results table.
+
+See docs/python.md for a walk-through.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Union
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from . import _native
+from ._native import InputError, VshakeError
+
+__version__: str = _native.__version__
+
+__all__ = [
+    "run",
+    "evaluate",
+    "simulate",
+    "compare",
+    "diagnose",
+    "fit",
+    "params",
+    "effects",
+    "plot_study",
+    "Comparison",
+    "Diagnosis",
+    "Fit",
+    "VshakeError",
+    "InputError",
+]
+
+PathLike = Union[str, "os.PathLike[str]"]
+StudyLike = Union[PathLike, Mapping[str, Any]]
+ModelLike = Union[PathLike, Mapping[str, Any], None]
+
+
+def _is_path(obj: Any) -> bool:
+    """A path (not TOML text): a PathLike, or a one-line string naming a file or ending in .toml."""
+    if isinstance(obj, os.PathLike):
+        return True
+    if not isinstance(obj, str) or "\n" in obj or "=" in obj:
+        return False
+    return obj.strip().endswith(".toml") or Path(obj).is_file()
+
+
+def _toml(obj: Mapping[str, Any]) -> str:
+    """TOML text of a dict (NumPy numbers and arrays become TOML numbers and arrays)."""
+
+    def plain(x: Any) -> Any:
+        if isinstance(x, Mapping):
+            return {str(k): plain(v) for k, v in x.items()}
+        if isinstance(x, (list, tuple, np.ndarray)):
+            return [plain(v) for v in x]
+        if isinstance(x, np.generic):
+            return x.item()
+        if isinstance(x, os.PathLike):
+            return os.fspath(x)
+        return x
+
+    return _native.toml_of_json(json.dumps(plain(obj)))
+
+
+def _study_args(study: StudyLike) -> Dict[str, Any]:
+    """The native call's study arguments: a file's path, or TOML text read from the current folder."""
+    if isinstance(study, Mapping):
+        return {"toml": _toml(study), "base": os.getcwd()}
+    if _is_path(study):
+        path = Path(study)
+        if not path.is_file():
+            raise InputError(f"{path}: no such study file")
+        return {"path": str(path)}
+    return {"toml": str(study), "base": os.getcwd()}
+
+
+def _model_tables(model: Mapping[str, Any]) -> Dict[str, Any]:
+    """``{"controller.g_d": 1.5}`` or ``{"controller": {"g_d": 1.5}}`` as [model.*] tables."""
+    tables: Dict[str, Dict[str, Any]] = {}
+    for key, value in model.items():
+        if isinstance(value, Mapping):
+            tables.setdefault(key, {}).update(value)
+        elif "." in key:
+            component, name = key.split(".", 1)
+            tables.setdefault(component, {})[name] = value
+        else:
+            raise InputError(
+                f"model: `{key}`: name a parameter as component.name (e.g. controller.g_d), "
+                "or give a component's table"
+            )
+    return tables
+
+
+def _model_path(model: ModelLike, scratch: Path) -> Optional[str]:
+    """A model file for ``--model``: the path given, or a dict written to a scratch file."""
+    if model is None:
+        return None
+    if isinstance(model, Mapping):
+        path = scratch / "model.toml"
+        path.write_text(_toml({"model": _model_tables(model)}))
+        return str(path)
+    path = Path(model)
+    if not path.is_file():
+        raise InputError(f"{path}: no such model file")
+    return str(path)
+
+
+class _Scratch:
+    """A temporary folder removed on exit."""
+
+    def __enter__(self) -> Path:
+        self.path = Path(tempfile.mkdtemp(prefix="vshake-"))
+        return self.path
+
+    def __exit__(self, *exc: Any) -> None:
+        shutil.rmtree(self.path, ignore_errors=True)
+
+
+def _read_table(path: Path) -> pa.Table:
+    """The whole table in memory (its file may be removed afterwards), metadata included."""
+    return pq.read_table(path, memory_map=False)
+
+
+def run(
+    study: StudyLike,
+    out: Optional[PathLike] = None,
+    model: ModelLike = None,
+    threads: int = 0,
+) -> pa.Table:
+    """Runs a study as ``study run`` does and returns its results table.
+
+    ``study`` is a study file's path, its TOML text, or a dict of the same tables (relative
+    paths in text or a dict start at the current folder). ``out`` also writes the table there
+    (a table vshake wrote is replaced; any other file is refused). ``model`` is a model file or
+    a dict (``{"controller.g_d": 1.5}``). ``threads=0`` uses every core. The table carries the
+    file's metadata (``table.schema.metadata``: ``vshake.study``, ``vshake.seed``, ...).
+    """
+    with _Scratch() as scratch:
+        target = Path(out) if out is not None else scratch / "results.parquet"
+        _native.run_study(
+            str(target), model=_model_path(model, scratch), threads=threads, **_study_args(study)
+        )
+        return _read_table(target)
+
+
+def _columns(params: Any, names: Optional[Sequence[str]]) -> List[tuple]:
+    """(name, values) pairs of parameter sets given as a dict, a DataFrame or a 2-D array."""
+    if isinstance(params, pd.DataFrame):
+        items = [(str(c), params[c].to_numpy()) for c in params.columns]
+    elif isinstance(params, Mapping):
+        items = [(str(k), np.asarray(v)) for k, v in params.items()]
+    else:
+        x = np.asarray(params, dtype=float)
+        if x.ndim != 2:
+            raise InputError(f"params: a 2-D array (sets x parameters) is expected, not {x.ndim}-D")
+        if names is None or len(names) != x.shape[1]:
+            raise InputError(
+                f"params: a {x.shape[0]} x {x.shape[1]} array needs names= with {x.shape[1]} "
+                "parameter names (SALib's problem['names'])"
+            )
+        items = [(str(n), x[:, i]) for i, n in enumerate(names)]
+    out = []
+    for name, values in items:
+        try:
+            v = np.asarray(values, dtype=float).ravel()
+        except (TypeError, ValueError):
+            raise InputError(f"params: column `{name}` is not numeric") from None
+        out.append((name, v.tolist()))
+    return out
+
+
+def _excitation_study(excitations: Any) -> Any:
+    """A study (path, text or dict) from a study file, TOML text, a dict or a list of excitations."""
+    if isinstance(excitations, Mapping) and "kind" in excitations:
+        excitations = [dict(excitations, name=excitations.get("name", "excitation"))]
+    if isinstance(excitations, (list, tuple)):
+        return {"excitations": [dict(e) for e in excitations]}
+    return excitations
+
+
+def evaluate(
+    params: Any,
+    excitations: Any,
+    metrics: Optional[Sequence[str]] = None,
+    names: Optional[Sequence[str]] = None,
+    model: ModelLike = None,
+    threads: int = 0,
+    table: bool = False,
+) -> Union[pd.DataFrame, pa.Table]:
+    """Runs parameter sets through the model: SALib's ``Y = model(X)``, on every core.
+
+    ``params``: a dict of arrays or a DataFrame, one row per set, columns named as ``params()``
+    names them (``controller.g_d`` or the results' column name ``g_d``); or a 2-D array with
+    ``names=`` (SALib's ``problem["names"]``). ``excitations``: a study file (its
+    [[excitations]], [model.*], [solver], [spectrum] and [responses] metrics are used, its design is
+    replaced by the sets), a study's TOML text or dict, a list of excitation dicts, or one.
+    ``metrics`` chooses the metric columns (default: the study's). Returns one row per set and
+    excitation, as ``study run`` writes them (``sample_id`` is the set's row; ``status`` says
+    whether the run ended; a metric of a failed run is NaN); ``table=True`` returns the
+    ``pyarrow.Table`` with its metadata instead.
+    """
+    columns = _columns(params, names)
+    with _Scratch() as scratch:
+        out = scratch / "evaluate.parquet"
+        _native.evaluate(
+            str(out),
+            columns,
+            metrics=list(metrics) if metrics is not None else None,
+            model=_model_path(model, scratch),
+            threads=threads,
+            **_study_args(_excitation_study(excitations)),
+        )
+        t = _read_table(out)
+    return t if table else t.to_pandas()
+
+
+def simulate(
+    excitation: Union[Mapping[str, Any], PathLike],
+    model: ModelLike = None,
+    solver: Optional[Mapping[str, Any]] = None,
+) -> pd.DataFrame:
+    """One run of the model, as ``study sim`` does: a DataFrame of the time history.
+
+    ``excitation`` is an excitation dict (``{"kind": "sine", "freq_hz": 3.0, "amp_g": 1.73}``;
+    docs/formats.md lists the kinds) or a run file (TOML with [excitation], [model.*],
+    [solver]). ``model``: a model file or a dict of parameters. The DataFrame has one row per
+    controller tick, one column per channel (``time_s``, ``ref_disp_m``, ``disp_m``,
+    ``accel_mps2``, ...); ``.attrs["metrics"]`` holds the run's metrics (``h3``, ``thd_odd``,
+    ``amp_ratio``, ...), ``.attrs["status"]`` says whether it ended.
+    """
+    with _Scratch() as scratch:
+        if isinstance(excitation, Mapping):
+            doc: Dict[str, Any] = {"excitation": dict(excitation)}
+            if solver:
+                doc["solver"] = dict(solver)
+            text, base = _toml(doc), os.getcwd()
+        else:
+            path = Path(excitation)
+            if not path.is_file():
+                raise InputError(f"{path}: no such run file")
+            if solver:
+                raise InputError("solver=: give it in the run file's [solver] table")
+            text, base = path.read_text(), str(path.parent)
+        out = scratch / "history.parquet"
+        status, metrics = _native.simulate(text, str(out), base=base, model=_model_path(model, scratch))
+        df = _read_table(out).to_pandas()
+    df.attrs["metrics"] = dict(metrics)
+    df.attrs["status"] = status
+    if status != "ok":
+        raise VshakeError(f"the run {status}")
+    return df
+
+
+def _report_tables(folder: Path) -> Dict[str, pa.Table]:
+    return {p.stem: _read_table(p) for p in sorted(folder.glob("*.parquet"))}
+
+
+def _html_table(t: Optional[pa.Table], rows: int = 20) -> str:
+    if t is None:
+        return ""
+    return t.slice(0, rows).to_pandas().to_html(index=False, float_format=lambda v: f"{v:.4g}")
+
+
+class _Result:
+    """A command's outcome: its printed report (``text``) and its tables (pyarrow)."""
+
+    _title = "vshake"
+    _main_table = "tests"
+
+    def __init__(self, text: str, tables: Dict[str, pa.Table], report: Optional[Path]) -> None:
+        self.text = text
+        self.tables = tables
+        self.report = report / "report.html" if report is not None else None
+
+    def __repr__(self) -> str:
+        return self.text
+
+    def _repr_html_(self) -> str:
+        import html
+
+        return (
+            f"<h4>{html.escape(self._title)}</h4>"
+            + self._html_head()
+            + _html_table(self.tables.get(self._main_table))
+            + f"<details><summary>report</summary><pre>{html.escape(self.text)}</pre></details>"
+        )
+
+    def _html_head(self) -> str:
+        return ""
+
+
+class Comparison(_Result):
+    """``study compare``: ``text`` (the printed comparison) and ``tables`` (tests, harmonics,
+    bins, cycles, overlay, statemap, stateterms)."""
+
+    _title = "model versus measurement"
+
+    @property
+    def tests(self) -> pd.DataFrame:
+        """One row per test: amplitude ratio, phase, THD, errors."""
+        return self.tables["tests"].to_pandas()
+
+
+class Diagnosis(_Result):
+    """``study diagnose``: the ``verdict``, ``text`` and ``tables`` (candidates, selection,
+    tests, evidence, statemap, stateterms)."""
+
+    _title = "diagnosis"
+    _main_table = "candidates"
+
+    @property
+    def verdict(self) -> str:
+        """The verdict line: ``most likely missing: NAME (family); ...``."""
+        m = re.search(r"^\s*verdict: (.*)$", self.text, re.M)
+        return m.group(1) if m else ""
+
+    @property
+    def candidates(self) -> pd.DataFrame:
+        """One row per candidate effect, best first."""
+        return self.tables["candidates"].to_pandas()
+
+    def _html_head(self) -> str:
+        import html
+
+        return f"<p><b>verdict:</b> {html.escape(self.verdict)}</p>"
+
+
+class Fit(_Result):
+    """``study fit``: ``estimates`` (parameter, estimate, std_error), ``model_toml`` (the fitted
+    model file's text, for ``model=``), ``model_path`` where it was written, and ``text``."""
+
+    _title = "fit"
+    _main_table = "estimates"
+
+    def __init__(self, text: str, model_toml: str, model_path: Optional[Path]) -> None:
+        self.model_toml = model_toml
+        self.model_path = model_path
+        head = model_toml.splitlines()[0] if model_toml else ""
+        rows = re.findall(r"([A-Za-z_0-9]+\.[A-Za-z_0-9]+) = ([^ ,]+) ± ([^ ,]+)", head)
+        est = pd.DataFrame(
+            [(p, float(e), float(s)) for p, e, s in rows],
+            columns=["parameter", "estimate", "std_error"],
+        )
+        super().__init__(text, {"estimates": pa.Table.from_pandas(est, preserve_index=False)}, None)
+
+    @property
+    def estimates(self) -> pd.DataFrame:
+        return self.tables["estimates"].to_pandas()
+
+
+def _campaign(campaign: PathLike) -> str:
+    path = Path(campaign)
+    if not path.is_file():
+        raise InputError(f"{path}: no such campaign file")
+    return str(path)
+
+
+def compare(
+    campaign: PathLike,
+    model: ModelLike = None,
+    report: Optional[PathLike] = None,
+    threads: int = 0,
+) -> Comparison:
+    """Compares the model with a measured campaign (``study compare``). ``report`` keeps the
+    report (report.html and the Parquet tables) in that folder."""
+    with _Scratch() as scratch:
+        folder = Path(report) if report is not None else scratch / "report"
+        text = _native.compare(
+            _campaign(campaign), str(folder), model=_model_path(model, scratch), threads=threads
+        )
+        return Comparison(text, _report_tables(folder), Path(report) if report else None)
+
+
+def diagnose(
+    campaign: PathLike,
+    model: ModelLike = None,
+    candidates: Optional[Iterable[str]] = None,
+    report: Optional[PathLike] = None,
+    out: Optional[PathLike] = None,
+    threads: int = 0,
+) -> Diagnosis:
+    """Says which effect is most likely missing (``study diagnose``). ``candidates`` limits the
+    effects tried; ``out`` writes the named effects' fitted model; ``report`` keeps the report."""
+    with _Scratch() as scratch:
+        folder = Path(report) if report is not None else scratch / "report"
+        text = _native.diagnose(
+            _campaign(campaign),
+            str(folder),
+            model=_model_path(model, scratch),
+            candidates=list(candidates or []),
+            out=str(out) if out is not None else None,
+            threads=threads,
+        )
+        return Diagnosis(text, _report_tables(folder), Path(report) if report else None)
+
+
+def fit(
+    campaign: PathLike,
+    effects: Union[str, Sequence[str]] = (),
+    free: Union[str, Sequence[str]] = (),
+    model: ModelLike = None,
+    out: Optional[PathLike] = None,
+    max_iter: int = 200,
+    threads: int = 0,
+) -> Fit:
+    """Adds effects and calibrates their parameters (and ``free`` ones) on a campaign
+    (``study fit``). ``out`` keeps the fitted model file; ``Fit.model_toml`` has its text."""
+    as_list = lambda x: [x] if isinstance(x, str) else list(x)  # noqa: E731
+    with _Scratch() as scratch:
+        target = Path(out) if out is not None else scratch / "fitted.toml"
+        text = _native.fit(
+            _campaign(campaign),
+            str(target),
+            effects=as_list(effects),
+            free=as_list(free),
+            model=_model_path(model, scratch),
+            max_iter=max_iter,
+            threads=threads,
+        )
+        return Fit(text, target.read_text(), Path(out) if out is not None else None)
+
+
+def params(component: Optional[str] = None) -> pd.DataFrame:
+    """Every parameter of the model and the effect library, as ``study params`` lists them:
+    path, component, name, column, unit, default, low, high, range, source, meaning."""
+    cols = ["parameter", "component", "name", "column", "unit", "default", "low", "high",
+            "range", "source", "meaning"]
+    df = pd.DataFrame(_native.params(), columns=cols)
+    if component is not None:
+        if component not in set(df["component"]):
+            known = ", ".join(dict.fromkeys(df["component"]))
+            raise InputError(f"unknown component `{component}`; expected one of: {known}")
+        df = df[df["component"] == component].reset_index(drop=True)
+    return df
+
+
+def effects() -> pd.DataFrame:
+    """The effect library: name, family, the parameters a diagnosis frees, what it adds."""
+    return pd.DataFrame(_native.effects(), columns=["effect", "family", "frees", "adds"])
+
+
+def plot_study(
+    results: Union[PathLike, pa.Table],
+    out: PathLike,
+    metrics: Optional[Sequence[str]] = None,
+) -> Path:
+    """Draws a study's plots as ``study plot`` does (SVG files and index.html in ``out``):
+    Sobol' indices with their intervals (a Saltelli design), each metric against each varied
+    parameter, and the failed runs in parameter space. Returns the index.html path."""
+    with _Scratch() as scratch:
+        if isinstance(results, pa.Table):
+            path = scratch / "results.parquet"
+            pq.write_table(results, path)
+        else:
+            path = Path(results)
+        _native.plot_study(str(path), str(out), metrics=list(metrics) if metrics else None)
+    return Path(out) / "index.html"

@@ -1,0 +1,269 @@
+//! The library's front for programs that embed vshake (the Python package in `python/`): each
+//! command as a function of values. Tables are written where the caller says, the report a
+//! command prints is returned as text, and errors are the commands' own (file, key, row).
+
+use super::cli::{CompareArgs, DiagnoseArgs, FitArgs, RunArgs};
+use super::gpu::Backend;
+use super::run_cmd::{self, Job};
+use super::BadInput;
+use crate::kernel::params::{ModelParams, ParamInfo};
+use crate::orchestration::batch::Plan;
+use crate::orchestration::sim;
+use crate::orchestration::spec::SimSpec;
+use crate::orchestration::study::StudySpec;
+use std::path::Path;
+
+/// A study: a file, or TOML text whose relative paths (records, design files) start at `base`.
+pub enum Study<'a> {
+    File(&'a Path),
+    Text { toml: &'a str, base: &'a Path },
+}
+
+impl Study<'_> {
+    fn text(&self) -> anyhow::Result<String> {
+        match self {
+            Study::File(f) => std::fs::read_to_string(f)
+                .map_err(|e| BadInput(format!("{}: cannot read: {e}", f.display())).into()),
+            Study::Text { toml, .. } => Ok(toml.to_string()),
+        }
+    }
+
+    fn base(&self) -> &Path {
+        match self {
+            Study::File(f) => f.parent().unwrap_or(Path::new(".")),
+            Study::Text { base, .. } => base,
+        }
+    }
+
+    /// How errors and the results' metadata name it.
+    fn label(&self) -> String {
+        match self {
+            Study::File(f) => std::fs::canonicalize(f)
+                .unwrap_or_else(|_| f.to_path_buf())
+                .display()
+                .to_string(),
+            Study::Text { .. } => "(study text)".into(),
+        }
+    }
+}
+
+/// `study run`'s arguments for a run writing `out` with `threads` (0: every core), quietly.
+fn run_args(model: Option<&Path>, out: &Path, threads: usize) -> RunArgs {
+    RunArgs {
+        file: None,
+        resume: None,
+        model: model.map(Path::to_path_buf),
+        dry_run: false,
+        yes: true,
+        checkpoint_secs: 30.0,
+        out: Some(out.to_path_buf()),
+        threads,
+        chunk: None,
+        samples: None,
+        quiet: true,
+        log_progress: false,
+        shard: None,
+        backend: Backend::Auto,
+    }
+}
+
+/// `study run`: the study's results table written to `out`; returns the printed summary.
+pub fn run_study(
+    study: Study,
+    model: Option<&Path>,
+    out: &Path,
+    threads: usize,
+) -> anyhow::Result<String> {
+    let args = run_args(model, out, threads);
+    let base_model = super::campaign_io::load_model(model)?;
+    let label = study.label();
+    let spec = StudySpec::from_toml_on(&study.text()?, &label, base_model)?;
+    let job = Job::of_spec(&args, spec, study.base(), &label)?;
+    let mut text = Vec::new();
+    run_cmd::execute(&args, job, &mut text, false)?;
+    Ok(String::from_utf8_lossy(&text).into_owned())
+}
+
+/// Runs given parameter sets (`columns`: a name as `study params` or a results table names it,
+/// and one value per set) against the study's excitations (its [[excitations]], [model.*],
+/// [solver], [spectrum] and [responses] metrics; its design is replaced by the sets), writing a
+/// results table to `out` as `study run` does.
+pub fn evaluate(
+    study: Study,
+    columns: &[(String, Vec<f64>)],
+    metrics: Option<&[String]>,
+    model: Option<&Path>,
+    out: &Path,
+    threads: usize,
+) -> anyhow::Result<String> {
+    let sets = columns.first().map_or(0, |c| c.1.len());
+    if let Some((name, c)) = columns.iter().find(|c| c.1.len() != sets) {
+        return Err(BadInput(format!(
+            "parameter `{name}` has {} values; the first one has {sets}",
+            c.len()
+        ))
+        .into());
+    }
+    if sets == 0 {
+        return Err(
+            BadInput("no parameter sets to evaluate (give at least one row)".into()).into(),
+        );
+    }
+    let label = study.label();
+    let text = design_replaced(&study.text()?, &label, sets, metrics)?;
+    let spec = StudySpec::from_toml_on(&text, &label, super::campaign_io::load_model(model)?)?;
+    let names: Vec<String> = columns.iter().map(|c| c.0.clone()).collect();
+    let infos = run_cmd::parameters_of_columns(&names, "parameters")?;
+    let wanted: Vec<String> = infos.iter().map(|i| i.path()).collect();
+    let references = run_cmd::references(&spec, study.base(), &wanted)?;
+    let rows: Vec<Vec<f64>> = (0..sets)
+        .map(|r| columns.iter().map(|c| c.1[r]).collect())
+        .collect();
+    let plan = Plan::from_table(&spec, infos, rows, references);
+    let args = run_args(model, out, threads);
+    let job = Job::of_plan(&args, spec, plan, &label)?;
+    let mut text = Vec::new();
+    run_cmd::execute(&args, job, &mut text, false)?;
+    Ok(String::from_utf8_lossy(&text).into_owned())
+}
+
+/// The study's TOML with its design replaced by `sets` rows given in memory.
+fn design_replaced(
+    text: &str,
+    label: &str,
+    sets: usize,
+    metrics: Option<&[String]>,
+) -> anyhow::Result<String> {
+    let mut t: toml::Table = crate::orchestration::toml_fields::parse(text, label)?;
+    t.remove("variables");
+    let mut method = toml::Table::new();
+    method.insert("sampling".into(), "file".into());
+    method.insert("file".into(), "(parameters in memory)".into());
+    t.insert("method".into(), method.into());
+    let study = t
+        .entry("study")
+        .or_insert_with(|| toml::Table::new().into());
+    if let Some(s) = study.as_table_mut() {
+        s.entry("name").or_insert_with(|| "evaluate".into());
+        s.insert("samples".into(), (sets as i64).into());
+    }
+    if let Some(o) = t.get_mut("output").and_then(toml::Value::as_table_mut) {
+        o.remove("histories");
+        o.remove("file");
+    }
+    if let Some(m) = metrics {
+        let r = t
+            .entry("responses")
+            .or_insert_with(|| toml::Table::new().into());
+        if let Some(r) = r.as_table_mut() {
+            let names: Vec<toml::Value> = m.iter().map(|s| s.as_str().into()).collect();
+            r.insert("metrics".into(), names.into());
+        }
+    }
+    Ok(toml::to_string(&t)?)
+}
+
+/// A run's outcome: its status in words and its metrics (name, value; NaN where not defined).
+pub struct Simulated {
+    pub status: String,
+    pub metrics: Vec<(&'static str, f64)>,
+}
+
+/// `study sim` of a run file's text (relative record paths start at `base`) on `model`: the
+/// time history of every channel written to `out`.
+pub fn simulate(
+    toml: &str,
+    base: &Path,
+    model: Option<&Path>,
+    out: &Path,
+) -> anyhow::Result<Simulated> {
+    let spec = SimSpec::from_toml_on(toml, "(run text)", super::campaign_io::load_model(model)?)?;
+    let reference = super::sim_cmd::build_reference(&spec, base)?;
+    let outcome = sim::run_sim(&spec, &reference)?;
+    let status = super::sim_cmd::status_text(&outcome.result.status);
+    super::sim_cmd::write_history(out, &spec, &outcome, &status)?;
+    Ok(Simulated {
+        status,
+        metrics: outcome.result.metrics.columns(),
+    })
+}
+
+/// `study compare CAMPAIGN --report DIR`: returns the printed report.
+pub fn compare(
+    campaign: &Path,
+    model: Option<&Path>,
+    report: &Path,
+    threads: usize,
+) -> anyhow::Result<String> {
+    let args = CompareArgs {
+        campaign: campaign.to_path_buf(),
+        model: model.map(Path::to_path_buf),
+        report: Some(report.to_path_buf()),
+        open_loop: None,
+        strict: false,
+        threads,
+        log_progress: false,
+    };
+    captured(|o| super::compare_cmd::run_to(&args, o))
+}
+
+/// `study diagnose CAMPAIGN --report DIR [--out MODEL]`: returns the printed report.
+pub fn diagnose(
+    campaign: &Path,
+    model: Option<&Path>,
+    candidates: &[String],
+    report: &Path,
+    out: Option<&Path>,
+    threads: usize,
+) -> anyhow::Result<String> {
+    let args = DiagnoseArgs {
+        campaign: campaign.to_path_buf(),
+        model: model.map(Path::to_path_buf),
+        candidates: candidates.to_vec(),
+        report: Some(report.to_path_buf()),
+        out: out.map(Path::to_path_buf),
+        strict: false,
+        threads,
+        backend: Backend::Auto,
+        log_progress: false,
+    };
+    captured(|o| super::diagnose_cmd::run_to(&args, o))
+}
+
+/// `study fit CAMPAIGN --effect E --free P --out MODEL`: returns the printed report.
+pub fn fit(
+    campaign: &Path,
+    effects: &[String],
+    free: &[String],
+    model: Option<&Path>,
+    out: &Path,
+    max_iter: usize,
+    threads: usize,
+) -> anyhow::Result<String> {
+    let args = FitArgs {
+        campaign: campaign.to_path_buf(),
+        effect: effects.to_vec(),
+        free: free.to_vec(),
+        model: model.map(Path::to_path_buf),
+        out: out.to_path_buf(),
+        max_iter,
+        strict: false,
+        threads,
+        backend: Backend::Auto,
+        log_progress: false,
+    };
+    captured(|o| super::fit_cmd::run_to(&args, o))
+}
+
+fn captured(
+    f: impl FnOnce(&mut dyn std::io::Write) -> anyhow::Result<()>,
+) -> anyhow::Result<String> {
+    let mut text = Vec::new();
+    f(&mut text)?;
+    Ok(String::from_utf8_lossy(&text).into_owned())
+}
+
+/// Every parameter of the model and the effect library, as `study params` lists them.
+pub fn parameters() -> Vec<&'static ParamInfo> {
+    ModelParams::registry().collect()
+}
