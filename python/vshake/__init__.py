@@ -58,6 +58,7 @@ __all__ = [
 
 PathLike = Union[str, "os.PathLike[str]"]
 StudyLike = Union[PathLike, Mapping[str, Any]]
+# A model: a model file, its TOML text, or a dict ({"controller.g_d": 1.5}).
 ModelLike = Union[PathLike, Mapping[str, Any], None]
 
 
@@ -117,12 +118,14 @@ def _model_tables(model: Mapping[str, Any]) -> Dict[str, Any]:
 
 
 def _model_path(model: ModelLike, scratch: Path) -> Optional[str]:
-    """A model file for ``--model``: the path given, or a dict written to a scratch file."""
+    """A model file for ``--model``: the path given, or a dict or a model file's text (such as
+    ``Fit.model_toml``) written to a scratch file."""
     if model is None:
         return None
-    if isinstance(model, Mapping):
+    if isinstance(model, Mapping) or (isinstance(model, str) and not _is_path(model)):
         path = scratch / "model.toml"
-        path.write_text(_toml({"model": _model_tables(model)}))
+        text = _toml({"model": _model_tables(model)}) if isinstance(model, Mapping) else model
+        path.write_text(text)
         return str(path)
     path = Path(model)
     if not path.is_file():
