@@ -9,13 +9,13 @@ use std::path::{Path, PathBuf};
 use vshake::shell::api::{self, Study};
 
 create_exception!(
-    _native,
+    vshake,
     VshakeError,
     PyException,
     "A vshake error: a run that failed, or the system (exit code 1 of `study`)."
 );
 create_exception!(
-    _native,
+    vshake,
     InputError,
     VshakeError,
     "Bad input: the message names the file, key, column or row (exit code 2 of `study`)."

@@ -45,6 +45,8 @@ def test_run_takes_a_dict_and_writes_out(root, tmp_path, monkeypatch):
     assert t.schema.metadata[b"vshake.kind"] == b"study_results"
 
 
+# The issue asks for saltelli.sample, which SALib 1.5+ marks deprecated (sobol.sample replaces it).
+@pytest.mark.filterwarnings("ignore::DeprecationWarning")
 def test_salib_first_order_indices_fall_in_study_sensitivity_intervals(root, study_bin, gains_sweep, tmp_path):
     """SALib's saltelli.sample -> vshake.evaluate -> sobol.analyze gives S1 of the gains sweep
     inside the 95 % intervals `study sensitivity` computes from the binary's run."""
@@ -148,3 +150,33 @@ def test_plot_study_draws_the_indices_scatter_and_failures(gains_sweep, tmp_path
     assert (tmp_path / "plots" / "failures.svg").is_file()
     with pytest.raises(vshake.InputError, match="other files"):
         vshake.plot_study(gains_sweep, tmp_path)
+
+
+def test_misuse_gets_a_clear_error(root, tmp_path, monkeypatch):
+    monkeypatch.chdir(root)
+    with pytest.raises(vshake.InputError, match="controller.g_d, which another column names too"):
+        vshake.evaluate({"g_d": [1.2], "controller.g_d": [1.8]}, "studies/smoke.toml")
+    with pytest.raises(vshake.InputError, match="no such study file"):
+        vshake.run("studies/smoke")
+    with pytest.raises(vshake.InputError, match="is a folder"):
+        vshake.run("studies/smoke.toml", out=tmp_path)
+    with pytest.raises(vshake.InputError, match="threads"):
+        vshake.run("studies/smoke.toml", threads=-1)
+    with pytest.raises(vshake.InputError) as e:
+        vshake.simulate({"kind": "sinus", "freq_hz": 3.0, "amp_g": 1.0})
+    assert "sinus" in str(e.value) and "unknown key" not in str(e.value)
+    with pytest.raises(vshake.InputError) as e:
+        vshake.simulate({"kind": "sine", "freq_hz": 3.0, "amp_g": 1.0}, model={"controller.f_s": 1.0})
+    assert "model=" in str(e.value) and "vshake-" not in str(e.value)
+    assert vshake.InputError.__module__ == "vshake"
+
+
+def test_evaluate_keeps_the_studys_fixed_variables(root, study_bin, tmp_path):
+    """smoke.toml fixes platen.mu_coef: evaluate's row equals study run's for the same gains."""
+    binary = tmp_path / "smoke.parquet"
+    subprocess.run([str(study_bin), "run", str(root / "studies/smoke.toml"), "--out", str(binary), "-q"], check=True, stdout=subprocess.DEVNULL)
+    t = pq.read_table(binary).to_pandas()
+    first = t[(t.sample_id < 8) & (t.excitation_id == 0)].sort_values("sample_id")
+    df = vshake.evaluate(first[["g_d", "l_a"]], root / "studies/smoke.toml", metrics="amp_ratio")
+    assert list(df.columns).count("amp_ratio") == 1
+    np.testing.assert_array_equal(df["amp_ratio"].to_numpy(), first["amp_ratio"].to_numpy())

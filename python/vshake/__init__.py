@@ -63,12 +63,34 @@ ModelLike = Union[PathLike, Mapping[str, Any], None]
 
 
 def _is_path(obj: Any) -> bool:
-    """A path (not TOML text): a PathLike, or a one-line string naming a file or ending in .toml."""
+    """A path, not TOML text: a PathLike, or a one-line string with no `=` or `[` (TOML text has
+    a key = value or a [table])."""
     if isinstance(obj, os.PathLike):
         return True
-    if not isinstance(obj, str) or "\n" in obj or "=" in obj:
-        return False
-    return obj.strip().endswith(".toml") or Path(obj).is_file()
+    return isinstance(obj, str) and not any(c in obj for c in "\n=[")
+
+
+def _file(path: PathLike, what: str) -> str:
+    """The path of an existing file, else InputError naming it."""
+    p = Path(path)
+    if p.is_dir():
+        raise InputError(f"{p}: is a folder, not a {what}")
+    if not p.is_file():
+        raise InputError(f"{p}: no such {what}")
+    return str(p)
+
+
+def _names(x: Union[None, str, Iterable[str]]) -> Optional[List[str]]:
+    """A list of names from one name or several."""
+    if x is None:
+        return None
+    return [x] if isinstance(x, str) else [str(n) for n in x]
+
+
+def _threads(n: int) -> int:
+    if not isinstance(n, (int, np.integer)) or n < 0:
+        raise InputError(f"threads={n!r}: a whole number of worker threads, 0 for every core")
+    return int(n)
 
 
 def _toml(obj: Mapping[str, Any]) -> str:
@@ -93,10 +115,7 @@ def _study_args(study: StudyLike) -> Dict[str, Any]:
     if isinstance(study, Mapping):
         return {"toml": _toml(study), "base": os.getcwd()}
     if _is_path(study):
-        path = Path(study)
-        if not path.is_file():
-            raise InputError(f"{path}: no such study file")
-        return {"path": str(path)}
+        return {"path": _file(study, "study file")}
     return {"toml": str(study), "base": os.getcwd()}
 
 
@@ -127,21 +146,26 @@ def _model_path(model: ModelLike, scratch: Path) -> Optional[str]:
         text = _toml({"model": _model_tables(model)}) if isinstance(model, Mapping) else model
         path.write_text(text)
         return str(path)
-    path = Path(model)
-    if not path.is_file():
-        raise InputError(f"{path}: no such model file")
-    return str(path)
+    return _file(model, "model file")
 
 
 class _Scratch:
-    """A temporary folder removed on exit."""
+    """A temporary folder removed on exit. An error that names a file written into it (a model
+    given as a dict, a table given in memory) names the argument instead."""
+
+    NAMES = {"model.toml": "model=", "results.parquet": "(the table given)"}
 
     def __enter__(self) -> Path:
         self.path = Path(tempfile.mkdtemp(prefix="vshake-"))
         return self.path
 
-    def __exit__(self, *exc: Any) -> None:
+    def __exit__(self, kind: Any, error: Any, trace: Any) -> None:
         shutil.rmtree(self.path, ignore_errors=True)
+        if isinstance(error, VshakeError) and error.args:
+            message = str(error.args[0])
+            for name, said in self.NAMES.items():
+                message = message.replace(str(self.path / name), said)
+            error.args = (message,) + tuple(error.args[1:])
 
 
 def _read_table(path: Path) -> pa.Table:
@@ -163,10 +187,15 @@ def run(
     a dict (``{"controller.g_d": 1.5}``). ``threads=0`` uses every core. The table carries the
     file's metadata (``table.schema.metadata``: ``vshake.study``, ``vshake.seed``, ...).
     """
+    if out is not None and Path(out).is_dir():
+        raise InputError(f"{out}: is a folder; name the results file (e.g. out='{Path(out) / 'results.parquet'}')")
     with _Scratch() as scratch:
         target = Path(out) if out is not None else scratch / "results.parquet"
         _native.run_study(
-            str(target), model=_model_path(model, scratch), threads=threads, **_study_args(study)
+            str(target),
+            model=_model_path(model, scratch),
+            threads=_threads(threads),
+            **_study_args(study),
         )
         return _read_table(target)
 
@@ -198,18 +227,20 @@ def _columns(params: Any, names: Optional[Sequence[str]]) -> List[tuple]:
 
 
 def _excitation_study(excitations: Any) -> Any:
-    """A study (path, text or dict) from a study file, TOML text, a dict or a list of excitations."""
+    """A study (path, text or dict) from a study file, TOML text, a dict or a list of excitations
+    (named ``excitation0``, ... where they have no name)."""
     if isinstance(excitations, Mapping) and "kind" in excitations:
         excitations = [dict(excitations, name=excitations.get("name", "excitation"))]
     if isinstance(excitations, (list, tuple)):
-        return {"excitations": [dict(e) for e in excitations]}
+        named = [dict({"name": f"excitation{i}"}, **e) for i, e in enumerate(excitations)]
+        return {"excitations": named}
     return excitations
 
 
 def evaluate(
     params: Any,
     excitations: Any,
-    metrics: Optional[Sequence[str]] = None,
+    metrics: Union[None, str, Sequence[str]] = None,
     names: Optional[Sequence[str]] = None,
     model: ModelLike = None,
     threads: int = 0,
@@ -219,9 +250,10 @@ def evaluate(
 
     ``params``: a dict of arrays or a DataFrame, one row per set, columns named as ``params()``
     names them (``controller.g_d`` or the results' column name ``g_d``); or a 2-D array with
-    ``names=`` (SALib's ``problem["names"]``). ``excitations``: a study file (its
-    [[excitations]], [model.*], [solver], [spectrum] and [responses] metrics are used, its design is
-    replaced by the sets), a study's TOML text or dict, a list of excitation dicts, or one.
+    ``names=`` (SALib's ``problem["names"]``); each parameter once. ``excitations``: a study file
+    (its [[excitations]], [model.*], [solver], [spectrum], [responses] metrics and fixed
+    [[variables]] are used; its other variables are replaced by the sets), a study's TOML text or
+    dict, a list of excitation dicts (named ``excitation0``, ... where they have no name), or one.
     ``metrics`` chooses the metric columns (default: the study's). Returns one row per set and
     excitation, as ``study run`` writes them (``sample_id`` is the set's row; ``status`` says
     whether the run ended; a metric of a failed run is NaN); ``table=True`` returns the
@@ -233,9 +265,9 @@ def evaluate(
         _native.evaluate(
             str(out),
             columns,
-            metrics=list(metrics) if metrics is not None else None,
+            metrics=_names(metrics),
             model=_model_path(model, scratch),
-            threads=threads,
+            threads=_threads(threads),
             **_study_args(_excitation_study(excitations)),
         )
         t = _read_table(out)
@@ -246,6 +278,7 @@ def simulate(
     excitation: Union[Mapping[str, Any], PathLike],
     model: ModelLike = None,
     solver: Optional[Mapping[str, Any]] = None,
+    check: bool = True,
 ) -> pd.DataFrame:
     """One run of the model, as ``study sim`` does: a DataFrame of the time history.
 
@@ -254,7 +287,9 @@ def simulate(
     [solver]). ``model``: a model file or a dict of parameters. The DataFrame has one row per
     controller tick, one column per channel (``time_s``, ``ref_disp_m``, ``disp_m``,
     ``accel_mps2``, ...); ``.attrs["metrics"]`` holds the run's metrics (``h3``, ``thd_odd``,
-    ``amp_ratio``, ...), ``.attrs["status"]`` says whether it ended.
+    ``amp_ratio``, ...), ``.attrs["status"]`` says whether it ended. A run that fails (the
+    stroke or pressure limit, divergence) raises :class:`VshakeError`; with ``check=False`` its
+    history up to the failure is returned instead.
     """
     with _Scratch() as scratch:
         if isinstance(excitation, Mapping):
@@ -263,9 +298,7 @@ def simulate(
                 doc["solver"] = dict(solver)
             text, base = _toml(doc), os.getcwd()
         else:
-            path = Path(excitation)
-            if not path.is_file():
-                raise InputError(f"{path}: no such run file")
+            path = Path(_file(excitation, "run file"))
             if solver:
                 raise InputError("solver=: give it in the run file's [solver] table")
             text, base = path.read_text(), str(path.parent)
@@ -274,8 +307,8 @@ def simulate(
         df = _read_table(out).to_pandas()
     df.attrs["metrics"] = dict(metrics)
     df.attrs["status"] = status
-    if status != "ok":
-        raise VshakeError(f"the run {status}")
+    if check and status != "ok":
+        raise VshakeError(f"the run {status} (simulate(..., check=False) returns its history)")
     return df
 
 
@@ -377,10 +410,7 @@ class Fit(_Result):
 
 
 def _campaign(campaign: PathLike) -> str:
-    path = Path(campaign)
-    if not path.is_file():
-        raise InputError(f"{path}: no such campaign file")
-    return str(path)
+    return _file(campaign, "campaign file")
 
 
 def compare(
@@ -394,7 +424,7 @@ def compare(
     with _Scratch() as scratch:
         folder = Path(report) if report is not None else scratch / "report"
         text = _native.compare(
-            _campaign(campaign), str(folder), model=_model_path(model, scratch), threads=threads
+            _campaign(campaign), str(folder), model=_model_path(model, scratch), threads=_threads(threads)
         )
         return Comparison(text, _report_tables(folder), Path(report) if report else None)
 
@@ -402,7 +432,7 @@ def compare(
 def diagnose(
     campaign: PathLike,
     model: ModelLike = None,
-    candidates: Optional[Iterable[str]] = None,
+    candidates: Union[None, str, Iterable[str]] = None,
     report: Optional[PathLike] = None,
     out: Optional[PathLike] = None,
     threads: int = 0,
@@ -415,9 +445,9 @@ def diagnose(
             _campaign(campaign),
             str(folder),
             model=_model_path(model, scratch),
-            candidates=list(candidates or []),
+            candidates=_names(candidates) or [],
             out=str(out) if out is not None else None,
-            threads=threads,
+            threads=_threads(threads),
         )
         return Diagnosis(text, _report_tables(folder), Path(report) if report else None)
 
@@ -433,17 +463,16 @@ def fit(
 ) -> Fit:
     """Adds effects and calibrates their parameters (and ``free`` ones) on a campaign
     (``study fit``). ``out`` keeps the fitted model file; ``Fit.model_toml`` has its text."""
-    as_list = lambda x: [x] if isinstance(x, str) else list(x)  # noqa: E731
     with _Scratch() as scratch:
         target = Path(out) if out is not None else scratch / "fitted.toml"
         text = _native.fit(
             _campaign(campaign),
             str(target),
-            effects=as_list(effects),
-            free=as_list(free),
+            effects=_names(effects) or [],
+            free=_names(free) or [],
             model=_model_path(model, scratch),
             max_iter=max_iter,
-            threads=threads,
+            threads=_threads(threads),
         )
         return Fit(text, target.read_text(), Path(out) if out is not None else None)
 
@@ -470,16 +499,18 @@ def effects() -> pd.DataFrame:
 def plot_study(
     results: Union[PathLike, pa.Table],
     out: PathLike,
-    metrics: Optional[Sequence[str]] = None,
+    metrics: Union[None, str, Sequence[str]] = None,
+    bootstrap: int = 200,
 ) -> Path:
     """Draws a study's plots as ``study plot`` does (SVG files and index.html in ``out``):
     Sobol' indices with their intervals (a Saltelli design), each metric against each varied
-    parameter, and the failed runs in parameter space. Returns the index.html path."""
+    parameter, and the failed runs in parameter space. ``bootstrap``: resamples for the indices'
+    95 % intervals. A folder holding other files is refused. Returns the index.html path."""
     with _Scratch() as scratch:
         if isinstance(results, pa.Table):
             path = scratch / "results.parquet"
             pq.write_table(results, path)
         else:
-            path = Path(results)
-        _native.plot_study(str(path), str(out), metrics=list(metrics) if metrics else None)
+            path = Path(_file(results, "results file"))
+        _native.plot_study(str(path), str(out), metrics=_names(metrics), bootstrap=bootstrap)
     return Path(out) / "index.html"

@@ -405,14 +405,15 @@ pub fn read_excitation_in(
                     KINDS.join(", ")
                 ),
             );
-            (None, &SINE_KEYS)
+            // The other keys depend on the kind: none of them is judged.
+            return None;
         }
         None => {
             issues.push(
                 f.path_of("kind"),
                 format!("missing (one of {})", KINDS.join(", ")),
             );
-            (None, &SINE_KEYS)
+            return None;
         }
     };
     f.finish(&[expected, extra].concat(), issues);

@@ -86,8 +86,8 @@ pub fn run_study(
 
 /// Runs given parameter sets (`columns`: a name as `study params` or a results table names it,
 /// and one value per set) against the study's excitations (its [[excitations]], [model.*],
-/// [solver], [spectrum] and [responses] metrics; its design is replaced by the sets), writing a
-/// results table to `out` as `study run` does.
+/// [solver], [spectrum], [responses] metrics and fixed variables; its design is replaced by the
+/// sets), writing a results table to `out` as `study run` does.
 pub fn evaluate(
     study: Study,
     columns: &[(String, Vec<f64>)],
@@ -135,7 +135,7 @@ fn design_replaced(
     metrics: Option<&[String]>,
 ) -> anyhow::Result<String> {
     let mut t: toml::Table = crate::orchestration::toml_fields::parse(text, label)?;
-    t.remove("variables");
+    fixed_into_model(&mut t);
     let mut method = toml::Table::new();
     method.insert("sampling".into(), "file".into());
     method.insert("file".into(), "(parameters in memory)".into());
@@ -161,6 +161,35 @@ fn design_replaced(
         }
     }
     Ok(toml::to_string(&t)?)
+}
+
+/// Removes a study's [[variables]]; its fixed ones become values of its model (`[model.*]`), as
+/// every sample of `study run` has them.
+fn fixed_into_model(t: &mut toml::Table) {
+    let Some(toml::Value::Array(vars)) = t.remove("variables") else {
+        return;
+    };
+    for v in vars.iter().filter_map(toml::Value::as_table) {
+        let text = |k: &str| v.get(k).and_then(toml::Value::as_str);
+        let (Some(name), Some("fixed"), Some(value)) =
+            (text("name"), text("distribution"), v.get("value"))
+        else {
+            continue;
+        };
+        let Some((component, param)) = name.split_once('.') else {
+            continue;
+        };
+        let model = t
+            .entry("model")
+            .or_insert_with(|| toml::Table::new().into());
+        let part = model.as_table_mut().map(|m| {
+            m.entry(component)
+                .or_insert_with(|| toml::Table::new().into())
+        });
+        if let Some(p) = part.and_then(toml::Value::as_table_mut) {
+            p.insert(param.into(), value.clone());
+        }
+    }
 }
 
 /// A run's outcome: its status in words and its metrics (name, value; NaN where not defined).

@@ -3,7 +3,7 @@
 use super::cli::DiagnoseArgs;
 use super::fit_cmd::{check_effect, load_problem, print_checks, residual_warnings};
 use super::meta::{self, Key, Kind};
-use super::report::esc;
+use super::report::{esc, legend};
 use super::tables::{self, Column};
 use super::BadInput;
 use super::{campaign_io::load_model, RunFailed};
@@ -617,10 +617,7 @@ fn error_falls_svg(problem: &Problem, d: &Diagnosis) -> Result<String, Box<dyn s
             });
             c.draw_series(pts.into_iter().map(|p| Circle::new(p, 4, color.filled())))?;
         }
-        c.configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()?;
+        legend(&mut c)?;
         root.present()?;
     }
     Ok(s)

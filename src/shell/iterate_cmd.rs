@@ -201,7 +201,7 @@ pub(crate) fn write_whole(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
 /// The error of each iteration (left) and the target against the achieved acceleration with the
 /// kept drive (right), as SVG.
 fn plot(done: &TableIteration) -> Result<String, Box<dyn std::error::Error>> {
-    use super::report::draw_line;
+    use super::report::{draw_line, legend};
     use plotters::prelude::*;
     let mut s = String::new();
     {
@@ -260,10 +260,7 @@ fn plot(done: &TableIteration) -> Result<String, Box<dyn std::error::Error>> {
         draw_line(&mut c, target, BLACK.stroke_width(2), Some("target"))?;
         let achieved = line(&done.achieved).into_iter();
         draw_line(&mut c, achieved, RED.stroke_width(1), Some("achieved"))?;
-        c.configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()?;
+        legend(&mut c)?;
         root.present()?;
     }
     Ok(s)

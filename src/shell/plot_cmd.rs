@@ -4,7 +4,7 @@
 //! SVG files and an index.html that shows them, in a folder of their own.
 
 use super::cli::PlotArgs;
-use super::report::{esc, page_head};
+use super::report::{esc, legend, page_head};
 use super::sensitivity_cmd::{analyse, load, Loaded};
 use super::tables::{self, input_if_user, AtomicFile};
 use super::BadInput;
@@ -20,14 +20,14 @@ const FIRST: RGBColor = RGBColor(31, 119, 180);
 const TOTAL: RGBColor = RGBColor(214, 39, 40);
 const OK: RGBColor = RGBColor(150, 150, 150);
 const FAILED: RGBColor = RGBColor(214, 39, 40);
-/// One colour per excitation, in table order (matplotlib's tab10).
-const SERIES: [RGBColor; 6] = [
-    RGBColor(31, 119, 180),
-    RGBColor(255, 127, 14),
-    RGBColor(44, 160, 44),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-    RGBColor(227, 119, 194),
+/// One colour per excitation, in table order (matplotlib's tab10), and its name.
+const SERIES: [(RGBColor, &str); 6] = [
+    (RGBColor(31, 119, 180), "blue"),
+    (RGBColor(255, 127, 14), "orange"),
+    (RGBColor(44, 160, 44), "green"),
+    (RGBColor(148, 103, 189), "purple"),
+    (RGBColor(140, 86, 75), "brown"),
+    (RGBColor(227, 119, 194), "pink"),
 ];
 /// Points drawn per scatter panel at most (every k-th row beyond), to keep the SVG light (about
 /// 100 bytes a point); failed runs are all drawn.
@@ -68,7 +68,8 @@ pub fn plot(
     };
     let mut files: Vec<(String, String)> = Vec::new();
     for (e, m, ix) in &indices {
-        if let Some(svg) = sobol_svg(&l.paths, ix).map_err(drawing)? {
+        let title = format!("{m} at {}", l.excitations[*e]);
+        if let Some(svg) = sobol_svg(&l.paths, ix, &title).map_err(drawing)? {
             files.push((format!("sobol_{}_{m}.svg", l.excitations[*e]), svg));
         }
     }
@@ -117,6 +118,14 @@ fn check_folder(out: &Path) -> anyhow::Result<()> {
     }
     std::fs::create_dir_all(out)
         .map_err(|e| BadInput(format!("{}: cannot create the folder: {e}", out.display())))?;
+    // An earlier drawing's plots go: the new index shows only the new ones.
+    if ours {
+        for f in std::fs::read_dir(out)?.flatten() {
+            if f.path().extension().is_some_and(|x| x == "svg") {
+                std::fs::remove_file(f.path())?;
+            }
+        }
+    }
     Ok(())
 }
 
@@ -136,14 +145,7 @@ fn page(
 ) -> anyhow::Result<String> {
     let mut h = String::from(MARK);
     h.push('\n');
-    let legend: Vec<(&str, String)> = l
-        .excitations
-        .iter()
-        .enumerate()
-        .map(|(i, e)| (e.as_str(), css(SERIES[i % SERIES.len()])))
-        .collect();
-    let legend: Vec<(&str, &str)> = legend.iter().map(|(e, c)| (*e, c.as_str())).collect();
-    page_head(&mut h, &format!("study plot: {}", file.display()), &legend)?;
+    page_head(&mut h, &format!("study plot: {}", file.display()), &[])?;
     let failed = status.iter().filter(|s| *s != "ok").count();
     writeln!(
         h,
@@ -170,7 +172,10 @@ fn page(
         "Each metric against each parameter",
         "scatter_",
         files,
-        "A point per run, coloured by excitation.",
+        &format!(
+            "A point per run, coloured by excitation: {}.",
+            excitation_colours(l)
+        ),
     )?;
     let note = if failed == 0 {
         "No run failed or was invalid."
@@ -206,13 +211,21 @@ fn section(
     Ok(())
 }
 
-fn css(c: RGBColor) -> String {
-    format!("#{:02x}{:02x}{:02x}", c.0, c.1, c.2)
+/// Each excitation's name with its colour in the scatter plots, in words.
+fn excitation_colours(l: &Loaded) -> String {
+    let each = l.excitations.iter().enumerate();
+    each.map(|(i, e)| format!("{e} {}", SERIES[i % SERIES.len()].1))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// S1 and ST bars per parameter with their intervals; None without Sobol' indices (too few base
 /// points ended).
-fn sobol_svg(paths: &[String], ix: &Indices) -> Result<Option<String>, Box<dyn std::error::Error>> {
+fn sobol_svg(
+    paths: &[String],
+    ix: &Indices,
+    title: &str,
+) -> Result<Option<String>, Box<dyn std::error::Error>> {
     let Some(sobol) = &ix.sobol else {
         return Ok(None);
     };
@@ -233,6 +246,7 @@ fn sobol_svg(paths: &[String], ix: &Indices) -> Result<Option<String>, Box<dyn s
         root.fill(&WHITE)?;
         let n = paths.len() as f64;
         let mut c = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 15))
             .margin(8)
             .x_label_area_size(40)
             .y_label_area_size(50)
@@ -280,10 +294,7 @@ fn sobol_svg(paths: &[String], ix: &Indices) -> Result<Option<String>, Box<dyn s
                 )
             }))?;
         }
-        c.configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()?;
+        legend(&mut c)?;
         root.present()?;
     }
     Ok(Some(s))
@@ -341,7 +352,7 @@ fn scatter_svg(l: &Loaded, metric: &str) -> Plot {
                 thinned(y.len(), MAX_POINTS)
                     .filter(|&r| y[r].is_finite())
                     .map(|r| {
-                        let colour = SERIES[exc[r] as usize % SERIES.len()];
+                        let colour = SERIES[exc[r] as usize % SERIES.len()].0;
                         Circle::new((x[r], y[r]), 2, colour.mix(0.5).filled())
                     }),
             )?;

@@ -68,6 +68,20 @@ where
     Ok(())
 }
 
+/// A chart's legend in the house style: the series' labels on a translucent white box.
+pub(crate) fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
+    c: &mut ChartContext<'a, DB, CT>,
+) -> Result<(), Box<dyn std::error::Error>>
+where
+    DB::ErrorType: 'static,
+{
+    c.configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()?;
+    Ok(())
+}
+
 /// Measured and model acceleration over the window, and their residual below.
 fn overlay_svg(r: &Compared) -> Result<String, Box<dyn std::error::Error>> {
     let mut s = String::new();
@@ -101,10 +115,7 @@ fn overlay_svg(r: &Compared) -> Result<String, Box<dyn std::error::Error>> {
             MODEL.stroke_width(1),
             Some("model"),
         )?;
-        c.configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()?;
+        legend(&mut c)?;
         let res: Vec<f64> = r.accel_model.iter().zip(meas).map(|(m, x)| m - x).collect();
         let (r0, r1) = range(res.iter().copied());
         let mut c = ChartBuilder::on(&bottom)
@@ -240,10 +251,7 @@ fn amplitude_svg(results: &[Compared]) -> Result<Option<String>, Box<dyn std::er
                     .map(|p| Circle::new(p, 4, color.filled())),
             )?;
         }
-        c.configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()?;
+        legend(&mut c)?;
         root.present()?;
     }
     Ok(Some(s))

@@ -110,6 +110,9 @@ pub fn parameters_of_columns(
             .or_else(|| ModelParams::registry().find(|p| p.column_name() == *n || p.name == n));
         match info.map(|i| (i, cannot_vary(i))) {
             Some((_, Some(why))) => return Err(BadInput(format!("{source}: column `{n}`: {why}")).into()),
+            Some((i, None)) if infos.iter().any(|j| j.path() == i.path()) => {
+                return Err(BadInput(format!("{source}: column `{n}` names {}, which another column names too; give each parameter once", i.path())).into())
+            }
             Some((i, None)) => infos.push(i),
             None => {
                 return Err(BadInput(format!(

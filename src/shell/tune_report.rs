@@ -3,7 +3,7 @@
 //! response spectra of the target, the start and the tuned gains overlaid. The numbers behind it
 //! are in evaluations.parquet and generations.parquet beside it.
 
-use super::report::{draw_line, esc, page_head};
+use super::report::{draw_line, esc, legend, page_head};
 use super::tune_cmd::Nominal;
 use crate::kernel::excitation::Reference;
 use crate::orchestration::sim::SimOutcome;
@@ -247,10 +247,7 @@ fn spectrum_svg(
         c.draw_series(LineSeries::new(line(&pb), TUNED.stroke_width(2)))?
             .label("tuned")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], TUNED));
-        c.configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()?;
+        legend(&mut c)?;
         root.present()?;
     }
     Ok(s)
@@ -298,10 +295,7 @@ fn generations_svg(t: &Tuned) -> Plot {
             TUNED.stroke_width(2),
             Some("best so far"),
         )?;
-        c.configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()?;
+        legend(&mut c)?;
         root.present()?;
     }
     Ok(s)
