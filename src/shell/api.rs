@@ -22,7 +22,7 @@ pub enum Study<'a> {
 impl Study<'_> {
     fn text(&self) -> anyhow::Result<String> {
         match self {
-            Study::File(f) => std::fs::read_to_string(f)
+            Study::File(f) => super::tables::read_input_text(f)
                 .map_err(|e| BadInput(format!("{}: cannot read: {e}", f.display())).into()),
             Study::Text { toml, .. } => Ok(toml.to_string()),
         }

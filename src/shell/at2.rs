@@ -23,7 +23,7 @@ const KIND: &str = "PEER .AT2";
 
 /// Reads an `.AT2` file into the columns `time_s` (k·DT) and `accel_g`.
 pub fn read(path: &Path) -> Result<NumTable, TableError> {
-    let bytes = std::fs::read(path).map_err(|err| TableError::Io {
+    let bytes = super::tables::read_input(path).map_err(|err| TableError::Io {
         file: path.to_path_buf(),
         err,
     })?;

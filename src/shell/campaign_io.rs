@@ -21,7 +21,7 @@ pub fn load_model(path: Option<&Path>) -> anyhow::Result<ModelParams> {
     match path {
         None => Ok(ModelParams::default()),
         Some(p) => {
-            let text = std::fs::read_to_string(p)
+            let text = super::tables::read_input_text(p)
                 .map_err(|e| BadInput(format!("{}: cannot read: {e}", p.display())))?;
             Ok(campaign::model_from_toml(&text, &p.display().to_string())?)
         }
@@ -29,7 +29,7 @@ pub fn load_model(path: Option<&Path>) -> anyhow::Result<ModelParams> {
 }
 
 pub fn load_campaign(file: &Path, model: &ModelParams) -> anyhow::Result<LoadedCampaign> {
-    let text = std::fs::read_to_string(file)
+    let text = super::tables::read_input_text(file)
         .map_err(|e| BadInput(format!("{}: cannot read: {e}", file.display())))?;
     let campaign = Campaign::from_toml(&text, &file.display().to_string(), model)?;
     Ok(LoadedCampaign {
@@ -66,10 +66,12 @@ fn load_test(
 ) -> anyhow::Result<Result<AlignedTest, Vec<String>>> {
     let path = lc.base.join(&test.data);
     if !path.is_file() {
-        let what = if path.is_dir() {
-            "a folder, not a data file"
-        } else {
-            "not found"
+        let what = match super::tables::not_regular(&path) {
+            Some(kind) => format!("is {kind}, not a data file"),
+            None => match std::fs::metadata(&path) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => format!("cannot read: {e}"),
+                _ => "not found".into(),
+            },
         };
         return Ok(Err(vec![format!(
             "{}: {what} (the data of test `{}` in {})",

@@ -31,7 +31,7 @@ pub fn load_study(file: &Path) -> anyhow::Result<StudySpec> {
 /// Reads and validates a study file on the model file `model` (`--model`; None: the defaults).
 pub fn load_study_on(file: &Path, model: Option<&Path>) -> anyhow::Result<StudySpec> {
     let base = super::campaign_io::load_model(model)?;
-    let text = std::fs::read_to_string(file)
+    let text = tables::read_input_text(file)
         .map_err(|e| BadInput(format!("{}: cannot read: {e}", file.display())))?;
     Ok(StudySpec::from_toml_on(
         &text,

@@ -22,7 +22,7 @@ pub fn build_reference(spec: &SimSpec, base: &Path) -> anyhow::Result<Reference>
 /// Reads and validates a run file on the model file `model` (`--model`; None: the defaults).
 pub fn load_spec(file: &Path, model: Option<&Path>) -> anyhow::Result<SimSpec> {
     let base = super::campaign_io::load_model(model)?;
-    let text = std::fs::read_to_string(file)
+    let text = tables::read_input_text(file)
         .map_err(|e| BadInput(format!("{}: cannot read: {e}", file.display())))?;
     Ok(SimSpec::from_toml_on(
         &text,

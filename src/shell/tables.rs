@@ -137,8 +137,61 @@ fn io_message(e: &std::io::Error) -> String {
     match e.kind() {
         std::io::ErrorKind::NotFound => "not found".into(),
         std::io::ErrorKind::PermissionDenied => "cannot read: permission denied".into(),
+        // Made by `regular_input`: what the path is, in words.
+        std::io::ErrorKind::InvalidInput => e.to_string(),
         _ => format!("cannot read: {e}"),
     }
+}
+
+/// What a path that exists but is not a regular file is (a folder, a FIFO, a device, a socket),
+/// for messages; None for a regular file, or a path whose reader will say why it cannot be read.
+pub fn not_regular(path: &Path) -> Option<&'static str> {
+    use std::os::unix::fs::FileTypeExt;
+    let t = std::fs::metadata(path).ok()?.file_type();
+    Some(if t.is_file() {
+        return None;
+    } else if t.is_dir() {
+        "a folder"
+    } else if t.is_fifo() {
+        "a FIFO (named pipe)"
+    } else if t.is_char_device() || t.is_block_device() {
+        "a device"
+    } else if t.is_socket() {
+        "a socket"
+    } else {
+        "not a regular file"
+    })
+}
+
+/// Refuses, before opening it, an input that is not a regular file: a FIFO would block the read
+/// and a device never end it. The error's kind is `InvalidInput`, its text what the path is.
+pub fn regular_input(path: &Path) -> std::io::Result<()> {
+    match not_regular(path) {
+        None => Ok(()),
+        Some(what) => Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            format!("is {what}, not a regular file: vshake reads files"),
+        )),
+    }
+}
+
+/// `std::fs::read` of an input, refused at once when it is not a regular file.
+pub fn read_input(path: &Path) -> std::io::Result<Vec<u8>> {
+    regular_input(path)?;
+    std::fs::read(path)
+}
+
+/// `std::fs::read_to_string` of an input (a study, run, campaign or model file), refused at once
+/// when it is not a regular file.
+pub fn read_input_text(path: &Path) -> std::io::Result<String> {
+    regular_input(path)?;
+    std::fs::read_to_string(path)
+}
+
+/// `File::open` of an input, refused at once when it is not a regular file.
+fn open_input(path: &Path) -> std::io::Result<File> {
+    regular_input(path)?;
+    File::open(path)
 }
 
 impl TableError {
@@ -151,6 +204,7 @@ impl TableError {
                 std::io::ErrorKind::NotFound
                     | std::io::ErrorKind::PermissionDenied
                     | std::io::ErrorKind::IsADirectory
+                    | std::io::ErrorKind::InvalidInput
             ),
             TableError::Many(v) => v.iter().all(TableError::is_input),
             _ => true,
@@ -229,7 +283,7 @@ fn guarded<T>(path: &Path, read: impl FnOnce() -> Result<T, TableError>) -> Resu
 
 fn column_names_unguarded(path: &Path) -> Result<Vec<String>, TableError> {
     let file = path.to_path_buf();
-    let f = File::open(path).map_err(|e| TableError::Io {
+    let f = open_input(path).map_err(|e| TableError::Io {
         file: file.clone(),
         err: e,
     })?;
@@ -250,7 +304,7 @@ fn column_names_unguarded(path: &Path) -> Result<Vec<String>, TableError> {
     } else if starts_with(path, matlab::V5_MAGIC) {
         Ok(mat_columns(path)?.names)
     } else {
-        let bytes = std::fs::read(path).map_err(|e| TableError::Io { file, err: e })?;
+        let bytes = read_input(path).map_err(|e| TableError::Io { file, err: e })?;
         let text = String::from_utf8_lossy(&bytes);
         let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
         let lay = columns::layout(text);
@@ -377,7 +431,7 @@ fn read_columns_lenient_impl(
 /// ([`columns::resolve`]), converted to SI.
 fn read_csv(path: &Path, wanted: Wanted<'_>) -> Result<(NumTable, BadCells), TableError> {
     let file = path.to_path_buf();
-    let bytes = std::fs::read(path).map_err(|e| TableError::Io {
+    let bytes = read_input(path).map_err(|e| TableError::Io {
         file: file.clone(),
         err: e,
     })?;
@@ -436,7 +490,7 @@ fn read_csv(path: &Path, wanted: Wanted<'_>) -> Result<(NumTable, BadCells), Tab
 /// The numeric variables of the MAT-file at `path` as columns ([`matlab::columns`]).
 fn mat_columns(path: &Path) -> Result<matlab::MatColumns, TableError> {
     let file = path.to_path_buf();
-    let bytes = std::fs::read(path).map_err(|e| TableError::Io {
+    let bytes = read_input(path).map_err(|e| TableError::Io {
         file: file.clone(),
         err: e,
     })?;
@@ -552,7 +606,7 @@ fn mat_lengths(
 fn starts_with(path: &Path, magic: &[u8]) -> bool {
     use std::io::Read;
     let mut head = vec![0u8; magic.len()];
-    File::open(path)
+    open_input(path)
         .and_then(|mut f| f.read_exact(&mut head))
         .is_ok_and(|_| head == magic)
 }
@@ -764,7 +818,7 @@ fn read_parquet(
         kind: "Parquet",
         message: e.to_string(),
     };
-    let f = File::open(path).map_err(|e| TableError::Io {
+    let f = open_input(path).map_err(|e| TableError::Io {
         file: file.clone(),
         err: e,
     })?;
@@ -1348,7 +1402,7 @@ pub fn parquet_rows(path: &Path) -> Result<usize, TableError> {
 
 fn parquet_rows_unguarded(path: &Path) -> Result<usize, TableError> {
     let file = path.to_path_buf();
-    let f = File::open(path).map_err(|e| TableError::Io {
+    let f = open_input(path).map_err(|e| TableError::Io {
         file: file.clone(),
         err: e,
     })?;
@@ -1367,7 +1421,7 @@ pub fn parquet_metadata(path: &Path) -> Result<Vec<(String, String)>, TableError
 
 fn parquet_metadata_unguarded(path: &Path) -> Result<Vec<(String, String)>, TableError> {
     let file = path.to_path_buf();
-    let f = File::open(path).map_err(|e| TableError::Io {
+    let f = open_input(path).map_err(|e| TableError::Io {
         file: file.clone(),
         err: e,
     })?;
@@ -1471,7 +1525,7 @@ fn read_values<T>(
         kind: "Parquet",
         message: e.to_string(),
     };
-    let f = File::open(path).map_err(|e| TableError::Io {
+    let f = open_input(path).map_err(|e| TableError::Io {
         file: file.clone(),
         err: e,
     })?;
@@ -1517,7 +1571,7 @@ pub fn parquet_batches(
         kind: "Parquet",
         message: e.to_string(),
     };
-    let f = File::open(path).map_err(|e| TableError::Io {
+    let f = open_input(path).map_err(|e| TableError::Io {
         file: file.clone(),
         err: e,
     })?;

@@ -28,7 +28,7 @@ const OUTPUTS: [&str; 5] = [
 ];
 
 pub fn run(args: &TuneArgs) -> anyhow::Result<()> {
-    let text = std::fs::read_to_string(&args.file)
+    let text = super::tables::read_input_text(&args.file)
         .map_err(|e| BadInput(format!("{}: cannot read: {e}", args.file.display())))?;
     let base_model = super::campaign_io::load_model(args.model.as_deref())?;
     let spec = TuneSpec::from_toml_on(&text, &args.file.display().to_string(), base_model)?;
