@@ -96,7 +96,9 @@ echo "-- a task stopped before its time limit requeues itself and resumes its sh
 bash "$work/requeue/submit.sh"
 tmp0="$work/requeue/shards/gains_sweep.shard-0-of-2.partial.parquet.tmp"
 for i in $(seq 1 120); do [ -e "$tmp0" ] && break; sleep 0.5; done
-sleep 2
+# A shard of the sweep runs for about 3 s on one core: signal it early, once some chunks are done
+# (their rows are what the requeued task keeps), so that it is still running when signalled.
+sleep 0.5
 task0=$(squeue -h -o "%i %T" | awk '$1 ~ /_0$/ && $2 == "RUNNING" {print $1}')
 test -n "$task0" || { echo "shard 0 is not running"; squeue; exit 1; }
 scancel --signal=TERM --batch "$task0"
