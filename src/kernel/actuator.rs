@@ -8,6 +8,8 @@
 //!
 //! Chamber 1 is the cap side, chamber 2 the rod side; positive y is extension.
 
+use super::params::ActuatorParams;
+
 /// Per-lane actuator coefficients.
 #[derive(Debug, Clone, Copy)]
 pub struct ActuatorLane {
@@ -17,6 +19,20 @@ pub struct ActuatorLane {
     pub l: f64,
     pub vd1: f64,
     pub vd2: f64,
+}
+
+impl ActuatorLane {
+    /// The coefficients of one parameter set's actuators.
+    pub fn of(a: &ActuatorParams) -> Self {
+        ActuatorLane {
+            beta: a.beta,
+            a1: a.a1,
+            a2: a.a2,
+            l: a.l,
+            vd1: a.vd1,
+            vd2: a.vd2,
+        }
+    }
 }
 
 /// β/V1 and β/V2 at displacement y (shared by all actuators of a lane).
@@ -38,6 +54,12 @@ pub fn pressure_rates(
     v: f64,
 ) -> (f64, f64) {
     (b1 * (q_in1 - c.a1 * v), b2 * (c.a2 * v - q_out2))
+}
+
+/// Rate of the force of one actuator, dP1/dt·A1 − dP2/dt·A2, from [`pressure_rates`].
+#[inline(always)]
+pub fn force_rate(c: &ActuatorLane, dp1: f64, dp2: f64) -> f64 {
+    dp1 * c.a1 - dp2 * c.a2
 }
 
 /// Force of one actuator, P1 A1 − P2 A2.

@@ -16,6 +16,8 @@
 //! q_in1 = K_q x, q_out2 = K_q (A2/A1) x with K_q = K_v w1 √(P_S − P1₀).
 //! The law is a type parameter of the kernel, chosen once per batch.
 
+use super::params::{ModelParams, ValveLaw};
+
 /// Regularised orifice law sq(Δp) = Δp / (Δp² + p_tr²)^¼, with `p_tr2` = p_tr².
 #[inline(always)]
 pub fn sq(dp: f64, p_tr2: f64) -> f64 {
@@ -58,6 +60,62 @@ pub struct ValveLane {
     /// Linear valve: n_val·K_q (m²/s) and n_val·K_q·A2/A1.
     pub kq1: f64,
     pub kq2: f64,
+}
+
+impl ValveLane {
+    /// The coefficients of one parameter set (docs/model.md §3; the linear valve's K_q at the
+    /// no-load cap pressure, §5).
+    pub fn of(m: &ModelParams) -> Self {
+        let sv = &m.servovalve;
+        let k = sv.n_val * sv.kv * sv.w3;
+        let (p1_0, _) = m.no_load_pressures();
+        let kq = sv.n_val * sv.kv * sv.r1 * sv.w3 * (sv.p_s - p1_0).sqrt();
+        ValveLane {
+            kw1: k * sv.r1,
+            kw2: k * sv.r2,
+            kw3: k,
+            kw4: k * sv.r4,
+            p_r: sv.p_r,
+            p_tr2: sv.p_tr * sv.p_tr,
+            kq1: kq,
+            kq2: kq * m.actuator.a2 / m.actuator.a1,
+        }
+    }
+}
+
+/// One parameter set's valves under its `valve_law`, evaluated at single states outside the time
+/// loop (the state map of a diagnosis): the kernel's own flow laws, not a copy.
+#[derive(Debug, Clone, Copy)]
+pub struct Valves {
+    lane: ValveLane,
+    p_s: f64,
+    law: ValveLaw,
+}
+
+impl Valves {
+    pub fn of(m: &ModelParams) -> Self {
+        Valves {
+            lane: ValveLane::of(m),
+            p_s: m.servovalve.p_s,
+            law: m.valve_law,
+        }
+    }
+
+    /// (n_val·q_in1, n_val·q_out2) at spool position `x` (m) and chamber pressures (Pa), m³/s.
+    pub fn flows(&self, x: f64, p1: f64, p2: f64) -> (f64, f64) {
+        match self.law {
+            ValveLaw::Orifice => Orifice::flows(&self.lane, x, p1, p2, self.p_s),
+            ValveLaw::Linear => Linear::flows(&self.lane, x, p1, p2, self.p_s),
+        }
+    }
+
+    /// ∂(flows)/∂x on the side of `x` (x ≤ 0 counts as the closing side), m²/s: both laws are
+    /// linear in x on each side, so it is the flow at a unit opening on that side.
+    pub fn gains(&self, x: f64, p1: f64, p2: f64) -> (f64, f64) {
+        let side = if x > 0.0 { 1.0 } else { -1.0 };
+        let (g1, g2) = self.flows(side, p1, p2);
+        (side * g1, side * g2)
+    }
 }
 
 /// A servo-valve flow law: (spool x, P1, P2, supply P_S) → (n_val·q_in1, n_val·q_out2) in m³/s.

@@ -115,34 +115,8 @@ impl<const N: usize> LaneParams<N> {
                 return Err(SetupError::NotUniform { lane: l });
             }
         }
-        let valve: [ValveLane; N] = std::array::from_fn(|l| {
-            let m = p(l);
-            let sv = &m.servovalve;
-            let k = sv.n_val * sv.kv * sv.w3;
-            let (p1_0, _) = m.no_load_pressures();
-            let kq = sv.n_val * sv.kv * sv.r1 * sv.w3 * (sv.p_s - p1_0).sqrt();
-            ValveLane {
-                kw1: k * sv.r1,
-                kw2: k * sv.r2,
-                kw3: k,
-                kw4: k * sv.r4,
-                p_r: sv.p_r,
-                p_tr2: sv.p_tr * sv.p_tr,
-                kq1: kq,
-                kq2: kq * m.actuator.a2 / m.actuator.a1,
-            }
-        });
-        let act: [ActuatorLane; N] = std::array::from_fn(|l| {
-            let a = &p(l).actuator;
-            ActuatorLane {
-                beta: a.beta,
-                a1: a.a1,
-                a2: a.a2,
-                l: a.l,
-                vd1: a.vd1,
-                vd2: a.vd2,
-            }
-        });
+        let valve: [ValveLane; N] = std::array::from_fn(|l| ValveLane::of(p(l)));
+        let act: [ActuatorLane; N] = std::array::from_fn(|l| ActuatorLane::of(&p(l).actuator));
         let platen: [PlatenLane; N] = std::array::from_fn(|l| {
             let m = p(l);
             PlatenLane {
@@ -453,6 +427,37 @@ pub fn run_usual<const N: usize, E: Effect<N>, O: Observer<N>>(
     }
     let _ = (lp, effect, reference, solver, obs);
     None
+}
+
+/// The baseline plant's state derivative for one parameter set at state `s` (indexed by
+/// [`super::state::idx`]) and spool command `x_c`, m: the time loop's right-hand side (both
+/// actuators, no effect, the set's valve law and damping exponent) at one state, against which
+/// the analyses that evaluate the plant outside the loop are checked.
+pub fn plant_derivatives(
+    model: &ModelParams,
+    x_c: f64,
+    s: &[f64; NP],
+) -> Result<[f64; NP], SetupError> {
+    let lp = LaneParams::<1>::new(&[model])?;
+    let state: [[f64; 1]; NP] = std::array::from_fn(|i| [s[i]]);
+    let mut ds = [[0.0; 1]; NP];
+    let (e, x) = (&super::effects::Baseline, &[x_c]);
+    let (es, mut des) = ([], []);
+    match (lp.valve_law, lp.alpha_half) {
+        (ValveLaw::Orifice, true) => {
+            rhs::<1, N_ACT, Orifice, SqrtDamping, _>(&lp, e, x, &state, &es, &mut ds, &mut des)
+        }
+        (ValveLaw::Orifice, false) => {
+            rhs::<1, N_ACT, Orifice, PowDamping, _>(&lp, e, x, &state, &es, &mut ds, &mut des)
+        }
+        (ValveLaw::Linear, true) => {
+            rhs::<1, N_ACT, Linear, SqrtDamping, _>(&lp, e, x, &state, &es, &mut ds, &mut des)
+        }
+        (ValveLaw::Linear, false) => {
+            rhs::<1, N_ACT, Linear, PowDamping, _>(&lp, e, x, &state, &es, &mut ds, &mut des)
+        }
+    }
+    Ok(std::array::from_fn(|i| ds[i][0]))
 }
 
 /// The checks before a run: the reference's rate is the controller's, substeps ≥ 1, a drive as

@@ -23,6 +23,8 @@ use super::sim;
 use crate::kernel::metrics::N_HARM;
 use crate::kernel::resample::ch;
 use crate::kernel::simulate::{LaneStatus, Solver};
+use faer::prelude::*;
+use faer::{Mat, Side};
 use rayon::prelude::*;
 use std::f64::consts::PI;
 
@@ -109,65 +111,43 @@ impl Projector {
     /// The projector of the window `tau` (model times, s) for fundamental `f` (Hz) and
     /// harmonics 1 … `n_harm` (fewer when the window has too few samples for them).
     pub fn new(tau: &[f64], f: f64, n_harm: usize) -> Self {
-        let n = tau.len();
-        let n_harm = n_harm.min(N_HARM).min(n.saturating_sub(1) / 2);
+        let n_harm = n_harm.min(N_HARM).min(tau.len().saturating_sub(1) / 2);
+        // Drop the highest harmonic while the window cannot tell the functions apart (XᵀX is
+        // then not positive definite: e.g. samples at a multiple of a harmonic's phase); the
+        // mean alone always can.
+        (0..=n_harm)
+            .rev()
+            .find_map(|h| Self::with_harmonics(tau, f, h))
+            .expect("the mean alone is resolved by any window")
+    }
+
+    /// The projector with exactly `n_harm` harmonics, or None when XᵀX has no Cholesky factor.
+    fn with_harmonics(tau: &[f64], f: f64, n_harm: usize) -> Option<Self> {
         let p = 1 + 2 * n_harm;
-        // Basis at each sample, then the normal matrix XᵀX.
-        let basis = |t: f64, out: &mut [f64]| {
-            out[0] = 1.0;
-            for k in 1..=n_harm {
-                let c = f * t * k as f64;
-                let (s, co) = (2.0 * PI * (c - c.floor())).sin_cos();
-                out[2 * k - 1] = co;
-                out[2 * k] = s;
+        // The basis X at the samples, one row per function.
+        let x = Mat::<f64>::from_fn(p, tau.len(), |i, m| {
+            let k = (i + 1) / 2;
+            let c = f * tau[m] * k as f64;
+            let (s, co) = (2.0 * PI * (c - c.floor())).sin_cos();
+            match i {
+                0 => 1.0,
+                _ if i % 2 == 1 => co,
+                _ => s,
             }
+        });
+        // Rows of (XᵀX)⁻¹Xᵀ (X is n × p: here its transpose is stored) by faer's Cholesky.
+        let gram = &x * x.transpose();
+        let rows = gram.llt(Side::Lower).ok()?.solve(&x);
+        let to_rows = |a: &Mat<f64>| -> Vec<Vec<f64>> {
+            (0..p)
+                .map(|i| (0..tau.len()).map(|m| a[(i, m)]).collect())
+                .collect()
         };
-        let mut g = vec![0.0; p * p];
-        let mut b = vec![0.0; p];
-        for &t in tau {
-            basis(t, &mut b);
-            for i in 0..p {
-                for j in 0..=i {
-                    g[i * p + j] += b[i] * b[j];
-                }
-            }
-        }
-        // Cholesky G = L Lᵀ (G is positive definite for at least p distinct phases).
-        let mut l = vec![0.0; p * p];
-        for i in 0..p {
-            for j in 0..=i {
-                let s = g[i * p + j] - (0..j).map(|k| l[i * p + k] * l[j * p + k]).sum::<f64>();
-                l[i * p + j] = if i == j {
-                    s.max(f64::MIN_POSITIVE).sqrt()
-                } else {
-                    s / l[j * p + j]
-                };
-            }
-        }
-        let mut rows = vec![vec![0.0; n]; p];
-        let mut xs = vec![vec![0.0; n]; p];
-        let mut y = vec![0.0; p];
-        for (m, &t) in tau.iter().enumerate() {
-            basis(t, &mut b);
-            for i in 0..p {
-                xs[i][m] = b[i];
-            }
-            // (XᵀX)⁻¹ bₘ: forward then back substitution.
-            for i in 0..p {
-                y[i] = (b[i] - (0..i).map(|k| l[i * p + k] * y[k]).sum::<f64>()) / l[i * p + i];
-            }
-            for i in (0..p).rev() {
-                y[i] = (y[i] - (i + 1..p).map(|k| l[k * p + i] * y[k]).sum::<f64>()) / l[i * p + i];
-            }
-            for i in 0..p {
-                rows[i][m] = y[i];
-            }
-        }
-        Projector {
+        Some(Projector {
             n_harm,
-            rows,
-            basis: xs,
-        }
+            rows: to_rows(&rows),
+            basis: to_rows(&x),
+        })
     }
 
     /// Harmonics the projector resolves.

@@ -59,8 +59,9 @@
 
 use super::compare::{Compared, Projector};
 use super::memory::{self, Input, Kind, MemoryFit};
+use crate::kernel::actuator::{self, ActuatorLane};
 use crate::kernel::params::ModelParams;
-use crate::kernel::servovalve::sq;
+use crate::kernel::servovalve::Valves;
 use faer::prelude::*;
 use faer::Mat;
 use std::f64::consts::PI;
@@ -305,6 +306,7 @@ pub fn test_states(
     disp: &[f64],
 ) -> [Vec<f64>; 5] {
     let stroke = model.servovalve.k_sp * model.servovalve.u_lim;
+    let valves = Valves::of(model);
     [
         spool_m.iter().map(|x| x / stroke).collect(),
         vel.to_vec(),
@@ -312,60 +314,21 @@ pub fn test_states(
         disp.to_vec(),
         spool_m
             .iter()
-            .zip(p1)
-            .map(|(&x, &p)| cap_flow(model, x, p))
+            .zip(p1.iter().zip(p2))
+            .map(|(&x, (&a, &b))| valves.flows(x, a, b).0)
             .collect(),
     ]
 }
 
-/// Valve flow into the cap chamber of one actuator (all its valves), m³/s, at spool position
-/// `x` and cap pressure `p1`: through the active land, supply → cap for x > 0, cap → return for
-/// x < 0 (the baseline's orifice law).
-fn cap_flow(model: &ModelParams, x: f64, p1: f64) -> f64 {
-    let sv = &model.servovalve;
-    let k = sv.n_val * sv.kv * sv.w3;
-    let p_tr2 = sv.p_tr * sv.p_tr;
-    if x > 0.0 {
-        k * sv.r1 * x * sq(sv.p_s - p1, p_tr2)
-    } else {
-        k * x * sq(p1 - sv.p_r, p_tr2)
-    }
-}
-
-/// ∂(cap flow)/∂x at spool position `x` and cap pressure `p1`: the active land's K·sq(Δp), m²/s.
-fn cap_gain(model: &ModelParams, x: f64, p1: f64) -> f64 {
-    let sv = &model.servovalve;
-    let k = sv.n_val * sv.kv * sv.w3;
-    let p_tr2 = sv.p_tr * sv.p_tr;
-    if x > 0.0 {
-        k * sv.r1 * sq(sv.p_s - p1, p_tr2)
-    } else {
-        k * sq(p1 - sv.p_r, p_tr2)
-    }
-}
-
-/// The actuators' force rate dF/dt the baseline's chambers give at spool position `x`, chamber
-/// pressures `p1`, `p2`, velocity `v` and displacement `y`:
-/// n_act·β·[A1/V1·(q1 − A1 v) − A2/V2·(A2 v − q2)], with the valve law's flows into chamber 1
-/// and out of chamber 2 (docs/model.md §3).
-fn force_rate(model: &ModelParams, x: f64, p1: f64, p2: f64, v: f64, y: f64) -> f64 {
-    let sv = &model.servovalve;
-    let a = &model.actuator;
-    let k = sv.n_val * sv.kv * sv.w3;
-    let p_tr2 = sv.p_tr * sv.p_tr;
-    let q1 = cap_flow(model, x, p1);
-    let q2 = if x > 0.0 {
-        k * sv.r2 * x * sq(p2 - sv.p_r, p_tr2)
-    } else {
-        k * sv.r4 * x * sq(sv.p_s - p2, p_tr2)
-    };
-    let (v1, v2) = (
-        (a.a1 * (a.l + y) + a.vd1).max(1e-9),
-        (a.a2 * (a.l - y) + a.vd2).max(1e-9),
-    );
-    crate::kernel::N_ACT as f64
-        * a.beta
-        * (a.a1 / v1 * (q1 - a.a1 * v) - a.a2 / v2 * (a.a2 * v - q2))
+/// The actuators' force rate dF/dt the model's valves and chambers give at spool position `x`,
+/// chamber pressures `p1`, `p2`, velocity `v` and displacement `y` (the kernel's flow law, under
+/// the model's `valve_law`, and chamber balance; docs/model.md §3).
+fn force_rate(plant: &(Valves, ActuatorLane), x: f64, p1: f64, p2: f64, v: f64, y: f64) -> f64 {
+    let (valves, act) = plant;
+    let (q1, q2) = valves.flows(x, p1, p2);
+    let (b1, b2) = actuator::stiffness_factors(act, y);
+    let (dp1, dp2) = actuator::pressure_rates(act, b1, b2, q1, q2, v);
+    crate::kernel::N_ACT as f64 * actuator::force_rate(act, dp1, dp2)
 }
 
 /// One test's residuals at its samples, in the order of [`Residual::ALL`] (the platen force is
@@ -406,33 +369,36 @@ pub fn test_residuals(c: &Compared) -> ([Option<Vec<f64>>; 5], [f64; 5]) {
     // left, over the rate one unit of cap flow (with the rod flow matched to the areas) gives, is
     // the flow the plant has and the model lacks.
     let (_, v_meas) = smooth(&m.disp);
-    let a = &model.actuator;
+    let plant = (Valves::of(model), ActuatorLane::of(&model.actuator));
+    let act = &plant.1;
     let n_act = crate::kernel::N_ACT as f64;
     let stroke = model.servovalve.k_sp * model.servovalve.u_lim;
     let flow: Vec<f64> = (0..n)
         .map(|k| {
             let (y, y_model) = (c.states[3][k], c.disp_model[k]);
             let x = c.states[0][k] * stroke;
-            let expected = force_rate(model, x, c.p1[k], c.p2[k], v_meas[k], y)
+            let expected = force_rate(&plant, x, c.p1[k], c.p2[k], v_meas[k], y)
                 - force_rate(
-                    model,
+                    &plant,
                     c.spool_model[k],
                     c.p1_model[k],
                     c.p2_model[k],
                     c.vel_model[k],
                     y_model,
                 );
-            let (v1, v2) = (
-                (a.a1 * (a.l + y) + a.vd1).max(1e-9),
-                (a.a2 * (a.l - y) + a.vd2).max(1e-9),
-            );
-            let per_flow = n_act * a.beta * (a.a1 / v1 + a.a2 / v2 * a.a2 / a.a1);
+            // dF/dt per unit of cap flow, the rod flow matched to the areas.
+            let (b1, b2) = actuator::stiffness_factors(act, y);
+            let per_flow = n_act * (act.a1 * b1 + act.a2 * b2 * act.a2 / act.a1);
             (rf_rate[k] - expected) / per_flow
         })
         .collect();
     let (flow, _) = smooth(&flow);
     let opening: Vec<f64> = (0..n)
-        .map(|k| flow[k] / cap_gain(model, c.states[0][k] * stroke, c.p1[k]).max(1e-12) / stroke)
+        .map(|k| {
+            let x = c.states[0][k] * stroke;
+            let gain = plant.0.gains(x, c.p1[k], c.p2[k]).0;
+            flow[k] / gain.max(1e-12) / stroke
+        })
         .collect();
     let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt();
     // The opening is already a fraction of the full stroke: not rescaled, so its map reads directly
@@ -957,6 +923,47 @@ mod tests {
 
     /// A residual made of one term of one state, among correlated states, is attributed to that
     /// state and term.
+    /// The state map's force rate is the kernel's right-hand side at the same state, under
+    /// either valve law, at random states across the stroke and the pressure range.
+    #[test]
+    fn the_force_rate_is_the_kernels_at_random_states() {
+        use crate::kernel::params::ValveLaw;
+        use crate::kernel::simulate::plant_derivatives;
+        use crate::kernel::state::{idx, NP};
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(31);
+        for law in [ValveLaw::Orifice, ValveLaw::Linear] {
+            let mut model = ModelParams::default();
+            model.valve_law = law;
+            let plant = (Valves::of(&model), ActuatorLane::of(&model.actuator));
+            let (sv, l) = (&model.servovalve, model.actuator.l);
+            for _ in 0..200 {
+                let x = (rng.random::<f64>() * 2.0 - 1.0) * sv.k_sp * sv.u_lim;
+                let p = |r: &mut rand::rngs::StdRng| sv.p_r + r.random::<f64>() * (sv.p_s - sv.p_r);
+                let (p1, p2) = (p(&mut rng), p(&mut rng));
+                let (v, y) = (
+                    rng.random::<f64>() - 0.5,
+                    (rng.random::<f64>() * 1.8 - 0.9) * l,
+                );
+                let mut s = [0.0; NP];
+                (s[idx::Y], s[idx::VEL]) = (y, v);
+                for i in 0..2 {
+                    (s[idx::P1[i]], s[idx::P2[i]]) = (p1, p2);
+                }
+                let ds = plant_derivatives(&model, x, &s).unwrap();
+                let a = &model.actuator;
+                let kernel: f64 = (0..2)
+                    .map(|i| ds[idx::P1[i]] * a.a1 - ds[idx::P2[i]] * a.a2)
+                    .sum();
+                let ours = force_rate(&plant, x, p1, p2, v, y);
+                assert!(
+                    (ours - kernel).abs() <= 1e-12 * kernel.abs().max(1.0),
+                    "{law:?}: {ours} against the kernel's {kernel} at x {x}, p {p1} {p2}, v {v}, y {y}"
+                );
+            }
+        }
+    }
+
     #[test]
     fn stlsq_finds_the_term_it_was_made_of() {
         let n = 4000;

@@ -314,27 +314,10 @@ impl<'a> Fields<'a> {
 pub fn suggest<'e>(key: &str, expected: &[&'e str]) -> Option<&'e str> {
     expected
         .iter()
-        .map(|e| (levenshtein(key, e), *e))
+        .map(|e| (strsim::levenshtein(key, e), *e))
         .filter(|(d, e)| *d <= 2.max(e.len() / 4))
         .min()
         .map(|(_, e)| e)
-}
-
-fn levenshtein(a: &str, b: &str) -> usize {
-    let b: Vec<char> = b.chars().collect();
-    let mut prev: Vec<usize> = (0..=b.len()).collect();
-    for (i, ca) in a.chars().enumerate() {
-        let mut cur = vec![i + 1];
-        for (j, cb) in b.iter().enumerate() {
-            cur.push(
-                (prev[j] + (ca != *cb) as usize)
-                    .min(prev[j + 1] + 1)
-                    .min(cur[j] + 1),
-            );
-        }
-        prev = cur;
-    }
-    prev[b.len()]
 }
 
 #[cfg(test)]
