@@ -35,7 +35,7 @@ fn layout_section() -> String {
     text[start..end].to_string()
 }
 
-/// Whether a backticked word is written as a module is: `name` (the file `name.rs`) or `name/`
+/// Whether a backticked word is written the way a module is: `name` (the file `name.rs`) or `name/`
 /// (a folder), the name in snake_case (a lower-case letter, then lower-case letters, digits and
 /// underscores).
 fn looks_like_module(word: &str) -> bool {
