@@ -1,5 +1,6 @@
-//! The house rules that a reader of the code relies on: the README's "Layout" section names every
-//! module, and no function in the shell or orchestration layers is longer than a screen.
+//! The house rules that a reader of the code relies on: the "Layout" section of
+//! docs/architecture.md names every module and only modules, the README stays a short front page,
+//! and no function in the shell or orchestration layers is longer than a screen.
 
 use std::path::{Path, PathBuf};
 
@@ -21,38 +22,166 @@ fn rust_files(dir: &Path) -> Vec<PathBuf> {
     out
 }
 
-/// Every module of the three layers (its file stem, `mod.rs` aside) is named in backticks in the
-/// README's "Layout" section, and the section names no module that is not there.
-#[test]
-fn the_readme_layout_names_every_module() {
-    let readme = std::fs::read_to_string(root().join("README.md")).unwrap();
-    let start = readme.find("\n## Layout\n").expect("a Layout section");
-    let end = readme[start + 1..]
+/// The "Layout" section of docs/architecture.md: from its `## Layout` heading to the next `## `.
+fn layout_section() -> String {
+    let text =
+        std::fs::read_to_string(root().join("docs/architecture.md")).expect("docs/architecture.md");
+    let start = text
+        .find("\n## Layout\n")
+        .expect("a `## Layout` section in docs/architecture.md");
+    let end = text[start + 1..]
         .find("\n## ")
-        .map_or(readme.len(), |e| start + 1 + e);
-    let section = &readme[start..end];
-    for layer in ["kernel", "orchestration", "shell"] {
-        assert!(
-            section.contains(&format!("`src/{layer}/`")),
-            "the layer {layer} is not in the Layout section"
-        );
-        let dir = root().join("src").join(layer);
-        for f in std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().path()) {
-            let stem = f.file_stem().unwrap().to_string_lossy().to_string();
-            if stem == "mod" {
-                continue;
+        .map_or(text.len(), |e| start + 1 + e);
+    text[start..end].to_string()
+}
+
+/// Whether a backticked word is written the way a module is: `name` (the file `name.rs`) or `name/`
+/// (a folder), the name in snake_case (a lower-case letter, then lower-case letters, digits and
+/// underscores).
+fn looks_like_module(word: &str) -> bool {
+    let name = word.strip_suffix('/').unwrap_or(word);
+    let mut chars = name.chars();
+    match chars.next() {
+        Some(c) if c.is_ascii_lowercase() => {
+            chars.all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_')
+        }
+        _ => false,
+    }
+}
+
+/// The modules a Layout section names, per layer, in its order: a layer is a top-level list item
+/// that starts with `` - `src/<layer>/` ``; its modules are the backticked words that look like
+/// module names (`looks_like_module`) in the nested items under it (lines that start with
+/// `"  - "`, and their continuation lines, which start with four spaces). The layer's own line and
+/// its continuation lines (two spaces) are prose: their backticked words are not read.
+fn named_modules(section: &str) -> Vec<(String, Vec<String>)> {
+    let mut layers: Vec<(String, Vec<String>)> = Vec::new();
+    let mut nested = false;
+    for line in section.lines() {
+        if let Some(rest) = line.strip_prefix("- `src/") {
+            let layer = rest.split('/').next().unwrap_or("").to_string();
+            layers.push((layer, Vec::new()));
+            nested = false;
+            continue;
+        }
+        if line.starts_with("  - ") {
+            nested = true;
+        } else if !line.starts_with("    ") {
+            nested = false;
+        }
+        if !nested {
+            continue;
+        }
+        if let Some((_, names)) = layers.last_mut() {
+            for (i, part) in line.split('`').enumerate() {
+                if i % 2 == 1 && looks_like_module(part) {
+                    names.push(part.to_string());
+                }
             }
-            let name = if f.is_dir() {
-                format!("`{stem}/`")
-            } else {
-                format!("`{stem}`")
-            };
+        }
+    }
+    layers
+}
+
+/// The modules of `src/<layer>/`: `name` for a file `name.rs`, `name/` for a folder; `mod.rs`
+/// aside.
+fn modules_of(layer: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    for f in std::fs::read_dir(root().join("src").join(layer))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+    {
+        let stem = f.file_stem().unwrap().to_string_lossy().to_string();
+        if stem == "mod" {
+            continue;
+        }
+        if f.is_dir() {
+            out.push(format!("{stem}/"));
+        } else if f.extension().is_some_and(|x| x == "rs") {
+            out.push(stem);
+        }
+    }
+    out.sort();
+    out
+}
+
+/// The "Layout" section of docs/architecture.md and the modules agree, both ways. Its convention:
+/// each layer is a top-level list item `` - `src/<layer>/` — … ``, and the items nested under it
+/// name that layer's modules in backticks, `` `name` `` for `src/<layer>/name.rs` and
+/// `` `name/` `` for the folder `src/<layer>/name/` (`mod.rs` aside). Every module must be named
+/// under its own layer, and every backticked snake_case word in those nested items (`name` or
+/// `name/`) must be a module of that layer; other backticked text there (types such as
+/// `EffectId`, files such as `effects/mod.rs`, commands, flags) does not look like a module name
+/// and is not checked.
+#[test]
+fn the_architecture_layout_names_every_module_and_only_modules() {
+    let named = named_modules(&layout_section());
+    let layers: Vec<&str> = named.iter().map(|(layer, _)| layer.as_str()).collect();
+    assert_eq!(
+        layers,
+        ["kernel", "orchestration", "shell"],
+        "the layers of docs/architecture.md's Layout section"
+    );
+    for (layer, names) in &named {
+        let modules = modules_of(layer);
+        for m in &modules {
             assert!(
-                section.contains(&name),
-                "src/{layer}/{stem} is not named in the README's Layout section"
+                names.contains(m),
+                "src/{layer}/{m} is not named in docs/architecture.md's Layout section \
+                 (write `{m}` in an item nested under `src/{layer}/`)"
+            );
+        }
+        for n in names {
+            assert!(
+                modules.contains(n),
+                "docs/architecture.md's Layout section names `{n}` under `src/{layer}/`, \
+                 which has no such module"
             );
         }
     }
+}
+
+/// The Layout convention's reader on a small section: modules in nested items only, the layer's
+/// own lines and other backticked text not read.
+#[test]
+fn the_layout_reader_reads_nested_items_only() {
+    let section = "## Layout\n\n\
+        - `src/kernel/` — the `study` prose, `ignored`:\n  \
+        also `ignored`.\n  \
+        - `controller`, `EffectId`, `effects/mod.rs`, `study tune`,\n    \
+        `cuda/` and `gpu_lanes`;\n\
+        - `src/shell/` — more.\n  \
+        - `cli`\n\
+        After the list, `not_read`.\n";
+    assert_eq!(
+        named_modules(section),
+        vec![
+            (
+                "kernel".to_string(),
+                vec![
+                    "controller".to_string(),
+                    "cuda/".to_string(),
+                    "gpu_lanes".to_string()
+                ]
+            ),
+            ("shell".to_string(), vec!["cli".to_string()]),
+        ]
+    );
+    assert!(looks_like_module("spec_quake") && looks_like_module("effects/"));
+    assert!(!looks_like_module("EffectId") && !looks_like_module("lane.cu"));
+    assert!(!looks_like_module("--resume") && !looks_like_module("study tune"));
+}
+
+/// The README is a short front page (issue 31): at most 300 lines; the tour, the tutorials and the
+/// details are in docs/.
+#[test]
+fn the_readme_is_at_most_300_lines() {
+    let readme = std::fs::read_to_string(root().join("README.md")).unwrap();
+    let n = readme.lines().count();
+    assert!(
+        n <= 300,
+        "README.md has {n} lines; at most 300 (move the rest to docs/)"
+    );
 }
 
 /// The length of every function (from its `fn` line to its closing brace) in a Rust source, test
