@@ -1,4 +1,4 @@
-//! vshake: a virtual shake table. See the README for the tour.
+//! vshake: a virtual shake table. See the README and docs/guide.md for the tour.
 //!
 //! Three layers, dependencies pointing one way:
 //! - [`kernel`]: physics, integration and metrics (pure; no I/O, no serde, no threads);

@@ -371,7 +371,7 @@ fn the_state_map_places_known_effects_on_their_states() {
     }
 }
 
-/// Issue 11, part 5: the bundled campaign of the README tutorial "An effect the library does not
+/// Issue 11, part 5: the bundled campaign of the tutorial (docs/guide.md) "An effect the library does not
 /// have" hides a spool overlap; the map points at small spool openings.
 #[test]
 fn the_overlap_tutorial_campaign_points_at_small_spool_openings() {

@@ -1,7 +1,7 @@
 //! `study tune` as a user meets it: the bundled tuning lowers the objective of the published gains
 //! by at least 30 % at full scale, the same seed gives the same gains bit for bit on any number of
 //! threads, the robust mode reports a 90th percentile below the published gains', the outputs
-//! are what the report says, and bad input is refused before any work. The README's tutorial
+//! are what the report says, and bad input is refused before any work. docs/guide.md's tutorial
 //! (tuned at 10 % on the bare table against tuned at full scale with the specimen) is run as
 //! written.
 
@@ -256,7 +256,7 @@ fn bad_tuning_files_are_refused_before_any_work() {
     }
 }
 
-/// The README's tutorial: tuned at 10 % on the bare table, the leads are worse than the published
+/// docs/guide.md's tutorial: tuned at 10 % on the bare table, the leads are worse than the published
 /// ones at full scale with the specimen; tuned at full scale with it, they are better than both.
 #[test]
 fn tuning_at_reduced_amplitude_fails_at_full_scale() {

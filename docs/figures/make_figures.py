@@ -1,6 +1,6 @@
-"""Draws the README's record-sweep figures as plain SVG (no plotting library needed).
+"""Draws docs/guide.md's record-sweep figures as plain SVG (no plotting library needed).
 
-usage (from the repository root, after the commands in README "Earthquakes"):
+usage (from the repository root, after the commands in docs/guide.md "Earthquakes"):
   python3 docs/figures/make_figures.py firm_published_spectrum.parquet firm_tuned_spectrum.parquet \
       record_sweep_sensitivity.parquet docs/figures
 """

@@ -12,8 +12,8 @@ use std::path::PathBuf;
     long_about = "vshake: the virtual shake table. A nonlinear servo-hydraulic model of the UCSD-NEES LHPOST \
 (three-variable controller, four-port orifice servo-valves, single-ended actuators, rigid platen with friction).\n\n\
 Exit codes: 0 success; 1 a run failed (diverged, stroke or pressure limit) or a system error; 2 bad input.\n\n\
-Documentation: README.md (tour and tutorials), docs/model.md (the physics contract: every equation, default \
-and source), docs/formats.md (measured-test files, campaigns, study files and results tables)."
+Documentation: README.md (set-up and examples), docs/guide.md (tour and tutorials), \
+docs/model.md (the physics contract: every equation, default and source), docs/formats.md (measured-test files, campaigns, study files and results tables)."
 )]
 pub struct Cli {
     #[command(subcommand)]

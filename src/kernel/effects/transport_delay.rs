@@ -9,7 +9,7 @@
 //! delay at table frequencies: phase −STAGES·atan(ωτ/STAGES) = −ωτ·(1 − (ωτ)²/(3·STAGES²) + …),
 //! magnitude (1 + (ωτ/STAGES)²)^(−STAGES/2) ≈ 1 − (ωτ)²/(2·STAGES) — at 6 Hz and τ = 2 ms the
 //! phase is within 0.01 % of −ωτ and the magnitude within 0.02 % of 1 (a choice; documented in the
-//! README's effects table).
+//! docs/guide.md's effects table).
 
 use super::{Effect, EffectInfo, LibraryEffect, PlantView, Stage};
 use crate::kernel::params::{params, Component, ModelParams, Range};
