@@ -160,15 +160,18 @@ fn supply_droop_grows_with_amplitude_and_shows_in_the_envelope() {
 }
 
 /// Spool dynamics (80 Hz, ζ = 0.7): the spool lags its command by 2ζ·f/f_n, and at 2 Hz the
-/// closed loop passes that lag to the acceleration (≈ −2°); the amplitude ratio falls everywhere.
+/// closed loop passes that lag to the acceleration within 10 % (−2.14° and −2.12° against
+/// −2.005°: the loop's feedback at 2 Hz neither removes it nor doubles it, as in open loop
+/// below); the amplitude ratio falls everywhere.
 #[test]
 fn spool_dynamics_adds_phase_lag() {
     let r = hidden("spool_dynamics", &[]);
     let lag = 2.0 * 0.7 * 2.0 / 80.0 * 180.0 / std::f64::consts::PI;
     for t in ["f2_a0p3", "f2_a1p5"] {
         let d = r.get(t, "phase_measured_deg") - r.get(t, "phase_model_deg");
+        println!("{t}: phase change {d}° against the spool's lag −{lag:.3}°");
         assert!(
-            (d + lag).abs() < 0.5 * lag,
+            (d + lag).abs() < 0.1 * lag,
             "{t}: phase change {d}° against the spool's lag −{lag:.2}°"
         );
     }

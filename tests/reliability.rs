@@ -1,7 +1,9 @@
 //! Long studies survive interruption and resume; impossible designs fail before they start.
 //! Each test runs the `study` binary as a user would, on studies written here.
 
+mod common;
 use arrow_array::{Array, Float64Array, StringArray, UInt32Array, UInt64Array};
+use common::study;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -11,15 +13,6 @@ use vshake::shell::tables::{parquet_batches, parquet_metadata};
 
 fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_study"))
-}
-
-fn study(args: &[&str]) -> (i32, String, String) {
-    let out = bin().args(args).output().expect("run study");
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into(),
-        String::from_utf8_lossy(&out.stderr).into(),
-    )
 }
 
 fn gains_sweep() -> PathBuf {

@@ -6,21 +6,15 @@
 //! tracked reference read back with `signal = "reference"`, the campaign default) and a record
 //! run as a reference. A diagnosis of it finds nothing missing.
 
+mod common;
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use vshake::shell::tables::{read_columns_allow_nan, read_strings};
 
+/// Runs `study` with `args`: (success, stdout, stderr).
 fn study(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_study"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into(),
-        String::from_utf8_lossy(&out.stderr).into(),
-    )
+    let (code, out, err) = common::study(args);
+    (code == 0, out, err)
 }
 
 /// A drive record (displacement, m) at `rate` Hz for 10 s: a multisine of equal acceleration

@@ -528,6 +528,7 @@ pub fn drive_label(open_loop: Option<OpenLoop>) -> String {
 mod tests {
     use super::*;
     use crate::kernel::excitation::Sine;
+    use std::f64::consts::FRAC_PI_2;
 
     /// The samples of a sine's analysis window at the controller's rate.
     fn samples(s: &Sine) -> Samples {
@@ -607,8 +608,19 @@ mod tests {
         assert!((c.amp_ratio_measured - 1.0).abs() < 1e-9 && c.phase_measured_deg.abs() < 1e-9);
         assert_eq!(c.cycle_amp_model.len(), 6);
         assert!(c.rms_residual_disp_ratio == 0.0);
-        let fr: f64 = c.bins.iter().map(|b| b.fraction).sum();
-        assert!(fr > 0.2 && fr < 1.0);
+        // Over whole cycles of a sine the bins hold the share of the phase where |cos θ| ≤ 0.1,
+        // |cos θ| ≥ 0.95 and |sin θ| ≥ 0.95: (2/π)·asin 0.1 and (2/π)·acos 0.95 (twice), 0.468
+        // together, to within the four bin edges per cycle (a sample each).
+        let edge = 4.0 * 2.0 / s.rate_hz;
+        let (reversal, peak) = (0.1f64.asin() / FRAC_PI_2, 0.95f64.acos() / FRAC_PI_2);
+        for (b, want) in c.bins.iter().zip([reversal, peak, peak]) {
+            assert!(
+                (b.fraction - want).abs() <= edge,
+                "{}: {} of the samples, {want} expected",
+                b.name,
+                b.fraction
+            );
+        }
     }
 
     #[test]

@@ -262,12 +262,36 @@ mod tests {
         );
     }
 
+    /// The timed loops do the work their rates count, and their AVX2 builds the same work; no
+    /// timing here (`study bench` measures the rates, where a busy machine cannot fail a test).
     #[test]
-    fn the_rates_are_positive_and_ordered() {
-        let r = rates(0.01);
-        assert!(r.flops > 0.0 && r.divs > 0.0 && r.sqrts > 0.0);
-        // A multiply or an add is never slower than a square root.
-        assert!(r.flops > r.sqrts, "{r:?}");
-        assert_ne!(add_chain(1000, 1), add_chain(1001, 1));
+    fn the_timed_loops_compute_what_they_count() {
+        let (c, n) = (1e-3f64, (CHAINS * LANES) as f64);
+        // 1.5 · 1^i and 0.5 + i·b per chain and lane.
+        let flops = (MUL_CHAINS * LANES) as f64 * (1.5 + 0.5 + 100.0 * 0.25);
+        assert_eq!(flop_body(100, 1.0, 0.25), flops);
+        // x ← √(x + c) and x ← c / (x + c) converge to their fixed points.
+        let root = (1.0 + (1.0 + 4.0 * c).sqrt()) / 2.0;
+        assert!((sqrt_body(200, c) / n - root).abs() < 1e-12);
+        let quotient = (-c + (c * c + 4.0 * c).sqrt()) / 2.0;
+        assert!((div_body(4000, c) / n - quotient).abs() < 1e-12);
+        // The clock's chain is one add and one rotate per iteration, not folded away.
+        let k = 0x9e37_79b9_7f4a_7c15u64;
+        assert_eq!(
+            add_chain(1000, 1),
+            add_chain(999, 1).wrapping_add(k).rotate_left(7)
+        );
+        #[cfg(target_arch = "x86_64")]
+        if wide() {
+            // SAFETY: the CPU reports AVX2 and FMA.
+            unsafe {
+                assert_eq!(
+                    flop_avx2(100, 1.0, 0.25).to_bits(),
+                    flop_body(100, 1.0, 0.25).to_bits()
+                );
+                assert_eq!(sqrt_avx2(200, c).to_bits(), sqrt_body(200, c).to_bits());
+                assert_eq!(div_avx2(400, c).to_bits(), div_body(400, c).to_bits());
+            }
+        }
     }
 }
