@@ -34,37 +34,22 @@
 //! table and its hooks, add the line `my_effect::MyEffect,` to the registry, and name its variant in its `params!` line
 //! (`as Component::Effect(super::EffectId::MyEffect)`). `study params`,
 //! model files (`[model.my_effect]`), `synth --effect`, `fit --effect` and `diagnose` then know
-//! it; the registry's test checks it is complete. For example, a cubic hardening of the hold-down
-//! struts, F = −k3·y³:
+//! it; the registry's test checks it is complete. docs/tutorial/spool_overlap.rs is such a file,
+//! whole (CI adds it to the library, fits it and diagnoses with it).
 //!
-//! ```ignore
-//! use super::{Effect, EffectInfo, LibraryEffect, Stage};
-//! use crate::kernel::params::{params, Component, ModelParams, Range};
+//! The hooks themselves need nothing of the registry: any type implementing [`Effect`] runs in
+//! the kernel. For example, a cubic hardening of the hold-down struts, F = −k3·y³, run against
+//! the baseline on a 0.1 m, 1 Hz sine (this example is compiled and run by `cargo test`):
 //!
-//! pub const INFO: EffectInfo = EffectInfo {
-//!     name: "hold_down",
-//!     family: "hold-down stiffness",
-//!     summary: "a cubic hardening of the hold-down struts",
-//!     params: Params::PARAMS,
-//!     stages: &[Stage::free(&["k3"])],
-//!     moves_spool: false,
-//! };
+//! ```
+//! use vshake::kernel::effects::Effect;
+//! use vshake::kernel::excitation::Sine;
+//! use vshake::kernel::params::ModelParams;
+//! use vshake::kernel::simulate::{self, LaneParams, LaneStatus, NoObserver, Solver};
 //!
-//! params! {
-//!     pub struct Params in effect_params.hold_down as (Component::Effect(super::EffectId::HoldDown)) {
-//!         k3: "N/m³", "n_per_m3", 1.0e8, Range::any(), Chosen, "Cubic stiffness [chosen].";
-//!     }
-//! }
-//!
-//! pub struct HoldDown<const N: usize> {
-//!     k3: [f64; N], // per lane; 0 where the effect is off
-//! }
-//!
-//! impl<const N: usize> LibraryEffect<N> for HoldDown<N> {
-//!     fn new(p: [&ModelParams; N]) -> Self {
-//!         let on = super::lane_mask::<N, Self>(&p);
-//!         HoldDown { k3: std::array::from_fn(|l| on[l] * Params::of(p[l]).k3) }
-//!     }
+//! /// F = −k3·y³ on the platen, k3 in N/m³ per lane (0 where the effect is off).
+//! struct HoldDown<const N: usize> {
+//!     k3: [f64; N],
 //! }
 //!
 //! impl<const N: usize> Effect<N> for HoldDown<N> {
@@ -77,6 +62,21 @@
 //!         -self.k3[l] * y * y * y
 //!     }
 //! }
+//!
+//! let model = ModelParams::default();
+//! let lanes = LaneParams::<1>::new(&[&model]).unwrap();
+//! let sine = Sine { freq_hz: 1.0, amp_m: 0.1, taper_s: 1.0, duration_s: 4.0, window_cycles: Some(2) };
+//! let run = |k3: f64| {
+//!     let effect = HoldDown { k3: [k3] };
+//!     let reference = sine.reference(model.controller.f_s);
+//!     let [r] = simulate::run(&lanes, &effect, &reference, &Solver::default(), &mut NoObserver)
+//!         .unwrap();
+//!     assert_eq!(r.status, LaneStatus::Ok);
+//!     r.metrics
+//! };
+//! let (baseline, hardened) = (run(0.0), run(1.0e8));
+//! // The odd force (1e5 N at the peak) adds odd harmonics to the acceleration.
+//! assert!(hardened.h(3) > baseline.h(3) + 1e-3, "{} {}", hardened.h(3), baseline.h(3));
 //! ```
 //!
 //! An effect with states of its own declares them as `type State = [[f64; N]; K]` and gives
