@@ -126,7 +126,7 @@ impl Projector {
         let p = 1 + 2 * n_harm;
         // The basis X at the samples, one row per function.
         let x = Mat::<f64>::from_fn(p, tau.len(), |i, m| {
-            let k = (i + 1) / 2;
+            let k = i.div_ceil(2);
             let c = f * tau[m] * k as f64;
             let (s, co) = (2.0 * PI * (c - c.floor())).sin_cos();
             match i {

@@ -933,8 +933,10 @@ mod tests {
         use rand::{RngExt, SeedableRng};
         let mut rng = rand::rngs::StdRng::seed_from_u64(31);
         for law in [ValveLaw::Orifice, ValveLaw::Linear] {
-            let mut model = ModelParams::default();
-            model.valve_law = law;
+            let model = ModelParams {
+                valve_law: law,
+                ..Default::default()
+            };
             let plant = (Valves::of(&model), ActuatorLane::of(&model.actuator));
             let (sv, l) = (&model.servovalve, model.actuator.l);
             for _ in 0..200 {
