@@ -4,6 +4,11 @@
 //! cut the residual by half and recover the hidden parameters within their reported uncertainty.
 //! A control campaign (nothing hidden) must get "no significant missing effect", and a campaign
 //! whose hidden effect is not in the library must not get a confident wrong answer.
+//!
+//! `cargo test --release` runs the tutorial's effect (seal friction) and the progress lines; the
+//! rest take minutes and are `--ignored`, run by a CI step (`.ci/run`:
+//! `cargo test --release --test diagnose --test roundtrip -- --ignored`), so that the test
+//! command stays within minutes of the first build (issue 31).
 
 mod common;
 use common::{followed_state, study};
@@ -287,6 +292,7 @@ fn hidden_pair(a: (&str, &str, &[(&str, f64)]), b: (&str, &str, &[(&str, f64)]))
 
 /// Acceptance of issue 11: two missing effects from different families are both named.
 #[test]
+#[ignore = "slow (about 100 s in all): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
 fn spool_dynamics_and_leakage_together_are_both_found() {
     hidden_pair(
         ("spool_dynamics", "valve dynamics", &[("freq_hz", 50.0)]),
@@ -295,6 +301,7 @@ fn spool_dynamics_and_leakage_together_are_both_found() {
 }
 
 #[test]
+#[ignore = "slow (about 100 s in all): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
 fn seal_friction_and_supply_together_are_both_found() {
     hidden_pair(
         (
@@ -307,21 +314,25 @@ fn seal_friction_and_supply_together_are_both_found() {
 }
 
 #[test]
+#[ignore = "slow (about 100 s in all): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
 fn spool_dynamics_is_found() {
     hidden("spool_dynamics", "valve dynamics", &[("freq_hz", 50.0)]);
 }
 
 #[test]
+#[ignore = "slow (about 100 s in all): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
 fn transport_delay_is_found() {
     hidden("transport_delay", "valve dynamics", &[("tau", 4.0e-3)]);
 }
 
 #[test]
+#[ignore = "slow (about 100 s in all): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
 fn leakage_is_found() {
     hidden("leakage", "leakage", &[("c_int", 1.0e-10)]);
 }
 
 #[test]
+#[ignore = "slow (about 100 s in all): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
 fn supply_droop_is_found() {
     hidden("supply", "supply pressure", &[("q_pump", 0.16)]);
 }
@@ -336,6 +347,7 @@ fn seal_friction_is_found() {
 }
 
 #[test]
+#[ignore = "slow (about 100 s in all): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
 fn flow_saturation_is_found() {
     hidden(
         "flow_saturation",
@@ -347,6 +359,7 @@ fn flow_saturation_is_found() {
 /// The flexible bulk modulus: softer at low chamber pressure (as entrained air makes it), a
 /// curve the library's fixed forms only approach.
 #[test]
+#[ignore = "slow (about 100 s in all): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
 fn a_pressure_dependent_bulk_modulus_is_found() {
     hidden(
         "bulk_curve",
@@ -356,6 +369,7 @@ fn a_pressure_dependent_bulk_modulus_is_found() {
 }
 
 #[test]
+#[ignore = "slow (about 100 s in all): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
 fn compressibility_is_found() {
     hidden(
         "compressibility",
@@ -365,6 +379,7 @@ fn compressibility_is_found() {
 }
 
 #[test]
+#[ignore = "slow (about 100 s in all): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
 fn reaction_mass_is_found() {
     hidden(
         "reaction_mass",
@@ -374,17 +389,20 @@ fn reaction_mass_is_found() {
 }
 
 #[test]
+#[ignore = "slow (about 100 s in all): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
 fn hold_down_nonlinearity_is_found() {
     hidden("hold_down", "hold-down stiffness", &[("k3", 2.0e8)]);
 }
 
 #[test]
+#[ignore = "slow (about 100 s in all): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
 fn asymmetry_is_found() {
     hidden("asymmetry", "asymmetry", &[("extend_gain", 1.08)]);
 }
 
 /// Acceptance 2: nothing hidden, only noise: no candidate is significant.
 #[test]
+#[ignore = "slow (about 100 s in all): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
 fn a_control_campaign_has_no_significant_missing_effect() {
     let d = tempfile::tempdir().unwrap();
     synth(d.path(), &[]);
@@ -497,6 +515,7 @@ fn write_hidden<E: vshake::kernel::effects::Effect<1>>(dir: &Path, effect: &E) {
 /// errors, to the noise; the state map, from the data alone, names an oscillator on the platen
 /// with the same numbers.
 #[test]
+#[ignore = "slow (about 100 s in all): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
 fn a_specimen_written_apart_from_the_library_is_named_and_fitted() {
     let d = tempfile::tempdir().unwrap();
     let w = 2.0 * std::f64::consts::PI * 5.0;
@@ -601,6 +620,7 @@ impl vshake::kernel::effects::Effect<1> for Ripple {
 /// Acceptance 3: the hidden effect is not in the library. The report must not name a missing
 /// effect with confidence: the best candidate explains little of the residual.
 #[test]
+#[ignore = "slow (about 100 s in all): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
 fn an_effect_outside_the_library_gets_no_confident_answer() {
     let d = tempfile::tempdir().unwrap();
     write_hidden(
@@ -656,6 +676,7 @@ impl vshake::kernel::effects::Effect<1> for Expansion {
 /// Issue 11: a flow gain rising with opening (not a form the library names) is explained by the
 /// flexible flow-gain curve, and the diagnosis names its family.
 #[test]
+#[ignore = "slow (about 100 s in all): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
 fn a_flow_gain_rising_with_opening_is_explained_by_the_flow_gain_curve() {
     let d = tempfile::tempdir().unwrap();
     write_hidden(
@@ -706,6 +727,7 @@ fn a_flow_gain_rising_with_opening_is_explained_by_the_flow_gain_curve() {
 /// agree with the mean reported standard error (within the sampling spread of an 8-sample
 /// standard deviation, sqrt(χ²₇/7): a factor 0.38–1.70 holds with 99 % probability).
 #[test]
+#[ignore = "slow (about 100 s in all): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
 fn standard_errors_match_the_spread_over_noise_seeds() {
     let d = tempfile::tempdir().unwrap();
     let c = campaign();
