@@ -3,7 +3,7 @@
 //! threads, the robust mode reports a 90th percentile below the published gains', the outputs
 //! are what the report says, and bad input is refused before any work. docs/guide.md's tutorial
 //! (tuned at 10 % on the bare table against tuned at full scale with the specimen) is run as
-//! written.
+//! written (`--ignored`: a CI step runs it).
 
 mod common;
 use common::study;
@@ -259,6 +259,7 @@ fn bad_tuning_files_are_refused_before_any_work() {
 /// docs/guide.md's tutorial: tuned at 10 % on the bare table, the leads are worse than the published
 /// ones at full scale with the specimen; tuned at full scale with it, they are better than both.
 #[test]
+#[ignore = "slow (about 12 s): a CI step runs it, cargo test --release --test tune -- --ignored"]
 fn tuning_at_reduced_amplitude_fails_at_full_scale() {
     let d = tempfile::tempdir().unwrap();
     let (low, full) = (d.path().join("bare_10pct"), d.path().join("specimen_full"));
