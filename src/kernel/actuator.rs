@@ -37,7 +37,7 @@ impl ActuatorLane {
 
 /// β/V1 and β/V2 at displacement y (shared by all actuators of a lane).
 #[inline(always)]
-pub fn stiffness_factors(c: &ActuatorLane, y: f64) -> (f64, f64) {
+pub(crate) fn stiffness_factors(c: &ActuatorLane, y: f64) -> (f64, f64) {
     let v1 = c.a1 * (c.l + y) + c.vd1;
     let v2 = c.a2 * (c.l - y) + c.vd2;
     (c.beta / v1, c.beta / v2)
@@ -58,7 +58,7 @@ pub fn pressure_rates(
 
 /// Rate of the force of one actuator, dP1/dt·A1 − dP2/dt·A2, from [`pressure_rates`].
 #[inline(always)]
-pub fn force_rate(c: &ActuatorLane, dp1: f64, dp2: f64) -> f64 {
+pub(crate) fn force_rate(c: &ActuatorLane, dp1: f64, dp2: f64) -> f64 {
     dp1 * c.a1 - dp2 * c.a2
 }
 

@@ -21,7 +21,7 @@ use super::params::ControllerParams;
 pub type Biquad = [f64; 5];
 
 /// Tustin (pre-warped at f0) coefficients of notch (f0 Hz, bandwidth Hz, depth dB) at rate f_s.
-pub fn notch_coefficients(f0: f64, bw: f64, depth_db: f64, f_s: f64) -> Biquad {
+pub(crate) fn notch_coefficients(f0: f64, bw: f64, depth_db: f64, f_s: f64) -> Biquad {
     let w0 = 2.0 * std::f64::consts::PI * f0;
     let zeta_p = bw / (2.0 * f0);
     let zeta_z = zeta_p * 10f64.powf(-depth_db / 20.0);

@@ -157,7 +157,7 @@ impl Reference {
 
     /// Channel `values` (one per tick) at time `t`, by the cubic through the four nearest ticks
     /// (held beyond the ends).
-    pub fn at_time(&self, values: &[f64], t: f64) -> f64 {
+    pub(crate) fn at_time(&self, values: &[f64], t: f64) -> f64 {
         let p = t * self.f_s;
         let n = values.len();
         if n == 0 {
@@ -207,7 +207,7 @@ impl Sine {
     }
 
     /// Number of whole cycles in the default window.
-    pub fn default_cycles(&self) -> u32 {
+    pub(crate) fn default_cycles(&self) -> u32 {
         ((self.duration_s - self.taper_s - 1.0) * self.freq_hz)
             .floor()
             .max(0.0) as u32
@@ -404,7 +404,7 @@ fn cubic_at_ticks(time_s: &[f64], values: &[f64], f_s: f64, n: usize) -> Vec<f64
 /// Exact discretisation, for an input linear between ticks (first-order hold), of the 4th-order
 /// filter 1/P(s/ω), P(s) = s⁴ + c₃s³ + c₂s² + c₁s + 1 with `c` = [c₁, c₂, c₃], in the states
 /// (y, ẏ, ÿ, y⃛): s[k+1] = Φ s[k] + Γ₀ u[k] + Γ₁ (u[k+1] − u[k]).
-pub fn foh_filter(c: [f64; 3], w: f64, dt: f64) -> ([[f64; 4]; 4], [f64; 4], [f64; 4]) {
+pub(crate) fn foh_filter(c: [f64; 3], w: f64, dt: f64) -> ([[f64; 4]; 4], [f64; 4], [f64; 4]) {
     // Scaled states ξ_i = y⁽ⁱ⁾/ωⁱ: ξ' = ω·(companion) ξ + ω·e4·u; augmented with u and its
     // change per tick d (u(τ) = u_k + d·τ/dt).
     let mut m = [[0.0f64; 6]; 6];

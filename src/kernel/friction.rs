@@ -21,7 +21,7 @@ pub struct FrictionLane {
 
 /// dz/dt of the friction law.
 #[inline(always)]
-pub fn dz_dt(c: &FrictionLane, v: f64, z: f64) -> f64 {
+pub(crate) fn dz_dt(c: &FrictionLane, v: f64, z: f64) -> f64 {
     let zv = z * v;
     let bracket = if zv > 0.0 {
         1.0

@@ -70,7 +70,7 @@ impl Default for Processing {
 
 impl Processing {
     /// Zero pad at each end, s: 2/f_hp (see the module docs).
-    pub fn pad_s(&self) -> f64 {
+    pub(crate) fn pad_s(&self) -> f64 {
         2.0 / self.highpass_hz
     }
 }
@@ -161,7 +161,7 @@ impl Biquad {
 }
 
 /// Scales `accel` so that its peak is `pga_mps2`; returns the factor.
-pub fn scale_to_pga(accel: &mut [f64], pga_mps2: f64) -> f64 {
+pub(crate) fn scale_to_pga(accel: &mut [f64], pga_mps2: f64) -> f64 {
     let peak = accel.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let factor = if peak > 0.0 { pga_mps2 / peak } else { 1.0 };
     accel.iter_mut().for_each(|v| *v *= factor);
@@ -272,7 +272,7 @@ impl Jet {
         let e = self.0[0].exp();
         self.compose([e; 4])
     }
-    pub fn recip(self) -> Jet {
+    pub(crate) fn recip(self) -> Jet {
         let u = self.0[0];
         self.compose([1.0 / u, -1.0 / (u * u), 2.0 / u.powi(3), -6.0 / u.powi(4)])
     }

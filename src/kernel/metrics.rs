@@ -229,7 +229,7 @@ pub struct LaneSums {
 impl MetricsAcc<1> {
     /// The accumulator holding one lane's sums: `template` (a [`MetricsAcc::new`] made once for
     /// every lane, so its oscillators are not rebuilt per lane) with the sums in place.
-    pub fn with_sums(&self, s: &LaneSums) -> Self {
+    pub(crate) fn with_sums(&self, s: &LaneSums) -> Self {
         let mut acc = self.clone();
         acc.n = s.n;
         for h in 0..N_HARM {
@@ -286,7 +286,7 @@ impl<const N: usize> MetricsAcc<N> {
 
     /// Every tick: max |u|.
     #[inline(always)]
-    pub fn every_tick(&mut self, u: &[f64; N]) {
+    pub(crate) fn every_tick(&mut self, u: &[f64; N]) {
         for l in 0..N {
             self.max_u[l] = self.max_u[l].max(u[l].abs());
         }
@@ -294,7 +294,7 @@ impl<const N: usize> MetricsAcc<N> {
 
     /// A tick inside the analysis window.
     #[inline(always)]
-    pub fn window_tick(&mut self, basis: Option<&Basis>, w: &WindowTick<'_, N>) {
+    pub(crate) fn window_tick(&mut self, basis: Option<&Basis>, w: &WindowTick<'_, N>) {
         self.n += 1;
         for l in 0..N {
             let (a_r, x_r) = (w.a_r[l], w.x_r[l]);

@@ -152,7 +152,7 @@ impl ParamInfo {
 
     /// The column name qualified by its component (`accel_sensor_delay_s`), for a table where
     /// two parameters would share [`ParamInfo::column_name`].
-    pub fn qualified_column_name(&self) -> String {
+    pub(crate) fn qualified_column_name(&self) -> String {
         format!("{}_{}", self.component.name(), self.column_name())
     }
 }
@@ -235,7 +235,7 @@ macro_rules! params {
             }
 
             /// This component's parameters in `m`, to change.
-            pub fn of_mut(m: &mut $crate::kernel::params::ModelParams) -> &mut Self {
+            pub(crate) fn of_mut(m: &mut $crate::kernel::params::ModelParams) -> &mut Self {
                 &mut m.$($field).+
             }
         }

@@ -41,7 +41,7 @@ macro_rules! soa {
         impl<const N: usize> $Soa<N> {
             #[inline(always)]
             pub fn lane(&self, l: usize) -> $Scalar { $Scalar { $($f: self.$f[l],)* } }
-            pub fn from_lanes(c: &[$Scalar; N]) -> Self { $Soa { $($f: std::array::from_fn(|l| c[l].$f),)* } }
+            pub(crate) fn from_lanes(c: &[$Scalar; N]) -> Self { $Soa { $($f: std::array::from_fn(|l| c[l].$f),)* } }
         }
     };
 }
@@ -269,7 +269,7 @@ pub trait Observer<const N: usize> {
 
 /// Where time `t` falls: its tick and its position in the tick in substeps, in [0, S); a
 /// position within 1e-9 of a node is that node.
-pub fn slot(t: f64, f_s: f64, substeps: usize) -> (usize, f64) {
+pub(crate) fn slot(t: f64, f_s: f64, substeps: usize) -> (usize, f64) {
     let s = substeps as f64;
     let p = t * f_s;
     let mut tick = p.floor().max(0.0) as usize;
@@ -370,7 +370,7 @@ pub fn run_on<const N: usize, E: Effect<N>, O: Observer<N>>(
 }
 
 /// [`run_each`] on a chosen instruction set.
-pub fn run_each_on<const N: usize, E: Effect<N>, O: Observer<N>>(
+pub(crate) fn run_each_on<const N: usize, E: Effect<N>, O: Observer<N>>(
     isa: Isa,
     lp: &LaneParams<N>,
     effect: &E,

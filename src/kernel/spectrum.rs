@@ -48,7 +48,7 @@ impl SpectrumSpec {
     }
 
     /// Indices of the periods inside the error band.
-    pub fn in_band(&self) -> impl Iterator<Item = usize> + '_ {
+    pub(crate) fn in_band(&self) -> impl Iterator<Item = usize> + '_ {
         // A relative slack of 1e-12 so that log-spaced end points computed by powf stay in.
         let (lo, hi) = self.band;
         self.periods
@@ -186,7 +186,7 @@ impl<const N: usize> SpectrumAcc<N> {
     /// Lane `l`'s PSA at every period.
     /// Sets lane `l`'s peak oscillator displacements (m), one per period: what another engine
     /// accumulated (the CUDA kernel), for [`SpectrumAcc::psa`].
-    pub fn set_peaks(&mut self, l: usize, peaks: &[f64]) {
+    pub(crate) fn set_peaks(&mut self, l: usize, peaks: &[f64]) {
         for (p, &v) in self.peak.iter_mut().zip(peaks) {
             p[l] = v;
         }

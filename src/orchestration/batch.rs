@@ -204,7 +204,7 @@ impl Plan {
     }
 
     /// A plan whose samples are the rows of a design table.
-    pub fn from_table(
+    pub(crate) fn from_table(
         spec: &StudySpec,
         columns: Vec<&'static ParamInfo>,
         rows: Vec<Vec<f64>>,
@@ -297,7 +297,7 @@ impl Plan {
 
     /// Runs samples `range` for every excitation: rows in (sample, excitation) order; `Err` only
     /// when the engine's device fails.
-    pub fn run_chunk(&self, range: Range<usize>) -> anyhow::Result<Vec<Row>> {
+    pub(crate) fn run_chunk(&self, range: Range<usize>) -> anyhow::Result<Vec<Row>> {
         self.run_samples(range)
     }
 
@@ -479,7 +479,7 @@ impl RowSink for Vec<Row> {
 
 /// A short timed run of samples spread evenly over a range, to size a run before it starts.
 #[derive(Debug, Clone)]
-pub struct Calibration {
+pub struct Timing {
     /// Samples in the timed round.
     pub samples: usize,
     /// Wall seconds of the timed round (every thread of the pool busy).
@@ -488,9 +488,9 @@ pub struct Calibration {
     pub rows: Vec<Row>,
 }
 
-impl Calibration {
+impl Timing {
     /// Estimated wall seconds for `samples` samples.
-    pub fn wall_s(&self, samples: usize) -> f64 {
+    pub(crate) fn wall_s(&self, samples: usize) -> f64 {
         self.secs / self.samples.max(1) as f64 * samples as f64
     }
 }
@@ -499,12 +499,12 @@ impl Calibration {
 /// two groups of [`LANES`] per thread), until a round takes `round` or covers the range; the
 /// last round is the measure (the first ones warm the threads and caches up). Failing samples end
 /// early in a real run too, so spreading the samples over the design weighs them as the run will.
-pub fn calibrate(
+pub(crate) fn time_round(
     plan: &Plan,
     range: Range<usize>,
     pool: &rayon::ThreadPool,
     round: std::time::Duration,
-) -> anyhow::Result<Calibration> {
+) -> anyhow::Result<Timing> {
     let len = range.len();
     let mut n = (2 * LANES * pool.current_num_threads()).min(len).max(1);
     loop {
@@ -522,7 +522,7 @@ pub fn calibrate(
         let rows = rows.concat();
         let secs = t.elapsed().as_secs_f64();
         if secs >= round.as_secs_f64() || n >= len {
-            return Ok(Calibration {
+            return Ok(Timing {
                 samples: n,
                 secs,
                 rows,

@@ -298,7 +298,7 @@ fn read_weights(t: &mut Fields<'_>, issues: &mut Issues) -> Weights {
 }
 
 /// Reads a model file: `[model.<component>]` tables as in run files (other tables are refused).
-pub fn model_from_toml(text: &str, file: &str) -> Result<ModelParams, InputError> {
+pub(crate) fn model_from_toml(text: &str, file: &str) -> Result<ModelParams, InputError> {
     let table = super::toml_fields::parse(text, file)?;
     let mut issues = Issues::default();
     let mut root = Fields::new("", &table);

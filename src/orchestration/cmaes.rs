@@ -71,7 +71,7 @@ impl Constants {
 }
 
 /// The default population size for n dimensions: 4 + ⌊3 ln n⌋.
-pub fn default_population(n: usize) -> usize {
+pub(crate) fn default_population(n: usize) -> usize {
     4 + (3.0 * (n as f64).ln()).floor() as usize
 }
 
@@ -394,8 +394,10 @@ fn rotate(a: &mut [Vec<f64>], v: &mut [Vec<f64>], p: usize, q: usize) {
 
 /// Minimises `f` (a whole population at once: candidates in, objectives out, in order) from
 /// `start` in the box until the spread falls below `tol` (a fraction of the ranges) or after
-/// `max_generations`; the best candidate and its objective.
-pub fn minimize(
+/// `max_generations`; the best candidate and its objective (the tests' driver; `tune` runs its
+/// own loop, with progress and a stop).
+#[cfg(test)]
+fn minimize(
     mut es: Cmaes,
     tol: f64,
     max_generations: usize,

@@ -120,7 +120,7 @@ pub fn unit(text: &str) -> Option<Unit> {
 }
 
 /// Every unit spelling, for messages.
-pub fn unit_list() -> String {
+pub(crate) fn unit_list() -> String {
     UNITS
         .iter()
         .map(|(n, _, _)| n[0])
@@ -484,7 +484,7 @@ fn read_twice(headers: &[String], out: &[Resolved]) -> Vec<ColumnProblem> {
 }
 
 /// Whether every cell of `row` is a unit (or empty), with at least one unit: a units row.
-pub fn is_units_row(row: &[String]) -> bool {
+pub(crate) fn is_units_row(row: &[String]) -> bool {
     row.iter().any(|c| unit(strip_brackets(c)).is_some())
         && row
             .iter()
@@ -492,7 +492,7 @@ pub fn is_units_row(row: &[String]) -> bool {
 }
 
 /// A unit cell without its brackets (`[mm]` → `mm`).
-pub fn strip_brackets(c: &str) -> &str {
+pub(crate) fn strip_brackets(c: &str) -> &str {
     c.trim()
         .trim_start_matches(['(', '[', '{'])
         .trim_end_matches([')', ']', '}'])

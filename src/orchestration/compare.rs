@@ -162,7 +162,7 @@ impl Projector {
 
     /// ‖x − P x‖²: what of `x` the mean and the resolved harmonics do not hold (other
     /// frequencies, higher harmonics, a trend, noise).
-    pub fn remainder_sq(&self, x: &[f64]) -> f64 {
+    pub(crate) fn remainder_sq(&self, x: &[f64]) -> f64 {
         let c: Vec<f64> = self
             .rows
             .iter()
@@ -189,7 +189,7 @@ impl Projector {
     }
 
     /// Functions fitted: the mean and two per resolved harmonic.
-    pub fn n_functions(&self) -> usize {
+    pub(crate) fn n_functions(&self) -> usize {
         self.rows.len()
     }
 
@@ -388,7 +388,7 @@ pub struct Compared {
 
 impl Compared {
     /// The warning for a residual above [`IMPLAUSIBLE_RESIDUAL`] of the signal, if any.
-    pub fn residual_warning(&self) -> Option<String> {
+    pub(crate) fn residual_warning(&self) -> Option<String> {
         let r = self.comparison.rms_residual_accel_ratio;
         (r > IMPLAUSIBLE_RESIDUAL).then(|| {
             format!(
@@ -402,7 +402,7 @@ impl Compared {
 
 /// Drives the test's model as the test was driven, samples it at the test's samples and
 /// compares. Fails (with the reason) when the model fails.
-pub fn compare_test(test: &AlignedTest, solver: &Solver) -> Result<Compared, String> {
+pub(crate) fn compare_test(test: &AlignedTest, solver: &Solver) -> Result<Compared, String> {
     let (result, rs) = sim::run_sampled(&test.model, &test.drive, solver, &test.samples.tau)
         .map_err(|e| format!("test {:?}: {e}", test.name))?;
     if let LaneStatus::Failed { time_s, reason } = result.status {
@@ -493,7 +493,7 @@ pub struct CompareSpec {
 
 impl CompareSpec {
     /// How the model is driven, in words.
-    pub fn drive_label(&self) -> String {
+    pub(crate) fn drive_label(&self) -> String {
         drive_label(self.open_loop)
     }
 
@@ -504,7 +504,7 @@ impl CompareSpec {
     }
 
     /// [`CompareSpec::run`], calling `done` as each test is compared (from any thread).
-    pub fn run_with(&self, done: &(dyn Fn() + Sync)) -> Result<Vec<Compared>, String> {
+    pub(crate) fn run_with(&self, done: &(dyn Fn() + Sync)) -> Result<Vec<Compared>, String> {
         self.tests
             .par_iter()
             .map(|t| {
@@ -517,7 +517,7 @@ impl CompareSpec {
 }
 
 /// How a model driven by `open_loop` (or closed loop) runs, in words.
-pub fn drive_label(open_loop: Option<OpenLoop>) -> String {
+pub(crate) fn drive_label(open_loop: Option<OpenLoop>) -> String {
     match open_loop {
         None => "closed loop".to_string(),
         Some(m) => format!("open loop on the measured {}", m.column()),

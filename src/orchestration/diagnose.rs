@@ -109,7 +109,7 @@ impl Candidate {
     pub fn significant(&self) -> bool {
         self.delta_bic > SIGNIFICANT_BIC && self.lowers_residual && self.explained >= EXPLAINS_SOME
     }
-    pub fn chi2(&self) -> f64 {
+    pub(crate) fn chi2(&self) -> f64 {
         self.fit.as_ref().map_or(f64::INFINITY, |f| f.chi2_after())
     }
 }
@@ -219,18 +219,6 @@ impl Diagnosis {
         }
     }
 
-    /// The chosen effects' joint fit: the best candidate's, or the last forward-selection step's.
-    pub fn chosen_fit(&self) -> Option<&fit::FitResult> {
-        match self.more.last() {
-            Some(s) => Some(&s.fit),
-            None => self
-                .candidates
-                .first()
-                .filter(|c| c.significant())
-                .and_then(|c| c.fit.as_ref().ok()),
-        }
-    }
-
     /// The parameters and the joint fit of the effects the verdict names (none when it names
     /// none).
     pub fn named_fit(&self) -> Option<(&[Free], &fit::FitResult)> {
@@ -269,7 +257,7 @@ impl Diagnosis {
     }
 
     /// The channels whose starting residual exceeds [`NOISE_FACTOR`] times their noise floor.
-    pub fn channels_off(&self) -> Vec<usize> {
+    pub(crate) fn channels_off(&self) -> Vec<usize> {
         (0..3)
             .filter(|&c| self.baseline.channel_rms(c) > NOISE_FACTOR * self.channel_noise[c])
             .collect()
@@ -392,7 +380,7 @@ impl Diagnosis {
     /// Maps the starting model's residual onto the plant's states, and the residual the named
     /// effects leave (both stay None when a test's model run fails: the diagnosis reports that
     /// itself).
-    pub fn map_states(&mut self, aligned: &[AlignedTest]) {
+    pub(crate) fn map_states(&mut self, aligned: &[AlignedTest]) {
         self.state_map = state_map(aligned);
         if let Some((free, fit)) = self.named_fit() {
             let fitted: Vec<AlignedTest> = aligned
@@ -418,13 +406,13 @@ fn state_map(aligned: &[AlignedTest]) -> Option<StateMap> {
 }
 
 /// The free parameters of `effect` at their values in `model`.
-pub fn free_of(effect: EffectId, model: &ModelParams) -> Vec<Free> {
+pub(crate) fn free_of(effect: EffectId, model: &ModelParams) -> Vec<Free> {
     free_of_stage(effect, 0, model)
 }
 
 /// The free parameters of stage `stage` of `effect` at their values in `model` (where that is 0,
 /// at the stage's start value, if it has one).
-pub fn free_of_stage(effect: EffectId, stage: usize, model: &ModelParams) -> Vec<Free> {
+pub(crate) fn free_of_stage(effect: EffectId, stage: usize, model: &ModelParams) -> Vec<Free> {
     let s = &effect.info().stages[stage];
     s.free
         .iter()
@@ -530,7 +518,7 @@ fn polish_leaders(problem: &Problem, out: &mut [Candidate], baseline: &fit::Eval
 /// effect one of whose parameters is free, in order, the stage's start values where the
 /// parameter is 0 (a second mode's mass: at 0 the mode is absent and its frequency has no effect)
 /// and then the stage's start scan (a resonance's frequency).
-pub fn scan_starts(problem: &Problem, free: &[Free]) -> Vec<Free> {
+pub(crate) fn scan_starts(problem: &Problem, free: &[Free]) -> Vec<Free> {
     let mut out = free.to_vec();
     for effect in EffectId::ALL {
         for (k, stage) in effect.info().stages.iter().enumerate() {

@@ -53,7 +53,7 @@ impl Frf {
 /// The H1 estimate of the response to `drive` from segments of `segment` samples (a power of
 /// two), Hann-windowed, overlapping by half; 0 at bins the drive did not excite (power below 1e-9
 /// of its largest).
-pub fn estimate_frf(drive: &[f64], response: &[f64], rate_hz: f64, segment: usize) -> Frf {
+pub(crate) fn estimate_frf(drive: &[f64], response: &[f64], rate_hz: f64, segment: usize) -> Frf {
     assert!(segment.is_power_of_two() && drive.len() == response.len());
     let half = segment / 2 + 1;
     let (mut num_re, mut num_im, mut den) = (vec![0.0; half], vec![0.0; half], vec![0.0; half]);
@@ -173,14 +173,14 @@ pub struct IterationRow {
 }
 
 /// rms(a − b) / rms(b) over `window` (None: all).
-pub fn rms_ratio_in(a: &[f64], b: &[f64], window: Option<(usize, usize)>) -> f64 {
+pub(crate) fn rms_ratio_in(a: &[f64], b: &[f64], window: Option<(usize, usize)>) -> f64 {
     let (w0, w1) = window.unwrap_or((0, b.len()));
     let (w1, w0) = (w1.min(a.len()).min(b.len()), w0.min(w1));
     rms_ratio(&a[w0..w1], &b[w0..w1])
 }
 
 /// rms(a − b) / rms(b).
-pub fn rms_ratio(a: &[f64], b: &[f64]) -> f64 {
+pub(crate) fn rms_ratio(a: &[f64], b: &[f64]) -> f64 {
     let e: f64 = a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum();
     let r: f64 = b.iter().map(|y| y * y).sum();
     (e / r).sqrt()
@@ -243,7 +243,7 @@ pub const FRF_SEGMENT: usize = 2048;
 
 /// `base` with the acceleration correction `c` (per tick) added and its integrals from rest:
 /// v += ∫c, x += ∫∫c (trapezoidal), j += dc/dt (central differences); the command is the new x.
-pub fn with_correction(base: &Reference, c: &[f64]) -> Reference {
+pub(crate) fn with_correction(base: &Reference, c: &[f64]) -> Reference {
     let n = base.len();
     let dt = 1.0 / base.f_s;
     let mut r = base.clone();
@@ -291,7 +291,7 @@ fn band_limited(x: &[f64], rate_hz: f64, band: (f64, f64)) -> Vec<f64> {
 
 /// A random drive as long as `like`: white noise of `seed` in [`FRF_BAND_HZ`], tapered over 1 s
 /// at both ends, of acceleration rms `rms`, from rest.
-pub fn random_drive(like: &Reference, rms: f64, seed: u64) -> Reference {
+pub(crate) fn random_drive(like: &Reference, rms: f64, seed: u64) -> Reference {
     let n = like.len();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let noise: Vec<f64> = (0..n)
@@ -314,7 +314,7 @@ pub fn random_drive(like: &Reference, rms: f64, seed: u64) -> Reference {
 }
 
 /// The acceleration the model's table records on `reference`, per tick, or why the run failed.
-pub fn table_accel(
+pub(crate) fn table_accel(
     model: &ModelParams,
     solver: &Solver,
     reference: &Reference,

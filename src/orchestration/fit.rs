@@ -1,4 +1,4 @@
-//! Calibration: nonlinear least squares of model parameters against a campaign of measured tests.
+//! Fitting: nonlinear least squares of model parameters against a campaign of measured tests.
 //!
 //! **Features.** A fit does not match raw time histories (noise, and the window's start, would
 //! dominate); it matches features that average noise out, computed on the file's own samples
@@ -116,7 +116,7 @@ fn rms_slice(v: &[f64]) -> f64 {
 }
 
 /// σ of white noise in `x` from its third differences, floored at [`NUMERICAL_FLOOR`] of its rms.
-pub fn noise_sigma_differences(x: &[f64]) -> f64 {
+pub(crate) fn noise_sigma_differences(x: &[f64]) -> f64 {
     let d3: Vec<f64> = x
         .windows(4)
         .map(|w| w[3] - 3.0 * w[2] + 3.0 * w[1] - w[0])
@@ -208,7 +208,7 @@ impl TestData {
 
     /// Prepares a test from its parts: the measured features, the noise estimate and the feature
     /// scales.
-    pub fn from_parts(
+    pub(crate) fn from_parts(
         name: String,
         model: ModelParams,
         drive: Reference,
@@ -311,11 +311,11 @@ pub struct Eval {
 
 impl Eval {
     /// The residual rms of test `t`, over its channels.
-    pub fn test_rms(&self, t: usize) -> f64 {
+    pub(crate) fn test_rms(&self, t: usize) -> f64 {
         rms_of(self.rms[t].iter().copied())
     }
     /// The residual rms of channel `c` over the tests (NaN where no test has it).
-    pub fn channel_rms(&self, c: usize) -> f64 {
+    pub(crate) fn channel_rms(&self, c: usize) -> f64 {
         let v: Vec<f64> = self
             .rms
             .iter()
@@ -332,7 +332,7 @@ impl Eval {
     pub fn residual_rms(&self) -> f64 {
         rms_of(self.rms.iter().flat_map(|r| r.iter().copied()))
     }
-    pub fn chi2(&self) -> f64 {
+    pub(crate) fn chi2(&self) -> f64 {
         if self.failure.is_some() {
             f64::INFINITY
         } else {
@@ -434,7 +434,7 @@ impl Problem {
 
     /// [`Problem::noise_rms`] of one channel (0 acceleration, 1 displacement, 2 force): over the
     /// tests that have it; NaN where none does.
-    pub fn channel_noise_rms(&self, c: usize) -> f64 {
+    pub(crate) fn channel_noise_rms(&self, c: usize) -> f64 {
         let v: Vec<f64> = (self.tests.iter())
             .filter_map(|t| match &t.measured[c] {
                 Some(x) if t.sigma[c] > 0.0 => Some(t.sigma[c] / rms_slice(x)),
@@ -451,7 +451,7 @@ impl Problem {
     /// Per test: the phase of the acceleration's fundamental, model minus measured, in degrees,
     /// under the evaluation `e` (NaN for a record test or a failed evaluation). Evidence of a
     /// lag: a missing lag shows as a phase error that grows with frequency.
-    pub fn fundamental_phase_error(&self, e: &Eval) -> Vec<f64> {
+    pub(crate) fn fundamental_phase_error(&self, e: &Eval) -> Vec<f64> {
         let mut at = 0;
         self.tests
             .iter()
@@ -611,7 +611,7 @@ impl Free {
         v.clamp(lo, hi)
     }
     /// The scaled coordinate of `value` (the inverse of [`Free::value`] inside the range).
-    pub fn u_of(&self, value: f64) -> f64 {
+    pub(crate) fn u_of(&self, value: f64) -> f64 {
         if self.log {
             (value / self.start).ln()
         } else {
@@ -635,7 +635,7 @@ pub fn apply(model: &ModelParams, free: &[Free], u: &[f64]) -> ModelParams {
 
 /// `model` with the parameters `free` at the values `estimate` (in their units), their effects
 /// switched on: a fit's model, whatever start its scaled coordinates are relative to.
-pub fn apply_estimates(model: &ModelParams, free: &[Free], estimate: &[f64]) -> ModelParams {
+pub(crate) fn apply_estimates(model: &ModelParams, free: &[Free], estimate: &[f64]) -> ModelParams {
     with_values(model, free, estimate.iter().copied())
 }
 
@@ -705,10 +705,10 @@ pub struct FitResult {
 }
 
 impl FitResult {
-    pub fn chi2_before(&self) -> f64 {
+    pub(crate) fn chi2_before(&self) -> f64 {
         self.before.chi2()
     }
-    pub fn chi2_after(&self) -> f64 {
+    pub(crate) fn chi2_after(&self) -> f64 {
         self.after.chi2()
     }
 }
@@ -825,7 +825,7 @@ pub fn fit(problem: &Problem, free: &[Free], max_iter: usize) -> Result<FitResul
 /// [`fit`], given the evaluation of the models as given (a diagnosis evaluates it once for every
 /// candidate). Levenberg–Marquardt: each iteration tries several damping factors at once
 /// ([`lambdas`]) and keeps the best step that lowers χ².
-pub fn fit_from(
+pub(crate) fn fit_from(
     problem: &Problem,
     free: &[Free],
     max_iter: usize,

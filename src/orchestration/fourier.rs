@@ -16,7 +16,7 @@ use std::f64::consts::PI;
 pub const NOISE_BAND: (f64, f64) = (0.4, 0.5);
 
 /// In-place radix-2 FFT of (re, im), length a power of two.
-pub fn fft(re: &mut [f64], im: &mut [f64]) {
+pub(crate) fn fft(re: &mut [f64], im: &mut [f64]) {
     let n = re.len();
     debug_assert!(n.is_power_of_two() && im.len() == n);
     let mut j = 0;

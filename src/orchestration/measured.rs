@@ -222,11 +222,11 @@ impl Alignment {
         self.time.time(self.end_row as f64)
     }
     /// Recording before the excitation, s.
-    pub fn pre_trigger_s(&self) -> f64 {
+    pub(crate) fn pre_trigger_s(&self) -> f64 {
         (self.start_row / self.time.rate_hz).max(0.0)
     }
     /// Recording after the excitation, s.
-    pub fn after_s(&self) -> f64 {
+    pub(crate) fn after_s(&self) -> f64 {
         (self.time.rows - self.end_row) as f64 / self.time.rate_hz
     }
 }
@@ -303,7 +303,7 @@ struct Located {
 
 /// Aligns a measured test to the model; `record` is the table holding a record excitation's
 /// column when it is another file than the test's data. Every problem of the file is returned.
-pub fn align(
+pub(crate) fn align(
     test: &TestSpec,
     data: &NumTable,
     record: Option<&NumTable>,
@@ -1215,7 +1215,7 @@ fn fundamental(x: &[f64], tau: &[f64], f: f64) -> (f64, f64) {
 }
 
 /// A 0-based (fractional) row as the 1-based row a user reads: a fraction only when it is one.
-pub fn fmt_row(r: f64) -> String {
+pub(crate) fn fmt_row(r: f64) -> String {
     if r == r.round() {
         format!("{}", r as i64 + 1)
     } else {

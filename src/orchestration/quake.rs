@@ -124,7 +124,7 @@ fn closed_form(f_s: f64, duration: f64, states: impl Fn(f64) -> [f64; 4]) -> Ref
 /// A displacement reference from a ground acceleration (m/s², every `dt` s from `t0`): processed
 /// into a displacement, then made into reference states as a record of what `filter` says
 /// (its corner, Hz, and whether it is a command or the tracked reference).
-pub fn from_acceleration(
+pub(crate) fn from_acceleration(
     accel: &[f64],
     t0: f64,
     dt: f64,

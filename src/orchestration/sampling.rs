@@ -124,7 +124,7 @@ fn linspace(a: f64, b: f64, n: usize) -> Vec<f64> {
 
 /// Standard normal quantile Φ⁻¹(p), Acklam's rational approximation (relative error < 1.2e-9).
 #[allow(clippy::excessive_precision)] // the coefficients as published
-pub fn normal_quantile(p: f64) -> f64 {
+pub(crate) fn normal_quantile(p: f64) -> f64 {
     const A: [f64; 6] = [
         -3.969683028665376e1,
         2.209460984245205e2,
@@ -171,7 +171,7 @@ pub fn normal_quantile(p: f64) -> f64 {
 
 /// Standard normal CDF Φ(x) = ½ erfc(−x/√2), with erfc from `libm` (the Rust port of musl's
 /// libm, accurate to about an ulp; used to map truncation bounds).
-pub fn normal_cdf(x: f64) -> f64 {
+pub(crate) fn normal_cdf(x: f64) -> f64 {
     0.5 * libm::erfc(-x / std::f64::consts::SQRT_2)
 }
 
@@ -198,7 +198,7 @@ pub const SOBOL_MAX_POINTS: usize = 1 << 16;
 pub const SOBOL_MAX_DIMS: usize = sobol_burley::NUM_DIMENSIONS as usize;
 
 /// Block of a Saltelli design row: 0 = A, 1 = B, 2 + i = AB_i.
-pub fn saltelli_block(sample: usize, d: usize) -> (usize, usize) {
+pub(crate) fn saltelli_block(sample: usize, d: usize) -> (usize, usize) {
     (sample / (d + 2), sample % (d + 2))
 }
 

@@ -235,7 +235,7 @@ pub struct Indices {
 /// The outputs of a Saltelli design regrouped by base point: one row `[f_A, f_B, f_AB_1, …,
 /// f_AB_d]` per base point whose every block finished, and the number of base points dropped
 /// because one of their runs failed (NaN) or is absent.
-pub fn saltelli_blocks(
+pub(crate) fn saltelli_blocks(
     rows: &[usize],
     base: &[f64],
     block: &[f64],
@@ -265,7 +265,7 @@ pub fn saltelli_blocks(
 /// Sobol' indices (Saltelli designs), SRC and PRCC of output `y` at excitation `e`. The
 /// bootstrap's seed depends only on `e`, so the result does not depend on the order outputs are
 /// analysed in.
-pub fn analyse(results: &Results<'_>, e: usize, y: &[f64], bootstrap: usize) -> Indices {
+pub(crate) fn analyse(results: &Results<'_>, e: usize, y: &[f64], bootstrap: usize) -> Indices {
     let d = results.inputs.len();
     let rows: Vec<usize> = (0..y.len())
         .filter(|&r| results.excitation[r] as usize == e)

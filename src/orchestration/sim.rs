@@ -101,7 +101,7 @@ pub struct History {
 impl History {
     /// The response spectrum of the achieved acceleration (`accel_mps2`) over the reference's
     /// window, as the kernel's online spectrum takes it.
-    pub fn accel_psa(&self, reference: &Reference, spectrum: &SpectrumSpec) -> Vec<f64> {
+    pub(crate) fn accel_psa(&self, reference: &Reference, spectrum: &SpectrumSpec) -> Vec<f64> {
         let cols = self.named_columns();
         let accel = cols
             .iter()
@@ -135,7 +135,7 @@ impl History {
             .map(|i| self.columns[i].as_slice())
     }
     /// The columns with their names, for a table.
-    pub fn named_columns(&self) -> Vec<(&'static str, &[f64])> {
+    pub(crate) fn named_columns(&self) -> Vec<(&'static str, &[f64])> {
         CHANNELS
             .iter()
             .map(|c| c.name)
@@ -239,7 +239,7 @@ impl<const N: usize, O: Observer<N>> EffectFn<N> for Single<'_, N, O> {
 /// at its row. A generated motion's noise is stream 0 of `seed` unless it names its own
 /// realisation ([`super::quake`]). Every reference but a sine carries the default response
 /// spectrum, and is checked against the table's limits.
-pub fn reference_for(
+pub(crate) fn reference_for(
     excitation: &ExcitationSpec,
     model: &ModelParams,
     record: Option<&NumTable>,
@@ -310,7 +310,7 @@ pub fn reference_for(
 }
 
 /// Runs `spec` against a prepared reference (sine or record).
-pub fn run_sim(spec: &SimSpec, reference: &Reference) -> Result<SimOutcome, SetupError> {
+pub(crate) fn run_sim(spec: &SimSpec, reference: &Reference) -> Result<SimOutcome, SetupError> {
     let mut history = History::with_capacity(reference.len());
     let [result] = run_lanes::<1, _>(&[&spec.model], reference, &spec.solver, &mut history)?;
     Ok(SimOutcome { result, history })
@@ -334,7 +334,12 @@ pub fn run_sampled(
 /// the file's times is the record, its derivatives the zero-phase filter's with corner
 /// `f_ref_hz`. A model run on it and the same record read from the file agree at the numerical
 /// floor, whatever generator made x_r.
-pub fn tracked_record(reference: &Reference, rate: f64, pre_rows: usize, f_ref_hz: f64) -> Record {
+pub(crate) fn tracked_record(
+    reference: &Reference,
+    rate: f64,
+    pre_rows: usize,
+    f_ref_hz: f64,
+) -> Record {
     let f_s = reference.f_s;
     let n = (reference.len() as f64 / f_s * rate).round() as usize;
     let x0 = reference.x[0];

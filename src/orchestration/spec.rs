@@ -126,7 +126,7 @@ impl RecordUnit {
             RecordUnit::G => crate::kernel::params::G,
         }
     }
-    pub fn is_acceleration(self) -> bool {
+    pub(crate) fn is_acceleration(self) -> bool {
         matches!(self, RecordUnit::G | RecordUnit::Mps2)
     }
 }
@@ -185,7 +185,7 @@ impl ExcitationSpec {
 
     /// Whether it is a sine (the harmonic metrics) rather than an earthquake-type motion (the
     /// spectral ones).
-    pub fn is_sine(&self) -> bool {
+    pub(crate) fn is_sine(&self) -> bool {
         matches!(self, ExcitationSpec::Sine { .. })
     }
 
@@ -293,7 +293,7 @@ pub struct SimSpec {
 }
 
 /// Reads `[model.<component>]` overrides into `model` (defaults for everything not named).
-pub fn read_model(mut f: Fields<'_>, model: &mut ModelParams, issues: &mut Issues) {
+pub(crate) fn read_model(mut f: Fields<'_>, model: &mut ModelParams, issues: &mut Issues) {
     for comp in ModelParams::components() {
         let Some(mut t) = f.table(comp.name(), issues) else {
             continue;
@@ -338,7 +338,7 @@ pub fn read_model(mut f: Fields<'_>, model: &mut ModelParams, issues: &mut Issue
 }
 
 /// Validates a model, prefixing every path with `prefix` (e.g. `model`).
-pub fn validate_model(model: &ModelParams, prefix: &str, issues: &mut Issues) {
+pub(crate) fn validate_model(model: &ModelParams, prefix: &str, issues: &mut Issues) {
     if let Err(list) = model.validate() {
         for i in list {
             let path = i
@@ -362,7 +362,7 @@ pub fn read_excitation(
 }
 
 /// [`read_excitation`] for a table that also holds `extra` keys read by the caller.
-pub fn read_excitation_with_extra(
+pub(crate) fn read_excitation_with_extra(
     f: Fields<'_>,
     model: &ModelParams,
     issues: &mut Issues,
@@ -374,7 +374,7 @@ pub fn read_excitation_with_extra(
 /// [`read_excitation`] with extra keys and, for a campaign test, its data file: a record
 /// without `file` is a column of it, and a record is by default the reference the controller
 /// tracked (`signal = "reference"`; elsewhere the default is `"command"`, docs/model.md §4).
-pub fn read_excitation_in(
+pub(crate) fn read_excitation_in(
     mut f: Fields<'_>,
     model: &ModelParams,
     issues: &mut Issues,
@@ -687,7 +687,7 @@ fn read_signal(f: &mut Fields<'_>, issues: &mut Issues, measured: bool) -> Signa
 }
 
 /// Whether `file` is a PEER NGA acceleration file (extension `.AT2`, any case).
-pub fn is_at2(file: &std::path::Path) -> bool {
+pub(crate) fn is_at2(file: &std::path::Path) -> bool {
     file.extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("at2"))
 }
@@ -718,7 +718,7 @@ pub const RECORD_KEYS: [&str; 11] = [
 ];
 
 /// Reads `[solver]`; `extra` names keys of the same table read by the caller.
-pub fn read_solver(mut f: Fields<'_>, issues: &mut Issues, extra: &[&str]) -> Solver {
+pub(crate) fn read_solver(mut f: Fields<'_>, issues: &mut Issues, extra: &[&str]) -> Solver {
     let mut s = Solver::default();
     if let Some(n) = f.int("substeps", issues) {
         if (1..=4096).contains(&n) {
@@ -772,7 +772,7 @@ impl SimSpec {
     }
 
     /// The spec after defaults, as TOML (every parameter written out), for result metadata.
-    pub fn resolved_toml(&self) -> String {
+    pub(crate) fn resolved_toml(&self) -> String {
         let mut root = toml::Table::new();
         root.insert("model".into(), toml::Value::Table(model_table(&self.model)));
         let mut e = toml::Table::new();
@@ -803,7 +803,7 @@ impl SimSpec {
 }
 
 /// Every model parameter as `[component] name = value` tables.
-pub fn model_table(model: &ModelParams) -> toml::Table {
+pub(crate) fn model_table(model: &ModelParams) -> toml::Table {
     let mut m = toml::Table::new();
     for comp in ModelParams::components() {
         let mut t = toml::Table::new();

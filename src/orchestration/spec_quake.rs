@@ -56,7 +56,7 @@ pub const RANDOM_KEYS: [&str; 8] = [
 pub const F_REF_DEFAULT: f64 = 50.0;
 
 /// `f_ref_hz`: the corner of the reference's filter (default 50 Hz), below f_s/2.
-pub fn read_f_ref(f: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues) -> f64 {
+pub(crate) fn read_f_ref(f: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues) -> f64 {
     let f_ref = f.f64("f_ref_hz", issues).unwrap_or(F_REF_DEFAULT);
     if !(f_ref > 0.0 && f_ref < 0.5 * model.controller.f_s) {
         issues.push(
@@ -68,7 +68,7 @@ pub fn read_f_ref(f: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues) 
 }
 
 /// `highpass_hz` and `taper_s` of an acceleration's processing (kernel::ground::Processing).
-pub fn read_processing(f: &mut Fields<'_>, issues: &mut Issues) -> Processing {
+pub(crate) fn read_processing(f: &mut Fields<'_>, issues: &mut Issues) -> Processing {
     let mut p = Processing::default();
     if let Some(hp) = f.f64("highpass_hz", issues) {
         if hp > 0.0 && hp <= 10.0 {
@@ -128,7 +128,7 @@ fn read_realisation(f: &mut Fields<'_>, issues: &mut Issues) -> (Realisation, Op
 }
 
 /// A stochastic ground motion: its length, realisation and any `ground.*` parameter.
-pub fn read_stochastic(
+pub(crate) fn read_stochastic(
     f: &mut Fields<'_>,
     model: &ModelParams,
     issues: &mut Issues,
@@ -209,7 +209,7 @@ fn read_taper(f: &mut Fields<'_>, issues: &mut Issues, duration: Option<f64>) ->
 }
 
 /// A sine sweep: f0 → f1 (either direction), its law, amplitude and taper.
-pub fn read_sweep(
+pub(crate) fn read_sweep(
     f: &mut Fields<'_>,
     model: &ModelParams,
     issues: &mut Issues,
@@ -273,7 +273,7 @@ pub fn read_sweep(
 }
 
 /// Band-limited random: the band, the rms acceleration, the run and its realisation.
-pub fn read_random(
+pub(crate) fn read_random(
     f: &mut Fields<'_>,
     model: &ModelParams,
     issues: &mut Issues,
@@ -310,7 +310,7 @@ pub fn read_random(
 }
 
 /// An excitation other than a sine as a resolved TOML table (every default written out).
-pub fn excitation_table(e: &ExcitationSpec) -> toml::Table {
+pub(crate) fn excitation_table(e: &ExcitationSpec) -> toml::Table {
     let mut t = toml::Table::new();
     let mut put = |k: &str, v: toml::Value| {
         t.insert(k.into(), v);

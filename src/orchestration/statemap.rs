@@ -137,7 +137,7 @@ impl State {
     }
 
     /// The unit of the scale the map divides it by.
-    pub fn scale_unit(self) -> &'static str {
+    pub(crate) fn scale_unit(self) -> &'static str {
         match self {
             State::SpoolOpening => "full stroke",
             State::Velocity => "m/s",
@@ -188,7 +188,7 @@ pub const TERMS: [Term; 7] = [
 ];
 
 impl Term {
-    pub fn eval(self, x: f64) -> f64 {
+    pub(crate) fn eval(self, x: f64) -> f64 {
         match self {
             Term::Linear => x,
             Term::SignedSquare => x * x.abs(),
@@ -202,7 +202,7 @@ impl Term {
     }
 
     /// The term written in the state's symbol.
-    pub fn formula(self, s: &str) -> String {
+    pub(crate) fn formula(self, s: &str) -> String {
         match self {
             Term::Linear => s.to_string(),
             Term::SignedSquare => format!("sign({s})·|{s}|²"),
@@ -486,7 +486,7 @@ pub struct TermFit {
 }
 
 impl TermFit {
-    pub fn formula(&self) -> String {
+    pub(crate) fn formula(&self) -> String {
         self.term.formula(self.state.symbol())
     }
 }
@@ -852,7 +852,7 @@ fn stlsq(
 impl StateMap {
     /// The regressions of residual `r`, one per state, largest R² first (empty when the tests
     /// lack what it needs).
-    pub fn by_state(&self, r: Residual) -> &[Regression] {
+    pub(crate) fn by_state(&self, r: Residual) -> &[Regression] {
         self.per_state
             .iter()
             .find(|v| v.first().is_some_and(|g| g.residual == r))

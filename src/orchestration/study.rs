@@ -129,14 +129,14 @@ pub struct StudySpec {
 }
 
 /// Every metric column name, in table order.
-pub fn all_metric_names() -> Vec<&'static str> {
+pub(crate) fn all_metric_names() -> Vec<&'static str> {
     Metrics::NAN.columns().into_iter().map(|(n, _)| n).collect()
 }
 
 /// Why a parameter cannot differ between the samples of a study (None: it can). The one such
 /// parameter is the controller rate, which every lane of a batch shares (the reference is sampled
 /// at it). Used for `[[variables]]` and for the columns of a design file.
-pub fn cannot_vary(info: &ParamInfo) -> Option<&'static str> {
+pub(crate) fn cannot_vary(info: &ParamInfo) -> Option<&'static str> {
     (info.path() == "controller.f_s").then_some("controller.f_s cannot be varied: every lane of a batch shares the controller rate; set it under [model.controller]")
 }
 
@@ -934,7 +934,7 @@ impl StudySpec {
     }
 
     /// Whether the design can be made with `samples` as it is now (after `--samples`).
-    pub fn check_design_size(&self) -> Result<(), String> {
+    pub(crate) fn check_design_size(&self) -> Result<(), String> {
         design_size(&self.method, self.samples, self.varied().len())
     }
 
@@ -958,7 +958,7 @@ impl StudySpec {
     }
 
     /// The study after defaults, as TOML, for result metadata.
-    pub fn resolved_toml(&self) -> String {
+    pub(crate) fn resolved_toml(&self) -> String {
         let mut root = toml::Table::new();
         let mut s = toml::Table::new();
         s.insert("name".into(), self.name.clone().into());

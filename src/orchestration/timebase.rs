@@ -90,7 +90,7 @@ impl TimeBase {
 }
 
 /// A rate for printing: whole hertz exactly, else six significant digits.
-pub fn fmt_rate(r: f64) -> String {
+pub(crate) fn fmt_rate(r: f64) -> String {
     if r == r.round() {
         format!("{r:.0}")
     } else {
@@ -162,7 +162,7 @@ impl fmt::Display for TimeProblem {
 
 /// Decimal quantum of the shortest round-trip representation of `x` (0 for 0) and its
 /// significant digits.
-pub fn printed_quantum(x: f64) -> (f64, u32) {
+pub(crate) fn printed_quantum(x: f64) -> (f64, u32) {
     if x == 0.0 || !x.is_finite() {
         return (0.0, 1);
     }
@@ -184,7 +184,7 @@ fn median(v: &mut [f64]) -> f64 {
 }
 
 /// Rebuilds the grid of a time column (see the module docs).
-pub fn rebuild(t: &[f64]) -> Result<TimeBase, TimeProblem> {
+pub(crate) fn rebuild(t: &[f64]) -> Result<TimeBase, TimeProblem> {
     let n = t.len();
     if n < 2 {
         return Err(TimeProblem::TooFew { rows: n });

@@ -116,7 +116,7 @@ impl<'a> Fields<'a> {
     }
 
     /// Full path of `key` in this table.
-    pub fn path_of(&self, key: &str) -> String {
+    pub(crate) fn path_of(&self, key: &str) -> String {
         join(&self.path, key)
     }
 
@@ -176,7 +176,7 @@ impl<'a> Fields<'a> {
     }
 
     /// A whole number.
-    pub fn int(&mut self, key: &str, issues: &mut Issues) -> Option<i64> {
+    pub(crate) fn int(&mut self, key: &str, issues: &mut Issues) -> Option<i64> {
         self.typed(key, issues, "a whole number", toml::Value::as_integer)
     }
 
@@ -186,7 +186,11 @@ impl<'a> Fields<'a> {
     }
 
     /// A whole number (`Ok`) or a string (`Err`).
-    pub fn int_or_str(&mut self, key: &str, issues: &mut Issues) -> Option<Result<i64, &'a str>> {
+    pub(crate) fn int_or_str(
+        &mut self,
+        key: &str,
+        issues: &mut Issues,
+    ) -> Option<Result<i64, &'a str>> {
         self.typed(key, issues, "a whole number or a string", |v| {
             v.as_integer().map(Ok).or_else(|| v.as_str().map(Err))
         })
@@ -274,7 +278,7 @@ impl<'a> Fields<'a> {
     }
 
     /// An array of numbers (integers or finite floats).
-    pub fn f64_array(&mut self, key: &str, issues: &mut Issues) -> Option<Vec<f64>> {
+    pub(crate) fn f64_array(&mut self, key: &str, issues: &mut Issues) -> Option<Vec<f64>> {
         self.array(key, issues, "numbers", "a finite number", |v| match v {
             toml::Value::Float(x) if x.is_finite() => Some(*x),
             toml::Value::Integer(n) => Some(*n as f64),
@@ -283,7 +287,7 @@ impl<'a> Fields<'a> {
     }
 
     /// An array of strings.
-    pub fn str_array(&mut self, key: &str, issues: &mut Issues) -> Option<Vec<&'a str>> {
+    pub(crate) fn str_array(&mut self, key: &str, issues: &mut Issues) -> Option<Vec<&'a str>> {
         self.array(key, issues, "strings", "a string", toml::Value::as_str)
     }
 
@@ -311,7 +315,7 @@ impl<'a> Fields<'a> {
 }
 
 /// The closest expected name by edit distance, when it is close.
-pub fn suggest<'e>(key: &str, expected: &[&'e str]) -> Option<&'e str> {
+pub(crate) fn suggest<'e>(key: &str, expected: &[&'e str]) -> Option<&'e str> {
     expected
         .iter()
         .map(|e| (strsim::levenshtein(key, e), *e))

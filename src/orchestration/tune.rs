@@ -196,7 +196,7 @@ impl Tuner {
     }
 
     /// The quantile reported for every candidate.
-    pub fn reported_quantile(&self) -> f64 {
+    pub(crate) fn reported_quantile(&self) -> f64 {
         match self.spec.statistic {
             Statistic::Quantile(q) => q,
             Statistic::Mean => 0.9,

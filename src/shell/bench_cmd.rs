@@ -1,10 +1,10 @@
 //! `study bench`: throughput of the kernel in simulated seconds per wall second, the scalar path
 //! beside it, the limit set by the model's minimal operation count on this machine
-//! ([`super::calibrate`]), and a CI gate on ratios measured in the same run (never on absolute
+//! ([`super::machine_rates`]), and a CI gate on ratios measured in the same run (never on absolute
 //! times: machines differ).
 
-use super::calibrate::{self, Rates, MINIMAL, TICK_OPS, WINDOW_OPS};
 use super::cli::BenchArgs;
+use super::machine_rates::{self, Rates, MINIMAL, TICK_OPS, WINDOW_OPS};
 use crate::kernel::effects::Baseline;
 use crate::kernel::excitation::{Reference, Sine};
 use crate::kernel::ground::Processing;
@@ -60,7 +60,7 @@ fn throughput<const N: usize>(threads: usize, secs: f64, r: &Reference) -> anyho
         simulate::run(&lp, &Baseline, r, &solver, &mut NoObserver)
             .map(|x| x[0].metrics.rms_err_accel_ratio)
     };
-    // Calibrate the repetitions to the time budget with one run.
+    // Size the repetitions to the time budget with one run.
     let t = Instant::now();
     run_once()?;
     let per_run = t.elapsed().as_secs_f64().max(1e-6);
@@ -90,21 +90,21 @@ pub struct Figures {
     /// Batch throughput on the record benchmark's motion ([`record_reference`]), 1 and 2 threads.
     pub record1: f64,
     pub record2: f64,
-    /// The model's limit on one thread (see [`calibrate`]).
+    /// The model's limit on one thread (see [`machine_rates`]).
     pub limit: f64,
     pub rates: Rates,
     pub rhs_per_sim_s: f64,
 }
 
 impl Figures {
-    pub fn batch_over_scalar(&self) -> f64 {
+    pub(crate) fn batch_over_scalar(&self) -> f64 {
         self.batch1 / self.scalar
     }
-    pub fn batch_over_limit(&self) -> f64 {
+    pub(crate) fn batch_over_limit(&self) -> f64 {
         self.batch1 / self.limit
     }
     /// Cycles per lane per right-hand-side evaluation (the tick's own work included).
-    pub fn cycles_per_rhs(&self, sim_s_per_s: f64) -> f64 {
+    pub(crate) fn cycles_per_rhs(&self, sim_s_per_s: f64) -> f64 {
         self.clock_hz / (sim_s_per_s * self.rhs_per_sim_s)
     }
 }
@@ -140,11 +140,14 @@ pub fn measure(secs: f64) -> anyhow::Result<Figures> {
     for _ in 0..ROUNDS {
         // Clock: a dependent chain of 1-cycle operations, 2 per iteration.
         let t = Instant::now();
-        std::hint::black_box(calibrate::add_chain(std::hint::black_box(chain_iters), 1));
+        std::hint::black_box(machine_rates::add_chain(
+            std::hint::black_box(chain_iters),
+            1,
+        ));
         f.clock_hz = f
             .clock_hz
             .max(2.0 * chain_iters as f64 / t.elapsed().as_secs_f64());
-        let m = calibrate::rates(budget / 3.0);
+        let m = machine_rates::rates(budget / 3.0);
         f.rates = Rates {
             flops: f.rates.flops.max(m.flops),
             divs: f.rates.divs.max(m.divs),

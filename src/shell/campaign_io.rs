@@ -17,7 +17,7 @@ pub struct LoadedCampaign {
 }
 
 /// Reads a model file given with `--model` (`[model.<component>]` tables).
-pub fn load_model(path: Option<&Path>) -> anyhow::Result<ModelParams> {
+pub(crate) fn load_model(path: Option<&Path>) -> anyhow::Result<ModelParams> {
     match path {
         None => Ok(ModelParams::default()),
         Some(p) => {
@@ -139,7 +139,7 @@ fn problem_list(campaign: &Path, what: &str, problems: &[String]) -> String {
 
 /// The notes and warnings of aligned tests, printed as two blocks; under `strict`, warnings are
 /// an error (exit code 2) instead.
-pub fn report_checks(
+pub(crate) fn report_checks(
     out: &mut dyn std::io::Write,
     campaign: &Path,
     tests: &[AlignedTest],

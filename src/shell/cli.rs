@@ -37,7 +37,7 @@ pub enum Command {
     Compare(CompareArgs),
     /// Write measurement files (docs/formats.md) made by the model, with hidden parameter changes and sensor noise.
     Synth(SynthArgs),
-    /// Calibrate effects' (and named baseline) parameters against a campaign (Levenberg-Marquardt).
+    /// Fit effects' (and named baseline) parameters to a campaign (Levenberg-Marquardt).
     Fit(FitArgs),
     /// Fit every candidate effect of the library and say which one is most likely missing.
     Diagnose(DiagnoseArgs),
@@ -217,10 +217,10 @@ pub struct CompareArgs {
 pub struct FitArgs {
     /// The campaign file (TOML, docs/formats.md).
     pub campaign: PathBuf,
-    /// Effects to add and calibrate (comma-separated; each frees its default parameters).
+    /// Effects to add and fit (comma-separated; each frees its default parameters).
     #[arg(long, value_delimiter = ',')]
     pub effect: Vec<String>,
-    /// More parameters to calibrate, as component.name (comma-separated), baseline ones included.
+    /// More parameters to fit, as component.name (comma-separated), baseline ones included.
     #[arg(long, value_delimiter = ',')]
     pub free: Vec<String>,
     /// Model file to start from ([model.<component>] tables; default: the defaults).

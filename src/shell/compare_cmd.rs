@@ -5,7 +5,7 @@ use super::campaign_io::{load_campaign, load_model, load_tests, report_checks};
 use super::cli::{CompareArgs, OpenLoop};
 use super::meta::{self, Key, Kind};
 use super::progress::Progress;
-use super::state_map;
+use super::statemap_report;
 use super::tables::{self, Column};
 use super::RunFailed;
 use crate::kernel::metrics::N_HARM;
@@ -39,7 +39,7 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<()> {
 }
 
 /// The command, its report printed to `o` (the Python package keeps it as text).
-pub fn run_to(args: &CompareArgs, o: &mut dyn Write) -> anyhow::Result<()> {
+pub(crate) fn run_to(args: &CompareArgs, o: &mut dyn Write) -> anyhow::Result<()> {
     let model = load_model(args.model.as_deref())?;
     let lc = load_campaign(&args.campaign, &model)?;
     let open_loop = args.open_loop.map(measured::OpenLoop::from);
@@ -74,7 +74,7 @@ pub fn run_to(args: &CompareArgs, o: &mut dyn Write) -> anyhow::Result<()> {
     print_files(o, &results)?;
     print_bins(o, &results)?;
     print_amplitudes(o, &results)?;
-    state_map::print(o, &state_map)?;
+    statemap_report::print(o, &state_map)?;
     report_checks(
         o,
         &args.campaign,
@@ -269,7 +269,7 @@ fn print_amplitudes(o: &mut dyn Write, results: &[Compared]) -> std::io::Result<
 }
 
 /// The Parquet tables of a comparison: one per kind of thing a report plots.
-pub fn write_tables(
+pub(crate) fn write_tables(
     dir: &Path,
     results: &[Compared],
     map: &StateMap,
@@ -279,7 +279,7 @@ pub fn write_tables(
     let mut meta = meta::header(Kind::Compare);
     meta.push(meta::pair(Key::Drive, drive));
     tables::write_table(&dir.join("tests.parquet"), tests_columns(results), &meta)?;
-    state_map::write(dir, map, &meta)?;
+    statemap_report::write(dir, map, &meta)?;
     tables::write_table(
         &dir.join("harmonics.parquet"),
         harmonics_columns(results),

@@ -35,7 +35,7 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
 }
 
 /// The command, its report printed to `o` (the Python package keeps it as text).
-pub fn run_to(args: &DiagnoseArgs, o: &mut dyn Write) -> anyhow::Result<()> {
+pub(crate) fn run_to(args: &DiagnoseArgs, o: &mut dyn Write) -> anyhow::Result<()> {
     let engine = super::gpu::choose(args.backend)?
         .not_covering("a diagnosis compares time histories and screens effects (the CUDA kernel returns metrics of the baseline only)")?;
     let model = load_model(args.model.as_deref())?;
@@ -90,7 +90,7 @@ pub fn run_to(args: &DiagnoseArgs, o: &mut dyn Write) -> anyhow::Result<()> {
     print_selection(o, &d)?;
     if let Some(map) = &d.state_map {
         writeln!(o, "\n  the starting model's residual:")?;
-        super::state_map::print(o, map)?;
+        super::statemap_report::print(o, map)?;
     }
     if let (Some(map), Some(true)) = (
         &d.state_map_after,
@@ -98,7 +98,7 @@ pub fn run_to(args: &DiagnoseArgs, o: &mut dyn Write) -> anyhow::Result<()> {
             .map(|(_, f)| f.after.residual_rms() > diagnose::NOISE_FACTOR * d.noise_rms),
     ) {
         writeln!(o, "\n  the residual the named effects leave:")?;
-        super::state_map::print(o, map)?;
+        super::statemap_report::print(o, map)?;
     }
     writeln!(o, "\n  verdict: {}", d.summary())?;
     if let Some(dir) = &args.report {
@@ -276,7 +276,7 @@ fn print_selection(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
 }
 
 /// The Parquet tables and the HTML page of a diagnosis.
-pub fn write_report(
+pub(crate) fn write_report(
     dir: &std::path::Path,
     campaign: &str,
     problem: &Problem,
@@ -289,7 +289,7 @@ pub fn write_report(
         meta::pair(Key::Verdict, d.summary()),
     ]);
     if let Some(map) = &d.state_map {
-        super::state_map::write(dir, map, &meta)?;
+        super::statemap_report::write(dir, map, &meta)?;
     }
     tables::write_table(
         &dir.join("candidates.parquet"),

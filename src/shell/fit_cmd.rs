@@ -1,4 +1,4 @@
-//! `study fit`: calibrate effects' parameters against a campaign and write the fitted model.
+//! `study fit`: fit effects' parameters against a campaign and write the fitted model.
 
 use super::campaign_io::{load_campaign, load_model, load_tests, report_checks, LoadedCampaign};
 use super::cli::FitArgs;
@@ -23,7 +23,11 @@ pub struct Loaded {
 
 /// Reads a campaign and its measured tests into a fitting problem. The data's warnings are an
 /// error under `strict`.
-pub fn load_problem(campaign: &Path, model: &ModelParams, strict: bool) -> anyhow::Result<Loaded> {
+pub(crate) fn load_problem(
+    campaign: &Path,
+    model: &ModelParams,
+    strict: bool,
+) -> anyhow::Result<Loaded> {
     let lc = load_campaign(campaign, model)?;
     let aligned = load_tests(&lc, None)?;
     if aligned.is_empty() {
@@ -43,7 +47,7 @@ pub fn load_problem(campaign: &Path, model: &ModelParams, strict: bool) -> anyho
 /// Warnings for tests whose acceleration residual is above half the signal both in the starting
 /// model `start` and in the best model the command found (`best`: a fit's result; none where it
 /// found nothing). A specimen or a missing effect the fit explains is not a wrong file.
-pub fn residual_warnings(
+pub(crate) fn residual_warnings(
     problem: &Problem,
     start: &fit::Eval,
     best: Option<&fit::Eval>,
@@ -68,7 +72,7 @@ pub const NOISE_MISMATCH: f64 = 4.0;
 /// their features were scaled by (χ²/n > [`NOISE_MISMATCH`]) while the campaign as a whole is near
 /// its noise: that test's noise is underestimated (a sensor noisier than its quiet rows show, a
 /// filter), or something is missing there only. Its standard errors are then too small.
-pub fn noise_warnings(problem: &Problem, best: Option<&fit::Eval>) -> Vec<String> {
+pub(crate) fn noise_warnings(problem: &Problem, best: Option<&fit::Eval>) -> Vec<String> {
     let Some(b) = best else { return Vec::new() };
     let mut chi2 = vec![0.0; problem.tests.len()];
     for (f, r) in problem.features().iter().zip(&b.r) {
@@ -84,7 +88,7 @@ pub fn noise_warnings(problem: &Problem, best: Option<&fit::Eval>) -> Vec<String
 }
 
 /// The library effect a command-line name means.
-pub fn check_effect(e: &str, flag: &str) -> anyhow::Result<EffectId> {
+pub(crate) fn check_effect(e: &str, flag: &str) -> anyhow::Result<EffectId> {
     EffectId::parse(e.trim()).ok_or_else(|| {
         let hint = suggest(e.trim(), &EFFECTS)
             .map_or(String::new(), |s| format!(" (did you mean `{s}`?)"));
@@ -97,7 +101,7 @@ pub fn check_effect(e: &str, flag: &str) -> anyhow::Result<EffectId> {
 }
 
 /// The free parameters: each effect's defaults, then the named ones.
-pub fn free_parameters(
+pub(crate) fn free_parameters(
     effects: &[String],
     named: &[String],
     model: &ModelParams,
@@ -142,7 +146,7 @@ pub fn free_parameters(
 
 /// The data notes and warnings after a fit's or a diagnosis's results (a one-line pointer on
 /// stderr when there are warnings).
-pub fn print_checks(
+pub(crate) fn print_checks(
     o: &mut dyn Write,
     checks: &str,
     implausible: &[String],
@@ -167,7 +171,7 @@ pub fn print_checks(
 
 /// A progress display counting `problem`'s model runs (on a terminal's stderr, or a line every
 /// 5 s with `log_lines`); finish it when the work is done.
-pub fn with_progress(problem: &mut Problem, label: &str, log_lines: bool) -> Arc<Progress> {
+pub(crate) fn with_progress(problem: &mut Problem, label: &str, log_lines: bool) -> Arc<Progress> {
     let progress = Arc::new(Progress::new(label, 0, false, log_lines));
     let p = progress.clone();
     problem.progress = Some(Arc::new(move |n| p.inc(n)));
@@ -179,7 +183,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
 }
 
 /// The command, its report printed to `o` (the Python package keeps it as text).
-pub fn run_to(args: &FitArgs, o: &mut dyn Write) -> anyhow::Result<()> {
+pub(crate) fn run_to(args: &FitArgs, o: &mut dyn Write) -> anyhow::Result<()> {
     let engine = super::gpu::choose(args.backend)?
         .not_covering("a fit compares time histories at the measured samples (the CUDA kernel returns metrics only)")?;
     let model = load_model(args.model.as_deref())?;
@@ -300,7 +304,7 @@ fn print_residuals(
 
 /// Writes the fitted model (the starting model with the fitted parameters, their effects on),
 /// headed by the command (`fit CAMPAIGN`) and the estimates, to `out`.
-pub fn write_fitted(
+pub(crate) fn write_fitted(
     out: &Path,
     command: &str,
     model: &ModelParams,

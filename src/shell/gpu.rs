@@ -108,7 +108,7 @@ impl Engine {
 
     /// The engine for work the GPU cannot take (`why`): the CPU, saying why under `auto`; an
     /// error (exit 2) naming what is not covered under `cuda`.
-    pub fn not_covering(self, why: &str) -> anyhow::Result<Engine> {
+    pub(crate) fn not_covering(self, why: &str) -> anyhow::Result<Engine> {
         if self.cuda.is_none() {
             return Ok(self);
         }
@@ -124,7 +124,7 @@ impl Engine {
     }
 
     /// The lane engine for a plan (None: the CPU kernel), given the GPU's coverage `unsupported`.
-    pub fn for_plan(
+    pub(crate) fn for_plan(
         self,
         unsupported: Option<String>,
     ) -> anyhow::Result<(Engine, Option<Arc<dyn LaneEngine>>)> {
@@ -284,7 +284,7 @@ impl Cuda {
 /// The kernel's PTX for the effects `bits`: from the cache (`$XDG_CACHE_HOME/vshake` or
 /// `~/.cache/vshake`, keyed by the source and the effects), else compiled by NVRTC (about a
 /// second) and cached.
-pub fn ptx(bits: i64) -> Result<String, String> {
+pub(crate) fn ptx(bits: i64) -> Result<String, String> {
     let key = fnv1a(&format!("{}\n{bits}", gpu_lanes::SOURCE));
     let path = cache_dir().map(|d| d.join(format!("lane-{key:016x}.ptx")));
     if let Some(text) = path.as_ref().and_then(|p| std::fs::read_to_string(p).ok()) {
@@ -304,7 +304,7 @@ pub fn ptx(bits: i64) -> Result<String, String> {
 /// Compiles the kernel with NVRTC for the effects `bits` (`-DVS_EFFECTS`: a build carries only
 /// the states of its effects). No FMA contraction (`--fmad=false`): the CPU kernel rounds every
 /// multiply and add, and so does the GPU, which keeps the two within 1e-9 of each other.
-pub fn compile_ptx(bits: i64) -> Result<String, String> {
+pub(crate) fn compile_ptx(bits: i64) -> Result<String, String> {
     // SAFETY: only tries to open the shared library.
     if !unsafe { cudarc::nvrtc::sys::is_culib_present() } {
         return Err(

@@ -51,7 +51,7 @@ impl Progress {
     }
 
     /// `n` more runs finished (callable from any thread).
-    pub fn inc(&self, n: usize) {
+    pub(crate) fn inc(&self, n: usize) {
         let done = self.done.fetch_add(n, Ordering::Relaxed) + n;
         if let Some(b) = &self.bar {
             b.inc(n as u64);

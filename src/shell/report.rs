@@ -29,7 +29,7 @@ fn range(v: impl Iterator<Item = f64>) -> (f64, f64) {
 }
 
 /// The runs of consecutive finite points of a line (a NaN breaks the line; it is never drawn).
-pub fn finite_runs(pts: impl Iterator<Item = (f64, f64)>) -> Vec<Vec<(f64, f64)>> {
+pub(crate) fn finite_runs(pts: impl Iterator<Item = (f64, f64)>) -> Vec<Vec<(f64, f64)>> {
     let mut runs: Vec<Vec<(f64, f64)>> = vec![Vec::new()];
     for p in pts {
         if p.0.is_finite() && p.1.is_finite() {
@@ -307,7 +307,7 @@ fn state_map_svg(map: &StateMap) -> Result<String, Box<dyn std::error::Error>> {
 
 /// The report's section on where in state space the residual lies: the sentence, the plot and
 /// the per-state regressions.
-pub fn state_map_section(map: &StateMap) -> anyhow::Result<String> {
+pub(crate) fn state_map_section(map: &StateMap) -> anyhow::Result<String> {
     let mut h = String::from("<h2>Where in state space</h2>\n");
     match map.sentence() {
         Some(s) => writeln!(h, "<p id=\"state-sentence\">{}</p>", esc(&s))?,

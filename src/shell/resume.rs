@@ -26,7 +26,7 @@ pub struct Kept {
 
 impl Kept {
     /// Copies the kept rows into `sink`, checking that they are the slice's first samples.
-    pub fn copy_into(&self, sink: &mut ResultsSink, job: &Job) -> anyhow::Result<()> {
+    pub(crate) fn copy_into(&self, sink: &mut ResultsSink, job: &Job) -> anyhow::Result<()> {
         let n_exc = job.plan.references.len();
         let mut left = self.samples * n_exc;
         let (_, reader) = tables::parquet_batches(&self.source).map_err(input_if_user)?;
@@ -60,7 +60,7 @@ impl Kept {
     }
 
     /// Removes a recovered file once the new file holds its rows.
-    pub fn discard(&self) {
+    pub(crate) fn discard(&self) {
         if self.temporary {
             let _ = std::fs::remove_file(&self.source);
         }

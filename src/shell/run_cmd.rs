@@ -29,7 +29,7 @@ pub fn load_study(file: &Path) -> anyhow::Result<StudySpec> {
 }
 
 /// Reads and validates a study file on the model file `model` (`--model`; None: the defaults).
-pub fn load_study_on(file: &Path, model: Option<&Path>) -> anyhow::Result<StudySpec> {
+pub(crate) fn load_study_on(file: &Path, model: Option<&Path>) -> anyhow::Result<StudySpec> {
     let base = super::campaign_io::load_model(model)?;
     let text = tables::read_input_text(file)
         .map_err(|e| BadInput(format!("{}: cannot read: {e}", file.display())))?;
@@ -99,7 +99,7 @@ fn design_columns(path: &Path) -> anyhow::Result<Vec<&'static ParamInfo>> {
 /// The parameters that columns name (a path such as controller.g_d, a qualified column name, or
 /// a column name such as g_d), refused when unknown or not variable; `source` names the columns'
 /// file in errors.
-pub fn parameters_of_columns(
+pub(crate) fn parameters_of_columns(
     names: &[String],
     source: &str,
 ) -> anyhow::Result<Vec<&'static ParamInfo>> {
@@ -187,7 +187,7 @@ impl ResultsSink {
     }
 
     /// Appends rows copied from another results file with the same columns.
-    pub fn write_batch(&mut self, batch: &arrow_array::RecordBatch) -> anyhow::Result<()> {
+    pub(crate) fn write_batch(&mut self, batch: &arrow_array::RecordBatch) -> anyhow::Result<()> {
         self.stream.write_batch(batch)
     }
 
@@ -272,7 +272,7 @@ impl RowSink for ResultsSink {
 }
 
 /// The metadata every results file carries.
-pub fn results_metadata(
+pub(crate) fn results_metadata(
     spec: &StudySpec,
     plan: &Plan,
     extra: &[(String, String)],
@@ -345,7 +345,7 @@ impl Job {
 
     /// A new run of a read study: `base` is the folder its relative paths start from,
     /// `study_file` the file (or the words) the metadata names it by.
-    pub fn of_spec(
+    pub(crate) fn of_spec(
         args: &RunArgs,
         mut spec: StudySpec,
         base: &Path,
@@ -364,7 +364,7 @@ impl Job {
     }
 
     /// A new run of a study's plan (its design made or given), named `study_file` in the metadata.
-    pub fn of_plan(
+    pub(crate) fn of_plan(
         args: &RunArgs,
         spec: StudySpec,
         plan: Plan,
@@ -534,7 +534,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
 /// Runs a job as `args` say (engine, threads, chunk, dry run, progress), printing its header and
 /// summary to `o`; with `signals`, SIGINT and SIGTERM stop it cleanly ([`interrupt`]; an embedding
 /// program, the Python package, keeps its own handlers).
-pub fn execute(
+pub(crate) fn execute(
     args: &RunArgs,
     mut job: Job,
     o: &mut dyn Write,
@@ -865,7 +865,7 @@ impl Shard {
 }
 
 /// Folder of the full histories requested by a study: `<out stem>_histories/`.
-pub fn history_dir(out: &Path) -> PathBuf {
+pub(crate) fn history_dir(out: &Path) -> PathBuf {
     let stem = out
         .file_stem()
         .map(|s| s.to_string_lossy().to_string())

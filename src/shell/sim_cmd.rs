@@ -15,12 +15,12 @@ use std::io::Write;
 use std::path::Path;
 
 /// Builds the reference of a spec, reading a record file relative to `base`.
-pub fn build_reference(spec: &SimSpec, base: &Path) -> anyhow::Result<Reference> {
+pub(crate) fn build_reference(spec: &SimSpec, base: &Path) -> anyhow::Result<Reference> {
     tables::load_reference(&spec.excitation, &spec.model, base, 0)
 }
 
 /// Reads and validates a run file on the model file `model` (`--model`; None: the defaults).
-pub fn load_spec(file: &Path, model: Option<&Path>) -> anyhow::Result<SimSpec> {
+pub(crate) fn load_spec(file: &Path, model: Option<&Path>) -> anyhow::Result<SimSpec> {
     let base = super::campaign_io::load_model(model)?;
     let text = tables::read_input_text(file)
         .map_err(|e| BadInput(format!("{}: cannot read: {e}", file.display())))?;
@@ -93,7 +93,7 @@ pub fn run(args: &SimArgs) -> anyhow::Result<()> {
 }
 
 /// A run's status in words: `ok`, or where and why it failed.
-pub fn status_text(status: &LaneStatus) -> String {
+pub(crate) fn status_text(status: &LaneStatus) -> String {
     match *status {
         LaneStatus::Ok => "ok".to_string(),
         LaneStatus::Failed { time_s, reason } => format!("failed at t = {time_s:.4} s: {reason}"),
@@ -101,7 +101,7 @@ pub fn status_text(status: &LaneStatus) -> String {
 }
 
 /// Writes a run's time history (every channel) with the resolved run and its status as metadata.
-pub fn write_history(
+pub(crate) fn write_history(
     path: &Path,
     spec: &SimSpec,
     out: &sim::SimOutcome,

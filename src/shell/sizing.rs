@@ -3,7 +3,7 @@
 
 use super::run_cmd::{Job, ResultsSink};
 use super::BadInput;
-use crate::orchestration::batch::{self, Calibration, RowSink};
+use crate::orchestration::batch::{self, RowSink, Timing};
 use std::io::{IsTerminal, Write};
 use std::ops::Range;
 use std::time::Duration;
@@ -11,9 +11,9 @@ use std::time::Duration;
 /// A run estimated above this many wall seconds asks for `--yes` first.
 pub const LONG_RUN_S: f64 = 86_400.0;
 
-/// Length of the timed round of a calibration: long enough to be steady (a round of a few
+/// Length of the timed round of a dry run's timing: long enough to be steady (a round of a few
 /// hundred samples), short beside any run worth estimating.
-const CALIBRATION_ROUND: Duration = Duration::from_millis(600);
+const TIMING_ROUND: Duration = Duration::from_millis(600);
 
 /// What to do with a run of an estimated wall time.
 #[derive(Debug, PartialEq)]
@@ -27,7 +27,7 @@ pub enum Decision {
 
 /// A run over [`LONG_RUN_S`] asks for `--yes` at a terminal, and starts with a loud warning in
 /// a batch job (where stderr is a log file).
-pub fn long_run_decision(wall_s: f64, yes: bool, terminal: bool) -> Decision {
+pub(crate) fn long_run_decision(wall_s: f64, yes: bool, terminal: bool) -> Decision {
     if wall_s <= LONG_RUN_S || yes {
         return Decision::Go;
     }
@@ -56,7 +56,7 @@ fn simulated_s(job: &Job, todo: &Range<usize>) -> f64 {
 
 /// Times a few samples when the run could take more than a day even at a fast 1 000 simulated
 /// seconds per wall second per thread, and asks for `--yes` if the estimate is over a day.
-pub fn gate_long_run(
+pub(crate) fn gate_long_run(
     job: &Job,
     todo: Range<usize>,
     pool: &rayon::ThreadPool,
@@ -65,7 +65,7 @@ pub fn gate_long_run(
     if yes || simulated_s(job, &todo) < LONG_RUN_S * 1_000.0 * pool.current_num_threads() as f64 {
         return Ok(());
     }
-    let c = batch::calibrate(&job.plan, todo.clone(), pool, CALIBRATION_ROUND)?;
+    let c = batch::time_round(&job.plan, todo.clone(), pool, TIMING_ROUND)?;
     match long_run_decision(c.wall_s(todo.len()), yes, std::io::stderr().is_terminal()) {
         Decision::Go => Ok(()),
         Decision::Warn(w) => {
@@ -77,9 +77,13 @@ pub fn gate_long_run(
 }
 
 /// Prints what a run would do and cost, without writing anything.
-pub fn dry_run(job: &Job, todo: Range<usize>, pool: &rayon::ThreadPool) -> anyhow::Result<()> {
+pub(crate) fn dry_run(
+    job: &Job,
+    todo: Range<usize>,
+    pool: &rayon::ThreadPool,
+) -> anyhow::Result<()> {
     let runs = todo.len() * job.plan.references.len();
-    let c = batch::calibrate(&job.plan, todo.clone(), pool, CALIBRATION_ROUND)?;
+    let c = batch::time_round(&job.plan, todo.clone(), pool, TIMING_ROUND)?;
     let wall = c.wall_s(todo.len());
     let bytes = output_bytes(job, &c, runs)?;
     let mut o = std::io::stdout().lock();
@@ -113,7 +117,7 @@ pub fn dry_run(job: &Job, todo: Range<usize>, pool: &rayon::ThreadPool) -> anyho
 
 /// The results file's size, from the timed rows written to a scratch file: its fixed part (the
 /// footer and metadata, from a file with no rows) plus the timed rows' bytes per row.
-fn output_bytes(job: &Job, c: &Calibration, runs: usize) -> anyhow::Result<f64> {
+fn output_bytes(job: &Job, c: &Timing, runs: usize) -> anyhow::Result<f64> {
     let dir = std::env::temp_dir().join(format!("vshake-dry-run-{}", std::process::id()));
     let size = |rows: &[batch::Row], name: &str| -> anyhow::Result<u64> {
         let path = dir.join(name);
@@ -132,7 +136,7 @@ fn output_bytes(job: &Job, c: &Calibration, runs: usize) -> anyhow::Result<f64> 
 }
 
 /// Seconds as s, min, h or days.
-pub fn human_time(s: f64) -> String {
+pub(crate) fn human_time(s: f64) -> String {
     match s {
         s if s < 90.0 => format!("{s:.1} s"),
         s if s < 5_400.0 => format!("{:.1} min", s / 60.0),

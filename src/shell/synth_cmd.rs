@@ -30,7 +30,7 @@ const NOISY: [(&str, &str); 5] = [
 ];
 
 /// Switches on the named effects.
-pub fn apply_effects(model: &mut ModelParams, effects: &[String]) -> anyhow::Result<()> {
+pub(crate) fn apply_effects(model: &mut ModelParams, effects: &[String]) -> anyhow::Result<()> {
     for e in effects {
         *model
             .effects
@@ -40,7 +40,7 @@ pub fn apply_effects(model: &mut ModelParams, effects: &[String]) -> anyhow::Res
 }
 
 /// Parses `path=value` model settings into `model`.
-pub fn apply_sets(model: &mut ModelParams, sets: &[String]) -> anyhow::Result<()> {
+pub(crate) fn apply_sets(model: &mut ModelParams, sets: &[String]) -> anyhow::Result<()> {
     for s in sets {
         let (path, value) = s
             .split_once('=')
@@ -92,7 +92,7 @@ impl Noise {
 
 /// Parses `--noise accel=0.05,disp=1e-5` (standard deviations in SI units) or `accel=1%` (of
 /// each test's rms of the channel).
-pub fn parse_noise(spec: Option<&str>) -> anyhow::Result<[Noise; 5]> {
+pub(crate) fn parse_noise(spec: Option<&str>) -> anyhow::Result<[Noise; 5]> {
     let mut out = [Noise::Absolute(0.0); 5];
     let Some(spec) = spec else { return Ok(out) };
     for item in spec.split(',').filter(|s| !s.trim().is_empty()) {

@@ -145,7 +145,7 @@ fn io_message(e: &std::io::Error) -> String {
 
 /// What a path that exists but is not a regular file is (a folder, a FIFO, a device, a socket),
 /// for messages; None for a regular file, or a path whose reader will say why it cannot be read.
-pub fn not_regular(path: &Path) -> Option<&'static str> {
+pub(crate) fn not_regular(path: &Path) -> Option<&'static str> {
     use std::os::unix::fs::FileTypeExt;
     let t = std::fs::metadata(path).ok()?.file_type();
     Some(if t.is_file() {
@@ -165,7 +165,7 @@ pub fn not_regular(path: &Path) -> Option<&'static str> {
 
 /// Refuses, before opening it, an input that is not a regular file: a FIFO would block the read
 /// and a device never end it. The error's kind is `InvalidInput`, its text what the path is.
-pub fn regular_input(path: &Path) -> std::io::Result<()> {
+pub(crate) fn regular_input(path: &Path) -> std::io::Result<()> {
     match not_regular(path) {
         None => Ok(()),
         Some(what) => Err(std::io::Error::new(
@@ -176,14 +176,14 @@ pub fn regular_input(path: &Path) -> std::io::Result<()> {
 }
 
 /// `std::fs::read` of an input, refused at once when it is not a regular file.
-pub fn read_input(path: &Path) -> std::io::Result<Vec<u8>> {
+pub(crate) fn read_input(path: &Path) -> std::io::Result<Vec<u8>> {
     regular_input(path)?;
     std::fs::read(path)
 }
 
 /// `std::fs::read_to_string` of an input (a study, run, campaign or model file), refused at once
 /// when it is not a regular file.
-pub fn read_input_text(path: &Path) -> std::io::Result<String> {
+pub(crate) fn read_input_text(path: &Path) -> std::io::Result<String> {
     regular_input(path)?;
     std::fs::read_to_string(path)
 }
@@ -197,7 +197,7 @@ fn open_input(path: &Path) -> std::io::Result<File> {
 impl TableError {
     /// Whether the error is the user's input (exit code 2) rather than the system's: everything
     /// but a failing disk (a file that is not there or not readable is the user's to fix).
-    pub fn is_input(&self) -> bool {
+    pub(crate) fn is_input(&self) -> bool {
         match self {
             TableError::Io { err, .. } => matches!(
                 err.kind(),
@@ -314,7 +314,7 @@ fn column_names_unguarded(path: &Path) -> Result<Vec<String>, TableError> {
 }
 
 /// Marks a table error as bad input (exit 2) when it is the user's.
-pub fn input_if_user(e: TableError) -> anyhow::Error {
+pub(crate) fn input_if_user(e: TableError) -> anyhow::Error {
     if e.is_input() {
         super::BadInput(e.to_string()).into()
     } else {
@@ -324,7 +324,7 @@ pub fn input_if_user(e: TableError) -> anyhow::Error {
 
 /// The reference of one excitation for `model`, reading a record's file relative to `base` (a
 /// PEER `.AT2` file by [`super::at2`]); a generated motion's noise from `seed`.
-pub fn load_reference(
+pub(crate) fn load_reference(
     excitation: &ExcitationSpec,
     model: &ModelParams,
     base: &Path,
@@ -344,7 +344,11 @@ pub fn load_reference(
 }
 
 /// A record's time and value columns: from a CSV or Parquet file, or a PEER `.AT2` file.
-pub fn read_record(path: &Path, column: &str, time_column: &str) -> Result<NumTable, TableError> {
+pub(crate) fn read_record(
+    path: &Path,
+    column: &str,
+    time_column: &str,
+) -> Result<NumTable, TableError> {
     if crate::orchestration::spec::is_at2(path) {
         super::at2::read(path)
     } else {
@@ -962,7 +966,7 @@ impl AtomicFile {
         self.commit_in_place()
     }
     /// Renames the temp file into place, keeping the guard (for owners that implement Drop).
-    pub fn commit_in_place(&mut self) -> std::io::Result<()> {
+    pub(crate) fn commit_in_place(&mut self) -> std::io::Result<()> {
         std::fs::rename(&self.tmp, &self.path)?;
         self.committed = true;
         Ok(())
@@ -1075,7 +1079,7 @@ struct Checkpoint {
 }
 
 /// The checkpoint sidecar of a results file being written: `path.tmp.checkpoint`.
-pub fn checkpoint_path(path: &Path) -> PathBuf {
+pub(crate) fn checkpoint_path(path: &Path) -> PathBuf {
     let mut p = path.as_os_str().to_owned();
     p.push(".tmp.checkpoint");
     PathBuf::from(p)
@@ -1096,7 +1100,7 @@ impl ParquetStream {
     }
 
     /// Opens `path.tmp` for a table with these Arrow fields.
-    pub fn create_with_fields(
+    pub(crate) fn create_with_fields(
         path: &Path,
         fields: Vec<Field>,
         metadata: &[(String, String)],
@@ -1164,7 +1168,7 @@ impl ParquetStream {
     }
 
     /// Appends a record batch whose columns match this table's fields.
-    pub fn write_batch(&mut self, batch: &RecordBatch) -> anyhow::Result<()> {
+    pub(crate) fn write_batch(&mut self, batch: &RecordBatch) -> anyhow::Result<()> {
         let batch = RecordBatch::try_new(self.schema.clone(), batch.columns().to_vec())?;
         self.writer.write(&batch)?;
         self.after_write()
@@ -1248,7 +1252,7 @@ impl ParquetStream {
     }
 
     /// Closes the file with these key-value pairs added to its metadata, and moves it into place.
-    pub fn finish_with(mut self, extra: &[(String, String)]) -> anyhow::Result<()> {
+    pub(crate) fn finish_with(mut self, extra: &[(String, String)]) -> anyhow::Result<()> {
         use anyhow::Context;
         for (k, v) in extra {
             self.writer
@@ -1302,7 +1306,7 @@ pub fn partial_path(out: &Path) -> PathBuf {
 }
 
 /// The results table a partial one becomes (see [`partial_path`]); any other path as it is.
-pub fn final_path(p: &Path) -> PathBuf {
+pub(crate) fn final_path(p: &Path) -> PathBuf {
     let name = p.file_name().unwrap_or_default().to_string_lossy();
     match (
         name.strip_suffix(".partial.parquet"),
@@ -1315,7 +1319,7 @@ pub fn final_path(p: &Path) -> PathBuf {
 }
 
 /// Where a killed run's rows go when they are recovered: `FILE.killed`.
-pub fn killed_path(path: &Path) -> PathBuf {
+pub(crate) fn killed_path(path: &Path) -> PathBuf {
     let mut killed = path.as_os_str().to_owned();
     killed.push(".killed");
     PathBuf::from(killed)
@@ -1385,7 +1389,7 @@ pub fn write_parquet(
 }
 
 /// Writes typed columns as one Parquet file, atomically.
-pub fn write_table(
+pub(crate) fn write_table(
     path: &Path,
     columns: Vec<(String, Column)>,
     metadata: &[(String, String)],
@@ -1396,7 +1400,7 @@ pub fn write_table(
 }
 
 /// The number of rows of a Parquet file (from its footer).
-pub fn parquet_rows(path: &Path) -> Result<usize, TableError> {
+pub(crate) fn parquet_rows(path: &Path) -> Result<usize, TableError> {
     guarded(path, || parquet_rows_unguarded(path))
 }
 

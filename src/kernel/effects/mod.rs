@@ -314,7 +314,7 @@ pub fn switch(m: &ModelParams, id: EffectId) -> f64 {
 }
 
 /// [`switch`] of effect `E` for every lane (an effect's constructor calls it with `Self`).
-pub fn lane_mask<const N: usize, E: Named>(p: &[&ModelParams; N]) -> [f64; N] {
+pub(crate) fn lane_mask<const N: usize, E: Named>(p: &[&ModelParams; N]) -> [f64; N] {
     std::array::from_fn(|l| switch(p[l], E::ID))
 }
 

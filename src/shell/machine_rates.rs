@@ -84,7 +84,7 @@ impl Rates {
     }
 
     /// Seconds per lane of one evaluation by the best split of the fourth roots.
-    pub fn rhs_seconds(&self, op: &OpCount) -> f64 {
+    pub(crate) fn rhs_seconds(&self, op: &OpCount) -> f64 {
         (0..=op.fourth_roots as usize)
             .map(|k| {
                 let (d, p) = self.seconds(op, k as f64);
@@ -222,7 +222,7 @@ pub fn rates(secs: f64) -> Rates {
 
 /// A dependent chain of 2·iters one-cycle integer operations (add, rotate): the clock, to turn
 /// rates into cycles. Returns a checksum.
-pub fn add_chain(iters: usize, seed: u64) -> u64 {
+pub(crate) fn add_chain(iters: usize, seed: u64) -> u64 {
     let mut a = seed;
     let b = black_box(0x9e37_79b9_7f4a_7c15u64);
     for _ in 0..iters {
