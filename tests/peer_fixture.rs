@@ -6,8 +6,8 @@
 //! degrees), and a run the peer stops the kernel fails too. A change of any plant constant by
 //! 0.01 % moves some metric by far more than that (`a_small_change_of_beta_is_caught`).
 
+mod common;
 use vshake::kernel::effects::Baseline;
-use vshake::kernel::excitation::{Reference, Sine};
 use vshake::kernel::params::ModelParams;
 use vshake::kernel::simulate::{self, LaneParams, LaneResult, LaneStatus, NoObserver, Solver};
 
@@ -42,17 +42,6 @@ fn cases() -> Vec<Case> {
         .collect()
 }
 
-fn reference(amp_g: f64) -> Reference {
-    Sine {
-        freq_hz: 3.0,
-        amp_m: Sine::amp_from_g(amp_g, 3.0),
-        taper_s: 1.0,
-        duration_s: 3.0,
-        window_cycles: Some(4),
-    }
-    .reference(1024.0)
-}
-
 fn run(case: &Case, base: &ModelParams) -> LaneResult {
     let mut model = base.clone();
     for (path, v) in &case.gains {
@@ -63,7 +52,7 @@ fn run(case: &Case, base: &ModelParams) -> LaneResult {
     let [r] = simulate::run(
         &lp,
         &Baseline,
-        &reference(case.amp_g),
+        &common::reference_sine(case.amp_g),
         &solver,
         &mut NoObserver,
     )

@@ -1,8 +1,9 @@
 //! The reference values of docs/model.md §5, the linear-valve counter-example, convergence of the
 //! integrator (§6) and the rest state, all through the public kernel API.
 
+mod common;
 use vshake::kernel::effects::Baseline;
-use vshake::kernel::excitation::{Reference, Sine};
+use vshake::kernel::excitation::Reference;
 use vshake::kernel::metrics::Metrics;
 use vshake::kernel::params::{ModelParams, ValveLaw};
 use vshake::kernel::simulate::{
@@ -10,23 +11,12 @@ use vshake::kernel::simulate::{
 };
 use vshake::kernel::state::idx;
 
-fn reference_sine(amp_g: f64) -> Reference {
-    Sine {
-        freq_hz: 3.0,
-        amp_m: Sine::amp_from_g(amp_g, 3.0),
-        taper_s: 1.0,
-        duration_s: 3.0,
-        window_cycles: Some(4),
-    }
-    .reference(1024.0)
-}
-
 fn metrics(p: &ModelParams, amp_g: f64, substeps: usize) -> Metrics {
     let lp = LaneParams::<1>::new(&[p]).unwrap();
     let [r] = simulate::run(
         &lp,
         &Baseline,
-        &reference_sine(amp_g),
+        &common::reference_sine(amp_g),
         &Solver { substeps },
         &mut NoObserver,
     )
@@ -136,7 +126,7 @@ fn default_step_is_converged() {
                 simulate::run(
                     &lp,
                     &Baseline,
-                    &reference_sine(g),
+                    &common::reference_sine(g),
                     &Solver { substeps },
                     &mut NoObserver,
                 )
@@ -260,7 +250,7 @@ fn lanes_are_independent_and_equal_the_scalar_path() {
         })
         .collect();
     let refs: Vec<&ModelParams> = sets.iter().collect();
-    let reference = reference_sine(1.73);
+    let reference = common::reference_sine(1.73);
     let lp8 = LaneParams::<8>::new(&refs).unwrap();
     let batch = simulate::run(
         &lp8,
@@ -324,7 +314,7 @@ fn a_diverging_lane_fails_alone() {
     let good = ModelParams::default();
     let mut bad = ModelParams::default();
     bad.controller.g_d = 400.0;
-    let reference = reference_sine(1.73);
+    let reference = common::reference_sine(1.73);
     let lp = LaneParams::<2>::new(&[&good, &bad]).unwrap();
     let r = simulate::run(
         &lp,

@@ -116,3 +116,18 @@ pub fn study(args: &[&str]) -> (i32, String, String) {
         String::from_utf8_lossy(&out.stderr).into(),
     )
 }
+
+/// The reference sine of docs/model.md §5 at `amp_g`: 3 Hz, 1 s taper, 3 s run, the last 4 cycles
+/// analysed, at the controller's 1024 Hz.
+#[allow(dead_code)] // used by the tests that pin the kernel's metrics
+pub fn reference_sine(amp_g: f64) -> vshake::kernel::excitation::Reference {
+    use vshake::kernel::excitation::Sine;
+    Sine {
+        freq_hz: 3.0,
+        amp_m: Sine::amp_from_g(amp_g, 3.0),
+        taper_s: 1.0,
+        duration_s: 3.0,
+        window_cycles: Some(4),
+    }
+    .reference(1024.0)
+}
