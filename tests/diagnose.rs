@@ -428,8 +428,8 @@ impl vshake::kernel::effects::Effect<1> for Specimen {
     fn initial_state(&self) -> Self::State {
         [[0.0], [0.0]]
     }
-    fn extra_force(&self, _l: usize, y: f64, v: f64, s: &Self::State) -> f64 {
-        self.k * (s[0][0] - y) + self.c * (s[1][0] - v)
+    fn extra_force(&self, c: vshake::kernel::effects::hook::Motion, s: &Self::State) -> f64 {
+        self.k * (s[0][0] - c.y) + self.c * (s[1][0] - c.v)
     }
     fn derivs(
         &self,
@@ -603,7 +603,7 @@ impl vshake::kernel::effects::Effect<1> for Ripple {
     fn initial_state(&self) -> Self::State {
         [[1.0], [0.0]]
     }
-    fn extra_force(&self, _l: usize, _y: f64, _v: f64, s: &Self::State) -> f64 {
+    fn extra_force(&self, _c: vshake::kernel::effects::hook::Motion, s: &Self::State) -> f64 {
         self.force * s[0][0]
     }
     fn derivs(
@@ -665,11 +665,8 @@ impl vshake::kernel::effects::Effect<1> for Expansion {
     fn initial_state(&self) -> Self::State {
         []
     }
-    fn opening(&self, _l: usize, _act: usize, x: f64, _s: &Self::State) -> f64 {
-        x * (1.0 + self.a * x.abs() * self.inv_ref)
-    }
-    fn spool_position(&self, _l: usize, _act: usize, x: f64, _s: &Self::State) -> f64 {
-        x
+    fn opening(&self, c: vshake::kernel::effects::hook::Opening, _s: &Self::State) -> f64 {
+        c.x * (1.0 + self.a * c.x.abs() * self.inv_ref)
     }
 }
 

@@ -186,9 +186,42 @@ impl fmt::Debug for ParamInfo {
 /// `pub struct Name in path.to.field as (Component::Part) { rows }`, where `path.to.field` is where
 /// [`ModelParams`] keeps it. Row syntax: `name: unit, suffix, default, range, source, "description";`
 macro_rules! params {
+    // An effect's table: its component and its place in the model (`of`, `of_mut`) come from its
+    // registry line (`kernel::effects`), where its name is spelt.
+    (
+        $(#[$meta:meta])*
+        pub struct $Struct:ident in effect {
+            $( $name:ident : $unit:literal, $suffix:literal, $default:expr, $range:expr, $src:ident, $doc:literal; )*
+        }
+    ) => {
+        $crate::kernel::params::params!(@table $(#[$meta])* $Struct ($Struct::COMPONENT) {
+            $( $name : $unit, $suffix, $default, $range, $src, $doc; )*
+        });
+    };
     (
         $(#[$meta:meta])*
         pub struct $Struct:ident in $($field:ident).+ as $component:tt {
+            $( $name:ident : $unit:literal, $suffix:literal, $default:expr, $range:expr, $src:ident, $doc:literal; )*
+        }
+    ) => {
+        $crate::kernel::params::params!(@table $(#[$meta])* $Struct $component {
+            $( $name : $unit, $suffix, $default, $range, $src, $doc; )*
+        });
+
+        impl $Struct {
+            /// This component's parameters in `m`.
+            pub fn of(m: &$crate::kernel::params::ModelParams) -> &Self {
+                &m.$($field).+
+            }
+
+            /// This component's parameters in `m`, to change.
+            pub(crate) fn of_mut(m: &mut $crate::kernel::params::ModelParams) -> &mut Self {
+                &mut m.$($field).+
+            }
+        }
+    };
+    (
+        @table $(#[$meta:meta])* $Struct:ident $component:tt {
             $( $name:ident : $unit:literal, $suffix:literal, $default:expr, $range:expr, $src:ident, $doc:literal; )*
         }
     ) => {
@@ -228,16 +261,6 @@ macro_rules! params {
                     },
                 )*
             ];
-
-            /// This component's parameters in `m`.
-            pub fn of(m: &$crate::kernel::params::ModelParams) -> &Self {
-                &m.$($field).+
-            }
-
-            /// This component's parameters in `m`, to change.
-            pub(crate) fn of_mut(m: &mut $crate::kernel::params::ModelParams) -> &mut Self {
-                &mut m.$($field).+
-            }
         }
     };
 }

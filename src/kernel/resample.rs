@@ -81,11 +81,11 @@ impl<const N: usize> Observer<N> for Resampler<N> {
     #[inline(always)]
     fn tick(&mut self, _v: &TickView<'_, N>) {}
 
-    fn sample_times(&self) -> &[f64] {
+    fn probe_times(&self) -> &[f64] {
         &self.times
     }
 
-    fn sample(&mut self, v: &TickView<'_, N>) {
+    fn probe(&mut self, v: &TickView<'_, N>) {
         let mut row = [[0.0; N]; C];
         row[ch::ACCEL] = *v.a;
         row[ch::DISP] = *v.x;

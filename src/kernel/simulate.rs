@@ -20,7 +20,7 @@
 
 use super::actuator::{self, ActuatorLane};
 use super::controller::{self, ControllerLane, ControllerMemory, RefState};
-use super::effects::{Effect, PlantView};
+use super::effects::{hook, Effect, PlantView};
 use super::excitation::{Drive, Reference};
 use super::friction::{self, FrictionLane};
 use super::metrics::{Basis, Metrics, MetricsAcc, WindowTick};
@@ -96,7 +96,7 @@ pub enum SetupError {
     LaneReferences,
     #[error("substeps must be at least 1")]
     Substeps,
-    #[error("the open-loop drive has {got} samples but the run has {expected} ticks")]
+    #[error("the open-loop drive has {got} values but the run has {expected} ticks")]
     DriveLength { got: usize, expected: usize },
 }
 
@@ -252,19 +252,19 @@ pub struct TickView<'a, const N: usize> {
 /// Receives every tick (time histories, live plots). The batch engine passes [`NoObserver`].
 ///
 /// An observer that needs the plant at other times (dense output at a measured file's sample
-/// rate, [`super::resample::Resampler`]) lists them in [`Observer::sample_times`] (s, ascending);
-/// it then receives [`Observer::sample`] at each, in order: the plant integrated to that time by
+/// rate, [`super::resample::Resampler`]) lists them in [`Observer::probe_times`] (s, ascending);
+/// it then receives [`Observer::probe`] at each, in order: the plant integrated to that time by
 /// a partial RK4 step from the substep before it (the command held, as in the tick), with the
 /// acceleration, force, stroke and spool evaluated there, and the tick's held command and
 /// reference. A time on a substep node (to 1e-9 of a substep) takes that node exactly.
 pub trait Observer<const N: usize> {
     fn tick(&mut self, view: &TickView<'_, N>);
-    /// Times at which [`Observer::sample`] is wanted (asked as the run goes).
-    fn sample_times(&self) -> &[f64] {
+    /// Times at which [`Observer::probe`] is wanted (asked as the run goes).
+    fn probe_times(&self) -> &[f64] {
         &[]
     }
-    /// The plant at the next of [`Observer::sample_times`].
-    fn sample(&mut self, _view: &TickView<'_, N>) {}
+    /// The plant at the next of [`Observer::probe_times`].
+    fn probe(&mut self, _view: &TickView<'_, N>) {}
 }
 
 /// Where time `t` falls: its tick and its position in the tick in substeps, in [0, S); a
@@ -582,25 +582,47 @@ fn rhs<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N>>(
         let valve = lp.valve.lane(l);
         let act = lp.act.lane(l);
         let (y, v, z) = (s[Y][l], s[VEL][l], s[Z][l]);
-        let ps = effect.supply(l, lp.p_s[l], es);
+        let ps = effect.supply(
+            hook::Supply {
+                lane: l,
+                p_s: lp.p_s[l],
+            },
+            es,
+        );
         p_s[l] = ps;
         // The chambers follow the actuator stroke (the platen's motion unless an effect says so).
-        let (y_s, v_s) = effect.stroke(l, y, v, es);
+        let motion = hook::Motion { lane: l, y, v };
+        let (y_s, v_s) = effect.stroke(motion, es);
         stroke[l] = y_s;
         let b = actuator::stiffness_factors(&act, y_s);
         let mut f = 0.0;
         let mut qs = 0.0;
         for i in 0..A {
             let (p1, p2) = (s[P1[i]][l], s[P2[i]][l]);
-            let x = effect.opening(l, i, x_c[l], es);
+            let x = effect.opening(opening(l, i, x_c[l]), es);
             xs[i][l] = x;
             let (q1, q2) = Q::flows(&valve, x, p1, p2, ps);
             // Supply → chamber 1 when x > 0, supply → chamber 2 (q2 < 0) otherwise.
             qs += if x > 0.0 { q1 } else { -q2 };
-            let (q1, q2) = effect.flows(l, i, (q1, q2), p1, p2, ps, es);
+            let flows = hook::Flows {
+                lane: l,
+                act: i,
+                q: (q1, q2),
+                p1,
+                p2,
+                p_s: ps,
+            };
+            let (q1, q2) = effect.flows(flows, es);
             q_in1[i][l] = q1;
             q_out2[i][l] = q2;
-            let (b1, b2) = effect.chamber_stiffness(l, i, b, p1, p2, es);
+            let chambers = hook::Chambers {
+                lane: l,
+                act: i,
+                b,
+                p1,
+                p2,
+            };
+            let (b1, b2) = effect.chamber_stiffness(chambers, es);
             let (d1, d2) = actuator::pressure_rates(&act, b1, b2, q1, q2, v_s);
             ds[P1[i]][l] = d1;
             ds[P2[i]][l] = d2;
@@ -618,7 +640,7 @@ fn rhs<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N>>(
         }
         q_supply[l] = qs;
         f_act[l] = f;
-        let fe = effect.extra_force(l, y, v, es);
+        let fe = effect.extra_force(motion, es);
         ds[VEL][l] = platen::accel::<D>(&lp.platen.lane(l), f, fe, y, v, z);
         ds[Y][l] = v;
         ds[Z][l] = friction::dz_dt(&lp.friction.lane(l), v, z);
@@ -638,7 +660,7 @@ fn rhs<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N>>(
     effect.derivs(&view, es, des);
 }
 
-/// The held part of a sample's view: its tick, substep, time, reference and command.
+/// The held part of a probe's view: its tick, substep, time, reference and command.
 struct Held<'a, const N: usize> {
     k: usize,
     sub: usize,
@@ -671,10 +693,10 @@ impl<const N: usize, E: Effect<N>> Probe<N, E> {
     }
 
     /// The plant `delta` after the node (s, es) whose derivatives are (k1, ek1), by one RK4 step
-    /// with the command held; its channels go to `obs.sample`.
+    /// with the command held; its channels go to `obs.probe`.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
-    fn sample<const A: usize, Q: FlowLaw, D: Damping, O: Observer<N>>(
+    fn probe<const A: usize, Q: FlowLaw, D: Damping, O: Observer<N>>(
         &mut self,
         lp: &LaneParams<N>,
         effect: &E,
@@ -719,12 +741,12 @@ impl<const N: usize, E: Effect<N>> Probe<N, E> {
         let (mut f, mut x, mut spool) = ([0.0; N], [0.0; N], [0.0; N]);
         total_force(lp, &self.s, &mut f);
         for l in 0..N {
-            x[l] = effect.stroke(l, self.s[Y][l], self.s[VEL][l], &self.es).0;
-            spool[l] = effect.spool_position(l, 0, x_c[l], &self.es);
+            x[l] = effect.stroke(motion(l, &self.s), &self.es).0;
+            spool[l] = effect.spool_position(opening(l, 0, x_c[l]), &self.es);
         }
         let mut a = self.k[3][VEL];
         recorded(effect, &self.es, &mut a, &mut x, &mut f);
-        obs.sample(&TickView {
+        obs.probe(&TickView {
             k: held.k,
             sub: held.sub,
             t: held.t,
@@ -751,7 +773,25 @@ fn recorded<const N: usize, E: Effect<N>>(
     f: &mut [f64; N],
 ) {
     for l in 0..N {
-        [a[l], x[l], f[l]] = effect.sensed(l, [a[l], x[l], f[l]], es);
+        let raw = [a[l], x[l], f[l]];
+        [a[l], x[l], f[l]] = effect.sensed(hook::Sensed { lane: l, raw }, es);
+    }
+}
+
+/// What [`Effect::opening`] and [`Effect::spool_position`] are given: lane `lane`'s actuator
+/// `act` at command `x`, m.
+#[inline(always)]
+fn opening(lane: usize, act: usize, x: f64) -> hook::Opening {
+    hook::Opening { lane, act, x }
+}
+
+/// What [`Effect::stroke`] is given: the platen's motion in lane `lane` at state `s`.
+#[inline(always)]
+fn motion<const N: usize>(lane: usize, s: &[[f64; N]; NP]) -> hook::Motion {
+    hook::Motion {
+        lane,
+        y: s[Y][lane],
+        v: s[VEL][lane],
     }
 }
 
@@ -868,14 +908,14 @@ fn integrate<
     let mut a = [0.0; N];
     let mut x = [0.0; N];
     let h = 1.0 / (lp.f_s * solver.substeps as f64);
-    // Dense output: the next requested sample time's slot.
-    let mut next_sample = 0usize;
-    let sample_slot = |obs: &O, i: usize| {
-        obs.sample_times()
+    // Dense output: the next requested probe time's slot.
+    let mut next_probe = 0usize;
+    let probe_slot = |obs: &O, i: usize| {
+        obs.probe_times()
             .get(i)
             .map(|&t| slot(t, lp.f_s, solver.substeps))
     };
-    let mut pending = sample_slot(obs, 0);
+    let mut pending = probe_slot(obs, 0);
     let mut probe = Probe::<N, E>::new(es);
     let (w0, w1) = reference.window;
     let fundamental = reference.fundamental_hz;
@@ -894,7 +934,7 @@ fn integrate<
         total_force(lp, &s, &mut f);
         for l in 0..N {
             // The displacement feedback (LVDT) reads the actuator stroke.
-            x[l] = effect.stroke(l, s[Y][l], s[VEL][l], &es).0;
+            x[l] = effect.stroke(motion(l, &s), &es).0;
             match &reference.drive {
                 Drive::ClosedLoop => {
                     u[l] = controller::tick(&lp.ctrl[l], &mut mem[l], &rl[l], x[l], f[l]);
@@ -916,7 +956,7 @@ fn integrate<
         rhs::<N, A, Q, D, E>(lp, effect, &x_c, &s, &es, &mut k1, &mut ek1);
         a.copy_from_slice(&k1[VEL]);
         for l in 0..N {
-            spool[l] = effect.spool_position(l, 0, x_c[l], &es);
+            spool[l] = effect.spool_position(opening(l, 0, x_c[l]), &es);
         }
         // Observers and the metrics see the channels as recorded (a measurement chain changes
         // them); the controller, the plant's.
@@ -958,13 +998,13 @@ fn integrate<
             if sub > 0 {
                 rhs::<N, A, Q, D, E>(lp, effect, &x_c, &s, &es, &mut k1, &mut ek1);
             }
-            // Samples in [t_k + sub·h, t_k + (sub + 1)·h): a partial step from this node.
+            // Probes in [t_k + sub·h, t_k + (sub + 1)·h): a partial step from this node.
             while let Some((tk, pos)) = pending {
                 if tk != k || pos >= (sub + 1) as f64 {
                     break;
                 }
                 let delta = (pos - sub as f64) * h;
-                probe.sample::<A, Q, D, O>(
+                probe.probe::<A, Q, D, O>(
                     lp,
                     effect,
                     &x_c,
@@ -982,8 +1022,8 @@ fn integrate<
                     },
                     obs,
                 );
-                next_sample += 1;
-                pending = sample_slot(obs, next_sample);
+                next_probe += 1;
+                pending = probe_slot(obs, next_probe);
             }
             axpy(&mut tmp, &s, 0.5 * h, &k1);
             axpy(etmp.as_mut(), es.as_ref(), 0.5 * h, ek1.as_ref());

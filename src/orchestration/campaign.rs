@@ -317,46 +317,45 @@ pub(crate) fn model_from_toml(text: &str, file: &str) -> Result<ModelParams, Inp
 mod tests {
     use super::*;
 
-    const FORMATS_EXAMPLE: &str = r#"
-[campaign]
-name = "bare_table_2026_03"
-description = "bare-table sine tests"
-
-[[test]]
-name = "sine_3hz_1p73g"
-data = "sine_3hz_1p73g.csv"
-excitation = { kind = "sine", freq_hz = 3.0, amp_g = 1.73, taper_s = 1.0 }
-
-[[test]]
-name = "el_centro_50pct"
-data = "elcentro50.parquet"
-excitation = { kind = "record", column = "ref_disp_m" }
-model = { platen = { m = 150000.0 } }
-weights = { force = 0.0 }
-"#;
+    /// The campaign example of docs/formats.md, read from the page itself (the first `toml`
+    /// block under "## Campaigns"), so that the page and this test cannot drift apart.
+    fn formats_example() -> String {
+        let page = include_str!("../../docs/formats.md");
+        let section = &page[page
+            .find("\n## Campaigns")
+            .expect("docs/formats.md: ## Campaigns")..];
+        let block = &section[section.find("```toml\n").expect("a toml block") + 8..];
+        block[..block.find("```").expect("the block's end")].to_string()
+    }
 
     #[test]
     fn reads_the_formats_md_example() {
-        // docs/formats.md's record excitation names only the column: the file is the test's data.
-        let c = Campaign::from_toml(
-            &FORMATS_EXAMPLE.replace(
-                "kind = \"record\", column",
-                "kind = \"record\", file = \"elcentro50.parquet\", column",
-            ),
-            "c.toml",
-            &ModelParams::default(),
-        )
-        .unwrap();
-        assert_eq!(c.tests.len(), 2);
-        assert_eq!(c.tests[1].model.platen.m, 150000.0);
+        let c = Campaign::from_toml(&formats_example(), "c.toml", &ModelParams::default()).unwrap();
+        assert_eq!(c.name, "bare_table_2026_03");
+        let names: Vec<&str> = c.tests.iter().map(|t| t.name.as_str()).collect();
+        assert_eq!(
+            names,
+            [
+                "sine_3hz_1p73g",
+                "sine_3hz_3p20g_pretrigger",
+                "el_centro_50pct"
+            ]
+        );
         assert_eq!(c.tests[0].model.platen.m, 144000.0);
-        assert_eq!(c.tests[1].weights.force, 0.0);
+        assert_eq!(c.tests[0].t0_s, None);
+        let pretrigger = &c.tests[1];
+        assert_eq!(pretrigger.model.platen.m, 150000.0);
+        assert_eq!(pretrigger.t0_s, Some(0.5));
+        assert_eq!(pretrigger.weights.force, 0.0);
+        assert_eq!(pretrigger.weights.accel, 1.0);
+        assert!(pretrigger.window_given);
+        assert_eq!(pretrigger.data, PathBuf::from("sine_3hz_3p20g.csv"));
     }
 
     #[test]
     fn record_tests_default_to_their_own_data_file() {
-        let c = Campaign::from_toml(FORMATS_EXAMPLE, "c.toml", &ModelParams::default()).unwrap();
-        match &c.tests[1].excitation {
+        let c = Campaign::from_toml(&formats_example(), "c.toml", &ModelParams::default()).unwrap();
+        match &c.tests[2].excitation {
             ExcitationSpec::Record { file, column, .. } => {
                 assert_eq!(file, &PathBuf::from("elcentro50.parquet"));
                 assert_eq!(column, "ref_disp_m");

@@ -365,7 +365,7 @@ pub const IMPLAUSIBLE_RESIDUAL: f64 = 0.5;
 
 /// One compared test: the comparison and the model's channels at the compared samples.
 #[derive(Debug, Clone)]
-pub struct Compared {
+pub struct ComparedTest {
     pub test: AlignedTest,
     pub comparison: Comparison,
     pub accel_model: Vec<f64>,
@@ -386,7 +386,7 @@ pub struct Compared {
     pub p2_model: Vec<f64>,
 }
 
-impl Compared {
+impl ComparedTest {
     /// The warning for a residual above [`IMPLAUSIBLE_RESIDUAL`] of the signal, if any.
     pub(crate) fn residual_warning(&self) -> Option<String> {
         let r = self.comparison.rms_residual_accel_ratio;
@@ -402,7 +402,7 @@ impl Compared {
 
 /// Drives the test's model as the test was driven, samples it at the test's samples and
 /// compares. Fails (with the reason) when the model fails.
-pub(crate) fn compare_test(test: &AlignedTest, solver: &Solver) -> Result<Compared, String> {
+pub(crate) fn compare_test(test: &AlignedTest, solver: &Solver) -> Result<ComparedTest, String> {
     let (result, rs) = sim::run_sampled(&test.model, &test.drive, solver, &test.samples.tau)
         .map_err(|e| format!("test {:?}: {e}", test.name))?;
     if let LaneStatus::Failed { time_s, reason } = result.status {
@@ -467,7 +467,7 @@ pub(crate) fn compare_test(test: &AlignedTest, solver: &Solver) -> Result<Compar
         &p2,
         &m.disp,
     );
-    Ok(Compared {
+    Ok(ComparedTest {
         test: test.clone(),
         comparison,
         accel_model: accel,
@@ -499,12 +499,12 @@ impl CompareSpec {
 
     /// Compares every test, in parallel on the current thread pool; a model failure stops the
     /// comparison with its test and reason.
-    pub fn run(&self) -> Result<Vec<Compared>, String> {
+    pub fn run(&self) -> Result<Vec<ComparedTest>, String> {
         self.run_with(&|| {})
     }
 
     /// [`CompareSpec::run`], calling `done` as each test is compared (from any thread).
-    pub(crate) fn run_with(&self, done: &(dyn Fn() + Sync)) -> Result<Vec<Compared>, String> {
+    pub(crate) fn run_with(&self, done: &(dyn Fn() + Sync)) -> Result<Vec<ComparedTest>, String> {
         self.tests
             .par_iter()
             .map(|t| {

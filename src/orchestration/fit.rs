@@ -1092,7 +1092,7 @@ mod tests {
             signal: crate::kernel::excitation::Signal::Command,
         }
         .reference(1024.0);
-        // Compared at 500 Hz, every sample of the record's span.
+        // ComparedTest at 500 Hz, every sample of the record's span.
         let tau: Vec<f64> = (0..1500).map(|i| i as f64 / 500.0).collect();
         reference.hold_to((tau[tau.len() - 1] * 1024.0) as usize + 2);
         let mut truth = ModelParams::default();

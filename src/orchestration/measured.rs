@@ -602,7 +602,7 @@ fn model_for(test: &TestSpec, open_loop: Option<OpenLoop>) -> ModelParams {
     if open_loop == Some(OpenLoop::Spool) {
         for e in crate::kernel::effects::EffectId::ALL
             .into_iter()
-            .filter(|e| e.info().moves_spool)
+            .filter(|e| e.moves_spool())
         {
             *model.effects.get_mut(e) = false;
         }

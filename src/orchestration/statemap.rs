@@ -57,7 +57,7 @@
 //! balance and the missing opening are also regressed on terms with memory ([`super::memory`]),
 //! named instead when they explain [`MEMORY_MARGIN`] more.
 
-use super::compare::{Compared, Projector};
+use super::compare::{ComparedTest, Projector};
 use super::memory::{self, Input, Kind, MemoryFit};
 use crate::kernel::actuator::{self, ActuatorLane};
 use crate::kernel::params::ModelParams;
@@ -335,7 +335,7 @@ fn force_rate(plant: &(Valves, ActuatorLane), x: f64, p1: f64, p2: f64, v: f64, 
 /// None when the file has no force), and the scale each is divided by in the map: the rms of the
 /// measured acceleration; of the force (or M·acceleration), twice; of the valve flow; and 1 for
 /// the opening (a fraction of the full stroke).
-pub fn test_residuals(c: &Compared) -> ([Option<Vec<f64>>; 5], [f64; 5]) {
+pub fn test_residuals(c: &ComparedTest) -> ([Option<Vec<f64>>; 5], [f64; 5]) {
     let m = &c.test.measured;
     let s = &c.test.samples;
     let model = &c.test.model;
@@ -542,7 +542,7 @@ pub const REGRESSED: [Residual; 4] = [
 ];
 
 /// The map and regressions of the compared tests.
-pub fn map(compared: &[Compared]) -> StateMap {
+pub fn map(compared: &[ComparedTest]) -> StateMap {
     let Pooled {
         mut states,
         res,
@@ -587,7 +587,7 @@ struct Pooled {
 }
 
 /// The tests' samples pooled, the residuals scaled.
-fn pool(compared: &[Compared]) -> Pooled {
+fn pool(compared: &[ComparedTest]) -> Pooled {
     let mut states: [Vec<f64>; 5] = Default::default();
     let mut res: [Option<Vec<f64>>; 5] = std::array::from_fn(|_| Some(Vec::new()));
     let mut scale_sq = [0.0f64; 5];
@@ -624,7 +624,7 @@ fn pool(compared: &[Compared]) -> Pooled {
 /// The residuals on a term with memory, in their own units: the platen's balance (the residual
 /// force where the files have no force) on a carried oscillator, the missing opening on a lag.
 fn memory_fits(
-    compared: &[Compared],
+    compared: &[ComparedTest],
     res: &[Option<Vec<f64>>; 5],
     res_scale: &[f64; 5],
 ) -> Vec<(Residual, MemoryFit)> {
@@ -701,7 +701,7 @@ fn regressions(
 /// A test's input to a term with memory of family `kind` ([`memory::fit`]): the measured
 /// displacement (for a record its second rate after the 10 ms average: the base acceleration)
 /// or the spool opening.
-fn input_of(kind: Kind, c: &Compared) -> Input {
+fn input_of(kind: Kind, c: &ComparedTest) -> Input {
     let s = &c.test.samples;
     let x = match kind {
         Kind::Carried => &c.test.measured.disp,

@@ -9,7 +9,7 @@ use super::statemap_report;
 use super::tables::{self, Column};
 use super::RunFailed;
 use crate::kernel::metrics::N_HARM;
-use crate::orchestration::compare::{CompareSpec, Compared, Comparison};
+use crate::orchestration::compare::{CompareSpec, ComparedTest, Comparison};
 use crate::orchestration::measured::{self, fmt_row, Start};
 use crate::orchestration::statemap::{self, StateMap};
 use crate::orchestration::timebase::fmt_rate;
@@ -55,7 +55,7 @@ pub(crate) fn run_to(args: &CompareArgs, o: &mut dyn Write) -> anyhow::Result<()
     progress.finish();
     let residual_warnings: Vec<String> = results
         .iter()
-        .filter_map(Compared::residual_warning)
+        .filter_map(ComparedTest::residual_warning)
         .collect();
     let state_map = statemap::map(&results);
     let model_name = args
@@ -106,7 +106,7 @@ pub(crate) fn run_to(args: &CompareArgs, o: &mut dyn Write) -> anyhow::Result<()
     Ok(())
 }
 
-fn print_tests(o: &mut dyn Write, results: &[Compared]) -> std::io::Result<()> {
+fn print_tests(o: &mut dyn Write, results: &[ComparedTest]) -> std::io::Result<()> {
     writeln!(
         o,
         "  {:<22} {:<20} {:>15} {:>17} {:>15} {:>10} {:>10} {:>10} {:>10} {:>15}",
@@ -171,7 +171,7 @@ fn print_tests(o: &mut dyn Write, results: &[Compared]) -> std::io::Result<()> {
 }
 
 /// How each file was read: its rate, where the excitation starts and ends, the window.
-fn print_files(o: &mut dyn Write, results: &[Compared]) -> std::io::Result<()> {
+fn print_files(o: &mut dyn Write, results: &[ComparedTest]) -> std::io::Result<()> {
     writeln!(o)?;
     writeln!(o, "  data files (sample rate; where the excitation starts and ends in the file; the analysis window):")?;
     writeln!(
@@ -203,7 +203,7 @@ fn print_files(o: &mut dyn Write, results: &[Compared]) -> std::io::Result<()> {
     Ok(())
 }
 
-fn print_bins(o: &mut dyn Write, results: &[Compared]) -> std::io::Result<()> {
+fn print_bins(o: &mut dyn Write, results: &[ComparedTest]) -> std::io::Result<()> {
     writeln!(o)?;
     writeln!(o, "  residual of the acceleration by part of the cycle (rms in the part / rms of the measured acceleration):")?;
     writeln!(o, "  (and the kinematic consistency |a1|/(w^2 |x1|) of the acceleration and displacement channels: 1 for one rigid body)")?;
@@ -234,8 +234,8 @@ fn print_bins(o: &mut dyn Write, results: &[Compared]) -> std::io::Result<()> {
 }
 
 /// Across the campaign: error against amplitude, per frequency.
-fn print_amplitudes(o: &mut dyn Write, results: &[Compared]) -> std::io::Result<()> {
-    let mut sines: Vec<(f64, f64, &Compared)> = results
+fn print_amplitudes(o: &mut dyn Write, results: &[ComparedTest]) -> std::io::Result<()> {
+    let mut sines: Vec<(f64, f64, &ComparedTest)> = results
         .iter()
         .filter_map(|r| match r.test.excitation.label() {
             (_, f, g) if f.is_finite() => Some((f, g, r)),
@@ -271,7 +271,7 @@ fn print_amplitudes(o: &mut dyn Write, results: &[Compared]) -> std::io::Result<
 /// The Parquet tables of a comparison: one per kind of thing a report plots.
 pub(crate) fn write_tables(
     dir: &Path,
-    results: &[Compared],
+    results: &[ComparedTest],
     map: &StateMap,
     drive: &str,
 ) -> anyhow::Result<()> {
@@ -295,7 +295,7 @@ pub(crate) fn write_tables(
 }
 
 /// `tests.parquet`: one row per test.
-fn tests_columns(results: &[Compared]) -> Vec<(String, Column)> {
+fn tests_columns(results: &[ComparedTest]) -> Vec<(String, Column)> {
     let mut cols = test_alignment_columns(results);
     cols.extend(test_ratio_columns(results));
     cols.extend(test_residual_columns(results));
@@ -303,9 +303,9 @@ fn tests_columns(results: &[Compared]) -> Vec<(String, Column)> {
 }
 
 /// `tests.parquet`'s test, excitation and where it lies in the file.
-fn test_alignment_columns(results: &[Compared]) -> Vec<(String, Column)> {
-    let s = |f: &dyn Fn(&Compared) -> String| Column::Str(results.iter().map(f).collect());
-    let x = |f: &dyn Fn(&Compared) -> f64| Column::F64(results.iter().map(f).collect());
+fn test_alignment_columns(results: &[ComparedTest]) -> Vec<(String, Column)> {
+    let s = |f: &dyn Fn(&ComparedTest) -> String| Column::Str(results.iter().map(f).collect());
+    let x = |f: &dyn Fn(&ComparedTest) -> f64| Column::F64(results.iter().map(f).collect());
     vec![
         ("test".to_string(), s(&|r| r.test.name.clone())),
         (
@@ -334,8 +334,8 @@ fn test_alignment_columns(results: &[Compared]) -> Vec<(String, Column)> {
 }
 
 /// `tests.parquet`'s fundamental's amplitude ratios and phases, and the harmonic ratios.
-fn test_ratio_columns(results: &[Compared]) -> Vec<(String, Column)> {
-    let x = |f: &dyn Fn(&Compared) -> f64| Column::F64(results.iter().map(f).collect());
+fn test_ratio_columns(results: &[ComparedTest]) -> Vec<(String, Column)> {
+    let x = |f: &dyn Fn(&ComparedTest) -> f64| Column::F64(results.iter().map(f).collect());
     let mut cols = vec![
         (
             "amp_ratio_measured".to_string(),
@@ -368,10 +368,10 @@ fn test_ratio_columns(results: &[Compared]) -> Vec<(String, Column)> {
 }
 
 /// `tests.parquet`'s residuals, drifts, kinematic ratios, warnings and notes.
-fn test_residual_columns(results: &[Compared]) -> Vec<(String, Column)> {
-    let x = |f: &dyn Fn(&Compared) -> f64| Column::F64(results.iter().map(f).collect());
+fn test_residual_columns(results: &[ComparedTest]) -> Vec<(String, Column)> {
+    let x = |f: &dyn Fn(&ComparedTest) -> f64| Column::F64(results.iter().map(f).collect());
     let list =
-        |f: &dyn Fn(&Compared) -> Vec<String>| Column::StrList(results.iter().map(f).collect());
+        |f: &dyn Fn(&ComparedTest) -> Vec<String>| Column::StrList(results.iter().map(f).collect());
     vec![
         (
             "rms_residual_accel_ratio".to_string(),
@@ -423,8 +423,8 @@ fn test_residual_columns(results: &[Compared]) -> Vec<(String, Column)> {
 
 /// `harmonics.parquet`: per test and harmonic, the model's, the measurement's and the residual's
 /// complex amplitude.
-fn harmonics_columns(results: &[Compared]) -> Vec<(String, Column)> {
-    let rows: Vec<(&Compared, usize)> = results
+fn harmonics_columns(results: &[ComparedTest]) -> Vec<(String, Column)> {
+    let rows: Vec<(&ComparedTest, usize)> = results
         .iter()
         .flat_map(|r| (0..N_HARM).map(move |k| (r, k)))
         .collect();
@@ -454,8 +454,8 @@ fn harmonics_columns(results: &[Compared]) -> Vec<(String, Column)> {
 }
 
 /// `bins.parquet`: per test and part of the cycle, the residual.
-fn bins_columns(results: &[Compared]) -> Vec<(String, Column)> {
-    let bins: Vec<(&Compared, usize)> = results
+fn bins_columns(results: &[ComparedTest]) -> Vec<(String, Column)> {
+    let bins: Vec<(&ComparedTest, usize)> = results
         .iter()
         .flat_map(|r| (0..3).map(move |b| (r, b)))
         .collect();
@@ -492,8 +492,8 @@ fn bins_columns(results: &[Compared]) -> Vec<(String, Column)> {
 }
 
 /// `cycles.parquet`: per test and cycle, the measured and the model's amplitude.
-fn cycles_columns(results: &[Compared]) -> Vec<(String, Column)> {
-    let cyc: Vec<(&Compared, usize)> = results
+fn cycles_columns(results: &[ComparedTest]) -> Vec<(String, Column)> {
+    let cyc: Vec<(&ComparedTest, usize)> = results
         .iter()
         .flat_map(|r| (0..r.comparison.cycle_amp_model.len()).map(move |i| (r, i)))
         .collect();
@@ -527,8 +527,8 @@ fn cycles_columns(results: &[Compared]) -> Vec<(String, Column)> {
 
 /// `overlay.parquet`: per test and sample of the window, the measured and the model's
 /// acceleration.
-fn overlay_columns(results: &[Compared]) -> Vec<(String, Column)> {
-    let ov: Vec<(&Compared, usize)> = results
+fn overlay_columns(results: &[ComparedTest]) -> Vec<(String, Column)> {
+    let ov: Vec<(&ComparedTest, usize)> = results
         .iter()
         .flat_map(|r| (0..r.test.samples.len()).map(move |k| (r, k)))
         .collect();

@@ -5,7 +5,7 @@
 //! value is never drawn: a line breaks around it and a bar is left out, and a table cell shows "-".
 
 use crate::kernel::metrics::N_HARM;
-use crate::orchestration::compare::Compared;
+use crate::orchestration::compare::ComparedTest;
 use crate::orchestration::statemap::{self, Residual, State, StateMap};
 use crate::orchestration::timebase::fmt_rate;
 use plotters::prelude::*;
@@ -83,7 +83,7 @@ where
 }
 
 /// Measured and model acceleration over the window, and their residual below.
-fn overlay_svg(r: &Compared) -> Result<String, Box<dyn std::error::Error>> {
+fn overlay_svg(r: &ComparedTest) -> Result<String, Box<dyn std::error::Error>> {
     let mut s = String::new();
     {
         let root = SVGBackend::with_string(&mut s, (760, 420)).into_drawing_area();
@@ -139,7 +139,7 @@ fn overlay_svg(r: &Compared) -> Result<String, Box<dyn std::error::Error>> {
 }
 
 /// h2 … h9, measured and model, as grouped bars.
-fn harmonics_svg(r: &Compared) -> Result<String, Box<dyn std::error::Error>> {
+fn harmonics_svg(r: &ComparedTest) -> Result<String, Box<dyn std::error::Error>> {
     let mut s = String::new();
     {
         let root = SVGBackend::with_string(&mut s, (760, 300)).into_drawing_area();
@@ -191,7 +191,7 @@ fn harmonics_svg(r: &Compared) -> Result<String, Box<dyn std::error::Error>> {
 }
 
 /// RMS acceleration residual against amplitude, one line per frequency.
-fn amplitude_svg(results: &[Compared]) -> Result<Option<String>, Box<dyn std::error::Error>> {
+fn amplitude_svg(results: &[ComparedTest]) -> Result<Option<String>, Box<dyn std::error::Error>> {
     let mut pts: Vec<(f64, f64, f64)> = results
         .iter()
         .filter_map(|r| match &r.test.excitation {
@@ -367,7 +367,7 @@ fn num(v: f64, f: impl Fn(f64) -> String) -> String {
 /// The whole report as one self-contained HTML page.
 pub fn html(
     title: &str,
-    results: &[Compared],
+    results: &[ComparedTest],
     map: &StateMap,
     extra_warnings: &[String],
 ) -> anyhow::Result<String> {
@@ -418,7 +418,7 @@ figure{{margin:12px 0}} .legend span{{display:inline-block;width:14px;height:4px
 }
 
 /// The summary table: a row of headline numbers per test.
-fn summary_table(h: &mut String, results: &[Compared]) -> anyhow::Result<()> {
+fn summary_table(h: &mut String, results: &[ComparedTest]) -> anyhow::Result<()> {
     h.push_str("<h2>Summary</h2>\n<table id=\"summary\"><tr><th>test</th><th>amp. ratio meas.</th><th>model</th><th>phase° meas.</th><th>model</th><th>h3 meas.</th><th>model</th><th>rms resid. a</th><th>x</th><th>F</th><th>drift meas./cycle</th><th>model</th></tr>\n");
     for r in results {
         let c = &r.comparison;
@@ -446,7 +446,7 @@ fn summary_table(h: &mut String, results: &[Compared]) -> anyhow::Result<()> {
 /// The warnings of every test and the extra ones, where there are any.
 fn warnings_list(
     h: &mut String,
-    results: &[Compared],
+    results: &[ComparedTest],
     extra_warnings: &[String],
 ) -> anyhow::Result<()> {
     let warnings: Vec<&String> = results
@@ -465,7 +465,7 @@ fn warnings_list(
 }
 
 /// The data files table: where each test's excitation and window lie in its file.
-fn files_table(h: &mut String, results: &[Compared]) -> anyhow::Result<()> {
+fn files_table(h: &mut String, results: &[ComparedTest]) -> anyhow::Result<()> {
     h.push_str("<h2>Data files</h2>\n<table id=\"files\"><tr><th>test</th><th>file</th><th>rate</th><th>excitation starts</th><th>ends</th><th>window</th><th>notes</th></tr>\n");
     for r in results {
         let a = &r.test.alignment;
@@ -486,7 +486,7 @@ fn files_table(h: &mut String, results: &[Compared]) -> anyhow::Result<()> {
 }
 
 /// Each test's section: its overlay, and its harmonics where the model has an amplitude ratio.
-fn test_sections(h: &mut String, results: &[Compared]) -> anyhow::Result<()> {
+fn test_sections(h: &mut String, results: &[ComparedTest]) -> anyhow::Result<()> {
     let plot = |r: Result<String, Box<dyn std::error::Error>>| {
         r.map_err(|e| anyhow::anyhow!("drawing a plot: {e}"))
     };

@@ -6,11 +6,11 @@
 
 use super::sensor_chain::sensor_effect;
 use super::{EffectInfo, Stage};
-use crate::kernel::params::{params, Component, ModelParams, Range};
+use crate::kernel::params::{params, ModelParams, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
-    name: "accel_sensor",
+    name: super::module_name(module_path!()),
     family: "measurement chain",
     summary: "the acceleration channel's sensor and anti-alias filter: a low-pass and a delay",
     params: Params::PARAMS,
@@ -20,13 +20,12 @@ pub const INFO: EffectInfo = EffectInfo {
         scan: Some(("f_c", &[15.0, 30.0, 60.0, 120.0, 240.0])),
         start: &[],
     }],
-    moves_spool: false,
 };
 
 params! {
     /// Effect `accel_sensor`: the recorded acceleration channel through a second-order low-pass
     /// and a delay (`sensor_chain`).
-    pub struct Params in effect_params.accel_sensor as (Component::Effect(super::EffectId::AccelSensor)) {
+    pub struct Params in effect {
         f_c: "Hz", "hz", 80.0, Range::closed(2.0, 400.0), Chosen,
             "Corner of the channel's low-pass [chosen: an anti-alias filter below a 1 kHz acquisition].";
         zeta: "-", "", std::f64::consts::FRAC_1_SQRT_2, Range::closed(0.05, 2.0), Chosen,

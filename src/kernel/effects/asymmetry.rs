@@ -3,23 +3,22 @@
 //! by `act2_gain` against actuator 1's. Its signature: even harmonics (h2) and a shifted
 //! displacement, from a table that extends and retracts differently.
 
-use super::{Effect, EffectInfo, LibraryEffect, Stage};
-use crate::kernel::params::{params, Component, ModelParams, Range};
+use super::{hook, Effect, EffectInfo, LibraryEffect, Stage};
+use crate::kernel::params::{params, ModelParams, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
-    name: "asymmetry",
+    name: super::module_name(module_path!()),
     family: "asymmetry",
     summary: "the valve flows of extension and retraction, or of the two actuators, differ",
     params: Params::PARAMS,
     stages: &[Stage::free(&["extend_gain"])],
-    moves_spool: false,
 };
 
 params! {
     /// Effect `asymmetry`: port/valve asymmetry. The flow gain for extension (x > 0) differs from
     /// that for retraction, and actuator 2's valves differ from actuator 1's.
-    pub struct Params in effect_params.asymmetry as (Component::Effect(super::EffectId::Asymmetry)) {
+    pub struct Params in effect {
         extend_gain: "-", "", 1.05, Range::gt(0.0), Chosen,
             "Flow gain for x > 0 relative to x < 0 [chosen: a 5 % port mismatch].";
         act2_gain: "-", "", 1.0, Range::gt(0.0), Chosen,
@@ -64,18 +63,10 @@ impl<const N: usize> Effect<N> for Asymmetry<N> {
 
     /// Valve flows of actuator `act`, scaled.
     #[inline(always)]
-    fn flows(
-        &self,
-        l: usize,
-        act: usize,
-        q: (f64, f64),
-        _p1: f64,
-        _p2: f64,
-        _p_s: f64,
-        _s: &Self::State,
-    ) -> (f64, f64) {
+    fn flows(&self, c: hook::Flows, _s: &Self::State) -> (f64, f64) {
+        let (l, q) = (c.lane, c.q);
         let g = (if q.0 > 0.0 { self.extend[l] } else { 1.0 })
-            * (if act == 1 { self.act2[l] } else { 1.0 });
+            * (if c.act == 1 { self.act2[l] } else { 1.0 });
         (g * q.0, g * q.1)
     }
 }

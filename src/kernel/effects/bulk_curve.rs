@@ -16,17 +16,16 @@
 //! campaign of sine tests determines a level, a slope and a bend of the curve, not more; three
 //! parameters also keep a diagnosis's fit of it cheap. b ≡ 1 is the baseline.]
 
-use super::{Effect, EffectInfo, LibraryEffect, Stage};
-use crate::kernel::params::{params, Component, ModelParams, Range};
+use super::{hook, Effect, EffectInfo, LibraryEffect, Stage};
+use crate::kernel::params::{params, ModelParams, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
-    name: "bulk_curve",
+    name: super::module_name(module_path!()),
     family: "compressibility",
     summary: "a bulk modulus of unknown form: its gain against chamber pressure at three knots",
     params: Params::PARAMS,
     stages: &[Stage::free(&["b0", "b1", "b2"])],
-    moves_spool: false,
 };
 
 /// Knots of the curve, as fractions of the supply pressure.
@@ -34,7 +33,7 @@ pub const KNOTS: [f64; 3] = [0.0, 0.5, 1.0];
 
 params! {
     /// Effect `bulk_curve`: β_e(p) = β·b(p/P_S), b piecewise linear through three knots.
-    pub struct Params in effect_params.bulk_curve as (Component::Effect(super::EffectId::BulkCurve)) {
+    pub struct Params in effect {
         b0: "-", "", 1.0, Range::closed(0.01, 10.0), Chosen,
             "Bulk-modulus gain at p = 0 (gauge) relative to the oil's [chosen: 1 = the baseline].";
         b1: "-", "", 1.0, Range::closed(0.01, 10.0), Chosen,
@@ -98,16 +97,11 @@ impl<const N: usize> Effect<N> for BulkCurve<N> {
 
     /// β_e/V of both chambers (cap, rod): the baseline's (or an earlier effect's) β/V times b(p).
     #[inline(always)]
-    fn chamber_stiffness(
-        &self,
-        l: usize,
-        _act: usize,
-        b: (f64, f64),
-        p1: f64,
-        p2: f64,
-        _s: &Self::State,
-    ) -> (f64, f64) {
-        (b.0 * self.gain(l, p1), b.1 * self.gain(l, p2))
+    fn chamber_stiffness(&self, c: hook::Chambers, _s: &Self::State) -> (f64, f64) {
+        (
+            c.b.0 * self.gain(c.lane, c.p1),
+            c.b.1 * self.gain(c.lane, c.p2),
+        )
     }
 }
 
@@ -146,7 +140,16 @@ mod tests {
         m.effects.bulk_curve = false;
         let off = BulkCurve::<1>::new([&m]);
         assert_eq!(
-            off.chamber_stiffness(0, 0, (3.0, 5.0), 1e6, 9e6, &[]),
+            off.chamber_stiffness(
+                hook::Chambers {
+                    lane: 0,
+                    act: 0,
+                    b: (3.0, 5.0),
+                    p1: 1e6,
+                    p2: 9e6
+                },
+                &[]
+            ),
             (3.0, 5.0)
         );
     }

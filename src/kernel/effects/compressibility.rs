@@ -13,24 +13,23 @@
 //! Isothermal air (polytropic exponent 1) is a choice: bubbles in oil exchange heat quickly, and
 //! it avoids a `powf` in the step.
 
-use super::{Effect, EffectInfo, LibraryEffect, Stage};
-use crate::kernel::params::{params, Component, ModelParams, Range};
+use super::{hook, Effect, EffectInfo, LibraryEffect, Stage};
+use crate::kernel::params::{params, ModelParams, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
-    name: "compressibility",
+    name: super::module_name(module_path!()),
     family: "compressibility",
     summary: "a softer oil column: dead volume, entrained air, hose compliance",
     params: Params::PARAMS,
     stages: &[Stage::free(&["dead_volume", "air_fraction"])],
-    moves_spool: false,
 };
 
 params! {
     /// Effect `compressibility`: effective bulk modulus and dead volume. Each chamber gains a dead
     /// volume (hoses, manifold) and its oil an entrained-air fraction and a wall compliance:
     /// 1/β_e = 1/(beta_ratio·β) + air_fraction·p_atm/p², with p the absolute chamber pressure.
-    pub struct Params in effect_params.compressibility as (Component::Effect(super::EffectId::Compressibility)) {
+    pub struct Params in effect {
         dead_volume: "m³", "m3", 0.02, Range::closed(0.0, 1.0), Chosen,
             "Dead volume added to every chamber (hoses, manifold, valve block) [chosen: 20 L].";
         beta_ratio: "-", "", 1.0, Range::closed(0.05, 1.0), Chosen,
@@ -100,15 +99,7 @@ impl<const N: usize> Effect<N> for Compressibility<N> {
 
     /// β_e/V of both chambers (cap, rod) of an actuator, from the baseline's β/V1, β/V2.
     #[inline(always)]
-    fn chamber_stiffness(
-        &self,
-        l: usize,
-        _act: usize,
-        b: (f64, f64),
-        p1: f64,
-        p2: f64,
-        _s: &Self::State,
-    ) -> (f64, f64) {
-        (self.one(l, b.0, p1), self.one(l, b.1, p2))
+    fn chamber_stiffness(&self, c: hook::Chambers, _s: &Self::State) -> (f64, f64) {
+        (self.one(c.lane, c.b.0, c.p1), self.one(c.lane, c.b.1, c.p2))
     }
 }

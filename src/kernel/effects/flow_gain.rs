@@ -15,17 +15,16 @@
 //! linear between them — enough for a monotone or a null-region shape, few enough for a campaign
 //! of eight tests to determine; g ≡ 1 is the baseline.]
 
-use super::{Effect, EffectInfo, LibraryEffect, Stage};
-use crate::kernel::params::{params, Component, ModelParams, Range};
+use super::{hook, Effect, EffectInfo, LibraryEffect, Stage};
+use crate::kernel::params::{params, ModelParams, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
-    name: "flow_gain",
+    name: super::module_name(module_path!()),
     family: "valve flow nonlinearity",
     summary: "a flow-gain curve of unknown form: gain against spool opening at five knots",
     params: Params::PARAMS,
     stages: &[Stage::free(&["g0", "g1", "g2", "g3", "g4"])],
-    moves_spool: false,
 };
 
 /// Knots of the curve, as fractions of x_ref.
@@ -33,7 +32,7 @@ pub const KNOTS: [f64; 5] = [0.0, 0.05, 0.15, 0.35, 0.7];
 
 params! {
     /// Effect `flow_gain`: x_eff = x·g(|x|/x_ref), g piecewise linear through the knots.
-    pub struct Params in effect_params.flow_gain as (Component::Effect(super::EffectId::FlowGain)) {
+    pub struct Params in effect {
         g0: "-", "", 1.0, Range::closed(0.0, 10.0), Chosen,
             "Flow gain at null (|x| = 0) relative to the baseline [chosen: 1 = the baseline].";
         g1: "-", "", 1.0, Range::closed(0.0, 10.0), Chosen,
@@ -90,7 +89,8 @@ impl<const N: usize> Effect<N> for FlowGain<N> {
 
     /// Effective opening of spool position `x`.
     #[inline(always)]
-    fn opening(&self, l: usize, _act: usize, x: f64, _s: &Self::State) -> f64 {
+    fn opening(&self, c: hook::Opening, _s: &Self::State) -> f64 {
+        let (l, x) = (c.lane, c.x);
         let r = x.abs() * self.inv_x_ref[l];
         let mut g = self.g[4][l];
         for k in (0..4).rev() {
@@ -104,11 +104,5 @@ impl<const N: usize> Effect<N> for FlowGain<N> {
             };
         }
         x * g
-    }
-
-    /// A metering nonlinearity: the spool itself is where the command puts it.
-    #[inline(always)]
-    fn spool_position(&self, _l: usize, _act: usize, x: f64, _s: &Self::State) -> f64 {
-        x
     }
 }

@@ -3,23 +3,22 @@
 //! velocity, so a lower amplitude ratio and more odd distortion at large amplitude, nothing at
 //! small amplitude.
 
-use super::{Effect, EffectInfo, LibraryEffect, Stage};
-use crate::kernel::params::{params, Component, ModelParams, Range};
+use super::{hook, Effect, EffectInfo, LibraryEffect, Stage};
+use crate::kernel::params::{params, ModelParams, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
-    name: "flow_saturation",
+    name: super::module_name(module_path!()),
     family: "valve flow nonlinearity",
     summary: "the metering area of the valves saturates toward large openings",
     params: Params::PARAMS,
     stages: &[Stage::free(&["x_sat"])],
-    moves_spool: false,
 };
 
 params! {
     /// Effect `flow_saturation`: spool-to-flow nonlinearity; the metering area saturates,
     /// x_eff = x_sat·tanh(x/x_sat).
-    pub struct Params in effect_params.flow_saturation as (Component::Effect(super::EffectId::FlowSaturation)) {
+    pub struct Params in effect {
         x_sat: "m", "m", 0.012, Range::gt(0.0), Chosen,
             "Spool opening scale of the saturation x_eff = x_sat·tanh(x/x_sat) [chosen: 12 mm of the 19.05 mm stroke].";
     }
@@ -57,13 +56,8 @@ impl<const N: usize> Effect<N> for FlowSaturation<N> {
 
     /// Effective opening of spool position `x`.
     #[inline(always)]
-    fn opening(&self, l: usize, _act: usize, x: f64, _s: &Self::State) -> f64 {
+    fn opening(&self, c: hook::Opening, _s: &Self::State) -> f64 {
+        let (l, x) = (c.lane, c.x);
         x + self.on[l] * (self.x_sat[l] * (x * self.inv_x_sat[l]).tanh() - x)
-    }
-
-    /// A metering nonlinearity: the spool itself is where the command puts it.
-    #[inline(always)]
-    fn spool_position(&self, _l: usize, _act: usize, x: f64, _s: &Self::State) -> f64 {
-        x
     }
 }

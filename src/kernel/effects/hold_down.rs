@@ -2,22 +2,21 @@
 //! −K·y of the baseline. Its signature: odd harmonics and a changed amplitude ratio where the
 //! displacement is large (low frequency, large amplitude), nothing at small displacement.
 
-use super::{Effect, EffectInfo, LibraryEffect, Stage};
-use crate::kernel::params::{params, Component, ModelParams, Range};
+use super::{hook, Effect, EffectInfo, LibraryEffect, Stage};
+use crate::kernel::params::{params, ModelParams, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
-    name: "hold_down",
+    name: super::module_name(module_path!()),
     family: "hold-down stiffness",
     summary: "a cubic hardening of the hold-down struts",
     params: Params::PARAMS,
     stages: &[Stage::free(&["k3"])],
-    moves_spool: false,
 };
 
 params! {
     /// Effect `hold_down`: hold-down strut stiffness nonlinearity, F = −k3·y³ on top of −K·y.
-    pub struct Params in effect_params.hold_down as (Component::Effect(super::EffectId::HoldDown)) {
+    pub struct Params in effect {
         k3: "N/m³", "n_per_m3", 1.0e8, Range::any(), Chosen,
             "Cubic stiffness of the hold-down struts, positive = hardening [chosen: k3·y³ equals K·y at y = 11 cm].";
     }
@@ -58,7 +57,7 @@ impl<const N: usize> Effect<N> for HoldDown<N> {
 
     /// Force of the cubic term on the platen, N.
     #[inline(always)]
-    fn extra_force(&self, l: usize, y: f64, _v: f64, _s: &Self::State) -> f64 {
-        -self.k3[l] * y * y * y
+    fn extra_force(&self, c: hook::Motion, _s: &Self::State) -> f64 {
+        -self.k3[c.lane] * c.y * c.y * c.y
     }
 }

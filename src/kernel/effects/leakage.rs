@@ -4,23 +4,22 @@
 //! that are largest where the force is (low frequency, large amplitude); neutral when off
 //! (both coefficients 0).
 
-use super::{Effect, EffectInfo, LibraryEffect, Stage};
-use crate::kernel::params::{params, Component, ModelParams, Range};
+use super::{hook, Effect, EffectInfo, LibraryEffect, Stage};
+use crate::kernel::params::{params, ModelParams, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
-    name: "leakage",
+    name: super::module_name(module_path!()),
     family: "leakage",
     summary: "internal leakage across the piston and external leakage to drain",
     params: Params::PARAMS,
     stages: &[Stage::free(&["c_int"])],
-    moves_spool: false,
 };
 
 params! {
     /// Effect `leakage`: internal leakage across the piston, q = c_int (P1 − P2), and external
     /// leakage from each chamber to drain, q = c_ext·P.
-    pub struct Params in effect_params.leakage as (Component::Effect(super::EffectId::Leakage)) {
+    pub struct Params in effect {
         c_int: "m³/(s·Pa)", "m3_per_s_pa", 2.0e-11, Range::ge(0.0), Chosen,
             "Internal (cross-piston) leakage coefficient [chosen: 12 L/min at 10 MPa across the piston].";
         c_ext: "m³/(s·Pa)", "m3_per_s_pa", 0.0, Range::ge(0.0), Chosen,
@@ -59,16 +58,8 @@ impl<const N: usize> Effect<N> for Leakage<N> {
 
     /// Net (into chamber 1, out of chamber 2) from the valve flows `q`.
     #[inline(always)]
-    fn flows(
-        &self,
-        l: usize,
-        _act: usize,
-        q: (f64, f64),
-        p1: f64,
-        p2: f64,
-        _p_s: f64,
-        _s: &Self::State,
-    ) -> (f64, f64) {
+    fn flows(&self, c: hook::Flows, _s: &Self::State) -> (f64, f64) {
+        let (l, q, p1, p2) = (c.lane, c.q, c.p1, c.p2);
         let cross = self.c_int[l] * (p1 - p2);
         (
             q.0 - cross - self.c_ext[l] * p1,

@@ -31,10 +31,11 @@
 //! # Writing a new effect
 //!
 //! Copy the smallest file here (`hold_down.rs`) to `my_effect.rs`, change its `INFO`, its `Params`
-//! table and its hooks, add the line `my_effect::MyEffect,` to the registry, and name its variant in its `params!` line
-//! (`as Component::Effect(super::EffectId::MyEffect)`). `study params`,
-//! model files (`[model.my_effect]`), `synth --effect`, `fit --effect` and `diagnose` then know
-//! it; the registry's test checks it is complete. docs/tutorial/spool_overlap.rs is such a file,
+//! table and its hooks, and add the line `my_effect::MyEffect,` to the registry: the name is
+//! spelt there alone (the file's `INFO.name` is `module_name(module_path!())`, its parameters'
+//! component and model-file table come from the registry line). `study params`, model files
+//! (`[model.my_effect]`), `synth --effect`, `fit --effect` and `diagnose` then know it; the
+//! registry's test checks it is complete. docs/tutorial/spool_overlap.rs is such a file,
 //! whole (CI adds it to the library, fits it and diagnoses with it).
 //!
 //! The hooks themselves need nothing of the registry: any type implementing [`Effect`] runs in
@@ -42,7 +43,7 @@
 //! the baseline on a 0.1 m, 1 Hz sine (this example is compiled and run by `cargo test`):
 //!
 //! ```
-//! use vshake::kernel::effects::Effect;
+//! use vshake::kernel::effects::{hook, Effect};
 //! use vshake::kernel::excitation::Sine;
 //! use vshake::kernel::params::ModelParams;
 //! use vshake::kernel::simulate::{self, LaneParams, LaneStatus, NoObserver, Solver};
@@ -58,8 +59,8 @@
 //!         []
 //!     }
 //!     #[inline(always)]
-//!     fn extra_force(&self, l: usize, y: f64, _v: f64, _s: &Self::State) -> f64 {
-//!         -self.k3[l] * y * y * y
+//!     fn extra_force(&self, c: hook::Motion, _s: &Self::State) -> f64 {
+//!         -self.k3[c.lane] * c.y * c.y * c.y
 //!     }
 //! }
 //!
@@ -83,7 +84,7 @@
 //! their derivatives in [`Effect::derivs`]. A throwaway effect (a test's specimen) needs only
 //! [`Effect`]: `simulate::run` takes any.
 
-use super::params::{ModelParams, ParamInfo};
+use super::params::{Component, ModelParams, ParamInfo};
 
 /// What the rest of the tool knows about a library effect: its name (the model-file table and
 /// the parameter paths `name.param`), its family, its parameters and the ones a diagnosis frees.
@@ -106,9 +107,6 @@ pub struct EffectInfo {
     /// parameters that only shape it (a smoothing velocity, a damping ratio that trades off
     /// against a frequency) stay fixed unless `--free` names them.
     pub stages: &'static [Stage],
-    /// Whether it changes the spool position a spool LVDT reads (a delay or the spool's own
-    /// dynamics); such effects are switched off when the plant is driven by a measured spool.
-    pub moves_spool: bool,
 }
 
 /// A set of an effect's parameters fitted together ([`EffectInfo::stages`]).
@@ -145,6 +143,20 @@ impl EffectInfo {
     }
 }
 
+/// The name of an effect's module, from its `module_path!()`: the last segment. An effect's
+/// [`EffectInfo::name`] is its module's name, spelt once, in its registry line (and so its file).
+pub const fn module_name(path: &'static str) -> &'static str {
+    let bytes = path.as_bytes();
+    let mut start = bytes.len();
+    while start > 0 && bytes[start - 1] != b':' {
+        start -= 1;
+    }
+    match std::str::from_utf8(bytes.split_at(start).1) {
+        Ok(name) => name,
+        Err(_) => panic!("a module path is UTF-8"),
+    }
+}
+
 /// The recorded channels an effect's [`Effect::sensed`] may change, by index: acceleration,
 /// displacement (the LVDT's stroke), total actuator force.
 pub const SENSED: [&str; 3] = ["accel", "disp", "force"];
@@ -155,10 +167,11 @@ pub trait LibraryEffect<const N: usize>: Effect<N> + Sized {
     fn new(lanes: [&ModelParams; N]) -> Self;
 }
 
-/// The registry: one line per effect, `module::Type`. It declares the module (one file in this
-/// directory), lists its `INFO` in [`LIBRARY`], adds its switch to [`EffectSwitches`] and its
-/// parameters to [`EffectParams`] (so `study params`, model files, `synth --effect`,
-/// `fit --effect` and `diagnose` know it), and composes it into [`EffectSet`].
+/// The registry: one line per effect, `module::Type`, the one place its name is spelt. It declares
+/// the module (one file in this directory), lists its `INFO` in [`LIBRARY`], adds its switch to
+/// [`EffectSwitches`] and its parameters to [`EffectParams`] (with their accessors `Params::of`
+/// and component, so `study params`, model files, `synth --effect`, `fit --effect` and
+/// `diagnose` know it), and composes it into [`EffectSet`].
 ///
 /// **The order is the order of composition** where effects act on the same quantity: the
 /// command passes through the effects in list order on its way to the valve opening (a delay,
@@ -200,7 +213,30 @@ macro_rules! library {
                     $(EffectId::$Type => stringify!($module),)*
                 }
             }
+
+            /// Whether the effect moves the spool a spool LVDT reads ([`Effect::MOVES_SPOOL`]);
+            /// such effects are switched off when the plant is driven by a measured spool.
+            pub fn moves_spool(self) -> bool {
+                match self {
+                    $(EffectId::$Type => <$module::$Type<1> as Effect<1>>::MOVES_SPOOL,)*
+                }
+            }
         }
+
+        $(impl $module::Params {
+            /// The component these parameters belong to.
+            pub const COMPONENT: Component = Component::Effect(EffectId::$Type);
+
+            /// This effect's parameters in `m`.
+            pub fn of(m: &ModelParams) -> &Self {
+                &m.effect_params.$module
+            }
+
+            /// This effect's parameters in `m`, to change.
+            pub(crate) fn of_mut(m: &mut ModelParams) -> &mut Self {
+                &mut m.effect_params.$module
+            }
+        })*
 
         /// Which library effects a parameter set switches on (all off by default).
         #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -279,6 +315,8 @@ library! {
 /// The measurement chain shared by the sensor effects.
 mod sensor_chain;
 
+pub mod hook;
+
 impl EffectId {
     /// The effect called `name` (its model-file table, `--effect` name and parameter prefix);
     /// `None` for a name the library does not have. The one place a name becomes an effect.
@@ -318,47 +356,50 @@ pub(crate) fn lane_mask<const N: usize, E: Named>(p: &[&ModelParams; N]) -> [f64
     std::array::from_fn(|l| switch(p[l], E::ID))
 }
 
-/// Per-lane states of an effect: `[[f64; N]; M]`, or a [`Pair`] of such.
-///
-/// # Safety
-/// An implementor is exactly a contiguous sequence of `[f64; N]` (no padding, nothing else), so
-/// that it can be viewed as a slice of lanes ([`Pair`]'s `AsRef`).
-pub unsafe trait LaneStates<const N: usize>:
-    Copy + Send + Sync + AsRef<[[f64; N]]> + AsMut<[[f64; N]]>
+/// Per-lane states of an effect: `[[f64; N]; M]`, or a [`Pair`] of such, viewed as a slice of
+/// lanes (the integrator's arithmetic runs over that slice).
+pub trait LaneStates<const N: usize>:
+    OnlyF64 + bytemuck::Pod + Send + Sync + AsRef<[[f64; N]]> + AsMut<[[f64; N]]>
 {
 }
 
-// SAFETY: an array of `[f64; N]` is such a sequence.
-unsafe impl<const N: usize, const M: usize> LaneStates<N> for [[f64; N]; M] {}
+impl<const N: usize, const M: usize> LaneStates<N> for [[f64; N]; M] {}
+
+impl<const N: usize, A: LaneStates<N>, B: LaneStates<N>> LaneStates<N> for Pair<A, B> {}
 
 /// The states of two effects side by side: the state of a [`Both`].
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Pair<A, B>(pub A, pub B);
 
-// SAFETY: `repr(C)` lays out A then B; both are sequences of `[f64; N]` (size a multiple of 8,
-// alignment 8), so there is no padding between or after them.
-unsafe impl<const N: usize, A: LaneStates<N>, B: LaneStates<N>> LaneStates<N> for Pair<A, B> {}
+/// A type made of `f64`s alone, laid out without padding: `[[f64; N]; M]` and [`Pair`]s of such.
+///
+/// # Safety
+/// An implementor's bytes are exactly a sequence of `f64` (size a multiple of 8, alignment 8, no
+/// padding), so that it is [`bytemuck::Pod`] and a [`Pair`] of two of them is too.
+pub unsafe trait OnlyF64: Copy + 'static {}
+
+// SAFETY: an array of `[f64; N]` is a sequence of f64.
+unsafe impl<const N: usize, const M: usize> OnlyF64 for [[f64; N]; M] {}
+// SAFETY: `repr(C)` lays out A then B; each is a sequence of f64 (alignment 8 where not empty,
+// size a multiple of 8), so there is no padding between or after them.
+unsafe impl<A: OnlyF64, B: OnlyF64> OnlyF64 for Pair<A, B> {}
+// SAFETY: all-zero bytes are 0.0s; see `OnlyF64`.
+unsafe impl<A: OnlyF64, B: OnlyF64> bytemuck::Zeroable for Pair<A, B> {}
+// SAFETY: every bit pattern of a sequence of f64 is valid and there is no padding (`OnlyF64`).
+unsafe impl<A: OnlyF64 + bytemuck::Pod, B: OnlyF64 + bytemuck::Pod> bytemuck::Pod for Pair<A, B> {}
 
 impl<const N: usize, A: LaneStates<N>, B: LaneStates<N>> AsRef<[[f64; N]]> for Pair<A, B> {
     #[inline(always)]
     fn as_ref(&self) -> &[[f64; N]] {
-        let len = std::mem::size_of::<Self>()
-            .checked_div(std::mem::size_of::<[f64; N]>())
-            .unwrap_or(0);
-        // SAFETY: `Self` is `len` contiguous `[f64; N]` (see `LaneStates`), borrowed for `self`'s life.
-        unsafe { std::slice::from_raw_parts(self as *const Self as *const [f64; N], len) }
+        bytemuck::cast_slice(std::slice::from_ref(self))
     }
 }
 
 impl<const N: usize, A: LaneStates<N>, B: LaneStates<N>> AsMut<[[f64; N]]> for Pair<A, B> {
     #[inline(always)]
     fn as_mut(&mut self) -> &mut [[f64; N]] {
-        let len = std::mem::size_of::<Self>()
-            .checked_div(std::mem::size_of::<[f64; N]>())
-            .unwrap_or(0);
-        // SAFETY: as in `as_ref`, borrowed mutably for `self`'s life.
-        unsafe { std::slice::from_raw_parts_mut(self as *mut Self as *mut [f64; N], len) }
+        bytemuck::cast_slice_mut(std::slice::from_mut(self))
     }
 }
 
@@ -387,9 +428,19 @@ pub struct PlantView<'a, const N: usize> {
 }
 
 /// An optional physical effect plugged into the lane kernel.
+///
+/// Each hook is given one [`hook`] struct (where: the lane, the actuator; what: the quantity it
+/// changes and the plant values it may depend on) and the effect's own states `s`.
 pub trait Effect<const N: usize>: Sync {
     /// Extra states per lane, as an array of lanes (`[[f64; N]; 0]` for none).
     type State: LaneStates<N>;
+
+    /// Whether [`Effect::opening`] moves the spool itself (a delay, the spool's own dynamics), so
+    /// that a spool LVDT reads the opening, rather than changing only the flow an opening passes
+    /// (a metering nonlinearity: the spool is where the command puts it). The one declaration of
+    /// what an effect moves: the recorded `spool_m` channel follows it, and such effects are
+    /// switched off when the plant is driven by a measured spool ([`EffectInfo::moves_spool`]).
+    const MOVES_SPOOL: bool = false;
 
     /// Extra states at t = 0.
     fn initial_state(&self) -> Self::State;
@@ -403,69 +454,54 @@ pub trait Effect<const N: usize>: Sync {
         true
     }
 
-    /// Supply pressure seen by the valves of lane `l`, from the nominal P_S.
+    /// Supply pressure seen by the valves, Pa, from `c.p_s`.
     #[inline(always)]
-    fn supply(&self, _l: usize, p_s: f64, _s: &Self::State) -> f64 {
-        p_s
+    fn supply(&self, c: hook::Supply, _s: &Self::State) -> f64 {
+        c.p_s
     }
 
-    /// Valve opening (effective spool position) of actuator `act` in lane `l`, from the held
-    /// command x_c.
+    /// Valve opening (effective spool position) of actuator `c.act`, m, from the command `c.x`.
     #[inline(always)]
-    fn opening(&self, _l: usize, _act: usize, x_c: f64, _s: &Self::State) -> f64 {
-        x_c
+    fn opening(&self, c: hook::Opening, _s: &Self::State) -> f64 {
+        c.x
     }
 
-    /// Spool position as a spool LVDT reads it (before any metering nonlinearity); recorded as
-    /// the `spool_m` channel. The same as [`Effect::opening`] unless an effect says otherwise.
+    /// Spool position as a spool LVDT reads it, recorded as the `spool_m` channel: the opening
+    /// where the effect moves the spool ([`Effect::MOVES_SPOOL`]), the command otherwise. Only
+    /// the compositions ([`Both`], [`Gated`]) define it; an effect declares `MOVES_SPOOL`.
     #[inline(always)]
-    fn spool_position(&self, l: usize, act: usize, x_c: f64, s: &Self::State) -> f64 {
-        self.opening(l, act, x_c, s)
+    fn spool_position(&self, c: hook::Opening, s: &Self::State) -> f64 {
+        if Self::MOVES_SPOOL {
+            self.opening(c, s)
+        } else {
+            c.x
+        }
     }
 
-    /// Actuator stroke and stroke rate of lane `l` from the platen's displacement `y` and
-    /// velocity `v` (the chamber volumes, the piston flows and the LVDT follow the stroke).
+    /// Actuator stroke and stroke rate (m, m/s) from the platen's motion `c.y`, `c.v` (the
+    /// chamber volumes, the piston flows and the LVDT follow the stroke).
     #[inline(always)]
-    fn stroke(&self, _l: usize, y: f64, v: f64, _s: &Self::State) -> (f64, f64) {
-        (y, v)
+    fn stroke(&self, c: hook::Motion, _s: &Self::State) -> (f64, f64) {
+        (c.y, c.v)
     }
 
-    /// β/V of the cap- and rod-side chambers of actuator `act`, from the baseline's `b` = (β/V1,
-    /// β/V2) at chamber pressures `p1`, `p2`.
+    /// β/V of the cap- and rod-side chambers of actuator `c.act`, Pa/m³, from `c.b`.
     #[inline(always)]
-    #[allow(clippy::too_many_arguments)]
-    fn chamber_stiffness(
-        &self,
-        _l: usize,
-        _act: usize,
-        b: (f64, f64),
-        _p1: f64,
-        _p2: f64,
-        _s: &Self::State,
-    ) -> (f64, f64) {
-        b
+    fn chamber_stiffness(&self, c: hook::Chambers, _s: &Self::State) -> (f64, f64) {
+        c.b
     }
 
-    /// The net flows of actuator `act` (into chamber 1, out of chamber 2), m³/s, from the valve
-    /// flows `q` (all valves of the actuator).
+    /// The net flows of actuator `c.act` (into chamber 1, out of chamber 2), m³/s, from the
+    /// valve flows `c.q` (all valves of the actuator).
     #[inline(always)]
-    #[allow(clippy::too_many_arguments)]
-    fn flows(
-        &self,
-        _l: usize,
-        _act: usize,
-        q: (f64, f64),
-        _p1: f64,
-        _p2: f64,
-        _p_s: f64,
-        _s: &Self::State,
-    ) -> (f64, f64) {
-        q
+    fn flows(&self, c: hook::Flows, _s: &Self::State) -> (f64, f64) {
+        c.q
     }
 
-    /// Extra force on the platen, N (positive in the direction of extension).
+    /// Extra force on the platen, N (positive in the direction of extension), at the platen's
+    /// motion `c`.
     #[inline(always)]
-    fn extra_force(&self, _l: usize, _y: f64, _v: f64, _s: &Self::State) -> f64 {
+    fn extra_force(&self, _c: hook::Motion, _s: &Self::State) -> f64 {
         0.0
     }
 
@@ -473,13 +509,12 @@ pub trait Effect<const N: usize>: Sync {
     #[inline(always)]
     fn derivs(&self, _plant: &PlantView<'_, N>, _s: &Self::State, _ds: &mut Self::State) {}
 
-    /// The channels as recorded in lane `l` ([`SENSED`]: acceleration, displacement, force), from
-    /// the plant's values `raw`: a measurement chain changes what is recorded (the histories, the
-    /// samples compared with a measurement, the metrics), not the plant (the controller's
-    /// feedback is `raw`).
+    /// The channels as recorded ([`SENSED`]: acceleration, displacement, force), from `c.raw`: a
+    /// measurement chain changes what is recorded (the histories, the samples compared with a
+    /// measurement, the metrics), not the plant (the controller's feedback is the plant's).
     #[inline(always)]
-    fn sensed(&self, _l: usize, raw: [f64; 3], _s: &Self::State) -> [f64; 3] {
-        raw
+    fn sensed(&self, c: hook::Sensed, _s: &Self::State) -> [f64; 3] {
+        c.raw
     }
 }
 
@@ -514,6 +549,7 @@ impl<const N: usize, A: LibraryEffect<N>, B: LibraryEffect<N>> LibraryEffect<N> 
 
 impl<const N: usize, A: Effect<N>, B: Effect<N>> Effect<N> for Both<A, B> {
     type State = Pair<A::State, B::State>;
+    const MOVES_SPOOL: bool = A::MOVES_SPOOL || B::MOVES_SPOOL;
 
     fn initial_state(&self) -> Self::State {
         Pair(self.0.initial_state(), self.1.initial_state())
@@ -522,78 +558,56 @@ impl<const N: usize, A: Effect<N>, B: Effect<N>> Effect<N> for Both<A, B> {
         self.0.symmetric() && self.1.symmetric()
     }
     #[inline(always)]
-    fn supply(&self, l: usize, p_s: f64, s: &Self::State) -> f64 {
-        self.1.supply(l, self.0.supply(l, p_s, &s.0), &s.1)
+    fn supply(&self, c: hook::Supply, s: &Self::State) -> f64 {
+        let p_s = self.0.supply(c, &s.0);
+        self.1.supply(hook::Supply { p_s, ..c }, &s.1)
     }
     #[inline(always)]
-    fn opening(&self, l: usize, act: usize, x_c: f64, s: &Self::State) -> f64 {
-        self.1
-            .opening(l, act, self.0.opening(l, act, x_c, &s.0), &s.1)
+    fn opening(&self, c: hook::Opening, s: &Self::State) -> f64 {
+        let x = self.0.opening(c, &s.0);
+        self.1.opening(hook::Opening { x, ..c }, &s.1)
     }
     #[inline(always)]
-    fn spool_position(&self, l: usize, act: usize, x_c: f64, s: &Self::State) -> f64 {
-        self.1
-            .spool_position(l, act, self.0.spool_position(l, act, x_c, &s.0), &s.1)
+    fn spool_position(&self, c: hook::Opening, s: &Self::State) -> f64 {
+        let x = self.0.spool_position(c, &s.0);
+        self.1.spool_position(hook::Opening { x, ..c }, &s.1)
     }
     #[inline(always)]
-    fn stroke(&self, l: usize, y: f64, v: f64, s: &Self::State) -> (f64, f64) {
-        let (y, v) = self.0.stroke(l, y, v, &s.0);
-        self.1.stroke(l, y, v, &s.1)
+    fn stroke(&self, c: hook::Motion, s: &Self::State) -> (f64, f64) {
+        let (y, v) = self.0.stroke(c, &s.0);
+        self.1.stroke(hook::Motion { y, v, ..c }, &s.1)
     }
     #[inline(always)]
-    fn chamber_stiffness(
-        &self,
-        l: usize,
-        act: usize,
-        b: (f64, f64),
-        p1: f64,
-        p2: f64,
-        s: &Self::State,
-    ) -> (f64, f64) {
-        self.1.chamber_stiffness(
-            l,
-            act,
-            self.0.chamber_stiffness(l, act, b, p1, p2, &s.0),
-            p1,
-            p2,
-            &s.1,
-        )
+    fn chamber_stiffness(&self, c: hook::Chambers, s: &Self::State) -> (f64, f64) {
+        let b = self.0.chamber_stiffness(c, &s.0);
+        self.1.chamber_stiffness(hook::Chambers { b, ..c }, &s.1)
     }
     #[inline(always)]
-    fn flows(
-        &self,
-        l: usize,
-        act: usize,
-        q: (f64, f64),
-        p1: f64,
-        p2: f64,
-        p_s: f64,
-        s: &Self::State,
-    ) -> (f64, f64) {
-        self.1.flows(
-            l,
-            act,
-            self.0.flows(l, act, q, p1, p2, p_s, &s.0),
-            p1,
-            p2,
-            p_s,
-            &s.1,
-        )
+    fn flows(&self, c: hook::Flows, s: &Self::State) -> (f64, f64) {
+        let q = self.0.flows(c, &s.0);
+        self.1.flows(hook::Flows { q, ..c }, &s.1)
     }
     #[inline(always)]
-    fn extra_force(&self, l: usize, y: f64, v: f64, s: &Self::State) -> f64 {
-        self.0.extra_force(l, y, v, &s.0) + self.1.extra_force(l, y, v, &s.1)
+    fn extra_force(&self, c: hook::Motion, s: &Self::State) -> f64 {
+        self.0.extra_force(c, &s.0) + self.1.extra_force(c, &s.1)
     }
     #[inline(always)]
-    fn sensed(&self, l: usize, raw: [f64; 3], s: &Self::State) -> [f64; 3] {
-        self.1.sensed(l, self.0.sensed(l, raw, &s.0), &s.1)
+    fn sensed(&self, c: hook::Sensed, s: &Self::State) -> [f64; 3] {
+        let raw = self.0.sensed(c, &s.0);
+        self.1.sensed(hook::Sensed { raw, ..c }, &s.1)
     }
     #[inline(always)]
     fn derivs(&self, plant: &PlantView<'_, N>, s: &Self::State, ds: &mut Self::State) {
         self.0.derivs(plant, &s.0, &mut ds.0);
         // B sees the command as A leaves it (actuator 0's: a command effect acts on all alike).
-        let x_c: [f64; N] =
-            std::array::from_fn(|l| self.0.spool_position(l, 0, plant.x_c[l], &s.0));
+        let x_c: [f64; N] = std::array::from_fn(|lane| {
+            let c = hook::Opening {
+                lane,
+                act: 0,
+                x: plant.x_c[lane],
+            };
+            self.0.spool_position(c, &s.0)
+        });
         self.1.derivs(
             &PlantView {
                 x_c: &x_c,
@@ -643,6 +657,7 @@ impl<const N: usize, E: LibraryEffect<N> + Named> LibraryEffect<N> for Gated<E> 
 
 impl<const N: usize, E: Effect<N>> Effect<N> for Gated<E> {
     type State = E::State;
+    const MOVES_SPOOL: bool = E::MOVES_SPOOL;
 
     fn initial_state(&self) -> Self::State {
         self.effect.initial_state()
@@ -651,84 +666,67 @@ impl<const N: usize, E: Effect<N>> Effect<N> for Gated<E> {
         !self.on || self.effect.symmetric()
     }
     #[inline(always)]
-    fn supply(&self, l: usize, p_s: f64, s: &Self::State) -> f64 {
+    fn supply(&self, c: hook::Supply, s: &Self::State) -> f64 {
         if self.on {
-            self.effect.supply(l, p_s, s)
+            self.effect.supply(c, s)
         } else {
-            p_s
+            c.p_s
         }
     }
     #[inline(always)]
-    fn opening(&self, l: usize, act: usize, x_c: f64, s: &Self::State) -> f64 {
+    fn opening(&self, c: hook::Opening, s: &Self::State) -> f64 {
         if self.on {
-            self.effect.opening(l, act, x_c, s)
+            self.effect.opening(c, s)
         } else {
-            x_c
+            c.x
         }
     }
     #[inline(always)]
-    fn spool_position(&self, l: usize, act: usize, x_c: f64, s: &Self::State) -> f64 {
+    fn spool_position(&self, c: hook::Opening, s: &Self::State) -> f64 {
         if self.on {
-            self.effect.spool_position(l, act, x_c, s)
+            self.effect.spool_position(c, s)
         } else {
-            x_c
+            c.x
         }
     }
     #[inline(always)]
-    fn stroke(&self, l: usize, y: f64, v: f64, s: &Self::State) -> (f64, f64) {
+    fn stroke(&self, c: hook::Motion, s: &Self::State) -> (f64, f64) {
         if self.on {
-            self.effect.stroke(l, y, v, s)
+            self.effect.stroke(c, s)
         } else {
-            (y, v)
+            (c.y, c.v)
         }
     }
     #[inline(always)]
-    fn chamber_stiffness(
-        &self,
-        l: usize,
-        act: usize,
-        b: (f64, f64),
-        p1: f64,
-        p2: f64,
-        s: &Self::State,
-    ) -> (f64, f64) {
+    fn chamber_stiffness(&self, c: hook::Chambers, s: &Self::State) -> (f64, f64) {
         if self.on {
-            self.effect.chamber_stiffness(l, act, b, p1, p2, s)
+            self.effect.chamber_stiffness(c, s)
         } else {
-            b
+            c.b
         }
     }
     #[inline(always)]
-    fn flows(
-        &self,
-        l: usize,
-        act: usize,
-        q: (f64, f64),
-        p1: f64,
-        p2: f64,
-        p_s: f64,
-        s: &Self::State,
-    ) -> (f64, f64) {
+    fn flows(&self, c: hook::Flows, s: &Self::State) -> (f64, f64) {
         if self.on {
-            self.effect.flows(l, act, q, p1, p2, p_s, s)
+            self.effect.flows(c, s)
         } else {
-            q
+            c.q
         }
     }
     #[inline(always)]
-    fn extra_force(&self, l: usize, y: f64, v: f64, s: &Self::State) -> f64 {
+    fn extra_force(&self, c: hook::Motion, s: &Self::State) -> f64 {
         if self.on {
-            self.effect.extra_force(l, y, v, s)
+            self.effect.extra_force(c, s)
         } else {
             0.0
         }
     }
     #[inline(always)]
-    fn sensed(&self, l: usize, raw: [f64; 3], s: &Self::State) -> [f64; 3] {
+    fn sensed(&self, c: hook::Sensed, s: &Self::State) -> [f64; 3] {
         if self.on {
-            self.effect.sensed(l, raw, s)
+            self.effect.sensed(c, s)
         } else {
-            raw
+            c.raw
         }
     }
     #[inline(always)]

@@ -11,12 +11,12 @@
 //! reaction path is not in docs/model.md). Its signature: the measured acceleration and displacement
 //! stop being one body's (a₁ ≠ −ω²·x₁), increasingly with frequency, as (m/m_r)·(f/f_r)²/(1 − (f/f_r)²).
 
-use super::{Effect, EffectInfo, LibraryEffect, PlantView, Stage};
-use crate::kernel::params::{params, Component, ModelParams, Range};
+use super::{hook, Effect, EffectInfo, LibraryEffect, PlantView, Stage};
+use crate::kernel::params::{params, ModelParams, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
-    name: "reaction_mass",
+    name: super::module_name(module_path!()),
     family: "reaction mass",
     summary: "the actuators push against a reaction mass on a compliant foundation",
     params: Params::PARAMS,
@@ -27,14 +27,13 @@ pub const INFO: EffectInfo = EffectInfo {
         scan: Some(("f_r", &[3.0, 6.0, 12.0, 25.0, 50.0, 100.0])),
         start: &[],
     }],
-    moves_spool: false,
 };
 
 params! {
     /// Effect `reaction_mass`: the actuators push against a reaction mass on a compliant
     /// foundation, m_r ÿ_r = −F − k_r y_r − c_r ẏ_r. The actuator stroke (and the LVDT) is y − y_r;
     /// the accelerometer sees the platen's absolute acceleration.
-    pub struct Params in effect_params.reaction_mass as (Component::Effect(super::EffectId::ReactionMass)) {
+    pub struct Params in effect {
         m_r: "kg", "kg", 2.0e6, Range::gt(0.0), Chosen,
             "Reaction mass [chosen: order of a large table's foundation block].";
         f_r: "Hz", "hz", 12.0, Range::closed(0.5, 200.0), Chosen,
@@ -84,8 +83,8 @@ impl<const N: usize> Effect<N> for ReactionMass<N> {
 
     /// Actuator stroke and stroke rate, from the platen's absolute displacement and velocity.
     #[inline(always)]
-    fn stroke(&self, l: usize, y: f64, v: f64, s: &Self::State) -> (f64, f64) {
-        (y - s[YR][l], v - s[VR][l])
+    fn stroke(&self, c: hook::Motion, s: &Self::State) -> (f64, f64) {
+        (c.y - s[YR][c.lane], c.v - s[VR][c.lane])
     }
 
     #[inline(always)]

@@ -3,23 +3,22 @@
 //! every velocity reversal, so relative odd harmonics (h3) that are largest at small amplitude,
 //! and a residual concentrated near velocity reversal; neutral when off (forces 0).
 
-use super::{Effect, EffectInfo, LibraryEffect, Stage};
-use crate::kernel::params::{params, Component, ModelParams, Range};
+use super::{hook, Effect, EffectInfo, LibraryEffect, Stage};
+use crate::kernel::params::{params, ModelParams, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
-    name: "seal_friction",
+    name: super::module_name(module_path!()),
     family: "friction",
     summary: "actuator seal friction with a Stribeck term",
     params: Params::PARAMS,
     stages: &[Stage::free(&["f_c", "f_s"])],
-    moves_spool: false,
 };
 
 params! {
     /// Effect `seal_friction`: actuator seal friction with a Stribeck term,
     /// F = −tanh(v/v_eps)·(f_c + (f_s − f_c)·exp(−(v/v_s)²)) − sigma·v.
-    pub struct Params in effect_params.seal_friction as (Component::Effect(super::EffectId::SealFriction)) {
+    pub struct Params in effect {
         f_c: "N", "n", 5000.0, Range::ge(0.0), Chosen,
             "Coulomb seal friction, all actuators together [chosen].";
         f_s: "N", "n", 8000.0, Range::ge(0.0), Chosen,
@@ -77,7 +76,8 @@ impl<const N: usize> Effect<N> for SealFriction<N> {
 
     /// Friction force on the platen, N.
     #[inline(always)]
-    fn extra_force(&self, l: usize, _y: f64, v: f64, _s: &Self::State) -> f64 {
+    fn extra_force(&self, c: hook::Motion, _s: &Self::State) -> f64 {
+        let (l, v) = (c.lane, c.v);
         let r = v * self.inv_vs[l];
         -(v * self.inv_eps[l]).tanh() * (self.f_c[l] + self.df[l] * (-r * r).exp())
             - self.sigma[l] * v

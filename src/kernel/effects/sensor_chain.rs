@@ -157,9 +157,13 @@ macro_rules! sensor_effect {
             }
 
             #[inline(always)]
-            fn sensed(&self, l: usize, raw: [f64; 3], s: &Self::State) -> [f64; 3] {
-                let mut out = raw;
-                out[$channel] = self.0.recorded(l, raw[$channel], s);
+            fn sensed(
+                &self,
+                c: $crate::kernel::effects::hook::Sensed,
+                s: &Self::State,
+            ) -> [f64; 3] {
+                let mut out = c.raw;
+                out[$channel] = self.0.recorded(c.lane, c.raw[$channel], s);
                 out
             }
         }

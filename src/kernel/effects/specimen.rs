@@ -15,8 +15,8 @@
 //! frequency (a resonance makes the fit non-convex in it); forward selection may add mode 2, then
 //! mode 3, the same way.
 
-use super::{Effect, EffectInfo, LibraryEffect, PlantView, Stage};
-use crate::kernel::params::{params, Component, ModelParams, Range};
+use super::{hook, Effect, EffectInfo, LibraryEffect, PlantView, Stage};
+use crate::kernel::params::{params, ModelParams, Range};
 
 /// Start frequencies a diagnosis scans for a mode, Hz [chosen: 12 % apart (a 5 %-damped mode's
 /// half-power band is 10 % wide, so the scan lands in its valley) over the band where a structure
@@ -29,7 +29,7 @@ const SCAN_HZ: &[f64] = &[
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
-    name: "specimen",
+    name: super::module_name(module_path!()),
     family: "specimen",
     summary: "a linear structure on the platen: up to three modes (modal mass, frequency, damping)",
     params: Params::PARAMS,
@@ -54,14 +54,13 @@ pub const INFO: EffectInfo = EffectInfo {
             start: &[("m3", 5.0e3)],
         },
     ],
-    moves_spool: false,
 };
 
 params! {
     /// Effect `specimen`: a linear structure on the platen, up to three modes relative to it,
     /// ü_i = −ω_i² u_i − 2ζ_iω_i u̇_i − a; the base shear Σ m_i(ω_i² u_i + 2ζ_iω_i u̇_i) acts on
     /// the platen. A mode with zero mass is absent.
-    pub struct Params in effect_params.specimen as (Component::Effect(super::EffectId::Specimen)) {
+    pub struct Params in effect {
         m1: "kg", "kg", 20.0e3, Range::ge(0.0), Chosen,
             "Modal mass of mode 1 [chosen: 20 t, a mid-size specimen of the LHPOST (payload up to 2 000 t)].";
         f1: "Hz", "hz", 3.0, Range::closed(0.1, 100.0), Chosen,
@@ -134,7 +133,8 @@ impl<const N: usize> Effect<N> for Specimen<N> {
 
     /// The base shear of the modes on the platen, N.
     #[inline(always)]
-    fn extra_force(&self, l: usize, _y: f64, _v: f64, s: &Self::State) -> f64 {
+    fn extra_force(&self, c: hook::Motion, s: &Self::State) -> f64 {
+        let l = c.lane;
         (0..MODES)
             .map(|i| self.m[i][l] * (self.w2[i][l] * s[U[i]][l] + self.two_zw[i][l] * s[UD[i]][l]))
             .sum()

@@ -2,13 +2,13 @@
 //! ẍ_s = ω²(x_c − x_s) − 2ζω ẋ_s, ω = 2π·freq_hz. Its signature: a phase lag that grows with
 //! frequency, and a smaller amplitude ratio at higher frequencies.
 
-use super::{Effect, EffectInfo, LibraryEffect, PlantView, Stage};
-use crate::kernel::params::{params, Component, ModelParams, Range};
+use super::{hook, Effect, EffectInfo, LibraryEffect, PlantView, Stage};
+use crate::kernel::params::{params, ModelParams, Range};
 use crate::kernel::N_ACT;
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
-    name: "spool_dynamics",
+    name: super::module_name(module_path!()),
     family: "valve dynamics",
     summary: "a second-order lag between the valve command and the spool",
     params: Params::PARAMS,
@@ -19,13 +19,12 @@ pub const INFO: EffectInfo = EffectInfo {
         scan: Some(("freq_hz", &[15.0, 25.0, 40.0, 60.0, 90.0, 140.0, 220.0])),
         start: &[],
     }],
-    moves_spool: true,
 };
 
 params! {
     /// Effect `spool_dynamics`: the servo-valve spool follows its command through a second-order
     /// lag, ẍ = ω²(x_c − x) − 2ζω ẋ (the baseline has x = x_c).
-    pub struct Params in effect_params.spool_dynamics as (Component::Effect(super::EffectId::SpoolDynamics)) {
+    pub struct Params in effect {
         freq_hz: "Hz", "hz", 80.0, Range::closed(1.0, 1000.0), Chosen,
             "Spool natural frequency [chosen: 80 Hz; with 40 Hz the published TVC loop oscillates at small amplitude].";
         zeta: "-", "", 0.7, Range::closed(0.05, 5.0), Chosen,
@@ -64,14 +63,16 @@ impl<const N: usize> SpoolDynamics<N> {
 
 impl<const N: usize> Effect<N> for SpoolDynamics<N> {
     type State = [[f64; N]; 2 * N_ACT];
+    /// It moves the spool itself: a spool LVDT reads the opening.
+    const MOVES_SPOOL: bool = true;
 
     fn initial_state(&self) -> Self::State {
         [[0.0; N]; 2 * N_ACT]
     }
 
     #[inline(always)]
-    fn opening(&self, l: usize, act: usize, x_c: f64, s: &Self::State) -> f64 {
-        x_c + self.on[l] * (s[X[act]][l] - x_c)
+    fn opening(&self, c: hook::Opening, s: &Self::State) -> f64 {
+        c.x + self.on[c.lane] * (s[X[c.act]][c.lane] - c.x)
     }
 
     #[inline(always)]

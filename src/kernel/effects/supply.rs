@@ -4,24 +4,23 @@
 //! draw of a test exceeds the pump, the supply droops, more at large amplitude, and the envelope
 //! of the acceleration sinks from cycle to cycle.
 
-use super::{Effect, EffectInfo, LibraryEffect, PlantView, Stage};
-use crate::kernel::params::{params, Component, ModelParams, Range};
+use super::{hook, Effect, EffectInfo, LibraryEffect, PlantView, Stage};
+use crate::kernel::params::{params, ModelParams, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
-    name: "supply",
+    name: super::module_name(module_path!()),
     family: "supply pressure",
     summary: "supply pressure droop: a pump of limited flow and an accumulator",
     params: Params::PARAMS,
     stages: &[Stage::free(&["q_pump", "c_acc"])],
-    moves_spool: false,
 };
 
 params! {
     /// Effect `supply`: supply pressure dynamics. A pressure-compensated pump delivers
     /// Q_p = q_pump·clamp((P_S − P_s)/dp_band, 0, 1) into an accumulator of capacitance c_acc;
     /// the valves draw Q from it: c_acc dP_s/dt = Q_p − Q. The valves see P_s instead of P_S.
-    pub struct Params in effect_params.supply as (Component::Effect(super::EffectId::Supply)) {
+    pub struct Params in effect {
         q_pump: "m³/s", "m3_per_s", 0.2, Range::gt(0.0), Chosen,
             "Pump flow at full stroke [chosen: below the peak draw of large tests, so accumulators carry the peaks].";
         c_acc: "m³/Pa", "m3_per_pa", 3.5e-8, Range::gt(0.0), Chosen,
@@ -74,8 +73,8 @@ impl<const N: usize> Effect<N> for Supply<N> {
     }
 
     #[inline(always)]
-    fn supply(&self, l: usize, p_s: f64, s: &Self::State) -> f64 {
-        p_s + self.on[l] * (s[0][l] - p_s)
+    fn supply(&self, c: hook::Supply, s: &Self::State) -> f64 {
+        c.p_s + self.on[c.lane] * (s[0][c.lane] - c.p_s)
     }
 
     #[inline(always)]

@@ -11,12 +11,12 @@
 //! phase is within 0.01 % of −ωτ and the magnitude within 0.02 % of 1 (a choice; documented in the
 //! docs/guide.md's effects table).
 
-use super::{Effect, EffectInfo, LibraryEffect, PlantView, Stage};
-use crate::kernel::params::{params, Component, ModelParams, Range};
+use super::{hook, Effect, EffectInfo, LibraryEffect, PlantView, Stage};
+use crate::kernel::params::{params, ModelParams, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
-    name: "transport_delay",
+    name: super::module_name(module_path!()),
     family: "valve dynamics",
     summary: "a pure delay between the valve command and the spool",
     params: Params::PARAMS,
@@ -27,13 +27,12 @@ pub const INFO: EffectInfo = EffectInfo {
         scan: Some(("tau", &[0.5e-3, 1.0e-3, 2.0e-3, 4.0e-3, 8.0e-3, 15.0e-3])),
         start: &[],
     }],
-    moves_spool: true,
 };
 
 params! {
     /// Effect `transport_delay`: a pure delay τ between the controller's command and the spool
     /// (pilot stages, driver electronics, digital I/O), before the spool dynamics if those are on.
-    pub struct Params in effect_params.transport_delay as (Component::Effect(super::EffectId::TransportDelay)) {
+    pub struct Params in effect {
         tau: "s", "s", 2.0e-3, Range::closed(0.5e-3, 20.0e-3), Chosen,
             "Delay between the valve command and the spool [chosen: 2 ms; realised as 4 equal first-order lags, see the effect's doc].";
     }
@@ -76,6 +75,8 @@ impl<const N: usize> TransportDelay<N> {
 impl<const N: usize> Effect<N> for TransportDelay<N> {
     /// The outputs of the stages; the last is the delayed command.
     type State = [[f64; N]; STAGES];
+    /// It moves the spool itself: a spool LVDT reads the opening.
+    const MOVES_SPOOL: bool = true;
 
     fn initial_state(&self) -> Self::State {
         [[0.0; N]; STAGES]
@@ -83,8 +84,8 @@ impl<const N: usize> Effect<N> for TransportDelay<N> {
 
     /// The delayed command of lane `l` (the command itself where the effect is off).
     #[inline(always)]
-    fn opening(&self, l: usize, _act: usize, x_c: f64, s: &Self::State) -> f64 {
-        x_c + self.on[l] * (s[STAGES - 1][l] - x_c)
+    fn opening(&self, c: hook::Opening, s: &Self::State) -> f64 {
+        c.x + self.on[c.lane] * (s[STAGES - 1][c.lane] - c.x)
     }
 
     #[inline(always)]
