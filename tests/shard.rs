@@ -76,7 +76,8 @@ fn merged_shards_equal_the_unsharded_run() {
         let keys = |m: &[(String, String)]| {
             let mut v = m
                 .iter()
-                .filter(|(k, _)| k.starts_with("vshake."))
+                // The row groups' checksums differ (the merge's row groups are the shards').
+                .filter(|(k, _)| k.starts_with("vshake.") && k != "vshake.row_group_crc32")
                 .cloned()
                 .collect::<Vec<_>>();
             v.sort();

@@ -224,6 +224,7 @@ fn bench_diagnose(campaign: &std::path::Path, max_seconds: Option<f64>) -> anyho
 }
 
 pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
+    super::outputs::check_outputs([args.write_baseline.as_ref()])?;
     let mut engine = super::gpu::choose(args.backend)?;
     if args.diagnose.is_some() {
         engine = engine.not_covering("the diagnosis screens effects one by one")?;

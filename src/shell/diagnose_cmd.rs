@@ -31,6 +31,7 @@ fn harmonic_label(k: usize, rate_hz: f64) -> String {
 }
 
 pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
+    super::outputs::check_outputs([args.out.as_ref()])?;
     run_to(args, &mut std::io::stdout())
 }
 

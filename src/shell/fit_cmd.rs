@@ -179,6 +179,7 @@ pub(crate) fn with_progress(problem: &mut Problem, label: &str, log_lines: bool)
 }
 
 pub fn run(args: &FitArgs) -> anyhow::Result<()> {
+    super::outputs::check_output(&args.out)?;
     run_to(args, &mut std::io::stdout())
 }
 

@@ -3,8 +3,9 @@
 
 use super::cli::MergeArgs;
 use super::meta::{self, Key, SHARD_KEYS};
+use super::outputs::{check_output, OutputLock};
 use super::tables::{self, ParquetStream};
-use super::BadInput;
+use super::{integrity, BadInput};
 use anyhow::Context;
 use std::collections::BTreeMap;
 use std::io::Write;
@@ -63,10 +64,11 @@ fn same_run(first: &ShardFile, f: &ShardFile) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Reads and checks the shards of `dir` (every .parquet file but `skip`), in shard order.
-fn shards(dir: &Path, skip: &Path) -> anyhow::Result<Vec<ShardFile>> {
+/// Reads and checks the shards of `dir` (every .parquet file but `skip`, and but merged tables,
+/// named in `skipped`), in shard order.
+fn shards(dir: &Path, skip: &Path, skipped: &mut Vec<PathBuf>) -> anyhow::Result<Vec<ShardFile>> {
     let files = shard_paths(dir, skip)?;
-    let (mut list, unfinished) = read_shards(files)?;
+    let (mut list, unfinished) = read_shards(files, skipped)?;
     if list.is_empty() {
         return Err(BadInput(format!(
             "{}: no complete shard\n{}",
@@ -107,12 +109,23 @@ fn shard_paths(dir: &Path, skip: &Path) -> anyhow::Result<Vec<PathBuf>> {
     Ok(files)
 }
 
-/// The shards' metadata and indices: the complete ones, and a line on each incomplete one.
-fn read_shards(files: Vec<PathBuf>) -> anyhow::Result<(Vec<ShardFile>, Vec<String>)> {
+/// The shards' metadata and indices: the complete ones, and a line on each incomplete one. A
+/// results table that is not a shard (a merge written into the shards' folder) is left out, and
+/// its path put in `skipped`.
+fn read_shards(
+    files: Vec<PathBuf>,
+    skipped: &mut Vec<PathBuf>,
+) -> anyhow::Result<(Vec<ShardFile>, Vec<String>)> {
     let mut list = Vec::new();
     let mut unfinished = Vec::new();
     for path in files {
         let pairs = tables::parquet_metadata(&path).map_err(tables::input_if_user)?;
+        if meta::is(&pairs, meta::Kind::StudyResults)
+            && meta::get(&pairs, Key::ShardIndex).is_none()
+        {
+            skipped.push(path);
+            continue;
+        }
         let done = meta::incomplete(&pairs);
         let meta: BTreeMap<String, String> = pairs.into_iter().collect();
         let mut f = ShardFile {
@@ -226,7 +239,14 @@ pub fn run(args: &MergeArgs) -> anyhow::Result<()> {
             .unwrap_or_else(|| "merged".into());
         args.dir.with_file_name(format!("{name}.parquet"))
     });
-    let list = shards(&args.dir, &out)?;
+    check_output(&out)?;
+    let _lock = OutputLock::acquire(&out)?;
+    let mut skipped = Vec::new();
+    let list = shards(&args.dir, &out, &mut skipped)?;
+    // Every shard's rows checked against their checksums before one is written.
+    for f in &list {
+        integrity::verify_file(&f.path)?;
+    }
     let first = &list[0];
     // The merged file says what the unsharded run says: the shard keys go.
     let meta = meta::carried(&first.meta, &SHARD_KEYS);
@@ -270,6 +290,14 @@ pub fn run(args: &MergeArgs) -> anyhow::Result<()> {
         .finish_with(&meta::completion(rows, rows))
         .with_context(|| format!("writing {}", out.display()))?;
     let mut o = std::io::stdout().lock();
+    for p in &skipped {
+        writeln!(
+            o,
+            "study merge: skipped {}: a results table, not a shard (no {})",
+            p.display(),
+            Key::ShardIndex
+        )?;
+    }
     writeln!(
         o,
         "study merge {}: {} shards, {rows} rows -> {}",

@@ -56,6 +56,9 @@ keys! {
     Complete = "complete",
     RowsDone = "rows_done",
     RowsTotal = "rows_total",
+    /// The CRC-32 of each row group as written (`crc32:` and a comma-separated list), checked by
+    /// `study run --resume` and `study merge` (shell::integrity).
+    RowGroupCrc32 = "row_group_crc32",
     /// A shard's place: `study merge` checks and removes them.
     ShardIndex = "shard_index",
     ShardCount = "shard_count",
@@ -84,7 +87,12 @@ keys! {
 pub const SHARD_KEYS: [Key; 3] = [Key::ShardIndex, Key::ShardCount, Key::ShardSamples];
 
 /// The keys a file gets when it is closed (not carried over by a merge or a resume).
-pub const COMPLETION_KEYS: [Key; 3] = [Key::Complete, Key::RowsDone, Key::RowsTotal];
+pub const COMPLETION_KEYS: [Key; 4] = [
+    Key::Complete,
+    Key::RowsDone,
+    Key::RowsTotal,
+    Key::RowGroupCrc32,
+];
 
 impl fmt::Display for Key {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {

@@ -10,12 +10,14 @@ pub mod compare_cmd;
 pub mod diagnose_cmd;
 pub mod fit_cmd;
 pub mod gpu;
+pub(crate) mod integrity;
 pub mod interrupt;
 pub mod iterate_cmd;
 pub mod machine_rates;
 pub mod matlab;
 pub mod merge_cmd;
 pub mod meta;
+pub(crate) mod outputs;
 pub mod params_cmd;
 pub mod plot_cmd;
 pub mod progress;
@@ -44,9 +46,12 @@ pub struct BadInput(pub String);
 #[error("{0}")]
 pub struct RunFailed(pub String);
 
-/// 2 for bad input, 1 for everything else.
+/// 2 for bad input (a damaged checkpoint too), 1 for everything else.
 pub fn exit_code(e: &anyhow::Error) -> i32 {
-    if e.downcast_ref::<InputError>().is_some() || e.downcast_ref::<BadInput>().is_some() {
+    if e.downcast_ref::<InputError>().is_some()
+        || e.downcast_ref::<BadInput>().is_some()
+        || e.downcast_ref::<tables::BadCheckpoint>().is_some()
+    {
         2
     } else {
         1

@@ -6,6 +6,7 @@
 //! id), so the finished file equals an uninterrupted run's row for row, bit for bit.
 
 use super::meta::{self, Key, Kind};
+use super::outputs::{check_output, OutputLock};
 use super::run_cmd::{plan_for, Job, ResultsSink, Shard};
 use super::tables::{self, input_if_user, Recovered};
 use super::BadInput;
@@ -14,6 +15,35 @@ use anyhow::Context;
 use arrow_array::{Array, UInt64Array};
 use std::io::Write;
 use std::path::{Path, PathBuf};
+
+/// The file whose rows a resume of `file` (results table `out`) keeps, and whether it is a
+/// recovered one (`FILE.killed`, removed once its rows are safe).
+fn source(file: &Path, out: &Path) -> anyhow::Result<(PathBuf, bool)> {
+    let partial = tables::partial_path(out);
+    let killed = tables::killed_path(&partial);
+    let (source, temporary) = match tables::recover_killed(&partial)? {
+        Recovered::File(p) => (p, true),
+        // A resume of a killed run, itself killed before its first checkpoint: the rows recovered
+        // the first time are still in FILE.killed.
+        Recovered::NoCheckpoint(_) | Recovered::Nothing if !partial.exists() && killed.exists() => (killed, true),
+        Recovered::NoCheckpoint(tmp) if !partial.exists() && !out.exists() => {
+            return Err(BadInput(format!(
+                "{}: the run was killed before its first checkpoint (no rows were safely written), so there is nothing to resume; start it again",
+                tmp.display()
+            ))
+            .into())
+        }
+        // A stopped run's rows (beside them, perhaps, the temp file of a resumed run killed
+        // before its first checkpoint: the stopped file still holds every row it had).
+        _ if partial.exists() => (partial, false),
+        // The complete table (or one stopped by an older vshake, under its final name).
+        _ => (out.to_path_buf(), false),
+    };
+    if !source.exists() {
+        return Err(BadInput(format!("{}: not found (nothing to resume)", file.display())).into());
+    }
+    Ok((source, temporary))
+}
 
 /// Rows of an interrupted run carried into the resumed one: its first `samples` samples.
 pub struct Kept {
@@ -71,29 +101,11 @@ impl Kept {
 /// `NAME.partial.parquet`), or None when it is already complete (said on stdout).
 pub fn job(file: &Path) -> anyhow::Result<Option<Job>> {
     let out = tables::final_path(file);
-    let partial = tables::partial_path(&out);
-    let killed = tables::killed_path(&partial);
-    let (source, temporary) = match tables::recover_killed(&partial)? {
-        Recovered::File(p) => (p, true),
-        // A resume of a killed run, itself killed before its first checkpoint: the rows recovered
-        // the first time are still in FILE.killed.
-        Recovered::NoCheckpoint(_) | Recovered::Nothing if !partial.exists() && killed.exists() => (killed, true),
-        Recovered::NoCheckpoint(tmp) if !partial.exists() && !out.exists() => {
-            return Err(BadInput(format!(
-                "{}: the run was killed before its first checkpoint (no rows were safely written), so there is nothing to resume; start it again",
-                tmp.display()
-            ))
-            .into())
-        }
-        // A stopped run's rows (beside them, perhaps, the temp file of a resumed run killed
-        // before its first checkpoint: the stopped file still holds every row it had).
-        _ if partial.exists() => (partial, false),
-        // The complete table (or one stopped by an older vshake, under its final name).
-        _ => (out.clone(), false),
-    };
-    if !source.exists() {
-        return Err(BadInput(format!("{}: not found (nothing to resume)", file.display())).into());
-    }
+    check_output(&out)?;
+    check_output(&tables::partial_path(&out))?;
+    // Before anything is read or moved: another process may be writing these files.
+    let lock = OutputLock::acquire(&out)?;
+    let (source, temporary) = source(file, &out)?;
     let meta = tables::parquet_metadata(&source).map_err(input_if_user)?;
     let get = |k: Key| meta::get(&meta, k);
     if !meta::is(&meta, Kind::StudyResults) {
@@ -108,6 +120,8 @@ pub fn job(file: &Path) -> anyhow::Result<Option<Job>> {
         )?;
         return Ok(None);
     }
+    // The kept rows are checked against their checksums before one is used.
+    super::integrity::verify_file(&source)?;
     let need = |k: Key| {
         get(k).ok_or_else(|| {
             BadInput(format!(
@@ -147,5 +161,6 @@ pub fn job(file: &Path) -> anyhow::Result<Option<Job>> {
         out,
         meta,
         kept,
+        lock: Some(lock),
     }))
 }

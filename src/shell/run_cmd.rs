@@ -2,6 +2,7 @@
 
 use super::cli::RunArgs;
 use super::meta::{self, Key, Kind};
+use super::outputs::{check_output, OutputLock};
 use super::progress::Progress;
 use super::tables::{self, input_if_user, load_reference, Column, ParquetStream};
 use super::{interrupt, BadInput};
@@ -332,6 +333,10 @@ pub struct Job {
     pub out: PathBuf,
     pub meta: Vec<(String, String)>,
     pub kept: Option<super::resume::Kept>,
+    /// The table's lock, held until the job is dropped: one writer at a time (none for a dry
+    /// run).
+    #[allow(dead_code)] // held, never read
+    pub(crate) lock: Option<OutputLock>,
 }
 
 impl Job {
@@ -383,7 +388,7 @@ impl Job {
                 return Err(BadInput(format!("{study_file}: output.histories[{i}]: sample {id} does not exist (the study has samples 0 to {})", plan.samples() - 1)).into());
             }
         }
-        let out = output_path(args.out.as_deref(), &spec, shard.as_ref())?;
+        let (out, lock) = output_path(args.out.as_deref(), &spec, shard.as_ref(), !args.dry_run)?;
         let mut extra = vec![meta::pair(Key::StudyFile, study_file)];
         extra.extend(shard.as_ref().map_or_else(Vec::new, |s| s.metadata()));
         let meta = results_metadata(&spec, &plan, &extra);
@@ -395,6 +400,7 @@ impl Job {
             out,
             meta,
             kept: None,
+            lock,
         })
     }
 
@@ -408,13 +414,16 @@ impl Job {
 }
 
 /// The results file: `--out` (inside it as `<name>.parquet` when it is a folder), else the
-/// study's `[output] file` (with `.shard-I-of-N` for a shard). Refused when it is a folder or its
-/// folder cannot be written: before any work.
+/// study's `[output] file` (with `.shard-I-of-N` for a shard), and its lock where `lock` (a dry
+/// run writes nothing, and takes none). Refused when it is a folder or another file that is not a
+/// regular one, when its folder cannot be written, or when another process writes it: before any
+/// work.
 fn output_path(
     out: Option<&Path>,
     spec: &StudySpec,
     shard: Option<&Shard>,
-) -> anyhow::Result<PathBuf> {
+    lock: bool,
+) -> anyhow::Result<(PathBuf, Option<OutputLock>)> {
     let default = match shard {
         None => spec.output.clone(),
         Some(s) => {
@@ -444,9 +453,12 @@ fn output_path(
         ))
         .into());
     }
+    check_output(&out)?;
+    check_output(&tables::partial_path(&out))?;
     check_writable(&out)?;
+    let lock = lock.then(|| OutputLock::acquire(&out)).transpose()?;
     check_replaceable(&out)?;
-    Ok(out)
+    Ok((out, lock))
 }
 
 /// A new run may replace a table vshake wrote (its metadata says so), never another file, and
@@ -565,15 +577,38 @@ pub(crate) fn execute(
         return super::sizing::dry_run(&job, todo, &pool);
     }
     super::sizing::gate_long_run(&job, todo.clone(), &pool, args.yes)?;
-    create_history_dir(&job)?;
+    let made = create_history_dir(&job)?;
     if signals {
         interrupt::install().context("catching SIGINT and SIGTERM")?;
     }
+    let (summary, progress) = match write_rows(args, &job, todo.clone(), &pool, chunk) {
+        Ok(done) => done,
+        Err(e) => {
+            // An empty histories folder made for this run goes with it (a kept one stays).
+            if let Some(dir) = made {
+                let _ = std::fs::remove_dir(dir);
+            }
+            return Err(failed_write(e, &job, args.checkpoint_secs));
+        }
+    };
+    print_done(o, &job, &summary, &progress, todo.len())?;
+    write_histories(o, &job)
+}
+
+/// Writes the job's rows (the kept ones, then the computed ones) to its partial file, and closes
+/// it: renamed to the results file when complete.
+fn write_rows(
+    args: &RunArgs,
+    job: &Job,
+    todo: Range<usize>,
+    pool: &rayon::ThreadPool,
+    chunk: usize,
+) -> anyhow::Result<(batch::Summary, Progress)> {
     let partial = tables::partial_path(&job.out);
     let mut sink = ResultsSink::create(&partial, &job.plan, &job.spec, &job.meta)?
         .checkpoints(Duration::from_secs_f64(args.checkpoint_secs));
     if let Some(k) = &job.kept {
-        k.copy_into(&mut sink, &job)?;
+        k.copy_into(&mut sink, job)?;
     }
     let progress = Progress::new(
         &job.spec.name,
@@ -583,17 +618,54 @@ pub(crate) fn execute(
     );
     let summary = batch::run_plan(
         &job.plan,
-        todo.clone(),
-        &pool,
+        todo,
+        pool,
         chunk,
         &mut sink,
         &|n| progress.inc(n),
         &|| interrupt::requested().is_some(),
     )?;
     progress.finish();
-    finish_results(&job, sink, summary.stopped)?;
-    print_done(o, &job, &summary, &progress, todo.len())?;
-    write_histories(o, &job)
+    finish_results(job, sink, summary.stopped)?;
+    Ok((summary, progress))
+}
+
+/// A failed write (a full disk, a file-size limit) as one message: the file and the cause once,
+/// then what is kept and how to continue. Other errors as they are.
+fn failed_write(e: anyhow::Error, job: &Job, secs: f64) -> anyhow::Error {
+    let Some(w) = e
+        .chain()
+        .find_map(|c| c.downcast_ref::<tables::WriteFailed>())
+    else {
+        return e;
+    };
+    let partial = tables::partial_path(&job.out);
+    let (tmp, side) = (
+        tables::tmp_path(&partial),
+        tables::checkpoint_path(&partial),
+    );
+    let fix = if w.no_space {
+        "make room (free disk space, or lift the file-size limit or quota)"
+    } else {
+        "mend the cause"
+    };
+    let resume = format!("study run --resume {}", partial.display());
+    let kept = match (tables::checkpoint_rows(&side), &job.kept) {
+        (Some(rows), _) if tmp.exists() => format!(
+            "the {rows} of {} rows written by its last checkpoint are kept in {} (and {}); {fix}, then continue with: {resume}",
+            job.rows_total(),
+            tmp.display(),
+            side.display()
+        ),
+        (_, Some(k)) => format!(
+            "no new checkpoint was written; the rows of the interrupted run are still in {}; {fix}, then continue with: {resume}",
+            k.source.display()
+        ),
+        _ => format!(
+            "no rows were kept (the run had not reached its first checkpoint, --checkpoint-secs {secs}); {fix}, then start it again"
+        ),
+    };
+    anyhow::anyhow!("{w}; {kept}")
 }
 
 /// `--checkpoint-secs` is a positive number of seconds.
@@ -619,18 +691,21 @@ fn job_of(args: &RunArgs) -> anyhow::Result<Option<Job>> {
     }
 }
 
-/// Creates the histories folder of a study that records histories.
-fn create_history_dir(job: &Job) -> anyhow::Result<()> {
-    if !job.spec.histories.is_empty() {
-        let dir = history_dir(&job.out);
-        std::fs::create_dir_all(&dir).map_err(|e| {
-            BadInput(format!(
-                "{}: cannot create the histories folder: {e}",
-                dir.display()
-            ))
-        })?;
+/// Creates the histories folder of a study that records histories; the folder where this made
+/// it (it was not there).
+fn create_history_dir(job: &Job) -> anyhow::Result<Option<PathBuf>> {
+    if job.spec.histories.is_empty() {
+        return Ok(None);
     }
-    Ok(())
+    let dir = history_dir(&job.out);
+    let made = !dir.exists();
+    std::fs::create_dir_all(&dir).map_err(|e| {
+        BadInput(format!(
+            "{}: cannot create the histories folder: {e}",
+            dir.display()
+        ))
+    })?;
+    Ok(made.then_some(dir))
 }
 
 /// Closes the results file (marked complete or not), drops the kept rows of a resumed run, and
@@ -638,14 +713,14 @@ fn create_history_dir(job: &Job) -> anyhow::Result<()> {
 fn finish_results(job: &Job, sink: ResultsSink, stopped: bool) -> anyhow::Result<()> {
     let (done, total) = (sink.rows(), job.rows_total());
     let partial = tables::partial_path(&job.out);
-    sink.finish(&meta::completion(done, total))
-        .with_context(|| format!("writing {}", partial.display()))?;
+    sink.finish(&meta::completion(done, total))?;
     if let Some(k) = &job.kept {
         k.discard();
     }
     if !stopped {
-        // Complete: the table takes its name.
-        std::fs::rename(&partial, &job.out)
+        // Complete: the table takes its name (never a device's, or another special file's).
+        super::outputs::regular_output(&job.out)
+            .and_then(|_| std::fs::rename(&partial, &job.out))
             .with_context(|| format!("renaming {} to {}", partial.display(), job.out.display()))?;
     }
     if stopped {

@@ -167,6 +167,12 @@ pub(crate) fn not_regular(path: &Path) -> Option<&'static str> {
 /// and a device never end it. The error's kind is `InvalidInput`, its text what the path is.
 pub(crate) fn regular_input(path: &Path) -> std::io::Result<()> {
     match not_regular(path) {
+        // A link that cannot be followed (a loop: ELOOP, whose kind is not stable) is the
+        // user's to mend, as a missing file is.
+        None if is_loop(path) => Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            "is a symbolic link that cannot be followed (a loop of links)",
+        )),
         None => Ok(()),
         Some(what) => Err(std::io::Error::new(
             std::io::ErrorKind::InvalidInput,
@@ -174,6 +180,20 @@ pub(crate) fn regular_input(path: &Path) -> std::io::Result<()> {
         )),
     }
 }
+
+/// Whether `path` is a symbolic link whose chain of links loops.
+fn is_loop(path: &Path) -> bool {
+    std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink())
+        && std::fs::metadata(path).is_err_and(|e| {
+            e.kind() != std::io::ErrorKind::NotFound && e.raw_os_error() == Some(ELOOP)
+        })
+}
+
+/// ELOOP, "too many levels of symbolic links" (Linux; the BSDs and macOS: 62).
+#[cfg(target_os = "linux")]
+const ELOOP: i32 = 40;
+#[cfg(not(target_os = "linux"))]
+const ELOOP: i32 = 62;
 
 /// `std::fs::read` of an input, refused at once when it is not a regular file.
 pub(crate) fn read_input(path: &Path) -> std::io::Result<Vec<u8>> {
@@ -221,7 +241,30 @@ fn stem(name: &str) -> &str {
 const BY_POSITION: &str =
     "columns = { time = { column = 1, unit = \"s\" }, accel = { column = 4, unit = \"g\" }, ... }";
 
+/// `text` quoted short: its first `max` bytes (at a character boundary) and how long it is, so a
+/// huge header line or cell is never printed back whole.
+pub(crate) fn clip(text: &str, max: usize) -> String {
+    if text.len() <= max {
+        return text.to_string();
+    }
+    let end = (0..=max)
+        .rev()
+        .find(|&i| text.is_char_boundary(i))
+        .unwrap_or(0);
+    format!("{}… ({} bytes in all)", &text[..end], text.len())
+}
+
+/// At most 40 column names, each quoted short ([`clip`]), to list in a message.
+fn short_names(found: &[String]) -> Vec<String> {
+    let mut v: Vec<String> = found.iter().take(40).map(|f| clip(f, 60)).collect();
+    if found.len() > 40 {
+        v.push(format!("and {} more", found.len() - 40));
+    }
+    v
+}
+
 fn missing(file: &Path, column: &str, found: &[String]) -> TableError {
+    let found = &short_names(found)[..];
     let other_units: Vec<&String> = found
         .iter()
         .filter(|f| stem(f) == stem(column) && *f != column)
@@ -734,7 +777,7 @@ fn column_error(
         columns::ColumnProblem::Missing(c) => missing(path, &c, headers),
         p => TableError::Column {
             file: path.to_path_buf(),
-            message: p.to_string(),
+            message: clip(&p.to_string(), 400),
         },
     }
 }
@@ -796,7 +839,7 @@ fn csv_number(cell: &str, sep: u8, decimal_commas: &mut bool) -> Result<f64, Str
             *decimal_commas = true;
             cell.replace(',', ".")
                 .parse()
-                .map_err(|_| format!("{cell:?} is not a number"))
+                .map_err(|_| format!("{:?} is not a number", clip(cell, 80)))
         }
         Err(_) => {
             let hint = if sep == b',' && cell.contains(';') {
@@ -804,7 +847,7 @@ fn csv_number(cell: &str, sep: u8, decimal_commas: &mut bool) -> Result<f64, Str
             } else {
                 ""
             };
-            Err(format!("{cell:?} is not a number{hint}"))
+            Err(format!("{:?} is not a number{hint}", clip(cell, 80)))
         }
     }
 }
@@ -950,23 +993,31 @@ pub struct AtomicFile {
     pub path: PathBuf,
     pub tmp: PathBuf,
     pub committed: bool,
+    /// Kept on drop though not committed ([`AtomicFile::keep`]).
+    kept: bool,
 }
 
 impl AtomicFile {
     pub fn new(path: &Path) -> Self {
-        let mut tmp = path.as_os_str().to_owned();
-        tmp.push(".tmp");
         AtomicFile {
             path: path.to_path_buf(),
-            tmp: PathBuf::from(tmp),
+            tmp: tmp_path(path),
             committed: false,
+            kept: false,
         }
+    }
+    /// Leaves the temp file in place when dropped uncommitted (the rows of a checkpoint in it).
+    pub(crate) fn keep(&mut self) {
+        self.kept = true;
     }
     pub fn commit(mut self) -> std::io::Result<()> {
         self.commit_in_place()
     }
     /// Renames the temp file into place, keeping the guard (for owners that implement Drop).
+    /// Never over something that is not a regular file: a rename would replace a device node
+    /// (`/dev/null` for root) or a FIFO with the table.
     pub(crate) fn commit_in_place(&mut self) -> std::io::Result<()> {
+        super::outputs::regular_output(&self.path)?;
         std::fs::rename(&self.tmp, &self.path)?;
         self.committed = true;
         Ok(())
@@ -975,7 +1026,7 @@ impl AtomicFile {
 
 impl Drop for AtomicFile {
     fn drop(&mut self) {
-        if !self.committed {
+        if !self.committed && !self.kept {
             let _ = std::fs::remove_file(&self.tmp);
         }
     }
@@ -1067,6 +1118,8 @@ pub struct ParquetStream {
     schema: Arc<Schema>,
     /// The key-value metadata in the order given (the schema's copy is a map).
     kv: Vec<KeyValue>,
+    /// The CRC-32 of each row group written so far ([`super::integrity`]).
+    sums: Vec<u32>,
     checkpoint: Option<Checkpoint>,
 }
 
@@ -1076,6 +1129,8 @@ struct Checkpoint {
     path: PathBuf,
     /// The file's key-value metadata, `ARROW:schema` included, for the checkpoint footers.
     kv: Vec<KeyValue>,
+    /// Whether a checkpoint was written: its rows are then safe, and an error keeps them.
+    saved: bool,
 }
 
 /// The checkpoint sidecar of a results file being written: `path.tmp.checkpoint`.
@@ -1083,6 +1138,51 @@ pub(crate) fn checkpoint_path(path: &Path) -> PathBuf {
     let mut p = path.as_os_str().to_owned();
     p.push(".tmp.checkpoint");
     PathBuf::from(p)
+}
+
+/// The temp file a results file is written to until it is closed: `path.tmp`.
+pub(crate) fn tmp_path(path: &Path) -> PathBuf {
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".tmp");
+    PathBuf::from(tmp)
+}
+
+/// A write that failed: the file, and the system's reason once (a Parquet error wraps the I/O
+/// error it reports, and repeats it).
+#[derive(Debug, thiserror::Error)]
+#[error("{}: cannot write: {cause}", file.display())]
+pub struct WriteFailed {
+    pub file: PathBuf,
+    pub cause: String,
+    /// The disk is full, or the file reached its size limit (`ulimit -f`) or a quota.
+    pub no_space: bool,
+}
+
+/// `e`, an error writing `file`, as a [`WriteFailed`]: the innermost I/O error in its chain as
+/// the cause, else the innermost message.
+pub(crate) fn write_failed(file: &Path, e: impl Into<anyhow::Error>) -> anyhow::Error {
+    use std::io::ErrorKind as K;
+    let e: anyhow::Error = e.into();
+    if e.downcast_ref::<WriteFailed>().is_some() {
+        return e;
+    }
+    let io = e
+        .chain()
+        .filter_map(|c| c.downcast_ref::<std::io::Error>())
+        .last();
+    let cause = io.map_or_else(|| e.root_cause().to_string(), |io| io.to_string());
+    let no_space = io.is_some_and(|io| {
+        matches!(
+            io.kind(),
+            K::StorageFull | K::FileTooLarge | K::QuotaExceeded
+        )
+    });
+    WriteFailed {
+        file: file.to_path_buf(),
+        cause,
+        no_space,
+    }
+    .into()
 }
 
 impl ParquetStream {
@@ -1139,14 +1239,22 @@ impl ParquetStream {
             std::fs::create_dir_all(dir)
                 .with_context(|| format!("cannot create {}", dir.display()))?;
         }
-        let f = File::create(&file.tmp)
+        // Read too: each row group's checksum is taken from the bytes in the file.
+        let f = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(true)
+            .open(&file.tmp)
             .with_context(|| format!("cannot create {}", file.tmp.display()))?;
-        let writer = ArrowWriter::try_new(f, schema.clone(), Some(props))?;
+        let writer = ArrowWriter::try_new(f, schema.clone(), Some(props))
+            .map_err(|e| write_failed(&file.tmp, e))?;
         Ok(ParquetStream {
             file,
             writer,
             schema,
             kv,
+            sums: Vec::new(),
             checkpoint: None,
         })
     }
@@ -1163,6 +1271,7 @@ impl ParquetStream {
             last: std::time::Instant::now(),
             path: checkpoint_path(&self.file.path),
             kv,
+            saved: false,
         });
         self
     }
@@ -1170,7 +1279,9 @@ impl ParquetStream {
     /// Appends a record batch whose columns match this table's fields.
     pub(crate) fn write_batch(&mut self, batch: &RecordBatch) -> anyhow::Result<()> {
         let batch = RecordBatch::try_new(self.schema.clone(), batch.columns().to_vec())?;
-        self.writer.write(&batch)?;
+        self.writer
+            .write(&batch)
+            .map_err(|e| write_failed(&self.file.tmp, e))?;
         self.after_write()
     }
 
@@ -1180,7 +1291,9 @@ impl ParquetStream {
             self.schema.clone(),
             columns.into_iter().map(Column::array).collect(),
         )?;
-        self.writer.write(&batch)?;
+        self.writer
+            .write(&batch)
+            .map_err(|e| write_failed(&self.file.tmp, e))?;
         self.after_write()
     }
 
@@ -1194,32 +1307,65 @@ impl ParquetStream {
         if self.writer.in_progress_size() > ROW_GROUP_BYTES
             || (due && self.writer.in_progress_rows() > 0)
         {
-            self.writer.flush()?;
+            self.writer
+                .flush()
+                .map_err(|e| write_failed(&self.file.tmp, e))?;
         }
+        self.take_sums()?;
         if due && !self.writer.flushed_row_groups().is_empty() {
             self.save_checkpoint()?;
         }
         Ok(())
     }
 
-    /// Syncs the row groups written so far and writes their footer to the sidecar (atomically).
+    /// Takes the checksum of each row group flushed since the last call, from the file's bytes.
+    fn take_sums(&mut self) -> anyhow::Result<()> {
+        if self.writer.flushed_row_groups().len() == self.sums.len() {
+            return Ok(());
+        }
+        let tmp = &self.file.tmp;
+        self.writer.sync().map_err(|e| write_failed(tmp, e))?;
+        for g in &self.writer.flushed_row_groups()[self.sums.len()..] {
+            let sum = super::integrity::row_group_sum(self.writer.inner(), g).ok_or_else(|| {
+                write_failed(
+                    tmp,
+                    anyhow::anyhow!("a row group just written cannot be read back"),
+                )
+            })?;
+            self.sums.push(sum);
+        }
+        Ok(())
+    }
+
+    /// Syncs the row groups written so far to the disk and writes their footer, with their
+    /// checksums, to the sidecar (atomically).
     fn save_checkpoint(&mut self) -> anyhow::Result<()> {
         use parquet::file::metadata::{FileMetaData, ParquetMetaData, ParquetMetaDataWriter};
         use std::io::Write;
         let Some(c) = self.checkpoint.as_mut() else {
             return Ok(());
         };
-        self.writer.sync()?;
+        let tmp = &self.file.tmp;
+        self.writer.sync().map_err(|e| write_failed(tmp, e))?;
+        self.writer
+            .inner()
+            .sync_data()
+            .map_err(|e| write_failed(tmp, e))?;
         let len = self.writer.bytes_written() as u64;
         let groups = self.writer.flushed_row_groups().to_vec();
         let rows = groups.iter().map(|g| g.num_rows()).sum();
         let descr = groups[0].schema_descr_ptr();
+        let mut kv = c.kv.clone();
+        kv.push(KeyValue::new(
+            super::meta::Key::RowGroupCrc32.as_str().to_string(),
+            super::integrity::encode(&self.sums),
+        ));
         let meta = ParquetMetaData::new(
             FileMetaData::new(
                 1,
                 rows,
                 Some("vshake checkpoint".into()),
-                Some(c.kv.clone()),
+                Some(kv),
                 descr,
                 None,
             ),
@@ -1228,11 +1374,14 @@ impl ParquetStream {
         let mut bytes = len.to_le_bytes().to_vec();
         ParquetMetaDataWriter::new(&mut bytes, &meta).finish()?;
         let side = AtomicFile::new(&c.path);
-        let mut f = File::create(&side.tmp)?;
-        f.write_all(&bytes)?;
-        f.sync_all()?;
-        side.commit()?;
+        let written = File::create(&side.tmp).and_then(|mut f| {
+            f.write_all(&bytes)?;
+            f.sync_all()
+        });
+        written.map_err(|e| write_failed(&side.tmp, e))?;
+        side.commit().map_err(|e| write_failed(&c.path, e))?;
         c.last = std::time::Instant::now();
+        c.saved = true;
         Ok(())
     }
 
@@ -1251,14 +1400,25 @@ impl ParquetStream {
         self.finish_with(&[])
     }
 
-    /// Closes the file with these key-value pairs added to its metadata, and moves it into place.
+    /// Closes the file with these key-value pairs and the row groups' checksums added to its
+    /// metadata, and moves it into place.
     pub(crate) fn finish_with(mut self, extra: &[(String, String)]) -> anyhow::Result<()> {
         use anyhow::Context;
-        for (k, v) in extra {
+        self.writer
+            .flush()
+            .map_err(|e| write_failed(&self.file.tmp, e))?;
+        self.take_sums()?;
+        let sums = (
+            super::meta::Key::RowGroupCrc32.as_str().to_string(),
+            super::integrity::encode(&self.sums),
+        );
+        for (k, v) in extra.iter().chain([&sums]) {
             self.writer
                 .append_key_value_metadata(KeyValue::new(k.clone(), v.clone()));
         }
-        self.writer.finish()?;
+        self.writer
+            .finish()
+            .map_err(|e| write_failed(&self.file.tmp, e))?;
         let path = self.file.path.clone();
         self.file
             .commit_in_place()
@@ -1271,11 +1431,13 @@ impl ParquetStream {
 }
 
 impl Drop for ParquetStream {
-    /// A stream dropped unfinished (an error) leaves neither its temp file ([`AtomicFile`]) nor
-    /// its checkpoint.
+    /// A stream dropped unfinished (an error) keeps its temp file and its checkpoint where a
+    /// checkpoint was written (those rows are safe, for `study run --resume`), else leaves neither.
     fn drop(&mut self) {
         if let Some(c) = &self.checkpoint {
-            if !self.file.committed {
+            if !self.file.committed && c.saved && c.path.exists() {
+                self.file.keep();
+            } else if !self.file.committed {
                 let _ = std::fs::remove_file(&c.path);
             }
         }
@@ -1327,13 +1489,13 @@ pub(crate) fn killed_path(path: &Path) -> PathBuf {
 
 /// Turns the temp file of a killed stream and its checkpoint into a readable Parquet file
 /// `path.killed` holding every checkpointed row group (the bytes after the checkpoint are
-/// dropped). The temp file and the checkpoint are consumed.
+/// dropped). The checkpoint and the row groups it describes are checked first (its footer, the
+/// temp file's length, each row group's checksum): a pair that does not match is refused and left
+/// as it is. Then the temp file and the checkpoint are consumed.
 pub fn recover_killed(path: &Path) -> anyhow::Result<Recovered> {
     use anyhow::Context;
     use std::io::{Seek, Write};
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".tmp");
-    let tmp = PathBuf::from(tmp);
+    let tmp = tmp_path(path);
     let side = checkpoint_path(path);
     if !tmp.exists() {
         return Ok(Recovered::Nothing);
@@ -1341,20 +1503,7 @@ pub fn recover_killed(path: &Path) -> anyhow::Result<Recovered> {
     let Ok(bytes) = std::fs::read(&side) else {
         return Ok(Recovered::NoCheckpoint(tmp));
     };
-    let bad = || BadCheckpoint(side.clone());
-    let len = u64::from_le_bytes(
-        bytes
-            .get(..8)
-            .ok_or_else(bad)?
-            .try_into()
-            .map_err(|_| bad())?,
-    );
-    let have = std::fs::metadata(&tmp)
-        .with_context(|| format!("reading {}", tmp.display()))?
-        .len();
-    if have < len {
-        return Err(BadCheckpoint(side).into());
-    }
+    let len = checked_checkpoint(&tmp, &side, &bytes)?;
     let killed = killed_path(path);
     std::fs::rename(&tmp, &killed)
         .with_context(|| format!("cannot move {} to {}", tmp.display(), killed.display()))?;
@@ -1362,18 +1511,73 @@ pub fn recover_killed(path: &Path) -> anyhow::Result<Recovered> {
         .write(true)
         .open(&killed)
         .with_context(|| format!("cannot open {}", killed.display()))?;
-    f.set_len(len)?;
-    f.seek(std::io::SeekFrom::End(0))?;
-    f.write_all(&bytes[8..])?;
-    f.sync_all()?;
+    let appended = f
+        .set_len(len)
+        .and_then(|_| f.seek(std::io::SeekFrom::End(0)))
+        .and_then(|_| f.write_all(&bytes[8..]))
+        .and_then(|_| f.sync_all());
+    appended.map_err(|e| write_failed(&killed, e))?;
     std::fs::remove_file(&side)?;
     Ok(Recovered::File(killed))
 }
 
-/// A checkpoint that does not describe its temp file.
+/// The length of the temp file a checkpoint covers, once checked: its footer is one, the temp
+/// file holds every byte of the row groups it lists, and each matches its checksum.
+fn checked_checkpoint(tmp: &Path, side: &Path, bytes: &[u8]) -> anyhow::Result<u64> {
+    use parquet::file::metadata::ParquetMetaDataReader;
+    let bad = |why: String| BadCheckpoint {
+        file: side.to_path_buf(),
+        why,
+    };
+    let n = bytes.len();
+    if n < 16 || &bytes[n - 4..] != b"PAR1" {
+        return Err(bad("it is not a checkpoint (too short, or no Parquet footer)".into()).into());
+    }
+    let len = u64::from_le_bytes(bytes[..8].try_into().expect("8 bytes"));
+    let footer = &bytes[8..n - 8];
+    let decoded = std::panic::catch_unwind(|| ParquetMetaDataReader::decode_metadata(footer));
+    let meta = match decoded {
+        Ok(Ok(m)) => m,
+        Ok(Err(e)) => return Err(bad(format!("its footer cannot be read ({e})")).into()),
+        Err(_) => return Err(bad("its footer is corrupt".into()).into()),
+    };
+    let data = File::open(tmp).map_err(|e| bad(format!("{}: {e}", tmp.display())))?;
+    let have = data.metadata().map(|m| m.len()).unwrap_or(0);
+    let end = meta
+        .row_groups()
+        .iter()
+        .map(|g| super::integrity::byte_range(g).map_or(u64::MAX, |(_, b)| b))
+        .max()
+        .unwrap_or(0);
+    if have < len || end > len {
+        return Err(bad(format!(
+            "it describes {} bytes, and {} holds {have}",
+            len.max(end),
+            tmp.display()
+        ))
+        .into());
+    }
+    super::integrity::verify(&data, &meta, tmp)?;
+    Ok(len)
+}
+
+/// The rows a checkpoint sidecar covers (None where there is none, or it cannot be read).
+pub(crate) fn checkpoint_rows(side: &Path) -> Option<u64> {
+    let bytes = std::fs::read(side).ok()?;
+    let footer = bytes.get(8..bytes.len().checked_sub(8)?)?;
+    let meta = std::panic::catch_unwind(|| {
+        parquet::file::metadata::ParquetMetaDataReader::decode_metadata(footer)
+    });
+    Some(meta.ok()?.ok()?.file_metadata().num_rows().max(0) as u64)
+}
+
+/// A checkpoint that does not describe its temp file: both are left as they are.
 #[derive(Debug, thiserror::Error)]
-#[error("{}: the checkpoint does not match its temp file (it describes more bytes than the file holds); start the run again", .0.display())]
-pub struct BadCheckpoint(pub PathBuf);
+#[error("{}: the checkpoint does not match its temp file: {why}; nothing was changed; start the run again (or restore both files)", file.display())]
+pub struct BadCheckpoint {
+    pub file: PathBuf,
+    pub why: String,
+}
 
 /// Writes f64 columns as one Parquet file (zstd) with key-value metadata, atomically.
 pub fn write_parquet(

@@ -1,0 +1,136 @@
+//! Output files: only regular files (or a path that does not exist yet) are written, and a
+//! results table has one writer at a time.
+
+use super::tables::not_regular;
+use super::BadInput;
+use std::fs::File;
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+
+/// Refuses an output path that exists and is not a regular file (a device such as /dev/null, a
+/// FIFO, a socket, a folder): renaming a finished table over it would replace it. The error's kind
+/// is `InvalidInput`, its text what the path is.
+pub(crate) fn regular_output(path: &Path) -> std::io::Result<()> {
+    match not_regular(path) {
+        None => Ok(()),
+        Some(what) => Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            format!("{}: is {what}, not a regular file: vshake writes its outputs to regular files (or a new path); it was left untouched", path.display()),
+        )),
+    }
+}
+
+/// [`regular_output`] for a command's output, before any work: bad input (exit 2).
+pub(crate) fn check_output(path: &Path) -> anyhow::Result<()> {
+    regular_output(path).map_err(|e| BadInput(format!("{e}; choose another output")).into())
+}
+
+/// [`check_output`] for an optional output.
+pub(crate) fn check_outputs<'a>(
+    paths: impl IntoIterator<Item = Option<&'a PathBuf>>,
+) -> anyhow::Result<()> {
+    paths
+        .into_iter()
+        .flatten()
+        .try_for_each(|p| check_output(p))
+}
+
+/// The lock file of a results table: `NAME.parquet.lock` beside it.
+pub(crate) fn lock_path(out: &Path) -> PathBuf {
+    let mut p = out.as_os_str().to_owned();
+    p.push(".lock");
+    PathBuf::from(p)
+}
+
+/// An exclusive lock on a results table, its partial file, temp file and checkpoint: an advisory
+/// `flock` on `NAME.parquet.lock`, which holds the writer's process id. The kernel drops the lock
+/// when its process ends, however it ends, so the lock of a dead process is taken over; the file
+/// is removed when the lock is released.
+#[derive(Debug)]
+pub struct OutputLock {
+    file: File,
+    path: PathBuf,
+}
+
+impl OutputLock {
+    /// Takes the lock of `out` (the results table), or refuses at once (exit 2) naming the process
+    /// that holds it.
+    pub(crate) fn acquire(out: &Path) -> anyhow::Result<OutputLock> {
+        let path = lock_path(out);
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir)
+                .map_err(|e| BadInput(format!("{}: cannot create: {e}", dir.display())))?;
+        }
+        check_output(&path)?;
+        loop {
+            let file = std::fs::OpenOptions::new()
+                .read(true)
+                .write(true)
+                .create(true)
+                .truncate(false)
+                .open(&path)
+                .map_err(|e| {
+                    BadInput(format!(
+                        "{}: cannot create the lock file: {e}",
+                        path.display()
+                    ))
+                })?;
+            match file.try_lock() {
+                Ok(()) => {}
+                Err(std::fs::TryLockError::WouldBlock) => return Err(held(out, &path, file)),
+                // A file system without locks: the run goes on unlocked.
+                Err(std::fs::TryLockError::Error(_)) => return Ok(OutputLock { file, path }),
+            }
+            // The holder before may have removed the file between our open and our lock: then
+            // the lock is on a file no other process can find, and it is taken again.
+            if !same_file(&file, &path) {
+                continue;
+            }
+            let mut lock = OutputLock { file, path };
+            lock.write_pid()
+                .map_err(|e| BadInput(format!("{}: cannot write: {e}", lock.path.display())))?;
+            return Ok(lock);
+        }
+    }
+
+    fn write_pid(&mut self) -> std::io::Result<()> {
+        self.file.set_len(0)?;
+        (&self.file).write_all(format!("{}\n", std::process::id()).as_bytes())?;
+        self.file.flush()
+    }
+}
+
+/// Whether `path` still names the open file `file`.
+fn same_file(file: &File, path: &Path) -> bool {
+    use std::os::unix::fs::MetadataExt;
+    match (file.metadata(), std::fs::metadata(path)) {
+        (Ok(a), Ok(b)) => a.dev() == b.dev() && a.ino() == b.ino(),
+        _ => false,
+    }
+}
+
+/// The refusal of a second writer: the holder's process id, from the lock file.
+fn held(out: &Path, lock: &Path, mut file: File) -> anyhow::Error {
+    let mut text = String::new();
+    let _ = file.read_to_string(&mut text);
+    let holder = match text.trim().parse::<u32>() {
+        Ok(pid) => format!("process {pid}"),
+        Err(_) => "another process".to_string(),
+    };
+    BadInput(format!(
+        "{}: {holder} is writing this table (it holds the lock {}); nothing was done: wait for it to end, or give another --out",
+        out.display(),
+        lock.display()
+    ))
+    .into()
+}
+
+impl Drop for OutputLock {
+    /// Removes the lock file, still locked (a process that opened it just before locks a file no
+    /// other can find, sees that, and takes the lock again).
+    fn drop(&mut self) {
+        if same_file(&self.file, &self.path) {
+            let _ = std::fs::remove_file(&self.path);
+        }
+    }
+}
