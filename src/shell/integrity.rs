@@ -12,51 +12,15 @@ use std::fs::File;
 use std::os::unix::fs::FileExt;
 use std::path::Path;
 
-/// The CRC-32 (IEEE 802.3, as zlib and PNG) lookup table.
-const TABLE: [u32; 256] = {
-    let mut t = [0u32; 256];
-    let mut i = 0;
-    while i < 256 {
-        let mut c = i as u32;
-        let mut k = 0;
-        while k < 8 {
-            c = if c & 1 != 0 {
-                0xEDB8_8320 ^ (c >> 1)
-            } else {
-                c >> 1
-            };
-            k += 1;
-        }
-        t[i] = c;
-        i += 1;
-    }
-    t
-};
-
-/// A running CRC-32.
-#[derive(Clone, Copy)]
-struct Crc(u32);
-
-impl Crc {
-    fn new() -> Self {
-        Crc(0xFFFF_FFFF)
-    }
-    fn update(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.0 = TABLE[((self.0 ^ b as u32) & 0xFF) as usize] ^ (self.0 >> 8);
-        }
-    }
-    fn value(self) -> u32 {
-        self.0 ^ 0xFFFF_FFFF
-    }
-}
+/// A running CRC-32 (IEEE 802.3, as zlib and PNG): crc32fast's.
+type Crc = crc32fast::Hasher;
 
 /// The CRC-32 of `bytes`.
 #[cfg(test)]
 fn crc32(bytes: &[u8]) -> u32 {
     let mut c = Crc::new();
     c.update(bytes);
-    c.value()
+    c.finalize()
 }
 
 /// The bytes a row group occupies in its file: from the first column chunk's start to the last
@@ -87,7 +51,7 @@ pub(crate) fn row_group_sum(file: &File, group: &RowGroupMetaData) -> Option<u32
         crc.update(&buf[..n]);
         at += n as u64;
     }
-    Some(crc.value())
+    Some(crc.finalize())
 }
 
 /// The metadata value of a list of row-group checksums: `crc32:` and one 8-digit hexadecimal
