@@ -308,6 +308,92 @@ fn a_flipped_byte_in_kept_rows_is_refused_by_resume() {
     assert_eq!(content(&out), content(&reference(d.path(), "256")));
 }
 
+/// Replaces the byte after the first `marker` in `path` by `by`; its offset.
+fn change_after(path: &Path, marker: &[u8], by: u8) -> usize {
+    let mut b = std::fs::read(path).unwrap();
+    let at = b.windows(marker.len()).position(|w| w == marker).unwrap() + marker.len();
+    assert_ne!(b[at], by);
+    b[at] = by;
+    std::fs::write(path, b).unwrap();
+    at
+}
+
+/// A killed run's checkpoint footer changed where the row groups' checksums do not reach: a
+/// digit of the study it was made for (a resume would mix two studies in one table), and a
+/// column's name (a reader would refuse the file only once the rows were moved). Both are refused
+/// by `--resume` with exit code 2 before anything is moved; restored, the resume completes.
+#[test]
+fn a_changed_checkpoint_footer_is_refused_before_anything_is_moved() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("k.parquet");
+    let partial = d.path().join("k.partial.parquet");
+    let (tmp, side) = (
+        with_suffix(&partial, ".tmp"),
+        with_suffix(&partial, ".tmp.checkpoint"),
+    );
+    let mut child = start(d.path(), &out, "256");
+    wait_for(&side);
+    std::thread::sleep(Duration::from_millis(300));
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let (tmp_bytes, side_bytes) = (std::fs::read(&tmp).unwrap(), std::fs::read(&side).unwrap());
+    // `high = 1.9` of g_d in the stored study becomes `high = 1.8`; then `amp_ratio`, the first
+    // time the footer names it (its schema), becomes `amp_ratiO`.
+    for (marker, by, says) in [
+        (
+            &b"high = 1."[..],
+            b'8',
+            "its metadata (the study, seed and shard",
+        ),
+        (&b"amp_rati"[..], b'O', "its schema cannot be read"),
+    ] {
+        change_after(&side, marker, by);
+        let (code, stdout, err) = study(&["run", "--resume", s(&out), "-q"]);
+        assert_eq!(code, 2, "{stdout}{err}");
+        assert!(err.contains(says), "{err}");
+        assert!(
+            std::fs::read(&tmp).unwrap() == tmp_bytes,
+            "the temp file was changed"
+        );
+        assert!(!out.exists() && !with_suffix(&partial, ".killed").exists());
+        std::fs::write(&side, &side_bytes).unwrap();
+    }
+    let (code, stdout, err) = study(&["run", "--resume", s(&out), "-q"]);
+    assert_eq!(code, 0, "{stdout}{err}");
+    assert_eq!(content(&out), content(&reference(d.path(), "256")));
+}
+
+/// A stopped run's file whose stored study was changed by one byte is refused by `--resume`.
+#[test]
+fn a_changed_study_in_a_stopped_file_is_refused_by_resume() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("t.parquet");
+    let partial = d.path().join("t.partial.parquet");
+    let mut child = start(d.path(), &out, "256");
+    wait_for(&with_suffix(&partial, ".tmp.checkpoint"));
+    std::thread::sleep(Duration::from_millis(200));
+    let pid = child.id().to_string();
+    assert!(Command::new("kill")
+        .args(["-TERM", &pid])
+        .status()
+        .unwrap()
+        .success());
+    let status = child.wait().unwrap();
+    assert_eq!(status.code(), Some(143), "{status:?}");
+    let before = std::fs::read(&partial).unwrap();
+    change_after(&partial, b"high = 1.", b'8');
+    let (code, stdout, err) = study(&["run", "--resume", s(&partial), "-q"]);
+    assert_eq!(code, 2, "{stdout}{err}");
+    assert!(
+        err.contains(&format!("{}: its metadata", partial.display())),
+        "{err}"
+    );
+    std::fs::write(&partial, &before).unwrap();
+    let (code, stdout, err) = study(&["run", "--resume", s(&partial), "-q"]);
+    assert_eq!(code, 0, "{stdout}{err}");
+    assert_eq!(content(&out), content(&reference(d.path(), "256")));
+}
+
 /// Acceptance 4 (merge): a flipped byte in a shard is refused by `study merge` with exit code 2,
 /// naming the shard and the rows; nothing is merged and the shards are kept. A merged table
 /// written into the shards' folder is skipped by the next merge.

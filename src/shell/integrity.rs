@@ -7,7 +7,7 @@
 
 use super::meta::Key;
 use super::BadInput;
-use parquet::file::metadata::{ParquetMetaData, RowGroupMetaData};
+use parquet::file::metadata::{KeyValue, ParquetMetaData, RowGroupMetaData};
 use std::fs::File;
 use std::os::unix::fs::FileExt;
 use std::path::Path;
@@ -72,10 +72,69 @@ fn decode(value: &str) -> Option<Vec<u32>> {
         .collect()
 }
 
+/// Whether a metadata key is one of the checksums (not covered by [`metadata_sum`]).
+fn is_checksum(key: &str) -> bool {
+    key == Key::RowGroupCrc32.as_str() || key == Key::MetadataCrc32.as_str()
+}
+
+/// The CRC-32 of the `vshake.*` key-value pairs of a file but the checksums, in order, each as
+/// `key=value` and a newline: what a resume or a merge takes from the file (its study, seed,
+/// shard), so that a byte changed there is refused like one changed in the rows.
+pub(crate) fn metadata_sum(kv: &[KeyValue]) -> u32 {
+    let mut crc = Crc::new();
+    for e in kv
+        .iter()
+        .filter(|e| e.key.starts_with("vshake.") && !is_checksum(&e.key))
+    {
+        crc.update(e.key.as_bytes());
+        crc.update(b"=");
+        crc.update(e.value.as_deref().unwrap_or("").as_bytes());
+        crc.update(b"\n");
+    }
+    crc.finalize()
+}
+
+/// The checksum entries of a file whose other metadata is `kv` and whose row groups' sums are
+/// `sums`: the row groups' list ([`encode`]) and the metadata's ([`metadata_sum`]).
+pub(crate) fn checksum_entries(kv: &[KeyValue], sums: &[u32]) -> [KeyValue; 2] {
+    [
+        KeyValue::new(Key::RowGroupCrc32.as_str().to_string(), encode(sums)),
+        KeyValue::new(
+            Key::MetadataCrc32.as_str().to_string(),
+            format!("crc32:{:08x}", metadata_sum(kv)),
+        ),
+    ]
+}
+
+/// Checks the metadata of `meta` against its checksum, where it has one.
+fn verify_metadata(meta: &ParquetMetaData, name: &Path) -> anyhow::Result<()> {
+    let kv = meta
+        .file_metadata()
+        .key_value_metadata()
+        .map_or(&[][..], |kv| kv);
+    let Some(stored) = kv
+        .iter()
+        .rev()
+        .find(|k| k.key == Key::MetadataCrc32.as_str())
+    else {
+        return Ok(());
+    };
+    let want = format!("crc32:{:08x}", metadata_sum(kv));
+    if stored.value.as_deref() != Some(want.as_str()) {
+        return Err(BadInput(format!(
+            "{}: its metadata (the study, seed and shard its rows were made for) does not match its checksum: the file was damaged or changed after it was written; it was not used, and nothing was changed (restore it, or run its rows again)",
+            name.display()
+        ))
+        .into());
+    }
+    Ok(())
+}
+
 /// Checks every row group of `meta` (the footer of `data`, or of its checkpoint) against the
 /// checksums it lists; `name` is the file the message names. A file without checksums (written by
 /// an older vshake) passes. A mismatch is bad input (exit 2), naming the file and the rows.
 pub(crate) fn verify(data: &File, meta: &ParquetMetaData, name: &Path) -> anyhow::Result<()> {
+    verify_metadata(meta, name)?;
     let value = meta
         .file_metadata()
         .key_value_metadata()

@@ -59,6 +59,9 @@ keys! {
     /// The CRC-32 of each row group as written (`crc32:` and a comma-separated list), checked by
     /// `study run --resume` and `study merge` (shell::integrity).
     RowGroupCrc32 = "row_group_crc32",
+    /// The CRC-32 of the file's own `vshake.*` metadata but the checksums (the study, seed and
+    /// shard its rows were made for), checked with the row groups' (shell::integrity).
+    MetadataCrc32 = "metadata_crc32",
     /// A shard's place: `study merge` checks and removes them.
     ShardIndex = "shard_index",
     ShardCount = "shard_count",
@@ -87,11 +90,12 @@ keys! {
 pub const SHARD_KEYS: [Key; 3] = [Key::ShardIndex, Key::ShardCount, Key::ShardSamples];
 
 /// The keys a file gets when it is closed (not carried over by a merge or a resume).
-pub const COMPLETION_KEYS: [Key; 4] = [
+pub const COMPLETION_KEYS: [Key; 5] = [
     Key::Complete,
     Key::RowsDone,
     Key::RowsTotal,
     Key::RowGroupCrc32,
+    Key::MetadataCrc32,
 ];
 
 impl fmt::Display for Key {

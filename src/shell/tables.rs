@@ -1356,10 +1356,7 @@ impl ParquetStream {
         let rows = groups.iter().map(|g| g.num_rows()).sum();
         let descr = groups[0].schema_descr_ptr();
         let mut kv = c.kv.clone();
-        kv.push(KeyValue::new(
-            super::meta::Key::RowGroupCrc32.as_str().to_string(),
-            super::integrity::encode(&self.sums),
-        ));
+        kv.extend(super::integrity::checksum_entries(&c.kv, &self.sums));
         let meta = ParquetMetaData::new(
             FileMetaData::new(
                 1,
@@ -1408,13 +1405,15 @@ impl ParquetStream {
             .flush()
             .map_err(|e| write_failed(&self.file.tmp, e))?;
         self.take_sums()?;
-        let sums = (
-            super::meta::Key::RowGroupCrc32.as_str().to_string(),
-            super::integrity::encode(&self.sums),
+        let mut kv = self.kv.clone();
+        kv.extend(
+            extra
+                .iter()
+                .map(|(k, v)| KeyValue::new(k.clone(), v.clone())),
         );
-        for (k, v) in extra.iter().chain([&sums]) {
-            self.writer
-                .append_key_value_metadata(KeyValue::new(k.clone(), v.clone()));
+        let sums = super::integrity::checksum_entries(&kv, &self.sums);
+        for e in kv.into_iter().skip(self.kv.len()).chain(sums) {
+            self.writer.append_key_value_metadata(e);
         }
         self.writer
             .finish()
@@ -1557,6 +1556,14 @@ fn checked_checkpoint(tmp: &Path, side: &Path, bytes: &[u8]) -> anyhow::Result<u
         ))
         .into());
     }
+    // The footer's Arrow schema against its Parquet schema, as a reader will take them: a byte
+    // changed in a column's name is refused here, before anything is moved.
+    let file_meta = meta.file_metadata();
+    parquet::arrow::parquet_to_arrow_schema(
+        file_meta.schema_descr(),
+        file_meta.key_value_metadata(),
+    )
+    .map_err(|e| bad(format!("its schema cannot be read ({e})")))?;
     super::integrity::verify(&data, &meta, tmp)?;
     Ok(len)
 }
