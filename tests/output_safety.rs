@@ -394,6 +394,53 @@ fn a_changed_study_in_a_stopped_file_is_refused_by_resume() {
     assert_eq!(content(&out), content(&reference(d.path(), "256")));
 }
 
+/// A file of the user's with the output's name, or a link there, is never replaced: `merge`,
+/// `sim` and `sensitivity` refuse it as `run` does (exit 2, the file unchanged).
+#[test]
+fn a_file_vshake_did_not_write_is_never_replaced() {
+    let d = tempfile::tempdir().unwrap();
+    let table = reference(d.path(), "8");
+    let notes = d.path().join("notes.parquet");
+    std::fs::write(&notes, "my notes\n").unwrap();
+    let link = d.path().join("link.parquet");
+    std::os::unix::fs::symlink(&table, &link).unwrap();
+    let sim = d.path().join("sim.toml");
+    std::fs::write(
+        &sim,
+        "[excitation]\nkind = \"sine\"\nfreq_hz = 3.0\namp_g = 0.5\n",
+    )
+    .unwrap();
+    for out in [&notes, &link] {
+        for args in [
+            vec!["sim", s(&sim), "-q", "--out", s(out)],
+            vec!["sensitivity", s(&table), "--out", s(out)],
+            vec![
+                "run",
+                s(&sweep(d.path())),
+                "--samples",
+                "8",
+                "--out",
+                s(out),
+                "-q",
+            ],
+        ] {
+            let (code, o, err) = study(&args);
+            assert_eq!(code, 2, "{args:?}: {o}{err}");
+            assert!(err.contains("nothing was replaced"), "{err}");
+        }
+    }
+    assert_eq!(std::fs::read_to_string(&notes).unwrap(), "my notes\n");
+    let shards = d.path().join("shards");
+    std::fs::create_dir(&shards).unwrap();
+    std::fs::copy(&table, shards.join("s.parquet")).unwrap();
+    let (code, o, err) = study(&["merge", s(&shards), "--out", s(&notes)]);
+    assert_eq!(code, 2, "{o}{err}");
+    assert_eq!(std::fs::read_to_string(&notes).unwrap(), "my notes\n");
+    // vshake's own file is replaced as before.
+    let (code, o, err) = study(&["sim", s(&sim), "-q", "--out", s(&table)]);
+    assert_eq!(code, 0, "{o}{err}");
+}
+
 /// Acceptance 4 (merge): a flipped byte in a shard is refused by `study merge` with exit code 2,
 /// naming the shard and the rows; nothing is merged and the shards are kept. A merged table
 /// written into the shards' folder is skipped by the next merge.

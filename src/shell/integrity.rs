@@ -77,18 +77,23 @@ fn is_checksum(key: &str) -> bool {
     key == Key::RowGroupCrc32.as_str() || key == Key::MetadataCrc32.as_str()
 }
 
-/// The CRC-32 of the `vshake.*` key-value pairs of a file but the checksums, in order, each as
+/// The CRC-32 of the `vshake.*` key-value pairs of a file but the checksums, sorted, each as
 /// `key=value` and a newline: what a resume or a merge takes from the file (its study, seed,
-/// shard), so that a byte changed there is refused like one changed in the rows.
+/// shard), so that a byte changed there is refused like one changed in the rows. Sorted, so that
+/// files with the same metadata have the same sum whatever order their writer gave the keys (a
+/// merged table and the single run it equals).
 pub(crate) fn metadata_sum(kv: &[KeyValue]) -> u32 {
-    let mut crc = Crc::new();
-    for e in kv
+    let mut pairs: Vec<(&str, &str)> = kv
         .iter()
         .filter(|e| e.key.starts_with("vshake.") && !is_checksum(&e.key))
-    {
-        crc.update(e.key.as_bytes());
+        .map(|e| (e.key.as_str(), e.value.as_deref().unwrap_or("")))
+        .collect();
+    pairs.sort_unstable();
+    let mut crc = Crc::new();
+    for (key, value) in pairs {
+        crc.update(key.as_bytes());
         crc.update(b"=");
-        crc.update(e.value.as_deref().unwrap_or("").as_bytes());
+        crc.update(value.as_bytes());
         crc.update(b"\n");
     }
     crc.finalize()

@@ -3,7 +3,7 @@
 
 use super::cli::MergeArgs;
 use super::meta::{self, Key, SHARD_KEYS};
-use super::outputs::{check_output, OutputLock};
+use super::outputs::{check_output, check_replaceable, OutputLock};
 use super::tables::{self, ParquetStream};
 use super::{integrity, BadInput};
 use anyhow::Context;
@@ -241,6 +241,7 @@ pub fn run(args: &MergeArgs) -> anyhow::Result<()> {
     });
     check_output(&out)?;
     let _lock = OutputLock::acquire(&out)?;
+    check_replaceable(&out)?;
     let mut skipped = Vec::new();
     let list = shards(&args.dir, &out, &mut skipped)?;
     // Every shard's rows checked against their checksums before one is written.

@@ -35,6 +35,43 @@ pub(crate) fn check_outputs<'a>(
         .try_for_each(|p| check_output(p))
 }
 
+/// A Parquet output may replace a file vshake wrote (its metadata has `vshake.kind`: an earlier
+/// run's table, history, spectrum or analysis), never another file of the same name, nor a link
+/// (vshake does not write through one): exit 2, nothing replaced.
+pub(crate) fn check_replaceable(out: &Path) -> anyhow::Result<()> {
+    let Ok(md) = std::fs::symlink_metadata(out) else {
+        return Ok(());
+    };
+    if md.file_type().is_symlink() {
+        return Err(BadInput(format!(
+            "{}: is a symbolic link, and vshake does not write through links; nothing was replaced: give the file it points to, or another path",
+            out.display()
+        ))
+        .into());
+    }
+    let ours = md.is_file()
+        && super::tables::parquet_metadata(out)
+            .is_ok_and(|m| super::meta::get(&m, super::meta::Key::Kind).is_some());
+    if !ours {
+        return Err(BadInput(format!(
+            "{}: exists and is not a file vshake wrote (no vshake.kind in its Parquet metadata); nothing was replaced: choose another output, or remove it",
+            out.display()
+        ))
+        .into());
+    }
+    Ok(())
+}
+
+/// [`check_output`] and [`check_replaceable`] for optional Parquet outputs.
+pub(crate) fn check_parquet_outputs<'a>(
+    paths: impl IntoIterator<Item = Option<&'a PathBuf>>,
+) -> anyhow::Result<()> {
+    paths.into_iter().flatten().try_for_each(|p| {
+        check_output(p)?;
+        check_replaceable(p)
+    })
+}
+
 /// The lock file of a results table: `NAME.parquet.lock` beside it.
 pub(crate) fn lock_path(out: &Path) -> PathBuf {
     let mut p = out.as_os_str().to_owned();

@@ -2,7 +2,7 @@
 
 use super::cli::RunArgs;
 use super::meta::{self, Key, Kind};
-use super::outputs::{check_output, OutputLock};
+use super::outputs::{check_output, check_replaceable, OutputLock};
 use super::progress::Progress;
 use super::tables::{self, input_if_user, load_reference, Column, ParquetStream};
 use super::{interrupt, BadInput};
@@ -106,18 +106,20 @@ pub(crate) fn parameters_of_columns(
 ) -> anyhow::Result<Vec<&'static ParamInfo>> {
     let mut infos: Vec<&'static ParamInfo> = Vec::new();
     for n in names {
+        // A name is quoted short in a message (a header line may be megabytes long).
+        let n_ = tables::clip(n, 60);
         let info = ModelParams::lookup(n)
             .or_else(|| ModelParams::registry().find(|p| p.qualified_column_name() == *n))
             .or_else(|| ModelParams::registry().find(|p| p.column_name() == *n || p.name == n));
         match info.map(|i| (i, cannot_vary(i))) {
-            Some((_, Some(why))) => return Err(BadInput(format!("{source}: column `{n}`: {why}")).into()),
+            Some((_, Some(why))) => return Err(BadInput(format!("{source}: column `{n_}`: {why}")).into()),
             Some((i, None)) if infos.iter().any(|j| j.path() == i.path()) => {
-                return Err(BadInput(format!("{source}: column `{n}` names {}, which another column names too; give each parameter once", i.path())).into())
+                return Err(BadInput(format!("{source}: column `{n_}` names {}, which another column names too; give each parameter once", i.path())).into())
             }
             Some((i, None)) => infos.push(i),
             None => {
                 return Err(BadInput(format!(
-                    "{source}: column `{n}` is not a model parameter (use a path such as controller.g_d, or a column name such as g_d; `study params` lists them)"
+                    "{source}: column `{n_}` is not a model parameter (use a path such as controller.g_d, or a column name such as g_d; `study params` lists them)"
                 ))
                 .into())
             }
@@ -457,37 +459,32 @@ fn output_path(
     check_output(&tables::partial_path(&out))?;
     check_writable(&out)?;
     let lock = lock.then(|| OutputLock::acquire(&out)).transpose()?;
+    check_no_interrupted_run(&out)?;
     check_replaceable(&out)?;
     Ok((out, lock))
 }
 
-/// A new run may replace a table vshake wrote (its metadata says so), never another file, and
-/// never the rows of an interrupted run of it (those are `--resume`'s).
-fn check_replaceable(out: &Path) -> anyhow::Result<()> {
+/// A new run may replace a table vshake wrote ([`check_replaceable`]), never the rows of an
+/// interrupted run of it (those are `--resume`'s).
+fn check_no_interrupted_run(out: &Path) -> anyhow::Result<()> {
     let partial = tables::partial_path(out);
-    let interrupted = [
+    let left: Vec<String> = [
         partial.clone(),
         tables::killed_path(&partial),
+        tables::tmp_path(&partial),
         tables::checkpoint_path(&partial),
-    ];
-    if let Some(p) = interrupted.iter().find(|p| p.exists()) {
+    ]
+    .iter()
+    .filter(|p| p.exists())
+    .map(|p| p.display().to_string())
+    .collect();
+    if !left.is_empty() {
         return Err(BadInput(format!(
-            "{}: an interrupted run of this table left its rows in {}; continue it with: study run --resume {}, or remove that file to start again",
+            "{}: an interrupted run of this table left its rows in {}; continue it with: study run --resume {}, or remove {} to start again",
             out.display(),
-            p.display(),
-            partial.display()
-        ))
-        .into());
-    }
-    let Ok(md) = std::fs::symlink_metadata(out) else {
-        return Ok(());
-    };
-    let ours = md.is_file()
-        && tables::parquet_metadata(out).is_ok_and(|m| meta::get(&m, Key::Kind).is_some());
-    if !ours {
-        return Err(BadInput(format!(
-            "{}: exists and is not a table vshake wrote (no vshake.kind in its Parquet metadata); nothing was replaced: choose another --out, or remove it",
-            out.display()
+            left.join(" and "),
+            partial.display(),
+            if left.len() > 1 { "those files" } else { "that file" }
         ))
         .into());
     }

@@ -138,7 +138,7 @@ pub(crate) fn analyse(
 }
 
 pub fn run(args: &SensitivityArgs) -> anyhow::Result<()> {
-    super::outputs::check_outputs([args.out.as_ref()])?;
+    super::outputs::check_parquet_outputs([args.out.as_ref()])?;
     let file = &args.file;
     let loaded = load(file, args.metrics.as_deref())?;
     let lines = analyse(&loaded, args.bootstrap, args.threads)?;

@@ -32,7 +32,7 @@ pub(crate) fn load_spec(file: &Path, model: Option<&Path>) -> anyhow::Result<Sim
 }
 
 pub fn run(args: &SimArgs) -> anyhow::Result<()> {
-    super::outputs::check_outputs([args.out.as_ref(), args.spectrum.as_ref()])?;
+    super::outputs::check_parquet_outputs([args.out.as_ref(), args.spectrum.as_ref()])?;
     let spec = load_spec(&args.file, args.model.as_deref())?;
     let base = args.file.parent().unwrap_or(Path::new("."));
     let reference = build_reference(&spec, base)?;

@@ -1550,8 +1550,7 @@ fn checked_checkpoint(tmp: &Path, side: &Path, bytes: &[u8]) -> anyhow::Result<u
         .unwrap_or(0);
     if have < len || end > len {
         return Err(bad(format!(
-            "it describes {} bytes, and {} holds {have}",
-            len.max(end),
+            "it covers {len} bytes of {}, whose row groups it lists end at byte {end}, and the file holds {have}",
             tmp.display()
         ))
         .into());

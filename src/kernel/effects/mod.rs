@@ -799,6 +799,26 @@ mod tests {
         );
     }
 
+    /// What an effect moves is declared once (`Effect::MOVES_SPOOL`) and read from there: the
+    /// delay and the spool's dynamics move the spool; the metering nonlinearities and the rest
+    /// do not, and the set moves it because some of its effects do.
+    #[test]
+    fn what_moves_the_spool_is_the_effects_declaration() {
+        let moving: Vec<&str> = EffectId::ALL
+            .into_iter()
+            .filter(|e| e.moves_spool())
+            .map(|e| e.name())
+            .collect();
+        assert_eq!(moving, ["transport_delay", "spool_dynamics"]);
+        assert!(<EffectSet<4> as Effect<4>>::MOVES_SPOOL);
+        assert!(!<Baseline as Effect<4>>::MOVES_SPOOL);
+        assert_eq!(
+            EffectId::FlowGain.name(),
+            "flow_gain",
+            "INFO.name is the module's"
+        );
+    }
+
     /// The composed states are the effects' states side by side: the layout follows the types.
     #[test]
     fn composed_states_are_contiguous() {
