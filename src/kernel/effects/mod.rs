@@ -810,8 +810,8 @@ mod tests {
             .map(|e| e.name())
             .collect();
         assert_eq!(moving, ["transport_delay", "spool_dynamics"]);
-        assert!(<EffectSet<4> as Effect<4>>::MOVES_SPOOL);
-        assert!(!<Baseline as Effect<4>>::MOVES_SPOOL);
+        const { assert!(<EffectSet<4> as Effect<4>>::MOVES_SPOOL) };
+        const { assert!(!<Baseline as Effect<4>>::MOVES_SPOOL) };
         assert_eq!(
             EffectId::FlowGain.name(),
             "flow_gain",
