@@ -4,7 +4,7 @@
 //! by `--resume` and `merge`. Each test runs the `study` binary on a cut gains sweep (seconds).
 
 mod common;
-use common::{content, study};
+use common::{content, study, wait_for};
 use std::os::unix::fs::FileTypeExt;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -64,18 +64,6 @@ fn start(dir: &Path, out: &Path, samples: &str) -> Child {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap()
-}
-
-fn wait_for(path: &Path) {
-    let t = Instant::now();
-    while !path.exists() {
-        assert!(
-            t.elapsed() < Duration::from_secs(60),
-            "{} never appeared",
-            path.display()
-        );
-        std::thread::sleep(Duration::from_millis(5));
-    }
 }
 
 /// Acceptance 1: under `ulimit -f` the run fails with one message (the file, the cause once, the
@@ -155,7 +143,7 @@ fn a_second_writer_is_refused_at_once_and_a_dead_ones_lock_is_taken_over() {
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("twice.parquet");
     let mut first = start(d.path(), &out, "256");
-    wait_for(&d.path().join("twice.partial.parquet.tmp"));
+    wait_for(&d.path().join("twice.partial.parquet.tmp"), Duration::ZERO);
     let pid = first.id();
     for args in [
         vec![
@@ -269,23 +257,29 @@ fn flip(path: &Path, at: usize) {
     std::fs::write(path, b).unwrap();
 }
 
+/// The cut sweep killed (SIGKILL) 0.3 s after its first checkpoint, in `dir`: its table, partial
+/// file, temp file and checkpoint paths.
+fn killed_run(dir: &Path) -> (PathBuf, PathBuf, PathBuf, PathBuf) {
+    let out = dir.join("k.parquet");
+    let partial = dir.join("k.partial.parquet");
+    let (tmp, side) = (
+        with_suffix(&partial, ".tmp"),
+        with_suffix(&partial, ".tmp.checkpoint"),
+    );
+    let mut child = start(dir, &out, "256");
+    wait_for(&side, Duration::from_millis(300));
+    child.kill().unwrap();
+    child.wait().unwrap();
+    (out, partial, tmp, side)
+}
+
 /// Acceptance 4 (resume): a flipped byte in a checkpointed row group of a killed run is refused by
 /// `--resume` with exit code 2, naming the file and the rows, and nothing is consumed; with the
 /// byte restored the resume completes the run.
 #[test]
 fn a_flipped_byte_in_kept_rows_is_refused_by_resume() {
     let d = tempfile::tempdir().unwrap();
-    let out = d.path().join("k.parquet");
-    let partial = d.path().join("k.partial.parquet");
-    let (tmp, side) = (
-        with_suffix(&partial, ".tmp"),
-        with_suffix(&partial, ".tmp.checkpoint"),
-    );
-    let mut child = start(d.path(), &out, "256");
-    wait_for(&side);
-    std::thread::sleep(Duration::from_millis(300));
-    child.kill().unwrap();
-    child.wait().unwrap();
+    let (out, partial, tmp, side) = killed_run(d.path());
     // The first row group starts after the 4-byte magic; byte 100 is in its first column chunk.
     flip(&tmp, 100);
     let (tmp_bytes, side_bytes) = (std::fs::read(&tmp).unwrap(), std::fs::read(&side).unwrap());
@@ -325,17 +319,7 @@ fn change_after(path: &Path, marker: &[u8], by: u8) -> usize {
 #[test]
 fn a_changed_checkpoint_footer_is_refused_before_anything_is_moved() {
     let d = tempfile::tempdir().unwrap();
-    let out = d.path().join("k.parquet");
-    let partial = d.path().join("k.partial.parquet");
-    let (tmp, side) = (
-        with_suffix(&partial, ".tmp"),
-        with_suffix(&partial, ".tmp.checkpoint"),
-    );
-    let mut child = start(d.path(), &out, "256");
-    wait_for(&side);
-    std::thread::sleep(Duration::from_millis(300));
-    child.kill().unwrap();
-    child.wait().unwrap();
+    let (out, partial, tmp, side) = killed_run(d.path());
     let (tmp_bytes, side_bytes) = (std::fs::read(&tmp).unwrap(), std::fs::read(&side).unwrap());
     // `high = 1.9` of g_d in the stored study becomes `high = 1.8`; then `amp_ratio`, the first
     // time the footer names it (its schema), becomes `amp_ratiO`.
@@ -370,8 +354,10 @@ fn a_changed_study_in_a_stopped_file_is_refused_by_resume() {
     let out = d.path().join("t.parquet");
     let partial = d.path().join("t.partial.parquet");
     let mut child = start(d.path(), &out, "256");
-    wait_for(&with_suffix(&partial, ".tmp.checkpoint"));
-    std::thread::sleep(Duration::from_millis(200));
+    wait_for(
+        &with_suffix(&partial, ".tmp.checkpoint"),
+        Duration::from_millis(200),
+    );
     let pid = child.id().to_string();
     assert!(Command::new("kill")
         .args(["-TERM", &pid])

@@ -3,7 +3,7 @@
 
 mod common;
 use arrow_array::{Array, Float64Array, StringArray, UInt32Array, UInt64Array};
-use common::study;
+use common::{study, wait_for};
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -119,20 +119,6 @@ fn start(out: &Path, extra: &[&str]) -> Child {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap()
-}
-
-/// Waits until `path` exists (a temp file or a checkpoint), then `extra` more.
-fn wait_for(path: &Path, extra: Duration) {
-    let t = Instant::now();
-    while !path.exists() {
-        assert!(
-            t.elapsed() < Duration::from_secs(60),
-            "{} never appeared",
-            path.display()
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    std::thread::sleep(extra);
 }
 
 fn with_suffix(p: &Path, suffix: &str) -> PathBuf {

@@ -131,3 +131,19 @@ pub fn reference_sine(amp_g: f64) -> vshake::kernel::excitation::Reference {
     }
     .reference(1024.0)
 }
+
+/// Waits until `path` exists (a temp file or a checkpoint of a run in the background), at most a
+/// minute, then `extra` more.
+#[allow(dead_code)] // used by the interruption tests, not by every test crate
+pub fn wait_for(path: &Path, extra: std::time::Duration) {
+    let t = std::time::Instant::now();
+    while !path.exists() {
+        assert!(
+            t.elapsed() < std::time::Duration::from_secs(60),
+            "{} never appeared",
+            path.display()
+        );
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    std::thread::sleep(extra);
+}
