@@ -452,7 +452,7 @@ fn huge_designs_are_refused_or_announced() {
         "{err}"
     );
 
-    let st = small_study(d.path(), "1000000000", "monte_carlo", SINE, "");
+    let st = small_study(d.path(), "4000000000", "monte_carlo", SINE, "");
     let (code, out, err) = study(&["run", s(&st), "--dry-run"]);
     assert_eq!(code, 0, "{err}");
     assert!(out.contains("days wall") && out.contains("--yes"), "{out}");

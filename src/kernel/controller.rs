@@ -20,6 +20,9 @@ use super::params::ControllerParams;
 /// Normalised biquad coefficients [b0, b1, b2, a1, a2] (a0 = 1).
 pub type Biquad = [f64; 5];
 
+/// A notch at depth 0: exactly the identity (b0 = 1, the rest 0).
+pub const IDENTITY: Biquad = [1.0, 0.0, 0.0, 0.0, 0.0];
+
 /// Tustin (pre-warped at f0) coefficients of notch (f0 Hz, bandwidth Hz, depth dB) at rate f_s.
 pub(crate) fn notch_coefficients(f0: f64, bw: f64, depth_db: f64, f_s: f64) -> Biquad {
     let w0 = 2.0 * std::f64::consts::PI * f0;
@@ -63,6 +66,8 @@ pub struct ControllerLane {
     pub hp_b: f64,
     pub hp_a: f64,
     pub notches: [Biquad; 5],
+    /// Which notches are the [`IDENTITY`] (depth 0), found once so that a tick need not compare.
+    pub identity: [bool; 5],
     pub u_lim: f64,
     pub k_sp: f64,
 }
@@ -74,7 +79,7 @@ impl ControllerLane {
         let notches = p.notches().map(|(f0, bw, depth)| {
             if depth == 0.0 {
                 // Exactly the identity (the Tustin form would equal it up to rounding).
-                [1.0, 0.0, 0.0, 0.0, 0.0]
+                IDENTITY
             } else {
                 notch_coefficients(f0, bw, depth, p.f_s)
             }
@@ -89,6 +94,7 @@ impl ControllerLane {
             hp_b: two_fs / (two_fs + w_hp),
             hp_a: (two_fs - w_hp) / (two_fs + w_hp),
             notches,
+            identity: notches.map(|q| q == IDENTITY),
             u_lim,
             k_sp,
         }
@@ -130,7 +136,12 @@ pub fn tick(c: &ControllerLane, m: &mut ControllerMemory, r: &RefState, x: f64, 
     m.f_prev = f;
     let mut u =
         c.c_fb * (r.x - x) + c.c_d * r.x + c.c_v * r.v + c.c_a * r.a + c.c_j * r.j + c.c_f * m.f_hp;
-    for (q, s) in c.notches.iter().zip(m.notch.iter_mut()) {
+    for ((q, s), &identity) in c.notches.iter().zip(m.notch.iter_mut()).zip(&c.identity) {
+        if identity {
+            // Its states stay +0 while u is finite, so y = 1·u + 0 = u + 0 (the same bits).
+            u += 0.0;
+            continue;
+        }
         let y = q[0] * u + s[0];
         s[0] = q[1] * u - q[3] * y + s[1];
         s[1] = q[2] * u - q[4] * y;

@@ -11,12 +11,14 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod actuator;
+mod bare;
 pub mod controller;
 pub mod effects;
 pub mod excitation;
 pub mod friction;
 pub mod gpu_lanes;
 pub mod ground;
+pub mod lanes;
 pub mod metrics;
 pub mod params;
 pub mod platen;
@@ -32,4 +34,4 @@ pub const N_ACT: usize = 2;
 
 /// Lanes of the batch kernel (samples integrated together). Eight f64 lanes are two AVX2
 /// vectors, which gives the square-root and division units independent work to overlap.
-pub const LANES: usize = 8;
+pub const LANES: usize = 16;

@@ -9,6 +9,8 @@
 //! |v|^α is a type parameter ([`Damping`]): α = 0.5 (the paper's value) uses a square root,
 //! other exponents `powf`; the choice is made once per batch.
 
+use super::lanes::{Pack, Simd};
+
 /// Per-lane platen coefficients.
 #[derive(Debug, Clone, Copy)]
 pub struct PlatenLane {
@@ -22,6 +24,22 @@ pub struct PlatenLane {
 /// How |v|^α is evaluated.
 pub trait Damping: Copy + Send + Sync + 'static {
     fn pow(v_abs: f64, alpha: f64) -> f64;
+
+    /// [`Damping::pow`] in every lane.
+    #[inline(always)]
+    fn pow_lanes<S: Simd, const G: usize>(v_abs: Pack<S, G>, alpha: Pack<S, G>) -> Pack<S, G> {
+        let mut r = v_abs;
+        let (mut v, mut a) = ([0.0; 16], [0.0; 16]);
+        for g in 0..G {
+            v_abs.0[g].store(&mut v);
+            alpha.0[g].store(&mut a);
+            for i in 0..S::LANES {
+                v[i] = Self::pow(v[i], a[i]);
+            }
+            r.0[g] = S::load(&v);
+        }
+        r
+    }
 }
 
 /// α = 0.5 for every lane: |v|^α = √|v|.
@@ -30,6 +48,10 @@ pub struct SqrtDamping;
 impl Damping for SqrtDamping {
     #[inline(always)]
     fn pow(v_abs: f64, _alpha: f64) -> f64 {
+        v_abs.sqrt()
+    }
+    #[inline(always)]
+    fn pow_lanes<S: Simd, const G: usize>(v_abs: Pack<S, G>, _alpha: Pack<S, G>) -> Pack<S, G> {
         v_abs.sqrt()
     }
 }

@@ -16,13 +16,17 @@
 //!    carried along (its metrics become NaN); it never aborts the batch.
 //!
 //! The valve law (`Q`), the damping law (`D`) and the effect (`E`) are type parameters, so the
-//! step has no branch on configuration. N = 1 is the scalar path: the same code, one lane.
+//! step has no branch on configuration. N = 1 is the scalar path: the same code, one lane. The
+//! bare plant (no effect) takes `kernel::bare`'s right-hand side: every lane in explicit SIMD
+//! registers, the same operations and bits.
 
 use super::actuator::{self, ActuatorLane};
+use super::bare;
 use super::controller::{self, ControllerLane, ControllerMemory, RefState};
 use super::effects::{hook, Effect, PlantView};
 use super::excitation::{Drive, Reference};
 use super::friction::{self, FrictionLane};
+use super::lanes::{AVX2, AVX512, PORTABLE};
 use super::metrics::{Basis, Metrics, MetricsAcc, WindowTick};
 use super::params::{ModelParams, ValveLaw};
 use super::platen::{self, Damping, PlatenLane, PowDamping, SqrtDamping};
@@ -292,22 +296,30 @@ impl<const N: usize> Observer<N> for NoObserver {
     fn tick(&mut self, _view: &TickView<'_, N>) {}
 }
 
-/// The instruction set a batch's kernel is built for.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// The instruction set a batch's kernel is built for, narrowest first.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
 pub enum Isa {
     /// The portable build (x86-64 baseline: SSE2).
     Portable,
     /// The same code compiled with AVX2 and FMA enabled (x86-64 CPUs that report both).
     Avx2,
+    /// AVX-512 F and VL as well: the bare plant in eight-lane registers, with 32 of them (the
+    /// runs with effects take the AVX2 build).
+    Avx512,
 }
 
 impl Isa {
     /// The widest instruction set this CPU runs (runtime detection).
     pub fn detected() -> Isa {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
         {
-            return Isa::Avx2;
+            use std::arch::is_x86_feature_detected as has;
+            if has!("avx2") && has!("fma") {
+                if has!("avx512f") && has!("avx512vl") {
+                    return Isa::Avx512;
+                }
+                return Isa::Avx2;
+            }
         }
         Isa::Portable
     }
@@ -317,6 +329,7 @@ impl Isa {
         match self {
             Isa::Portable => "portable",
             Isa::Avx2 => "avx2",
+            Isa::Avx512 => "avx512",
         }
     }
 }
@@ -330,9 +343,10 @@ impl std::fmt::Display for Isa {
 /// Runs a batch: dispatches once on the valve law, the damping law and the instruction set, then
 /// integrates.
 ///
-/// The AVX2 build is the same generic code compiled with wider vectors. Rust never contracts a
-/// multiply and an add into an FMA, and square root and division are correctly rounded, so both
-/// builds give bit-identical results (`tests/reference.rs` checks it).
+/// The AVX2 and AVX-512 builds are the same generic code compiled with wider vectors, the bare
+/// plant's right-hand side in explicit registers of that width (`kernel::bare`). Rust never
+/// contracts a multiply and an add into an FMA, and square root and division are correctly
+/// rounded, so every build gives bit-identical results (`tests/reference.rs` checks it).
 pub fn run<const N: usize, E: Effect<N>, O: Observer<N>>(
     lp: &LaneParams<N>,
     effect: &E,
@@ -379,20 +393,20 @@ pub(crate) fn run_each_on<const N: usize, E: Effect<N>, O: Observer<N>>(
     obs: &mut O,
 ) -> Result<[LaneResult; N], SetupError> {
     check(lp.f_s, refs, solver)?;
-    // AVX2 only where the CPU has it: asking for it elsewhere runs the portable build.
-    let wide = isa == Isa::Avx2 && Isa::detected() == Isa::Avx2;
+    // Never more than the CPU has: asking for more runs the widest build it has.
+    let isa = isa.min(Isa::detected());
     Ok(match (lp.valve_law, lp.alpha_half) {
         (ValveLaw::Orifice, true) => {
-            actuators::<N, Orifice, SqrtDamping, E, O>(wide, lp, effect, refs, solver, obs)
+            actuators::<N, Orifice, SqrtDamping, E, O>(isa, lp, effect, refs, solver, obs)
         }
         (ValveLaw::Orifice, false) => {
-            actuators::<N, Orifice, PowDamping, E, O>(wide, lp, effect, refs, solver, obs)
+            actuators::<N, Orifice, PowDamping, E, O>(isa, lp, effect, refs, solver, obs)
         }
         (ValveLaw::Linear, true) => {
-            actuators::<N, Linear, SqrtDamping, E, O>(wide, lp, effect, refs, solver, obs)
+            actuators::<N, Linear, SqrtDamping, E, O>(isa, lp, effect, refs, solver, obs)
         }
         (ValveLaw::Linear, false) => {
-            actuators::<N, Linear, PowDamping, E, O>(wide, lp, effect, refs, solver, obs)
+            actuators::<N, Linear, PowDamping, E, O>(isa, lp, effect, refs, solver, obs)
         }
     })
 }
@@ -409,7 +423,7 @@ pub fn run_usual<const N: usize, E: Effect<N>, O: Observer<N>>(
     obs: &mut O,
 ) -> Option<Result<[LaneResult; N], SetupError>> {
     #[cfg(target_arch = "x86_64")]
-    if matches!(lp.valve_law, ValveLaw::Orifice) && lp.alpha_half && Isa::detected() == Isa::Avx2 {
+    if matches!(lp.valve_law, ValveLaw::Orifice) && lp.alpha_half && Isa::detected() >= Isa::Avx2 {
         let refs = &[reference; N];
         if let Err(e) = check(lp.f_s, refs, solver) {
             return Some(Err(e));
@@ -444,18 +458,18 @@ pub fn plant_derivatives(
     let (e, x) = (&super::effects::Baseline, &[x_c]);
     let (es, mut des) = ([], []);
     match (lp.valve_law, lp.alpha_half) {
-        (ValveLaw::Orifice, true) => {
-            rhs::<1, N_ACT, Orifice, SqrtDamping, _>(&lp, e, x, &state, &es, &mut ds, &mut des)
-        }
-        (ValveLaw::Orifice, false) => {
-            rhs::<1, N_ACT, Orifice, PowDamping, _>(&lp, e, x, &state, &es, &mut ds, &mut des)
-        }
-        (ValveLaw::Linear, true) => {
-            rhs::<1, N_ACT, Linear, SqrtDamping, _>(&lp, e, x, &state, &es, &mut ds, &mut des)
-        }
-        (ValveLaw::Linear, false) => {
-            rhs::<1, N_ACT, Linear, PowDamping, _>(&lp, e, x, &state, &es, &mut ds, &mut des)
-        }
+        (ValveLaw::Orifice, true) => rhs::<1, N_ACT, PORTABLE, Orifice, SqrtDamping, _>(
+            &lp, e, x, &state, &es, &mut ds, &mut des,
+        ),
+        (ValveLaw::Orifice, false) => rhs::<1, N_ACT, PORTABLE, Orifice, PowDamping, _>(
+            &lp, e, x, &state, &es, &mut ds, &mut des,
+        ),
+        (ValveLaw::Linear, true) => rhs::<1, N_ACT, PORTABLE, Linear, SqrtDamping, _>(
+            &lp, e, x, &state, &es, &mut ds, &mut des,
+        ),
+        (ValveLaw::Linear, false) => rhs::<1, N_ACT, PORTABLE, Linear, PowDamping, _>(
+            &lp, e, x, &state, &es, &mut ds, &mut des,
+        ),
     }
     Ok(std::array::from_fn(|i| ds[i][0]))
 }
@@ -500,7 +514,7 @@ pub fn check(f_s: f64, refs: &[&Reference], solver: &Solver) -> Result<(), Setup
 /// One equivalent actuator when the effect keeps the two identical ([`Effect::symmetric`]: every
 /// lane's actuators share their parameters, so only an effect can tell them apart), else both.
 fn actuators<const N: usize, Q: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N>>(
-    wide: bool,
+    isa: Isa,
     lp: &LaneParams<N>,
     effect: &E,
     refs: &[&Reference; N],
@@ -508,9 +522,9 @@ fn actuators<const N: usize, Q: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N
     obs: &mut O,
 ) -> [LaneResult; N] {
     if effect.symmetric() {
-        dispatch::<N, 1, Q, D, E, O>(wide, lp, effect, refs, solver, obs)
+        dispatch::<N, 1, Q, D, E, O>(isa, lp, effect, refs, solver, obs)
     } else {
-        dispatch::<N, N_ACT, Q, D, E, O>(wide, lp, effect, refs, solver, obs)
+        dispatch::<N, N_ACT, Q, D, E, O>(isa, lp, effect, refs, solver, obs)
     }
 }
 
@@ -522,20 +536,47 @@ fn dispatch<
     E: Effect<N>,
     O: Observer<N>,
 >(
-    wide: bool,
+    isa: Isa,
     lp: &LaneParams<N>,
     effect: &E,
     refs: &[&Reference; N],
     solver: &Solver,
     obs: &mut O,
 ) -> [LaneResult; N] {
+    // SAFETY (both calls): `isa` is at most what the CPU reports (`run_each_on`).
     #[cfg(target_arch = "x86_64")]
-    if wide {
-        // SAFETY: `wide` is only true when the CPU reports AVX2 and FMA (`Isa::detected`).
-        return unsafe { integrate_avx2::<N, A, Q, D, E, O>(lp, effect, refs, solver, obs) };
+    match isa {
+        // The AVX-512 build is made for the bare plant only (design exploration's path), which
+        // keeps the build time of the many effect kernels in check.
+        Isa::Avx512 if E::BARE => {
+            return unsafe { integrate_avx512::<N, A, Q, D, E, O>(lp, effect, refs, solver, obs) }
+        }
+        Isa::Avx512 | Isa::Avx2 => {
+            return unsafe { integrate_avx2::<N, A, Q, D, E, O>(lp, effect, refs, solver, obs) }
+        }
+        Isa::Portable => {}
     }
-    let _ = wide;
-    integrate::<N, A, Q, D, E, O>(lp, effect, refs, solver, obs)
+    let _ = isa;
+    integrate::<N, A, PORTABLE, Q, D, E, O>(lp, effect, refs, solver, obs)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma,avx512f,avx512vl")]
+unsafe fn integrate_avx512<
+    const N: usize,
+    const A: usize,
+    Q: FlowLaw,
+    D: Damping,
+    E: Effect<N>,
+    O: Observer<N>,
+>(
+    lp: &LaneParams<N>,
+    effect: &E,
+    refs: &[&Reference; N],
+    solver: &Solver,
+    obs: &mut O,
+) -> [LaneResult; N] {
+    integrate::<N, A, AVX512, Q, D, E, O>(lp, effect, refs, solver, obs)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -554,7 +595,7 @@ unsafe fn integrate_avx2<
     solver: &Solver,
     obs: &mut O,
 ) -> [LaneResult; N] {
-    integrate::<N, A, Q, D, E, O>(lp, effect, refs, solver, obs)
+    integrate::<N, A, AVX2, Q, D, E, O>(lp, effect, refs, solver, obs)
 }
 
 /// Plant right-hand side for every lane, computing `A` actuators: both, or (A = 1) the first
@@ -562,7 +603,7 @@ unsafe fn integrate_avx2<
 /// (x + x is exact, so this equals computing the identical second actuator, bit for bit).
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn rhs<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N>>(
+fn rhs<const N: usize, const A: usize, const SIMD: u8, Q: FlowLaw, D: Damping, E: Effect<N>>(
     lp: &LaneParams<N>,
     effect: &E,
     x_c: &[f64; N],
@@ -571,6 +612,10 @@ fn rhs<const N: usize, const A: usize, Q: FlowLaw, D: Damping, E: Effect<N>>(
     ds: &mut [[f64; N]; NP],
     des: &mut E::State,
 ) {
+    if E::BARE && A == 1 && bare::fits::<SIMD>(N) {
+        bare::rhs::<N, SIMD, Q, D>(lp, x_c, s, ds);
+        return;
+    }
     let mut q_in1 = [[0.0; N]; N_ACT];
     let mut q_out2 = [[0.0; N]; N_ACT];
     let mut xs = [[0.0; N]; N_ACT];
@@ -696,7 +741,7 @@ impl<const N: usize, E: Effect<N>> Probe<N, E> {
     /// with the command held; its channels go to `obs.probe`.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
-    fn probe<const A: usize, Q: FlowLaw, D: Damping, O: Observer<N>>(
+    fn probe<const A: usize, const SIMD: u8, Q: FlowLaw, D: Damping, O: Observer<N>>(
         &mut self,
         lp: &LaneParams<N>,
         effect: &E,
@@ -712,18 +757,18 @@ impl<const N: usize, E: Effect<N>> Probe<N, E> {
         if delta > 0.0 {
             let [k2, k3, k4, ka] = &mut self.k;
             let [ek2, ek3, ek4, eka] = &mut self.ek;
-            axpy(&mut self.tmp, s, 0.5 * delta, k1);
+            plant_axpy::<N, A>(&mut self.tmp, s, 0.5 * delta, k1);
             axpy(self.etmp.as_mut(), es.as_ref(), 0.5 * delta, ek1.as_ref());
-            rhs::<N, A, Q, D, E>(lp, effect, x_c, &self.tmp, &self.etmp, k2, ek2);
-            axpy(&mut self.tmp, s, 0.5 * delta, k2);
+            rhs::<N, A, SIMD, Q, D, E>(lp, effect, x_c, &self.tmp, &self.etmp, k2, ek2);
+            plant_axpy::<N, A>(&mut self.tmp, s, 0.5 * delta, k2);
             axpy(self.etmp.as_mut(), es.as_ref(), 0.5 * delta, ek2.as_ref());
-            rhs::<N, A, Q, D, E>(lp, effect, x_c, &self.tmp, &self.etmp, k3, ek3);
-            axpy(&mut self.tmp, s, delta, k3);
+            rhs::<N, A, SIMD, Q, D, E>(lp, effect, x_c, &self.tmp, &self.etmp, k3, ek3);
+            plant_axpy::<N, A>(&mut self.tmp, s, delta, k3);
             axpy(self.etmp.as_mut(), es.as_ref(), delta, ek3.as_ref());
-            rhs::<N, A, Q, D, E>(lp, effect, x_c, &self.tmp, &self.etmp, k4, ek4);
+            rhs::<N, A, SIMD, Q, D, E>(lp, effect, x_c, &self.tmp, &self.etmp, k4, ek4);
             self.s = *s;
             self.es = *es;
-            rk4_combine(&mut self.s, delta / 6.0, k1, k2, k3, k4);
+            plant_combine::<N, A>(&mut self.s, delta / 6.0, [k1, k2, k3, k4]);
             rk4_combine(
                 self.es.as_mut(),
                 delta / 6.0,
@@ -732,7 +777,7 @@ impl<const N: usize, E: Effect<N>> Probe<N, E> {
                 ek3.as_ref(),
                 ek4.as_ref(),
             );
-            rhs::<N, A, Q, D, E>(lp, effect, x_c, &self.s, &self.es, ka, eka);
+            rhs::<N, A, SIMD, Q, D, E>(lp, effect, x_c, &self.s, &self.es, ka, eka);
         } else {
             self.s = *s;
             self.es = *es;
@@ -815,8 +860,58 @@ fn rk4_combine<const N: usize>(
 ) {
     for j in 0..s.len() {
         for l in 0..N {
-            s[j][l] += h6 * (k1[j][l] + 2.0 * (k2[j][l] + k3[j][l]) + k4[j][l]);
+            // 2·m as m + m (the same bits, on an adder rather than a multiplier).
+            let m = k2[j][l] + k3[j][l];
+            s[j][l] += h6 * (k1[j][l] + (m + m) + k4[j][l]);
         }
+    }
+}
+
+/// The plant rows a step computes: with one equivalent actuator (A = 1) the second actuator's
+/// rows are copies of the first's, which no right-hand side reads.
+const fn plant_rows<const A: usize>() -> &'static [usize] {
+    if A == 1 {
+        &[P1[0], P2[0], Y, VEL, Z]
+    } else {
+        &[0, 1, 2, 3, 4, 5, 6]
+    }
+}
+
+/// [`axpy`] over the [`plant_rows`].
+#[inline(always)]
+fn plant_axpy<const N: usize, const A: usize>(
+    out: &mut [[f64; N]; NP],
+    base: &[[f64; N]; NP],
+    h: f64,
+    k: &[[f64; N]; NP],
+) {
+    for &j in plant_rows::<A>() {
+        axpy(&mut out[j..=j], &base[j..=j], h, &k[j..=j]);
+    }
+}
+
+/// [`rk4_combine`] over the [`plant_rows`]; with A = 1 the second actuator's rows then copy the
+/// first's (the same operations would give the same bits).
+#[inline(always)]
+fn plant_combine<const N: usize, const A: usize>(
+    s: &mut [[f64; N]; NP],
+    h6: f64,
+    k: [&[[f64; N]; NP]; 4],
+) {
+    for &j in plant_rows::<A>() {
+        let r = j..=j;
+        rk4_combine(
+            &mut s[r.clone()],
+            h6,
+            &k[0][r.clone()],
+            &k[1][r.clone()],
+            &k[2][r.clone()],
+            &k[3][r],
+        );
+    }
+    if A == 1 {
+        s[P1[1]] = s[P1[0]];
+        s[P2[1]] = s[P2[0]];
     }
 }
 
@@ -831,6 +926,52 @@ fn initial_state<const N: usize>(lp: &LaneParams<N>) -> [[f64; N]; NP] {
     s
 }
 
+/// What the controller reads at a tick, per lane: the reference, the stroke and the force.
+struct Feedback<'a, const N: usize> {
+    r: &'a [RefState; N],
+    x: &'a [f64; N],
+    f: &'a [f64; N],
+}
+
+/// The valve command `u` and the held spool command `x_c` of every lane at tick `k`: from the
+/// controller in closed loop, else from the open-loop drive (one branch per tick, not per lane).
+#[inline(always)]
+fn commands<const N: usize>(
+    lp: &LaneParams<N>,
+    drive: &Drive,
+    k: usize,
+    fed: &Feedback<'_, N>,
+    mem: &mut [ControllerMemory; N],
+    u: &mut [f64; N],
+    x_c: &mut [f64; N],
+) {
+    match drive {
+        Drive::ClosedLoop => {
+            for l in 0..N {
+                u[l] = controller::tick(&lp.ctrl[l], &mut mem[l], &fed.r[l], fed.x[l], fed.f[l]);
+                x_c[l] = lp.ctrl[l].k_sp * u[l];
+            }
+        }
+        Drive::ValveCommand(cmd) => {
+            for l in 0..N {
+                u[l] = cmd[k].clamp(-lp.ctrl[l].u_lim, lp.ctrl[l].u_lim);
+                x_c[l] = lp.ctrl[l].k_sp * u[l];
+            }
+        }
+        Drive::Spool(measured) => {
+            // A measured spool moves continuously; holding its sample at t_k over the tick would
+            // delay it by half a tick (0.5/f_s). The held value is the mean of its linear
+            // interpolant over [t_k, t_{k+1}] instead (a choice; error O((ωT)²)).
+            let held = 0.5 * (measured[k] + measured[(k + 1).min(measured.len() - 1)]);
+            for l in 0..N {
+                x_c[l] = held;
+                u[l] = x_c[l] / lp.ctrl[l].k_sp;
+            }
+        }
+    }
+}
+
+#[inline(always)]
 fn total_force<const N: usize>(lp: &LaneParams<N>, s: &[[f64; N]; NP], f: &mut [f64; N]) {
     for l in 0..N {
         let act = lp.act.lane(l);
@@ -838,6 +979,27 @@ fn total_force<const N: usize>(lp: &LaneParams<N>, s: &[[f64; N]; NP], f: &mut [
             .map(|i| actuator::force(&act, s[P1[i]][l], s[P2[i]][l]))
             .sum();
     }
+}
+
+/// The lanes that [`check_lane`] passes, found without branches (so the lanes are checked
+/// together): finite, inside the stroke and every pressure in [−1 MPa, 2·P_S].
+#[inline(always)]
+fn healthy<const N: usize>(lp: &LaneParams<N>, s: &[[f64; N]; NP]) -> [bool; N] {
+    let mut ok = [true; N];
+    for l in 0..N {
+        let mut good = s[Y][l].abs() < lp.act.l[l];
+        for row in s {
+            good &= row[l].is_finite();
+        }
+        let p_hi = 2.0 * lp.p_s[l];
+        for i in 0..N_ACT {
+            for j in [P1[i], P2[i]] {
+                good &= (s[j][l] >= -1.0e6) & (s[j][l] <= p_hi);
+            }
+        }
+        ok[l] = good;
+    }
+    ok
 }
 
 fn check_lane<const N: usize>(lp: &LaneParams<N>, s: &[[f64; N]; NP], l: usize) -> Option<Failure> {
@@ -867,6 +1029,7 @@ fn check_lane<const N: usize>(lp: &LaneParams<N>, s: &[[f64; N]; NP], l: usize) 
 fn integrate<
     const N: usize,
     const A: usize,
+    const SIMD: u8,
     Q: FlowLaw,
     D: Damping,
     E: Effect<N>,
@@ -935,25 +1098,14 @@ fn integrate<
         for l in 0..N {
             // The displacement feedback (LVDT) reads the actuator stroke.
             x[l] = effect.stroke(motion(l, &s), &es).0;
-            match &reference.drive {
-                Drive::ClosedLoop => {
-                    u[l] = controller::tick(&lp.ctrl[l], &mut mem[l], &rl[l], x[l], f[l]);
-                    x_c[l] = lp.ctrl[l].k_sp * u[l];
-                }
-                Drive::ValveCommand(cmd) => {
-                    u[l] = cmd[k].clamp(-lp.ctrl[l].u_lim, lp.ctrl[l].u_lim);
-                    x_c[l] = lp.ctrl[l].k_sp * u[l];
-                }
-                Drive::Spool(measured) => {
-                    // A measured spool moves continuously; holding its sample at t_k over the tick
-                    // would delay it by half a tick (0.5/f_s). The held value is the mean of its
-                    // linear interpolant over [t_k, t_{k+1}] instead (a choice; error O((ωT)²)).
-                    x_c[l] = 0.5 * (measured[k] + measured[(k + 1).min(measured.len() - 1)]);
-                    u[l] = x_c[l] / lp.ctrl[l].k_sp;
-                }
-            }
         }
-        rhs::<N, A, Q, D, E>(lp, effect, &x_c, &s, &es, &mut k1, &mut ek1);
+        let fed = Feedback {
+            r: &rl,
+            x: &x,
+            f: &f,
+        };
+        commands(lp, &reference.drive, k, &fed, &mut mem, &mut u, &mut x_c);
+        rhs::<N, A, SIMD, Q, D, E>(lp, effect, &x_c, &s, &es, &mut k1, &mut ek1);
         a.copy_from_slice(&k1[VEL]);
         for l in 0..N {
             spool[l] = effect.spool_position(opening(l, 0, x_c[l]), &es);
@@ -996,7 +1148,7 @@ fn integrate<
 
         for sub in 0..solver.substeps {
             if sub > 0 {
-                rhs::<N, A, Q, D, E>(lp, effect, &x_c, &s, &es, &mut k1, &mut ek1);
+                rhs::<N, A, SIMD, Q, D, E>(lp, effect, &x_c, &s, &es, &mut k1, &mut ek1);
             }
             // Probes in [t_k + sub·h, t_k + (sub + 1)·h): a partial step from this node.
             while let Some((tk, pos)) = pending {
@@ -1004,7 +1156,7 @@ fn integrate<
                     break;
                 }
                 let delta = (pos - sub as f64) * h;
-                probe.probe::<A, Q, D, O>(
+                probe.probe::<A, SIMD, Q, D, O>(
                     lp,
                     effect,
                     &x_c,
@@ -1025,16 +1177,16 @@ fn integrate<
                 next_probe += 1;
                 pending = probe_slot(obs, next_probe);
             }
-            axpy(&mut tmp, &s, 0.5 * h, &k1);
+            plant_axpy::<N, A>(&mut tmp, &s, 0.5 * h, &k1);
             axpy(etmp.as_mut(), es.as_ref(), 0.5 * h, ek1.as_ref());
-            rhs::<N, A, Q, D, E>(lp, effect, &x_c, &tmp, &etmp, &mut k2, &mut ek2);
-            axpy(&mut tmp, &s, 0.5 * h, &k2);
+            rhs::<N, A, SIMD, Q, D, E>(lp, effect, &x_c, &tmp, &etmp, &mut k2, &mut ek2);
+            plant_axpy::<N, A>(&mut tmp, &s, 0.5 * h, &k2);
             axpy(etmp.as_mut(), es.as_ref(), 0.5 * h, ek2.as_ref());
-            rhs::<N, A, Q, D, E>(lp, effect, &x_c, &tmp, &etmp, &mut k3, &mut ek3);
-            axpy(&mut tmp, &s, h, &k3);
+            rhs::<N, A, SIMD, Q, D, E>(lp, effect, &x_c, &tmp, &etmp, &mut k3, &mut ek3);
+            plant_axpy::<N, A>(&mut tmp, &s, h, &k3);
             axpy(etmp.as_mut(), es.as_ref(), h, ek3.as_ref());
-            rhs::<N, A, Q, D, E>(lp, effect, &x_c, &tmp, &etmp, &mut k4, &mut ek4);
-            rk4_combine(&mut s, h / 6.0, &k1, &k2, &k3, &k4);
+            rhs::<N, A, SIMD, Q, D, E>(lp, effect, &x_c, &tmp, &etmp, &mut k4, &mut ek4);
+            plant_combine::<N, A>(&mut s, h / 6.0, [&k1, &k2, &k3, &k4]);
             rk4_combine(
                 es.as_mut(),
                 h / 6.0,
@@ -1045,10 +1197,15 @@ fn integrate<
             );
         }
 
-        // Guard (docs/model.md §3), once per tick.
+        // Guard (docs/model.md §3), once per tick: every lane at once, the reason where one fails.
         let mut alive = 0;
+        let healthy = healthy(lp, &s);
         for l in 0..N {
             if status[l] != LaneStatus::Ok {
+                continue;
+            }
+            if healthy[l] {
+                alive += 1;
                 continue;
             }
             if let Some(reason) = check_lane(lp, &s, l) {
@@ -1150,9 +1307,12 @@ mod tests {
         let elp = LaneParams::<8>::new(&erefs).unwrap();
         let set = crate::kernel::effects::effect_set::<8>(&erefs);
         assert!(set.symmetric());
-        for wide in [false, Isa::detected() == Isa::Avx2] {
+        for isa in [Isa::Portable, Isa::Avx2, Isa::Avx512]
+            .into_iter()
+            .filter(|&i| i <= Isa::detected())
+        {
             let one = dispatch::<8, 1, Orifice, SqrtDamping, _, NoObserver>(
-                wide,
+                isa,
                 &elp,
                 &set,
                 &[&r; 8],
@@ -1160,7 +1320,7 @@ mod tests {
                 &mut NoObserver,
             );
             let two = dispatch::<8, 2, Orifice, SqrtDamping, _, NoObserver>(
-                wide,
+                isa,
                 &elp,
                 &set,
                 &[&r; 8],
@@ -1180,9 +1340,12 @@ mod tests {
                 }
             }
         }
-        for wide in [false, Isa::detected() == Isa::Avx2] {
+        for isa in [Isa::Portable, Isa::Avx2, Isa::Avx512]
+            .into_iter()
+            .filter(|&i| i <= Isa::detected())
+        {
             let one = dispatch::<8, 1, Orifice, SqrtDamping, Baseline, NoObserver>(
-                wide,
+                isa,
                 &lp,
                 &Baseline,
                 &[&r; 8],
@@ -1190,7 +1353,7 @@ mod tests {
                 &mut NoObserver,
             );
             let two = dispatch::<8, 2, Orifice, SqrtDamping, Baseline, NoObserver>(
-                wide,
+                isa,
                 &lp,
                 &Baseline,
                 &[&r; 8],

@@ -442,6 +442,10 @@ pub trait Effect<const N: usize>: Sync {
     /// switched off when the plant is driven by a measured spool ([`EffectInfo::moves_spool`]).
     const MOVES_SPOOL: bool = false;
 
+    /// Whether every hook of the plant is its identity and there are no extra states (the
+    /// baseline alone): the kernel then takes its vector path for the bare plant.
+    const BARE: bool = false;
+
     /// Extra states at t = 0.
     fn initial_state(&self) -> Self::State;
 
@@ -524,6 +528,7 @@ pub struct Baseline;
 
 impl<const N: usize> Effect<N> for Baseline {
     type State = [[f64; N]; 0];
+    const BARE: bool = true;
     fn initial_state(&self) -> Self::State {
         []
     }
