@@ -773,9 +773,14 @@ fn with_jacobian(
         .collect()
 }
 
-/// The damping factors tried at once in an iteration, around λ, as many as fit in one batch.
+/// Lanes the fitter plans its trials for: the batch width it was tuned with, fixed so that a
+/// wider kernel batch (the kernel's [`crate::kernel::LANES`]) does not change a fit's path.
+const TRIAL_LANES: usize = 8;
+
+/// The damping factors tried at once in an iteration, around λ, as many as fit in
+/// [`TRIAL_LANES`].
 fn lambdas(lambda: f64, p: usize) -> Vec<f64> {
-    match (crate::kernel::LANES / (p + 1)).clamp(1, 4) {
+    match (TRIAL_LANES / (p + 1)).clamp(1, 4) {
         1 => vec![lambda],
         2 => vec![lambda / 10.0, lambda * 10.0],
         3 => vec![lambda / 10.0, lambda, lambda * 10.0],
