@@ -32,6 +32,13 @@ pub mod state;
 /// effects may break their symmetry.
 pub const N_ACT: usize = 2;
 
-/// Lanes of the batch kernel (samples integrated together). Eight f64 lanes are two AVX2
-/// vectors, which gives the square-root and division units independent work to overlap.
+/// Lanes of the bare plant's batch kernel (samples without effects integrated together, design
+/// exploration's path): sixteen f64 lanes are four AVX2 or two AVX-512 registers, enough
+/// independent work to hide the right-hand side's chain of dependent Newton steps
+/// (docs/performance.md).
 pub const LANES: usize = 16;
+
+/// Lanes of the batch kernels with effects (the effect set, and one effect at a time for fits
+/// and diagnoses). Eight: their per-lane code is written lane by lane and left to LLVM, for which
+/// sixteen lanes only add register spills and build time.
+pub const EFFECT_LANES: usize = 8;

@@ -428,6 +428,13 @@ pub fn run_usual<const N: usize, E: Effect<N>, O: Observer<N>>(
         if let Err(e) = check(lp.f_s, refs, solver) {
             return Some(Err(e));
         }
+        if const { !E::SPLITS } {
+            assert_symmetric(effect);
+            // SAFETY: the CPU reports AVX2 and FMA (`Isa::detected`).
+            return Some(Ok(unsafe {
+                integrate_avx2::<N, 1, Orifice, SqrtDamping, E, O>(lp, effect, refs, solver, obs)
+            }));
+        }
         // SAFETY: the CPU reports AVX2 and FMA (`Isa::detected`).
         return Some(Ok(unsafe {
             if effect.symmetric() {
@@ -521,11 +528,25 @@ fn actuators<const N: usize, Q: FlowLaw, D: Damping, E: Effect<N>, O: Observer<N
     solver: &Solver,
     obs: &mut O,
 ) -> [LaneResult; N] {
+    // Decided by the type where the effect cannot tell the actuators apart (`Effect::SPLITS`):
+    // the kernel with both actuators is then not built (the branch is pruned at compile time).
+    if const { !E::SPLITS } {
+        assert_symmetric(effect);
+        return dispatch::<N, 1, Q, D, E, O>(isa, lp, effect, refs, solver, obs);
+    }
     if effect.symmetric() {
         dispatch::<N, 1, Q, D, E, O>(isa, lp, effect, refs, solver, obs)
     } else {
         dispatch::<N, N_ACT, Q, D, E, O>(isa, lp, effect, refs, solver, obs)
     }
+}
+
+/// An effect that does not declare [`Effect::SPLITS`] keeps the actuators identical.
+fn assert_symmetric<const N: usize, E: Effect<N>>(effect: &E) {
+    assert!(
+        effect.symmetric(),
+        "an effect whose `symmetric` can say false declares `const SPLITS: bool = true`"
+    );
 }
 
 fn dispatch<
@@ -546,9 +567,9 @@ fn dispatch<
     // SAFETY (both calls): `isa` is at most what the CPU reports (`run_each_on`).
     #[cfg(target_arch = "x86_64")]
     match isa {
-        // The AVX-512 build is made for the bare plant only (design exploration's path), which
-        // keeps the build time of the many effect kernels in check.
-        Isa::Avx512 if E::BARE => {
+        // The AVX-512 build is made for the bare plant's vector path only (design
+        // exploration's), which keeps the build time of the many effect kernels in check.
+        Isa::Avx512 if const { E::BARE && A == 1 && bare::fits::<AVX512>(N) } => {
             return unsafe { integrate_avx512::<N, A, Q, D, E, O>(lp, effect, refs, solver, obs) }
         }
         Isa::Avx512 | Isa::Avx2 => {

@@ -16,7 +16,7 @@ use super::study::{Method, StudySpec};
 use crate::kernel::excitation::Reference;
 use crate::kernel::metrics::Metrics;
 use crate::kernel::params::{ModelParams, ParamInfo};
-use crate::kernel::simulate::{self, Failure, LaneResult, LaneStatus, NoObserver, SetupError};
+use crate::kernel::simulate::{self, Failure, LaneResult, LaneStatus, SetupError};
 use crate::kernel::spectrum::SpectrumSpec;
 use crate::kernel::LANES;
 use rayon::prelude::*;
@@ -367,16 +367,11 @@ impl Plan {
                 .map(|&i| own[i].as_ref().unwrap_or(reference))
                 .collect();
             // Lanes without effects give the same bits in the effect set (it is neutral
-            // there), and a lane's reference is its own, so the kernel `run_lanes_each`
-            // chooses per group does not make a row depend on its neighbours.
-            let results = super::sim::run_lanes_each::<LANES, _>(
-                &models,
-                &refs,
-                &self.solver,
-                &mut NoObserver,
-            );
+            // there), and a lane's reference is its own, so the kernel `run_group` chooses
+            // per group does not make a row depend on its neighbours.
+            let results = super::sim::run_group(&models, &refs, &self.solver);
             for (lane, &i) in group.iter().enumerate() {
-                let (status, metrics) = lane_outcome(results.as_ref().map(|r| &r[..]), lane);
+                let (status, metrics) = lane_outcome(results.as_deref(), lane);
                 rows[i] = Some(self.row(&samples[i], e, status, metrics));
             }
         }

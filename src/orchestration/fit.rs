@@ -56,7 +56,7 @@ use crate::kernel::excitation::Reference;
 use crate::kernel::params::{ModelParams, ParamInfo};
 use crate::kernel::resample::{ch, Resampler};
 use crate::kernel::simulate::{LaneStatus, Solver};
-use crate::kernel::LANES;
+use crate::kernel::EFFECT_LANES as LANES;
 use faer::prelude::*;
 use faer::Mat;
 use rayon::prelude::*;
@@ -774,7 +774,8 @@ fn with_jacobian(
 }
 
 /// Lanes the fitter plans its trials for: the batch width it was tuned with, fixed so that a
-/// wider kernel batch (the kernel's [`crate::kernel::LANES`]) does not change a fit's path.
+/// change of the kernel's batch width ([`crate::kernel::EFFECT_LANES`]) does not change a fit's
+/// path.
 const TRIAL_LANES: usize = 8;
 
 /// The damping factors tried at once in an iteration, around λ, as many as fit in

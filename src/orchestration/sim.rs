@@ -13,6 +13,7 @@ use crate::kernel::simulate::{
 };
 use crate::kernel::spectrum::SpectrumSpec;
 use crate::kernel::state::idx;
+use crate::kernel::{EFFECT_LANES, LANES};
 
 /// A channel of a time history: its column name (the docs/formats.md measured-test name where
 /// one exists, so a history can be read back as a measured test), what it holds, and how a tick
@@ -185,6 +186,38 @@ pub fn run_lanes_each<const N: usize, O: Observer<N>>(
     } else {
         simulate::run_each(&lp, &Baseline, &refs, solver, obs)
     }
+}
+
+/// The lanes of up to [`LANES`] models (`refs` as in [`run_lanes_each`]), without an observer:
+/// lanes without effects in one batch of the bare plant's [`LANES`], lanes with effects in
+/// batches of [`EFFECT_LANES`] (lanes are independent, bit for bit, so the split does not change
+/// a lane). A setup error of any batch is the group's.
+pub fn run_group(
+    models: &[&ModelParams],
+    refs: &[&Reference],
+    solver: &Solver,
+) -> Result<Vec<LaneResult>, SetupError> {
+    assert!(!models.is_empty() && models.len() <= LANES);
+    assert!(refs.len() == 1 || refs.len() == models.len());
+    let obs = &mut simulate::NoObserver;
+    if !models.iter().any(|m| m.effects.any()) {
+        let lp = LaneParams::<LANES>::new(models)?;
+        let refs: [&Reference; LANES] = std::array::from_fn(|l| refs[l.min(refs.len() - 1)]);
+        let r = simulate::run_each(&lp, &Baseline, &refs, solver, obs)?;
+        return Ok(r[..models.len()].to_vec());
+    }
+    let mut out = Vec::with_capacity(models.len());
+    for (k, m) in models.chunks(EFFECT_LANES).enumerate() {
+        let lo = k * EFFECT_LANES;
+        let r = if refs.len() == 1 {
+            refs
+        } else {
+            &refs[lo..lo + m.len()]
+        };
+        let got = run_lanes_each::<EFFECT_LANES, _>(m, r, solver, obs)?;
+        out.extend_from_slice(&got[..m.len()]);
+    }
+    Ok(out)
 }
 
 /// [`run_lanes`] with a kernel made for the one library effect the lanes switch on, when they

@@ -10,7 +10,7 @@ use crate::kernel::excitation::{Reference, Sine};
 use crate::kernel::ground::Processing;
 use crate::kernel::params::ModelParams;
 use crate::kernel::simulate::{self, Isa, LaneParams, NoObserver, Solver};
-use crate::kernel::LANES;
+use crate::kernel::{EFFECT_LANES, LANES};
 use crate::orchestration::quake;
 use crate::orchestration::spec::{ExcitationSpec, Realisation};
 use anyhow::{bail, Context};
@@ -205,7 +205,7 @@ fn bench_diagnose(campaign: &std::path::Path, max_seconds: Option<f64>) -> anyho
         candidates.len(),
         rayon::current_num_threads()
     )?;
-    writeln!(out, "  wall time {secs:.1} s; {runs} batches of {LANES} lanes per test (one per Levenberg-Marquardt iteration, Jacobian included)")?;
+    writeln!(out, "  wall time {secs:.1} s; {runs} batches of {EFFECT_LANES} lanes per test (one per Levenberg-Marquardt iteration, Jacobian included)")?;
     writeln!(out, "  verdict: {}", d.summary())?;
     if let Some(max) = max_seconds {
         writeln!(

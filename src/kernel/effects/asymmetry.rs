@@ -51,6 +51,7 @@ impl<const N: usize> Asymmetry<N> {
 
 impl<const N: usize> Effect<N> for Asymmetry<N> {
     type State = [[f64; N]; 0];
+    const SPLITS: bool = true;
 
     fn initial_state(&self) -> Self::State {
         []

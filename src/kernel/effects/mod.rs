@@ -446,13 +446,20 @@ pub trait Effect<const N: usize>: Sync {
     /// baseline alone): the kernel then takes its vector path for the bare plant.
     const BARE: bool = false;
 
+    /// Whether the effect can tell the two actuators apart, so that [`Effect::symmetric`] may
+    /// say `false`. The kernel is built with both actuators only for effects that declare it
+    /// (the build of the many effect kernels halves), and refuses to run one whose `symmetric`
+    /// says `false` without it.
+    const SPLITS: bool = false;
+
     /// Extra states at t = 0.
     fn initial_state(&self) -> Self::State;
 
     /// Whether the two actuators stay identical in every lane under this effect (it treats them
     /// alike). Then the kernel integrates one equivalent actuator and doubles its force and its
     /// supply flow: the same numbers, bit for bit, at half the valve and chamber work. An effect
-    /// that gives the actuators different laws (`asymmetry.act2_gain ≠ 1`) says `false`.
+    /// that gives the actuators different laws (`asymmetry.act2_gain ≠ 1`) says `false`, and
+    /// declares [`Effect::SPLITS`].
     #[inline(always)]
     fn symmetric(&self) -> bool {
         true
@@ -555,6 +562,7 @@ impl<const N: usize, A: LibraryEffect<N>, B: LibraryEffect<N>> LibraryEffect<N> 
 impl<const N: usize, A: Effect<N>, B: Effect<N>> Effect<N> for Both<A, B> {
     type State = Pair<A::State, B::State>;
     const MOVES_SPOOL: bool = A::MOVES_SPOOL || B::MOVES_SPOOL;
+    const SPLITS: bool = A::SPLITS || B::SPLITS;
 
     fn initial_state(&self) -> Self::State {
         Pair(self.0.initial_state(), self.1.initial_state())
@@ -663,6 +671,7 @@ impl<const N: usize, E: LibraryEffect<N> + Named> LibraryEffect<N> for Gated<E> 
 impl<const N: usize, E: Effect<N>> Effect<N> for Gated<E> {
     type State = E::State;
     const MOVES_SPOOL: bool = E::MOVES_SPOOL;
+    const SPLITS: bool = E::SPLITS;
 
     fn initial_state(&self) -> Self::State {
         self.effect.initial_state()
@@ -817,6 +826,11 @@ mod tests {
         assert_eq!(moving, ["transport_delay", "spool_dynamics"]);
         const { assert!(<EffectSet<4> as Effect<4>>::MOVES_SPOOL) };
         const { assert!(!<Baseline as Effect<4>>::MOVES_SPOOL) };
+        // Only the asymmetry tells the actuators apart, and the set does because it holds it.
+        const { assert!(<EffectSet<4> as Effect<4>>::SPLITS) };
+        const { assert!(<asymmetry::Asymmetry<4> as Effect<4>>::SPLITS) };
+        const { assert!(!<Baseline as Effect<4>>::SPLITS) };
+        const { assert!(!<seal_friction::SealFriction<4> as Effect<4>>::SPLITS) };
         assert_eq!(
             EffectId::FlowGain.name(),
             "flow_gain",
