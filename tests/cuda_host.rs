@@ -61,7 +61,14 @@ fn host_run(
     solver: &Solver,
 ) -> Vec<LaneResult> {
     let shared = Shared::new(models, refs, solver).expect("valid run");
-    let params = gpu_lanes::pack_params(models).expect("uniform lanes");
+    let whole = gpu_lanes::pack_params(models).expect("uniform lanes");
+    // As on the GPU: the fields every lane shares in the kernel's constant (`vs_u`), the records
+    // of the varying ones alone in `params`.
+    let uniform = gpu_lanes::Uniform::of(&whole, models.len());
+    let mut params = uniform.compact(&whole, models.len());
+    if params.is_empty() {
+        params.push(0.0);
+    }
     let mut bytes = Vec::new();
     let mut put = |v: &[u8]| bytes.extend_from_slice(v);
     for i in shared.ints {
@@ -79,11 +86,14 @@ fn host_run(
         &shared.osc,
         &params,
     ];
-    for a in arrays {
+    for a in arrays.into_iter().chain([&uniform.values]) {
         put(&(a.len() as i64).to_le_bytes());
         for x in a.iter() {
             put(&x.to_le_bytes());
         }
+    }
+    for word in uniform.vary {
+        put(&word.to_le_bytes());
     }
     let dir = tempfile::tempdir().unwrap();
     let (inp, outp) = (dir.path().join("in"), dir.path().join("out"));

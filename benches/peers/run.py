@@ -33,6 +33,9 @@ import time
 
 import numpy as np
 
+# The peers are CPU programs: JAX is kept off a GPU that the machine may have.
+os.environ.setdefault("JAX_PLATFORMS", "cpu")
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 import model  # noqa: E402
@@ -51,7 +54,7 @@ def study_toml(samples, substeps):
             + f"\n[solver]\nsubsteps = {substeps}\nchunk = 64\n")
 
 
-def run_study(binary, samples, substeps, tmp):
+def run_study(binary, samples, substeps, tmp, backend="cpu"):
     """`study run` on the work: (wall seconds, gains dict, metrics dict, ok mask)."""
     import pyarrow.parquet as pq
     toml = os.path.join(tmp, f"peers_{substeps}.toml")
@@ -59,7 +62,8 @@ def run_study(binary, samples, substeps, tmp):
     with open(toml, "w") as f:
         f.write(study_toml(samples, substeps))
     t0 = time.perf_counter()
-    subprocess.run([binary, "run", toml, "--out", out, "-q"], check=True, stdout=subprocess.DEVNULL)
+    subprocess.run([binary, "run", toml, "--out", out, "-q", "--backend", backend], check=True,
+                   stdout=subprocess.DEVNULL)
     wall = time.perf_counter() - t0
     t = pq.read_table(out)
     gains = {g: t.column(g).to_numpy() for g in RANGES}
@@ -129,6 +133,7 @@ def main():
     ap.add_argument("--peers", default="numpy,jax", help="comma-separated: numpy, jax")
     ap.add_argument("--procs", type=int, default=os.cpu_count(), help="peer processes (one per core)")
     ap.add_argument("--check", type=int, default=64, help="gain sets checked against study")
+    ap.add_argument("--backend", default="cpu", help="study's --backend (cpu: the peers' own ground)")
     a = ap.parse_args()
     peers = [p for p in a.peers.split(",") if p]
     if "jax" in peers:
@@ -145,7 +150,7 @@ def main():
     failed = False
     with tempfile.TemporaryDirectory() as tmp:
         for substeps in [int(s) for s in a.substeps.split(",")]:
-            wall, gains, metrics, ok = run_study(a.study, a.samples, substeps, tmp)
+            wall, gains, metrics, ok = run_study(a.study, a.samples, substeps, tmp, a.backend)
             rate = sim_s / wall
             print(f"{'vshake':<8} {substeps:>8} {wall:>9.2f} {rate:>10.0f} {1.0:>10.2f} {'-':>9}", flush=True)
             rows = rng.choice(np.flatnonzero(ok), size=min(a.check, int(ok.sum())), replace=False)

@@ -106,14 +106,75 @@ pub fn pack_params(models: &[&ModelParams]) -> Result<Vec<f64>, SetupError> {
         if m.controller.f_s != models[0].controller.f_s || m.valve_law != models[0].valve_law {
             return Err(SetupError::NotUniform { lane: l });
         }
-        for (f, v) in lane_record(&LaneParams::<1>::new(&[m])?, m)
-            .into_iter()
-            .enumerate()
-        {
+        for (f, v) in record(m)?.into_iter().enumerate() {
             p[f * n + l] = v;
         }
     }
     Ok(p)
+}
+
+/// One model's parameter record, in lane.cu's field order.
+pub fn record(m: &ModelParams) -> Result<[f64; LANE_FIELDS], SetupError> {
+    Ok(lane_record(&LaneParams::<1>::new(&[m])?, m))
+}
+
+/// The fields of a launch's parameter records that every lane shares, which the kernel reads
+/// from its constant `vs_u`; the others it reads from the launch's records of the varying
+/// fields alone (lane.cu: `vs_p`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Uniform {
+    /// Bit f (of word f / 64) set where field f differs between lanes (lane.cu: `VS_VARY0..2`).
+    pub vary: [u64; 3],
+    /// Every field's value in the first lane (`vs_u`; the varying ones are not read).
+    pub values: Vec<f64>,
+}
+
+const _: () = assert!(LANE_FIELDS <= 3 * 64, "the mask holds 192 fields");
+
+impl Uniform {
+    /// Which fields of `params` (n lanes, field-major, as [`pack_params`] writes them) vary,
+    /// comparing bits (so -0.0 and 0.0 differ, and a NaN equals itself).
+    pub fn of(params: &[f64], n: usize) -> Uniform {
+        let mut vary = [0u64; 3];
+        for f in 0..LANE_FIELDS {
+            let lanes = &params[f * n..(f + 1) * n];
+            if lanes.iter().any(|v| v.to_bits() != lanes[0].to_bits()) {
+                vary[f / 64] |= 1 << (f % 64);
+            }
+        }
+        let values = (0..LANE_FIELDS).map(|f| params[f * n]).collect();
+        Uniform { vary, values }
+    }
+
+    /// The bits of the fields where `record` differs from `first`.
+    pub fn differing(first: &[f64; LANE_FIELDS], record: &[f64; LANE_FIELDS]) -> [u64; 3] {
+        let mut vary = [0u64; 3];
+        for (f, (a, b)) in first.iter().zip(record).enumerate() {
+            if a.to_bits() != b.to_bits() {
+                vary[f / 64] |= 1 << (f % 64);
+            }
+        }
+        vary
+    }
+
+    /// Whether field `f` is read from each lane's record.
+    pub fn varies(&self, f: usize) -> bool {
+        self.vary[f / 64] >> (f % 64) & 1 == 1
+    }
+
+    /// The varying fields, in order (their rows in [`Uniform::compact`]).
+    pub fn varying(&self) -> Vec<usize> {
+        (0..LANE_FIELDS).filter(|&f| self.varies(f)).collect()
+    }
+
+    /// The records of the varying fields alone, field-major (the kernel's `P`), from the whole
+    /// records `params` of n lanes.
+    pub fn compact(&self, params: &[f64], n: usize) -> Vec<f64> {
+        self.varying()
+            .into_iter()
+            .flat_map(|f| params[f * n..(f + 1) * n].iter().copied())
+            .collect()
+    }
 }
 
 /// One lane's record, in lane.cu's field order: the baseline's, then the covered effects'
@@ -350,5 +411,25 @@ mod tests {
         assert!(source.contains("VS_LANE_FIELDS=VS_SENSOR+21"));
         let m = ModelParams::default();
         assert_eq!(pack_params(&[&m]).unwrap().len(), LANE_FIELDS);
+    }
+
+    /// A field varies when some lane's value differs from the first lane's, bit for bit.
+    #[test]
+    fn the_shared_fields_are_those_equal_in_every_lane() {
+        let a = ModelParams::default();
+        let mut b = a.clone();
+        b.controller.g_d *= 1.1;
+        b.controller.l_a *= 0.9;
+        let p = pack_params(&[&a, &b, &a]).unwrap();
+        let u = Uniform::of(&p, 3);
+        let varying: Vec<usize> = (0..LANE_FIELDS).filter(|&f| u.varies(f)).collect();
+        // The displacement gain and the acceleration lead: c_fb and c_a, fields 23 and 26.
+        assert_eq!(varying, [23, 26]);
+        assert_eq!(u.values.len(), LANE_FIELDS);
+        assert_eq!(u.values[9], p[9 * 3], "beta, shared");
+        assert_eq!(u.compact(&p, 3), [&p[69..72], &p[78..81]].concat());
+        let (ra, rb) = (record(&a).unwrap(), record(&b).unwrap());
+        assert_eq!(Uniform::differing(&ra, &rb), u.vary);
+        assert_eq!(Uniform::of(&pack_params(&[&a]).unwrap(), 1).vary, [0; 3]);
     }
 }

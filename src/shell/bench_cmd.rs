@@ -392,10 +392,14 @@ fn bench_cuda(out: &mut dyn Write, cuda: &super::gpu::Cuda) -> anyhow::Result<()
     cuda.run(&refs[..1024], &[&reference], &solver)?
         .context("warm-up launch")?;
     let t = Instant::now();
+    super::gpu::pack(&refs)?;
+    let pack_s = t.elapsed().as_secs_f64();
+    let t = Instant::now();
     let got = cuda
         .run(&refs, &[&reference], &solver)?
         .context("GPU batch")?;
     let secs = t.elapsed().as_secs_f64();
+    let [upload_s, kernel_s] = *cuda.last_launch_s.lock().unwrap_or_else(|e| e.into_inner());
     let mut worst = 0.0f64;
     for (c, group) in refs[..256].chunks(LANES).enumerate() {
         let lp = LaneParams::<LANES>::new(group)?;
@@ -412,9 +416,13 @@ fn bench_cuda(out: &mut dyn Write, cuda: &super::gpu::Cuda) -> anyhow::Result<()
     writeln!(
         out,
         "  GPU: {GPU_LANES} gain sets × 3 s sine (3 Hz, 1.73 g), 8 substeps: {:.3} s, {:.0} \
-         sim-s/wall-s; CPU kernel vs GPU on 256 sets: largest relative difference {worst:.1e}",
+         sim-s/wall-s (of it: packing {:.3} s, upload {:.3} s, kernel and download {:.3} s); CPU \
+         kernel vs GPU on 256 sets: largest relative difference {worst:.1e}",
         secs,
-        GPU_LANES as f64 * 3.0 / secs
+        GPU_LANES as f64 * 3.0 / secs,
+        pack_s,
+        upload_s,
+        kernel_s
     )?;
     Ok(())
 }

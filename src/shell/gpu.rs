@@ -10,11 +10,14 @@
 
 use super::BadInput;
 use crate::kernel::excitation::Reference;
-use crate::kernel::gpu_lanes::{self, Shared};
+use crate::kernel::gpu_lanes::{self, Shared, Uniform};
 use crate::kernel::params::ModelParams;
 use crate::kernel::simulate::{LaneResult, SetupError, Solver};
 use crate::orchestration::batch::LaneEngine;
-use cudarc::driver::{CudaContext, CudaFunction, CudaStream, LaunchConfig, PushKernelArg};
+use cudarc::driver::{
+    CudaContext, CudaFunction, CudaModule, CudaStream, LaunchConfig, PushKernelArg,
+};
+use rayon::prelude::*;
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
@@ -146,16 +149,23 @@ impl Engine {
 /// registers fit the register file of every CUDA GPU.
 const BLOCK: u32 = 128;
 
-/// The CUDA kernel on GPU 0: one build per set of effects (lane.cu's `VS_EFFECTS`), loaded when a
-/// launch first needs it.
+/// What a build of the kernel is specialised for: the effects' bits
+/// ([`gpu_lanes::effect_bits`]) and the parameter fields that vary between lanes
+/// ([`Uniform::vary`]).
+type BuildKey = (i64, [u64; 3]);
+
+/// The CUDA kernel on GPU 0: one build per set of effects and of varying fields (lane.cu's
+/// `VS_EFFECTS`, `VS_VARY0..2`), loaded when a launch first needs it.
 pub struct Cuda {
     pub name: String,
     ctx: Arc<CudaContext>,
     stream: Arc<CudaStream>,
-    /// The loaded builds, by effect bits ([`gpu_lanes::effect_bits`]).
-    builds: Mutex<HashMap<i64, CudaFunction>>,
+    /// The loaded builds: the module (its constant `vs_u`) and the entry point.
+    builds: Mutex<HashMap<BuildKey, (Arc<CudaModule>, CudaFunction)>>,
     /// One batch on the device at a time (worker threads share the GPU).
     busy: Mutex<()>,
+    /// The last launch's seconds: the upload, then the kernel and the download.
+    pub last_launch_s: Mutex<[f64; 2]>,
 }
 
 impl Cuda {
@@ -169,34 +179,46 @@ impl Cuda {
             ctx,
             builds: Mutex::new(HashMap::new()),
             busy: Mutex::new(()),
+            last_launch_s: Mutex::new([0.0; 2]),
         };
-        cuda.build(0)?;
+        cuda.build((0, [!0; 3]))?;
         Ok(cuda)
     }
 
-    /// The kernel built for the effects `bits`.
-    fn build(&self, bits: i64) -> Result<CudaFunction, String> {
+    /// The kernel built for `key`.
+    fn build(&self, key: BuildKey) -> Result<(Arc<CudaModule>, CudaFunction), String> {
         let mut builds = self.builds.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(f) = builds.get(&bits) {
-            return Ok(f.clone());
+        if let Some(b) = builds.get(&key) {
+            return Ok(b.clone());
         }
         let name = &self.name;
         let module = self
             .ctx
-            .load_module(cudarc::nvrtc::Ptx::from_src(ptx(bits)?))
+            .load_module(cudarc::nvrtc::Ptx::from_src(ptx(key)?))
             .map_err(|e| format!("{name}: the kernel did not load ({e})"))?;
         let func = module
             .load_function("vs_lanes")
             .map_err(|e| format!("{name}: the kernel did not load ({e})"))?;
-        builds.insert(bits, func.clone());
-        Ok(func)
+        builds.insert(key, (module.clone(), func.clone()));
+        Ok((module, func))
     }
 
-    /// Runs the lanes on the device: the shared run and the parameters up, the sums back.
-    fn launch(&self, shared: &Shared, params: &[f64], n: usize) -> anyhow::Result<Vec<f64>> {
-        let func = self.build(shared.ints[9]).map_err(anyhow::Error::msg)?;
+    /// Runs the lanes on the device: the shared fields into the build's constant `vs_u`, the
+    /// shared run and the parameters up, the sums back.
+    fn launch(&self, shared: &Shared, packed: &Packed, n: usize) -> anyhow::Result<Vec<f64>> {
+        let uniform = &packed.uniform;
+        let (module, func) = self
+            .build((shared.ints[9], uniform.vary))
+            .map_err(anyhow::Error::msg)?;
         let _one = self.busy.lock().unwrap_or_else(|e| e.into_inner());
+        let t0 = std::time::Instant::now();
         let s = &self.stream;
+        let bytes: Vec<u8> = uniform
+            .values
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        s.memcpy_htod(&bytes, &mut module.get_global("vs_u", s)?)?;
         let [x, v, a, j] = [0, 1, 2, 3].map(|i| s.clone_htod(&shared.refs[i]));
         let (x, v, a, j) = (x?, v?, a?, j?);
         let (drive, basis, osc) = (
@@ -204,7 +226,7 @@ impl Cuda {
             s.clone_htod(&shared.basis)?,
             s.clone_htod(&shared.osc)?,
         );
-        let p = s.clone_htod(params)?;
+        let p = s.clone_htod(&packed.varying)?;
         let mut out = s.alloc_zeros::<f64>(gpu_lanes::out_fields(shared.n_osc()) * n)?;
         let lanes = n as i64;
         let mut b = s.launch_builder(&func);
@@ -223,8 +245,13 @@ impl Cuda {
         };
         // SAFETY: the arguments match `vs_lanes` in lane.cu (10 int64, a float64, 8 device
         // pointers of the sizes gpu_lanes.rs gives, the output, the lane count).
+        let t1 = std::time::Instant::now();
         unsafe { b.launch(cfg) }?;
-        Ok(s.clone_dtoh(&out)?)
+        let out = s.clone_dtoh(&out)?;
+        let t2 = std::time::Instant::now();
+        *self.last_launch_s.lock().unwrap_or_else(|e| e.into_inner()) =
+            [(t1 - t0).as_secs_f64(), (t2 - t1).as_secs_f64()];
+        Ok(out)
     }
 }
 
@@ -263,34 +290,150 @@ impl Cuda {
         refs: &[&Reference],
         solver: &Solver,
     ) -> anyhow::Result<Result<Vec<LaneResult>, SetupError>> {
-        let setup = Shared::new(models, refs, solver)
-            .and_then(|shared| Ok((shared, gpu_lanes::pack_params(models)?)));
-        let (shared, params) = match setup {
+        let setup =
+            Shared::new(models, refs, solver).and_then(|shared| Ok((shared, pack(models)?)));
+        let (shared, packed) = match setup {
             Ok(s) => s,
             Err(e) => return Ok(Err(e)),
         };
         let n = models.len();
         let out = self
-            .launch(&shared, &params, n)
+            .launch(&shared, &packed, n)
             .map_err(|e| anyhow::anyhow!("the GPU ({}) failed: {e}", self.name))?;
         let lane_ref = |l: usize| refs[l.min(refs.len() - 1)];
         let finish = gpu_lanes::Finisher::new(refs[0], shared.n_osc());
         Ok(Ok((0..n)
+            .into_par_iter()
             .map(|l| finish.lane(&out, n, l, lane_ref(l)))
             .collect()))
     }
 }
 
-/// The kernel's PTX for the effects `bits`: from the cache (`$XDG_CACHE_HOME/vshake` or
-/// `~/.cache/vshake`, keyed by the source and the effects), else compiled by NVRTC (about a
-/// second) and cached.
-pub(crate) fn ptx(bits: i64) -> Result<String, String> {
-    let key = fnv1a(&format!("{}\n{bits}", gpu_lanes::SOURCE));
+/// Lanes per piece of the parameter records made on one worker thread.
+const PACK_PIECE: usize = 512;
+
+/// A launch's parameters: the fields every lane shares, and the records of the others.
+pub(crate) struct Packed {
+    pub uniform: Uniform,
+    /// The varying fields' records, field-major ([`Uniform::compact`]; one zero when none).
+    pub varying: Vec<f64>,
+}
+
+/// The parameters of `models` ([`gpu_lanes::record`]s), made on the worker threads in two
+/// passes: which fields differ from the first lane's, then the records of those alone (a few
+/// fields of a study's varied parameters instead of all 131).
+pub(crate) fn pack(models: &[&ModelParams]) -> Result<Packed, SetupError> {
+    let first = models[0];
+    if let Some(lane) = models
+        .iter()
+        .position(|m| m.controller.f_s != first.controller.f_s || m.valve_law != first.valve_law)
+    {
+        return Err(SetupError::NotUniform { lane });
+    }
+    let head = gpu_lanes::record(first)?;
+    let vary = if shared_fields_off() {
+        [!0; 3]
+    } else {
+        models
+            .par_chunks(PACK_PIECE)
+            .map(|piece| {
+                piece.iter().try_fold([0u64; 3], |acc, m| {
+                    let d = Uniform::differing(&head, &gpu_lanes::record(m)?);
+                    Ok(std::array::from_fn(|w| acc[w] | d[w]))
+                })
+            })
+            .try_reduce(|| [0; 3], |a, b| Ok(std::array::from_fn(|w| a[w] | b[w])))?
+    };
+    let uniform = Uniform {
+        vary,
+        values: head.to_vec(),
+    };
+    let fields = uniform.varying();
+    let varying = varying_records(models, &fields)?;
+    Ok(Packed { uniform, varying })
+}
+
+/// The records of `fields` of `models`, field-major: pieces made apart, then placed row by row.
+fn varying_records(models: &[&ModelParams], fields: &[usize]) -> Result<Vec<f64>, SetupError> {
+    let (n, k) = (models.len(), fields.len());
+    if k == 0 {
+        return Ok(vec![0.0]);
+    }
+    let pieces: Vec<Vec<f64>> = models
+        .par_chunks(PACK_PIECE)
+        .map(|piece| {
+            let m = piece.len();
+            let mut block = vec![0.0; k * m];
+            for (l, model) in piece.iter().enumerate() {
+                let r = gpu_lanes::record(model)?;
+                for (row, &f) in fields.iter().enumerate() {
+                    block[row * m + l] = r[f];
+                }
+            }
+            Ok(block)
+        })
+        .collect::<Result<_, SetupError>>()?;
+    let mut varying = vec![0.0; k * n];
+    varying
+        .par_chunks_mut(n)
+        .enumerate()
+        .for_each(|(row, out)| {
+            for (i, block) in pieces.iter().enumerate() {
+                let m = block.len() / k;
+                out[i * PACK_PIECE..i * PACK_PIECE + m]
+                    .copy_from_slice(&block[row * m..(row + 1) * m]);
+            }
+        });
+    Ok(varying)
+}
+
+/// Whether NVRTC contracts multiplies and adds into FMAs: yes (about 20 % fewer float64
+/// instructions; the metrics then differ from the CPU kernel's by rounding, 4e-11 relative at
+/// most on the gains and record sweeps), unless `VSHAKE_CUDA_FMAD=0`, which gives the CPU
+/// kernel's numbers bit for bit.
+fn fma_contraction() -> bool {
+    std::env::var_os("VSHAKE_CUDA_FMAD").is_none_or(|v| v != "0")
+}
+
+/// `VSHAKE_CUDA_SHARED_FIELDS=0`: every parameter read from each lane's record, none from the
+/// constant bank (for measuring what sharing them gains; results are the same).
+fn shared_fields_off() -> bool {
+    std::env::var_os("VSHAKE_CUDA_SHARED_FIELDS").is_some_and(|v| v == "0")
+}
+
+/// The NVRTC options of a build: the effects, the varying fields, and the resident blocks per
+/// multiprocessor where `VSHAKE_CUDA_MIN_BLOCKS` sets them (for measuring; lane.cu's
+/// `VS_MIN_BLOCKS` default otherwise).
+fn build_options((bits, vary): BuildKey) -> Vec<String> {
+    let mut options = vec![format!("-DVS_EFFECTS={bits}")];
+    for (i, word) in vary.iter().enumerate() {
+        options.push(format!("-DVS_VARY{i}={word:#x}ULL"));
+    }
+    if let Some(b) = std::env::var("VSHAKE_CUDA_MIN_BLOCKS")
+        .ok()
+        .and_then(|b| b.parse::<u32>().ok())
+    {
+        options.push(format!("-DVS_MIN_BLOCKS={b}"));
+    }
+    options
+}
+
+/// The kernel's PTX for a build: from the cache (`$XDG_CACHE_HOME/vshake` or `~/.cache/vshake`,
+/// keyed by the source and the build's options), else compiled by NVRTC (about a second) and
+/// cached.
+pub(crate) fn ptx(key: BuildKey) -> Result<String, String> {
+    let options = build_options(key);
+    let key = fnv1a(&format!(
+        "{}\n{} fmad={}",
+        gpu_lanes::SOURCE,
+        options.join(" "),
+        fma_contraction()
+    ));
     let path = cache_dir().map(|d| d.join(format!("lane-{key:016x}.ptx")));
     if let Some(text) = path.as_ref().and_then(|p| std::fs::read_to_string(p).ok()) {
         return Ok(text);
     }
-    let text = compile_ptx(bits)?;
+    let text = compile_ptx(options)?;
     if let Some(p) = path {
         // A cache that cannot be written costs a compile next time, nothing else.
         let tmp = p.with_extension(format!("tmp{}", std::process::id()));
@@ -301,10 +444,10 @@ pub(crate) fn ptx(bits: i64) -> Result<String, String> {
     Ok(text)
 }
 
-/// Compiles the kernel with NVRTC for the effects `bits` (`-DVS_EFFECTS`: a build carries only
-/// the states of its effects). No FMA contraction (`--fmad=false`): the CPU kernel rounds every
-/// multiply and add, and so does the GPU, which keeps the two within 1e-9 of each other.
-pub(crate) fn compile_ptx(bits: i64) -> Result<String, String> {
+/// Compiles the kernel with NVRTC with a build's `options` ([`build_options`]: a build carries
+/// only the states of its effects, and reads only the varying fields from the lanes' records),
+/// contracting into FMAs as [`fma_contraction`] says.
+pub(crate) fn compile_ptx(options: Vec<String>) -> Result<String, String> {
     // SAFETY: only tries to open the shared library.
     if !unsafe { cudarc::nvrtc::sys::is_culib_present() } {
         return Err(
@@ -314,9 +457,9 @@ pub(crate) fn compile_ptx(bits: i64) -> Result<String, String> {
         );
     }
     let opts = cudarc::nvrtc::CompileOptions {
-        fmad: Some(false),
+        fmad: Some(fma_contraction()),
         name: Some("lane.cu".into()),
-        options: vec![format!("-DVS_EFFECTS={bits}")],
+        options,
         ..Default::default()
     };
     cudarc::nvrtc::compile_ptx_with_opts(gpu_lanes::SOURCE, opts)
@@ -386,11 +529,12 @@ mod tests {
         let all = gpu_lanes::EFFECT_BITS
             .iter()
             .fold(gpu_lanes::TWO_ACTUATORS, |b, (_, bit)| b | bit);
-        for bits in [0, all] {
+        for key in [(0, [0; 3]), (all, [!0; 3])] {
             let t = std::time::Instant::now();
-            let ptx = compile_ptx(bits).unwrap_or_else(|e| panic!("{e}"));
+            let ptx = compile_ptx(build_options(key)).unwrap_or_else(|e| panic!("{e}"));
             eprintln!(
-                "NVRTC, effects {bits:#x}: {} bytes of PTX in {:.2} s",
+                "NVRTC, effects {:#x}: {} bytes of PTX in {:.2} s",
+                key.0,
                 ptx.len(),
                 t.elapsed().as_secs_f64()
             );
@@ -399,7 +543,37 @@ mod tests {
                 "no vs_lanes entry in the PTX"
             );
             assert!(ptx.contains(".f64"), "the kernel is float64");
+            if key.1 == [0; 3] {
+                assert!(ptx.contains("vs_u["), "no constant for the shared fields");
+            }
         }
+    }
+
+    /// Made in pieces on the worker threads, the shared fields and the varying records are
+    /// those of the whole records packed in one go.
+    #[test]
+    fn packing_in_pieces_equals_packing_at_once() {
+        let models: Vec<ModelParams> = (0..PACK_PIECE * 2 + 5)
+            .map(|i| {
+                let mut m = ModelParams::default();
+                m.controller.g_d = 1.0 + i as f64 * 1e-4;
+                m.platen.m = 1.4e5 + (i % 7) as f64;
+                m
+            })
+            .collect();
+        let refs: Vec<&ModelParams> = models.iter().collect();
+        let whole = gpu_lanes::pack_params(&refs).unwrap();
+        let want = Uniform::of(&whole, refs.len());
+        let got = pack(&refs).unwrap();
+        assert_eq!(got.uniform, want);
+        assert_eq!(got.varying, want.compact(&whole, refs.len()));
+        assert_eq!(
+            got.uniform.varying().len(),
+            3,
+            "c_fb, 1/m and the Coulomb force mu m g"
+        );
+        let same = pack(&refs[..1]).unwrap();
+        assert_eq!((same.uniform.vary, same.varying), ([0; 3], vec![0.0]));
     }
 
     #[test]

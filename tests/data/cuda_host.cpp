@@ -2,7 +2,9 @@
 // parameters from a binary file, runs `vs_lane` on every lane, writes the sums.
 //
 // Input, little-endian: 10 int64 (gpu_lanes.rs `Shared::ints`), float64 f_s, int64 lanes, then
-// eight arrays, each an int64 length and its float64s: x, v, a, j, drive, basis, osc, params.
+// nine arrays, each an int64 length and its float64s: x, v, a, j, drive, basis, osc, the varying
+// fields' records, the shared fields' values (`vs_u`); then the three words of the varying
+// fields' mask (`vs_vary`).
 // Output: lanes × out_fields float64s, field-major.
 #include "../../src/kernel/cuda/lane.cu"
 #include <cstdio>
@@ -30,9 +32,12 @@ int main(int argc, char **argv) {
   double f_s;
   if (fread(&f_s, 8, 1, in) != 1) return 2;
   long long n = read_i64(in);
-  std::vector<double> arr[8];
+  std::vector<double> arr[9];
   for (auto &a : arr) a = read_array(in);
+  for (vs_u64 &w : vs_vary) w = (vs_u64)read_i64(in);
   fclose(in);
+  if (arr[8].size() != VS_LANE_FIELDS) { fprintf(stderr, "vs_u: wrong length\n"); return 2; }
+  for (int f = 0; f < VS_LANE_FIELDS; ++f) vs_u[f] = arr[8][f];
   vs_effects = ints[9];
   VsRun r = {ints[0], ints[1], ints[2], ints[3], ints[4], ints[5], ints[6], ints[7], ints[8], ints[9], f_s,
              arr[0].data(), arr[1].data(), arr[2].data(), arr[3].data(), arr[4].data(),

@@ -143,6 +143,46 @@ struct VsRun {
 // effects' own.
 struct VsState { double p1[2], p2[2], y, v, z, e[VS_NES]; };
 
+// Parameters that every lane of a launch shares (gpu_lanes.rs `Uniform`) are read from `vs_u`
+// (on the GPU a constant-bank operand); P holds the records of the varying fields alone,
+// field-major, in field order (lane l's value of the s-th varying field at P[s * n + l]). Which
+// fields vary is fixed when the kernel is compiled (NVRTC: -DVS_VARY0..2, bit f of the 131-bit
+// mask for field f), so that each read is resolved then; the host build reads the mask per run
+// (`vs_vary`, set by the harness).
+VS_FN constexpr int vs_popc(vs_u64 x) {
+  x = x - ((x >> 1) & 0x5555555555555555ULL);
+  x = (x & 0x3333333333333333ULL) + ((x >> 2) & 0x3333333333333333ULL);
+  x = (x + (x >> 4)) & 0x0F0F0F0F0F0F0F0FULL;
+  return (int)((x * 0x0101010101010101ULL) >> 56);
+}
+
+// Whether field i varies under the mask (m0, m1, m2), and its row in P.
+VS_FN constexpr bool vs_varies_in(vs_u64 m0, vs_u64 m1, vs_u64 m2, int i) {
+  return (((i < 64 ? m0 : (i < 128 ? m1 : m2)) >> (i & 63)) & 1ULL) != 0;
+}
+VS_FN constexpr int vs_row_in(vs_u64 m0, vs_u64 m1, vs_u64 m2, int i) {
+  return i < 64    ? vs_popc(m0 & ((1ULL << i) - 1))
+         : i < 128 ? vs_popc(m0) + vs_popc(m1 & ((1ULL << (i - 64)) - 1))
+                   : vs_popc(m0) + vs_popc(m1) + vs_popc(m2 & ((1ULL << (i - 128)) - 1));
+}
+
+#ifdef __CUDACC_RTC__
+#if !defined(VS_VARY0) || !defined(VS_VARY1) || !defined(VS_VARY2)
+#error "the kernel is compiled with -DVS_VARY0=<mask> -DVS_VARY1=<mask> -DVS_VARY2=<mask>"
+#endif
+__constant__ double vs_u[VS_LANE_FIELDS];
+#define VS_MASK VS_VARY0, VS_VARY1, VS_VARY2
+#else
+static double vs_u[VS_LANE_FIELDS];
+static vs_u64 vs_vary[3] = {~0ULL, ~0ULL, ~0ULL};
+#define VS_MASK vs_vary[0], vs_vary[1], vs_vary[2]
+#endif
+
+// Field i of lane l's parameters (n lanes).
+VS_FN double vs_p(const double *P, long long n, long long l, int i) {
+  return vs_varies_in(VS_MASK, i) ? P[vs_row_in(VS_MASK, i) * n + l] : vs_u[i];
+}
+
 // servovalve.rs: the regularised square root, Newton for s^(−1/4) from a bit-trick seed.
 VS_FN double vs_inv_fourth_root(double s) {
   double y = vs_from_bits(0x4feb0c0bba5e3540ULL - (vs_to_bits(s) >> 2));
@@ -157,7 +197,7 @@ VS_FN double vs_sq(double dp, double p_tr2) { return dp * vs_inv_fourth_root(dp 
 
 VS_FN bool vs_finite(double x) { return x - x == 0.0; }
 
-#define F(i) P[(i) * n + l]
+#define F(i) vs_p(P, n, l, (i))
 
 // The command after transport_delay (its spool_position, which the spool's dynamics follow).
 VS_FN double vs_delayed(const double *P, long long n, long long l, const VsState &s, double x) {
@@ -419,7 +459,7 @@ struct VsCtrl { double f_prev, f_hp, notch[5][2]; };
 
 VS_FN double vs_tick(const double *P, long long n, long long l, VsCtrl &m, double xr, double vr,
                      double ar, double jr, double x, double f) {
-#define F(i) P[(i) * n + l]
+#define F(i) vs_p(P, n, l, (i))
   m.f_hp = F(VS_HP_B) * (f - m.f_prev) + F(VS_HP_A) * m.f_hp;
   m.f_prev = f;
   double u = F(VS_C_FB) * (xr - x) + F(VS_C_D) * xr + F(VS_C_V) * vr + F(VS_C_A) * ar +
@@ -443,11 +483,11 @@ VS_FN int vs_guard(const double *P, long long n, long long l, const VsState &s, 
   bool finite = vs_finite(s.y) && vs_finite(s.v) && vs_finite(s.z);
   for (int i = 0; i < VS_NA; ++i) finite = finite && vs_finite(s.p1[i]) && vs_finite(s.p2[i]);
   if (!finite) return 1;
-  if (fabs(s.y) >= P[VS_L * n + l]) {
+  if (fabs(s.y) >= vs_p(P, n, l, VS_L)) {
     value = s.y;
     return 2;
   }
-  double hi = 2.0 * P[VS_P_S * n + l];
+  double hi = 2.0 * vs_p(P, n, l, VS_P_S);
   for (int i = 0; i < VS_NA; ++i) {
     const double p[2] = {s.p1[i], s.p2[i]};
     for (int c = 0; c < 2; ++c) {
@@ -545,14 +585,14 @@ VS_FN void vs_store(const VsRun &r, double *out, long long n, long long l, const
 // stroke x and the actuator force f the controller reads.
 VS_FN double vs_command(const double *P, long long n, long long l, const VsRun &r, long long k,
                         VsCtrl &m, double x, double f, double &u) {
-  double k_sp = P[VS_K_SP * n + l];
+  double k_sp = vs_p(P, n, l, VS_K_SP);
   if (r.drive == 0) {
     long long at = l * r.ref_stride + k;
     u = vs_tick(P, n, l, m, r.x[at], r.v[at], r.a[at], r.j[at], x, f);
     return k_sp * u;
   }
   if (r.drive == 1) {
-    double lim = P[VS_U_LIM * n + l], c = r.drive_signal[k];
+    double lim = vs_p(P, n, l, VS_U_LIM), c = r.drive_signal[k];
     u = c < -lim ? -lim : (c > lim ? lim : c);
     return k_sp * u;
   }
@@ -584,17 +624,17 @@ VS_FN void vs_substeps(const double *P, long long n, long long l, const VsRun &r
 // P_S0, every other effect state 0.
 VS_FN void vs_initial(const double *P, long long n, long long l, VsState &s) {
   for (int i = 0; i < 2; ++i) {
-    s.p1[i] = P[VS_P0_1 * n + l];
-    s.p2[i] = P[VS_P0_2 * n + l];
+    s.p1[i] = vs_p(P, n, l, VS_P0_1);
+    s.p2[i] = vs_p(P, n, l, VS_P0_2);
   }
   s.y = s.v = s.z = 0.0;
   for (int i = 0; i < VS_NES; ++i) s.e[i] = 0.0;
-  if (VS_ON(VS_E_SUPPLY)) s.e[VS_S_SUPPLY] = P[(VS_SUPPLY + 1) * n + l];
+  if (VS_ON(VS_E_SUPPLY)) s.e[VS_S_SUPPLY] = vs_p(P, n, l, VS_SUPPLY + 1);
 }
 
 // The actuators' total force on the platen (simulate.rs `total_force`).
 VS_FN double vs_force(const double *P, long long n, long long l, const VsState &s) {
-  double a1 = P[VS_A1 * n + l], a2 = P[VS_A2 * n + l];
+  double a1 = vs_p(P, n, l, VS_A1), a2 = vs_p(P, n, l, VS_A2);
   double f0 = s.p1[0] * a1 - s.p2[0] * a2;
   return VS_NA == 1 ? f0 + f0 : f0 + (s.p1[1] * a1 - s.p2[1] * a2);
 }
@@ -635,14 +675,19 @@ VS_FN void vs_lane(const VsRun &r, const double *P, double *out, long long n, lo
 }
 
 #ifdef __CUDACC_RTC__
+// Blocks of 128 lanes (gpu.rs: BLOCK), at least VS_MIN_BLOCKS of them resident per
+// multiprocessor: the register budget per lane that ptxas keeps to (4: 128 registers).
+#ifndef VS_MIN_BLOCKS
+#define VS_MIN_BLOCKS 4
+#endif
 // The launch: the run's integers in the order of gpu_lanes.rs `Shared::ints`, then its arrays.
-extern "C" __global__ void vs_lanes(long long ticks, long long substeps, long long w0,
+extern "C" __global__ void __launch_bounds__(128, VS_MIN_BLOCKS) vs_lanes(long long ticks, long long substeps, long long w0,
                                     long long w1, long long has_basis, long long drive,
                                     long long linear_valve, long long n_osc,
                                     long long ref_stride, long long effects, double f_s,
                                     const double *x, const double *v, const double *a,
                                     const double *j, const double *drive_signal,
-                                    const double *basis, const double *osc, const double *P,
+                                    const double *basis, const double *osc, const double *__restrict__ P,
                                     double *out, long long n) {
   long long l = (long long)blockIdx.x * blockDim.x + threadIdx.x;
   VsRun r = {ticks, substeps, w0, w1, has_basis, drive, linear_valve, n_osc, ref_stride, effects, f_s,
