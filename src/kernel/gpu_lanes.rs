@@ -49,13 +49,15 @@ pub const TWO_ACTUATORS: i64 = 1 << 16;
 /// The `effects` bits of a launch: every covered effect some lane switches on, and
 /// [`TWO_ACTUATORS`] where some lane's actuators differ.
 pub fn effect_bits(models: &[&ModelParams]) -> i64 {
-    let two = models
-        .iter()
-        .any(|m| !effects::asymmetry::Asymmetry::<1>::new([m]).symmetric());
-    EFFECT_BITS
-        .iter()
-        .filter(|(id, _)| models.iter().any(|m| m.effects.get(*id)))
-        .fold(if two { TWO_ACTUATORS } else { 0 }, |bits, (_, b)| bits | b)
+    // One pass over the models (a study's launch has many, each a few kilobytes).
+    models.iter().fold(0, |bits, m| {
+        let two = !effects::asymmetry::Asymmetry::<1>::new([m]).symmetric();
+        EFFECT_BITS
+            .iter()
+            .filter(|(id, _)| m.effects.get(*id))
+            .fold(if two { TWO_ACTUATORS } else { 0 }, |b, (_, bit)| b | bit)
+            | bits
+    })
 }
 
 /// Most response-spectrum periods a lane accumulates (lane.cu: `VS_MAX_OSC`).
@@ -135,26 +137,17 @@ impl Uniform {
     /// Which fields of `params` (n lanes, field-major, as [`pack_params`] writes them) vary,
     /// comparing bits (so -0.0 and 0.0 differ, and a NaN equals itself).
     pub fn of(params: &[f64], n: usize) -> Uniform {
-        let mut vary = [0u64; 3];
-        for f in 0..LANE_FIELDS {
+        let vary = mask((0..LANE_FIELDS).filter(|&f| {
             let lanes = &params[f * n..(f + 1) * n];
-            if lanes.iter().any(|v| v.to_bits() != lanes[0].to_bits()) {
-                vary[f / 64] |= 1 << (f % 64);
-            }
-        }
+            lanes.iter().any(|v| v.to_bits() != lanes[0].to_bits())
+        }));
         let values = (0..LANE_FIELDS).map(|f| params[f * n]).collect();
         Uniform { vary, values }
     }
 
     /// The bits of the fields where `record` differs from `first`.
     pub fn differing(first: &[f64; LANE_FIELDS], record: &[f64; LANE_FIELDS]) -> [u64; 3] {
-        let mut vary = [0u64; 3];
-        for (f, (a, b)) in first.iter().zip(record).enumerate() {
-            if a.to_bits() != b.to_bits() {
-                vary[f / 64] |= 1 << (f % 64);
-            }
-        }
-        vary
+        mask((0..LANE_FIELDS).filter(|&f| first[f].to_bits() != record[f].to_bits()))
     }
 
     /// Whether field `f` is read from each lane's record.
@@ -164,7 +157,7 @@ impl Uniform {
 
     /// The varying fields, in order (their rows in [`Uniform::compact`]).
     pub fn varying(&self) -> Vec<usize> {
-        (0..LANE_FIELDS).filter(|&f| self.varies(f)).collect()
+        fields(self.vary)
     }
 
     /// The records of the varying fields alone, field-major (the kernel's `P`), from the whole
@@ -175,6 +168,27 @@ impl Uniform {
             .flat_map(|f| params[f * n..(f + 1) * n].iter().copied())
             .collect()
     }
+}
+
+/// The mask of `fields`: bit f of word f / 64 ([`Uniform::vary`]).
+fn mask(fields: impl Iterator<Item = usize>) -> [u64; 3] {
+    let mut vary = [0u64; 3];
+    for f in fields {
+        vary[f / 64] |= 1 << (f % 64);
+    }
+    vary
+}
+
+/// The fields set in `vary`, in order (at most [`LANE_FIELDS`]).
+pub fn fields(vary: [u64; 3]) -> Vec<usize> {
+    (0..LANE_FIELDS)
+        .filter(|&f| vary[f / 64] >> (f % 64) & 1 == 1)
+        .collect()
+}
+
+/// The fields set in either mask.
+pub fn union(a: [u64; 3], b: [u64; 3]) -> [u64; 3] {
+    std::array::from_fn(|w| a[w] | b[w])
 }
 
 /// One lane's record, in lane.cu's field order: the baseline's, then the covered effects'

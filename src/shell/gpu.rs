@@ -10,17 +10,19 @@
 
 use super::BadInput;
 use crate::kernel::excitation::Reference;
-use crate::kernel::gpu_lanes::{self, Shared, Uniform};
+use crate::kernel::gpu_lanes::{self, Shared, Uniform, LANE_FIELDS};
 use crate::kernel::params::ModelParams;
 use crate::kernel::simulate::{LaneResult, SetupError, Solver};
 use crate::orchestration::batch::LaneEngine;
 use cudarc::driver::{
-    CudaContext, CudaFunction, CudaModule, CudaStream, LaunchConfig, PushKernelArg,
+    CudaContext, CudaFunction, CudaModule, CudaSlice, CudaStream, LaunchConfig, PinnedHostSlice,
+    PushKernelArg,
 };
 use rayon::prelude::*;
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
+use std::time::Instant;
 
 /// The engine asked for on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
@@ -162,11 +164,33 @@ pub struct Cuda {
     stream: Arc<CudaStream>,
     /// The loaded builds: the module (its constant `vs_u`) and the entry point.
     builds: Mutex<HashMap<BuildKey, (Arc<CudaModule>, CudaFunction)>>,
-    /// One batch on the device at a time (worker threads share the GPU).
-    busy: Mutex<()>,
-    /// The last launch's seconds: the upload, then the kernel and the download.
-    pub last_launch_s: Mutex<[f64; 2]>,
+    /// The output on the device, kept between launches (grown when one needs more); its lock
+    /// lets one batch on the device at a time (worker threads share the GPU).
+    device_out: Mutex<Option<CudaSlice<f64>>>,
+    /// Page-locked host buffers the outputs come back to (faster than pageable memory, and no
+    /// page faults), each taken by one launch until its lanes are finished.
+    host_out: Mutex<Vec<PinnedHostSlice<f64>>>,
+    /// Where the last run's time went ([`Timings`]).
+    pub last: Mutex<Timings>,
 }
+
+/// Seconds of one run on the GPU, by stage.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Timings {
+    /// The run's shared data (reference, drive, basis, oscillators) and the parameter records.
+    pub setup: f64,
+    /// The shared fields, the run and the records up to the device.
+    pub upload: f64,
+    pub kernel: f64,
+    /// The sums back to the host.
+    pub download: f64,
+    /// The lanes' metrics from their sums, on every worker thread.
+    pub finish: f64,
+}
+
+/// Outputs larger than this come back to pageable memory rather than a page-locked buffer kept
+/// for the next launch (f64 values: 64 MiB).
+const PINNED_MAX: usize = 1 << 23;
 
 impl Cuda {
     /// Opens GPU 0, named `name`, and loads the baseline's build (compiled, or from the cache),
@@ -178,10 +202,11 @@ impl Cuda {
             stream: ctx.default_stream(),
             ctx,
             builds: Mutex::new(HashMap::new()),
-            busy: Mutex::new(()),
-            last_launch_s: Mutex::new([0.0; 2]),
+            device_out: Mutex::new(None),
+            host_out: Mutex::new(Vec::new()),
+            last: Mutex::new(Timings::default()),
         };
-        cuda.build((0, [!0; 3]))?;
+        cuda.build((0, [0; 3]))?;
         Ok(cuda)
     }
 
@@ -204,15 +229,29 @@ impl Cuda {
     }
 
     /// Runs the lanes on the device: the shared fields into the build's constant `vs_u`, the
-    /// shared run and the parameters up, the sums back.
-    fn launch(&self, shared: &Shared, packed: &Packed, n: usize) -> anyhow::Result<Vec<f64>> {
+    /// shared run and the parameters up, the kernel, the sums back into `host` (n lanes).
+    fn launch(
+        &self,
+        shared: &Shared,
+        packed: &Packed,
+        n: usize,
+        host: &mut Output,
+        times: &mut Timings,
+    ) -> anyhow::Result<()> {
         let uniform = &packed.uniform;
         let (module, func) = self
             .build((shared.ints[9], uniform.vary))
             .map_err(anyhow::Error::msg)?;
-        let _one = self.busy.lock().unwrap_or_else(|e| e.into_inner());
-        let t0 = std::time::Instant::now();
+        let len = gpu_lanes::out_fields(shared.n_osc()) * n;
+        let mut kept = self.device_out.lock().unwrap_or_else(|e| e.into_inner());
+        let t0 = Instant::now();
         let s = &self.stream;
+        if kept.as_ref().is_none_or(|o| o.len() < len) {
+            *kept = None;
+            *kept = Some(s.alloc_zeros::<f64>(len)?);
+        }
+        let out = kept.as_mut().expect("made above");
+        s.memset_zeros(&mut out.slice_mut(0..len))?;
         let bytes: Vec<u8> = uniform
             .values
             .iter()
@@ -227,7 +266,6 @@ impl Cuda {
             s.clone_htod(&shared.osc)?,
         );
         let p = s.clone_htod(&packed.varying)?;
-        let mut out = s.alloc_zeros::<f64>(gpu_lanes::out_fields(shared.n_osc()) * n)?;
         let lanes = n as i64;
         let mut b = s.launch_builder(&func);
         for i in &shared.ints {
@@ -237,21 +275,87 @@ impl Cuda {
         for d in [&x, &v, &a, &j, &drive, &basis, &osc, &p] {
             b.arg(d);
         }
-        b.arg(&mut out).arg(&lanes);
+        b.arg(&mut *out).arg(&lanes);
         let cfg = LaunchConfig {
             grid_dim: ((n as u32).div_ceil(BLOCK), 1, 1),
             block_dim: (BLOCK, 1, 1),
             shared_mem_bytes: 0,
         };
+        s.synchronize()?;
+        let t1 = Instant::now();
         // SAFETY: the arguments match `vs_lanes` in lane.cu (10 int64, a float64, 8 device
-        // pointers of the sizes gpu_lanes.rs gives, the output, the lane count).
-        let t1 = std::time::Instant::now();
+        // pointers of the sizes gpu_lanes.rs gives, the output of at least `len` values, the
+        // lane count).
         unsafe { b.launch(cfg) }?;
-        let out = s.clone_dtoh(&out)?;
-        let t2 = std::time::Instant::now();
-        *self.last_launch_s.lock().unwrap_or_else(|e| e.into_inner()) =
-            [(t1 - t0).as_secs_f64(), (t2 - t1).as_secs_f64()];
-        Ok(out)
+        s.synchronize()?;
+        let t2 = Instant::now();
+        host.fill_from(s, &out.slice(0..len))?;
+        (times.upload, times.kernel, times.download) = (
+            (t1 - t0).as_secs_f64(),
+            (t2 - t1).as_secs_f64(),
+            t2.elapsed().as_secs_f64(),
+        );
+        Ok(())
+    }
+
+    /// A host buffer for `len` output values: a kept page-locked one, a new one, or (past
+    /// [`PINNED_MAX`]) pageable memory.
+    fn output(&self, len: usize) -> anyhow::Result<Output> {
+        if len > PINNED_MAX {
+            return Ok(Output::Pageable(vec![0.0; len]));
+        }
+        let mut kept = self.host_out.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(i) = kept.iter().position(|h| h.len() >= len) {
+            return Ok(Output::Pinned(kept.swap_remove(i)));
+        }
+        drop(kept);
+        // SAFETY: the buffer is written by the download before it is read. Flags 0: cached
+        // (cudarc's `alloc_pinned` makes write-combined memory, slow for the CPU to read).
+        Ok(Output::Pinned(unsafe {
+            self.ctx.alloc_pinned_with_flags::<f64>(len, 0)
+        }?))
+    }
+
+    /// Keeps a page-locked buffer for the next launch (at most one per worker thread).
+    fn give_back(&self, out: Output) {
+        if let Output::Pinned(h) = out {
+            let mut kept = self.host_out.lock().unwrap_or_else(|e| e.into_inner());
+            if kept.len() < rayon::current_num_threads() {
+                kept.push(h);
+            }
+        }
+    }
+}
+
+/// Where a launch's output comes back to.
+enum Output {
+    Pinned(PinnedHostSlice<f64>),
+    Pageable(Vec<f64>),
+}
+
+impl Output {
+    /// Copies `src` from the device into the buffer's start, and waits for it.
+    fn fill_from(
+        &mut self,
+        s: &Arc<CudaStream>,
+        src: &cudarc::driver::CudaView<'_, f64>,
+    ) -> anyhow::Result<()> {
+        match self {
+            Output::Pinned(h) => {
+                s.memcpy_dtoh(src, h)?;
+                h.as_slice()?;
+            }
+            Output::Pageable(v) => s.memcpy_dtoh(src, v)?,
+        }
+        Ok(())
+    }
+
+    /// The first `len` values (after [`Output::fill_from`]).
+    fn values(&self, len: usize) -> anyhow::Result<&[f64]> {
+        Ok(match self {
+            Output::Pinned(h) => &h.as_slice()?[..len],
+            Output::Pageable(v) => &v[..len],
+        })
     }
 }
 
@@ -290,22 +394,35 @@ impl Cuda {
         refs: &[&Reference],
         solver: &Solver,
     ) -> anyhow::Result<Result<Vec<LaneResult>, SetupError>> {
-        let setup =
-            Shared::new(models, refs, solver).and_then(|shared| Ok((shared, pack(models)?)));
-        let (shared, packed) = match setup {
-            Ok(s) => s,
-            Err(e) => return Ok(Err(e)),
+        let t = Instant::now();
+        // The shared run on one worker while the others pack the parameters.
+        let (shared, packed) =
+            match rayon::join(|| Shared::new(models, refs, solver), || pack(models)) {
+                (Ok(shared), Ok(packed)) => (shared, packed),
+                (Err(e), _) | (_, Err(e)) => return Ok(Err(e)),
+            };
+        let mut times = Timings {
+            setup: t.elapsed().as_secs_f64(),
+            ..Timings::default()
         };
         let n = models.len();
-        let out = self
-            .launch(&shared, &packed, n)
-            .map_err(|e| anyhow::anyhow!("the GPU ({}) failed: {e}", self.name))?;
+        let len = gpu_lanes::out_fields(shared.n_osc()) * n;
+        let failed = |e: anyhow::Error| anyhow::anyhow!("the GPU ({}) failed: {e}", self.name);
+        let mut host = self.output(len).map_err(failed)?;
+        self.launch(&shared, &packed, n, &mut host, &mut times)
+            .map_err(failed)?;
+        let t = Instant::now();
+        let out = host.values(len).map_err(failed)?;
         let lane_ref = |l: usize| refs[l.min(refs.len() - 1)];
         let finish = gpu_lanes::Finisher::new(refs[0], shared.n_osc());
-        Ok(Ok((0..n)
+        let done = (0..n)
             .into_par_iter()
-            .map(|l| finish.lane(&out, n, l, lane_ref(l)))
-            .collect()))
+            .map(|l| finish.lane(out, n, l, lane_ref(l)))
+            .collect();
+        self.give_back(host);
+        times.finish = t.elapsed().as_secs_f64();
+        *self.last.lock().unwrap_or_else(|e| e.into_inner()) = times;
+        Ok(Ok(done))
     }
 }
 
@@ -319,9 +436,10 @@ pub(crate) struct Packed {
     pub varying: Vec<f64>,
 }
 
-/// The parameters of `models` ([`gpu_lanes::record`]s), made on the worker threads in two
-/// passes: which fields differ from the first lane's, then the records of those alone (a few
-/// fields of a study's varied parameters instead of all 131).
+/// The parameters of `models` ([`gpu_lanes::record`]s), made once each on the worker threads:
+/// each piece of lanes keeps the records of the fields that differ from the first lane's within
+/// it; the fields that differ anywhere are then placed row by row (a few fields of a study's
+/// varied parameters instead of all 131).
 pub(crate) fn pack(models: &[&ModelParams]) -> Result<Packed, SetupError> {
     let first = models[0];
     if let Some(lane) = models
@@ -331,60 +449,73 @@ pub(crate) fn pack(models: &[&ModelParams]) -> Result<Packed, SetupError> {
         return Err(SetupError::NotUniform { lane });
     }
     let head = gpu_lanes::record(first)?;
-    let vary = if shared_fields_off() {
-        [!0; 3]
-    } else {
-        models
-            .par_chunks(PACK_PIECE)
-            .map(|piece| {
-                piece.iter().try_fold([0u64; 3], |acc, m| {
-                    let d = Uniform::differing(&head, &gpu_lanes::record(m)?);
-                    Ok(std::array::from_fn(|w| acc[w] | d[w]))
-                })
-            })
-            .try_reduce(|| [0; 3], |a, b| Ok(std::array::from_fn(|w| a[w] | b[w])))?
-    };
+    let every = shared_fields_off();
+    let pieces: Vec<Piece> = models
+        .par_chunks(PACK_PIECE)
+        .map(|lanes| Piece::new(lanes, &head, every))
+        .collect::<Result<_, SetupError>>()?;
+    let vary = pieces
+        .iter()
+        .fold([0; 3], |a, p| gpu_lanes::union(a, p.vary));
     let uniform = Uniform {
         vary,
         values: head.to_vec(),
     };
     let fields = uniform.varying();
-    let varying = varying_records(models, &fields)?;
+    let varying = place(&pieces, &fields, &head, models.len());
     Ok(Packed { uniform, varying })
 }
 
-/// The records of `fields` of `models`, field-major: pieces made apart, then placed row by row.
-fn varying_records(models: &[&ModelParams], fields: &[usize]) -> Result<Vec<f64>, SetupError> {
-    let (n, k) = (models.len(), fields.len());
-    if k == 0 {
-        return Ok(vec![0.0]);
+/// The records of some lanes' fields that differ from the first lane's (all of them, `every`).
+struct Piece {
+    vary: [u64; 3],
+    /// Those fields, in order, and their values: a row of the piece's lanes each.
+    fields: Vec<usize>,
+    rows: Vec<f64>,
+}
+
+impl Piece {
+    fn new(
+        lanes: &[&ModelParams],
+        head: &[f64; LANE_FIELDS],
+        every: bool,
+    ) -> Result<Piece, SetupError> {
+        let records = lanes
+            .iter()
+            .map(|m| gpu_lanes::record(m))
+            .collect::<Result<Vec<_>, _>>()?;
+        let vary = match every {
+            true => [!0; 3],
+            false => records.iter().fold([0; 3], |a, r| {
+                gpu_lanes::union(a, Uniform::differing(head, r))
+            }),
+        };
+        let fields = gpu_lanes::fields(vary);
+        let rows = fields
+            .iter()
+            .flat_map(|&f| records.iter().map(move |r| r[f]))
+            .collect();
+        Ok(Piece { vary, fields, rows })
     }
-    let pieces: Vec<Vec<f64>> = models
-        .par_chunks(PACK_PIECE)
-        .map(|piece| {
-            let m = piece.len();
-            let mut block = vec![0.0; k * m];
-            for (l, model) in piece.iter().enumerate() {
-                let r = gpu_lanes::record(model)?;
-                for (row, &f) in fields.iter().enumerate() {
-                    block[row * m + l] = r[f];
-                }
+}
+
+/// The rows of `fields` for `n` lanes in pieces of [`PACK_PIECE`], field-major: a piece's own
+/// row where the field differs within it, else the first lane's value (one zero when no field
+/// varies).
+fn place(pieces: &[Piece], fields: &[usize], head: &[f64; LANE_FIELDS], n: usize) -> Vec<f64> {
+    if fields.is_empty() {
+        return vec![0.0];
+    }
+    let mut varying = vec![0.0; fields.len() * n];
+    varying.par_chunks_mut(n).zip(fields).for_each(|(out, &f)| {
+        for (piece, out) in pieces.iter().zip(out.chunks_mut(PACK_PIECE)) {
+            match piece.fields.iter().position(|&g| g == f) {
+                Some(r) => out.copy_from_slice(&piece.rows[r * out.len()..][..out.len()]),
+                None => out.fill(head[f]),
             }
-            Ok(block)
-        })
-        .collect::<Result<_, SetupError>>()?;
-    let mut varying = vec![0.0; k * n];
+        }
+    });
     varying
-        .par_chunks_mut(n)
-        .enumerate()
-        .for_each(|(row, out)| {
-            for (i, block) in pieces.iter().enumerate() {
-                let m = block.len() / k;
-                out[i * PACK_PIECE..i * PACK_PIECE + m]
-                    .copy_from_slice(&block[row * m..(row + 1) * m]);
-            }
-        });
-    Ok(varying)
 }
 
 /// Whether NVRTC contracts multiplies and adds into FMAs: yes (about 20 % fewer float64
@@ -558,6 +689,10 @@ mod tests {
                 let mut m = ModelParams::default();
                 m.controller.g_d = 1.0 + i as f64 * 1e-4;
                 m.platen.m = 1.4e5 + (i % 7) as f64;
+                if i == 2 * PACK_PIECE + 3 {
+                    // A field that differs in the last piece alone.
+                    m.controller.l_a = 0.6;
+                }
                 m
             })
             .collect();
@@ -569,8 +704,8 @@ mod tests {
         assert_eq!(got.varying, want.compact(&whole, refs.len()));
         assert_eq!(
             got.uniform.varying().len(),
-            3,
-            "c_fb, 1/m and the Coulomb force mu m g"
+            4,
+            "c_fb, c_a, 1/m and the Coulomb force mu m g"
         );
         let same = pack(&refs[..1]).unwrap();
         assert_eq!((same.uniform.vary, same.varying), ([0; 3], vec![0.0]));
