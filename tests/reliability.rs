@@ -191,6 +191,7 @@ fn sigterm_then_resume_equals_an_uninterrupted_run() {
     assert!(!partial.exists(), "the complete table took its name");
     assert_eq!(cells(&out), cells(reference()));
     assert!(kv(&out) == kv(reference()), "the metadata differs");
+    assert_eq!(meta(&out, "vshake.backend").as_deref(), Some("cpu"));
     // A complete file is left alone.
     let (code, stdout, _) = study(&["run", "--resume", s(&out)]);
     assert!(

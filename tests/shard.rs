@@ -84,6 +84,8 @@ fn merged_shards_equal_the_unsharded_run() {
             v
         };
         assert_eq!(keys(&meta), keys(&full_meta));
+        let backend = meta.iter().find(|(k, _)| k == "vshake.backend");
+        assert_eq!(backend.map(|(_, v)| v.as_str()), Some("cpu"), "{meta:?}");
     }
 }
 
@@ -214,6 +216,43 @@ fn slurm_scripts_wire_the_array_to_the_shards() {
     );
     let submit = std::fs::read_to_string(dir.join("submit.sh")).unwrap();
     assert!(submit.contains("--dependency=afterok:${array}"), "{submit}");
+    // Into the same folder: the same options rewrite the same scripts; other options (8 shards)
+    // are refused before any script is written, and an edited script is kept.
+    let same = [
+        "slurm",
+        s.to_str().unwrap(),
+        "--shards",
+        "4",
+        "--partition",
+        "debug",
+        "--time",
+        "00:10:00",
+        "--cpus",
+        "1",
+        "--dir",
+        dir.to_str().unwrap(),
+    ];
+    ok(&same);
+    let mut other = same;
+    other[3] = "8";
+    let (code, _, e) = study(&other);
+    assert_eq!(code, 2, "{e}");
+    assert!(
+        e.contains("array.sbatch: exists with other contents"),
+        "{e}"
+    );
+    assert_eq!(
+        std::fs::read_to_string(dir.join("array.sbatch")).unwrap(),
+        array
+    );
+    std::fs::write(dir.join("submit.sh"), "edited").unwrap();
+    let (code, _, e) = study(&same);
+    assert_eq!(code, 2, "{e}");
+    assert!(e.contains("submit.sh: exists with other contents"), "{e}");
+    assert_eq!(
+        std::fs::read_to_string(dir.join("submit.sh")).unwrap(),
+        "edited"
+    );
     // A GPU array: each task asks for a GPU and runs (and resumes) with --backend cuda.
     let gpu_dir = d.path().join("gpu");
     let out = ok(&[

@@ -5,7 +5,9 @@
 #   2. `study run` of benches/gpu/million.toml (1 048 576 samples) end to end, Parquet written;
 #   3. studies/gains_sweep.toml, studies/record_sweep.toml and benches/gpu/effects.toml on the GPU
 #      and on the CPU: every metric within 1e-9 relative (agree.py).
-# usage: benches/gpu/check.sh [STUDY_BINARY] [WORK_DIR]     (run from the repository root)
+# usage: benches/gpu/check.sh [STUDY_BINARY] [WORK_DIR]     (run from the repository root;
+#        STUDY_BINARY defaults to target/release/study, WORK_DIR, where the tables go, to
+#        /tmp/vshake-gpu). Without a usable GPU it stops after the first step, exit 1.
 set -u
 export PATH="$PATH:/usr/local/cuda/bin"
 bin=${1:-target/release/study}
@@ -27,9 +29,15 @@ step() { # step NAME COMMAND...: runs it, prints its wall time and exit code
     echo "== $name: rc $rc, $(awk "BEGIN { printf \"%.2f\", $EPOCHREALTIME - $t0 }") s wall"
     [ $rc -eq 0 ] || fails=$((fails + 1))
 }
-nvidia-smi --query-gpu=name,driver_version,memory.total,clocks.max.sm --format=csv,noheader
-nproc
+if command -v nvidia-smi >/dev/null; then
+    echo "GPU: $(nvidia-smi --query-gpu=name,driver_version,memory.total,clocks.max.sm --format=csv,noheader)"
+fi
+echo "CPU cores: $(nproc)"
 step bench "$bin" bench --backend cuda --seconds 1
+if [ $fails -ne 0 ]; then # no GPU this binary can use: the cause is the line above
+    echo "== stopped: study bench --backend cuda failed (its error above says why); nothing else was run"
+    exit 1
+fi
 step million "$bin" run benches/gpu/million.toml --backend cuda --out "$work/million.parquet"
 step million_rows python3 -c "
 import pyarrow.parquet as pq, pyarrow.compute as pc, sys

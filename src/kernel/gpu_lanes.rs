@@ -152,7 +152,7 @@ impl Uniform {
 
     /// Whether field `f` is read from each lane's record.
     pub fn varies(&self, f: usize) -> bool {
-        self.vary[f / 64] >> (f % 64) & 1 == 1
+        bit(self.vary, f)
     }
 
     /// The varying fields, in order (their rows in [`Uniform::compact`]).
@@ -179,11 +179,14 @@ fn mask(fields: impl Iterator<Item = usize>) -> [u64; 3] {
     vary
 }
 
+/// Whether field `f` is set in the mask `vary`.
+fn bit(vary: [u64; 3], f: usize) -> bool {
+    vary[f / 64] >> (f % 64) & 1 == 1
+}
+
 /// The fields set in `vary`, in order (at most [`LANE_FIELDS`]).
 pub fn fields(vary: [u64; 3]) -> Vec<usize> {
-    (0..LANE_FIELDS)
-        .filter(|&f| vary[f / 64] >> (f % 64) & 1 == 1)
-        .collect()
+    (0..LANE_FIELDS).filter(|&f| bit(vary, f)).collect()
 }
 
 /// The fields set in either mask.

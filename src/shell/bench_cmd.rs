@@ -225,10 +225,13 @@ fn bench_diagnose(campaign: &std::path::Path, max_seconds: Option<f64>) -> anyho
 
 pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     super::outputs::check_outputs([args.write_baseline.as_ref()])?;
-    let mut engine = super::gpu::choose(args.backend)?;
-    if args.diagnose.is_some() {
-        engine = engine.not_covering("the diagnosis screens effects one by one")?;
-    }
+    let engine = match args.diagnose {
+        Some(_) => super::gpu::uncovered(
+            args.backend,
+            "a diagnosis compares time histories (the CUDA kernel returns metrics only)",
+        )?,
+        None => super::gpu::choose(args.backend)?,
+    };
     println!("study bench: backend {}", engine.describe());
     if let Some(c) = &args.diagnose {
         return bench_diagnose(c, args.max_seconds);

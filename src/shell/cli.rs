@@ -239,8 +239,8 @@ pub struct FitArgs {
     /// Worker threads (0 = every core).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
-    /// Engine: `auto` (a GPU when one is found and the work is covered, else the CPU, saying
-    /// why), `cpu`, or `cuda` (refused with the cause where no GPU can run it).
+    /// Engine: the CPU always (a fit or diagnosis compares time histories, which the CUDA kernel
+    /// does not return): `auto` and `cpu` run on the CPU, `cuda` is refused (exit 2).
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     pub backend: Backend,
     /// Progress as a plain line every 5 s on stderr (for batch-job logs) instead of the
@@ -273,8 +273,8 @@ pub struct DiagnoseArgs {
     /// Worker threads (0 = every core).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
-    /// Engine: `auto` (a GPU when one is found and the work is covered, else the CPU, saying
-    /// why), `cpu`, or `cuda` (refused with the cause where no GPU can run it).
+    /// Engine: the CPU always (a fit or diagnosis compares time histories, which the CUDA kernel
+    /// does not return): `auto` and `cpu` run on the CPU, `cuda` is refused (exit 2).
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     pub backend: Backend,
     /// Progress as a plain line every 5 s on stderr (for batch-job logs) instead of the
@@ -506,7 +506,8 @@ Example: study compare studies/tutorial/campaign.toml --report /tmp/report";
 const RUN_HELP: &str = "Run a study file through the batch engine and write one Parquet row per sample x excitation: \
 sample_id, excitation_id, excitation, every parameter, every metric, status, fail_time_s, fail_reason \
 (plus design_base, design_block for Saltelli designs). The resolved study, seed, version and schema version \
-are in the file's key-value metadata. Results are bit-identical for any --threads and --chunk.
+are in the file's key-value metadata. Results are bit-identical for any --threads and --chunk on one backend \
+(the GPU's differ from the CPU's by rounding, at most about 4e-11 relative: see --backend).
 
 The study file (TOML), SALib-style variables in Dakota-style blocks:
 

@@ -37,8 +37,10 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
 
 /// The command, its report printed to `o` (the Python package keeps it as text).
 pub(crate) fn run_to(args: &DiagnoseArgs, o: &mut dyn Write) -> anyhow::Result<()> {
-    let engine = super::gpu::choose(args.backend)?
-        .not_covering("a diagnosis compares time histories and screens effects (the CUDA kernel returns metrics of the baseline only)")?;
+    let engine = super::gpu::uncovered(
+        args.backend,
+        "a diagnosis compares time histories (the CUDA kernel returns metrics only)",
+    )?;
     let model = load_model(args.model.as_deref())?;
     let candidates: Vec<EffectId> = if args.candidates.is_empty() {
         EffectId::ALL
@@ -85,7 +87,7 @@ pub(crate) fn run_to(args: &DiagnoseArgs, o: &mut dyn Write) -> anyhow::Result<(
         d.candidates.len(),
         secs
     )?;
-    writeln!(o, "  backend {}", engine.describe())?;
+    writeln!(o, "  backend     {}", engine.describe())?;
     print_candidates(o, &d)?;
     print_evidence(o, &problem, &d)?;
     print_selection(o, &d)?;

@@ -185,8 +185,10 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
 
 /// The command, its report printed to `o` (the Python package keeps it as text).
 pub(crate) fn run_to(args: &FitArgs, o: &mut dyn Write) -> anyhow::Result<()> {
-    let engine = super::gpu::choose(args.backend)?
-        .not_covering("a fit compares time histories at the measured samples (the CUDA kernel returns metrics only)")?;
+    let engine = super::gpu::uncovered(
+        args.backend,
+        "a fit compares time histories at the measured samples (the CUDA kernel returns metrics only)",
+    )?;
     let model = load_model(args.model.as_deref())?;
     let free = free_parameters(&args.effect, &args.free, &model)?;
     let mut loaded = load_problem(&args.campaign, &model, args.strict)?;
@@ -224,7 +226,7 @@ pub(crate) fn run_to(args: &FitArgs, o: &mut dyn Write) -> anyhow::Result<()> {
         },
         t0.elapsed().as_secs_f64()
     )?;
-    writeln!(o, "  backend {}", engine.describe())?;
+    writeln!(o, "  backend     {}", engine.describe())?;
     writeln!(o)?;
     print_estimates(o, &free, &r)?;
     print_residuals(o, problem, &r)?;

@@ -32,7 +32,8 @@ pub enum Backend {
     Auto,
     /// The CPU kernel on every worker thread.
     Cpu,
-    /// An NVIDIA GPU (CUDA); refused, with the cause, where none can be used.
+    /// An NVIDIA GPU (CUDA); refused, with the cause, where none can be used (also `gpu`).
+    #[value(alias = "gpu")]
     Cuda,
 }
 
@@ -43,7 +44,12 @@ pub fn probe() -> Result<String, String> {
         return Err("no NVIDIA driver (libcuda.so not found)".into());
     }
     use cudarc::driver::result;
-    result::init().map_err(|e| format!("the NVIDIA driver did not start ({e})"))?;
+    result::init().map_err(|e| match e.0 {
+        cudarc::driver::sys::CUresult::CUDA_ERROR_NO_DEVICE => {
+            "no GPU visible to the NVIDIA driver".to_string()
+        }
+        _ => format!("the NVIDIA driver did not start ({e})"),
+    })?;
     let count = result::device::get_count().map_err(|e| format!("no GPU visible ({e})"))?;
     if count < 1 {
         return Err("no GPU visible to the NVIDIA driver".into());
@@ -76,6 +82,21 @@ pub fn choose(backend: Backend) -> anyhow::Result<Engine> {
             Err(BadInput(format!("--backend cuda: {cause}")).into())
         }
         Err(cause) => Ok(Engine::cpu(backend, Some(cause))),
+    }
+}
+
+/// The engine for a command the GPU never runs (`why`): the CPU, saying why under `auto`, without
+/// opening the GPU; an error (exit 2) under `cuda`.
+pub fn uncovered(backend: Backend, why: &str) -> anyhow::Result<Engine> {
+    match backend {
+        Backend::Cpu => Ok(Engine::cpu(backend, None)),
+        Backend::Auto => Ok(Engine::cpu(
+            backend,
+            Some(format!("not supported on the GPU: {why}")),
+        )),
+        Backend::Cuda => {
+            Err(BadInput(format!("--backend cuda: not supported on the GPU: {why}")).into())
+        }
     }
 }
 
@@ -141,6 +162,15 @@ impl Engine {
         Ok((engine, lanes))
     }
 
+    /// `cuda` or `cpu`: the engine as a results file's `vshake.backend` names it.
+    pub fn tag(&self) -> &'static str {
+        if self.cuda.is_some() {
+            "cuda"
+        } else {
+            "cpu"
+        }
+    }
+
     /// The CUDA engine, when one runs.
     pub fn cuda(&self) -> Option<&Arc<Cuda>> {
         self.cuda.as_ref()
@@ -191,6 +221,9 @@ pub struct Timings {
 /// Outputs larger than this come back to pageable memory rather than a page-locked buffer kept
 /// for the next launch (f64 values: 64 MiB).
 const PINNED_MAX: usize = 1 << 23;
+
+/// Most page-locked memory kept between launches, all buffers together (f64 values: 256 MiB).
+const PINNED_KEPT_MAX: usize = 1 << 25;
 
 impl Cuda {
     /// Opens GPU 0, named `name`, and loads the baseline's build (compiled, or from the cache),
@@ -248,7 +281,9 @@ impl Cuda {
         let s = &self.stream;
         if kept.as_ref().is_none_or(|o| o.len() < len) {
             *kept = None;
-            *kept = Some(s.alloc_zeros::<f64>(len)?);
+            // SAFETY: f64 has no invalid bit patterns, and the memset below zeroes the values the
+            // kernel adds to before it runs.
+            *kept = Some(unsafe { s.alloc::<f64>(len) }?);
         }
         let out = kept.as_mut().expect("made above");
         s.memset_zeros(&mut out.slice_mut(0..len))?;
@@ -316,11 +351,13 @@ impl Cuda {
         }?))
     }
 
-    /// Keeps a page-locked buffer for the next launch (at most one per worker thread).
+    /// Keeps a page-locked buffer for the next launch (at most one per worker thread, and
+    /// [`PINNED_KEPT_MAX`] values in all); a buffer not kept is freed.
     fn give_back(&self, out: Output) {
         if let Output::Pinned(h) = out {
             let mut kept = self.host_out.lock().unwrap_or_else(|e| e.into_inner());
-            if kept.len() < rayon::current_num_threads() {
+            let total: usize = kept.iter().map(|k| k.len()).sum();
+            if kept.len() < rayon::current_num_threads() && total + h.len() <= PINNED_KEPT_MAX {
                 kept.push(h);
             }
         }

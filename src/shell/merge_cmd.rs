@@ -230,6 +230,19 @@ fn check_tiling(by_index: &BTreeMap<usize, &ShardFile>, count: usize) -> anyhow:
     Ok(())
 }
 
+/// The merged file's metadata: what the unsharded run's says (the first shard's, the shard keys
+/// gone), naming every backend that computed the shards' rows.
+fn merged_metadata(list: &[ShardFile]) -> Vec<(String, String)> {
+    let mut meta = meta::carried(&list[0].meta, &SHARD_KEYS);
+    let backends = list
+        .iter()
+        .filter_map(|f| f.meta.get(Key::Backend.as_str()));
+    for b in backends.flat_map(|v| meta::items(v)) {
+        meta::add_item(&mut meta, Key::Backend, &b);
+    }
+    meta
+}
+
 pub fn run(args: &MergeArgs) -> anyhow::Result<()> {
     let out = args.out.clone().unwrap_or_else(|| {
         let name = args
@@ -249,8 +262,7 @@ pub fn run(args: &MergeArgs) -> anyhow::Result<()> {
         integrity::verify_file(&f.path)?;
     }
     let first = &list[0];
-    // The merged file says what the unsharded run says: the shard keys go.
-    let meta = meta::carried(&first.meta, &SHARD_KEYS);
+    let meta = merged_metadata(&list);
     let (fields, _) = tables::parquet_batches(&first.path).map_err(tables::input_if_user)?;
     let mut stream = ParquetStream::create_with_fields(&out, fields.clone(), &meta)?;
     let mut rows = 0usize;

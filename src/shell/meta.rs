@@ -62,6 +62,9 @@ keys! {
     /// The CRC-32 of the file's own `vshake.*` metadata but the checksums (the study, seed and
     /// shard its rows were made for), checked with the row groups' (shell::integrity).
     MetadataCrc32 = "metadata_crc32",
+    /// The engines that computed a results file's rows, in the order they ran (`cpu`, `cuda`;
+    /// [`list`]): a run resumed, or shards merged, across backends name both.
+    Backend = "backend",
     /// A shard's place: `study merge` checks and removes them.
     ShardIndex = "shard_index",
     ShardCount = "shard_count",
@@ -202,6 +205,17 @@ pub fn carried<'a>(
         .collect()
 }
 
+/// Adds `item` to the list-valued `key` of `meta` (made where missing; an item it has is not
+/// added twice).
+pub fn add_item(meta: &mut Vec<(String, String)>, key: Key, item: &str) {
+    match meta.iter_mut().find(|(k, _)| k == key.as_str()) {
+        Some((_, v)) if items(v).iter().any(|i| i == item) => {}
+        Some((_, v)) if v.is_empty() => *v = item.to_string(),
+        Some((_, v)) => *v = format!("{v}{LIST_SEPARATOR}{item}"),
+        None => meta.push(pair(key, item)),
+    }
+}
+
 /// The completion pairs of a file holding `done` of `total` rows.
 pub fn completion(done: usize, total: usize) -> Vec<(String, String)> {
     vec![
@@ -220,6 +234,17 @@ pub fn incomplete(meta: &[(String, String)]) -> Option<(String, String)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn add_item_appends_once() {
+        let mut m = vec![pair(Key::Seed, 1)];
+        add_item(&mut m, Key::Backend, "cuda");
+        add_item(&mut m, Key::Backend, "cuda");
+        assert_eq!(get(&m, Key::Backend), Some("cuda"));
+        add_item(&mut m, Key::Backend, "cpu");
+        assert_eq!(get(&m, Key::Backend), Some("cuda,cpu"));
+        assert_eq!(m.len(), 2);
+    }
 
     #[test]
     fn keys_are_distinct_and_prefixed() {

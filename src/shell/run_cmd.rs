@@ -566,10 +566,15 @@ pub(crate) fn execute(
         (None, None) => job.spec.chunk,
     };
     job.plan.engine = lanes;
+    meta::add_item(&mut job.meta, Key::Backend, engine.tag());
     let pool = pool(args.threads)?;
     let todo = (job.range.start + job.samples_kept())..job.range.end;
     print_header(o, &job, args, &pool, chunk)?;
     writeln!(o, "  backend     {}", engine.describe())?;
+    if let Some(b) = meta::get(&job.meta, Key::Backend).filter(|b| b.contains(meta::LIST_SEPARATOR))
+    {
+        writeln!(o, "  note        the kept rows and the new ones come from different backends ({b}): they differ by rounding (at most about 4e-11 relative)")?;
+    }
     if args.dry_run {
         return super::sizing::dry_run(&job, todo, &pool);
     }

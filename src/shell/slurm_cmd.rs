@@ -34,6 +34,22 @@ fn slurm_value(flag: &str, v: &str) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Refuses (exit 2, before any script is written) a job script that exists with other contents: an
+/// earlier `study slurm` with other options, or one edited by hand, is not replaced silently.
+fn check_unchanged(path: &Path, text: &str) -> anyhow::Result<()> {
+    super::outputs::check_output(path)?;
+    match std::fs::read(path) {
+        Ok(old) if old != text.as_bytes() => Err(BadInput(format!(
+            "{}: exists with other contents (written by a `study slurm` with other options, or \
+             edited); nothing was written: remove the folder's scripts (and its shards/), or \
+             choose another --dir",
+            path.display()
+        ))
+        .into()),
+        _ => Ok(()),
+    }
+}
+
 /// What the job scripts need: the study's name and size, the absolute paths, the shared
 /// `#SBATCH` lines.
 struct Job<'a> {
@@ -52,11 +68,15 @@ pub fn run(args: &SlurmArgs) -> anyhow::Result<()> {
     let job = prepare(args)?;
     let (array, merge, submit) = (array_script(&job), merge_script(&job), submit_script(&job));
     let dir = &job.dir;
-    for (file, text) in [
+    let scripts = [
         ("array.sbatch", &array),
         ("merge.sbatch", &merge),
         ("submit.sh", &submit),
-    ] {
+    ];
+    for (file, text) in scripts {
+        check_unchanged(&dir.join(file), text)?;
+    }
+    for (file, text) in scripts {
         let path = dir.join(file);
         std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))?;
         #[cfg(unix)]
