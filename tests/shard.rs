@@ -176,7 +176,7 @@ fn slurm_scripts_wire_the_array_to_the_shards() {
     let d = tempfile::tempdir().unwrap();
     let s = smoke();
     let dir = d.path().join("job");
-    let out = ok(&[
+    let args = [
         "slurm",
         s.to_str().unwrap(),
         "--shards",
@@ -189,7 +189,8 @@ fn slurm_scripts_wire_the_array_to_the_shards() {
         "1",
         "--dir",
         dir.to_str().unwrap(),
-    ]);
+    ];
+    let out = ok(&args);
     assert!(
         out.contains("64 samples x 1 excitations in 4 shards"),
         "{out}"
@@ -218,22 +219,8 @@ fn slurm_scripts_wire_the_array_to_the_shards() {
     assert!(submit.contains("--dependency=afterok:${array}"), "{submit}");
     // Into the same folder: the same options rewrite the same scripts; other options (8 shards)
     // are refused before any script is written, and an edited script is kept.
-    let same = [
-        "slurm",
-        s.to_str().unwrap(),
-        "--shards",
-        "4",
-        "--partition",
-        "debug",
-        "--time",
-        "00:10:00",
-        "--cpus",
-        "1",
-        "--dir",
-        dir.to_str().unwrap(),
-    ];
-    ok(&same);
-    let mut other = same;
+    ok(&args);
+    let mut other = args;
     other[3] = "8";
     let (code, _, e) = study(&other);
     assert_eq!(code, 2, "{e}");
@@ -246,7 +233,7 @@ fn slurm_scripts_wire_the_array_to_the_shards() {
         array
     );
     std::fs::write(dir.join("submit.sh"), "edited").unwrap();
-    let (code, _, e) = study(&same);
+    let (code, _, e) = study(&args);
     assert_eq!(code, 2, "{e}");
     assert!(e.contains("submit.sh: exists with other contents"), "{e}");
     assert_eq!(
