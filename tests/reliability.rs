@@ -378,6 +378,12 @@ fn the_output_path_is_checked_before_any_work() {
         "{out}"
     );
 
+    // A path ending in `/` is a folder, made where missing, that holds the default name.
+    let new = format!("{}/", s(&d.path().join("new")));
+    let (code, out, err) = study(&["run", s(&st), "--out", &new, "-q"]);
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(d.path().join("new/small.parquet").is_file(), "{out}");
+
     std::fs::remove_file(dir.join("small.parquet")).unwrap();
     std::fs::create_dir(dir.join("small.parquet")).unwrap();
     let (code, out, err) = study(&["run", s(&st), "--out", s(&dir)]);

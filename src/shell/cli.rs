@@ -82,7 +82,8 @@ pub struct RunArgs {
     /// (see --resume).
     #[arg(long, default_value_t = 30.0, value_name = "SECONDS")]
     pub checkpoint_secs: f64,
-    /// Results file (default: [output] file of the study, else <name>.parquet).
+    /// Results file (default: [output] file of the study, else <name>.parquet); a folder, or a
+    /// path ending in `/` (made where missing), holds it under that default name.
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Worker threads (0 = every core).
@@ -241,7 +242,7 @@ pub struct FitArgs {
     pub threads: usize,
     /// Engine: the CPU always (a fit or diagnosis compares time histories, which the CUDA kernel
     /// does not return): `auto` and `cpu` run on the CPU, `cuda` is refused (exit 2).
-    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    #[arg(long, value_enum, default_value_t = Backend::Auto, hide_possible_values = true)]
     pub backend: Backend,
     /// Progress as a plain line every 5 s on stderr (for batch-job logs) instead of the
     /// terminal's progress line.
@@ -275,7 +276,7 @@ pub struct DiagnoseArgs {
     pub threads: usize,
     /// Engine: the CPU always (a fit or diagnosis compares time histories, which the CUDA kernel
     /// does not return): `auto` and `cpu` run on the CPU, `cuda` is refused (exit 2).
-    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    #[arg(long, value_enum, default_value_t = Backend::Auto, hide_possible_values = true)]
     pub backend: Backend,
     /// Progress as a plain line every 5 s on stderr (for batch-job logs) instead of the
     /// terminal's progress line.

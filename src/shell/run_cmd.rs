@@ -438,8 +438,13 @@ fn output_path(
                 .with_file_name(format!("{stem}.shard-{}-of-{}.parquet", s.index, s.count))
         }
     };
+    // A folder, or a path ending in a separator (a folder to make), takes the default name.
+    let folder = |o: &Path| {
+        let last = o.as_os_str().to_string_lossy().chars().last();
+        o.is_dir() || last.is_some_and(std::path::is_separator)
+    };
     let out = match out {
-        Some(o) if o.is_dir() => o.join(
+        Some(o) if folder(o) => o.join(
             default
                 .file_name()
                 .unwrap_or_else(|| std::ffi::OsStr::new("results.parquet")),
