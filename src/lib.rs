@@ -1,10 +1,12 @@
 //! vshake: a virtual shake table. See the README and docs/guide.md for the tour.
 //!
-//! Three layers, dependencies pointing one way:
-//! - [`kernel`]: physics, integration and metrics (pure; no I/O, no serde, no threads);
-//! - [`orchestration`]: specs, validation, running configurations through the kernel;
-//! - [`shell`]: the command line, files and reports.
+//! Three crates, dependencies pointing one way, re-exported here under their layer's name:
+//! - [`kernel`] (the `vshake-kernel` crate): physics, integration and metrics (pure; no I/O,
+//!   no serde, no threads);
+//! - [`orchestration`] (`vshake-orchestration`): specs, validation, running configurations
+//!   through the kernel;
+//! - [`shell`] (this crate): the command line, files and reports.
 
-pub mod kernel;
-pub mod orchestration;
+pub use vshake_kernel as kernel;
+pub use vshake_orchestration as orchestration;
 pub mod shell;

@@ -1,4 +1,4 @@
-//! The CUDA lane kernel (`src/kernel/cuda/lane.cu`) built for the host by a C++ compiler and
+//! The CUDA lane kernel (`crates/kernel/src/cuda/lane.cu`) built for the host by a C++ compiler and
 //! compared with the Rust kernel on random parameter sets of the baseline model and every library
 //! effect, every drive and every kind of shared reference: every metric within 1e-12 relative,
 //! the same failures.
@@ -20,7 +20,7 @@ use vshake::kernel::simulate::SetupError;
 use vshake::kernel::simulate::{Failure, LaneResult, LaneStatus, Solver};
 use vshake::kernel::spectrum::SpectrumSpec;
 use vshake::orchestration::batch::{LaneEngine, RowStatus};
-use vshake::orchestration::sim::run_lanes_each;
+use vshake::orchestration::sim::run_group;
 use vshake::orchestration::study::StudySpec;
 use vshake::shell::run_cmd;
 
@@ -337,13 +337,7 @@ fn the_cuda_kernel_built_for_the_host_gives_the_rust_kernels_metrics() {
             models[LANES - 1].actuator.l = 0.02; // a lane that reaches its stroke limit on most runs
             models[LANES - 2].servovalve.p_s *= 3.0; // and one whose pressure may leave its band
             let refs: Vec<&ModelParams> = models.iter().collect();
-            let want = run_lanes_each::<LANES, _>(
-                &refs,
-                &[&reference],
-                &solver,
-                &mut vshake::kernel::simulate::NoObserver,
-            )
-            .unwrap();
+            let want = run_group(&refs, &[&reference], &solver).unwrap();
             let got = host_run(&exe, &refs, &[&reference], &solver);
             for l in 0..LANES {
                 assert_same(&format!("{what}, {law:?} valve"), l, &got[l], &want[l]);
@@ -395,13 +389,7 @@ fn each_effect_alone_gives_the_rust_kernels_metrics() {
             }
             let run = |ms: &[ModelParams]| {
                 let ms: Vec<&ModelParams> = ms.iter().collect();
-                let want = run_lanes_each::<LANES, _>(
-                    &ms,
-                    &[reference],
-                    &solver,
-                    &mut vshake::kernel::simulate::NoObserver,
-                )
-                .unwrap();
+                let want = run_group(&ms, &[reference], &solver).unwrap();
                 (want, host_run(&exe, &ms, &[reference], &solver))
             };
             let (want, got) = run(&models);

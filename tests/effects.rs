@@ -579,8 +579,7 @@ fn a_kernel_for_one_effect_equals_the_effect_set_bit_for_bit() {
         )
         .unwrap();
         let mut rec = Recorded([[0.0; 3]; 8]);
-        let single =
-            run_lanes_single::<8, _>(&refs, &reference, &Solver::default(), &mut rec).unwrap();
+        let single = run_lanes_single(&refs, &reference, &Solver::default(), &mut rec).unwrap();
         assert_eq!(
             single.iter().map(bits).collect::<Vec<_>>(),
             whole.iter().map(bits).collect::<Vec<_>>(),

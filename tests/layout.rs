@@ -1,7 +1,8 @@
 //! The house rules that a reader of the code relies on: the "Layout" section of
 //! docs/architecture.md names every module and only modules, the README stays a short front page,
 //! no function in the shell or orchestration layers is longer than a screen, and the layers
-//! depend one way (kernel <- orchestration <- shell).
+//! depend one way (kernel <- orchestration <- shell): each layer is a crate, and its manifest
+//! names only the layers below it (the compiler then refuses a path that reaches up).
 
 use std::path::{Path, PathBuf};
 
@@ -51,7 +52,7 @@ fn looks_like_module(word: &str) -> bool {
 }
 
 /// The modules a Layout section names, per layer, in its order: a layer is a top-level list item
-/// that starts with `` - `src/<layer>/` ``; its modules are the backticked words that look like
+/// that starts with `` - `<folder>/` `` (a folder of [`LAYERS`]); its modules are the backticked words that look like
 /// module names (`looks_like_module`) in the nested items under it (lines that start with
 /// `"  - "`, and their continuation lines, which start with four spaces). The layer's own line and
 /// its continuation lines (two spaces) are prose: their backticked words are not read.
@@ -59,9 +60,11 @@ fn named_modules(section: &str) -> Vec<(String, Vec<String>)> {
     let mut layers: Vec<(String, Vec<String>)> = Vec::new();
     let mut nested = false;
     for line in section.lines() {
-        if let Some(rest) = line.strip_prefix("- `src/") {
-            let layer = rest.split('/').next().unwrap_or("").to_string();
-            layers.push((layer, Vec::new()));
+        let folder = LAYERS
+            .iter()
+            .find(|(_, dir, _)| line.starts_with(&format!("- `{dir}/`")));
+        if let Some((layer, _, _)) = folder {
+            layers.push((layer.to_string(), Vec::new()));
             nested = false;
             continue;
         }
@@ -84,16 +87,33 @@ fn named_modules(section: &str) -> Vec<(String, Vec<String>)> {
     layers
 }
 
-/// The modules of `src/<layer>/`: `name` for a file `name.rs`, `name/` for a folder; `mod.rs`
-/// aside.
+/// The layers, their folders of source (as the Layout section writes them) and their crates.
+const LAYERS: [(&str, &str, &str); 3] = [
+    ("kernel", "crates/kernel/src", "crates/kernel"),
+    (
+        "orchestration",
+        "crates/orchestration/src",
+        "crates/orchestration",
+    ),
+    ("shell", "src/shell", "."),
+];
+
+/// The source folder of `layer`.
+fn layer_dir(layer: &str) -> PathBuf {
+    let (_, dir, _) = LAYERS.iter().find(|(l, _, _)| *l == layer).unwrap();
+    root().join(dir)
+}
+
+/// The modules of a layer's folder: `name` for a file `name.rs`, `name/` for a folder; `mod.rs`
+/// and `lib.rs` (the crate's root) aside.
 fn modules_of(layer: &str) -> Vec<String> {
     let mut out = Vec::new();
-    for f in std::fs::read_dir(root().join("src").join(layer))
+    for f in std::fs::read_dir(layer_dir(layer))
         .unwrap()
         .map(|e| e.unwrap().path())
     {
         let stem = f.file_stem().unwrap().to_string_lossy().to_string();
-        if stem == "mod" {
+        if stem == "mod" || stem == "lib" {
             continue;
         }
         if f.is_dir() {
@@ -107,9 +127,10 @@ fn modules_of(layer: &str) -> Vec<String> {
 }
 
 /// The "Layout" section of docs/architecture.md and the modules agree, both ways. Its convention:
-/// each layer is a top-level list item `` - `src/<layer>/` — … ``, and the items nested under it
-/// name that layer's modules in backticks, `` `name` `` for `src/<layer>/name.rs` and
-/// `` `name/` `` for the folder `src/<layer>/name/` (`mod.rs` aside). Every module must be named
+/// each layer is a top-level list item `` - `<folder>/` — … `` (the layer's folder of source,
+/// [`LAYERS`]), and the items nested under it name that layer's modules in backticks,
+/// `` `name` `` for `<folder>/name.rs` and `` `name/` `` for the folder `<folder>/name/`
+/// (`mod.rs` and `lib.rs` aside). Every module must be named
 /// under its own layer, and every backticked snake_case word in those nested items (`name` or
 /// `name/`) must be a module of that layer; other backticked text there (types such as
 /// `EffectId`, files such as `effects/mod.rs`, commands, flags) does not look like a module name
@@ -128,14 +149,15 @@ fn the_architecture_layout_names_every_module_and_only_modules() {
         for m in &modules {
             assert!(
                 names.contains(m),
-                "src/{layer}/{m} is not named in docs/architecture.md's Layout section \
-                 (write `{m}` in an item nested under `src/{layer}/`)"
+                "{}/{m} is not named in docs/architecture.md's Layout section \
+                 (write `{m}` in an item nested under its layer's folder)",
+                layer_dir(layer).display()
             );
         }
         for n in names {
             assert!(
                 modules.contains(n),
-                "docs/architecture.md's Layout section names `{n}` under `src/{layer}/`, \
+                "docs/architecture.md's Layout section names `{n}` under the {layer}, \
                  which has no such module"
             );
         }
@@ -147,7 +169,7 @@ fn the_architecture_layout_names_every_module_and_only_modules() {
 #[test]
 fn the_layout_reader_reads_nested_items_only() {
     let section = "## Layout\n\n\
-        - `src/kernel/` — the `study` prose, `ignored`:\n  \
+        - `crates/kernel/src/` — the `study` prose, `ignored`:\n  \
         also `ignored`.\n  \
         - `controller`, `EffectId`, `effects/mod.rs`, `study tune`,\n    \
         `cuda/` and `gpu_lanes`;\n\
@@ -283,7 +305,7 @@ fn the_length_counter_counts() {
 fn shell_and_orchestration_functions_fit_on_a_screen() {
     let mut long = Vec::new();
     for layer in ["shell", "orchestration"] {
-        for f in rust_files(&root().join("src").join(layer)) {
+        for f in rust_files(&layer_dir(layer)) {
             for (n, name, line) in function_lengths(&std::fs::read_to_string(&f).unwrap()) {
                 if n > 80 {
                     long.push(format!(
@@ -301,67 +323,50 @@ fn shell_and_orchestration_functions_fit_on_a_screen() {
     );
 }
 
-// The three layers of docs/architecture.md, enforced: the kernel (physics, the time loop) names
-// neither orchestration nor the shell, and orchestration (studies, comparison, diagnosis) does
-// not name the shell. A path that climbs out of a layer (`super::super::shell`) counts too.
+// The three layers of docs/architecture.md, enforced by the compiler: each is a crate, and a
+// crate's manifest names only the layers below it, so a path that reaches up does not compile.
 
-/// The lines (1-based) of `text` whose code (not a comment) names one of the `forbidden` layers:
-/// `crate::<layer>`, or `super::super::<layer>` climbing out of this one.
-fn reach_ups(text: &str, forbidden: &[&str]) -> Vec<usize> {
-    let mut lines = Vec::new();
-    for (i, line) in text.lines().enumerate() {
-        let code = line.split("//").next().unwrap_or("");
-        let names = |other: &&str| {
-            code.contains(&format!("crate::{other}"))
-                || code.contains(&format!("super::super::{other}"))
-        };
-        if forbidden.iter().any(names) {
-            lines.push(i + 1);
-        }
-    }
-    lines
+/// The vshake crates that the manifest at `dir` (relative to the root) depends on, build and
+/// development dependencies alike.
+fn vshake_dependencies(dir: &str) -> Vec<String> {
+    dependencies_in(&std::fs::read_to_string(root().join(dir).join("Cargo.toml")).unwrap())
 }
 
-/// Lines of the files under `src/<layer>` that name one of the `forbidden` layers.
-fn uses(layer: &str, forbidden: &[&str]) -> Vec<String> {
-    let root = root();
-    let mut found = Vec::new();
-    for f in rust_files(&root.join("src").join(layer)) {
-        let text = std::fs::read_to_string(&f).unwrap();
-        let rel = f.strip_prefix(&root).unwrap().display().to_string();
-        for n in reach_ups(&text, forbidden) {
-            found.push(format!(
-                "{rel}:{n}: {}",
-                text.lines().nth(n - 1).unwrap().trim()
-            ));
-        }
-    }
-    found
+/// The vshake crates a manifest's text names as dependencies (lines `vshake-NAME = ...`).
+fn dependencies_in(text: &str) -> Vec<String> {
+    let mut deps: Vec<String> = text
+        .lines()
+        .filter_map(|l| l.trim_start().strip_prefix("vshake-"))
+        .filter_map(|l| {
+            l.split_once(['=', ' '])
+                .map(|(name, _)| format!("vshake-{name}"))
+        })
+        .collect();
+    deps.sort();
+    deps.dedup();
+    deps
 }
 
 #[test]
-fn the_kernel_names_neither_orchestration_nor_the_shell() {
-    let found = uses("kernel", &["orchestration", "shell"]);
-    assert!(
-        found.is_empty(),
-        "the kernel reaches up:\n{}",
-        found.join("\n")
+fn each_layer_depends_on_the_layers_below_only() {
+    assert_eq!(vshake_dependencies("crates/kernel"), Vec::<String>::new());
+    assert_eq!(
+        vshake_dependencies("crates/orchestration"),
+        ["vshake-kernel"]
+    );
+    assert_eq!(
+        vshake_dependencies("."),
+        ["vshake-kernel", "vshake-orchestration"]
     );
 }
 
 #[test]
-fn orchestration_does_not_name_the_shell() {
-    let found = uses("orchestration", &["shell"]);
-    assert!(
-        found.is_empty(),
-        "orchestration reaches up:\n{}",
-        found.join("\n")
+fn the_manifest_reader_finds_dependencies() {
+    let text = "[package]\nname = \"vshake-shell\"\n[dependencies]\n\
+                vshake-kernel = { path = \"../kernel\" }\nrayon = \"1\"\n\
+                [dev-dependencies]\nvshake-orchestration= { path = \"o\" }\n";
+    assert_eq!(
+        dependencies_in(text),
+        ["vshake-kernel", "vshake-orchestration"]
     );
-}
-
-#[test]
-fn the_check_finds_a_reach_up_and_not_a_comment() {
-    let text = "use super::params;\n// see crate::shell::report\nuse crate::shell::report;\n\
-                fn f() { super::super::orchestration::g() }\n";
-    assert_eq!(reach_ups(text, &["orchestration", "shell"]), vec![3, 4]);
 }

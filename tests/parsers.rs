@@ -4,12 +4,16 @@
 //! panic; each ends either accepted or refused as bad input (exit code 2) with a message that
 //! names the file.
 //!
-//! `cargo test` runs 256 cases per property; CI's property step runs 50 000
-//! (`PROPTEST_CASES=50000 cargo test --release --test parsers`): 50 000 random headers of up to
-//! 12 fields (and as many units rows), over 10⁵ fields, and 50 000 files with such headers.
+//! `cargo test` runs 256 cases per property (`PROPTEST_CASES` sets another count); CI's property
+//! step sizes them by time instead (`VSHAKE_PROPTEST_SECONDS=20 cargo test --release --test
+//! parsers`: rounds of 256 cases until 20 s have passed, per property), so that the step's time
+//! does not grow with the parsers' speed or their number of properties, and prints each count.
 
 use proptest::prelude::*;
+use proptest::test_runner::{Config, TestRunner};
+use std::fmt::Debug;
 use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
 use vshake::shell::campaign_io::{load_campaign, load_tests};
 use vshake::shell::run_cmd::{load_study, plan_for};
 use vshake::shell::{exit_code, tables};
@@ -32,6 +36,45 @@ fn check(result: anyhow::Result<()>, file: &Path) -> Result<(), TestCaseError> {
         );
     }
     Ok(())
+}
+
+/// Runs `test` on random values of `strategy` (proptest's runner, shrinking a failure to its
+/// smallest case): `PROPTEST_CASES` cases (256 unless set), or, where `VSHAKE_PROPTEST_SECONDS`
+/// is set, rounds of that many cases until the seconds have passed. Prints the count.
+fn property<S: Strategy>(
+    name: &str,
+    strategy: S,
+    test: impl Fn(S::Value) -> Result<(), TestCaseError>,
+) where
+    S::Value: Debug,
+{
+    let config = Config {
+        failure_persistence: None,
+        ..Config::default()
+    };
+    let budget = std::env::var("VSHAKE_PROPTEST_SECONDS")
+        .ok()
+        .map(|s| match s.parse::<f64>() {
+            Ok(secs) if secs > 0.0 => Duration::from_secs_f64(secs),
+            _ => panic!("VSHAKE_PROPTEST_SECONDS={s:?}: a positive number of seconds"),
+        });
+    let (round, start) = (config.cases as usize, Instant::now());
+    // A runner counts its cases until it is done: a fresh one per round, its generator drawn from
+    // the first's.
+    let mut seeds = TestRunner::new(config.clone());
+    let mut cases = 0;
+    loop {
+        let mut runner = TestRunner::new_with_rng(config.clone(), seeds.new_rng());
+        if let Err(e) = runner.run(&strategy, &test) {
+            panic!("{name}: {e}");
+        }
+        cases += round;
+        if budget.is_none_or(|b| start.elapsed() >= b) {
+            break;
+        }
+    }
+    let secs = start.elapsed().as_secs_f64();
+    println!("{name}: {cases} cases in {secs:.1} s, none failed");
 }
 
 /// A byte edit: replace, insert or delete at a position (taken modulo the length).
@@ -149,25 +192,44 @@ fn try_study(dir: &Path, bytes: &[u8]) -> Result<(), TestCaseError> {
     check(result, &path)
 }
 
-proptest! {
-    #[test]
-    fn study_files_of_random_bytes(bytes in proptest::collection::vec(any::<u8>(), 0..600)) {
-        let d = tempfile::tempdir().unwrap();
-        try_study(d.path(), &bytes)?;
-    }
+#[test]
+fn study_files_of_random_bytes() {
+    property(
+        stringify!(study_files_of_random_bytes),
+        proptest::collection::vec(any::<u8>(), 0..600),
+        |bytes| {
+            let d = tempfile::tempdir().unwrap();
+            try_study(d.path(), &bytes)?;
+            Ok(())
+        },
+    );
+}
 
-    #[test]
-    fn study_files_with_mutated_bytes(seed in 0usize..3, e in edits()) {
-        let d = tempfile::tempdir().unwrap();
-        try_study(d.path(), &mutate(&study_seeds()[seed], &e))?;
-    }
+#[test]
+fn study_files_with_mutated_bytes() {
+    property(
+        stringify!(study_files_with_mutated_bytes),
+        (0usize..3, edits()),
+        |(seed, e)| {
+            let d = tempfile::tempdir().unwrap();
+            try_study(d.path(), &mutate(&study_seeds()[seed], &e))?;
+            Ok(())
+        },
+    );
+}
 
-    #[test]
-    fn study_files_with_odd_values(seed in 0usize..3, p in picks()) {
-        let d = tempfile::tempdir().unwrap();
-        let text = String::from_utf8(study_seeds()[seed].clone()).unwrap();
-        try_study(d.path(), odd_values(&text, &p).as_bytes())?;
-    }
+#[test]
+fn study_files_with_odd_values() {
+    property(
+        stringify!(study_files_with_odd_values),
+        (0usize..3, picks()),
+        |(seed, p)| {
+            let d = tempfile::tempdir().unwrap();
+            let text = String::from_utf8(study_seeds()[seed].clone()).unwrap();
+            try_study(d.path(), odd_values(&text, &p).as_bytes())?;
+            Ok(())
+        },
+    );
 }
 
 // ---- campaign files and measured tests ------------------------------------------------------
@@ -221,58 +283,147 @@ fn try_campaign(
     }
 }
 
-proptest! {
-    #[test]
-    fn campaign_files_of_random_bytes(bytes in proptest::collection::vec(any::<u8>(), 0..600)) {
-        let d = tempfile::tempdir().unwrap();
-        try_campaign(d.path(), &bytes, "t.csv", measured_csv().as_bytes())?;
-    }
+#[test]
+fn campaign_files_of_random_bytes() {
+    property(
+        stringify!(campaign_files_of_random_bytes),
+        proptest::collection::vec(any::<u8>(), 0..600),
+        |bytes| {
+            let d = tempfile::tempdir().unwrap();
+            try_campaign(d.path(), &bytes, "t.csv", measured_csv().as_bytes())?;
+            Ok(())
+        },
+    );
+}
 
-    #[test]
-    fn campaign_files_with_mutated_bytes(e in edits()) {
-        let d = tempfile::tempdir().unwrap();
-        try_campaign(d.path(), &mutate(CAMPAIGN.replace("DATA", "t.csv").as_bytes(), &e), "t.csv", measured_csv().as_bytes())?;
-    }
+#[test]
+fn campaign_files_with_mutated_bytes() {
+    property(
+        stringify!(campaign_files_with_mutated_bytes),
+        edits(),
+        |e| {
+            let d = tempfile::tempdir().unwrap();
+            try_campaign(
+                d.path(),
+                &mutate(CAMPAIGN.replace("DATA", "t.csv").as_bytes(), &e),
+                "t.csv",
+                measured_csv().as_bytes(),
+            )?;
+            Ok(())
+        },
+    );
+}
 
-    #[test]
-    fn campaign_files_with_odd_values(p in picks()) {
+#[test]
+fn campaign_files_with_odd_values() {
+    property(stringify!(campaign_files_with_odd_values), picks(), |p| {
         let d = tempfile::tempdir().unwrap();
         // One key per line, so that every value can be replaced.
-        let text = CAMPAIGN.replace("DATA", "t.csv").replace("excitation = { kind = \"sine\", ", "[test.excitation]\nkind = \"sine\"\n").replace(", ", "\n").replace(" }", "");
-        try_campaign(d.path(), odd_values(&text, &p).as_bytes(), "t.csv", measured_csv().as_bytes())?;
-    }
+        let text = CAMPAIGN
+            .replace("DATA", "t.csv")
+            .replace(
+                "excitation = { kind = \"sine\", ",
+                "[test.excitation]\nkind = \"sine\"\n",
+            )
+            .replace(", ", "\n")
+            .replace(" }", "");
+        try_campaign(
+            d.path(),
+            odd_values(&text, &p).as_bytes(),
+            "t.csv",
+            measured_csv().as_bytes(),
+        )?;
+        Ok(())
+    });
+}
 
-    #[test]
-    fn csv_tests_of_random_bytes(bytes in proptest::collection::vec(any::<u8>(), 0..2000)) {
+#[test]
+fn csv_tests_of_random_bytes() {
+    property(
+        stringify!(csv_tests_of_random_bytes),
+        proptest::collection::vec(any::<u8>(), 0..2000),
+        |bytes| {
+            let d = tempfile::tempdir().unwrap();
+            try_campaign(
+                d.path(),
+                CAMPAIGN.replace("DATA", "t.csv").as_bytes(),
+                "t.csv",
+                &bytes,
+            )?;
+            Ok(())
+        },
+    );
+}
+
+#[test]
+fn csv_tests_with_mutated_bytes() {
+    property(stringify!(csv_tests_with_mutated_bytes), edits(), |e| {
         let d = tempfile::tempdir().unwrap();
-        try_campaign(d.path(), CAMPAIGN.replace("DATA", "t.csv").as_bytes(), "t.csv", &bytes)?;
-    }
+        try_campaign(
+            d.path(),
+            CAMPAIGN.replace("DATA", "t.csv").as_bytes(),
+            "t.csv",
+            &mutate(measured_csv().as_bytes(), &e),
+        )?;
+        Ok(())
+    });
+}
 
-    #[test]
-    fn csv_tests_with_mutated_bytes(e in edits()) {
-        let d = tempfile::tempdir().unwrap();
-        try_campaign(d.path(), CAMPAIGN.replace("DATA", "t.csv").as_bytes(), "t.csv", &mutate(measured_csv().as_bytes(), &e))?;
-    }
+#[test]
+fn parquet_tests_of_random_bytes() {
+    property(
+        stringify!(parquet_tests_of_random_bytes),
+        proptest::collection::vec(any::<u8>(), 0..2000),
+        |bytes| {
+            let d = tempfile::tempdir().unwrap();
+            try_campaign(
+                d.path(),
+                CAMPAIGN.replace("DATA", "t.parquet").as_bytes(),
+                "t.parquet",
+                &bytes,
+            )?;
+            Ok(())
+        },
+    );
+}
 
-    #[test]
-    fn parquet_tests_of_random_bytes(bytes in proptest::collection::vec(any::<u8>(), 0..2000)) {
-        let d = tempfile::tempdir().unwrap();
-        try_campaign(d.path(), CAMPAIGN.replace("DATA", "t.parquet").as_bytes(), "t.parquet", &bytes)?;
-    }
+#[test]
+fn mat_tests_with_mutated_bytes() {
+    property(
+        stringify!(mat_tests_with_mutated_bytes),
+        (any::<bool>(), edits()),
+        |(v7, e)| {
+            let d = tempfile::tempdir().unwrap();
+            let seed = std::fs::read(repo(if v7 {
+                "tests/data/mat/v7_units.mat"
+            } else {
+                "tests/data/mat/v5_names.mat"
+            }))
+            .unwrap();
+            try_campaign(
+                d.path(),
+                CAMPAIGN.replace("DATA", "t.mat").as_bytes(),
+                "t.mat",
+                &mutate(&seed, &e),
+            )?;
+            Ok(())
+        },
+    );
+}
 
-    #[test]
-    fn mat_tests_with_mutated_bytes(v7 in any::<bool>(), e in edits()) {
-        let d = tempfile::tempdir().unwrap();
-        let seed = std::fs::read(repo(if v7 { "tests/data/mat/v7_units.mat" } else { "tests/data/mat/v5_names.mat" })).unwrap();
-        try_campaign(d.path(), CAMPAIGN.replace("DATA", "t.mat").as_bytes(), "t.mat", &mutate(&seed, &e))?;
-    }
-
-    #[test]
-    fn parquet_tests_with_mutated_bytes(e in edits()) {
+#[test]
+fn parquet_tests_with_mutated_bytes() {
+    property(stringify!(parquet_tests_with_mutated_bytes), edits(), |e| {
         let d = tempfile::tempdir().unwrap();
         let seed = measured_parquet(d.path());
-        try_campaign(d.path(), CAMPAIGN.replace("DATA", "t.parquet").as_bytes(), "t.parquet", &mutate(&seed, &e))?;
-    }
+        try_campaign(
+            d.path(),
+            CAMPAIGN.replace("DATA", "t.parquet").as_bytes(),
+            "t.parquet",
+            &mutate(&seed, &e),
+        )?;
+        Ok(())
+    });
 }
 
 /// A header field as a lab's export might write it: a channel's name in some spelling with a
@@ -343,43 +494,64 @@ fn csv_with_header(
     s
 }
 
-proptest! {
-    /// The header parsing alone: each field split into name and unit, the name recognised, the
-    /// unit looked up, the whole header resolved into the channels (with and without a units
-    /// row): never a panic.
-    #[test]
-    fn random_headers_never_panic(
-        fields in proptest::collection::vec(header_field(), 0..12),
-        units in proptest::option::of(proptest::collection::vec(header_field(), 0..12)),
-    ) {
-        use vshake::orchestration::columns;
-        for f in fields.iter().chain(units.iter().flatten()) {
-            let (name, unit) = columns::split(f);
-            let _ = columns::recognise(&name);
-            if let Some(u) = unit {
-                let _ = columns::unit(&u);
-            }
-        }
-        let wanted = ["time_s", "ref_disp_m", "disp_m", "accel_mps2"];
-        let optional = ["valve_cmd_v", "force_n", "p1_pa", "p2_pa", "spool_m"];
-        let resolved = columns::resolve(&fields, units.as_deref(), &wanted, &optional, &[]);
-        if let Ok(r) = resolved {
-            prop_assert!(r.len() >= wanted.len());
-            prop_assert!(r.iter().all(|c| c.index < fields.len() && c.to_si.is_finite() && c.to_si > 0.0));
-        }
-    }
+/// The header parsing alone: each field split into name and unit, the name recognised, the
+/// unit looked up, the whole header resolved into the channels (with and without a units
+/// row): never a panic.
 
-    /// Files with such headers, a units row and a preamble, in every separator: read, or
-    /// refused as bad input naming the file.
-    #[test]
-    fn csv_tests_with_random_headers(
-        preamble in proptest::collection::vec("[ -~]{0,30}", 0..4),
-        fields in proptest::collection::vec(header_field(), 0..8),
-        units in proptest::option::of(proptest::collection::vec(header_field(), 4..5)),
-        sep in proptest::sample::select(vec![',', ';', '\t', ' ']),
-    ) {
-        let d = tempfile::tempdir().unwrap();
-        let text = csv_with_header(&preamble, &fields, &units, sep);
-        try_campaign(d.path(), CAMPAIGN.replace("DATA", "t.csv").as_bytes(), "t.csv", text.as_bytes())?;
-    }
+#[test]
+fn random_headers_never_panic() {
+    property(
+        stringify!(random_headers_never_panic),
+        (
+            proptest::collection::vec(header_field(), 0..12),
+            proptest::option::of(proptest::collection::vec(header_field(), 0..12)),
+        ),
+        |(fields, units)| {
+            use vshake::orchestration::columns;
+            for f in fields.iter().chain(units.iter().flatten()) {
+                let (name, unit) = columns::split(f);
+                let _ = columns::recognise(&name);
+                if let Some(u) = unit {
+                    let _ = columns::unit(&u);
+                }
+            }
+            let wanted = ["time_s", "ref_disp_m", "disp_m", "accel_mps2"];
+            let optional = ["valve_cmd_v", "force_n", "p1_pa", "p2_pa", "spool_m"];
+            let resolved = columns::resolve(&fields, units.as_deref(), &wanted, &optional, &[]);
+            if let Ok(r) = resolved {
+                prop_assert!(r.len() >= wanted.len());
+                prop_assert!(r
+                    .iter()
+                    .all(|c| c.index < fields.len() && c.to_si.is_finite() && c.to_si > 0.0));
+            }
+            Ok(())
+        },
+    );
+}
+
+/// Files with such headers, a units row and a preamble, in every separator: read, or
+/// refused as bad input naming the file.
+
+#[test]
+fn csv_tests_with_random_headers() {
+    property(
+        stringify!(csv_tests_with_random_headers),
+        (
+            proptest::collection::vec("[ -~]{0,30}", 0..4),
+            proptest::collection::vec(header_field(), 0..8),
+            proptest::option::of(proptest::collection::vec(header_field(), 4..5)),
+            proptest::sample::select(vec![',', ';', '\t', ' ']),
+        ),
+        |(preamble, fields, units, sep)| {
+            let d = tempfile::tempdir().unwrap();
+            let text = csv_with_header(&preamble, &fields, &units, sep);
+            try_campaign(
+                d.path(),
+                CAMPAIGN.replace("DATA", "t.csv").as_bytes(),
+                "t.csv",
+                text.as_bytes(),
+            )?;
+            Ok(())
+        },
+    );
 }

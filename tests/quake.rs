@@ -364,13 +364,8 @@ fn the_default_step_is_converged_on_ground_motions() {
                 p.controller.g_f,
             ) = (g_d, l_v, l_a, g_f);
             let run = |substeps| {
-                vshake::orchestration::sim::run_lanes::<1, _>(
-                    &[&p],
-                    &r,
-                    &Solver { substeps },
-                    &mut NoObserver,
-                )
-                .unwrap()[0]
+                vshake::orchestration::sim::run_one(&p, &r, &Solver { substeps }, &mut NoObserver)
+                    .unwrap()
             };
             let (a, b) = (run(Solver::default().substeps), run(32));
             assert!(

@@ -5,11 +5,11 @@
 
 use super::cli::BenchArgs;
 use super::machine_rates::{self, Rates, MINIMAL, TICK_OPS, WINDOW_OPS};
-use crate::kernel::effects::Baseline;
+use crate::kernel::builds;
 use crate::kernel::excitation::{Reference, Sine};
 use crate::kernel::ground::Processing;
 use crate::kernel::params::ModelParams;
-use crate::kernel::simulate::{self, Isa, LaneParams, NoObserver, Solver};
+use crate::kernel::simulate::{Isa, LaneParams, NoObserver, Solver};
 use crate::kernel::{EFFECT_LANES, LANES};
 use crate::orchestration::quake;
 use crate::orchestration::spec::{ExcitationSpec, Realisation};
@@ -49,16 +49,21 @@ pub fn record_reference() -> anyhow::Result<Reference> {
     Ok(r.with_spectrum(quake::default_spectrum()))
 }
 
-/// Simulated seconds per wall second of `threads` workers each running N-lane batches of `r` for
-/// about `secs` seconds.
+/// Simulated seconds per wall second of `threads` workers each running batches of `r` for about
+/// `secs` seconds: N = 1 a single run as `study sim` makes it, N = [`LANES`] a batch of the bare
+/// plant as a design study runs it (the kernel's builds, [`builds`]).
 fn throughput<const N: usize>(threads: usize, secs: f64, r: &Reference) -> anyhow::Result<f64> {
+    const { assert!(N == 1 || N == LANES) };
     let p = ModelParams::default();
-    let sets: Vec<&ModelParams> = (0..N).map(|_| &p).collect();
-    let lp = LaneParams::<N>::new(&sets)?;
+    let lp = LaneParams::<LANES>::new(&[&p])?;
     let solver = Solver::default();
     let run_once = || {
-        simulate::run(&lp, &Baseline, r, &solver, &mut NoObserver)
-            .map(|x| x[0].metrics.rms_err_accel_ratio)
+        if N == 1 {
+            builds::run_lane(&p, r, &solver, &mut NoObserver).map(|x| x.metrics.rms_err_accel_ratio)
+        } else {
+            builds::run_bare_lanes(&lp, &[r; LANES], &solver)
+                .map(|x| x[0].metrics.rms_err_accel_ratio)
+        }
     };
     // Size the repetitions to the time budget with one run.
     let t = Instant::now();
@@ -430,7 +435,7 @@ fn worst_difference(
     let mut worst = 0.0f64;
     for (c, group) in sets.chunks(LANES).enumerate() {
         let lp = LaneParams::<LANES>::new(group)?;
-        let want = simulate::run(&lp, &Baseline, reference, solver, &mut NoObserver)?;
+        let want = builds::run_bare_lanes(&lp, &[reference; LANES], solver)?;
         for (l, w) in want.iter().enumerate().take(group.len()) {
             let g = got[c * LANES + l].metrics.columns();
             for ((_, a), (_, b)) in g.into_iter().zip(w.metrics.columns()) {

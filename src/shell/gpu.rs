@@ -3,7 +3,7 @@
 //! needs no CUDA toolkit and runs everywhere; their presence is checked before any call (cudarc's
 //! loader panics when a library is missing).
 //!
-//! The kernel is `src/kernel/cuda/lane.cu` (CUDA C++), compiled at run time by NVRTC and cached
+//! The kernel is `crates/kernel/src/cuda/lane.cu` (CUDA C++), compiled at run time by NVRTC and cached
 //! as PTX; [`Cuda`] runs a plan's lanes with it ([`crate::orchestration::batch::LaneEngine`]).
 //! `auto` uses it where a GPU is found and the work is covered, else runs on the CPU and says
 //! why; `cuda` refuses (exit 2) with the cause, never silently running on the CPU.

@@ -6,7 +6,7 @@
 // fields' records, the shared fields' values (`vs_u`); then the three words of the varying
 // fields' mask (`vs_vary`).
 // Output: lanes × out_fields float64s, field-major.
-#include "../../src/kernel/cuda/lane.cu"
+#include "../../crates/kernel/src/cuda/lane.cu"
 #include <cstdio>
 #include <cstdlib>
 #include <vector>

@@ -1,0 +1,169 @@
+//! The lane integrators the rest of vshake runs, compiled here, once.
+//!
+//! [`crate::simulate`]'s integrator is generic over the lane count, the effect and the observer,
+//! and a generic function is compiled in the crate that names its types. The functions here name
+//! them all, so that the orchestration and the shell, which call only these, compile none of the
+//! kernel's time loops: a change above the kernel does not rebuild them. Every observer of one
+//! lane count shares one build (`dyn Observer<N>`: one call per controller tick, against the
+//! substeps' right-hand sides of every lane).
+//!
+//! Each build is compiled at a site of its own ([`crate::simulate::Site`]: a module, so a codegen
+//! unit, so an LLVM module optimised on its own core), so that the builds are compiled in
+//! parallel. What is built, per valve law and damping law (four pairs):
+//! - one lane ([`run_lane`]: a single run, its history or its probes): the bare plant and the
+//!   effect set, portable code (one lane is scalar code in every build, the same bits);
+//! - [`EFFECT_LANES`] lanes with an observer ([`run_effect_lanes`]: batches with effects, a fit's
+//!   trials): the bare plant and the effect set, portable and AVX2;
+//! - [`LANES`] lanes of the bare plant ([`run_bare_lanes`]: design exploration): portable, AVX2
+//!   and AVX-512;
+//! - [`EFFECT_LANES`] lanes with one library effect alone ([`run_single_effect`], a diagnosis's
+//!   screening): the usual configuration, AVX2.
+
+use crate::effects::{effect_set, with_single, Baseline, Effect, EffectFn, EffectId};
+use crate::excitation::Reference;
+use crate::params::ModelParams;
+use crate::simulate::{
+    self, site, Isa, LaneParams, LaneResult, NoObserver, Observer, SetupError, Site, Solver,
+};
+use crate::{EFFECT_LANES, LANES};
+
+site! {
+    /// One lane, the bare plant.
+    one_bare
+}
+site! {
+    /// One lane, the effect set.
+    one_set
+}
+site! {
+    /// [`EFFECT_LANES`] lanes, the bare plant.
+    effect_lanes_bare
+}
+site! {
+    /// [`EFFECT_LANES`] lanes, the effect set.
+    effect_lanes_set
+}
+site! {
+    /// [`LANES`] lanes of the bare plant.
+    bare_lanes
+}
+site! {
+    /// One library effect alone.
+    single
+}
+
+/// The lanes of `lp` (made from `models`; `refs[l]` is lane l's reference) through the effect
+/// set when any model switches an effect on, else through the bare plant.
+fn run_models<const N: usize, Bare: Site, Set: Site>(
+    isa: Isa,
+    lp: &LaneParams<N>,
+    models: &[&ModelParams],
+    refs: &[&Reference; N],
+    solver: &Solver,
+    obs: &mut dyn Observer<N>,
+) -> Result<[LaneResult; N], SetupError> {
+    if models.iter().any(|m| m.effects.any()) {
+        let set = effect_set::<N>(models);
+        simulate::run_each_on::<N, _, _, Set>(isa, lp, &set, refs, solver, obs)
+    } else {
+        simulate::run_each_on::<N, _, _, Bare>(isa, lp, &Baseline, refs, solver, obs)
+    }
+}
+
+/// One run of `model` against `reference`, every tick to `obs`.
+pub fn run_lane(
+    model: &ModelParams,
+    reference: &Reference,
+    solver: &Solver,
+    obs: &mut dyn Observer<1>,
+) -> Result<LaneResult, SetupError> {
+    let lp = LaneParams::<1>::new(&[model])?;
+    let [r] = run_models::<1, one_bare::Here, one_set::Here>(
+        Isa::Portable,
+        &lp,
+        &[model],
+        &[reference],
+        solver,
+        obs,
+    )?;
+    Ok(r)
+}
+
+/// Up to [`EFFECT_LANES`] models as the lanes of one batch (`refs[l]` for lane l; lanes beyond
+/// the models repeat the last model, as [`LaneParams::new`] does).
+pub fn run_effect_lanes(
+    models: &[&ModelParams],
+    refs: &[&Reference; EFFECT_LANES],
+    solver: &Solver,
+    obs: &mut dyn Observer<EFFECT_LANES>,
+) -> Result<[LaneResult; EFFECT_LANES], SetupError> {
+    let lp = LaneParams::<EFFECT_LANES>::new(models)?;
+    run_models::<EFFECT_LANES, effect_lanes_bare::Here, effect_lanes_set::Here>(
+        Isa::detected(),
+        &lp,
+        models,
+        refs,
+        solver,
+        obs,
+    )
+}
+
+/// [`LANES`] lanes of the bare plant (no effect), without an observer.
+pub fn run_bare_lanes(
+    lp: &LaneParams<LANES>,
+    refs: &[&Reference; LANES],
+    solver: &Solver,
+) -> Result<[LaneResult; LANES], SetupError> {
+    let obs = &mut NoObserver;
+    simulate::run_each_on::<LANES, _, _, bare_lanes::Here>(
+        Isa::detected(),
+        lp,
+        &Baseline,
+        refs,
+        solver,
+        obs,
+    )
+}
+
+/// Up to [`EFFECT_LANES`] models that switch on library effect `id` alone, with a kernel made
+/// for that effect, in the usual configuration ([`simulate::run_usual`]); `None` elsewhere (the
+/// caller then runs [`run_effect_lanes`], the same numbers bit for bit).
+pub fn run_single_effect(
+    id: EffectId,
+    models: &[&ModelParams],
+    reference: &Reference,
+    solver: &Solver,
+    obs: &mut dyn Observer<EFFECT_LANES>,
+) -> Option<Result<[LaneResult; EFFECT_LANES], SetupError>> {
+    let lp = match LaneParams::<EFFECT_LANES>::new(models) {
+        Ok(lp) => lp,
+        Err(e) => return Some(Err(e)),
+    };
+    let lanes: [&ModelParams; EFFECT_LANES] =
+        std::array::from_fn(|l| models[l.min(models.len() - 1)]);
+    let single = Single {
+        lp: &lp,
+        reference,
+        solver,
+        obs,
+    };
+    with_single(id, lanes, single)
+}
+
+/// [`run_single_effect`]'s call, generic over the effect.
+struct Single<'a, 'o> {
+    lp: &'a LaneParams<EFFECT_LANES>,
+    reference: &'a Reference,
+    solver: &'a Solver,
+    obs: &'a mut (dyn Observer<EFFECT_LANES> + 'o),
+}
+
+impl EffectFn<EFFECT_LANES> for Single<'_, '_> {
+    type Output = Option<Result<[LaneResult; EFFECT_LANES], SetupError>>;
+    fn call<E: Effect<EFFECT_LANES>>(self, effect: &E) -> Self::Output {
+        let (lp, reference, solver) = (self.lp, self.reference, self.solver);
+        simulate::run_usual::<EFFECT_LANES, E, _, single::Here>(
+            lp, effect, reference, solver, self.obs,
+        )
+    }
+}

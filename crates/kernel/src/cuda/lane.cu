@@ -1,0 +1,697 @@
+// vshake's lane kernel in CUDA C++: one thread integrates one parameter set (a lane) of the
+// model of docs/model.md with any of the library's effects (gpu_lanes.rs: EFFECT_BITS), float64,
+// the whole run in registers, and accumulates the metrics online, so that only the sums of
+// `crates/kernel/src/metrics.rs` come back.
+//
+// It transcribes `crates/kernel/src/simulate.rs` (the tick, RK4 substeps, the §3 guard) and the parts it
+// calls (controller.rs, servovalve.rs, actuator.rs, platen.rs, friction.rs, metrics.rs,
+// spectrum.rs's oscillators and each effect's hooks, composed in registry order as the Rust
+// effect set composes them) operation for operation, in the same order, so that the host build
+// of this file gives the Rust kernel's numbers to rounding (`tests/cuda_host.rs` checks 1e-12).
+// Unless an effect tells the two actuators apart (asymmetry's actuator-2 gain: VS_E_TWO), one
+// stands for both, as the Rust kernel's equivalent actuator does (force and flows doubled, bit
+// for bit the same as two identical actuators).
+//
+// Compiled two ways:
+// - at run time by NVRTC for the GPU (`src/shell/gpu.rs`; `__CUDACC_RTC__` defined);
+// - for the host by a C++ compiler in `cargo test` (`tests/cuda_host.rs`), the CUDA qualifiers
+//   defined away; `vs_lane` is then called in a loop over lanes.
+//
+// Layouts (all float64, field-major: field f of lane l at [f * lanes + l]) are written by
+// `crates/kernel/src/gpu_lanes.rs`, whose constants must match the VS_* ones below.
+
+#ifdef __CUDACC_RTC__
+#define VS_FN __device__ __forceinline__
+typedef unsigned long long vs_u64;
+VS_FN double vs_from_bits(vs_u64 b) { return __longlong_as_double((long long)b); }
+VS_FN vs_u64 vs_to_bits(double x) { return (vs_u64)__double_as_longlong(x); }
+#else
+#include <cmath>
+#include <cstring>
+#define VS_FN static inline
+typedef unsigned long long vs_u64;
+VS_FN double vs_from_bits(vs_u64 b) { double x; std::memcpy(&x, &b, 8); return x; }
+VS_FN vs_u64 vs_to_bits(double x) { vs_u64 b; std::memcpy(&b, &x, 8); return b; }
+using std::fabs;
+using std::fmax;
+using std::pow;
+using std::sqrt;
+#endif
+
+// Lane parameter record (gpu_lanes.rs: LANE_FIELDS).
+enum {
+  VS_KW1, VS_KW2, VS_KW3, VS_KW4, VS_P_R, VS_P_TR2, VS_KQ1, VS_KQ2,
+  VS_P_S,
+  VS_BETA, VS_A1, VS_A2, VS_L, VS_VD1, VS_VD2,
+  VS_INV_M, VS_K, VS_C, VS_ALPHA, VS_MU,
+  VS_INV_Y, VS_KAPPA, VS_KAPPA_NEG,
+  VS_C_FB, VS_C_D, VS_C_V, VS_C_A, VS_C_J, VS_C_F, VS_HP_B, VS_HP_A,
+  VS_NOTCH,                      // 5 biquads × [b0, b1, b2, a1, a2]
+  VS_U_LIM = VS_NOTCH + 25, VS_K_SP, VS_P0_1, VS_P0_2,
+  // Library effects, in registry order (coefficients from each effect's `lane`, off lanes
+  // neutral):
+  VS_DELAY,                      // transport_delay: on, 4/tau
+  VS_SPOOL = VS_DELAY + 2,       // spool_dynamics: on, ω², 2ζω
+  VS_FSAT = VS_SPOOL + 3,        // flow_saturation: on, x_sat, 1/x_sat
+  VS_FGAIN = VS_FSAT + 3,        // flow_gain: g at the 5 knots, 1/x_ref
+  VS_ASYM = VS_FGAIN + 6,        // asymmetry: extension gain, actuator 2's gain
+  VS_LEAK = VS_ASYM + 2,         // leakage: c_int, c_ext
+  VS_SUPPLY = VS_LEAK + 2,       // supply: on, P_S0, q_pump, 1/c_acc, 1/dp_band
+  VS_SEAL = VS_SUPPLY + 5,       // seal_friction: f_c, f_s − f_c, 1/v_s, sigma, 1/v_eps
+  VS_COMP = VS_SEAL + 5,         // compressibility: on, beta, 1/beta_e, air·p_atm, dead volume
+  VS_BULK = VS_COMP + 5,         // bulk_curve: gain at the 3 knots, 1/P_S
+  VS_RMASS = VS_BULK + 4,        // reaction_mass: 1/m_r (0 off), k_r, c_r
+  VS_HOLD = VS_RMASS + 3,        // hold_down: k3
+  VS_SPEC = VS_HOLD + 1,         // specimen: per mode m (0 off), ω², 2ζω
+  VS_SENSOR = VS_SPEC + 9,       // accel, disp, force sensors: on, ω², 2ζω, τ, Padé, 12/τ², 6/τ
+  VS_LANE_FIELDS = VS_SENSOR + 21
+};
+
+// Which effects a build applies (gpu_lanes.rs: EFFECT_BITS), bit i = registry line i, and
+// whether the two actuators differ (then both are integrated, else one stands for both).
+enum {
+  VS_E_DELAY = 1, VS_E_SPOOL = 2, VS_E_FSAT = 4, VS_E_FGAIN = 8, VS_E_ASYM = 16, VS_E_LEAK = 32,
+  VS_E_SUPPLY = 64, VS_E_SEAL = 128, VS_E_COMP = 256, VS_E_BULK = 512, VS_E_RMASS = 1024,
+  VS_E_HOLD = 2048, VS_E_SPEC = 4096, VS_E_ACCEL = 8192, VS_E_DISP = 16384, VS_E_FORCE = 32768,
+  VS_E_TWO = 65536
+};
+
+// Output record (gpu_lanes.rs: OUT_*). Status: 0 ok, 1 non-finite, 2 stroke, 3 pressure.
+enum {
+  VS_STATUS, VS_FAIL_TICK, VS_FAIL_VALUE, VS_FAIL_CHAMBER, VS_N_WINDOW, VS_MAX_U,
+  VS_ERR_A2, VS_ERR_X2, VS_PEAK_ERR_A, VS_PEAK_ERR_X,
+  VS_PEAK, VS_PEAK_R = VS_PEAK + 3,
+  VS_AR_RE = VS_PEAK_R + 3, VS_AR_IM, VS_XR_RE, VS_XR_IM, VS_AR2, VS_XR2, VS_X_RE, VS_X_IM,
+  VS_A_RE, VS_A_IM = VS_A_RE + 9,
+  VS_OSC_PEAK = VS_A_IM + 9,     // one per oscillator of the response spectrum
+};
+
+// The effects are fixed when the kernel is compiled (NVRTC: -DVS_EFFECTS=bits, one build per
+// set of effects), so that a build carries only the states of its effects in registers. The
+// host build reads them per run (`vs_effects`, set by the harness).
+#ifndef VS_EFFECTS
+#ifdef __CUDACC_RTC__
+#error "the kernel is compiled with -DVS_EFFECTS=<bits>"
+#else
+static long long vs_effects = 0;
+#define VS_EFFECTS vs_effects
+#endif
+#endif
+#define VS_ON(bit) ((VS_EFFECTS & (bit)) != 0)
+#define VS_NA (VS_ON(VS_E_TWO) ? 2 : 1)
+
+// The effects' own states (gpu_lanes.rs: their order in the Rust effect set).
+enum {
+  VS_S_DELAY = 0,                // transport_delay: the 4 lags
+  VS_S_SPOOL = 4,                // spool_dynamics: x, v of actuator 1, then of actuator 2
+  VS_S_SUPPLY = 8,               // supply: the accumulator's pressure
+  VS_S_RMASS = 9,                // reaction_mass: y_r, v_r
+  VS_S_SPEC = 11,                // specimen: u, u' per mode
+  VS_S_SENSOR = 17,              // per sensor (accel, disp, force): y, y', z, z'
+  VS_NES = 29
+};
+
+// Whether extra state i is integrated in this build.
+VS_FN bool vs_live(int i) {
+  if (i < VS_S_SPOOL) return VS_ON(VS_E_DELAY);
+  if (i < VS_S_SUPPLY) return VS_ON(VS_E_SPOOL) && (i < VS_S_SPOOL + 2 || VS_ON(VS_E_TWO));
+  if (i < VS_S_RMASS) return VS_ON(VS_E_SUPPLY);
+  if (i < VS_S_SPEC) return VS_ON(VS_E_RMASS);
+  if (i < VS_S_SENSOR) return VS_ON(VS_E_SPEC);
+  return VS_ON(VS_E_ACCEL << ((i - VS_S_SENSOR) / 4));
+}
+
+// The run shared by every lane (gpu_lanes.rs: Shared).
+struct VsRun {
+  long long ticks, substeps, w0, w1;
+  long long has_basis;           // harmonic basis per window tick (a sine's fundamental)
+  long long drive;               // 0 closed loop, 1 valve command (V), 2 spool position (m)
+  long long linear_valve;        // 0 orifice law, 1 linear law
+  long long n_osc;               // response-spectrum oscillators (0: none)
+  long long ref_stride;          // 0: one reference for every lane; else lane l's at l × stride
+  long long effects;             // VS_E_* bits (the build's VS_EFFECTS)
+  double f_s;
+  const double *x, *v, *a, *j;   // reference per tick
+  const double *drive_signal;    // per tick (drive 1 or 2)
+  const double *basis;           // (w1 − w0) × [cos 1..9, sin 1..9]
+  const double *osc;             // n_osc × [a00, a01, a10, a11, b00, b01, b10, b11]
+};
+
+#define VS_MAX_OSC 128
+
+// The plant's states (both actuators' pressures; the second used when they differ), then the
+// effects' own.
+struct VsState { double p1[2], p2[2], y, v, z, e[VS_NES]; };
+
+// Parameters that every lane of a launch shares (gpu_lanes.rs `Uniform`) are read from `vs_u`
+// (on the GPU a constant-bank operand); P holds the records of the varying fields alone,
+// field-major, in field order (lane l's value of the s-th varying field at P[s * n + l]). Which
+// fields vary is fixed when the kernel is compiled (NVRTC: -DVS_VARY0..2, bit f of the 131-bit
+// mask for field f), so that each read is resolved then; the host build reads the mask per run
+// (`vs_vary`, set by the harness).
+VS_FN constexpr int vs_popc(vs_u64 x) {
+  x = x - ((x >> 1) & 0x5555555555555555ULL);
+  x = (x & 0x3333333333333333ULL) + ((x >> 2) & 0x3333333333333333ULL);
+  x = (x + (x >> 4)) & 0x0F0F0F0F0F0F0F0FULL;
+  return (int)((x * 0x0101010101010101ULL) >> 56);
+}
+
+// Whether field i varies under the mask (m0, m1, m2), and its row in P.
+VS_FN constexpr bool vs_varies_in(vs_u64 m0, vs_u64 m1, vs_u64 m2, int i) {
+  return (((i < 64 ? m0 : (i < 128 ? m1 : m2)) >> (i & 63)) & 1ULL) != 0;
+}
+VS_FN constexpr int vs_row_in(vs_u64 m0, vs_u64 m1, vs_u64 m2, int i) {
+  return i < 64    ? vs_popc(m0 & ((1ULL << i) - 1))
+         : i < 128 ? vs_popc(m0) + vs_popc(m1 & ((1ULL << (i - 64)) - 1))
+                   : vs_popc(m0) + vs_popc(m1) + vs_popc(m2 & ((1ULL << (i - 128)) - 1));
+}
+
+#ifdef __CUDACC_RTC__
+#if !defined(VS_VARY0) || !defined(VS_VARY1) || !defined(VS_VARY2)
+#error "the kernel is compiled with -DVS_VARY0=<mask> -DVS_VARY1=<mask> -DVS_VARY2=<mask>"
+#endif
+__constant__ double vs_u[VS_LANE_FIELDS];
+#define VS_MASK VS_VARY0, VS_VARY1, VS_VARY2
+#else
+static double vs_u[VS_LANE_FIELDS];
+static vs_u64 vs_vary[3] = {~0ULL, ~0ULL, ~0ULL};
+#define VS_MASK vs_vary[0], vs_vary[1], vs_vary[2]
+#endif
+
+// Field i of lane l's parameters (n lanes).
+VS_FN double vs_p(const double *P, long long n, long long l, int i) {
+  return vs_varies_in(VS_MASK, i) ? P[vs_row_in(VS_MASK, i) * n + l] : vs_u[i];
+}
+
+// servovalve.rs: the regularised square root, Newton for s^(−1/4) from a bit-trick seed.
+VS_FN double vs_inv_fourth_root(double s) {
+  double y = vs_from_bits(0x4feb0c0bba5e3540ULL - (vs_to_bits(s) >> 2));
+  for (int i = 0; i < 4; ++i) {
+    double y2 = y * y;
+    y *= 1.25 - 0.25 * s * (y2 * y2);
+  }
+  return y;
+}
+
+VS_FN double vs_sq(double dp, double p_tr2) { return dp * vs_inv_fourth_root(dp * dp + p_tr2); }
+
+VS_FN bool vs_finite(double x) { return x - x == 0.0; }
+
+#define F(i) vs_p(P, n, l, (i))
+
+// The command after transport_delay (its spool_position, which the spool's dynamics follow).
+VS_FN double vs_delayed(const double *P, long long n, long long l, const VsState &s, double x) {
+  if (VS_ON(VS_E_DELAY)) x = x + F(VS_DELAY) * (s.e[VS_S_DELAY + 3] - x);
+  return x;
+}
+
+// The `opening` hooks in registry order: delay, spool dynamics, flow_saturation, flow_gain.
+VS_FN double vs_opening(const double *P, long long n, long long l, int act, const VsState &s,
+                        double x) {
+  x = vs_delayed(P, n, l, s, x);
+  if (VS_ON(VS_E_SPOOL)) x = x + F(VS_SPOOL) * (s.e[VS_S_SPOOL + 2 * act] - x);
+  if (VS_ON(VS_E_FSAT)) x = x + F(VS_FSAT) * (F(VS_FSAT + 1) * tanh(x * F(VS_FSAT + 2)) - x);
+  if (VS_ON(VS_E_FGAIN)) {
+    const double knots[5] = {0.0, 0.05, 0.15, 0.35, 0.7};
+    double r = fabs(x) * F(VS_FGAIN + 5), g = F(VS_FGAIN + 4);
+    for (int k = 3; k >= 0; --k) {
+      double w = (r - knots[k]) / (knots[k + 1] - knots[k]);
+      if (r < knots[k + 1]) g = F(VS_FGAIN + k) + w * (F(VS_FGAIN + k + 1) - F(VS_FGAIN + k));
+    }
+    x = x * g;
+  }
+  return x;
+}
+
+// The `flows` hooks in registry order: asymmetry, then leakage.
+VS_FN void vs_flows(const double *P, long long n, long long l, int act, double p1, double p2,
+                    double &q1, double &q2) {
+  if (VS_ON(VS_E_ASYM)) {
+    double g = (q1 > 0.0 ? F(VS_ASYM) : 1.0) * (act == 1 ? F(VS_ASYM + 1) : 1.0);
+    q1 = g * q1;
+    q2 = g * q2;
+  }
+  if (VS_ON(VS_E_LEAK)) {
+    double cross = F(VS_LEAK) * (p1 - p2);
+    q1 = q1 - cross - F(VS_LEAK + 1) * p1;
+    q2 = q2 - cross + F(VS_LEAK + 1) * p2;
+  }
+}
+
+// effects/compressibility.rs `one`: a chamber's β/V with dead volume and entrained air.
+VS_FN double vs_compress(const double *P, long long n, long long l, double b, double p) {
+  double pa = fmax(p + 101325.0, 0.1 * 101325.0);
+  double beta_e = 1.0 / (F(VS_COMP + 2) + F(VS_COMP + 3) / (pa * pa));
+  double volume = F(VS_COMP + 1) / b + F(VS_COMP + 4);
+  return b + F(VS_COMP) * (beta_e / volume - b);
+}
+
+// effects/bulk_curve.rs `gain`: the bulk modulus's gain at gauge pressure p.
+VS_FN double vs_bulk_gain(const double *P, long long n, long long l, double p) {
+  const double knots[3] = {0.0, 0.5, 1.0};
+  double r = p * F(VS_BULK + 3);
+  double g = r < 0.0 ? F(VS_BULK) : F(VS_BULK + 2);
+  for (int k = 1; k >= 0; --k) {
+    double w = (r - knots[k]) / (knots[k + 1] - knots[k]);
+    if (r >= knots[k] && r < knots[k + 1]) g = F(VS_BULK + k) + w * (F(VS_BULK + k + 1) - F(VS_BULK + k));
+  }
+  return g;
+}
+
+// The `chamber_stiffness` hooks: compressibility, then bulk_curve.
+VS_FN void vs_stiffness(const double *P, long long n, long long l, double p1, double p2,
+                        double &b1, double &b2) {
+  if (VS_ON(VS_E_COMP)) {
+    b1 = vs_compress(P, n, l, b1, p1);
+    b2 = vs_compress(P, n, l, b2, p2);
+  }
+  if (VS_ON(VS_E_BULK)) {
+    b1 = b1 * vs_bulk_gain(P, n, l, p1);
+    b2 = b2 * vs_bulk_gain(P, n, l, p2);
+  }
+}
+
+// The `extra_force` hooks, summed as the Rust effect set nests them: seal + (hold + specimen).
+VS_FN double vs_extra_force(const double *P, long long n, long long l, const VsState &s) {
+  double fe = 0.0;
+  if (VS_ON(VS_E_SPEC)) {
+    double sum = -0.0;
+    for (int i = 0; i < 3; ++i) {
+      const long long q = VS_SPEC + 3 * i;
+      sum = sum + F(q) * (F(q + 1) * s.e[VS_S_SPEC + 2 * i] + F(q + 2) * s.e[VS_S_SPEC + 2 * i + 1]);
+    }
+    fe = sum;
+  }
+  if (VS_ON(VS_E_HOLD)) fe = -F(VS_HOLD) * s.y * s.y * s.y + fe;
+  if (VS_ON(VS_E_SEAL)) {
+    double r = s.v * F(VS_SEAL + 2);
+    fe = (-tanh(s.v * F(VS_SEAL + 4)) * (F(VS_SEAL) + F(VS_SEAL + 1) * exp(-r * r)) -
+          F(VS_SEAL + 3) * s.v) + fe;
+  }
+  return fe;
+}
+
+// sensor_chain.rs `derivs`: sensor c's low-pass and Padé delay driven by u.
+VS_FN void vs_sensor_derivs(const double *P, long long n, long long l, int c, double u,
+                            const VsState &s, VsState &d) {
+  const long long q = VS_SENSOR + 7 * c;
+  const int i = VS_S_SENSOR + 4 * c;
+  d.e[i] = s.e[i + 1];
+  d.e[i + 1] = F(q + 1) * (u - s.e[i]) - F(q + 2) * s.e[i + 1];
+  d.e[i + 2] = s.e[i + 3];
+  d.e[i + 3] = F(q + 5) * (s.e[i] - s.e[i + 2]) - F(q + 6) * s.e[i + 3];
+}
+
+// sensor_chain.rs `recorded`: channel c (0 accel, 1 disp, 2 force) as recorded, from u.
+VS_FN double vs_sensed(const double *P, long long n, long long l, int c, double u,
+                       const VsState &s) {
+  if (!VS_ON(VS_E_ACCEL << c)) return u;
+  const long long q = VS_SENSOR + 7 * c;
+  const int i = VS_S_SENSOR + 4 * c;
+  double y = s.e[i], yd = s.e[i + 1], t = F(q + 3);
+  double pade = y - t * s.e[i + 3];
+  double ydd = F(q + 1) * (u - y) - F(q + 2) * yd;
+  double taylor = y - t * yd + 0.5 * t * t * ydd;
+  double chain = taylor + F(q + 4) * (pade - taylor);
+  return u + F(q) * (chain - u);
+}
+
+// The `derivs` of the effects with states, in registry order, given the plant's quantities:
+// the held command, the supply flow, the actuator force, the acceleration and the stroke.
+VS_FN void vs_effect_derivs(const double *P, long long n, long long l, double x_c, double qs,
+                            double f, double accel, double stroke, const VsState &s,
+                            VsState &d) {
+  if (VS_ON(VS_E_DELAY)) {
+    double input = x_c;
+    for (int k = 0; k < 4; ++k) {
+      d.e[VS_S_DELAY + k] = F(VS_DELAY + 1) * (input - s.e[VS_S_DELAY + k]);
+      input = s.e[VS_S_DELAY + k];
+    }
+  }
+  if (VS_ON(VS_E_SPOOL)) {
+    double xd = vs_delayed(P, n, l, s, x_c);
+    for (int act = 0; act < VS_NA; ++act) {
+      const int i = VS_S_SPOOL + 2 * act;
+      d.e[i] = s.e[i + 1];
+      d.e[i + 1] = F(VS_SPOOL + 1) * (xd - s.e[i]) - F(VS_SPOOL + 2) * s.e[i + 1];
+    }
+  }
+  if (VS_ON(VS_E_SUPPLY)) {
+    double r = (F(VS_SUPPLY + 1) - s.e[VS_S_SUPPLY]) * F(VS_SUPPLY + 4);
+    double q_p = F(VS_SUPPLY + 2) * (r < 0.0 ? 0.0 : (r > 1.0 ? 1.0 : r));
+    d.e[VS_S_SUPPLY] = F(VS_SUPPLY) * (q_p - qs) * F(VS_SUPPLY + 3);
+  }
+  if (VS_ON(VS_E_RMASS)) {
+    d.e[VS_S_RMASS] = s.e[VS_S_RMASS + 1];
+    d.e[VS_S_RMASS + 1] = F(VS_RMASS) * (-f - F(VS_RMASS + 1) * s.e[VS_S_RMASS] -
+                                         F(VS_RMASS + 2) * s.e[VS_S_RMASS + 1]);
+  }
+  if (VS_ON(VS_E_SPEC)) {
+    for (int i = 0; i < 3; ++i) {
+      const long long q = VS_SPEC + 3 * i;
+      const int u = VS_S_SPEC + 2 * i;
+      d.e[u] = s.e[u + 1];
+      d.e[u + 1] = -F(q + 1) * s.e[u] - F(q + 2) * s.e[u + 1] - accel;
+    }
+  }
+  const double input[3] = {accel, stroke, f};
+  for (int c = 0; c < 3; ++c)
+    if (VS_ON(VS_E_ACCEL << c)) vs_sensor_derivs(P, n, l, c, input[c], s, d);
+}
+
+// The actuator stroke (what the chambers and the LVDT follow): reaction_mass's `stroke`.
+VS_FN void vs_stroke(const VsState &s, double &y, double &v) {
+  y = s.y;
+  v = s.v;
+  if (VS_ON(VS_E_RMASS)) {
+    y = s.y - s.e[VS_S_RMASS];
+    v = s.v - s.e[VS_S_RMASS + 1];
+  }
+}
+
+// The flows of one actuator's valves (servovalve.rs `Orifice` or `Linear`).
+VS_FN void vs_valve(const double *P, long long n, long long l, bool linear, double x, double p1,
+                    double p2, double ps, double &q1, double &q2) {
+  if (linear) {
+    q1 = F(VS_KQ1) * x;
+    q2 = F(VS_KQ2) * x;
+    return;
+  }
+  bool pos = x > 0.0;
+  double dp1 = pos ? ps - p1 : p1 - F(VS_P_R);
+  double k1 = pos ? F(VS_KW1) : F(VS_KW3);
+  double dp2 = pos ? p2 - F(VS_P_R) : ps - p2;
+  double k2 = pos ? F(VS_KW2) : F(VS_KW4);
+  q1 = k1 * x * vs_sq(dp1, F(VS_P_TR2));
+  q2 = k2 * x * vs_sq(dp2, F(VS_P_TR2));
+}
+
+// simulate.rs `rhs`: one actuator standing for two unless they differ (VS_E_TWO).
+VS_FN void vs_rhs(const double *P, long long n, long long l, bool linear, double x_c,
+                  const VsState &s, VsState &d) {
+  double ps = F(VS_P_S);
+  if (VS_ON(VS_E_SUPPLY)) ps = ps + F(VS_SUPPLY) * (s.e[VS_S_SUPPLY] - ps);
+  double ys, vs;
+  vs_stroke(s, ys, vs);
+  double b1_0 = F(VS_BETA) / (F(VS_A1) * (F(VS_L) + ys) + F(VS_VD1));
+  double b2_0 = F(VS_BETA) / (F(VS_A2) * (F(VS_L) - ys) + F(VS_VD2));
+  double f = 0.0, qs = 0.0;
+  for (int i = 0; i < VS_NA; ++i) {
+    double x = vs_opening(P, n, l, i, s, x_c), q1, q2;
+    vs_valve(P, n, l, linear, x, s.p1[i], s.p2[i], ps, q1, q2);
+    qs += x > 0.0 ? q1 : -q2;
+    vs_flows(P, n, l, i, s.p1[i], s.p2[i], q1, q2);
+    double b1 = b1_0, b2 = b2_0;
+    vs_stiffness(P, n, l, s.p1[i], s.p2[i], b1, b2);
+    d.p1[i] = b1 * (q1 - F(VS_A1) * vs);
+    d.p2[i] = b2 * (F(VS_A2) * vs - q2);
+    f += s.p1[i] * F(VS_A1) - s.p2[i] * F(VS_A2);
+  }
+  if (VS_NA == 1) {
+    f = f + f;
+    qs = qs + qs;
+  }
+  double alpha = F(VS_ALPHA), va = fabs(s.v);
+  double damp = alpha == 0.5 ? sqrt(va) : pow(va, alpha);
+  double fe = vs_extra_force(P, n, l, s);
+  d.v = (f + fe - F(VS_K) * s.y - (F(VS_C) * damp + F(VS_MU)) * s.z) * F(VS_INV_M);
+  d.y = s.v;
+  double zv = s.z * s.v;
+  double bracket = zv > 0.0 ? 1.0 : (zv < 0.0 ? F(VS_KAPPA_NEG) : F(VS_KAPPA));
+  d.z = s.v * F(VS_INV_Y) * (1.0 - s.z * s.z * bracket);
+  vs_effect_derivs(P, n, l, x_c, qs, f, d.v, ys, s, d);
+}
+
+#undef F
+
+VS_FN void vs_axpy(VsState &o, const VsState &b, double h, const VsState &k) {
+  for (int i = 0; i < VS_NA; ++i) {
+    o.p1[i] = b.p1[i] + h * k.p1[i];
+    o.p2[i] = b.p2[i] + h * k.p2[i];
+  }
+  o.y = b.y + h * k.y;
+  o.v = b.v + h * k.v;
+  o.z = b.z + h * k.z;
+  for (int i = 0; i < VS_NES; ++i)
+    if (vs_live(i)) o.e[i] = b.e[i] + h * k.e[i];
+}
+
+VS_FN double vs_rk4(double s, double h6, double k1, double k2, double k3, double k4) {
+  return s + h6 * (k1 + 2.0 * (k2 + k3) + k4);
+}
+
+// The RK4 combination of the four stages into s.
+VS_FN void vs_combine(VsState &s, double h6, const VsState &k1, const VsState &k2,
+                      const VsState &k3, const VsState &k4) {
+  for (int i = 0; i < VS_NA; ++i) {
+    s.p1[i] = vs_rk4(s.p1[i], h6, k1.p1[i], k2.p1[i], k3.p1[i], k4.p1[i]);
+    s.p2[i] = vs_rk4(s.p2[i], h6, k1.p2[i], k2.p2[i], k3.p2[i], k4.p2[i]);
+  }
+  s.y = vs_rk4(s.y, h6, k1.y, k2.y, k3.y, k4.y);
+  s.v = vs_rk4(s.v, h6, k1.v, k2.v, k3.v, k4.v);
+  s.z = vs_rk4(s.z, h6, k1.z, k2.z, k3.z, k4.z);
+  for (int i = 0; i < VS_NES; ++i)
+    if (vs_live(i)) s.e[i] = vs_rk4(s.e[i], h6, k1.e[i], k2.e[i], k3.e[i], k4.e[i]);
+}
+
+// controller.rs `tick`: the force high-pass, the gains, five notches, the clamp.
+struct VsCtrl { double f_prev, f_hp, notch[5][2]; };
+
+VS_FN double vs_tick(const double *P, long long n, long long l, VsCtrl &m, double xr, double vr,
+                     double ar, double jr, double x, double f) {
+#define F(i) vs_p(P, n, l, (i))
+  m.f_hp = F(VS_HP_B) * (f - m.f_prev) + F(VS_HP_A) * m.f_hp;
+  m.f_prev = f;
+  double u = F(VS_C_FB) * (xr - x) + F(VS_C_D) * xr + F(VS_C_V) * vr + F(VS_C_A) * ar +
+             F(VS_C_J) * jr + F(VS_C_F) * m.f_hp;
+  for (int i = 0; i < 5; ++i) {
+    const long long q = VS_NOTCH + 5 * i;
+    double y = F(q) * u + m.notch[i][0];
+    m.notch[i][0] = F(q + 1) * u - F(q + 3) * y + m.notch[i][1];
+    m.notch[i][1] = F(q + 2) * u - F(q + 4) * y;
+    u = y;
+  }
+  double lim = F(VS_U_LIM);
+  return u < -lim ? -lim : (u > lim ? lim : u);
+#undef F
+}
+
+// simulate.rs `check_lane`: 0 alive, else the status code, with the value and the chamber
+// (1, 2: actuator 1's cap and rod side; 3, 4: actuator 2's).
+VS_FN int vs_guard(const double *P, long long n, long long l, const VsState &s, double &value,
+                   double &chamber) {
+  bool finite = vs_finite(s.y) && vs_finite(s.v) && vs_finite(s.z);
+  for (int i = 0; i < VS_NA; ++i) finite = finite && vs_finite(s.p1[i]) && vs_finite(s.p2[i]);
+  if (!finite) return 1;
+  if (fabs(s.y) >= vs_p(P, n, l, VS_L)) {
+    value = s.y;
+    return 2;
+  }
+  double hi = 2.0 * vs_p(P, n, l, VS_P_S);
+  for (int i = 0; i < VS_NA; ++i) {
+    const double p[2] = {s.p1[i], s.p2[i]};
+    for (int c = 0; c < 2; ++c) {
+      if (!(p[c] >= -1.0e6 && p[c] <= hi)) {
+        value = p[c];
+        chamber = (double)(2 * i + c + 1);
+        return 3;
+      }
+    }
+  }
+  return 0;
+}
+
+// metrics.rs `MetricsAcc`: the sums of one lane.
+struct VsAcc {
+  double n, max_u, err_a2, err_x2, peak_err_a, peak_err_x, peak[3], peak_r[3];
+  double ar_re, ar_im, xr_re, xr_im, ar2, xr2, x_re, x_im, a_re[9], a_im[9];
+  double osc_u[VS_MAX_OSC], osc_v[VS_MAX_OSC], osc_peak[VS_MAX_OSC], prev;
+};
+
+VS_FN void vs_window(const VsRun &r, long long k, long long at, VsAcc &c, double a, double v,
+                     double x) {
+  double a_r = r.a[at], v_r = r.v[at], x_r = r.x[at];
+  c.n += 1.0;
+  c.ar2 += a_r * a_r;
+  c.xr2 += x_r * x_r;
+  double ea = a - a_r, ex = x - x_r;
+  c.err_a2 += ea * ea;
+  c.err_x2 += ex * ex;
+  c.peak_err_a = fmax(c.peak_err_a, fabs(ea));
+  c.peak_err_x = fmax(c.peak_err_x, fabs(ex));
+  const double got[3] = {a, v, x}, want[3] = {a_r, v_r, x_r};
+  for (int i = 0; i < 3; ++i) {
+    c.peak[i] = fmax(c.peak[i], fabs(got[i]));
+    c.peak_r[i] = fmax(c.peak_r[i], fabs(want[i]));
+  }
+  if (r.n_osc > 0) {
+    if (k > r.w0) {
+      for (long long i = 0; i < r.n_osc; ++i) {
+        const double *o = r.osc + 8 * i;
+        double u = c.osc_u[i], w = c.osc_v[i];
+        double un = o[0] * u + o[1] * w + o[4] * c.prev + o[5] * a;
+        double vn = o[2] * u + o[3] * w + o[6] * c.prev + o[7] * a;
+        c.osc_u[i] = un;
+        c.osc_v[i] = vn;
+        c.osc_peak[i] = fmax(c.osc_peak[i], fabs(un));
+      }
+    }
+    c.prev = a;
+  }
+  if (r.has_basis) {
+    const double *b = r.basis + 18 * (k - r.w0);
+    c.ar_re += a_r * b[0];
+    c.ar_im += a_r * b[9];
+    c.xr_re += x_r * b[0];
+    c.xr_im += x_r * b[9];
+    for (int h = 0; h < 9; ++h) {
+      c.a_re[h] += a * b[h];
+      c.a_im[h] += a * b[9 + h];
+    }
+    c.x_re += x * b[0];
+    c.x_im += x * b[9];
+  }
+}
+
+VS_FN void vs_store(const VsRun &r, double *out, long long n, long long l, const VsAcc &c) {
+#define O(i) out[(i) * n + l]
+  O(VS_N_WINDOW) = c.n;
+  O(VS_MAX_U) = c.max_u;
+  O(VS_ERR_A2) = c.err_a2;
+  O(VS_ERR_X2) = c.err_x2;
+  O(VS_PEAK_ERR_A) = c.peak_err_a;
+  O(VS_PEAK_ERR_X) = c.peak_err_x;
+  for (int i = 0; i < 3; ++i) {
+    O(VS_PEAK + i) = c.peak[i];
+    O(VS_PEAK_R + i) = c.peak_r[i];
+  }
+  O(VS_AR_RE) = c.ar_re;
+  O(VS_AR_IM) = c.ar_im;
+  O(VS_XR_RE) = c.xr_re;
+  O(VS_XR_IM) = c.xr_im;
+  O(VS_AR2) = c.ar2;
+  O(VS_XR2) = c.xr2;
+  O(VS_X_RE) = c.x_re;
+  O(VS_X_IM) = c.x_im;
+  for (int h = 0; h < 9; ++h) {
+    O(VS_A_RE + h) = c.a_re[h];
+    O(VS_A_IM + h) = c.a_im[h];
+  }
+  for (long long i = 0; i < r.n_osc; ++i) O(VS_OSC_PEAK + i) = c.osc_peak[i];
+#undef O
+}
+
+// The spool command held over tick k (simulate.rs `integrate`, the drive match), from the
+// stroke x and the actuator force f the controller reads.
+VS_FN double vs_command(const double *P, long long n, long long l, const VsRun &r, long long k,
+                        VsCtrl &m, double x, double f, double &u) {
+  double k_sp = vs_p(P, n, l, VS_K_SP);
+  if (r.drive == 0) {
+    long long at = l * r.ref_stride + k;
+    u = vs_tick(P, n, l, m, r.x[at], r.v[at], r.a[at], r.j[at], x, f);
+    return k_sp * u;
+  }
+  if (r.drive == 1) {
+    double lim = vs_p(P, n, l, VS_U_LIM), c = r.drive_signal[k];
+    u = c < -lim ? -lim : (c > lim ? lim : c);
+    return k_sp * u;
+  }
+  long long next = k + 1 < r.ticks ? k + 1 : r.ticks - 1;
+  double x_c = 0.5 * (r.drive_signal[k] + r.drive_signal[next]);
+  u = x_c / k_sp;
+  return x_c;
+}
+
+// One controller tick's RK4 substeps with the command held.
+VS_FN void vs_substeps(const double *P, long long n, long long l, const VsRun &r, double x_c,
+                       VsState &s, VsState &k1) {
+  bool linear = r.linear_valve != 0;
+  double h = 1.0 / (r.f_s * (double)r.substeps);
+  VsState k2, k3, k4, t;
+  for (long long sub = 0; sub < r.substeps; ++sub) {
+    if (sub > 0) vs_rhs(P, n, l, linear, x_c, s, k1);
+    vs_axpy(t, s, 0.5 * h, k1);
+    vs_rhs(P, n, l, linear, x_c, t, k2);
+    vs_axpy(t, s, 0.5 * h, k2);
+    vs_rhs(P, n, l, linear, x_c, t, k3);
+    vs_axpy(t, s, h, k3);
+    vs_rhs(P, n, l, linear, x_c, t, k4);
+    vs_combine(s, h / 6.0, k1, k2, k3, k4);
+  }
+}
+
+// The state at t = 0: the no-load pressures, the platen at rest, the supply's accumulator at
+// P_S0, every other effect state 0.
+VS_FN void vs_initial(const double *P, long long n, long long l, VsState &s) {
+  for (int i = 0; i < 2; ++i) {
+    s.p1[i] = vs_p(P, n, l, VS_P0_1);
+    s.p2[i] = vs_p(P, n, l, VS_P0_2);
+  }
+  s.y = s.v = s.z = 0.0;
+  for (int i = 0; i < VS_NES; ++i) s.e[i] = 0.0;
+  if (VS_ON(VS_E_SUPPLY)) s.e[VS_S_SUPPLY] = vs_p(P, n, l, VS_SUPPLY + 1);
+}
+
+// The actuators' total force on the platen (simulate.rs `total_force`).
+VS_FN double vs_force(const double *P, long long n, long long l, const VsState &s) {
+  double a1 = vs_p(P, n, l, VS_A1), a2 = vs_p(P, n, l, VS_A2);
+  double f0 = s.p1[0] * a1 - s.p2[0] * a2;
+  return VS_NA == 1 ? f0 + f0 : f0 + (s.p1[1] * a1 - s.p2[1] * a2);
+}
+
+// The whole run of lane l: params P (n lanes), results to out (n lanes).
+VS_FN void vs_lane(const VsRun &r, const double *P, double *out, long long n, long long l) {
+  VsState s, k1;
+  vs_initial(P, n, l, s);
+  VsCtrl m = {};
+  VsAcc c = {};
+  m.f_prev = vs_force(P, n, l, s);
+  double status = 0.0, fail_tick = 0.0, value = 0.0, chamber = 0.0;
+  bool linear = r.linear_valve != 0;
+  for (long long k = 0; k < r.ticks; ++k) {
+    double x, v_s, f = vs_force(P, n, l, s), u = 0.0;
+    vs_stroke(s, x, v_s);
+    double x_c = vs_command(P, n, l, r, k, m, x, f, u);
+    vs_rhs(P, n, l, linear, x_c, s, k1);
+    c.max_u = fmax(c.max_u, fabs(u));
+    if (k >= r.w0 && k < r.w1) {
+      // The metrics see the channels as recorded (the sensors' chains), the controller the plant's.
+      double a_rec = vs_sensed(P, n, l, 0, k1.v, s), x_rec = vs_sensed(P, n, l, 1, x, s);
+      vs_window(r, k, l * r.ref_stride + k, c, a_rec, s.v, x_rec);
+    }
+    vs_substeps(P, n, l, r, x_c, s, k1);
+    int why = vs_guard(P, n, l, s, value, chamber);
+    if (why != 0) {
+      status = (double)why;
+      fail_tick = (double)(k + 1);
+      break;
+    }
+  }
+  out[VS_STATUS * n + l] = status;
+  out[VS_FAIL_TICK * n + l] = fail_tick;
+  out[VS_FAIL_VALUE * n + l] = value;
+  out[VS_FAIL_CHAMBER * n + l] = chamber;
+  vs_store(r, out, n, l, c);
+}
+
+#ifdef __CUDACC_RTC__
+// Blocks of 128 lanes (gpu.rs: BLOCK), at least VS_MIN_BLOCKS of them resident per
+// multiprocessor: the register budget per lane that ptxas keeps to (4: 128 registers).
+#ifndef VS_MIN_BLOCKS
+#define VS_MIN_BLOCKS 4
+#endif
+// The launch: the run's integers in the order of gpu_lanes.rs `Shared::ints`, then its arrays.
+extern "C" __global__ void __launch_bounds__(128, VS_MIN_BLOCKS) vs_lanes(long long ticks, long long substeps, long long w0,
+                                    long long w1, long long has_basis, long long drive,
+                                    long long linear_valve, long long n_osc,
+                                    long long ref_stride, long long effects, double f_s,
+                                    const double *x, const double *v, const double *a,
+                                    const double *j, const double *drive_signal,
+                                    const double *basis, const double *osc, const double *__restrict__ P,
+                                    double *out, long long n) {
+  long long l = (long long)blockIdx.x * blockDim.x + threadIdx.x;
+  VsRun r = {ticks, substeps, w0, w1, has_basis, drive, linear_valve, n_osc, ref_stride, effects, f_s,
+             x, v, a, j, drive_signal, basis, osc};
+  if (l < n) vs_lane(r, P, out, n, l);
+}
+#endif

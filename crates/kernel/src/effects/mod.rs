@@ -1,0 +1,871 @@
+//! The seam for optional physical effects (spool dynamics, leakage, supply dynamics, …).
+//!
+//! An effect is one type implementing [`Effect`]: it may carry extra per-lane states, and it
+//! contributes through hooks that the plant right-hand side calls at fixed places:
+//!
+//! 1. [`Effect::supply`]: the supply pressure the valves see (supply droop);
+//! 2. [`Effect::opening`]: the valve opening from the held command x_c (spool dynamics, delay,
+//!    saturation);
+//! 3. [`Effect::flows`]: the valve flows of an actuator, changed (leakage, asymmetry);
+//! 4. [`Effect::stroke`]: the actuator stroke from the platen's motion (reaction-mass compliance);
+//!    the chamber volumes and the displacement feedback follow it;
+//! 5. [`Effect::chamber_stiffness`]: β/V of the chambers (effective bulk modulus, dead volume);
+//! 6. [`Effect::extra_force`]: a force on the platen (seal friction, hold-down nonlinearity);
+//! 7. [`Effect::derivs`]: the derivatives of its own states, given a view of the plant.
+//!
+//! Every hook has a no-op default and is `#[inline(always)]`, so the baseline ([`Baseline`]) costs
+//! nothing, and an effect is compiled into the same lane kernel (monomorphised, no dynamic dispatch
+//! in the step). Effects keep their parameters as `[f64; N]` per lane.
+//!
+//! Each library effect is one file in this directory: its `Params` table (unit, default, range,
+//! source of every parameter), its [`EffectInfo`] (name, family, the parameters a diagnosis frees)
+//! and its type, which implements [`Effect`] with its own state type and [`LibraryEffect`]. The
+//! registry (`library!` below, one line per effect) composes them by type into [`EffectSet`]
+//! (nested [`Both`]), whose state is the effects' states side by side ([`Pair`]): no state index
+//! is assigned by hand. The kernel runs the set whenever a lane switches any effect on; an effect
+//! that is off in a lane is neutral there (zero coefficients or a 0/1 lane mask), so the lanes of
+//! a batch share one step. An effect that no lane of the batch switches on is skipped altogether
+//! ([`Gated`]: one branch per hook whose outcome is fixed for the whole run), so a batch pays
+//! only for the effects it uses.
+//!
+//! # Writing a new effect
+//!
+//! Copy the smallest file here (`hold_down.rs`) to `my_effect.rs`, change its `INFO`, its `Params`
+//! table and its hooks, and add the line `my_effect::MyEffect,` to the registry: the name is
+//! spelt there alone (the file's `INFO.name` is `module_name(module_path!())`, its parameters'
+//! component and model-file table come from the registry line). `study params`, model files
+//! (`[model.my_effect]`), `synth --effect`, `fit --effect` and `diagnose` then know it; the
+//! registry's test checks it is complete. docs/tutorial/spool_overlap.rs is such a file,
+//! whole (CI adds it to the library, fits it and diagnoses with it).
+//!
+//! The hooks themselves need nothing of the registry: any type implementing [`Effect`] runs in
+//! the kernel. For example, a cubic hardening of the hold-down struts, F = −k3·y³, run against
+//! the baseline on a 0.1 m, 1 Hz sine (this example is compiled and run by `cargo test`):
+//!
+//! ```
+//! use vshake_kernel::effects::{hook, Effect};
+//! use vshake_kernel::excitation::Sine;
+//! use vshake_kernel::params::ModelParams;
+//! use vshake_kernel::simulate::{self, LaneParams, LaneStatus, NoObserver, Solver};
+//!
+//! /// F = −k3·y³ on the platen, k3 in N/m³ per lane (0 where the effect is off).
+//! struct HoldDown<const N: usize> {
+//!     k3: [f64; N],
+//! }
+//!
+//! impl<const N: usize> Effect<N> for HoldDown<N> {
+//!     type State = [[f64; N]; 0]; // no states of its own
+//!     fn initial_state(&self) -> Self::State {
+//!         []
+//!     }
+//!     #[inline(always)]
+//!     fn extra_force(&self, c: hook::Motion, _s: &Self::State) -> f64 {
+//!         -self.k3[c.lane] * c.y * c.y * c.y
+//!     }
+//! }
+//!
+//! let model = ModelParams::default();
+//! let lanes = LaneParams::<1>::new(&[&model]).unwrap();
+//! let sine = Sine { freq_hz: 1.0, amp_m: 0.1, taper_s: 1.0, duration_s: 4.0, window_cycles: Some(2) };
+//! let run = |k3: f64| {
+//!     let effect = HoldDown { k3: [k3] };
+//!     let reference = sine.reference(model.controller.f_s);
+//!     let [r] = simulate::run(&lanes, &effect, &reference, &Solver::default(), &mut NoObserver)
+//!         .unwrap();
+//!     assert_eq!(r.status, LaneStatus::Ok);
+//!     r.metrics
+//! };
+//! let (baseline, hardened) = (run(0.0), run(1.0e8));
+//! // The odd force (1e5 N at the peak) adds odd harmonics to the acceleration.
+//! assert!(hardened.h(3) > baseline.h(3) + 1e-3, "{} {}", hardened.h(3), baseline.h(3));
+//! ```
+//!
+//! An effect with states of its own declares them as `type State = [[f64; N]; K]` and gives
+//! their derivatives in [`Effect::derivs`]. A throwaway effect (a test's specimen) needs only
+//! [`Effect`]: `simulate::run` takes any.
+
+use super::params::{Component, ModelParams, ParamInfo};
+
+/// What the rest of the tool knows about a library effect: its name (the model-file table and
+/// the parameter paths `name.param`), its family, its parameters and the ones a diagnosis frees.
+/// Each effect's file defines its `INFO`.
+#[derive(Debug, Clone, Copy)]
+pub struct EffectInfo {
+    /// The effect's name: its model-file table, `--effect` name and parameter prefix.
+    pub name: &'static str,
+    /// The family of physics it belongs to. Effects whose signatures a campaign of sine tests
+    /// cannot tell apart (a spool lag and a delay both add a lag ∝ frequency below the spool's
+    /// bandwidth) share a family, and a diagnosis is judged by family.
+    pub family: &'static str,
+    /// One line: what it adds to the model.
+    pub summary: &'static str,
+    /// Its parameters (unit, default, range, source), from its `params!` table.
+    pub params: &'static [ParamInfo],
+    /// What a fit or a diagnosis frees, in stages: the first stage is the effect itself (a fit's
+    /// default `--free`), each further one a part a diagnosis may add on top once the effect is
+    /// chosen (a specimen's second mode). Each frees the parameters its signature determines;
+    /// parameters that only shape it (a smoothing velocity, a damping ratio that trades off
+    /// against a frequency) stay fixed unless `--free` names them.
+    pub stages: &'static [Stage],
+}
+
+/// A set of an effect's parameters fitted together ([`EffectInfo::stages`]).
+#[derive(Debug, Clone, Copy)]
+pub struct Stage {
+    /// What the stage adds, in words ("mode 2"); empty for an effect of one stage.
+    pub label: &'static str,
+    /// The parameters it frees.
+    pub free: &'static [&'static str],
+    /// A parameter whose start a fit scans over these values, keeping the best, before it
+    /// iterates: one that makes the misfit non-convex (a resonance's frequency).
+    pub scan: Option<(&'static str, &'static [f64])>,
+    /// Values a diagnosis starts this stage's parameters from where the model has them at 0
+    /// (a second mode's mass: at 0 the mode is absent and its frequency has no effect to scan).
+    pub start: &'static [(&'static str, f64)],
+}
+
+impl Stage {
+    /// A stage that frees `free`, without a scan.
+    pub const fn free(free: &'static [&'static str]) -> Stage {
+        Stage {
+            label: "",
+            free,
+            scan: None,
+            start: &[],
+        }
+    }
+}
+
+impl EffectInfo {
+    /// The parameters a fit frees by default: the first stage's.
+    pub fn free(&self) -> &'static [&'static str] {
+        self.stages[0].free
+    }
+}
+
+/// The name of an effect's module, from its `module_path!()`: the last segment. An effect's
+/// [`EffectInfo::name`] is its module's name, spelt once, in its registry line (and so its file).
+pub const fn module_name(path: &'static str) -> &'static str {
+    let bytes = path.as_bytes();
+    let mut start = bytes.len();
+    while start > 0 && bytes[start - 1] != b':' {
+        start -= 1;
+    }
+    match std::str::from_utf8(bytes.split_at(start).1) {
+        Ok(name) => name,
+        Err(_) => panic!("a module path is UTF-8"),
+    }
+}
+
+/// The recorded channels an effect's [`Effect::sensed`] may change, by index: acceleration,
+/// displacement (the LVDT's stroke), total actuator force.
+pub const SENSED: [&str; 3] = ["accel", "disp", "force"];
+
+/// An effect of the library: built per batch from the lanes' parameter sets.
+pub trait LibraryEffect<const N: usize>: Effect<N> + Sized {
+    /// The effect for N lanes; neutral in the lanes that do not switch it on.
+    fn new(lanes: [&ModelParams; N]) -> Self;
+}
+
+/// The registry: one line per effect, `module::Type`, the one place its name is spelt. It declares
+/// the module (one file in this directory), lists its `INFO` in [`LIBRARY`], adds its switch to
+/// [`EffectSwitches`] and its parameters to [`EffectParams`] (with their accessors `Params::of`
+/// and component, so `study params`, model files, `synth --effect`, `fit --effect` and
+/// `diagnose` know it), and composes it into [`EffectSet`].
+///
+/// **The order is the order of composition** where effects act on the same quantity: the
+/// command passes through the effects in list order on its way to the valve opening (a delay,
+/// then the spool's dynamics, then the metering nonlinearities), and the valve flows through the
+/// flow effects in list order (port asymmetry before leakage).
+macro_rules! library {
+    ($($module:ident :: $Type:ident),* $(,)?) => {
+        $(pub mod $module;)*
+
+        /// Every effect of the library, in registry order.
+        pub const LIBRARY: &[&EffectInfo] = &[$(&$module::INFO),*];
+
+        /// Names of the library's effects, in registry order.
+        pub const EFFECTS: [&str; [$($module::INFO.name),*].len()] = [$($module::INFO.name),*];
+
+        /// A library effect, by identity: one variant per registry line. A name becomes an
+        /// `EffectId` once, where it is read ([`EffectId::parse`]); everything after matches the
+        /// enum, so adding an effect is a compile error wherever it must be handled.
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+        pub enum EffectId {
+            $($Type,)*
+        }
+
+        impl EffectId {
+            /// Every library effect, in registry order.
+            pub const ALL: [EffectId; [$($module::INFO.name),*].len()] = [$(EffectId::$Type),*];
+
+            /// The effect's [`EffectInfo`] (its file's `INFO`).
+            pub fn info(self) -> &'static EffectInfo {
+                match self {
+                    $(EffectId::$Type => &$module::INFO,)*
+                }
+            }
+
+            /// The name of the effect's module (its registry line); equal to its `INFO.name`
+            /// (the registry's test checks it).
+            pub fn module(self) -> &'static str {
+                match self {
+                    $(EffectId::$Type => stringify!($module),)*
+                }
+            }
+
+            /// Whether the effect moves the spool a spool LVDT reads ([`Effect::MOVES_SPOOL`]);
+            /// such effects are switched off when the plant is driven by a measured spool.
+            pub fn moves_spool(self) -> bool {
+                match self {
+                    $(EffectId::$Type => <$module::$Type<1> as Effect<1>>::MOVES_SPOOL,)*
+                }
+            }
+        }
+
+        $(impl $module::Params {
+            /// The component these parameters belong to.
+            pub const COMPONENT: Component = Component::Effect(EffectId::$Type);
+
+            /// This effect's parameters in `m`.
+            pub fn of(m: &ModelParams) -> &Self {
+                &m.effect_params.$module
+            }
+
+            /// This effect's parameters in `m`, to change.
+            pub(crate) fn of_mut(m: &mut ModelParams) -> &mut Self {
+                &mut m.effect_params.$module
+            }
+        })*
+
+        /// Which library effects a parameter set switches on (all off by default).
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+        pub struct EffectSwitches {
+            $(pub $module: bool,)*
+        }
+
+        impl EffectSwitches {
+            /// The switch of effect `id`.
+            pub fn get_mut(&mut self, id: EffectId) -> &mut bool {
+                match id {
+                    $(EffectId::$Type => &mut self.$module,)*
+                }
+            }
+            /// Whether effect `id` is on.
+            pub fn get(&self, id: EffectId) -> bool {
+                match id {
+                    $(EffectId::$Type => self.$module,)*
+                }
+            }
+            /// Whether any effect is on.
+            pub fn any(&self) -> bool {
+                false $(|| self.$module)*
+            }
+            /// The effects that are on, in registry order.
+            pub fn on(&self) -> impl Iterator<Item = EffectId> + '_ {
+                EffectId::ALL.into_iter().filter(|&e| self.get(e))
+            }
+        }
+
+        /// The parameters of every library effect (used where the effect is switched on).
+        #[derive(Debug, Clone, PartialEq, Default)]
+        pub struct EffectParams {
+            $(pub $module: $module::Params,)*
+        }
+
+        $(impl<const N: usize> Named for $module::$Type<N> {
+            const ID: EffectId = EffectId::$Type;
+        })*
+
+        /// Every library effect composed, per lane; what is off in a lane is neutral there.
+        pub type EffectSet<const N: usize> = library!(@nest N; $($module::$Type),*);
+
+        /// Calls `f` with library effect `id` alone, built for `lanes` (see [`EffectFn`]).
+        pub fn with_single<const N: usize, F: EffectFn<N>>(id: EffectId, lanes: [&ModelParams; N], f: F) -> F::Output {
+            match id {
+                $(EffectId::$Type => f.call(&<$module::$Type<N> as LibraryEffect<N>>::new(lanes)),)*
+            }
+        }
+    };
+    (@nest $n:ident; ) => { Baseline };
+    (@nest $n:ident; $module:ident :: $Type:ident $(, $rm:ident :: $rt:ident)*) => {
+        Both<Gated<$module::$Type<$n>>, library!(@nest $n; $($rm::$rt),*)>
+    };
+}
+
+library! {
+    transport_delay::TransportDelay,
+    spool_dynamics::SpoolDynamics,
+    flow_saturation::FlowSaturation,
+    flow_gain::FlowGain,
+    asymmetry::Asymmetry,
+    leakage::Leakage,
+    supply::Supply,
+    seal_friction::SealFriction,
+    compressibility::Compressibility,
+    bulk_curve::BulkCurve,
+    reaction_mass::ReactionMass,
+    hold_down::HoldDown,
+    specimen::Specimen,
+    accel_sensor::AccelSensor,
+    disp_sensor::DispSensor,
+    force_sensor::ForceSensor,
+}
+
+/// The measurement chain shared by the sensor effects.
+mod sensor_chain;
+
+pub mod hook;
+
+impl EffectId {
+    /// The effect called `name` (its model-file table, `--effect` name and parameter prefix);
+    /// `None` for a name the library does not have. The one place a name becomes an effect.
+    pub fn parse(name: &str) -> Option<EffectId> {
+        Self::ALL.into_iter().find(|e| e.name() == name)
+    }
+
+    /// The effect's name.
+    pub fn name(self) -> &'static str {
+        self.info().name
+    }
+}
+
+impl std::fmt::Display for EffectId {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// The library's effects for up to N lanes (missing lanes repeat the last parameter set).
+pub fn effect_set<const N: usize>(sets: &[&ModelParams]) -> EffectSet<N> {
+    EffectSet::<N>::new(std::array::from_fn(|l| sets[l.min(sets.len() - 1)]))
+}
+
+/// 1.0 where effect `id` is switched on in `m`, 0.0 where it is off: the factor an effect's
+/// coefficients are multiplied by, so an off lane is neutral without a branch in the step.
+pub fn switch(m: &ModelParams, id: EffectId) -> f64 {
+    if m.effects.get(id) {
+        1.0
+    } else {
+        0.0
+    }
+}
+
+/// [`switch`] of effect `E` for every lane (an effect's constructor calls it with `Self`).
+pub(crate) fn lane_mask<const N: usize, E: Named>(p: &[&ModelParams; N]) -> [f64; N] {
+    std::array::from_fn(|l| switch(p[l], E::ID))
+}
+
+/// Per-lane states of an effect: `[[f64; N]; M]`, or a [`Pair`] of such, viewed as a slice of
+/// lanes (the integrator's arithmetic runs over that slice).
+pub trait LaneStates<const N: usize>:
+    OnlyF64 + bytemuck::Pod + Send + Sync + AsRef<[[f64; N]]> + AsMut<[[f64; N]]>
+{
+}
+
+impl<const N: usize, const M: usize> LaneStates<N> for [[f64; N]; M] {}
+
+impl<const N: usize, A: LaneStates<N>, B: LaneStates<N>> LaneStates<N> for Pair<A, B> {}
+
+/// The states of two effects side by side: the state of a [`Both`].
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pair<A, B>(pub A, pub B);
+
+/// A type made of `f64`s alone, laid out without padding: `[[f64; N]; M]` and [`Pair`]s of such.
+///
+/// # Safety
+/// An implementor's bytes are exactly a sequence of `f64` (size a multiple of 8, alignment 8, no
+/// padding), so that it is [`bytemuck::Pod`] and a [`Pair`] of two of them is too.
+pub unsafe trait OnlyF64: Copy + 'static {}
+
+// SAFETY: an array of `[f64; N]` is a sequence of f64.
+unsafe impl<const N: usize, const M: usize> OnlyF64 for [[f64; N]; M] {}
+// SAFETY: `repr(C)` lays out A then B; each is a sequence of f64 (alignment 8 where not empty,
+// size a multiple of 8), so there is no padding between or after them.
+unsafe impl<A: OnlyF64, B: OnlyF64> OnlyF64 for Pair<A, B> {}
+// SAFETY: all-zero bytes are 0.0s; see `OnlyF64`.
+unsafe impl<A: OnlyF64, B: OnlyF64> bytemuck::Zeroable for Pair<A, B> {}
+// SAFETY: every bit pattern of a sequence of f64 is valid and there is no padding (`OnlyF64`).
+unsafe impl<A: OnlyF64 + bytemuck::Pod, B: OnlyF64 + bytemuck::Pod> bytemuck::Pod for Pair<A, B> {}
+
+impl<const N: usize, A: LaneStates<N>, B: LaneStates<N>> AsRef<[[f64; N]]> for Pair<A, B> {
+    #[inline(always)]
+    fn as_ref(&self) -> &[[f64; N]] {
+        bytemuck::cast_slice(std::slice::from_ref(self))
+    }
+}
+
+impl<const N: usize, A: LaneStates<N>, B: LaneStates<N>> AsMut<[[f64; N]]> for Pair<A, B> {
+    #[inline(always)]
+    fn as_mut(&mut self) -> &mut [[f64; N]] {
+        bytemuck::cast_slice_mut(std::slice::from_mut(self))
+    }
+}
+
+/// A view of the plant quantities of one right-hand-side evaluation, for [`Effect::derivs`].
+pub struct PlantView<'a, const N: usize> {
+    /// Held spool command per lane, m.
+    pub x_c: &'a [f64; N],
+    /// Valve opening (effective spool position) per actuator, after [`Effect::opening`], m.
+    pub opening: &'a [[f64; N]; super::N_ACT],
+    /// Flow drawn from the supply by all valves of a lane (supply → chamber 1 for x > 0,
+    /// supply → chamber 2 for x < 0), m³/s.
+    pub q_supply: &'a [f64; N],
+    /// Plant states (see [`crate::state::idx`]).
+    pub state: &'a [[f64; N]; super::state::NP],
+    /// Valve flow into chamber 1 and out of chamber 2 per actuator (all valves), m³/s.
+    pub q_in1: &'a [[f64; N]; super::N_ACT],
+    pub q_out2: &'a [[f64; N]; super::N_ACT],
+    /// Supply pressure seen by the valves, Pa.
+    pub p_s: &'a [f64; N],
+    /// Total actuator force on the platen, N.
+    pub f_act: &'a [f64; N],
+    /// Platen acceleration dv/dt, m/s² (with every effect's force).
+    pub accel: &'a [f64; N],
+    /// Actuator stroke (what the LVDT reads, after [`Effect::stroke`]), m.
+    pub stroke: &'a [f64; N],
+}
+
+/// An optional physical effect plugged into the lane kernel.
+///
+/// Each hook is given one [`hook`] struct (where: the lane, the actuator; what: the quantity it
+/// changes and the plant values it may depend on) and the effect's own states `s`.
+pub trait Effect<const N: usize>: Sync {
+    /// Extra states per lane, as an array of lanes (`[[f64; N]; 0]` for none).
+    type State: LaneStates<N>;
+
+    /// Whether [`Effect::opening`] moves the spool itself (a delay, the spool's own dynamics), so
+    /// that a spool LVDT reads the opening, rather than changing only the flow an opening passes
+    /// (a metering nonlinearity: the spool is where the command puts it). The one declaration of
+    /// what an effect moves: the recorded `spool_m` channel follows it, and such effects are
+    /// switched off when the plant is driven by a measured spool ([`EffectInfo::moves_spool`]).
+    const MOVES_SPOOL: bool = false;
+
+    /// Whether every hook of the plant is its identity and there are no extra states (the
+    /// baseline alone): the kernel then takes its vector path for the bare plant.
+    const BARE: bool = false;
+
+    /// Whether the effect can tell the two actuators apart, so that [`Effect::symmetric`] may
+    /// say `false`. The kernel is built with both actuators only for effects that declare it
+    /// (the build of the many effect kernels halves), and refuses to run one whose `symmetric`
+    /// says `false` without it.
+    const SPLITS: bool = false;
+
+    /// Extra states at t = 0.
+    fn initial_state(&self) -> Self::State;
+
+    /// Whether the two actuators stay identical in every lane under this effect (it treats them
+    /// alike). Then the kernel integrates one equivalent actuator and doubles its force and its
+    /// supply flow: the same numbers, bit for bit, at half the valve and chamber work. An effect
+    /// that gives the actuators different laws (`asymmetry.act2_gain ≠ 1`) says `false`, and
+    /// declares [`Effect::SPLITS`].
+    #[inline(always)]
+    fn symmetric(&self) -> bool {
+        true
+    }
+
+    /// Supply pressure seen by the valves, Pa, from `c.p_s`.
+    #[inline(always)]
+    fn supply(&self, c: hook::Supply, _s: &Self::State) -> f64 {
+        c.p_s
+    }
+
+    /// Valve opening (effective spool position) of actuator `c.act`, m, from the command `c.x`.
+    #[inline(always)]
+    fn opening(&self, c: hook::Opening, _s: &Self::State) -> f64 {
+        c.x
+    }
+
+    /// Spool position as a spool LVDT reads it, recorded as the `spool_m` channel: the opening
+    /// where the effect moves the spool ([`Effect::MOVES_SPOOL`]), the command otherwise. Only
+    /// the compositions ([`Both`], [`Gated`]) define it; an effect declares `MOVES_SPOOL`.
+    #[inline(always)]
+    fn spool_position(&self, c: hook::Opening, s: &Self::State) -> f64 {
+        if Self::MOVES_SPOOL {
+            self.opening(c, s)
+        } else {
+            c.x
+        }
+    }
+
+    /// Actuator stroke and stroke rate (m, m/s) from the platen's motion `c.y`, `c.v` (the
+    /// chamber volumes, the piston flows and the LVDT follow the stroke).
+    #[inline(always)]
+    fn stroke(&self, c: hook::Motion, _s: &Self::State) -> (f64, f64) {
+        (c.y, c.v)
+    }
+
+    /// β/V of the cap- and rod-side chambers of actuator `c.act`, Pa/m³, from `c.b`.
+    #[inline(always)]
+    fn chamber_stiffness(&self, c: hook::Chambers, _s: &Self::State) -> (f64, f64) {
+        c.b
+    }
+
+    /// The net flows of actuator `c.act` (into chamber 1, out of chamber 2), m³/s, from the
+    /// valve flows `c.q` (all valves of the actuator).
+    #[inline(always)]
+    fn flows(&self, c: hook::Flows, _s: &Self::State) -> (f64, f64) {
+        c.q
+    }
+
+    /// Extra force on the platen, N (positive in the direction of extension), at the platen's
+    /// motion `c`.
+    #[inline(always)]
+    fn extra_force(&self, _c: hook::Motion, _s: &Self::State) -> f64 {
+        0.0
+    }
+
+    /// Derivatives of the extra states.
+    #[inline(always)]
+    fn derivs(&self, _plant: &PlantView<'_, N>, _s: &Self::State, _ds: &mut Self::State) {}
+
+    /// The channels as recorded ([`SENSED`]: acceleration, displacement, force), from `c.raw`: a
+    /// measurement chain changes what is recorded (the histories, the samples compared with a
+    /// measurement, the metrics), not the plant (the controller's feedback is the plant's).
+    #[inline(always)]
+    fn sensed(&self, c: hook::Sensed, _s: &Self::State) -> [f64; 3] {
+        c.raw
+    }
+}
+
+/// The baseline model: no extra effect.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Baseline;
+
+impl<const N: usize> Effect<N> for Baseline {
+    type State = [[f64; N]; 0];
+    const BARE: bool = true;
+    fn initial_state(&self) -> Self::State {
+        []
+    }
+}
+
+impl<const N: usize> LibraryEffect<N> for Baseline {
+    fn new(_lanes: [&ModelParams; N]) -> Self {
+        Baseline
+    }
+}
+
+/// Two effects composed: A acts first where both act on the same quantity (the command, the
+/// flows, the supply pressure, the chamber stiffness, the stroke), their forces add, and B's
+/// states are driven by the command as A leaves it (a spool lag after a delay follows the
+/// delayed command). The state layout follows from the types: `Pair<A::State, B::State>`.
+pub struct Both<A, B>(pub A, pub B);
+
+impl<const N: usize, A: LibraryEffect<N>, B: LibraryEffect<N>> LibraryEffect<N> for Both<A, B> {
+    fn new(lanes: [&ModelParams; N]) -> Self {
+        Both(A::new(lanes), B::new(lanes))
+    }
+}
+
+impl<const N: usize, A: Effect<N>, B: Effect<N>> Effect<N> for Both<A, B> {
+    type State = Pair<A::State, B::State>;
+    const MOVES_SPOOL: bool = A::MOVES_SPOOL || B::MOVES_SPOOL;
+    const SPLITS: bool = A::SPLITS || B::SPLITS;
+
+    fn initial_state(&self) -> Self::State {
+        Pair(self.0.initial_state(), self.1.initial_state())
+    }
+    fn symmetric(&self) -> bool {
+        self.0.symmetric() && self.1.symmetric()
+    }
+    #[inline(always)]
+    fn supply(&self, c: hook::Supply, s: &Self::State) -> f64 {
+        let p_s = self.0.supply(c, &s.0);
+        self.1.supply(hook::Supply { p_s, ..c }, &s.1)
+    }
+    #[inline(always)]
+    fn opening(&self, c: hook::Opening, s: &Self::State) -> f64 {
+        let x = self.0.opening(c, &s.0);
+        self.1.opening(hook::Opening { x, ..c }, &s.1)
+    }
+    #[inline(always)]
+    fn spool_position(&self, c: hook::Opening, s: &Self::State) -> f64 {
+        let x = self.0.spool_position(c, &s.0);
+        self.1.spool_position(hook::Opening { x, ..c }, &s.1)
+    }
+    #[inline(always)]
+    fn stroke(&self, c: hook::Motion, s: &Self::State) -> (f64, f64) {
+        let (y, v) = self.0.stroke(c, &s.0);
+        self.1.stroke(hook::Motion { y, v, ..c }, &s.1)
+    }
+    #[inline(always)]
+    fn chamber_stiffness(&self, c: hook::Chambers, s: &Self::State) -> (f64, f64) {
+        let b = self.0.chamber_stiffness(c, &s.0);
+        self.1.chamber_stiffness(hook::Chambers { b, ..c }, &s.1)
+    }
+    #[inline(always)]
+    fn flows(&self, c: hook::Flows, s: &Self::State) -> (f64, f64) {
+        let q = self.0.flows(c, &s.0);
+        self.1.flows(hook::Flows { q, ..c }, &s.1)
+    }
+    #[inline(always)]
+    fn extra_force(&self, c: hook::Motion, s: &Self::State) -> f64 {
+        self.0.extra_force(c, &s.0) + self.1.extra_force(c, &s.1)
+    }
+    #[inline(always)]
+    fn sensed(&self, c: hook::Sensed, s: &Self::State) -> [f64; 3] {
+        let raw = self.0.sensed(c, &s.0);
+        self.1.sensed(hook::Sensed { raw, ..c }, &s.1)
+    }
+    #[inline(always)]
+    fn derivs(&self, plant: &PlantView<'_, N>, s: &Self::State, ds: &mut Self::State) {
+        self.0.derivs(plant, &s.0, &mut ds.0);
+        // B sees the command as A leaves it (actuator 0's: a command effect acts on all alike).
+        let x_c: [f64; N] = std::array::from_fn(|lane| {
+            let c = hook::Opening {
+                lane,
+                act: 0,
+                x: plant.x_c[lane],
+            };
+            self.0.spool_position(c, &s.0)
+        });
+        self.1.derivs(
+            &PlantView {
+                x_c: &x_c,
+                ..*plant
+            },
+            &s.1,
+            &mut ds.1,
+        );
+    }
+}
+
+/// Code generic over the effect type, to run with the type [`with_single`] picks (a closure
+/// cannot be generic).
+///
+/// [`EffectSet`] runs every library effect's hooks in every lane, with a branch per effect and
+/// hook that keeps the compiler from vectorising the lane loop; a kernel made for one effect
+/// runs at the baseline's speed plus the effect's own work (a diagnosis screens the library one
+/// effect at a time). Both give the same numbers, bit for bit (`tests/effects.rs`).
+pub trait EffectFn<const N: usize> {
+    type Output;
+    fn call<E: Effect<N>>(self, effect: &E) -> Self::Output;
+}
+
+/// A library effect's identity, known to its type (the registry implements it).
+pub trait Named {
+    const ID: EffectId;
+}
+
+/// A library effect that is skipped when no lane of the batch switches it on: every hook passes
+/// its input through, the extra force is 0 and the extra states stand still. The same numbers as
+/// the effect's own neutral lanes (an off lane's mask multiplies its contribution by 0), without
+/// evaluating it (a seal friction's tanh and exp, a saturation's tanh, for every lane of every
+/// evaluation).
+pub struct Gated<E> {
+    on: bool,
+    effect: E,
+}
+
+impl<const N: usize, E: LibraryEffect<N> + Named> LibraryEffect<N> for Gated<E> {
+    fn new(lanes: [&ModelParams; N]) -> Self {
+        Gated {
+            on: lanes.iter().any(|p| p.effects.get(E::ID)),
+            effect: E::new(lanes),
+        }
+    }
+}
+
+impl<const N: usize, E: Effect<N>> Effect<N> for Gated<E> {
+    type State = E::State;
+    const MOVES_SPOOL: bool = E::MOVES_SPOOL;
+    const SPLITS: bool = E::SPLITS;
+
+    fn initial_state(&self) -> Self::State {
+        self.effect.initial_state()
+    }
+    fn symmetric(&self) -> bool {
+        !self.on || self.effect.symmetric()
+    }
+    #[inline(always)]
+    fn supply(&self, c: hook::Supply, s: &Self::State) -> f64 {
+        if self.on {
+            self.effect.supply(c, s)
+        } else {
+            c.p_s
+        }
+    }
+    #[inline(always)]
+    fn opening(&self, c: hook::Opening, s: &Self::State) -> f64 {
+        if self.on {
+            self.effect.opening(c, s)
+        } else {
+            c.x
+        }
+    }
+    #[inline(always)]
+    fn spool_position(&self, c: hook::Opening, s: &Self::State) -> f64 {
+        if self.on {
+            self.effect.spool_position(c, s)
+        } else {
+            c.x
+        }
+    }
+    #[inline(always)]
+    fn stroke(&self, c: hook::Motion, s: &Self::State) -> (f64, f64) {
+        if self.on {
+            self.effect.stroke(c, s)
+        } else {
+            (c.y, c.v)
+        }
+    }
+    #[inline(always)]
+    fn chamber_stiffness(&self, c: hook::Chambers, s: &Self::State) -> (f64, f64) {
+        if self.on {
+            self.effect.chamber_stiffness(c, s)
+        } else {
+            c.b
+        }
+    }
+    #[inline(always)]
+    fn flows(&self, c: hook::Flows, s: &Self::State) -> (f64, f64) {
+        if self.on {
+            self.effect.flows(c, s)
+        } else {
+            c.q
+        }
+    }
+    #[inline(always)]
+    fn extra_force(&self, c: hook::Motion, s: &Self::State) -> f64 {
+        if self.on {
+            self.effect.extra_force(c, s)
+        } else {
+            0.0
+        }
+    }
+    #[inline(always)]
+    fn sensed(&self, c: hook::Sensed, s: &Self::State) -> [f64; 3] {
+        if self.on {
+            self.effect.sensed(c, s)
+        } else {
+            c.raw
+        }
+    }
+    #[inline(always)]
+    fn derivs(&self, plant: &PlantView<'_, N>, s: &Self::State, ds: &mut Self::State) {
+        if self.on {
+            self.effect.derivs(plant, s, ds);
+        } else {
+            for d in ds.as_mut() {
+                *d = [0.0; N];
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::params::Component;
+
+    /// Every registered effect is complete: a family, free parameters that it has, a name that is
+    /// its switch, its parameter table and its module (so a misspelt or half-registered effect
+    /// fails here, not silently in a diagnosis).
+    #[test]
+    fn every_registered_effect_is_complete() {
+        assert_eq!(LIBRARY.len(), EFFECTS.len());
+        assert_eq!(EffectId::ALL.len(), LIBRARY.len());
+        let mut sw = EffectSwitches::default();
+        for (id, e) in EffectId::ALL.into_iter().zip(LIBRARY) {
+            assert!(std::ptr::eq(id.info(), *e), "{}: registry order", e.name);
+            assert!(!e.family.trim().is_empty(), "{}: no family", e.name);
+            assert!(!e.summary.trim().is_empty(), "{}: no summary", e.name);
+            assert!(
+                !e.free().is_empty(),
+                "{}: no parameter a diagnosis frees",
+                e.name
+            );
+            assert!(!e.params.is_empty(), "{}: no parameters", e.name);
+            for f in e.stages.iter().flat_map(|st| st.free) {
+                assert!(
+                    e.params.iter().any(|p| p.name == *f),
+                    "{}: frees `{f}`, which it does not have",
+                    e.name
+                );
+            }
+            assert!(
+                e.params
+                    .iter()
+                    .all(|p| p.component == Component::Effect(id)),
+                "{}: its parameters belong to another component",
+                e.name
+            );
+            assert_eq!(
+                id.module(),
+                e.name,
+                "{}: its module (and so its switch and model-file field) has another name",
+                e.name
+            );
+            assert!(!sw.get(id));
+            *sw.get_mut(id) = true;
+            assert!(sw.get(id));
+            assert_eq!(sw.on().last(), Some(id));
+            assert_eq!(EffectId::parse(e.name), Some(id));
+        }
+        assert!(sw.any());
+        assert_eq!(sw.on().count(), LIBRARY.len());
+        assert_eq!(
+            EffectId::parse("seal_fricton"),
+            None,
+            "a misspelt name is not an effect"
+        );
+    }
+
+    /// What an effect moves is declared once (`Effect::MOVES_SPOOL`) and read from there: the
+    /// delay and the spool's dynamics move the spool; the metering nonlinearities and the rest
+    /// do not, and the set moves it because some of its effects do.
+    #[test]
+    fn what_moves_the_spool_is_the_effects_declaration() {
+        let moving: Vec<&str> = EffectId::ALL
+            .into_iter()
+            .filter(|e| e.moves_spool())
+            .map(|e| e.name())
+            .collect();
+        assert_eq!(moving, ["transport_delay", "spool_dynamics"]);
+        const { assert!(<EffectSet<4> as Effect<4>>::MOVES_SPOOL) };
+        const { assert!(!<Baseline as Effect<4>>::MOVES_SPOOL) };
+        // Only the asymmetry tells the actuators apart, and the set does because it holds it.
+        const { assert!(<EffectSet<4> as Effect<4>>::SPLITS) };
+        const { assert!(<asymmetry::Asymmetry<4> as Effect<4>>::SPLITS) };
+        const { assert!(!<Baseline as Effect<4>>::SPLITS) };
+        const { assert!(!<seal_friction::SealFriction<4> as Effect<4>>::SPLITS) };
+        assert_eq!(
+            EffectId::FlowGain.name(),
+            "flow_gain",
+            "INFO.name is the module's"
+        );
+    }
+
+    /// The composed states are the effects' states side by side: the layout follows the types.
+    #[test]
+    fn composed_states_are_contiguous() {
+        let p = ModelParams::default();
+        let set = effect_set::<4>(&[&p]);
+        let s = set.initial_state();
+        let n = s.as_ref().len();
+        assert_eq!(std::mem::size_of_val(s.as_ref()), std::mem::size_of_val(&s));
+        assert_eq!(
+            n,
+            transport_delay::STAGES + 2 * crate::N_ACT + 1 + 2 + 2 * specimen::MODES + 3 * 4,
+            "delay, spool, supply, reaction mass, specimen, three sensor chains"
+        );
+        // The supply pressure starts at P_S, every other state at 0.
+        let ps = p.servovalve.p_s;
+        assert_eq!(
+            s.as_ref()
+                .iter()
+                .filter(|lanes| lanes.iter().all(|&v| v == ps))
+                .count(),
+            1
+        );
+        assert_eq!(
+            s.as_ref()
+                .iter()
+                .filter(|lanes| lanes.iter().all(|&v| v == 0.0))
+                .count(),
+            n - 1
+        );
+    }
+}

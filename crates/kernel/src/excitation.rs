@@ -1,0 +1,723 @@
+//! Excitations: the reference states (x_r, v_r, a_r, j_r) at every controller tick (docs/model.md §4).
+//!
+//! They are computed once, before a run, into a [`Reference`] that every lane of a batch shares,
+//! so the tick loop reads arrays and never branches on the excitation kind.
+//!
+//! - **sine**: x_r = X·e(t)·sin(2πft), e = ½(1 − cos(πt/T_taper)) for t < T_taper, else 1;
+//!   v_r, a_r, j_r are the exact derivatives (product rule with e's derivatives).
+//! - **record**, by what it is ([`Signal`]):
+//!   - a *command* (a drive file, a ground motion): linearly interpolated to the ticks, then a
+//!     discrete 4th-order critically damped state-variable filter H(s) = ω⁴/(s+ω)⁴, ω = 2π f_ref,
+//!     whose four states are (x_r, v_r, a_r, j_r) [chosen: all four reference states come from
+//!     the filter so they are mutually consistent; the filter is discretised exactly for a
+//!     zero-order-held input (matrix exponential), and starts at rest at the first record value];
+//!     causal like a controller's generator, so x_r lags the record (4/ω at low frequency);
+//!   - the tracked *reference* (what a data-acquisition system records): x_r is the record
+//!     itself, by the cubic through the four nearest samples between them; v_r, a_r, j_r are the
+//!     derivatives of the record through a zero-phase filter, the 4th-order Butterworth of corner
+//!     f_ref run backward then forward, |H|² = 1/(1 + (f/f_ref)⁸) [chosen: flat to 3e-6 at
+//!     f_ref/5, where the command's critically damped filter run both ways would take 15 % off
+//!     a_r; each pass is exact for an input linear between ticks, the input first corrected by
+//!     −Δ²/12, so the derivatives of a smooth record are right to O((ωT)⁴)]; no lag.
+
+use super::spectrum::SpectrumSpec;
+use std::f64::consts::PI;
+
+/// Reference states at every tick, plus what the metrics need to know about them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Reference {
+    /// Controller rate, Hz.
+    pub f_s: f64,
+    pub x: Vec<f64>,
+    pub v: Vec<f64>,
+    pub a: Vec<f64>,
+    pub j: Vec<f64>,
+    /// The reference displacement command before any filter (a sine: x_r itself; a record: the
+    /// record interpolated to the ticks), m — what a controller log calls the reference.
+    pub command: Vec<f64>,
+    /// Ticks of the analysis window, [start, end).
+    pub window: (usize, usize),
+    /// Fundamental frequency for the harmonic metrics, Hz (`None` for records).
+    pub fundamental_hz: Option<f64>,
+    /// What moves the spool: the controller (the default) or a measured column (open loop).
+    pub drive: Drive,
+    /// The response spectrum the metrics take, with the target's PSA (of `a` over the window),
+    /// m/s² ([`Reference::with_spectrum`]); `None`: no spectral metrics.
+    pub spectrum: Option<(SpectrumSpec, Vec<f64>)>,
+}
+
+/// What moves the spool.
+///
+/// Open loop drives the plant with a measured column instead of the controller, to separate
+/// the plant's error from the controller's. The reference still gives the analysis window and
+/// the phase reference of the metrics.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub enum Drive {
+    /// The three-variable controller closes the loop (docs/model.md §3).
+    #[default]
+    ClosedLoop,
+    /// A valve command per tick, V: clamped to ±u_lim like the controller's output, then
+    /// x_c = k_sp·u goes through the valve effects (delay, spool dynamics) as usual.
+    ValveCommand(Vec<f64>),
+    /// A spool position per tick, m; the spool command held over [t_k, t_{k+1}) is the mean of
+    /// the samples at t_k and t_{k+1} (the measured spool moves continuously). A measured spool already
+    /// contains the valve's own dynamics, so the caller switches the delay and spool-dynamics
+    /// effects off for this drive.
+    Spool(Vec<f64>),
+}
+
+impl Reference {
+    /// An empty reference with room for `n` ticks; the window is every tick until set.
+    fn with_capacity(f_s: f64, n: usize, fundamental_hz: Option<f64>) -> Self {
+        Reference {
+            f_s,
+            x: Vec::with_capacity(n),
+            v: Vec::with_capacity(n),
+            a: Vec::with_capacity(n),
+            j: Vec::with_capacity(n),
+            command: Vec::with_capacity(n),
+            window: (0, n),
+            fundamental_hz,
+            drive: Drive::ClosedLoop,
+            spectrum: None,
+        }
+    }
+
+    /// A reference from its states (x, v, a, j) at every tick (the command is x); the window is
+    /// every tick, no fundamental.
+    pub fn from_states(f_s: f64, states: &[[f64; 4]]) -> Self {
+        let mut r = Reference::with_capacity(f_s, states.len(), None);
+        states.iter().for_each(|s| r.push(*s, s[0]));
+        r
+    }
+
+    /// Appends one tick: the states (x, v, a, j) and the command.
+    fn push(&mut self, s: [f64; 4], command: f64) {
+        self.x.push(s[0]);
+        self.v.push(s[1]);
+        self.a.push(s[2]);
+        self.j.push(s[3]);
+        self.command.push(command);
+    }
+
+    pub fn len(&self) -> usize {
+        self.x.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.x.is_empty()
+    }
+    /// Time of tick k, s.
+    pub fn time(&self, k: usize) -> f64 {
+        k as f64 / self.f_s
+    }
+
+    /// The same reference with a response spectrum: the target's PSA is the spectrum of `a` over
+    /// the window.
+    pub fn with_spectrum(mut self, spec: SpectrumSpec) -> Self {
+        let (w0, w1) = self.window;
+        let target = super::spectrum::psa(&self.a[w0..w1], 1.0 / self.f_s, &spec);
+        self.spectrum = Some((spec, target));
+        self
+    }
+
+    /// Peaks over the window: (max |x_r|, max |v_r|, max |a_r|).
+    pub fn peaks(&self) -> (f64, f64, f64) {
+        let (w0, w1) = self.window;
+        let peak = |v: &[f64]| v[w0..w1].iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        (peak(&self.x), peak(&self.v), peak(&self.a))
+    }
+
+    /// Keeps the first `n` ticks (the window is clipped to them).
+    pub fn truncate(&mut self, n: usize) {
+        for v in [
+            &mut self.x,
+            &mut self.v,
+            &mut self.a,
+            &mut self.j,
+            &mut self.command,
+        ] {
+            v.truncate(n);
+        }
+        self.window = (self.window.0.min(n), self.window.1.min(n));
+    }
+
+    /// Lengthens the reference to `n` ticks by holding its last tick (states and command). A
+    /// run needs a tick beyond the last time it is sampled at ([`super::resample::Resampler`]);
+    /// a held tick at the end changes nothing before it.
+    pub fn hold_to(&mut self, n: usize) {
+        while !self.is_empty() && self.len() < n {
+            let k = self.len() - 1;
+            let (s, c) = (
+                [self.x[k], self.v[k], self.a[k], self.j[k]],
+                self.command[k],
+            );
+            self.push(s, c);
+        }
+    }
+
+    /// Channel `values` (one per tick) at time `t`, by the cubic through the four nearest ticks
+    /// (held beyond the ends).
+    pub fn at_time(&self, values: &[f64], t: f64) -> f64 {
+        let p = t * self.f_s;
+        let n = values.len();
+        if n == 0 {
+            return f64::NAN;
+        }
+        let k = p.floor();
+        if p == k && (k as usize) < n {
+            return values[k as usize];
+        }
+        if n < 4 || p <= 0.0 || p >= (n - 1) as f64 {
+            return values[(p.round().max(0.0) as usize).min(n - 1)];
+        }
+        let j0 = (k as usize).saturating_sub(1).min(n - 4);
+        (0..4)
+            .map(|i| {
+                let xi = (j0 + i) as f64;
+                let w: f64 = (0..4)
+                    .filter(|&q| q != i)
+                    .map(|q| (p - (j0 + q) as f64) / (xi - (j0 + q) as f64))
+                    .product();
+                w * values[j0 + i]
+            })
+            .sum()
+    }
+}
+
+/// Sine excitation (docs/model.md §4).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sine {
+    /// Frequency f, Hz.
+    pub freq_hz: f64,
+    /// Displacement amplitude X, m (from g: X = a·g/(2πf)²).
+    pub amp_m: f64,
+    /// Half-cosine taper-in time, s (0 = none). Default 1 s.
+    pub taper_s: f64,
+    /// Run length, s: ticks k = 0 … round(duration·f_s) − 1.
+    pub duration_s: f64,
+    /// Whole cycles in the analysis window (ending at the last tick); `None` = every whole cycle
+    /// after T_taper + 1 s.
+    pub window_cycles: Option<u32>,
+}
+
+impl Sine {
+    /// Displacement amplitude for an acceleration amplitude in g.
+    pub fn amp_from_g(amp_g: f64, freq_hz: f64) -> f64 {
+        amp_g * super::params::G / (2.0 * PI * freq_hz).powi(2)
+    }
+
+    /// Number of whole cycles in the default window.
+    pub fn default_cycles(&self) -> u32 {
+        ((self.duration_s - self.taper_s - 1.0) * self.freq_hz)
+            .floor()
+            .max(0.0) as u32
+    }
+
+    /// Reference states at time t.
+    pub fn states(&self, t: f64) -> [f64; 4] {
+        let w = 2.0 * PI * self.freq_hz;
+        let (s, c) = (w * t).sin_cos();
+        let sd = [s, w * c, -w * w * s, -w * w * w * c];
+        let ed = if t < self.taper_s {
+            let p = PI / self.taper_s;
+            let (ps, pc) = (p * t).sin_cos();
+            [
+                0.5 * (1.0 - pc),
+                0.5 * p * ps,
+                0.5 * p * p * pc,
+                -0.5 * p * p * p * ps,
+            ]
+        } else {
+            [1.0, 0.0, 0.0, 0.0]
+        };
+        let x = self.amp_m;
+        [
+            x * ed[0] * sd[0],
+            x * (ed[1] * sd[0] + ed[0] * sd[1]),
+            x * (ed[2] * sd[0] + 2.0 * ed[1] * sd[1] + ed[0] * sd[2]),
+            x * (ed[3] * sd[0] + 3.0 * ed[2] * sd[1] + 3.0 * ed[1] * sd[2] + ed[0] * sd[3]),
+        ]
+    }
+
+    /// Reference displacement x_r at time t (0 before the start, t < 0), m.
+    pub fn displacement(&self, t: f64) -> f64 {
+        if t < 0.0 {
+            return 0.0;
+        }
+        let e = if t < self.taper_s {
+            0.5 * (1.0 - (PI * t / self.taper_s).cos())
+        } else {
+            1.0
+        };
+        self.amp_m * e * (2.0 * PI * self.freq_hz * t).sin()
+    }
+
+    /// The reference at controller rate f_s.
+    pub fn reference(&self, f_s: f64) -> Reference {
+        let n = (self.duration_s * f_s).round() as usize;
+        let mut r = Reference::with_capacity(f_s, n, Some(self.freq_hz));
+        for k in 0..n {
+            let s = self.states(k as f64 / f_s);
+            r.push(s, s[0]);
+        }
+        let cycles = self.window_cycles.unwrap_or_else(|| self.default_cycles());
+        let len = ((cycles as f64) * f_s / self.freq_hz).round() as usize;
+        r.window = (n.saturating_sub(len), n);
+        r
+    }
+}
+
+/// Sampled displacement record (docs/model.md §4).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Record {
+    /// Sample times, s (strictly increasing).
+    pub time_s: Vec<f64>,
+    /// Displacement, m.
+    pub disp_m: Vec<f64>,
+    /// Corner of the reference filter, Hz. Default 50 Hz.
+    pub f_ref_hz: f64,
+    /// What the record is: a command (the causal generator) or the tracked reference.
+    pub signal: Signal,
+}
+
+impl Record {
+    /// The reference at controller rate f_s, ticks from the first to the last record time.
+    ///
+    /// Panics if the record has fewer than two samples or times that do not increase; the
+    /// orchestration layer validates records (with file, column and row) before they get here.
+    pub fn reference(&self, f_s: f64) -> Reference {
+        assert!(self.time_s.len() >= 2 && self.time_s.len() == self.disp_m.len());
+        let span = self.time_s[self.time_s.len() - 1] - self.time_s[0];
+        let n = (span * f_s).floor() as usize + 1;
+        match self.signal {
+            Signal::Command => self.generated(f_s, n),
+            Signal::Reference => self.tracked(f_s, n),
+        }
+    }
+
+    /// `signal = "reference"`: x_r is the record (the cubic through the nearest samples between
+    /// them), v_r, a_r and j_r its zero-phase derivatives ([`zero_phase_derivatives`]).
+    fn tracked(&self, f_s: f64, n: usize) -> Reference {
+        let u = cubic_at_ticks(&self.time_s, &self.disp_m, f_s, n);
+        let d = zero_phase_derivatives(&u, 2.0 * PI * self.f_ref_hz, 1.0 / f_s);
+        let mut r = Reference::with_capacity(f_s, n, None);
+        for (k, s) in d.iter().enumerate() {
+            r.push([u[k], s[1], s[2], s[3]], u[k]);
+        }
+        r
+    }
+
+    /// `signal = "command"`: the record, linear between samples, through the causal
+    /// state-variable filter (docs/model.md §4), exact for the record's linear interpolant.
+    fn generated(&self, f_s: f64, n: usize) -> Reference {
+        let t0 = self.time_s[0];
+        let (phi, g0, g1) = foh_filter(CRITICAL4, 2.0 * PI * self.f_ref_hz, 1.0 / f_s);
+        let mut r = Reference::with_capacity(f_s, n, None);
+        let mut s = [self.disp_m[0], 0.0, 0.0, 0.0];
+        let mut i = 0;
+        let mut u_at = |k: usize| {
+            let t = t0 + k as f64 / f_s;
+            while i + 2 < self.time_s.len() && self.time_s[i + 1] <= t {
+                i += 1;
+            }
+            let (ta, tb) = (self.time_s[i], self.time_s[i + 1]);
+            let w = ((t - ta) / (tb - ta)).clamp(0.0, 1.0);
+            self.disp_m[i] + w * (self.disp_m[i + 1] - self.disp_m[i])
+        };
+        let mut u = u_at(0);
+        for k in 0..n {
+            r.push(s, u);
+            let next = u_at(k + 1);
+            s = std::array::from_fn(|row| {
+                (0..4).map(|c| phi[row][c] * s[c]).sum::<f64>() + g0[row] * u + g1[row] * (next - u)
+            });
+            u = next;
+        }
+        r
+    }
+}
+
+/// What a record is, which decides how its four reference states are made (docs/model.md §4).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Signal {
+    /// The command into the controller's reference generator (a drive file, a ground motion fed
+    /// to the table): the states of the causal 4th-order state-variable filter, lag included.
+    #[default]
+    Command,
+    /// The reference the controller tracked (what a data-acquisition system records): x_r is the
+    /// record itself; v_r, a_r, j_r its derivatives by a zero-phase filter, with no lag.
+    Reference,
+}
+
+impl Signal {
+    /// Its name in a spec (`signal = "reference"`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Signal::Command => "command",
+            Signal::Reference => "reference",
+        }
+    }
+}
+
+/// Coefficients c₁, c₂, c₃ of the 4th-order Butterworth polynomial s⁴ + c₃s³ + c₂s² + c₁s + 1
+/// (unit corner): (s² + 2cos(π/8)s + 1)(s² + 2cos(3π/8)s + 1).
+const BUTTERWORTH4: [f64; 3] = [
+    2.613_125_929_752_753,
+    3.414_213_562_373_095,
+    2.613_125_929_752_753,
+];
+
+/// The record's values at `n` ticks from its first time, by the cubic through the four nearest
+/// samples (the end samples held beyond the ends).
+fn cubic_at_ticks(time_s: &[f64], values: &[f64], f_s: f64, n: usize) -> Vec<f64> {
+    let m = time_s.len();
+    let t0 = time_s[0];
+    let mut i = 0;
+    (0..n)
+        .map(|k| {
+            let t = t0 + k as f64 / f_s;
+            while i + 2 < m && time_s[i + 1] <= t {
+                i += 1;
+            }
+            let j0 = i.saturating_sub(1).min(m.saturating_sub(4));
+            let nodes = (j0..(j0 + 4).min(m)).collect::<Vec<_>>();
+            if nodes.len() < 4 || t <= t0 || t >= time_s[m - 1] {
+                // Two samples, or beyond an end: linear, held outside.
+                let w = ((t - time_s[i]) / (time_s[i + 1] - time_s[i])).clamp(0.0, 1.0);
+                return values[i] + w * (values[i + 1] - values[i]);
+            }
+            nodes
+                .iter()
+                .map(|&a| {
+                    let w: f64 = nodes
+                        .iter()
+                        .filter(|&&b| b != a)
+                        .map(|&b| (t - time_s[b]) / (time_s[a] - time_s[b]))
+                        .product();
+                    w * values[a]
+                })
+                .sum()
+        })
+        .collect()
+}
+
+/// Exact discretisation, for an input linear between ticks (first-order hold), of the 4th-order
+/// filter 1/P(s/ω), P(s) = s⁴ + c₃s³ + c₂s² + c₁s + 1 with `c` = [c₁, c₂, c₃], in the states
+/// (y, ẏ, ÿ, y⃛): s[k+1] = Φ s[k] + Γ₀ u[k] + Γ₁ (u[k+1] − u[k]).
+pub(crate) fn foh_filter(c: [f64; 3], w: f64, dt: f64) -> ([[f64; 4]; 4], [f64; 4], [f64; 4]) {
+    // Scaled states ξ_i = y⁽ⁱ⁾/ωⁱ: ξ' = ω·(companion) ξ + ω·e4·u; augmented with u and its
+    // change per tick d (u(τ) = u_k + d·τ/dt).
+    let mut m = [[0.0f64; 6]; 6];
+    for i in 0..3 {
+        m[i][i + 1] = w * dt;
+    }
+    let coef = [1.0, c[0], c[1], c[2]];
+    for k in 0..4 {
+        m[3][k] = -coef[k] * w * dt;
+    }
+    m[3][4] = w * dt;
+    m[4][5] = 1.0;
+    let e = expm(&m);
+    let mut phi = [[0.0; 4]; 4];
+    let (mut g0, mut g1) = ([0.0; 4], [0.0; 4]);
+    for r in 0..4 {
+        let up = w.powi(r as i32);
+        for k in 0..4 {
+            phi[r][k] = e[r][k] * up / w.powi(k as i32);
+        }
+        g0[r] = e[r][4] * up;
+        g1[r] = e[r][5] * up;
+    }
+    (phi, g0, g1)
+}
+
+/// Coefficients of the critically damped (s + 1)⁴ of the command's state-variable filter.
+pub const CRITICAL4: [f64; 3] = [4.0, 6.0, 4.0];
+
+/// One pass of the filter over `u` (every tick), from rest at u[0]: the states at every tick.
+fn butterworth_pass(u: &[f64], w: f64, dt: f64) -> Vec<[f64; 4]> {
+    let (phi, g0, g1) = foh_filter(BUTTERWORTH4, w, dt);
+    // The first-order hold takes (ωT)²/12 off a smooth input's amplitude at ω; the input is
+    // first corrected by the inverse, u − Δ²u/12, so the pass is exact to O((ωT)⁴).
+    let n = u.len();
+    let at = |k: isize| u[k.clamp(0, n as isize - 1) as usize];
+    let p: Vec<f64> = (0..n as isize)
+        .map(|k| at(k) - (at(k + 1) - 2.0 * at(k) + at(k - 1)) / 12.0)
+        .collect();
+    let mut s = [p[0], 0.0, 0.0, 0.0];
+    let mut out = Vec::with_capacity(n);
+    for k in 0..n {
+        out.push(s);
+        if k + 1 < n {
+            let (uk, du) = (p[k], p[k + 1] - p[k]);
+            s = std::array::from_fn(|r| {
+                (0..4).map(|c| phi[r][c] * s[c]).sum::<f64>() + g0[r] * uk + g1[r] * du
+            });
+        }
+    }
+    out
+}
+
+/// The derivatives (v, a, j) of `u` (every tick) by the zero-phase filter |B(jω/ω_c)|⁻² — the
+/// Butterworth filter run backward, then forward — so without lag: the forward pass's states.
+///
+/// A record may end (or start) in motion, where a filter run from rest would ring. Each end is
+/// therefore extended, over [`pad_len`] ticks, by the parabola that fits the last 10 ms (at least
+/// 8 ticks) by least squares [chosen: it carries the end's velocity and acceleration on, while
+/// a fit over more than a few ticks keeps a recorded reference's quantisation out of it]; the
+/// filter runs over the extended record, and the pads are dropped.
+pub fn zero_phase_derivatives(u: &[f64], w: f64, dt: f64) -> Vec<[f64; 4]> {
+    let pad = pad_len(w, dt).min(u.len());
+    let fit = ((0.01 / dt).round() as usize).clamp(8, u.len().max(1));
+    let head: Vec<f64> = {
+        let rev: Vec<f64> = u.iter().rev().copied().collect();
+        let mut h = extrapolate(&rev, fit, pad);
+        h.reverse();
+        h
+    };
+    let tail = extrapolate(u, fit, pad);
+    let mut rev: Vec<f64> = head.iter().chain(u).chain(&tail).rev().copied().collect();
+    let back = butterworth_pass(&rev, w, dt);
+    rev.clear();
+    rev.extend(back.iter().rev().map(|s| s[0]));
+    let mut out = butterworth_pass(&rev, w, dt);
+    out.truncate(head.len() + u.len());
+    out.drain(..head.len());
+    out
+}
+
+/// Ticks by which a record is extended at each end for the zero-phase filter: ten time constants
+/// 1/ω of the filter (its impulse response is below 1e-4 of its peak there).
+fn pad_len(w: f64, dt: f64) -> usize {
+    (10.0 / (w * dt)).ceil() as usize
+}
+
+/// `pad` values after the end of `u`, on the parabola fitted by least squares to its last `fit`
+/// values (a line or the last value when there are fewer).
+fn extrapolate(u: &[f64], fit: usize, pad: usize) -> Vec<f64> {
+    let n = u.len();
+    let m = fit.min(n);
+    if m < 3 {
+        return vec![*u.last().unwrap_or(&0.0); pad];
+    }
+    // Least squares in the tick offset s from the last value (s = 0, −1, …, −(m − 1)).
+    let (mut a, mut b) = ([[0.0f64; 3]; 3], [0.0f64; 3]);
+    for k in 0..m {
+        let s = -(k as f64);
+        let basis = [1.0, s, s * s];
+        for i in 0..3 {
+            b[i] += basis[i] * u[n - 1 - k];
+            for j in 0..3 {
+                a[i][j] += basis[i] * basis[j];
+            }
+        }
+    }
+    let c = solve3(a, b);
+    (1..=pad)
+        .map(|k| {
+            let s = k as f64;
+            c[0] + c[1] * s + c[2] * s * s
+        })
+        .collect()
+}
+
+/// The solution of a 3×3 system by Cramer's rule (the normal equations of a parabola's fit).
+fn solve3(a: [[f64; 3]; 3], b: [f64; 3]) -> [f64; 3] {
+    let det = |m: [[f64; 3]; 3]| {
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
+    let d = det(a);
+    std::array::from_fn(|col| {
+        let mut m = a;
+        for r in 0..3 {
+            m[r][col] = b[r];
+        }
+        det(m) / d
+    })
+}
+
+fn matmul<const M: usize>(a: &[[f64; M]; M], b: &[[f64; M]; M]) -> [[f64; M]; M] {
+    let mut c = [[0.0; M]; M];
+    for i in 0..M {
+        for k in 0..M {
+            for j in 0..M {
+                c[i][j] += a[i][k] * b[k][j];
+            }
+        }
+    }
+    c
+}
+
+/// exp(m) by a 20-term Taylor series after scaling m to norm ≤ ¼, then squaring back.
+pub(crate) fn expm<const M: usize>(m: &[[f64; M]; M]) -> [[f64; M]; M] {
+    let norm = m
+        .iter()
+        .map(|r| r.iter().map(|v| v.abs()).sum::<f64>())
+        .fold(0.0, f64::max);
+    let squarings = if norm > 0.25 {
+        (norm / 0.25).log2().ceil() as i32
+    } else {
+        0
+    };
+    let scale = 0.5f64.powi(squarings);
+    let mut a = *m;
+    a.iter_mut().flatten().for_each(|v| *v *= scale);
+    let mut result = [[0.0; M]; M];
+    let mut term = [[0.0; M]; M];
+    for i in 0..M {
+        result[i][i] = 1.0;
+        term[i][i] = 1.0;
+    }
+    for n in 1..=20 {
+        term = matmul(&term, &a);
+        term.iter_mut().flatten().for_each(|v| *v /= n as f64);
+        for i in 0..M {
+            for j in 0..M {
+                result[i][j] += term[i][j];
+            }
+        }
+    }
+    for _ in 0..squarings {
+        result = matmul(&result, &result);
+    }
+    result
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sine_derivatives_are_consistent() {
+        let s = Sine {
+            freq_hz: 3.0,
+            amp_m: 0.05,
+            taper_s: 1.0,
+            duration_s: 3.0,
+            window_cycles: Some(4),
+        };
+        for &t in &[0.1, 0.5, 0.999, 1.5, 2.2] {
+            let h = 1e-6;
+            let (p, m) = (s.states(t + h), s.states(t - h));
+            let c = s.states(t);
+            for d in 0..3 {
+                let fd = (p[d] - m[d]) / (2.0 * h);
+                assert!(
+                    (fd - c[d + 1]).abs() <= 1e-5 * (1.0 + c[d + 1].abs()),
+                    "t={t} d={d}: {fd} vs {}",
+                    c[d + 1]
+                );
+            }
+        }
+        let r = s.reference(1024.0);
+        assert_eq!(r.len(), 3072);
+        assert_eq!(r.window, (3072 - 1365, 3072));
+        assert_eq!(s.default_cycles(), 3);
+        assert!((Sine::amp_from_g(1.73, 3.0) - 0.047749).abs() < 1e-6);
+    }
+
+    #[test]
+    fn svf_tracks_a_ramp_with_exact_derivatives() {
+        // A ramp of 0.1 m/s: after the transient, v_r = 0.1, a_r = j_r = 0, x_r lags by 4/ω
+        // (the filter is exact for an input linear between ticks: no ripple, no extra lag).
+        let f_s = 1024.0;
+        let t: Vec<f64> = (0..=2048).map(|k| k as f64 / f_s).collect();
+        let d: Vec<f64> = t.iter().map(|t| 0.1 * t).collect();
+        let rec = Record {
+            time_s: t,
+            disp_m: d,
+            f_ref_hz: 50.0,
+            signal: Signal::Command,
+        };
+        let r = rec.reference(f_s);
+        assert_eq!(r.len(), 2049);
+        let k = 2000;
+        // The transient decays as (ωt)³e^{−ωt}/6 of the ramp: 2e-123 by t = 1.95 s; what is
+        // left is rounding.
+        assert!((r.v[k] - 0.1).abs() < 1e-12, "{}", r.v[k]);
+        assert!(
+            r.a[k].abs() < 1e-9 && r.j[k].abs() < 1e-6,
+            "a {} j {}",
+            r.a[k],
+            r.j[k]
+        );
+        let lag = 4.0 / (2.0 * PI * 50.0);
+        let expected = 0.1 * (k as f64 / f_s - lag);
+        assert!(
+            (r.x[k] - expected).abs() < 1e-12,
+            "{} vs {expected}",
+            r.x[k]
+        );
+    }
+
+    #[test]
+    fn svf_dc_gain_is_one() {
+        let (phi, g0, _) = foh_filter(CRITICAL4, 2.0 * PI * 50.0, 1.0 / 1024.0);
+        // Fixed point for u = 1 is x = 1, other states 0.
+        let s = [1.0, 0.0, 0.0, 0.0];
+        for r in 0..4 {
+            let next = (0..4).map(|c| phi[r][c] * s[c]).sum::<f64>() + g0[r];
+            assert!((next - s[r]).abs() < 1e-9, "row {r}: {next}");
+        }
+    }
+
+    /// `signal = "reference"`: x_r is the record, and its derivatives by the zero-phase filter
+    /// are those of the signal, with no lag, at the controller's rate and at a DAQ's 500 and
+    /// 256 Hz (a multisine of 1.3, 7 and 15 Hz; the first and last 2 s, where the filter starts,
+    /// left out).
+    #[test]
+    fn a_tracked_reference_has_the_record_and_its_derivatives() {
+        let comps = [(0.04, 1.3, 0.2), (0.004, 7.0, 1.0), (0.0008, 15.0, 2.0)];
+        let exact = |t: f64| -> [f64; 4] {
+            let mut s = [0.0; 4];
+            for (a, f, p) in comps {
+                let w = 2.0 * PI * f;
+                let (sn, cs) = (w * t + p).sin_cos();
+                s = [
+                    s[0] + a * sn,
+                    s[1] + a * w * cs,
+                    s[2] - a * w * w * sn,
+                    s[3] - a * w.powi(3) * cs,
+                ];
+            }
+            s
+        };
+        // Largest error over the largest value, of x, v, a, j: measured 0, 8.8e-6, 3.1e-5,
+        // 2.2e-4 at 1024 Hz; 6.2e-7, 1.2e-5, 4.1e-5, 2.4e-4 at 500 Hz; 9.5e-6, 4.7e-5, 1.3e-4,
+        // 3.9e-4 at 256 Hz (j loses (15/50)⁸ = 6.6e-5 of its 15 Hz part to the filter).
+        for (rate, bound) in [
+            (1024.0, [1e-15, 2e-5, 6e-5, 4e-4]),
+            (500.0, [2e-6, 2e-5, 6e-5, 4e-4]),
+            (256.0, [2e-5, 1e-4, 3e-4, 8e-4]),
+        ] {
+            let n = (20.0 * rate) as usize;
+            let time_s: Vec<f64> = (0..n).map(|i| i as f64 / rate).collect();
+            let disp_m: Vec<f64> = time_s.iter().map(|&t| exact(t)[0]).collect();
+            let rec = Record {
+                time_s,
+                disp_m,
+                f_ref_hz: 50.0,
+                signal: Signal::Reference,
+            };
+            let r = rec.reference(1024.0);
+            let (mut err, mut mag) = ([0.0f64; 4], [0.0f64; 4]);
+            for k in 2048..(r.len() - 2048) {
+                let e = exact(k as f64 / 1024.0);
+                for (d, got) in [r.x[k], r.v[k], r.a[k], r.j[k]].into_iter().enumerate() {
+                    err[d] = err[d].max((got - e[d]).abs());
+                    mag[d] = mag[d].max(e[d].abs());
+                }
+            }
+            for d in 0..4 {
+                assert!(
+                    err[d] <= bound[d] * mag[d],
+                    "{rate} Hz, state {d}: {}",
+                    err[d] / mag[d]
+                );
+            }
+            assert_eq!(r.command, r.x);
+        }
+    }
+}

@@ -1,0 +1,749 @@
+//! Diagnosis: which physical effect is most likely missing from the model.
+//!
+//! Every candidate effect of the library is fitted to the campaign (the free parameters of the
+//! first of its `EffectInfo::stages`, from the best point of the stage's start scan where it has
+//! one; the candidates in parallel; the leading ones whose fits stop at [`MAX_ITER`] go on,
+//! [`polish_leaders`]) and ranked by the Bayesian
+//! information criterion: ΔBIC = χ²_baseline − χ²_candidate − p·ln n (n the features' degrees of
+//! freedom, p parameters added). With the features scaled by their noise, χ² of a right model is
+//! ≈ n − p, so:
+//! - a candidate is *significant* when ΔBIC > [`SIGNIFICANT_BIC`] (Kass & Raftery's "very strong"
+//!   evidence; fitting p parameters to noise alone lowers χ² by about p, far below p·ln n) and its
+//!   fit does not leave a larger residual than the baseline's (the χ² weighs each channel by its
+//!   noise, the residual by its signal, so a fit may trade one channel against another; a
+//!   candidate that makes what the user sees worse is never called significant), and it explains
+//!   at least [`EXPLAINS_SOME`] of the residual beyond noise. Significant candidates rank first,
+//!   each group by ΔBIC;
+//! - the share of the residual it *explains* is 1 − (R_c² − N²)/(R_b² − N²), with R the residual
+//!   rms over every test and channel (what a user sees fall) of the baseline and the candidate and
+//!   N the noise floor of that rms: the part of the baseline's residual beyond noise that the
+//!   candidate removes. (A χ² share would overstate a candidate that mimics the few features of
+//!   largest signal-to-noise ratio while leaving the residual as it was.)
+//!
+//! **Several missing effects: forward selection with refit.** When the best candidate is
+//! significant and the χ² it leaves is still above what noise leaves by more than any further
+//! parameter's BIC penalty, every remaining candidate is fitted again *on top of it*, its
+//! parameters freed together with the chosen ones' (starting from their estimates); the best is
+//! added if its ΔBIC over the chosen set is significant and it removes at least [`ADDS_ENOUGH`]
+//! of the residual beyond noise the set leaves, and so on, up to [`MAX_EFFECTS`]. The verdict
+//! names "A + B" and the share each adds when together they explain at least
+//! [`EXPLAINS_TOGETHER`] of the residual beyond noise; a best candidate that
+//! explains less than [`EXPLAINS_ENOUGH`] (alone or with those added) is reported as such: the
+//! missing effect is probably not in the library, and the starting model's residual mapped onto
+//! the plant's states ([`super::statemap`]) names the state and term it follows. A named set that
+//! leaves more than [`NOISE_FACTOR`] times the noise floor is said to, with the state and term of
+//! what it leaves.
+
+use super::fit::{self, FeatureInfo, Free, Problem};
+use super::measured::AlignedTest;
+use super::statemap::StateMap;
+use rayon::prelude::*;
+use vshake_kernel::params::{EffectId, ModelParams};
+
+/// The family of the sensors' effects: a verdict naming it says which channel's measurement.
+pub const MEASUREMENT_FAMILY: &str = "measurement chain";
+
+/// ΔBIC above which a candidate counts as significant.
+pub const SIGNIFICANT_BIC: f64 = 10.0;
+/// Share of the residual beyond noise a candidate must explain to be called significant at all
+/// [chosen: 1 %. Over thousands of features a flexible effect lowers χ² by more than the BIC
+/// penalty by absorbing a sliver of the misfit (a numerical floor, an unmodelled detail); a
+/// candidate that removes under a hundredth of what the user sees is not evidence of anything.]
+pub const EXPLAINS_SOME: f64 = 0.01;
+/// Share of the residual beyond noise a candidate must explain to be named the missing effect.
+pub const EXPLAINS_ENOUGH: f64 = 0.5;
+/// Share of the residual beyond noise several effects must explain together to be named
+/// together: more than one effect is a claim that the library holds the whole of what is missing,
+/// so they must take the residual (nearly) to the noise; otherwise two wrong effects could each
+/// mimic part of an effect the library does not have.
+pub const EXPLAINS_TOGETHER: f64 = 0.9;
+/// Leading candidates whose fits go on when they stop at [`MAX_ITER`] ([`polish_leaders`]).
+pub const POLISHED: usize = 3;
+/// Iterations of each candidate's fit.
+pub const MAX_ITER: usize = 25;
+/// Most effects forward selection names together.
+pub const MAX_EFFECTS: usize = 3;
+/// Share of the residual beyond noise left by the effects chosen so far that a further effect
+/// must remove to be added. [chosen: a quarter. When the library's closest form of an effect is
+/// only close (a flow-gain curve standing in for a sharp dead band), what it leaves is large in
+/// χ² over thousands of features, and other flexible effects each take a sliver of it with a
+/// significant ΔBIC; an effect that removes a sliver is not a second missing effect.]
+pub const ADDS_ENOUGH: f64 = 0.25;
+/// A chosen set of effects is "right to the noise" when it leaves a residual rms within this
+/// factor of the noise floor. [chosen: 1.5, the criterion for a fit that is done.]
+pub const NOISE_FACTOR: f64 = 1.5;
+
+/// One fitted candidate.
+pub struct Candidate {
+    pub effect: EffectId,
+    pub family: &'static str,
+    pub free: Vec<Free>,
+    pub fit: Result<fit::FitResult, fit::FitError>,
+    pub delta_bic: f64,
+    pub explained: f64,
+    /// Whether the fit leaves a campaign residual rms no larger than the baseline's.
+    pub lowers_residual: bool,
+}
+
+impl Step {
+    /// What it adds.
+    pub fn part(&self) -> Part {
+        Part {
+            effect: self.effect,
+            stage: self.stage,
+        }
+    }
+}
+
+impl Candidate {
+    /// What it names: its effect.
+    pub fn part(&self) -> Part {
+        Part {
+            effect: self.effect,
+            stage: 0,
+        }
+    }
+
+    /// ΔBIC above [`SIGNIFICANT_BIC`], a residual no larger than the baseline's, and at least
+    /// [`EXPLAINS_SOME`] of the residual beyond noise explained.
+    pub fn significant(&self) -> bool {
+        self.delta_bic > SIGNIFICANT_BIC && self.lowers_residual && self.explained >= EXPLAINS_SOME
+    }
+    pub fn chi2(&self) -> f64 {
+        self.fit.as_ref().map_or(f64::INFINITY, |f| f.chi2_after())
+    }
+}
+
+/// A part of the model a diagnosis names: an effect (stage 0), or a further stage of one (a
+/// specimen's second mode, [`vshake_kernel::effects::EffectInfo::stages`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Part {
+    pub effect: EffectId,
+    pub stage: usize,
+}
+
+impl std::fmt::Display for Part {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.stage {
+            0 => write!(f, "{}", self.effect),
+            k => write!(
+                f,
+                "{}'s {}",
+                self.effect,
+                self.effect.info().stages[k].label
+            ),
+        }
+    }
+}
+
+/// One effect (or a further stage of a chosen one) added by forward selection on top of those
+/// chosen before it.
+pub struct Step {
+    pub effect: EffectId,
+    /// The stage of the effect it adds (0: the effect itself).
+    pub stage: usize,
+    pub family: &'static str,
+    /// The joint fit: the parameters of every chosen effect so far, this one's last.
+    pub free: Vec<Free>,
+    pub fit: fit::FitResult,
+    /// ΔBIC over the effects chosen before it.
+    pub delta_bic: f64,
+    /// Share of the baseline's residual beyond noise that the chosen effects explain together,
+    /// this one included.
+    pub explained: f64,
+}
+
+/// The outcome of a diagnosis.
+pub struct Diagnosis {
+    pub baseline: fit::Eval,
+    /// Degrees of freedom of the features: the χ² of a model right to the noise.
+    pub n: usize,
+    /// Noise floor of the residual rms.
+    pub noise_rms: f64,
+    /// Noise floor of each channel's residual rms (acceleration, displacement, force).
+    pub channel_noise: [f64; 3],
+    /// Candidates, best first.
+    pub candidates: Vec<Candidate>,
+    /// Effects forward selection added on top of the best candidate, in order.
+    pub more: Vec<Step>,
+    pub features: Vec<FeatureInfo>,
+    /// Each test's sample rate, Hz: a record's evidence is split by frequency band.
+    pub rates_hz: Vec<f64>,
+    /// The starting model's residual mapped onto the plant's states, when the caller made it
+    /// ([`super::statemap`]): a verdict of "not in the library" then names the state and term
+    /// the residual follows.
+    pub state_map: Option<super::statemap::StateMap>,
+    /// The residual the named effects leave, mapped likewise (when the caller made it): a
+    /// verdict whose effects do not take the residual to the noise names what is left.
+    pub state_map_after: Option<super::statemap::StateMap>,
+}
+
+/// What the diagnosis concludes.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Verdict {
+    /// The baseline already fits to the noise, or no candidate lowers the misfit significantly.
+    NothingSignificant,
+    /// The best candidate (and those forward selection added to it) is significant and explains
+    /// most of the residual.
+    Missing { effects: Vec<Part>, explained: f64 },
+    /// The best candidate (with those added to it) is significant but explains little of the
+    /// residual.
+    Unexplained { effects: Vec<Part>, explained: f64 },
+}
+
+impl Diagnosis {
+    pub fn verdict(&self) -> Verdict {
+        match self.candidates.first() {
+            Some(c) if c.significant() => {
+                let effects: Vec<Part> = std::iter::once(c.part())
+                    .chain(self.more.iter().map(Step::part))
+                    .collect();
+                let explained = self.more.last().map_or(c.explained, |s| s.explained);
+                if self.more.is_empty() || explained >= EXPLAINS_TOGETHER {
+                    if explained >= EXPLAINS_ENOUGH {
+                        Verdict::Missing { effects, explained }
+                    } else {
+                        Verdict::Unexplained { effects, explained }
+                    }
+                } else if c.explained >= EXPLAINS_ENOUGH {
+                    // The effects added to it do not close the gap to the noise: name the first only.
+                    Verdict::Missing {
+                        effects: vec![c.part()],
+                        explained: c.explained,
+                    }
+                } else {
+                    Verdict::Unexplained { effects, explained }
+                }
+            }
+            _ => Verdict::NothingSignificant,
+        }
+    }
+
+    /// The parameters and the joint fit of the effects the verdict names (none when it names
+    /// none).
+    pub fn named_fit(&self) -> Option<(&[Free], &fit::FitResult)> {
+        let n = match self.verdict() {
+            Verdict::Missing { effects, .. } | Verdict::Unexplained { effects, .. } => {
+                effects.len()
+            }
+            Verdict::NothingSignificant => return None,
+        };
+        match n {
+            0 => None,
+            1 => self
+                .candidates
+                .first()
+                .and_then(|c| c.fit.as_ref().ok().map(|f| (c.free.as_slice(), f))),
+            n => self.more.get(n - 2).map(|s| (s.free.as_slice(), &s.fit)),
+        }
+    }
+
+    /// ", but it leaves a residual 3.9× the noise floor: …" when the named effects do not take the
+    /// residual to within [`NOISE_FACTOR`] of the noise; empty when they do.
+    fn short_of_noise(&self) -> String {
+        let Some((_, f)) = self.named_fit() else {
+            return String::new();
+        };
+        let ratio = f.after.residual_rms() / self.noise_rms;
+        if !(ratio > NOISE_FACTOR) {
+            return String::new();
+        }
+        let left = self
+            .state_map_after
+            .as_ref()
+            .and_then(|m| m.sentence())
+            .map_or(String::new(), |s| format!("; in what is left, {s}"));
+        format!(", but leaves a residual {ratio:.1}x the noise floor: its form is probably not quite the plant's{left}")
+    }
+
+    /// The channels whose starting residual exceeds [`NOISE_FACTOR`] times their noise floor.
+    pub(crate) fn channels_off(&self) -> Vec<usize> {
+        (0..3)
+            .filter(|&c| self.baseline.channel_rms(c) > NOISE_FACTOR * self.channel_noise[c])
+            .collect()
+    }
+
+    /// "; the residual sits in the acceleration channel alone …" when the named effects are the
+    /// measurement chain and one channel alone misfits; empty otherwise.
+    fn measurement_note(&self, effects: &[Part]) -> String {
+        let off = self.channels_off();
+        let chain = effects
+            .iter()
+            .all(|p| p.effect.info().family == MEASUREMENT_FAMILY);
+        match off.as_slice() {
+            [c] if chain => {
+                let ch = ["acceleration", "displacement", "force"][*c];
+                format!("; the residual sits in the {ch} channel alone (the others agree with the model to the noise): it is the {ch} channel's measurement, not the plant")
+            }
+            _ => String::new(),
+        }
+    }
+
+    /// The verdict in plain words.
+    pub fn summary(&self) -> String {
+        let best = self.candidates.first();
+        match self.verdict() {
+            Verdict::NothingSignificant => match best {
+                Some(c) if c.delta_bic > SIGNIFICANT_BIC && !c.lowers_residual => format!(
+                    "no candidate explains the residual significantly (best: {}, dBIC = {:.1}, but its fit leaves a larger residual than the baseline's); no significant missing effect{}",
+                    c.effect,
+                    c.delta_bic,
+                    self.where_it_fails()
+                ),
+                Some(c) if c.delta_bic > SIGNIFICANT_BIC => format!(
+                    "no candidate explains the residual significantly (best: {}, dBIC = {:.1}, but it explains {:.1} % of the residual beyond noise, under {:.0} %); no significant missing effect{}",
+                    c.effect,
+                    c.delta_bic,
+                    100.0 * c.explained,
+                    100.0 * EXPLAINS_SOME,
+                    self.where_it_fails()
+                ),
+                _ => format!(
+                    "no candidate explains the residual significantly (best: {}, dBIC = {:.1} <= {SIGNIFICANT_BIC}); no significant missing effect{}",
+                    best.map_or("-", |c| c.effect.name()),
+                    best.map_or(f64::NAN, |c| c.delta_bic),
+                    self.where_it_fails()
+                ),
+            },
+            Verdict::Missing { effects, explained } if effects.len() == 1 => format!(
+                "most likely missing: {} ({}); it explains {:.0} % of the residual beyond noise (dBIC = {:.0}){}{}",
+                effects[0],
+                effects[0].effect.info().family,
+                100.0 * explained,
+                best.map_or(f64::NAN, |c| c.delta_bic),
+                self.short_of_noise(),
+                self.measurement_note(&effects)
+            ),
+            Verdict::Missing { effects, explained } => format!(
+                "most likely missing: {}; together they explain {:.0} % of the residual beyond noise ({}){}{}",
+                effects.iter().map(|e| match e.stage {
+                    0 => format!("{e} ({})", e.effect.info().family),
+                    _ => e.to_string(),
+                }).collect::<Vec<_>>().join(" + "),
+                100.0 * explained,
+                self.shares(),
+                self.short_of_noise(),
+                self.measurement_note(&effects)
+            ),
+            Verdict::Unexplained { effects, explained } if effects.len() == 1 => format!(
+                "the best candidate, {}, explains only {:.0} % of the residual beyond noise: the missing effect is probably not in the library{}",
+                effects[0],
+                100.0 * explained,
+                self.where_it_fails()
+            ),
+            Verdict::Unexplained { effects, explained } => format!(
+                "the best candidates together, {}, explain only {:.0} % of the residual beyond noise ({}): the missing effect is probably not in the library{}",
+                effects.iter().map(|e| e.to_string()).collect::<Vec<_>>().join(" + "),
+                100.0 * explained,
+                self.shares(),
+                self.where_it_fails()
+            ),
+        }
+    }
+
+    /// "; the missing valve flow follows sign(x) in spool opening (R² = 0.96): …", from the
+    /// state map; empty without one, when no state explains the residual, or when the starting
+    /// model is already within [`NOISE_FACTOR`] of the noise floor.
+    fn where_it_fails(&self) -> String {
+        if !(self.baseline.residual_rms() > NOISE_FACTOR * self.noise_rms) {
+            return String::new();
+        }
+        self.state_map
+            .as_ref()
+            .and_then(|m| m.sentence())
+            .map_or(String::new(), |s| format!("; {s}"))
+    }
+}
+
+impl Diagnosis {
+    /// What each chosen effect adds, in order: "A 60 %, + B 35 %" (shares of the residual beyond
+    /// noise, each over the effects before it).
+    fn shares(&self) -> String {
+        let Some(first) = self.candidates.first() else {
+            return String::new();
+        };
+        let mut prev = first.explained;
+        let mut parts = vec![format!("{} {:.0} %", first.effect, 100.0 * prev)];
+        for s in &self.more {
+            parts.push(format!(
+                "+ {} {:.0} %",
+                s.part(),
+                100.0 * (s.explained - prev)
+            ));
+            prev = s.explained;
+        }
+        parts.join(", ")
+    }
+}
+
+impl Diagnosis {
+    /// Maps the starting model's residual onto the plant's states, and the residual the named
+    /// effects leave (both stay None when a test's model run fails: the diagnosis reports that
+    /// itself).
+    pub fn map_states(&mut self, aligned: &[AlignedTest]) {
+        self.state_map = state_map(aligned);
+        if let Some((free, fit)) = self.named_fit() {
+            let fitted: Vec<AlignedTest> = aligned
+                .iter()
+                .map(|t| AlignedTest {
+                    model: fit::apply_estimates(&t.model, free, &fit.estimate),
+                    ..t.clone()
+                })
+                .collect();
+            self.state_map_after = state_map(&fitted);
+        }
+    }
+}
+
+/// The residual of `aligned` mapped onto the plant's states (None when a model run fails).
+fn state_map(aligned: &[AlignedTest]) -> Option<StateMap> {
+    let solver = Default::default();
+    let compared: Result<Vec<_>, String> = aligned
+        .par_iter()
+        .map(|t| super::compare::compare_test(t, &solver))
+        .collect();
+    compared.ok().map(|c| super::statemap::map(&c))
+}
+
+/// The free parameters of `effect` at their values in `model`.
+pub fn free_of(effect: EffectId, model: &ModelParams) -> Vec<Free> {
+    free_of_stage(effect, 0, model)
+}
+
+/// The free parameters of stage `stage` of `effect` at their values in `model` (where that is 0,
+/// at the stage's start value, if it has one).
+pub(crate) fn free_of_stage(effect: EffectId, stage: usize, model: &ModelParams) -> Vec<Free> {
+    let s = &effect.info().stages[stage];
+    s.free
+        .iter()
+        .map(|n| {
+            let info = ModelParams::lookup(&format!("{effect}.{n}"))
+                .expect("default free parameters are registered");
+            let v = (info.get)(model);
+            let start = s.start.iter().find(|(name, _)| name == n).map(|x| x.1);
+            Free::new(info, start.filter(|_| v == 0.0).unwrap_or(v))
+        })
+        .collect()
+}
+
+/// `free` with the scanned start of stage `stage` of `effect` (see [`fit::scanned`]).
+fn scanned(problem: &Problem, free: &[Free], effect: EffectId, stage: usize) -> Vec<Free> {
+    let scan = effect.info().stages[stage].scan;
+    let path = scan.map(|(name, _)| format!("{effect}.{name}"));
+    fit::scanned(problem, free, path.as_deref().zip(scan.map(|(_, v)| v)))
+}
+
+/// How a candidate's fit is scored against the baseline (χ², residual rms, its noise floor²).
+struct Scoring {
+    chi2_b: f64,
+    rb: f64,
+    n2: f64,
+    ln_n: f64,
+}
+
+impl Scoring {
+    /// The candidate `effect` with its parameters `free` and their fit: its ΔBIC, the share of
+    /// the residual beyond noise it explains, and whether it lowers the residual.
+    fn candidate(
+        &self,
+        effect: EffectId,
+        free: Vec<Free>,
+        fit: Result<fit::FitResult, fit::FitError>,
+    ) -> Candidate {
+        let p = free.len() as f64;
+        let lowers_residual = fit
+            .as_ref()
+            .is_ok_and(|f| f.after.residual_rms() <= self.rb);
+        let (delta_bic, explained) = match &fit {
+            Ok(f) => {
+                let rc = f.after.residual_rms();
+                let excess = self.rb * self.rb - self.n2;
+                // A candidate that fits the features worse than the baseline explains nothing.
+                let e = if excess > 0.0 && f.chi2_after() < self.chi2_b {
+                    (1.0 - (rc * rc - self.n2) / excess).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+                (self.chi2_b - f.chi2_after() - p * self.ln_n, e)
+            }
+            Err(_) => (f64::NEG_INFINITY, 0.0),
+        };
+        Candidate {
+            effect,
+            family: effect.info().family,
+            free,
+            fit,
+            delta_bic,
+            explained,
+            lowers_residual,
+        }
+    }
+}
+
+/// Significant candidates first, each group by ΔBIC.
+fn rank(out: &mut [Candidate]) {
+    out.sort_by(|a, b| {
+        b.significant()
+            .cmp(&a.significant())
+            .then(b.delta_bic.total_cmp(&a.delta_bic))
+    });
+}
+
+/// The leading [`POLISHED`] significant candidates whose fits stopped at [`MAX_ITER`] go on from
+/// their estimates (up to 4 × [`MAX_ITER`] more), and the candidates are ranked again: two
+/// effects of one family may both explain nearly all, and the one whose parameters are
+/// correlated (a dead volume and an air fraction) converges slowly; stopping it early would rank
+/// the other first.
+fn polish_leaders(problem: &Problem, out: &mut [Candidate], baseline: &fit::Eval, s: &Scoring) {
+    let slow: Vec<usize> = (0..out.len().min(POLISHED))
+        .filter(|&i| out[i].significant() && out[i].fit.as_ref().is_ok_and(|f| !f.converged))
+        .collect();
+    let again: Vec<(usize, Candidate)> = slow
+        .par_iter()
+        .filter_map(|&i| {
+            let c = &out[i];
+            let f = c.fit.as_ref().ok()?;
+            let restart = at_estimates(&c.free, &f.estimate);
+            let r = fit::fit_from(problem, &restart, 4 * MAX_ITER, baseline.clone()).ok()?;
+            (r.chi2_after() < f.chi2_after()).then(|| (i, s.candidate(c.effect, restart, Ok(r))))
+        })
+        .collect();
+    for (i, c) in again {
+        out[i] = c;
+    }
+    rank(out);
+}
+
+/// `free` (`study fit`'s parameters) started as a diagnosis starts them: for every stage of an
+/// effect one of whose parameters is free, in order, the stage's start values where the
+/// parameter is 0 (a second mode's mass: at 0 the mode is absent and its frequency has no effect)
+/// and then the stage's start scan (a resonance's frequency).
+pub fn scan_starts(problem: &Problem, free: &[Free]) -> Vec<Free> {
+    let mut out = free.to_vec();
+    for effect in EffectId::ALL {
+        for (k, stage) in effect.info().stages.iter().enumerate() {
+            let path = |n: &str| format!("{effect}.{n}");
+            let touched = stage
+                .free
+                .iter()
+                .any(|n| out.iter().any(|f| f.info.path() == path(n)));
+            if !touched {
+                continue;
+            }
+            for f in out.iter_mut() {
+                let start = stage.start.iter().find(|(n, _)| f.info.path() == path(n));
+                if let (Some(&(_, v)), true) = (start, f.start == 0.0) {
+                    *f = Free::new(f.info, v);
+                }
+            }
+            out = scanned(problem, &out, effect, k);
+        }
+    }
+    out
+}
+
+/// Fits every candidate and ranks them.
+pub fn diagnose(problem: &Problem, candidates: &[EffectId]) -> Diagnosis {
+    let baseline = problem.evaluate(1, &|_, m| m.clone()).remove(0);
+    let n = problem.dof().round() as usize;
+    let chi2_b = baseline.chi2();
+    let noise = problem.noise_rms();
+    let (rb, n2) = (baseline.residual_rms(), noise * noise);
+    let model0 = &problem.tests[0].model;
+    let score = Scoring {
+        chi2_b,
+        rb,
+        n2,
+        ln_n: (n as f64).ln(),
+    };
+    let mut out: Vec<Candidate> = candidates
+        .par_iter()
+        .map(|&effect| {
+            let free = scanned(problem, &free_of(effect, model0), effect, 0);
+            let fit = fit::fit_from(problem, &free, MAX_ITER, baseline.clone());
+            score.candidate(effect, free, fit)
+        })
+        .collect();
+    rank(&mut out);
+    polish_leaders(problem, &mut out, &baseline, &score);
+    let more = forward_selection(problem, &out, n, (rb, n2));
+    Diagnosis {
+        baseline,
+        n,
+        noise_rms: noise,
+        channel_noise: std::array::from_fn(|c| problem.channel_noise_rms(c)),
+        candidates: out,
+        more,
+        features: problem.features(),
+        rates_hz: problem.tests.iter().map(|t| t.samples.rate_hz).collect(),
+        state_map: None,
+        state_map_after: None,
+    }
+}
+
+/// Forward selection on top of the best candidate (see the module docs): the effects it adds.
+/// `baseline_rms` is the baseline's residual rms and the square of its noise floor.
+fn forward_selection(
+    problem: &Problem,
+    ranked: &[Candidate],
+    n: usize,
+    baseline_rms: (f64, f64),
+) -> Vec<Step> {
+    let (rb, n2) = baseline_rms;
+    let ln_n = (n as f64).ln();
+    let excess = rb * rb - n2;
+    let share = |e: &fit::Eval| {
+        if excess > 0.0 {
+            (1.0 - (e.residual_rms().powi(2) - n2) / excess).clamp(0.0, 1.0)
+        } else {
+            0.0
+        }
+    };
+    let Some(best) = ranked.first().filter(|c| c.significant()) else {
+        return Vec::new();
+    };
+    let Ok(best_fit) = &best.fit else {
+        return Vec::new();
+    };
+    let mut chosen: Vec<Part> = vec![best.part()];
+    // The chosen parameters at their estimates, and the evaluation they leave.
+    let mut free = at_estimates(&best.free, &best_fit.estimate);
+    let mut at = best_fit.after.clone();
+    let mut steps = Vec::new();
+    while chosen.len() < MAX_EFFECTS {
+        // Room left: even a perfect further effect of one parameter must beat its penalty, and
+        // the χ² left must exceed what noise leaves by more than its own spread (a χ² of n
+        // degrees of freedom has standard deviation √(2n); [chosen: three of them]).
+        if at.chi2() - n as f64 <= (ln_n + SIGNIFICANT_BIC).max(3.0 * (2.0 * n as f64).sqrt()) {
+            break;
+        }
+        let Some((part, f, r, dbic)) =
+            best_addition(problem, ranked, (&chosen, &free, &at), (ln_n, n2))
+        else {
+            break;
+        };
+        let (f, r, dbic) = polished(problem, f, r, dbic);
+        free = at_estimates(&f, &r.estimate);
+        at = r.after.clone();
+        chosen.push(part);
+        steps.push(Step {
+            effect: part.effect,
+            stage: part.stage,
+            family: part.effect.info().family,
+            free: f,
+            explained: share(&r.after),
+            fit: r,
+            delta_bic: dbic,
+        });
+    }
+    steps
+}
+
+/// The parameters `free` at the values `estimate`.
+fn at_estimates(free: &[Free], estimate: &[f64]) -> Vec<Free> {
+    free.iter()
+        .zip(estimate)
+        .map(|(f, &v)| Free::new(f.info, v))
+        .collect()
+}
+
+/// What forward selection may add to the `chosen` parts: every other candidate that could be
+/// fitted, and the next stage of each chosen effect that has one.
+fn additions(ranked: &[Candidate], chosen: &[Part]) -> Vec<Part> {
+    let has = |e: EffectId| chosen.iter().any(|p| p.effect == e);
+    let mut out: Vec<Part> = ranked
+        .iter()
+        .filter(|c| !has(c.effect) && c.fit.is_ok())
+        .map(Candidate::part)
+        .collect();
+    for p in chosen {
+        let next = p.stage + 1;
+        let last = !chosen
+            .iter()
+            .any(|q| q.effect == p.effect && q.stage > p.stage);
+        if last && next < p.effect.info().stages.len() {
+            out.push(Part {
+                effect: p.effect,
+                stage: next,
+            });
+        }
+    }
+    out
+}
+
+/// The candidate that adds most to the chosen parts (their parameters `free`, leaving the
+/// evaluation `at`): what it adds, the joint parameters, their fit and its ΔBIC; None where no
+/// addition is significant, lowers the residual and removes enough of what is left of it.
+fn best_addition(
+    problem: &Problem,
+    ranked: &[Candidate],
+    (chosen, free, at): (&[Part], &[Free], &fit::Eval),
+    (ln_n, n2): (f64, f64),
+) -> Option<(Part, Vec<Free>, fit::FitResult, f64)> {
+    let model0 = &problem.tests[0].model;
+    let rest = additions(ranked, chosen);
+    let tried: Vec<(Part, Vec<Free>, Result<fit::FitResult, fit::FitError>)> = rest
+        .par_iter()
+        .map(|&part| {
+            let mut f = free.to_vec();
+            f.extend(free_of_stage(part.effect, part.stage, model0));
+            let f = scanned(problem, &f, part.effect, part.stage);
+            let r = fit::fit_from(problem, &f, MAX_ITER, at.clone());
+            (part, f, r)
+        })
+        .collect();
+    let chi2_at = at.chi2();
+    let rms_at = at.residual_rms();
+    let excess_at = rms_at * rms_at - n2;
+    tried
+        .into_iter()
+        .filter_map(|(part, f, r)| {
+            let r = r.ok()?;
+            let p_new = (f.len() - free.len()) as f64;
+            let dbic = chi2_at - r.chi2_after() - p_new * ln_n;
+            let removes = (rms_at * rms_at - r.after.residual_rms().powi(2)) / excess_at;
+            (dbic > SIGNIFICANT_BIC && r.after.residual_rms() <= rms_at && removes >= ADDS_ENOUGH)
+                .then_some((part, f, r, dbic))
+        })
+        .max_by(|a, b| a.3.total_cmp(&b.3))
+}
+
+/// A joint fit `r` (of the parameters `f`, with ΔBIC `dbic`) that did not converge, refitted
+/// from its estimates with more iterations where that lowers its χ²: the parameters (started
+/// where the fit returned was started: its scaled coordinates are relative to them), the fit
+/// and the ΔBIC it then has.
+fn polished(
+    problem: &Problem,
+    mut f: Vec<Free>,
+    mut r: fit::FitResult,
+    mut dbic: f64,
+) -> (Vec<Free>, fit::FitResult, f64) {
+    if !r.converged {
+        // The chosen set's parameters started where they compensated for the missing effect:
+        // the joint fit may need more iterations than a candidate's screening fit.
+        let restart = at_estimates(&f, &r.estimate);
+        if let Ok(polished) = fit::fit_from(problem, &restart, 4 * MAX_ITER, r.after.clone()) {
+            if polished.chi2_after() <= r.chi2_after() {
+                dbic += r.chi2_after() - polished.chi2_after();
+                r = polished;
+                f = restart;
+            }
+        }
+    }
+    (f, r, dbic)
+}
+
+/// The feature groups (test, harmonic) whose χ² a candidate lowers most: (test, harmonic, χ²
+/// baseline, χ² candidate), largest reduction first.
+pub fn evidence(d: &Diagnosis, c: &Candidate, top: usize) -> Vec<(usize, usize, f64, f64)> {
+    let Ok(f) = &c.fit else { return Vec::new() };
+    let b = fit::grouped(&d.features, &d.rates_hz, &d.baseline.r);
+    let a = fit::grouped(&d.features, &d.rates_hz, &f.after.r);
+    let mut v: Vec<(usize, usize, f64, f64)> = b
+        .iter()
+        .map(|(&(t, k), &x)| (t, k, x, a.get(&(t, k)).copied().unwrap_or(f64::NAN)))
+        .collect();
+    v.sort_by(|x, y| (y.2 - y.3).total_cmp(&(x.2 - x.3)));
+    v.truncate(top);
+    v
+}

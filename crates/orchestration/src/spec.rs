@@ -1,0 +1,883 @@
+//! Run specifications read from TOML: model overrides, one excitation, solver settings.
+//!
+//! ```toml
+//! [model.servovalve]          # any parameter of `study params`, as [model.<component>] <name> = value
+//! kv = 0.018551
+//! law = "orifice"             # or "linear" (the published counter-example)
+//!
+//! [excitation]                # kind = "sine" | "record"
+//! kind = "sine"
+//! freq_hz = 3.0
+//! amp_g = 1.73                # or amp_m (displacement amplitude)
+//! taper_s = 1.0               # half-cosine taper-in, default 1 s
+//! duration_s = 3.0            # default taper_s + 2 s
+//! window_cycles = 4           # default: every whole cycle after taper_s + 1 s
+//!
+//! [solver]
+//! substeps = 4                # RK4 steps per controller tick (default 4)
+//! ```
+//!
+//! A record excitation names a file and its columns instead:
+//! `{ kind = "record", file = "quake.csv", column = "ref_disp_m", time_column = "time_s", f_ref_hz = 50.0, scale = 1.0 }`
+//! (the path is relative to the spec file); `unit = "g"` or `"m/s2"` makes the column a ground
+//! acceleration, and a PEER `.AT2` file is one by itself (`pga_g` scales it to a peak,
+//! `highpass_hz` sets its processing into a displacement, kernel::ground). The earthquake-type
+//! kinds (docs/formats.md "Excitations"):
+//! - `{ kind = "stochastic", duration_s = 20, realisation = 0 }` (or `"per_sample"`), with any
+//!   `ground.*` parameter as a key (`f_g_hz = 3.0`);
+//! - `{ kind = "sweep", f0_hz = 0.5, f1_hz = 20, duration_s = 40, amp_g = 0.2, law = "log" }`;
+//! - `{ kind = "random", f_lo_hz = 0.5, f_hi_hz = 15, rms_g = 0.1, duration_s = 20 }`.
+//!
+//! Every problem is reported at once with its key path.
+
+use super::toml_fields::{Fields, InputError, Issues};
+use std::path::PathBuf;
+use vshake_kernel::excitation::{Signal, Sine};
+use vshake_kernel::ground::{Processing, Sweep};
+use vshake_kernel::params::{Component, ModelParams, ValveLaw};
+use vshake_kernel::simulate::Solver;
+
+/// The excitation of a run, as written in a spec (a record's file is not read yet).
+#[derive(Debug, Clone, PartialEq)]
+pub enum ExcitationSpec {
+    Sine {
+        sine: Sine,
+        /// The amplitude as the user gave it, in g, if it was given in g.
+        amp_g: Option<f64>,
+    },
+    Record {
+        file: PathBuf,
+        column: String,
+        time_column: String,
+        f_ref_hz: f64,
+        scale: f64,
+        /// What the column holds (a `.AT2` file: acceleration in g).
+        unit: RecordUnit,
+        /// Scale an acceleration record to this peak, g (instead of `scale`).
+        pga_g: Option<f64>,
+        /// How an acceleration becomes a displacement.
+        processing: Processing,
+        /// What the record is: the reference the controller tracked, or a command into its
+        /// reference generator (docs/model.md §4).
+        signal: Signal,
+    },
+    /// A Kanai–Tajimi / Clough–Penzien ground motion (kernel::ground), its parameters the
+    /// model's `ground.*` with `ground` overriding them.
+    Stochastic {
+        duration_s: f64,
+        realisation: Realisation,
+        seed: Option<u64>,
+        ground: Vec<(&'static str, f64)>,
+        processing: Processing,
+        f_ref_hz: f64,
+    },
+    /// A sine sweep (kernel::ground::Sweep); `amp_g` as given, if it was.
+    Sweep { sweep: Sweep, amp_g: Option<f64> },
+    /// Band-limited random: a random-phase multisine (kernel::ground::Multisine).
+    Random {
+        f_lo_hz: f64,
+        f_hi_hz: f64,
+        rms_g: f64,
+        duration_s: f64,
+        taper_s: f64,
+        realisation: Realisation,
+        seed: Option<u64>,
+    },
+}
+
+/// What a record column holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RecordUnit {
+    /// Displacement, m (the default).
+    M,
+    /// Displacement, mm.
+    Mm,
+    /// Ground acceleration, g (9.80665 m/s²).
+    G,
+    /// Ground acceleration, m/s².
+    Mps2,
+}
+
+impl RecordUnit {
+    pub const NAMES: [&'static str; 4] = ["m", "mm", "g", "m/s2"];
+
+    pub fn parse(s: &str) -> Option<RecordUnit> {
+        Some(match s {
+            "m" => RecordUnit::M,
+            "mm" => RecordUnit::Mm,
+            "g" => RecordUnit::G,
+            "m/s2" | "m/s^2" | "m/s²" => RecordUnit::Mps2,
+            _ => return None,
+        })
+    }
+    pub fn name(self) -> &'static str {
+        match self {
+            RecordUnit::M => "m",
+            RecordUnit::Mm => "mm",
+            RecordUnit::G => "g",
+            RecordUnit::Mps2 => "m/s2",
+        }
+    }
+    /// The factor to SI (m or m/s²).
+    pub fn to_si(self) -> f64 {
+        match self {
+            RecordUnit::M | RecordUnit::Mps2 => 1.0,
+            RecordUnit::Mm => 1e-3,
+            RecordUnit::G => vshake_kernel::params::G,
+        }
+    }
+    pub(crate) fn is_acceleration(self) -> bool {
+        matches!(self, RecordUnit::G | RecordUnit::Mps2)
+    }
+}
+
+/// Which noise realisation a random excitation uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Realisation {
+    /// The same realisation for every sample: stream k of the excitation's seed.
+    Fixed(u64),
+    /// One per sample of a study: stream = the sample id (a run outside a study uses stream 0).
+    PerSample,
+}
+
+impl Realisation {
+    /// The noise stream of sample `sample`.
+    pub fn stream(self, sample: u64) -> u64 {
+        match self {
+            Realisation::Fixed(k) => k,
+            Realisation::PerSample => sample,
+        }
+    }
+}
+
+impl ExcitationSpec {
+    /// One-line description for printouts.
+    /// The excitation in a few words, with its frequency and amplitude in g (NaN for a record).
+    pub fn label(&self) -> (String, f64, f64) {
+        match self {
+            ExcitationSpec::Sine { sine, amp_g } => {
+                let g = amp_g.unwrap_or(
+                    sine.amp_m * (2.0 * std::f64::consts::PI * sine.freq_hz).powi(2)
+                        / vshake_kernel::params::G,
+                );
+                (
+                    format!("sine {} Hz {:.2} g", sine.freq_hz, g),
+                    sine.freq_hz,
+                    g,
+                )
+            }
+            ExcitationSpec::Record { column, .. } => {
+                (format!("record {column}"), f64::NAN, f64::NAN)
+            }
+            ExcitationSpec::Stochastic { .. } => {
+                ("stochastic ground motion".into(), f64::NAN, f64::NAN)
+            }
+            ExcitationSpec::Sweep { sweep, .. } => (
+                format!("sweep {}-{} Hz", sweep.f0_hz, sweep.f1_hz),
+                f64::NAN,
+                f64::NAN,
+            ),
+            ExcitationSpec::Random {
+                f_lo_hz, f_hi_hz, ..
+            } => (format!("random {f_lo_hz}-{f_hi_hz} Hz"), f64::NAN, f64::NAN),
+        }
+    }
+
+    /// Whether it is a sine (the harmonic metrics) rather than an earthquake-type motion (the
+    /// spectral ones).
+    pub fn is_sine(&self) -> bool {
+        matches!(self, ExcitationSpec::Sine { .. })
+    }
+
+    /// Whether its reference depends on the sample: a realisation per sample, or a stochastic
+    /// motion whose `ground.*` parameters the study varies (`varied` says which paths vary).
+    pub fn per_sample(&self, varied: impl Fn(&str) -> bool) -> bool {
+        match self {
+            ExcitationSpec::Stochastic {
+                realisation,
+                ground,
+                ..
+            } => {
+                *realisation == Realisation::PerSample
+                    || vshake_kernel::ground::GroundParams::PARAMS
+                        .iter()
+                        .any(|p| varied(&p.path()) && !ground.iter().any(|(n, _)| *n == p.name))
+            }
+            ExcitationSpec::Random { realisation, .. } => *realisation == Realisation::PerSample,
+            _ => false,
+        }
+    }
+
+    pub fn describe(&self) -> String {
+        match self {
+            ExcitationSpec::Sine { sine, amp_g } => {
+                let amp = match amp_g {
+                    Some(g) => format!("{g} g ({:.4} m)", sine.amp_m),
+                    None => format!("{} m", sine.amp_m),
+                };
+                format!(
+                    "sine {} Hz, {amp}, taper {} s, {} s run, window {} cycles",
+                    sine.freq_hz,
+                    sine.taper_s,
+                    sine.duration_s,
+                    sine.window_cycles.unwrap_or_else(|| sine.default_cycles())
+                )
+            }
+            ExcitationSpec::Record {
+                file,
+                column,
+                f_ref_hz,
+                unit,
+                signal,
+                ..
+            } if !unit.is_acceleration() => {
+                format!(
+                    "record {}:{column}, {}",
+                    file.display(),
+                    filter_words(*signal, *f_ref_hz)
+                )
+            }
+            ExcitationSpec::Record {
+                file,
+                column,
+                f_ref_hz,
+                unit,
+                pga_g,
+                processing,
+                signal,
+                ..
+            } => format!(
+                "acceleration record {}:{column} ({}){}, high-pass {} Hz, {}",
+                file.display(),
+                unit.name(),
+                pga_g.map_or(String::new(), |g| format!(" scaled to {g} g")),
+                processing.highpass_hz,
+                filter_words(*signal, *f_ref_hz)
+            ),
+            ExcitationSpec::Stochastic {
+                duration_s,
+                realisation,
+                ..
+            } => format!("stochastic ground motion, {duration_s} s, realisation {realisation:?}"),
+            ExcitationSpec::Sweep { sweep, amp_g } => format!(
+                "{:?} sweep {}-{} Hz over {} s, {}",
+                sweep.law,
+                sweep.f0_hz,
+                sweep.f1_hz,
+                sweep.duration_s,
+                match (sweep.amp_m, amp_g) {
+                    (Some(x), _) => format!("{x} m"),
+                    (None, Some(g)) => format!("{g} g"),
+                    (None, None) => format!("{} m/s²", sweep.accel_mps2),
+                }
+            ),
+            ExcitationSpec::Random {
+                f_lo_hz,
+                f_hi_hz,
+                rms_g,
+                duration_s,
+                ..
+            } => {
+                format!("band-limited random {f_lo_hz}-{f_hi_hz} Hz, {rms_g} g rms, {duration_s} s")
+            }
+        }
+    }
+}
+
+/// A single-run specification (`study sim`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimSpec {
+    pub model: ModelParams,
+    pub excitation: ExcitationSpec,
+    pub solver: Solver,
+}
+
+/// Reads `[model.<component>]` overrides into `model` (defaults for everything not named).
+pub(crate) fn read_model(mut f: Fields<'_>, model: &mut ModelParams, issues: &mut Issues) {
+    for comp in ModelParams::components() {
+        let Some(mut t) = f.table(comp.name(), issues) else {
+            continue;
+        };
+        let names: Vec<&str> = ModelParams::registry()
+            .filter(|p| p.component == comp)
+            .map(|p| p.name)
+            .collect();
+        let mut expected = names.clone();
+        if let Some(e) = comp.effect() {
+            // An optional effect is on when its table is given (`enabled = false` switches it off).
+            expected.push("enabled");
+            *model.effects.get_mut(e) = t.bool("enabled", issues).unwrap_or(true);
+        }
+        if comp == Component::Servovalve {
+            expected.push("law");
+            if let Some(law) = t.str("law", issues) {
+                match law {
+                    "orifice" => model.valve_law = ValveLaw::Orifice,
+                    "linear" => model.valve_law = ValveLaw::Linear,
+                    other => issues.push(
+                        t.path_of("law"),
+                        format!("unknown valve law {other:?}; expected \"orifice\" or \"linear\""),
+                    ),
+                }
+            }
+        }
+        for name in &names {
+            if let Some(v) = t.f64(name, issues) {
+                let info = ModelParams::lookup(&format!("{comp}.{name}")).expect("registry name");
+                (info.set)(model, v);
+            }
+        }
+        t.finish(&expected, issues);
+    }
+    f.finish(
+        &ModelParams::components()
+            .map(Component::name)
+            .collect::<Vec<_>>(),
+        issues,
+    );
+}
+
+/// Validates a model, prefixing every path with `prefix` (e.g. `model`).
+pub(crate) fn validate_model(model: &ModelParams, prefix: &str, issues: &mut Issues) {
+    if let Err(list) = model.validate() {
+        for i in list {
+            let path = i
+                .path
+                .split(", ")
+                .map(|p| format!("{prefix}.{p}"))
+                .collect::<Vec<_>>()
+                .join(", ");
+            issues.push(path, i.message);
+        }
+    }
+}
+
+/// Reads an excitation table (`[excitation]` or an inline table of a campaign test).
+pub fn read_excitation(
+    f: Fields<'_>,
+    model: &ModelParams,
+    issues: &mut Issues,
+) -> Option<ExcitationSpec> {
+    read_excitation_in(f, model, issues, &[], None)
+}
+
+/// [`read_excitation`] for a table that also holds `extra` keys read by the caller.
+pub(crate) fn read_excitation_with_extra(
+    f: Fields<'_>,
+    model: &ModelParams,
+    issues: &mut Issues,
+    extra: &[&str],
+) -> Option<ExcitationSpec> {
+    read_excitation_in(f, model, issues, extra, None)
+}
+
+/// [`read_excitation`] with extra keys and, for a campaign test, its data file: a record
+/// without `file` is a column of it, and a record is by default the reference the controller
+/// tracked (`signal = "reference"`; elsewhere the default is `"command"`, docs/model.md §4).
+pub(crate) fn read_excitation_in(
+    mut f: Fields<'_>,
+    model: &ModelParams,
+    issues: &mut Issues,
+    extra: &[&str],
+    test_data: Option<&std::path::Path>,
+) -> Option<ExcitationSpec> {
+    let kind = f.str("kind", issues);
+    let (out, expected): (_, &[&str]) = match kind {
+        Some("sine") => (read_sine(&mut f, model, issues), &SINE_KEYS),
+        Some("record") => (read_record(&mut f, model, issues, test_data), &RECORD_KEYS),
+        Some("stochastic") => (
+            super::spec_quake::read_stochastic(&mut f, model, issues),
+            &super::spec_quake::STOCHASTIC_KEYS[..],
+        ),
+        Some("sweep") => (
+            super::spec_quake::read_sweep(&mut f, model, issues),
+            &super::spec_quake::SWEEP_KEYS[..],
+        ),
+        Some("random") => (
+            super::spec_quake::read_random(&mut f, model, issues),
+            &super::spec_quake::RANDOM_KEYS[..],
+        ),
+        Some(other) => {
+            issues.push(
+                f.path_of("kind"),
+                format!(
+                    "unknown excitation kind {other:?}; expected one of {}",
+                    KINDS.join(", ")
+                ),
+            );
+            // The other keys depend on the kind: none of them is judged.
+            return None;
+        }
+        None => {
+            issues.push(
+                f.path_of("kind"),
+                format!("missing (one of {})", KINDS.join(", ")),
+            );
+            return None;
+        }
+    };
+    f.finish(&[expected, extra].concat(), issues);
+    out
+}
+
+/// The excitation kinds.
+pub const KINDS: [&str; 5] = [
+    "\"sine\"",
+    "\"record\"",
+    "\"stochastic\"",
+    "\"sweep\"",
+    "\"random\"",
+];
+
+/// A sine: its frequency below Nyquist, its amplitude (in g or in metres) within the stroke,
+/// a taper shorter than the run, and an analysis window that fits.
+fn read_sine(
+    f: &mut Fields<'_>,
+    model: &ModelParams,
+    issues: &mut Issues,
+) -> Option<ExcitationSpec> {
+    let freq = f.f64("freq_hz", issues);
+    let amp_g = f.f64("amp_g", issues);
+    let amp_m = f.f64("amp_m", issues);
+    let taper = f.f64("taper_s", issues).unwrap_or(1.0);
+    let duration = f.f64("duration_s", issues).unwrap_or(taper + 2.0);
+    let cycles = f.int("window_cycles", issues);
+    let freq = sine_frequency(f, freq, 0.5 * model.controller.f_s, issues);
+    check_sine_timing(f, taper, duration, issues);
+    let x_amp = sine_amplitude(f, model, (amp_g, amp_m), freq, issues);
+    let cycles = sine_window_cycles(f, cycles, issues);
+    let (Some(freq), Some(x_amp)) = (freq, x_amp) else {
+        return None;
+    };
+    let mut sine = Sine {
+        freq_hz: freq,
+        amp_m: x_amp,
+        taper_s: taper,
+        duration_s: duration,
+        window_cycles: cycles,
+    };
+    let n = cycles.unwrap_or_else(|| sine.default_cycles());
+    sine.window_cycles = Some(n);
+    check_sine_window(f, n, freq, duration, issues);
+    Some(ExcitationSpec::Sine {
+        sine,
+        amp_g: amp_g.filter(|_| amp_m.is_none()),
+    })
+}
+
+/// A sine's frequency, Hz: given, and in (0, Nyquist).
+fn sine_frequency(f: &Fields<'_>, freq: Option<f64>, nyq: f64, issues: &mut Issues) -> Option<f64> {
+    match freq {
+        Some(x) if x > 0.0 && x < nyq => Some(x),
+        Some(x) => {
+            issues.push(
+                f.path_of("freq_hz"),
+                format!(
+                    "{x} Hz must be in (0, {nyq}) Hz (below the controller's Nyquist frequency)"
+                ),
+            );
+            None
+        }
+        None => {
+            issues.push(f.path_of("freq_hz"), "missing (sine frequency in Hz)");
+            None
+        }
+    }
+}
+
+/// A sine's taper is not negative, its duration in (0, 3600] s and longer than the taper.
+fn check_sine_timing(f: &Fields<'_>, taper: f64, duration: f64, issues: &mut Issues) {
+    if taper < 0.0 {
+        issues.push(
+            f.path_of("taper_s"),
+            format!("{taper} s must not be negative"),
+        );
+    }
+    if duration <= 0.0 || duration > 3600.0 {
+        issues.push(
+            f.path_of("duration_s"),
+            format!("{duration} s must be in (0, 3600] s"),
+        );
+    } else if taper >= duration {
+        issues.push(f.path_of("taper_s"), format!("{taper} s must be shorter than duration_s = {duration} s (the taper would fill the whole run)"));
+    }
+}
+
+/// A sine's `window_cycles`, where given: at least 1.
+fn sine_window_cycles(f: &Fields<'_>, cycles: Option<i64>, issues: &mut Issues) -> Option<u32> {
+    match cycles {
+        Some(c) if c >= 1 => Some(c as u32),
+        Some(c) => {
+            issues.push(
+                f.path_of("window_cycles"),
+                format!("{c} must be at least 1"),
+            );
+            None
+        }
+        None => None,
+    }
+}
+
+/// A sine's analysis window of `n` cycles is at least one cycle and fits in the run.
+fn check_sine_window(f: &Fields<'_>, n: u32, freq: f64, duration: f64, issues: &mut Issues) {
+    if n == 0 {
+        issues.push(f.path_of("duration_s"), format!("{duration} s leaves no whole cycle after taper_s + 1 s for the analysis window; lengthen the run or set window_cycles"));
+    } else if n as f64 / freq > duration + 1e-9 {
+        issues.push(
+            f.path_of("window_cycles"),
+            format!(
+                "{n} cycles ({:.3} s) do not fit in the {duration} s run",
+                n as f64 / freq
+            ),
+        );
+    }
+}
+
+/// A sine's displacement amplitude, m, from `amp_g` or `amp_m` (exactly one), positive and below
+/// the half stroke.
+fn sine_amplitude(
+    f: &Fields<'_>,
+    model: &ModelParams,
+    (amp_g, amp_m): (Option<f64>, Option<f64>),
+    freq: Option<f64>,
+    issues: &mut Issues,
+) -> Option<f64> {
+    let (x, key, given) = match (amp_g, amp_m, freq) {
+        (Some(_), Some(_), _) => {
+            issues.push(
+                f.path_of("amp_m"),
+                "give the amplitude once: amp_g or amp_m, not both",
+            );
+            return None;
+        }
+        (None, None, _) => {
+            issues.push(
+                f.path_of("amp_g"),
+                "missing (acceleration amplitude in g, or amp_m in metres)",
+            );
+            return None;
+        }
+        (Some(g), None, Some(fr)) => (Sine::amp_from_g(g, fr), "amp_g", g),
+        (None, Some(m), Some(_)) => (m, "amp_m", m),
+        (_, _, None) => return None,
+    };
+    let l = model.actuator.l;
+    if x <= 0.0 {
+        issues.push(f.path_of(key), format!("{given} must be positive"));
+        None
+    } else if x >= l {
+        issues.push(f.path_of(key), format!("displacement amplitude {x:.4} m exceeds the stroke: |x| must stay below the half stroke actuator.l = {l} m"));
+        None
+    } else {
+        Some(x)
+    }
+}
+
+/// A record: its file (or the campaign test's own data file), columns, the reference filter's
+/// cut-off, a scale and what it is (`signal`: the tracked reference by default in a campaign
+/// test, whose data file `test_data` is; a command elsewhere).
+fn read_record(
+    f: &mut Fields<'_>,
+    model: &ModelParams,
+    issues: &mut Issues,
+    test_data: Option<&std::path::Path>,
+) -> Option<ExcitationSpec> {
+    let signal = read_signal(f, issues, test_data.is_some());
+    let default_file = test_data;
+    let file = f.str("file", issues);
+    let column = f.str("column", issues).unwrap_or("ref_disp_m");
+    let time_column = f.str("time_column", issues).unwrap_or("time_s");
+    let f_ref = super::spec_quake::read_f_ref(f, model, issues);
+    let scale = f.f64("scale", issues);
+    let pga_g = f.f64("pga_g", issues);
+    let unit_key = f.str("unit", issues);
+    let processing = super::spec_quake::read_processing(f, issues);
+    let Some(file) = file
+        .map(PathBuf::from)
+        .or_else(|| default_file.map(PathBuf::from))
+    else {
+        issues.push(
+            f.path_of("file"),
+            "missing (the CSV, Parquet or .AT2 file holding the record)",
+        );
+        return None;
+    };
+    let at2 = is_at2(&file);
+    let unit = match (unit_key, at2) {
+        (None, true) | (Some("g"), true) => RecordUnit::G,
+        (Some(u), true) => {
+            issues.push(
+                f.path_of("unit"),
+                format!("{u:?}: a PEER .AT2 file holds acceleration in g"),
+            );
+            RecordUnit::G
+        }
+        (None, false) => RecordUnit::M,
+        (Some(u), false) => RecordUnit::parse(u).unwrap_or_else(|| {
+            issues.push(
+                f.path_of("unit"),
+                format!(
+                    "unknown unit {u:?}; expected one of {:?}",
+                    RecordUnit::NAMES
+                ),
+            );
+            RecordUnit::M
+        }),
+    };
+    if let Some(g) = pga_g {
+        if !unit.is_acceleration() {
+            issues.push(f.path_of("pga_g"), "scaling to a peak acceleration needs an acceleration record (unit = \"g\" or \"m/s2\", or a .AT2 file); use scale");
+        } else if scale.is_some() {
+            issues.push(f.path_of("pga_g"), "give scale or pga_g, not both");
+        } else if !(g > 0.0 && g.is_finite()) {
+            issues.push(f.path_of("pga_g"), format!("{g} g must be positive"));
+        }
+    }
+    let column = if at2 {
+        super::spec_quake::AT2_COLUMN
+    } else {
+        column
+    };
+    let time_column = if at2 {
+        super::spec_quake::AT2_TIME
+    } else {
+        time_column
+    };
+    Some(ExcitationSpec::Record {
+        file,
+        column: column.to_string(),
+        time_column: time_column.to_string(),
+        f_ref_hz: f_ref,
+        scale: scale.unwrap_or(1.0),
+        unit,
+        pga_g,
+        processing,
+        signal,
+    })
+}
+
+/// How a record's reference states are made, in words.
+fn filter_words(signal: Signal, f_ref_hz: f64) -> String {
+    match signal {
+        Signal::Command => format!("a command through the state-variable filter {f_ref_hz} Hz"),
+        Signal::Reference => format!("the tracked reference, zero-phase derivatives {f_ref_hz} Hz"),
+    }
+}
+
+/// The `signal` key of a record: "reference" or "command" (docs/model.md §4); the default is the
+/// tracked reference for a measured test, the command elsewhere.
+fn read_signal(f: &mut Fields<'_>, issues: &mut Issues, measured: bool) -> Signal {
+    match f.str("signal", issues) {
+        None if measured => Signal::Reference,
+        None => Signal::Command,
+        Some("reference") => Signal::Reference,
+        Some("command") => Signal::Command,
+        Some(other) => {
+            issues.push(
+                f.path_of("signal"),
+                format!(
+                    "{other:?}: expected \"reference\" (the reference the controller tracked, as a \
+                     data-acquisition system records it) or \"command\" (the command into the \
+                     controller's reference generator)"
+                ),
+            );
+            Signal::Command
+        }
+    }
+}
+
+/// Whether `file` is a PEER NGA acceleration file (extension `.AT2`, any case).
+pub fn is_at2(file: &std::path::Path) -> bool {
+    file.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("at2"))
+}
+
+/// The keys of a sine excitation (campaign tests, study excitations); docs/formats.md lists each.
+pub const SINE_KEYS: [&str; 7] = [
+    "kind",
+    "freq_hz",
+    "amp_g",
+    "amp_m",
+    "taper_s",
+    "duration_s",
+    "window_cycles",
+];
+/// The keys of a record excitation; docs/formats.md lists each.
+pub const RECORD_KEYS: [&str; 11] = [
+    "kind",
+    "file",
+    "column",
+    "time_column",
+    "f_ref_hz",
+    "scale",
+    "unit",
+    "pga_g",
+    "highpass_hz",
+    "taper_s",
+    "signal",
+];
+
+/// Reads `[solver]`; `extra` names keys of the same table read by the caller.
+pub(crate) fn read_solver(mut f: Fields<'_>, issues: &mut Issues, extra: &[&str]) -> Solver {
+    let mut s = Solver::default();
+    if let Some(n) = f.int("substeps", issues) {
+        if (1..=4096).contains(&n) {
+            s.substeps = n as usize;
+        } else {
+            issues.push(f.path_of("substeps"), format!("{n} must be in 1..=4096"));
+        }
+    }
+    f.finish(&[&["substeps"][..], extra].concat(), issues);
+    s
+}
+
+impl SimSpec {
+    /// Parses a sim file's text; `file` names it in errors.
+    pub fn from_toml(text: &str, file: &str) -> Result<SimSpec, InputError> {
+        Self::from_toml_on(text, file, ModelParams::default())
+    }
+
+    /// [`SimSpec::from_toml`] from the parameters `base` (a model file's, `--model`) instead of
+    /// the defaults: the run file's `[model.*]` tables change them further.
+    pub fn from_toml_on(text: &str, file: &str, base: ModelParams) -> Result<SimSpec, InputError> {
+        let table = super::toml_fields::parse(text, file)?;
+        let mut issues = Issues::default();
+        let mut root = Fields::new("", &table);
+        let mut model = base;
+        if let Some(m) = root.table("model", &mut issues) {
+            read_model(m, &mut model, &mut issues);
+        }
+        validate_model(&model, "model", &mut issues);
+        let excitation = match root.table("excitation", &mut issues) {
+            Some(e) => read_excitation(e, &model, &mut issues),
+            None => {
+                issues.push(
+                    "excitation",
+                    format!("missing table (kind = one of {})", KINDS.join(", ")),
+                );
+                None
+            }
+        };
+        let solver = match root.table("solver", &mut issues) {
+            Some(s) => read_solver(s, &mut issues, &[]),
+            None => Solver::default(),
+        };
+        root.finish(&["model", "excitation", "solver"], &mut issues);
+        issues.into_result(file)?;
+        Ok(SimSpec {
+            model,
+            excitation: excitation.expect("no issues means an excitation"),
+            solver,
+        })
+    }
+
+    /// The spec after defaults, as TOML (every parameter written out), for result metadata.
+    pub fn resolved_toml(&self) -> String {
+        let mut root = toml::Table::new();
+        root.insert("model".into(), toml::Value::Table(model_table(&self.model)));
+        let mut e = toml::Table::new();
+        match &self.excitation {
+            ExcitationSpec::Sine { sine, amp_g } => {
+                e.insert("kind".into(), "sine".into());
+                e.insert("freq_hz".into(), sine.freq_hz.into());
+                if let Some(g) = amp_g {
+                    e.insert("amp_g".into(), (*g).into());
+                } else {
+                    e.insert("amp_m".into(), sine.amp_m.into());
+                }
+                e.insert("taper_s".into(), sine.taper_s.into());
+                e.insert("duration_s".into(), sine.duration_s.into());
+                e.insert(
+                    "window_cycles".into(),
+                    (sine.window_cycles.unwrap_or_else(|| sine.default_cycles()) as i64).into(),
+                );
+            }
+            other => e = super::spec_quake::excitation_table(other),
+        }
+        root.insert("excitation".into(), toml::Value::Table(e));
+        let mut s = toml::Table::new();
+        s.insert("substeps".into(), (self.solver.substeps as i64).into());
+        root.insert("solver".into(), toml::Value::Table(s));
+        toml::to_string(&root).expect("TOML of plain values")
+    }
+}
+
+/// Every model parameter as `[component] name = value` tables.
+pub fn model_table(model: &ModelParams) -> toml::Table {
+    let mut m = toml::Table::new();
+    for comp in ModelParams::components() {
+        let mut t = toml::Table::new();
+        if comp == Component::Servovalve {
+            let law = match model.valve_law {
+                ValveLaw::Orifice => "orifice",
+                ValveLaw::Linear => "linear",
+            };
+            t.insert("law".into(), law.into());
+        }
+        if comp.effect().is_some_and(|e| !model.effects.get(e)) {
+            continue;
+        }
+        for p in ModelParams::registry().filter(|p| p.component == comp) {
+            t.insert(p.name.into(), (p.get)(model).into());
+        }
+        m.insert(comp.name().into(), toml::Value::Table(t));
+    }
+    m
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = r#"
+[model.platen]
+m = 150000.0
+[model.servovalve]
+law = "linear"
+[excitation]
+kind = "sine"
+freq_hz = 3.0
+amp_g = 1.73
+window_cycles = 4
+"#;
+
+    #[test]
+    fn reads_overrides_and_defaults() {
+        let s = SimSpec::from_toml(GOOD, "good.toml").unwrap();
+        assert_eq!(s.model.platen.m, 150000.0);
+        assert_eq!(s.model.valve_law, ValveLaw::Linear);
+        assert_eq!(s.model.platen.k, 1.266e6);
+        assert_eq!(s.solver.substeps, Solver::default().substeps);
+        let ExcitationSpec::Sine { sine, .. } = s.excitation else {
+            panic!()
+        };
+        assert_eq!(sine.duration_s, 3.0);
+        assert_eq!(sine.window_cycles, Some(4));
+        // The resolved TOML reads back to the same spec.
+        let again = SimSpec::from_toml(&s.resolved_toml(), "resolved").unwrap();
+        assert_eq!(again.model, s.model);
+    }
+
+    #[test]
+    fn reports_all_problems_with_key_paths() {
+        let bad = r#"
+[model.platen]
+m = -5.0
+mm = 3
+[model.actuator]
+beta = 0.0
+[excitation]
+kind = "sine"
+freq_hz = 0.5
+amp_g = 10.0
+"#;
+        let e = SimSpec::from_toml(bad, "bad.toml").unwrap_err();
+        let paths: Vec<&str> = e.issues.iter().map(|i| i.path.as_str()).collect();
+        assert!(paths.contains(&"model.platen.m"), "{e}");
+        assert!(paths.contains(&"model.platen.mm"), "{e}");
+        assert!(paths.contains(&"model.actuator.beta"), "{e}");
+        assert!(paths.contains(&"excitation.amp_g"), "{e}");
+        assert!(e.to_string().contains("exceeds the stroke"), "{e}");
+        assert!(e.to_string().contains("did you mean `m`"), "{e}");
+    }
+}
