@@ -15,7 +15,7 @@ use std::fmt::Debug;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 use vshake::shell::campaign_io::{load_campaign, load_tests};
-use vshake::shell::run_cmd::{load_study, plan_for};
+use vshake::shell::job::{load_study, plan_for};
 use vshake::shell::{exit_code, tables};
 
 fn repo(p: &str) -> PathBuf {

@@ -8,7 +8,7 @@ use common::study;
 use std::path::{Path, PathBuf};
 use vshake::orchestration::batch::{self, Plan, Row};
 use vshake::orchestration::study::StudySpec;
-use vshake::shell::run_cmd;
+use vshake::shell::job;
 
 fn studies_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("studies")
@@ -28,7 +28,7 @@ fn every_bundled_file_parses_and_validates() {
             let spec = StudySpec::from_toml(&text, &path.display().to_string())
                 .unwrap_or_else(|e| panic!("{e}"));
             // Its plan can be built (record files found, design sized).
-            let plan = run_cmd::plan_for(&spec, &studies_dir())
+            let plan = job::plan_for(&spec, &studies_dir())
                 .unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
             assert!(plan.rows() > 0);
         } else if table.contains_key("tune") {
@@ -160,7 +160,7 @@ fn run_rows(plan: &Plan, threads: usize, chunk: usize) -> Vec<Row> {
 #[test]
 fn results_are_identical_for_any_thread_count_and_chunk_size() {
     let spec = StudySpec::from_toml(MIXED, "mixed.toml").unwrap();
-    let plan = run_cmd::plan_for(&spec, Path::new(".")).unwrap();
+    let plan = job::plan_for(&spec, Path::new(".")).unwrap();
     let reference = run_rows(&plan, 1, 8);
     assert_eq!(reference.len(), 37 * 2);
     let key = |r: &Row| -> Vec<u64> {

@@ -4,7 +4,8 @@
 
 use super::cli::{CompareArgs, DiagnoseArgs, FitArgs, RunArgs};
 use super::gpu::Backend;
-use super::run_cmd::{self, Job};
+use super::job::{self, Job};
+use super::run_cmd;
 use super::BadInput;
 use crate::kernel::params::{ModelParams, ParamInfo};
 use crate::orchestration::batch::Plan;
@@ -113,9 +114,9 @@ pub fn evaluate(
     let text = design_replaced(&study.text()?, &label, sets, metrics)?;
     let spec = StudySpec::from_toml_on(&text, &label, super::campaign_io::load_model(model)?)?;
     let names: Vec<String> = columns.iter().map(|c| c.0.clone()).collect();
-    let infos = run_cmd::parameters_of_columns(&names, "parameters")?;
+    let infos = job::parameters_of_columns(&names, "parameters")?;
     let wanted: Vec<String> = infos.iter().map(|i| i.path()).collect();
-    let references = run_cmd::references(&spec, study.base(), &wanted)?;
+    let references = job::references(&spec, study.base(), &wanted)?;
     let rows: Vec<Vec<f64>> = (0..sets)
         .map(|r| columns.iter().map(|c| c.1[r]).collect())
         .collect();
@@ -207,7 +208,7 @@ pub fn simulate(
     out: &Path,
 ) -> anyhow::Result<Simulated> {
     let spec = SimSpec::from_toml_on(toml, "(run text)", super::campaign_io::load_model(model)?)?;
-    let reference = super::sim_cmd::build_reference(&spec, base)?;
+    let reference = super::run_spec::build_reference(&spec, base)?;
     let outcome = sim::run_sim(&spec, &reference)?;
     let status = super::sim_cmd::status_text(&outcome.result.status);
     super::sim_cmd::write_history(out, &spec, &outcome, &status)?;

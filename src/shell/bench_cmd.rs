@@ -185,7 +185,7 @@ fn read_baseline(path: &std::path::Path) -> anyhow::Result<(f64, f64)> {
 /// Times a diagnosis of `campaign` with every candidate of the library.
 fn bench_diagnose(campaign: &std::path::Path, max_seconds: Option<f64>) -> anyhow::Result<()> {
     let model = crate::kernel::params::ModelParams::default();
-    let problem = super::fit_cmd::load_problem(campaign, &model, false)?.problem;
+    let problem = super::fit_problem::load_problem(campaign, &model, false)?.problem;
     let candidates = crate::kernel::params::EffectId::ALL;
     let simulated: f64 = problem
         .tests

@@ -49,7 +49,7 @@ pub(crate) fn run_to(args: &CompareArgs, o: &mut dyn Write) -> anyhow::Result<()
         solver: Default::default(),
     };
     let progress = Progress::new("compare", spec.tests.len(), false, args.log_progress);
-    let results = super::run_cmd::pool(args.threads)?
+    let results = super::job::pool(args.threads)?
         .install(|| spec.run_with(&|| progress.inc(1)))
         .map_err(RunFailed)?;
     progress.finish();

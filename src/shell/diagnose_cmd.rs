@@ -1,7 +1,7 @@
 //! `study diagnose`: fit every candidate effect and say which one is most likely missing.
 
 use super::cli::DiagnoseArgs;
-use super::fit_cmd::{check_effect, load_problem, print_checks, residual_warnings};
+use super::fit_problem::{check_effect, load_problem, print_checks, residual_warnings};
 use super::meta::{self, Key, Kind};
 use super::report::{esc, legend};
 use super::tables::{self, Column};
@@ -55,10 +55,10 @@ pub(crate) fn run_to(args: &DiagnoseArgs, o: &mut dyn Write) -> anyhow::Result<(
     };
     let mut loaded = load_problem(&args.campaign, &model, args.strict)?;
     let progress =
-        super::fit_cmd::with_progress(&mut loaded.problem, "diagnose", args.log_progress);
+        super::fit_problem::with_progress(&mut loaded.problem, "diagnose", args.log_progress);
     let problem = loaded.problem;
     let t0 = std::time::Instant::now();
-    let d = super::run_cmd::pool(args.threads)?.install(|| {
+    let d = super::job::pool(args.threads)?.install(|| {
         let mut d = diagnose::diagnose(&problem, &candidates);
         d.map_states(&loaded.aligned);
         d
@@ -74,7 +74,7 @@ pub(crate) fn run_to(args: &DiagnoseArgs, o: &mut dyn Write) -> anyhow::Result<(
             .and_then(|c| c.fit.as_ref().ok().map(|f| &f.after))
     });
     let mut implausible = residual_warnings(&problem, &d.baseline, best);
-    implausible.extend(super::fit_cmd::noise_warnings(&problem, best));
+    implausible.extend(super::fit_problem::noise_warnings(&problem, best));
     if args.strict && !implausible.is_empty() {
         return Err(BadInput(format!("{} (--strict)", implausible.join("\n"))).into());
     }
@@ -132,7 +132,7 @@ fn write_named(
         return Ok(());
     };
     let command = format!("diagnose {}", campaign.display());
-    super::fit_cmd::write_fitted(out, &command, model, free, fit)?;
+    super::fit_problem::write_fitted(out, &command, model, free, fit)?;
     writeln!(
         o,
         "\n  wrote {} (the named effects fitted: {}; use it with --model)",

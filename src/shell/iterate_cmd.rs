@@ -2,7 +2,8 @@
 
 use super::cli::IterateArgs;
 use super::meta::{self, Key, Kind};
-use super::{sim_cmd, tables, BadInput, RunFailed};
+use super::outputs::{output_paths, write_whole};
+use super::{run_spec, tables, BadInput, RunFailed};
 use crate::orchestration::drive_iteration::{
     iterate_on_model, IterationRow, IterationSettings, TableIteration, FRF_SEGMENT,
 };
@@ -21,10 +22,10 @@ const OUTPUTS: [&str; 5] = [
 
 pub fn run(args: &IterateArgs) -> anyhow::Result<()> {
     let settings = settings(args)?;
-    let spec = sim_cmd::load_spec(&args.file, args.model.as_deref())?;
+    let spec = run_spec::load_spec(&args.file, args.model.as_deref())?;
     let targets = outputs(args)?;
     let base = args.file.parent().unwrap_or(Path::new("."));
-    let target = sim_cmd::build_reference(&spec, base)?;
+    let target = run_spec::build_reference(&spec, base)?;
     if target.len() < 2 * FRF_SEGMENT {
         return Err(BadInput(format!(
             "{}: the excitation is {:.2} s long; the frequency response needs at least {:.1} s",
@@ -117,27 +118,6 @@ fn outputs(args: &IterateArgs) -> anyhow::Result<Vec<PathBuf>> {
     }
 }
 
-/// The files `names` in the folder `dir`: refused before any work where `dir` is not a folder,
-/// or one of them exists and `force` is not given.
-pub(crate) fn output_paths(
-    dir: &Path,
-    names: &[&str],
-    force: bool,
-) -> anyhow::Result<Vec<PathBuf>> {
-    if dir.exists() && !dir.is_dir() {
-        return Err(BadInput(format!("{}: exists and is not a folder", dir.display())).into());
-    }
-    let paths: Vec<PathBuf> = names.iter().map(|f| dir.join(f)).collect();
-    if let Some(p) = paths.iter().find(|p| p.exists()) {
-        if !force {
-            return Err(
-                BadInput(format!("{}: exists (--force overwrites it)", p.display())).into(),
-            );
-        }
-    }
-    Ok(paths)
-}
-
 fn summary(o: &mut impl Write, done: &TableIteration) -> anyhow::Result<()> {
     let best = done
         .rows
@@ -188,14 +168,6 @@ fn write_outputs(
     write_history(&paths[3], done)?;
     let svg = plot(done).map_err(|e| anyhow::anyhow!("drawing {}: {e}", paths[4].display()))?;
     write_whole(&paths[4], svg.as_bytes())
-}
-
-/// `bytes` written to `path.tmp`, then renamed into place (removed if the write fails).
-pub(crate) fn write_whole(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
-    let file = tables::AtomicFile::new(path);
-    std::fs::write(&file.tmp, bytes)
-        .and_then(|_| file.commit())
-        .with_context(|| format!("writing {}", path.display()))
 }
 
 /// The error of each iteration (left) and the target against the achieved acceleration with the

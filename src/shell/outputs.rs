@@ -3,6 +3,7 @@
 
 use super::tables::not_regular;
 use super::BadInput;
+use anyhow::Context;
 use std::fs::File;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
@@ -170,4 +171,33 @@ impl Drop for OutputLock {
             let _ = std::fs::remove_file(&self.path);
         }
     }
+}
+
+/// The files `names` in the folder `dir`: refused before any work where `dir` is not a folder,
+/// or one of them exists and `force` is not given.
+pub(crate) fn output_paths(
+    dir: &Path,
+    names: &[&str],
+    force: bool,
+) -> anyhow::Result<Vec<PathBuf>> {
+    if dir.exists() && !dir.is_dir() {
+        return Err(BadInput(format!("{}: exists and is not a folder", dir.display())).into());
+    }
+    let paths: Vec<PathBuf> = names.iter().map(|f| dir.join(f)).collect();
+    if let Some(p) = paths.iter().find(|p| p.exists()) {
+        if !force {
+            return Err(
+                BadInput(format!("{}: exists (--force overwrites it)", p.display())).into(),
+            );
+        }
+    }
+    Ok(paths)
+}
+
+/// `bytes` written to `path.tmp`, then renamed into place (removed if the write fails).
+pub(crate) fn write_whole(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+    let file = super::tables::AtomicFile::new(path);
+    std::fs::write(&file.tmp, bytes)
+        .and_then(|_| file.commit())
+        .with_context(|| format!("writing {}", path.display()))
 }

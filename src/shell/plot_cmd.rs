@@ -5,7 +5,7 @@
 
 use super::cli::PlotArgs;
 use super::report::{esc, legend, page_head};
-use super::sensitivity_cmd::{analyse, load, Loaded};
+use super::results_reader::{analyse, load, Loaded};
 use super::tables::{self, input_if_user, AtomicFile};
 use super::BadInput;
 use crate::orchestration::sensitivity::Indices;

@@ -5,14 +5,12 @@
 //! computes exactly what the first one would have; every sample depends only on (seed, sample
 //! id), so the finished file equals an uninterrupted run's row for row, bit for bit.
 
+use super::job::{plan_for, Job, Kept, Shard};
 use super::meta::{self, Key, Kind};
 use super::outputs::{check_output, OutputLock};
-use super::run_cmd::{plan_for, Job, ResultsSink, Shard};
 use super::tables::{self, input_if_user, Recovered};
 use super::BadInput;
 use crate::orchestration::study::StudySpec;
-use anyhow::Context;
-use arrow_array::{Array, UInt64Array};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -43,58 +41,6 @@ fn source(file: &Path, out: &Path) -> anyhow::Result<(PathBuf, bool)> {
         return Err(BadInput(format!("{}: not found (nothing to resume)", file.display())).into());
     }
     Ok((source, temporary))
-}
-
-/// Rows of an interrupted run carried into the resumed one: its first `samples` samples.
-pub struct Kept {
-    pub source: PathBuf,
-    pub samples: usize,
-    /// The source is a file recovered from a killed run (`FILE.killed`), removed once its rows
-    /// are safe in the new file.
-    temporary: bool,
-}
-
-impl Kept {
-    /// Copies the kept rows into `sink`, checking that they are the slice's first samples.
-    pub(crate) fn copy_into(&self, sink: &mut ResultsSink, job: &Job) -> anyhow::Result<()> {
-        let n_exc = job.plan.references.len();
-        let mut left = self.samples * n_exc;
-        let (_, reader) = tables::parquet_batches(&self.source).map_err(input_if_user)?;
-        let mut expect = job.range.start as u64;
-        let mut in_sample = 0;
-        for batch in reader {
-            let batch = batch.with_context(|| format!("reading {}", self.source.display()))?;
-            let batch = batch.slice(0, batch.num_rows().min(left));
-            let ids = batch
-                .column_by_name("sample_id")
-                .and_then(|c| c.as_any().downcast_ref::<UInt64Array>())
-                .ok_or_else(|| {
-                    BadInput(format!("{}: no sample_id column", self.source.display()))
-                })?;
-            for id in ids.values().iter() {
-                if *id != expect {
-                    return Err(BadInput(format!("{}: row of sample {id} where sample {expect} was expected: not the rows of this study's run", self.source.display())).into());
-                }
-                in_sample += 1;
-                if in_sample == n_exc {
-                    (expect, in_sample) = (expect + 1, 0);
-                }
-            }
-            left -= batch.num_rows();
-            sink.write_batch(&batch)?;
-            if left == 0 {
-                break;
-            }
-        }
-        Ok(())
-    }
-
-    /// Removes a recovered file once the new file holds its rows.
-    pub(crate) fn discard(&self) {
-        if self.temporary {
-            let _ = std::fs::remove_file(&self.source);
-        }
-    }
 }
 
 /// The job that continues `file` (the results table, `NAME.parquet`, or its partial one,

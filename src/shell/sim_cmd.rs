@@ -2,8 +2,9 @@
 
 use super::cli::SimArgs;
 use super::meta::{self, Key, Kind};
+use super::run_spec::{build_reference, load_spec};
 use super::tables;
-use super::{BadInput, RunFailed};
+use super::RunFailed;
 use crate::kernel::excitation::Reference;
 use crate::kernel::params::G;
 use crate::kernel::simulate::LaneStatus;
@@ -13,23 +14,6 @@ use crate::orchestration::spec::SimSpec;
 use anyhow::Context;
 use std::io::Write;
 use std::path::Path;
-
-/// Builds the reference of a spec, reading a record file relative to `base`.
-pub(crate) fn build_reference(spec: &SimSpec, base: &Path) -> anyhow::Result<Reference> {
-    tables::load_reference(&spec.excitation, &spec.model, base, 0)
-}
-
-/// Reads and validates a run file on the model file `model` (`--model`; None: the defaults).
-pub(crate) fn load_spec(file: &Path, model: Option<&Path>) -> anyhow::Result<SimSpec> {
-    let base = super::campaign_io::load_model(model)?;
-    let text = tables::read_input_text(file)
-        .map_err(|e| BadInput(format!("{}: cannot read: {e}", file.display())))?;
-    Ok(SimSpec::from_toml_on(
-        &text,
-        &file.display().to_string(),
-        base,
-    )?)
-}
 
 pub fn run(args: &SimArgs) -> anyhow::Result<()> {
     super::outputs::check_parquet_outputs([args.out.as_ref(), args.spectrum.as_ref()])?;
@@ -112,7 +96,7 @@ pub(crate) fn write_history(
     let mut meta = meta::header(Kind::TimeHistory);
     meta.extend([
         meta::pair(Key::Spec, spec.resolved_toml()),
-        meta::pair(Key::SchemaVersion, super::run_cmd::SCHEMA_VERSION),
+        meta::pair(Key::SchemaVersion, super::job::SCHEMA_VERSION),
         meta::pair(Key::Status, status),
     ]);
     tables::write_parquet(path, &cols, &meta).with_context(|| format!("writing {}", path.display()))

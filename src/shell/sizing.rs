@@ -1,7 +1,7 @@
 //! The size of a run before it starts: `study run --dry-run` (samples, runs, estimated wall time
 //! from a short timed run, output size), and the question a run of more than a day asks first.
 
-use super::run_cmd::{Job, ResultsSink};
+use super::job::{Job, ResultsSink};
 use super::BadInput;
 use crate::orchestration::batch::{self, RowSink, Timing};
 use std::io::{IsTerminal, Write};

@@ -2,7 +2,7 @@
 //! a merge job that runs after every task succeeded (`--dependency=afterok`), ready to submit.
 
 use super::cli::SlurmArgs;
-use super::run_cmd::{load_study, plan_for, Shard};
+use super::job::{load_study, plan_for, Shard};
 use super::BadInput;
 use crate::orchestration::batch::Plan;
 use crate::orchestration::study::StudySpec;

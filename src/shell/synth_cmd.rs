@@ -34,7 +34,7 @@ pub(crate) fn apply_effects(model: &mut ModelParams, effects: &[String]) -> anyh
     for e in effects {
         *model
             .effects
-            .get_mut(super::fit_cmd::check_effect(e, "--effect")?) = true;
+            .get_mut(super::fit_problem::check_effect(e, "--effect")?) = true;
     }
     Ok(())
 }

@@ -4,7 +4,8 @@
 use super::cli::TuneArgs;
 use super::meta::{self, Key, Kind};
 use super::tables::{self, Column};
-use super::{run_cmd, tune_report, BadInput, RunFailed};
+use super::tune_report::Nominal;
+use super::{job, tune_report, BadInput, RunFailed};
 use crate::kernel::excitation::Reference;
 use crate::kernel::metrics::Metrics;
 use crate::kernel::params::ModelParams;
@@ -33,10 +34,10 @@ pub fn run(args: &TuneArgs) -> anyhow::Result<()> {
     let base_model = super::campaign_io::load_model(args.model.as_deref())?;
     let spec = TuneSpec::from_toml_on(&text, &args.file.display().to_string(), base_model)?;
     let dir = args.out.clone().unwrap_or_else(|| spec.output.clone());
-    let paths = super::iterate_cmd::output_paths(&dir, &OUTPUTS, args.force)?;
+    let paths = super::outputs::output_paths(&dir, &OUTPUTS, args.force)?;
     let base = args.file.parent().unwrap_or(Path::new("."));
-    let references = run_cmd::references(&tune::study_of(&spec), base, &[])?;
-    let pool = run_cmd::pool(args.threads)?;
+    let references = job::references(&tune::study_of(&spec), base, &[])?;
+    let pool = job::pool(args.threads)?;
     std::fs::create_dir_all(&dir).map_err(|e| {
         BadInput(format!(
             "{}: cannot create the output folder: {e}",
@@ -71,7 +72,7 @@ pub fn run(args: &TuneArgs) -> anyhow::Result<()> {
     write_evaluations(&paths[2], &tuner, &tuned, &text, &command)?;
     write_generations(&paths[3], &tuned.generations)?;
     let page = tune_report::html(&tuner, &tuned, &nominal, &references, wall)?;
-    super::iterate_cmd::write_whole(&paths[4], page.as_bytes())?;
+    super::outputs::write_whole(&paths[4], page.as_bytes())?;
     if let Some(why) = &tuned.best.infeasible {
         // A model left by an earlier run (--force) would pass for this one's.
         for stale in &paths[..2] {
@@ -245,13 +246,6 @@ fn result(o: &mut impl Write, tuner: &Tuner, t: &Tuned, wall: f64) -> anyhow::Re
     Ok(())
 }
 
-/// The start and the tuned gains on the nominal model (no uncertain draw), each excitation with
-/// its history: for the report's spectra and errors.
-pub struct Nominal {
-    pub start: Vec<SimOutcome>,
-    pub tuned: Vec<SimOutcome>,
-}
-
 fn nominal_runs(tuner: &Tuner, t: &Tuned, refs: &[Reference]) -> anyhow::Result<Nominal> {
     let run = |gains: &[f64]| -> anyhow::Result<Vec<SimOutcome>> {
         let model = with_gains(tuner, gains);
@@ -331,7 +325,7 @@ fn write_model(
         gains.join("\n")
     );
     let text = head + &toml::to_string(&root)?;
-    super::iterate_cmd::write_whole(path, text.as_bytes())
+    super::outputs::write_whole(path, text.as_bytes())
 }
 
 /// evaluations.parquet: a row per run (generation, candidate, draw, excitation).

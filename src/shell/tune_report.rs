@@ -4,12 +4,18 @@
 //! are in evaluations.parquet and generations.parquet beside it.
 
 use super::report::{draw_line, esc, legend, page_head};
-use super::tune_cmd::Nominal;
 use crate::kernel::excitation::Reference;
 use crate::orchestration::sim::SimOutcome;
 use crate::orchestration::tune::{error_term, Tuned, Tuner};
 use plotters::prelude::*;
 use std::fmt::Write as _;
+
+/// The start and the tuned gains on the nominal model (no uncertain draw), each excitation with
+/// its history: for the report's spectra and errors.
+pub struct Nominal {
+    pub start: Vec<SimOutcome>,
+    pub tuned: Vec<SimOutcome>,
+}
 
 const G: f64 = 9.806_65;
 const START: RGBColor = RGBColor(31, 119, 180);

@@ -18,7 +18,9 @@
 //! The valve law (`Q`), the damping law (`D`) and the effect (`E`) are type parameters, so the
 //! step has no branch on configuration. N = 1 is the scalar path: the same code, one lane. The
 //! bare plant (no effect) takes `kernel::bare`'s right-hand side: every lane in explicit SIMD
-//! registers, the same operations and bits.
+//! registers, the same operations and bits; every other right-hand side is compiled once per build,
+//! out of line. The builds the rest of vshake runs are made in `crate::builds`, each at a
+//! [`Site`] of its own (a module, so a codegen unit).
 
 use super::actuator::{self, ActuatorLane};
 use super::bare;
@@ -906,6 +908,12 @@ fn rhs<
 ) {
     if const { E::BARE && A == 1 && bare::fits::<SIMD>(N) } {
         bare::rhs::<N, SIMD, Q, D>(lp, x_c, s, ds);
+        return;
+    }
+    // The bare plant's single lane (`study sim`, a comparison's runs) is small code, and a call per
+    // evaluation costs it about a fifth of its speed: inline.
+    if const { E::BARE && N == 1 } {
+        rhs_general::<N, A, SIMD, Q, D, E>(lp, effect, x_c, s, es, ds, des);
         return;
     }
     // SAFETY: a build runs only where the CPU has its instruction set (`dispatch`).
