@@ -1,7 +1,7 @@
 //! Effect `spool_overlap`: lands that overlap their ports by δ, a dead band around null:
 //! no flow while |x| ≤ δ, then x_eff = sign(x)·(|x| − δ).
 use super::{hook, Effect, EffectInfo, LibraryEffect, Stage};
-use crate::kernel::params::{params, ModelParams, Range};
+use crate::params::{params, ModelParams, Range};
 
 pub const INFO: EffectInfo = EffectInfo {
     name: super::module_name(module_path!()), // its registry line names it
