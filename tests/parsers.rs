@@ -5,8 +5,8 @@
 //! names the file.
 //!
 //! `cargo test` runs 256 cases per property (`PROPTEST_CASES` sets another count); CI's property
-//! step sizes them by time instead (`VSHAKE_PROPTEST_SECONDS=20 cargo test --release --test
-//! parsers`: rounds of 256 cases until 20 s have passed, per property), so that the step's time
+//! step sizes them by time instead (`VSHAKE_PROPTEST_SECONDS=10 cargo test --release --test
+//! parsers`: rounds of 256 cases until 10 s have passed, per property), so that the step's time
 //! does not grow with the parsers' speed or their number of properties, and prints each count.
 
 use proptest::prelude::*;
