@@ -19,9 +19,9 @@ use vshake::kernel::params::{ModelParams, ValveLaw};
 use vshake::kernel::simulate::SetupError;
 use vshake::kernel::simulate::{Failure, LaneResult, LaneStatus, Solver};
 use vshake::kernel::spectrum::SpectrumSpec;
-use vshake::orchestration::batch::{LaneEngine, RowStatus};
-use vshake::orchestration::sim::run_group;
-use vshake::orchestration::study::StudySpec;
+use vshake::orchestration::runs::single::run_group;
+use vshake::orchestration::study::batch::{LaneEngine, RowStatus};
+use vshake::orchestration::study::problem::StudySpec;
 use vshake::shell::job;
 
 const LANES: usize = 8;

@@ -464,7 +464,7 @@ impl Noise {
 fn write_hidden<E: vshake::kernel::effects::Effect<1>>(dir: &Path, effect: &E) {
     use vshake::kernel::params::ModelParams;
     use vshake::kernel::simulate::{self, LaneParams, Solver};
-    use vshake::orchestration::sim::History;
+    use vshake::orchestration::runs::single::History;
     // The campaign's files and layout, then each test's data replaced by the effect's run.
     synth(dir, &[]);
     let model = ModelParams::default();

@@ -419,7 +419,7 @@ fn a_switched_off_effect_is_neutral() {
             out.to_str().unwrap(),
         ]);
         assert_eq!(code, 0, "{name}: {stdout}{stderr}");
-        let names: Vec<&str> = vshake::orchestration::sim::CHANNELS
+        let names: Vec<&str> = vshake::orchestration::runs::single::CHANNELS
             .iter()
             .map(|c| c.name)
             .collect();
@@ -549,7 +549,7 @@ fn a_kernel_for_one_effect_equals_the_effect_set_bit_for_bit() {
     use vshake::kernel::effects::{effect_set, EffectId};
     use vshake::kernel::params::ModelParams;
     use vshake::kernel::simulate::{self, LaneParams, NoObserver, Solver};
-    use vshake::orchestration::sim::run_lanes_single;
+    use vshake::orchestration::runs::single::run_lanes_single;
     let base = ModelParams::default();
     let reference = vshake::kernel::excitation::Sine {
         freq_hz: 5.0,
@@ -609,7 +609,8 @@ fn sine_channels(model: &vshake::kernel::params::ModelParams, f: f64, amp_g: f64
     let tau: Vec<f64> = (w0..w1).map(|k| k as f64 / 1024.0).collect();
     r.hold_to(w1 + 2);
     let (res, rs) =
-        vshake::orchestration::sim::run_sampled(model, &r, &Default::default(), &tau).unwrap();
+        vshake::orchestration::runs::single::run_sampled(model, &r, &Default::default(), &tau)
+            .unwrap();
     assert!(matches!(
         res.status,
         vshake::kernel::simulate::LaneStatus::Ok
@@ -673,7 +674,7 @@ fn a_specimen_is_a_mass_a_spring_and_a_damper_on_the_platen() {
 #[test]
 fn a_sensor_chain_filters_and_delays_its_channel_only() {
     use vshake::kernel::params::{EffectId, ModelParams};
-    use vshake::orchestration::compare::project;
+    use vshake::orchestration::diagnosis::projector::project;
     let f = 5.0;
     let om = 2.0 * std::f64::consts::PI * f;
     let bare = sine_channels(&ModelParams::default(), f, 1.0);

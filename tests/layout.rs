@@ -55,10 +55,13 @@ fn looks_like_module(word: &str) -> bool {
 /// that starts with `` - `<folder>/` `` (a folder of [`LAYERS`]); its modules are the backticked words that look like
 /// module names (`looks_like_module`) in the nested items under it (lines that start with
 /// `"  - "`, and their continuation lines, which start with four spaces). The layer's own line and
-/// its continuation lines (two spaces) are prose: their backticked words are not read.
-fn named_modules(section: &str) -> Vec<(String, Vec<String>)> {
+/// its continuation lines (two spaces) are prose: their backticked words are not read. In an item
+/// that names a room of the layer (`rooms`: `diagnosis/`), the modules after it are the room's
+/// (`compare` there is `diagnosis/compare`).
+fn named_modules(section: &str, rooms: &dyn Fn(&str) -> Vec<String>) -> Vec<(String, Vec<String>)> {
     let mut layers: Vec<(String, Vec<String>)> = Vec::new();
     let mut nested = false;
+    let mut room: Option<String> = None;
     for line in section.lines() {
         let folder = LAYERS
             .iter()
@@ -70,16 +73,24 @@ fn named_modules(section: &str) -> Vec<(String, Vec<String>)> {
         }
         if line.starts_with("  - ") {
             nested = true;
+            room = None;
         } else if !line.starts_with("    ") {
             nested = false;
         }
         if !nested {
             continue;
         }
-        if let Some((_, names)) = layers.last_mut() {
+        if let Some((layer, names)) = layers.last_mut() {
+            let layer_rooms = rooms(layer);
             for (i, part) in line.split('`').enumerate() {
                 if i % 2 == 1 && looks_like_module(part) {
-                    names.push(part.to_string());
+                    match &room {
+                        Some(r) if !part.ends_with('/') => names.push(format!("{r}{part}")),
+                        _ => names.push(part.to_string()),
+                    }
+                    if layer_rooms.iter().any(|r| r == part) {
+                        room = Some(part.to_string());
+                    }
                 }
             }
         }
@@ -104,21 +115,29 @@ fn layer_dir(layer: &str) -> PathBuf {
     root().join(dir)
 }
 
-/// The modules of a layer's folder: `name` for a file `name.rs`, `name/` for a folder; `mod.rs`
-/// and `lib.rs` (the crate's root) aside.
+/// The modules of a layer's folder: `name` for a file `name.rs`; `name/` for a folder that is one
+/// module (`name/mod.rs`, or no Rust beside it: `effects/`, `cuda/`); for a room (a folder beside
+/// its `name.rs`, which only declares the room's files) `name/` and `name/child` for each file in
+/// it. `mod.rs` and `lib.rs` (the crate's root) aside.
 fn modules_of(layer: &str) -> Vec<String> {
+    let dir = layer_dir(layer);
     let mut out = Vec::new();
-    for f in std::fs::read_dir(layer_dir(layer))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-    {
+    for f in std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().path()) {
         let stem = f.file_stem().unwrap().to_string_lossy().to_string();
         if stem == "mod" || stem == "lib" {
             continue;
         }
         if f.is_dir() {
             out.push(format!("{stem}/"));
-        } else if f.extension().is_some_and(|x| x == "rs") {
+            if is_room(&f) {
+                for c in std::fs::read_dir(&f).unwrap().map(|e| e.unwrap().path()) {
+                    if c.extension().is_some_and(|x| x == "rs") {
+                        let child = c.file_stem().unwrap().to_string_lossy().to_string();
+                        out.push(format!("{stem}/{child}"));
+                    }
+                }
+            }
+        } else if f.extension().is_some_and(|x| x == "rs") && !dir.join(&stem).is_dir() {
             out.push(stem);
         }
     }
@@ -126,18 +145,22 @@ fn modules_of(layer: &str) -> Vec<String> {
     out
 }
 
-/// The "Layout" section of docs/architecture.md and the modules agree, both ways. Its convention:
-/// each layer is a top-level list item `` - `<folder>/` — … `` (the layer's folder of source,
-/// [`LAYERS`]), and the items nested under it name that layer's modules in backticks,
-/// `` `name` `` for `<folder>/name.rs` and `` `name/` `` for the folder `<folder>/name/`
-/// (`mod.rs` and `lib.rs` aside). Every module must be named
-/// under its own layer, and every backticked snake_case word in those nested items (`name` or
-/// `name/`) must be a module of that layer; other backticked text there (types such as
-/// `EffectId`, files such as `effects/mod.rs`, commands, flags) does not look like a module name
-/// and is not checked.
+/// Whether folder `f` is a room: its module file `f.rs` stands beside it.
+fn is_room(f: &Path) -> bool {
+    f.with_extension("rs").is_file()
+}
+
+/// The rooms of a layer (`name/`).
+fn rooms_of(layer: &str) -> Vec<String> {
+    modules_of(layer)
+        .into_iter()
+        .filter(|m| m.ends_with('/') && is_room(&layer_dir(layer).join(m.trim_end_matches('/'))))
+        .collect()
+}
+
 #[test]
 fn the_architecture_layout_names_every_module_and_only_modules() {
-    let named = named_modules(&layout_section());
+    let named = named_modules(&layout_section(), &rooms_of);
     let layers: Vec<&str> = named.iter().map(|(layer, _)| layer.as_str()).collect();
     assert_eq!(
         layers,
@@ -174,20 +197,45 @@ fn the_layout_reader_reads_nested_items_only() {
         - `controller`, `EffectId`, `effects/mod.rs`, `study tune`,\n    \
         `cuda/` and `gpu_lanes`;\n\
         - `src/shell/` — more.\n  \
-        - `cli`\n\
+        - `cli`\n  \
+        - `job/`: `outputs`,\n    \
+        `sizing`;\n  \
+        - `api`\n\
         After the list, `not_read`.\n";
+    let kernel = (
+        "kernel".to_string(),
+        ["controller", "cuda/", "gpu_lanes"]
+            .map(String::from)
+            .to_vec(),
+    );
+    // With `job/` a room of the shell, the modules after it in its item are the room's.
+    let rooms = |layer: &str| match layer {
+        "shell" => vec!["job/".to_string()],
+        _ => vec![],
+    };
     assert_eq!(
-        named_modules(section),
+        named_modules(section, &rooms),
         vec![
+            kernel.clone(),
             (
-                "kernel".to_string(),
-                vec![
-                    "controller".to_string(),
-                    "cuda/".to_string(),
-                    "gpu_lanes".to_string()
-                ]
+                "shell".to_string(),
+                ["cli", "job/", "job/outputs", "job/sizing", "api"]
+                    .map(String::from)
+                    .to_vec()
             ),
-            ("shell".to_string(), vec!["cli".to_string()]),
+        ]
+    );
+    // Without rooms, a folder's words are modules of the layer.
+    assert_eq!(
+        named_modules(section, &|_| vec![]),
+        vec![
+            kernel,
+            (
+                "shell".to_string(),
+                ["cli", "job/", "outputs", "sizing", "api"]
+                    .map(String::from)
+                    .to_vec()
+            ),
         ]
     );
     assert!(looks_like_module("spec_quake") && looks_like_module("effects/"));
@@ -436,57 +484,168 @@ fn the_command_check_finds_an_import_and_not_a_comment() {
 // listed one that is gone (so the list only shrinks).
 
 /// The circles that remain, each sorted: issue 49's list less those broken since.
-const KNOWN_CIRCLES: [&str; 5] = [
-    "kernel: bare, lanes, platen, servovalve, simulate",
-    "kernel: effects, excitation, ground, params, spectrum",
-    "orchestration: compare, memory, statemap",
-    "orchestration: spec, spec_quake",
+const KNOWN_CIRCLES: [&str; 2] = [
+    "kernel: effects/, ground, params",
     "shell: at2, outputs, tables",
 ];
 
-/// The modules of `layer` that module `m`'s code (comments aside) names: `crate::x`,
-/// `crate::shell::x`, `super::x` and `super::{.., x, ..}` from a file of the layer's folder,
-/// `super::super::x` from a file in one of its folders.
+/// The module path of a layer's file, from the crate's root (the shell's files sit under `shell`):
+/// `diagnosis/compare.rs` is `diagnosis::compare`, `effects/mod.rs` is `effects`.
+fn module_path(layer: &str, file: &Path) -> Vec<String> {
+    let rel = file.strip_prefix(layer_dir(layer)).unwrap();
+    let mut path: Vec<String> = if layer == "shell" {
+        vec!["shell".into()]
+    } else {
+        vec![]
+    };
+    for part in rel.with_extension("").iter() {
+        let part = part.to_string_lossy().to_string();
+        if part != "mod" {
+            path.push(part);
+        }
+    }
+    path
+}
+
+/// Every module path that `code` names from module `here`: `crate::a::b`, `super::a`,
+/// `super::super::a`, `self::a`, and each path of a group (`crate::a::{b, c::D}`), resolved from
+/// the crate's root.
+fn paths_named(code: &str, here: &[String]) -> Vec<Vec<String>> {
+    let flat: String = code.split_whitespace().collect::<Vec<_>>().join(" ");
+    let mut out = Vec::new();
+    for start in ["crate::", "super::", "self::"] {
+        for (i, _) in flat.match_indices(start) {
+            let before = flat[..i].chars().next_back();
+            if before.is_some_and(|c| c.is_ascii_alphanumeric() || c == '_' || c == ':') {
+                continue;
+            }
+            for p in expand(&path_at(&flat[i..])) {
+                out.extend(resolve(&p, here));
+            }
+        }
+    }
+    out
+}
+
+/// The path written at the start of `text`: segments joined by `::`, with a `{...}` group kept
+/// whole.
+fn path_at(text: &str) -> String {
+    let mut end = 0;
+    let mut depth = 0;
+    for (i, c) in text.char_indices() {
+        match c {
+            '{' => depth += 1,
+            '}' if depth > 0 => depth -= 1,
+            c if depth == 0 && !(c.is_ascii_alphanumeric() || c == '_' || c == ':') => break,
+            _ => {}
+        }
+        end = i + c.len_utf8();
+        if depth == 0 && c == '}' {
+            break;
+        }
+    }
+    text[..end].to_string()
+}
+
+/// A path with groups as the paths it stands for: `a::{b, c::{d, e}}` is `a::b`, `a::c::d`,
+/// `a::c::e`.
+fn expand(path: &str) -> Vec<String> {
+    let Some(open) = path.find('{') else {
+        return vec![path.trim_end_matches("::").to_string()];
+    };
+    let head = &path[..open];
+    let inner = &path[open + 1..path.len().saturating_sub(1)];
+    let (mut items, mut depth, mut from) = (Vec::new(), 0, 0);
+    for (i, c) in inner.char_indices() {
+        match c {
+            '{' => depth += 1,
+            '}' => depth -= 1,
+            ',' if depth == 0 => {
+                items.push(&inner[from..i]);
+                from = i + 1;
+            }
+            _ => {}
+        }
+    }
+    items.push(&inner[from..]);
+    items
+        .iter()
+        .map(|s| s.trim())
+        .filter(|s| !s.is_empty() && *s != "self" && *s != "*")
+        .flat_map(|s| expand(&format!("{head}{s}")))
+        .chain(std::iter::once(head.trim_end_matches("::").to_string()))
+        .collect()
+}
+
+/// `path` (starting with `crate`, `super` or `self`) from the crate's root, as seen from module
+/// `here`.
+fn resolve(path: &str, here: &[String]) -> Option<Vec<String>> {
+    let mut segs = path.split("::").filter(|s| !s.is_empty());
+    let mut out: Vec<String> = match segs.next()? {
+        "crate" => vec![],
+        "self" => here.to_vec(),
+        "super" => here[..here.len().checked_sub(1)?].to_vec(),
+        _ => return None,
+    };
+    for s in segs {
+        if s == "super" {
+            out.pop()?;
+        } else {
+            out.push(s.to_string());
+        }
+    }
+    Some(out)
+}
+
+/// The node of `modules` a module path falls in: the longest module whose path begins it.
+fn node_of(layer: &str, path: &[String], modules: &[String]) -> Option<String> {
+    let base = usize::from(layer == "shell");
+    if layer == "shell" && path.first().map(String::as_str) != Some("shell") {
+        return None;
+    }
+    modules
+        .iter()
+        .filter(|m| {
+            let segs: Vec<&str> = m.trim_end_matches('/').split('/').collect();
+            path.len() >= base + segs.len() && path[base..base + segs.len()] == segs[..]
+        })
+        .max_by_key(|m| m.len())
+        .cloned()
+}
+
+/// The modules of `layer` that module `m`'s code (comments aside) names, by any path from the
+/// crate's root, `super` or `self`; a folder that is one module (`effects/`) is one node with
+/// all its files, and a room's file (`diagnosis.rs`, which only declares the room) none.
 fn named_by(layer: &str, m: &str, modules: &[String]) -> Vec<String> {
     let dir = layer_dir(layer);
     let name = m.trim_end_matches('/');
-    let (files, nested) = if m.ends_with('/') {
-        (rust_files(&dir.join(name)), true)
+    let files = if m.ends_with('/') {
+        if is_room(&dir.join(name)) {
+            vec![]
+        } else {
+            rust_files(&dir.join(name))
+        }
     } else {
-        (vec![dir.join(format!("{name}.rs"))], false)
+        vec![dir.join(format!("{name}.rs"))]
     };
-    let mut code = String::new();
+    let mut found = Vec::new();
     for f in files {
-        for line in std::fs::read_to_string(f).unwrap().lines() {
-            code += line.split("//").next().unwrap_or("");
-            code.push('\n');
+        let text = std::fs::read_to_string(&f).unwrap();
+        let code: String = text
+            .lines()
+            .map(|l| l.split("//").next().unwrap_or(""))
+            .collect::<Vec<_>>()
+            .join("\n");
+        for p in paths_named(&code, &module_path(layer, &f)) {
+            if let Some(n) = node_of(layer, &p, modules) {
+                if n != m && !found.contains(&n) {
+                    found.push(n);
+                }
+            }
         }
     }
-    let flat: String = code.split_whitespace().collect::<Vec<_>>().join(" ");
-    modules
-        .iter()
-        .map(|o| o.trim_end_matches('/'))
-        .filter(|&o| o != name)
-        .filter(|&o| {
-            let mut paths = vec![format!("crate::{o}::"), format!("crate::shell::{o}::")];
-            if nested {
-                paths.push(format!("super::super::{o}::"));
-            } else {
-                paths.push(format!("super::{o}::"));
-            }
-            let grouped = |g: &str| {
-                g.split(['{', '}', ',', ' '])
-                    .any(|w| w == o || w.starts_with(&format!("{o}::")))
-            };
-            paths.iter().any(|p| flat.contains(p.as_str()))
-                || flat
-                    .split("super::{")
-                    .skip(1)
-                    .any(|rest| !nested && grouped(rest.split('}').next().unwrap_or("")))
-                || flat.contains(&format!("super::{o};"))
-        })
-        .map(str::to_string)
-        .collect()
+    found.sort();
+    found
 }
 
 /// The strongly connected components of more than one module (Tarjan), each sorted.
@@ -557,12 +716,7 @@ fn no_new_circle_of_files_and_the_known_ones_listed() {
         let modules = modules_of(layer);
         let graph: Vec<(String, Vec<String>)> = modules
             .iter()
-            .map(|m| {
-                (
-                    m.trim_end_matches('/').to_string(),
-                    named_by(layer, m, &modules),
-                )
-            })
+            .map(|m| (m.clone(), named_by(layer, m, &modules)))
             .collect();
         for c in circles(&graph) {
             found.push(format!("{layer}: {}", c.join(", ")));
@@ -593,4 +747,42 @@ fn the_circle_finder_finds_circles() {
     ]);
     assert_eq!(circles(&graph), [["a", "b", "c"]]);
     assert!(circles(&g(&[("a", &["b"]), ("b", &[])])).is_empty());
+}
+
+#[test]
+fn the_path_reader_resolves_groups_and_super() {
+    let here: Vec<String> = ["shell", "job", "outputs"].map(String::from).to_vec();
+    let mut got: Vec<String> = paths_named(
+        "use super::super::formats::{input::{self, TableError}, at2};\n\
+         let x = crate::kernel::params::G; super::sizing::plan(); my_super::x;",
+        &here,
+    )
+    .iter()
+    .map(|p| p.join("::"))
+    .collect();
+    got.sort();
+    got.dedup();
+    assert_eq!(
+        got,
+        [
+            "kernel::params::G",
+            "shell::formats",
+            "shell::formats::at2",
+            "shell::formats::input",
+            "shell::formats::input::TableError",
+            "shell::job::sizing::plan",
+        ]
+    );
+    let modules = ["formats/", "formats/input", "job/", "job/sizing"].map(String::from);
+    let input = ["shell", "formats", "input", "TableError"].map(String::from);
+    assert_eq!(
+        node_of("shell", &input, &modules).as_deref(),
+        Some("formats/input")
+    );
+    assert_eq!(
+        node_of("kernel", &input[1..], &modules).as_deref(),
+        Some("formats/input")
+    );
+    let kernel = ["kernel", "params", "G"].map(String::from);
+    assert_eq!(node_of("shell", &kernel, &modules), None);
 }

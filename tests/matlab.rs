@@ -4,7 +4,7 @@
 //! with channels of different lengths, are refused naming the file and the cause.
 
 use std::path::{Path, PathBuf};
-use vshake::orchestration::columns::Mapped;
+use vshake::orchestration::measured::channels::Mapped;
 use vshake::shell::tables::{self, NumTable};
 
 const CHANNELS: [&str; 4] = ["time_s", "ref_disp_m", "disp_m", "accel_mps2"];

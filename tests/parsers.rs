@@ -176,7 +176,7 @@ fn try_study(dir: &Path, bytes: &[u8]) -> Result<(), TestCaseError> {
     let result = load_study(&path).and_then(|spec| {
         let small = spec.samples <= 100_000
             && spec.excitations.iter().all(|e| match &e.spec {
-                vshake::orchestration::spec::ExcitationSpec::Sine { sine, .. } => {
+                vshake::orchestration::runs::spec::ExcitationSpec::Sine { sine, .. } => {
                     sine.duration_s <= 60.0
                 }
                 _ => true,
@@ -507,17 +507,17 @@ fn random_headers_never_panic() {
             proptest::option::of(proptest::collection::vec(header_field(), 0..12)),
         ),
         |(fields, units)| {
-            use vshake::orchestration::columns;
+            use vshake::orchestration::measured::channels;
             for f in fields.iter().chain(units.iter().flatten()) {
-                let (name, unit) = columns::split(f);
-                let _ = columns::recognise(&name);
+                let (name, unit) = channels::split(f);
+                let _ = channels::recognise(&name);
                 if let Some(u) = unit {
-                    let _ = columns::unit(&u);
+                    let _ = channels::unit(&u);
                 }
             }
             let wanted = ["time_s", "ref_disp_m", "disp_m", "accel_mps2"];
             let optional = ["valve_cmd_v", "force_n", "p1_pa", "p2_pa", "spool_m"];
-            let resolved = columns::resolve(&fields, units.as_deref(), &wanted, &optional, &[]);
+            let resolved = channels::resolve(&fields, units.as_deref(), &wanted, &optional, &[]);
             if let Ok(r) = resolved {
                 prop_assert!(r.len() >= wanted.len());
                 prop_assert!(r

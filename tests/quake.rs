@@ -7,8 +7,8 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use vshake::kernel::ground::{self, GroundParams, Processing};
 use vshake::kernel::params::G;
-use vshake::orchestration::quake;
-use vshake::orchestration::spec::RecordUnit;
+use vshake::orchestration::runs::quake;
+use vshake::orchestration::runs::spec::RecordUnit;
 mod common;
 use common::content;
 use common::study;
@@ -332,7 +332,7 @@ fn the_record_sweep_writes_spectral_columns_duckdb_reads_and_sensitivity_ranks_t
 fn the_default_step_is_converged_on_ground_motions() {
     use vshake::kernel::params::ModelParams;
     use vshake::kernel::simulate::{LaneStatus, NoObserver, Solver};
-    use vshake::orchestration::spec::{ExcitationSpec, Realisation};
+    use vshake::orchestration::runs::spec::{ExcitationSpec, Realisation};
     let motions = [
         vec![("pga_g", 0.5)],
         vec![("pga_g", 0.4), ("f_g_hz", 1.2), ("zeta_g", 0.35)],
@@ -364,8 +364,13 @@ fn the_default_step_is_converged_on_ground_motions() {
                 p.controller.g_f,
             ) = (g_d, l_v, l_a, g_f);
             let run = |substeps| {
-                vshake::orchestration::sim::run_one(&p, &r, &Solver { substeps }, &mut NoObserver)
-                    .unwrap()
+                vshake::orchestration::runs::single::run_one(
+                    &p,
+                    &r,
+                    &Solver { substeps },
+                    &mut NoObserver,
+                )
+                .unwrap()
             };
             let (a, b) = (run(Solver::default().substeps), run(32));
             assert!(

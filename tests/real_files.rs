@@ -568,7 +568,8 @@ fn every_data_problem_of_a_campaign_at_once() {
 /// the repository's docs, which exist.
 #[test]
 fn the_docs_describe_every_campaign_key() {
-    use vshake::orchestration::{campaign, spec};
+    use vshake::orchestration::measured::campaign;
+    use vshake::orchestration::runs::spec;
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let formats = std::fs::read_to_string(root.join("docs/formats.md")).expect("docs/formats.md");
     assert!(root.join("docs/model.md").is_file(), "docs/model.md");

@@ -6,8 +6,8 @@ mod common;
 use common::study;
 
 use std::path::{Path, PathBuf};
-use vshake::orchestration::batch::{self, Plan, Row};
-use vshake::orchestration::study::StudySpec;
+use vshake::orchestration::study::batch::{self, Plan, Row};
+use vshake::orchestration::study::problem::StudySpec;
 use vshake::shell::job;
 
 fn studies_dir() -> PathBuf {
@@ -32,7 +32,7 @@ fn every_bundled_file_parses_and_validates() {
                 .unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
             assert!(plan.rows() > 0);
         } else if table.contains_key("tune") {
-            let spec = vshake::orchestration::tune_spec::TuneSpec::from_toml_on(
+            let spec = vshake::orchestration::preparation::tune_spec::TuneSpec::from_toml_on(
                 &text,
                 &path.display().to_string(),
                 Default::default(),
@@ -40,8 +40,11 @@ fn every_bundled_file_parses_and_validates() {
             .unwrap_or_else(|e| panic!("{e}"));
             assert!(!spec.gains.is_empty() && !spec.objective.is_empty());
         } else {
-            vshake::orchestration::spec::SimSpec::from_toml(&text, &path.display().to_string())
-                .unwrap_or_else(|e| panic!("{e}"));
+            vshake::orchestration::runs::spec::SimSpec::from_toml(
+                &text,
+                &path.display().to_string(),
+            )
+            .unwrap_or_else(|e| panic!("{e}"));
         }
         n += 1;
     }
@@ -55,14 +58,14 @@ fn every_bundled_file_parses_and_validates() {
         let text = std::fs::read_to_string(&path).unwrap();
         let name = path.display().to_string();
         if text.contains("[tune]") {
-            vshake::orchestration::tune_spec::TuneSpec::from_toml_on(
+            vshake::orchestration::preparation::tune_spec::TuneSpec::from_toml_on(
                 &text,
                 &name,
                 Default::default(),
             )
             .unwrap_or_else(|e| panic!("{e}"));
         } else {
-            vshake::orchestration::spec::SimSpec::from_toml(&text, &name)
+            vshake::orchestration::runs::spec::SimSpec::from_toml(&text, &name)
                 .unwrap_or_else(|e| panic!("{e}"));
         }
     }
@@ -72,7 +75,7 @@ fn every_bundled_file_parses_and_validates() {
         let path = entry.unwrap().path();
         if path.extension().is_some_and(|e| e == "toml") {
             let text = std::fs::read_to_string(&path).unwrap();
-            let camp = vshake::orchestration::campaign::Campaign::from_toml(
+            let camp = vshake::orchestration::measured::campaign::Campaign::from_toml(
                 &text,
                 &path.display().to_string(),
                 &Default::default(),

@@ -8,10 +8,10 @@ use super::job::{self, Job};
 use super::run_cmd;
 use super::BadInput;
 use crate::kernel::params::{ModelParams, ParamInfo};
-use crate::orchestration::batch::Plan;
-use crate::orchestration::sim;
-use crate::orchestration::spec::SimSpec;
-use crate::orchestration::study::StudySpec;
+use crate::orchestration::runs::single;
+use crate::orchestration::runs::spec::SimSpec;
+use crate::orchestration::study::batch::Plan;
+use crate::orchestration::study::problem::StudySpec;
 use std::path::Path;
 
 /// A study: a file, or TOML text whose relative paths (records, design files) start at `base`.
@@ -209,7 +209,7 @@ pub fn simulate(
 ) -> anyhow::Result<Simulated> {
     let spec = SimSpec::from_toml_on(toml, "(run text)", super::campaign_io::load_model(model)?)?;
     let reference = super::run_spec::build_reference(&spec, base)?;
-    let outcome = sim::run_sim(&spec, &reference)?;
+    let outcome = single::run_sim(&spec, &reference)?;
     let status = super::sim_cmd::status_text(&outcome.result.status);
     super::sim_cmd::write_history(out, &spec, &outcome, &status)?;
     Ok(Simulated {

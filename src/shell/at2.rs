@@ -15,8 +15,8 @@
 //! note); every problem names the file and its line.
 
 use super::tables::TableError;
-use crate::orchestration::measured::NumTable;
-use crate::orchestration::spec_quake::{AT2_COLUMN, AT2_TIME};
+use crate::orchestration::measured::aligned::NumTable;
+use crate::orchestration::runs::quake_spec::{AT2_COLUMN, AT2_TIME};
 use std::path::Path;
 
 const KIND: &str = "PEER .AT2";

@@ -11,8 +11,8 @@ use crate::kernel::ground::Processing;
 use crate::kernel::params::ModelParams;
 use crate::kernel::simulate::{Isa, LaneParams, NoObserver, Solver};
 use crate::kernel::{EFFECT_LANES, LANES};
-use crate::orchestration::quake;
-use crate::orchestration::spec::{ExcitationSpec, Realisation};
+use crate::orchestration::runs::quake;
+use crate::orchestration::runs::spec::{ExcitationSpec, Realisation};
 use anyhow::{bail, Context};
 use rayon::prelude::*;
 use std::io::Write;
@@ -193,7 +193,7 @@ fn bench_diagnose(campaign: &std::path::Path, max_seconds: Option<f64>) -> anyho
         .map(|t| t.drive.len() as f64 / t.drive.f_s)
         .sum();
     let t0 = std::time::Instant::now();
-    let d = crate::orchestration::diagnose::diagnose(&problem, &candidates);
+    let d = crate::orchestration::diagnosis::diagnose::diagnose(&problem, &candidates);
     let secs = t0.elapsed().as_secs_f64();
     let runs: usize = d
         .candidates
@@ -394,7 +394,7 @@ const GPU_LANES: usize = 1 << 16;
 /// device's memory pool and a page-locked output buffer in place), with where the time went and
 /// the largest difference from the CPU kernel on 256 of the lanes.
 fn bench_cuda(out: &mut dyn Write, cuda: &super::gpu::Cuda) -> anyhow::Result<()> {
-    use crate::orchestration::batch::LaneEngine;
+    use crate::orchestration::study::batch::LaneEngine;
     let reference = reference();
     let solver = Solver { substeps: 8 };
     let models = gain_sets(GPU_LANES);

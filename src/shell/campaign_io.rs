@@ -4,9 +4,9 @@
 use super::tables::{self, NumTable};
 use super::BadInput;
 use crate::kernel::params::ModelParams;
-use crate::orchestration::campaign::{self, Campaign, TestSpec};
-use crate::orchestration::measured::{self, AlignedTest, OpenLoop, OPTIONAL, REQUIRED};
-use crate::orchestration::spec::ExcitationSpec;
+use crate::orchestration::measured::aligned::{self, AlignedTest, OpenLoop, OPTIONAL, REQUIRED};
+use crate::orchestration::measured::campaign::{self, Campaign, TestSpec};
+use crate::orchestration::runs::spec::ExcitationSpec;
 use std::path::{Path, PathBuf};
 
 /// A campaign with the folder its paths are relative to.
@@ -45,7 +45,7 @@ pub fn load_campaign(file: &Path, model: &ModelParams) -> anyhow::Result<LoadedC
 /// `map` is the test's `columns` table.
 pub fn read_measured(
     path: &Path,
-    map: &[(String, crate::orchestration::columns::Mapped)],
+    map: &[(String, crate::orchestration::measured::channels::Mapped)],
 ) -> Result<NumTable, Vec<String>> {
     match tables::read_columns_lenient(path, &REQUIRED, &OPTIONAL, map) {
         Ok((table, bad)) if bad.is_empty() => Ok(table),
@@ -100,7 +100,7 @@ fn load_test(
         }
         _ => None,
     };
-    Ok(measured::align(test, &data, record.as_ref(), open_loop)
+    Ok(aligned::align(test, &data, record.as_ref(), open_loop)
         .map_err(|ps| ps.iter().map(|p| p.to_string()).collect()))
 }
 

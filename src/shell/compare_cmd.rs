@@ -9,18 +9,18 @@ use super::statemap_report;
 use super::tables::{self, Column};
 use super::RunFailed;
 use crate::kernel::metrics::N_HARM;
-use crate::orchestration::compare::{CompareSpec, ComparedTest, Comparison};
-use crate::orchestration::measured::{self, fmt_row, Start};
-use crate::orchestration::statemap::{self, StateMap};
-use crate::orchestration::timebase::fmt_rate;
+use crate::orchestration::diagnosis::compare::{CompareSpec, ComparedTest, Comparison};
+use crate::orchestration::diagnosis::statemap::{self, StateMap};
+use crate::orchestration::measured::aligned::{self, fmt_row, Start};
+use crate::orchestration::measured::timebase::fmt_rate;
 use std::io::Write;
 use std::path::Path;
 
-impl From<OpenLoop> for measured::OpenLoop {
+impl From<OpenLoop> for aligned::OpenLoop {
     fn from(o: OpenLoop) -> Self {
         match o {
-            OpenLoop::Valve => measured::OpenLoop::Valve,
-            OpenLoop::Spool => measured::OpenLoop::Spool,
+            OpenLoop::Valve => aligned::OpenLoop::Valve,
+            OpenLoop::Spool => aligned::OpenLoop::Spool,
         }
     }
 }
@@ -42,7 +42,7 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<()> {
 pub(crate) fn run_to(args: &CompareArgs, o: &mut dyn Write) -> anyhow::Result<()> {
     let model = load_model(args.model.as_deref())?;
     let lc = load_campaign(&args.campaign, &model)?;
-    let open_loop = args.open_loop.map(measured::OpenLoop::from);
+    let open_loop = args.open_loop.map(aligned::OpenLoop::from);
     let spec = CompareSpec {
         tests: load_tests(&lc, open_loop)?,
         open_loop,

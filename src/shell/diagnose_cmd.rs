@@ -8,8 +8,8 @@ use super::tables::{self, Column};
 use super::BadInput;
 use super::{campaign_io::load_model, RunFailed};
 use crate::kernel::params::EffectId;
-use crate::orchestration::diagnose::{self, Diagnosis};
-use crate::orchestration::fit::Problem;
+use crate::orchestration::diagnosis::diagnose::{self, Diagnosis};
+use crate::orchestration::diagnosis::fit::Problem;
 use plotters::prelude::*;
 use std::fmt::Write as _;
 use std::io::Write;
@@ -17,7 +17,8 @@ use std::io::Write;
 /// What a feature group is: a sine's harmonic, mean or remainder, or a record's frequency band
 /// (`rate_hz`: the test's sample rate).
 fn harmonic_label(k: usize, rate_hz: f64) -> String {
-    use crate::orchestration::{fit, fourier};
+    use crate::orchestration::diagnosis::fit;
+    use crate::orchestration::fourier;
     match k {
         fit::MEAN => "mean".into(),
         fit::REMAINDER => "beyond h1-h9".into(),
@@ -399,8 +400,8 @@ fn selection_columns(d: &Diagnosis) -> Vec<(String, Column)> {
     let cs = &d.candidates;
     let mut steps: Vec<(
         String,
-        &[crate::orchestration::fit::Free],
-        &crate::orchestration::fit::FitResult,
+        &[crate::orchestration::diagnosis::fit::Free],
+        &crate::orchestration::diagnosis::fit::FitResult,
         f64,
         f64,
     )> = Vec::new();
@@ -561,8 +562,9 @@ fn evidence_columns(problem: &Problem, d: &Diagnosis) -> Vec<(String, Column)> {
 /// "The error falls": rms acceleration residual per test, baseline and the top candidates.
 fn error_falls_svg(problem: &Problem, d: &Diagnosis) -> Result<String, Box<dyn std::error::Error>> {
     let n = problem.tests.len();
-    let per =
-        |e: &crate::orchestration::fit::Eval| (0..n).map(|t| e.test_rms(t)).collect::<Vec<f64>>();
+    let per = |e: &crate::orchestration::diagnosis::fit::Eval| {
+        (0..n).map(|t| e.test_rms(t)).collect::<Vec<f64>>()
+    };
     let mut series: Vec<(String, Vec<f64>)> = vec![("baseline".into(), per(&d.baseline))];
     for c in d.candidates.iter().take(4) {
         if let Ok(f) = &c.fit {

@@ -3,7 +3,7 @@
 use super::campaign_io::load_model;
 use super::cli::FitArgs;
 use super::{BadInput, RunFailed};
-use crate::orchestration::fit::{self, Free, Problem};
+use crate::orchestration::diagnosis::fit::{self, Free, Problem};
 use std::io::Write;
 
 use super::fit_problem::{
@@ -31,7 +31,8 @@ pub(crate) fn run_to(args: &FitArgs, o: &mut dyn Write) -> anyhow::Result<()> {
     let pool = super::job::pool(args.threads)?;
     // Each freed stage's start and scan (a mode's mass, a resonance's frequency, a lag), as a
     // diagnosis makes them.
-    let free = pool.install(|| crate::orchestration::diagnose::scan_starts(problem, &free));
+    let free =
+        pool.install(|| crate::orchestration::diagnosis::diagnose::scan_starts(problem, &free));
     let r = pool
         .install(|| fit::fit(problem, &free, args.max_iter))
         .map_err(|e| RunFailed(format!("the fit failed: {e}")))?;

@@ -7,7 +7,7 @@ use super::campaign_io::{load_campaign, load_tests, report_checks, LoadedCampaig
 use super::progress::Progress;
 use super::BadInput;
 use crate::kernel::params::{EffectId, ModelParams, EFFECTS};
-use crate::orchestration::fit::{self, Free, Problem, TestData};
+use crate::orchestration::diagnosis::fit::{self, Free, Problem, TestData};
 use crate::orchestration::toml_fields::suggest;
 use std::io::Write;
 use std::path::Path;
@@ -18,7 +18,7 @@ pub struct Loaded {
     pub campaign: LoadedCampaign,
     pub problem: Problem,
     /// The tests as aligned to the model.
-    pub aligned: Vec<crate::orchestration::measured::AlignedTest>,
+    pub aligned: Vec<crate::orchestration::measured::aligned::AlignedTest>,
     /// The notes and warnings about the data files, as printed.
     pub checks: String,
 }
@@ -54,7 +54,7 @@ pub(crate) fn residual_warnings(
     start: &fit::Eval,
     best: Option<&fit::Eval>,
 ) -> Vec<String> {
-    let limit = crate::orchestration::compare::IMPLAUSIBLE_RESIDUAL;
+    let limit = crate::orchestration::diagnosis::compare::IMPLAUSIBLE_RESIDUAL;
     let accel = |e: &fit::Eval, t: usize| e.rms.get(t).map_or(0.0, |r| r[0]);
     (problem.tests.iter().enumerate())
         .filter(|(t, _)| accel(start, *t) > limit && best.is_none_or(|b| accel(b, *t) > limit))
@@ -111,7 +111,7 @@ pub(crate) fn free_parameters(
     let mut free: Vec<Free> = Vec::new();
     for e in effects {
         let e = check_effect(e, "--effect")?;
-        free.extend(crate::orchestration::diagnose::free_of(e, model));
+        free.extend(crate::orchestration::diagnosis::diagnose::free_of(e, model));
     }
     let all: Vec<String> = ModelParams::registry().map(|p| p.path()).collect();
     let all_refs: Vec<&str> = all.iter().map(String::as_str).collect();
@@ -193,7 +193,7 @@ pub(crate) fn write_fitted(
     let mut root = toml::Table::new();
     root.insert(
         "model".into(),
-        toml::Value::Table(crate::orchestration::spec::model_table(&fitted)),
+        toml::Value::Table(crate::orchestration::runs::spec::model_table(&fitted)),
     );
     let header = format!(
         "# Fitted by `study {command}` (vshake {}): {}\n",

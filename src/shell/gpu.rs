@@ -4,7 +4,7 @@
 //! loader panics when a library is missing).
 //!
 //! The kernel is `crates/kernel/src/cuda/lane.cu` (CUDA C++), compiled at run time by NVRTC and cached
-//! as PTX; [`Cuda`] runs a plan's lanes with it ([`crate::orchestration::batch::LaneEngine`]).
+//! as PTX; [`Cuda`] runs a plan's lanes with it ([`crate::orchestration::study::batch::LaneEngine`]).
 //! `auto` uses it where a GPU is found and the work is covered, else runs on the CPU and says
 //! why; `cuda` refuses (exit 2) with the cause, never silently running on the CPU.
 
@@ -13,7 +13,7 @@ use crate::kernel::excitation::Reference;
 use crate::kernel::gpu_lanes::{self, Shared, Uniform, LANE_FIELDS};
 use crate::kernel::params::ModelParams;
 use crate::kernel::simulate::{LaneResult, SetupError, Solver};
-use crate::orchestration::batch::LaneEngine;
+use crate::orchestration::study::batch::LaneEngine;
 use cudarc::driver::{
     CudaContext, CudaFunction, CudaModule, CudaSlice, CudaStream, LaunchConfig, PinnedHostSlice,
     PushKernelArg,

@@ -4,7 +4,7 @@ use super::cli::IterateArgs;
 use super::meta::{self, Key, Kind};
 use super::outputs::{output_paths, write_whole};
 use super::{run_spec, tables, BadInput, RunFailed};
-use crate::orchestration::drive_iteration::{
+use crate::orchestration::preparation::drive_iteration::{
     iterate_on_model, IterationRow, IterationSettings, TableIteration, FRF_SEGMENT,
 };
 use anyhow::Context;

@@ -8,7 +8,7 @@ use super::report::{esc, legend, page_head};
 use super::results_reader::{analyse, load, Loaded};
 use super::tables::{self, input_if_user, AtomicFile};
 use super::BadInput;
-use crate::orchestration::sensitivity::Indices;
+use crate::orchestration::study::sensitivity::Indices;
 use plotters::prelude::*;
 use std::fmt::Write as _;
 use std::io::Write;

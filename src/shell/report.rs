@@ -5,9 +5,10 @@
 //! value is never drawn: a line breaks around it and a bar is left out, and a table cell shows "-".
 
 use crate::kernel::metrics::N_HARM;
-use crate::orchestration::compare::ComparedTest;
-use crate::orchestration::statemap::{self, Residual, State, StateMap};
-use crate::orchestration::timebase::fmt_rate;
+use crate::orchestration::diagnosis::compare::ComparedTest;
+use crate::orchestration::diagnosis::statemap::{self, Residual, StateMap};
+use crate::orchestration::diagnosis::states::State;
+use crate::orchestration::measured::timebase::fmt_rate;
 use plotters::prelude::*;
 use std::fmt::Write as _;
 
@@ -195,7 +196,7 @@ fn amplitude_svg(results: &[ComparedTest]) -> Result<Option<String>, Box<dyn std
     let mut pts: Vec<(f64, f64, f64)> = results
         .iter()
         .filter_map(|r| match &r.test.excitation {
-            crate::orchestration::spec::ExcitationSpec::Sine { sine, .. } => {
+            crate::orchestration::runs::spec::ExcitationSpec::Sine { sine, .. } => {
                 let g = sine.amp_m * (2.0 * std::f64::consts::PI * sine.freq_hz).powi(2)
                     / crate::kernel::params::G;
                 Some((sine.freq_hz, g, r.comparison.rms_residual_accel_ratio))

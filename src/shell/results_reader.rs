@@ -5,7 +5,7 @@
 use super::meta::{self, Key, Kind};
 use super::tables::{self, input_if_user, NumTable};
 use super::BadInput;
-use crate::orchestration::sensitivity::{self, Indices, Results};
+use crate::orchestration::study::sensitivity::{self, Indices, Results};
 use rayon::prelude::*;
 use std::path::Path;
 

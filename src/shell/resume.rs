@@ -10,7 +10,7 @@ use super::meta::{self, Key, Kind};
 use super::outputs::{check_output, OutputLock};
 use super::tables::{self, input_if_user, Recovered};
 use super::BadInput;
-use crate::orchestration::study::StudySpec;
+use crate::orchestration::study::problem::StudySpec;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 

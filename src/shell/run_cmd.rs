@@ -7,10 +7,10 @@ use super::tables::{self};
 use super::{interrupt, BadInput};
 use crate::kernel::simulate::Isa;
 use crate::kernel::LANES;
-use crate::orchestration::batch::{self};
-use crate::orchestration::sim;
-use crate::orchestration::spec::SimSpec;
-use crate::orchestration::study::Method;
+use crate::orchestration::runs::single;
+use crate::orchestration::runs::spec::SimSpec;
+use crate::orchestration::study::batch::{self};
+use crate::orchestration::study::problem::Method;
 use anyhow::Context;
 use std::io::Write;
 use std::ops::Range;
@@ -355,13 +355,15 @@ fn write_histories(o: &mut dyn Write, job: &Job) -> anyhow::Result<()> {
             };
             // A per-sample motion is this sample's realisation; one that cannot run has no history.
             let own = match &plan.per_sample[e] {
-                Some(x) => match crate::orchestration::quake::generated(x, &model, plan.seed, id) {
-                    Ok(r) => Some(r.with_spectrum(plan.spectrum.clone())),
-                    Err(_) => continue,
-                },
+                Some(x) => {
+                    match crate::orchestration::runs::quake::generated(x, &model, plan.seed, id) {
+                        Ok(r) => Some(r.with_spectrum(plan.spectrum.clone())),
+                        Err(_) => continue,
+                    }
+                }
                 None => None,
             };
-            let outcome = sim::run_sim(&sim_spec, own.as_ref().unwrap_or(&plan.references[e]))?;
+            let outcome = single::run_sim(&sim_spec, own.as_ref().unwrap_or(&plan.references[e]))?;
             let path = dir.join(format!("sample{id}_{}.parquet", exc.name));
             let cols = outcome.history.named_columns();
             let mut meta = meta::header(Kind::TimeHistory);

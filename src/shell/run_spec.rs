@@ -4,7 +4,7 @@
 use super::tables;
 use super::BadInput;
 use crate::kernel::excitation::Reference;
-use crate::orchestration::spec::SimSpec;
+use crate::orchestration::runs::spec::SimSpec;
 use std::path::Path;
 
 /// Reads and validates a run file on the model file `model` (`--model`; None: the defaults).

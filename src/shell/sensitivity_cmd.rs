@@ -1,12 +1,12 @@
 //! `study sensitivity results.parquet`: Sobol' indices (Saltelli designs), SRC and PRCC (any
 //! design), per excitation and metric; a Parquet table and a ranked printout. The analysis is
-//! `orchestration::sensitivity`; this reads the results table, prints and writes.
+//! `orchestration::study::sensitivity`; this reads the results table, prints and writes.
 
 use super::cli::SensitivityArgs;
 use super::meta::{self, Key, Kind};
 use super::results_reader::{analyse, load, Loaded};
 use super::tables::{self, Column};
-use crate::orchestration::sensitivity::{self, Indices, SobolIndex};
+use crate::orchestration::study::sensitivity::{self, Indices, SobolIndex};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 

@@ -9,8 +9,8 @@ use crate::kernel::excitation::Reference;
 use crate::kernel::params::G;
 use crate::kernel::simulate::LaneStatus;
 use crate::kernel::spectrum::SpectrumSpec;
-use crate::orchestration::sim::{self, CHANNELS};
-use crate::orchestration::spec::SimSpec;
+use crate::orchestration::runs::single::{self, CHANNELS};
+use crate::orchestration::runs::spec::SimSpec;
 use anyhow::Context;
 use std::io::Write;
 use std::path::Path;
@@ -20,7 +20,7 @@ pub fn run(args: &SimArgs) -> anyhow::Result<()> {
     let spec = load_spec(&args.file, args.model.as_deref())?;
     let base = args.file.parent().unwrap_or(Path::new("."));
     let reference = build_reference(&spec, base)?;
-    let out = sim::run_sim(&spec, &reference)?;
+    let out = single::run_sim(&spec, &reference)?;
     let mut stdout = std::io::stdout().lock();
     let h = 1.0 / (spec.model.controller.f_s * spec.solver.substeps as f64);
     if !args.quiet {
@@ -89,7 +89,7 @@ pub(crate) fn status_text(status: &LaneStatus) -> String {
 pub(crate) fn write_history(
     path: &Path,
     spec: &SimSpec,
-    out: &sim::SimOutcome,
+    out: &single::SimOutcome,
     status: &str,
 ) -> anyhow::Result<()> {
     let cols = out.history.named_columns();
@@ -108,7 +108,7 @@ pub(crate) fn write_history(
 fn write_spectrum(
     o: &mut impl Write,
     args: &SimArgs,
-    history: &sim::History,
+    history: &single::History,
     reference: &Reference,
     spectrum: &SpectrumSpec,
     target: &[f64],

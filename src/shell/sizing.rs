@@ -3,7 +3,7 @@
 
 use super::job::{Job, ResultsSink};
 use super::BadInput;
-use crate::orchestration::batch::{self, RowSink, Timing};
+use crate::orchestration::study::batch::{self, RowSink, Timing};
 use std::io::{IsTerminal, Write};
 use std::ops::Range;
 use std::time::Duration;

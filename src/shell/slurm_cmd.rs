@@ -4,8 +4,8 @@
 use super::cli::SlurmArgs;
 use super::job::{load_study, plan_for, Shard};
 use super::BadInput;
-use crate::orchestration::batch::Plan;
-use crate::orchestration::study::StudySpec;
+use crate::orchestration::study::batch::Plan;
+use crate::orchestration::study::problem::StudySpec;
 use anyhow::Context;
 use std::io::Write;
 use std::path::{Path, PathBuf};

@@ -2,7 +2,7 @@
 //! Parquet tables.
 
 use super::tables::{self, Column};
-use crate::orchestration::statemap::{self, StateMap};
+use crate::orchestration::diagnosis::statemap::{self, StateMap};
 use std::io::Write;
 
 /// Where in state space the residual lies: per residual, the share each state's terms explain

@@ -10,9 +10,9 @@ use crate::kernel::excitation::Reference;
 use crate::kernel::params::ModelParams;
 use crate::kernel::resample::ch;
 use crate::kernel::simulate::{LaneStatus, Solver};
-use crate::orchestration::campaign::TestSpec;
-use crate::orchestration::sim;
-use crate::orchestration::spec::{ExcitationSpec, SimSpec};
+use crate::orchestration::measured::campaign::TestSpec;
+use crate::orchestration::runs::single;
+use crate::orchestration::runs::spec::{ExcitationSpec, SimSpec};
 use anyhow::Context;
 use chacha20::ChaCha8Rng;
 use rand::SeedableRng;
@@ -202,7 +202,7 @@ fn sample_test(
             substeps: FINE_SUBSTEPS,
         }
     };
-    let (result, rs) = sim::run_sampled(&spec.model, reference, &solver, &tau)?;
+    let (result, rs) = single::run_sampled(&spec.model, reference, &solver, &tau)?;
     if let LaneStatus::Failed { time_s, reason } = result.status {
         return Ok(Err(format!(
             "the model failed at t = {time_s:.4} s: {reason}"
@@ -340,7 +340,7 @@ fn read_as_record(e: &ExcitationSpec, as_records: bool) -> Option<f64> {
         ExcitationSpec::Record { f_ref_hz, .. } => Some(*f_ref_hz),
         ExcitationSpec::Stochastic { f_ref_hz, .. } if as_records => Some(*f_ref_hz),
         ExcitationSpec::Sweep { .. } | ExcitationSpec::Random { .. } if as_records => {
-            Some(crate::orchestration::spec_quake::F_REF_DEFAULT)
+            Some(crate::orchestration::runs::quake_spec::F_REF_DEFAULT)
         }
         _ => None,
     }
@@ -424,7 +424,7 @@ fn synth_test(
     if let Some(f_ref_hz) = read_as_record(&test.excitation, args.as_records) {
         // The campaign reads this test's x_r as the tracked reference: the truth tracks that
         // reference too, its derivatives the zero-phase filter's (docs/model.md §4).
-        let record = sim::tracked_record(&reference, rate, pre_rows, f_ref_hz);
+        let record = single::tracked_record(&reference, rate, pre_rows, f_ref_hz);
         reference = record.reference(test_model.controller.f_s);
         pre_rows = 0;
     }

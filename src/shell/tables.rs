@@ -3,13 +3,13 @@
 //! column, a NaN or empty cell, an empty file, a header with other units: each names the file,
 //! the column and the row), and an atomic Parquet writer (temp file + rename; an interrupted
 //! write leaves no file that looks complete). The time base and the values are checked one floor
-//! down ([`crate::orchestration::measured`]).
+//! down ([`crate::orchestration::measured::aligned`]).
 
 use crate::kernel::excitation::Reference;
 use crate::kernel::params::ModelParams;
-use crate::orchestration::columns;
-use crate::orchestration::sim;
-use crate::orchestration::spec::ExcitationSpec;
+use crate::orchestration::measured::channels;
+use crate::orchestration::runs::single;
+use crate::orchestration::runs::spec::ExcitationSpec;
 use crate::shell::matlab;
 use arrow_array::builder::{Float64Builder, ListBuilder, StringBuilder};
 use arrow_array::{
@@ -25,7 +25,7 @@ use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-pub use crate::orchestration::measured::NumTable;
+pub use crate::orchestration::measured::aligned::NumTable;
 
 /// A problem with a data file.
 #[derive(Debug, thiserror::Error)]
@@ -284,7 +284,7 @@ fn missing(file: &Path, column: &str, found: &[String]) -> TableError {
              campaign's `columns` table, e.g. {BY_POSITION}, docs/formats.md)",
             found.join(", ")
         )
-    } else if columns::channel(column).is_some() {
+    } else if channels::channel(column).is_some() {
         format!(
             " (columns present: {}; a column named otherwise is mapped to it by the campaign's \
              `columns` table, docs/formats.md)",
@@ -350,7 +350,7 @@ fn column_names_unguarded(path: &Path) -> Result<Vec<String>, TableError> {
         let bytes = read_input(path).map_err(|e| TableError::Io { file, err: e })?;
         let text = String::from_utf8_lossy(&bytes);
         let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
-        let lay = columns::layout(text);
+        let lay = channels::layout(text);
         let lines: Vec<&str> = text.lines().collect();
         Ok(csv_header(&lines, &lay).0)
     }
@@ -382,7 +382,7 @@ pub(crate) fn load_reference(
         } => Some(read_record(&base.join(file), column, time_column).map_err(input_if_user)?),
         _ => None,
     };
-    sim::reference_for(excitation, model, record.as_ref(), seed)
+    single::reference_for(excitation, model, record.as_ref(), seed)
         .map_err(|p| super::BadInput(p.to_string()).into())
 }
 
@@ -392,7 +392,7 @@ pub(crate) fn read_record(
     column: &str,
     time_column: &str,
 ) -> Result<NumTable, TableError> {
-    if crate::orchestration::spec::is_at2(path) {
+    if crate::orchestration::runs::spec::is_at2(path) {
         super::at2::read(path)
     } else {
         read_columns(path, &[time_column, column], &[])
@@ -434,7 +434,7 @@ pub fn read_columns_lenient(
     path: &Path,
     wanted: &[&str],
     optional: &[&str],
-    map: &[(String, columns::Mapped)],
+    map: &[(String, channels::Mapped)],
 ) -> Result<(NumTable, Vec<TableError>), TableError> {
     let (table, bad) = read_columns_lenient_impl(path, (wanted, optional, map), false)?;
     Ok((table, bad.errors()))
@@ -443,7 +443,7 @@ pub fn read_columns_lenient(
 type Wanted<'a> = (
     &'a [&'a str],
     &'a [&'a str],
-    &'a [(String, columns::Mapped)],
+    &'a [(String, channels::Mapped)],
 );
 
 fn read_columns_lenient_impl(
@@ -475,7 +475,7 @@ fn read_columns_lenient_impl(
 
 /// Reads the `wanted` (and those of the `optional` present) columns of a CSV file: its layout
 /// (separator, preamble, header, units row) found from its lines, its columns by name and unit
-/// ([`columns::resolve`]), converted to SI.
+/// ([`channels::resolve`]), converted to SI.
 fn read_csv(path: &Path, wanted: Wanted<'_>) -> Result<(NumTable, BadCells), TableError> {
     let file = path.to_path_buf();
     let bytes = read_input(path).map_err(|e| TableError::Io {
@@ -495,7 +495,7 @@ fn read_csv(path: &Path, wanted: Wanted<'_>) -> Result<(NumTable, BadCells), Tab
     if text.trim().is_empty() {
         return Err(TableError::EmptyFile { file });
     }
-    let lay = columns::layout(text);
+    let lay = channels::layout(text);
     let lines: Vec<&str> = text.lines().collect();
     let (headers, units) = csv_header(&lines, &lay);
     let idx = csv_columns(
@@ -631,7 +631,7 @@ fn read_mat(path: &Path, wanted: Wanted<'_>) -> Result<(NumTable, BadCells), Tab
 fn mat_lengths(
     path: &Path,
     mat: &matlab::MatColumns,
-    idx: &[columns::Resolved],
+    idx: &[channels::Resolved],
 ) -> Result<(), TableError> {
     let lens: Vec<(String, usize)> = (idx.iter())
         .map(|r| (mat.names[r.index].clone(), mat.values[r.index].len()))
@@ -687,32 +687,32 @@ fn binary_kind(bytes: &[u8]) -> Option<(String, String)> {
 }
 
 /// The header's fields (`column 1`, ... where the file has none) and the units row's.
-fn csv_header(lines: &[&str], lay: &columns::Layout) -> (Vec<String>, Option<Vec<String>>) {
+fn csv_header(lines: &[&str], lay: &channels::Layout) -> (Vec<String>, Option<Vec<String>>) {
     let headers = match lay.header {
-        Some(h) => columns::fields(lines[h], lay.sep),
+        Some(h) => channels::fields(lines[h], lay.sep),
         None => {
             let n = lines
                 .get(lay.data)
-                .map_or(0, |l| columns::fields(l, lay.sep).len());
+                .map_or(0, |l| channels::fields(l, lay.sep).len());
             (1..=n).map(|k| format!("column {k}")).collect()
         }
     };
     let units = lay.units.map(|u| {
-        (columns::fields(lines[u], lay.sep).iter())
-            .map(|c| columns::strip_brackets(c).to_string())
+        (channels::fields(lines[u], lay.sep).iter())
+            .map(|c| channels::strip_brackets(c).to_string())
             .collect()
     });
     (headers, units)
 }
 
 /// One note for the columns read under another name or unit than vshake's.
-fn columns_note(idx: &[columns::Resolved]) -> Option<String> {
+fn columns_note(idx: &[channels::Resolved]) -> Option<String> {
     let notes: Vec<&str> = idx.iter().filter_map(|r| r.note.as_deref()).collect();
     (!notes.is_empty()).then(|| notes.join("; "))
 }
 
 /// What the layout shows that a plain CSV file would not.
-fn layout_notes(lay: &columns::Layout) -> Vec<String> {
+fn layout_notes(lay: &channels::Layout) -> Vec<String> {
     let mut notes = Vec::new();
     match lay.sep {
         b';' => notes.push("read as semicolon-separated values".to_string()),
@@ -751,8 +751,8 @@ fn csv_columns(
     units: Option<&[String]>,
     has_header: bool,
     (wanted, optional, map): Wanted<'_>,
-) -> Result<Vec<columns::Resolved>, TableError> {
-    columns::resolve(headers, units, wanted, optional, map).map_err(|problems| {
+) -> Result<Vec<channels::Resolved>, TableError> {
+    channels::resolve(headers, units, wanted, optional, map).map_err(|problems| {
         TableError::all(
             (problems.into_iter())
                 .map(|p| column_error(path, headers, has_header, p))
@@ -766,15 +766,15 @@ fn column_error(
     path: &Path,
     headers: &[String],
     has_header: bool,
-    p: columns::ColumnProblem,
+    p: channels::ColumnProblem,
 ) -> TableError {
     match p {
-        columns::ColumnProblem::Missing(c) if !has_header => TableError::MissingColumn {
+        channels::ColumnProblem::Missing(c) if !has_header => TableError::MissingColumn {
             file: path.to_path_buf(),
             column: c,
             hint: " (the file has no header row, its first line is numbers: add a header naming the columns, or give each channel's position in the campaign's `columns` table, e.g. columns = { time = { column = 1, unit = \"s\" } }, docs/formats.md)".into(),
         },
-        columns::ColumnProblem::Missing(c) => missing(path, &c, headers),
+        channels::ColumnProblem::Missing(c) => missing(path, &c, headers),
         p => TableError::Column {
             file: path.to_path_buf(),
             message: clip(&p.to_string(), 400),
@@ -787,7 +787,7 @@ fn column_error(
 fn read_csv_records(
     rdr: &mut csv::Reader<&[u8]>,
     file: &Path,
-    idx: &[columns::Resolved],
+    idx: &[channels::Resolved],
     (sep, first_line): (u8, usize),
 ) -> Result<(Vec<Vec<f64>>, BadCells, bool), TableError> {
     let mut columns: Vec<Vec<f64>> = vec![Vec::new(); idx.len()];
@@ -876,7 +876,7 @@ fn read_parquet(
         .iter()
         .map(|f| f.name().clone())
         .collect();
-    let idx = columns::resolve(&found, None, wanted, optional, map).map_err(|problems| {
+    let idx = channels::resolve(&found, None, wanted, optional, map).map_err(|problems| {
         TableError::all(
             (problems.into_iter())
                 .map(|p| column_error(path, &found, true, p))

@@ -9,11 +9,11 @@ use super::{job, tune_report, BadInput, RunFailed};
 use crate::kernel::excitation::Reference;
 use crate::kernel::metrics::Metrics;
 use crate::kernel::params::ModelParams;
-use crate::orchestration::batch::{Row, RowStatus};
-use crate::orchestration::sim::{self, SimOutcome};
-use crate::orchestration::spec::SimSpec;
-use crate::orchestration::tune::{self, Evaluation, GenerationSummary, Tuned, Tuner};
-use crate::orchestration::tune_spec::{Statistic, TuneSpec};
+use crate::orchestration::preparation::tune::{self, Evaluation, GenerationSummary, Tuned, Tuner};
+use crate::orchestration::preparation::tune_spec::{Statistic, TuneSpec};
+use crate::orchestration::runs::single::{self, SimOutcome};
+use crate::orchestration::runs::spec::SimSpec;
+use crate::orchestration::study::batch::{Row, RowStatus};
 use anyhow::Context;
 use std::io::Write;
 use std::path::Path;
@@ -157,9 +157,9 @@ fn header(
         )?;
     }
     let s = spec.search;
-    let lambda = s
-        .population
-        .unwrap_or_else(|| crate::orchestration::cmaes::default_population(spec.gains.len()));
+    let lambda = s.population.unwrap_or_else(|| {
+        crate::orchestration::preparation::cmaes::default_population(spec.gains.len())
+    });
     writeln!(o, "  search      CMA-ES, population {lambda}, sigma0 {}, at most {} generations, seed {}, {threads} thread{}", s.sigma0, s.generations, spec.seed, if threads == 1 { "" } else { "s" })?;
     if !args.quiet {
         writeln!(
@@ -260,7 +260,7 @@ fn nominal_runs(tuner: &Tuner, t: &Tuned, refs: &[Reference]) -> anyhow::Result<
                     excitation: e.spec.clone(),
                     solver: tuner.spec.solver,
                 };
-                sim::run_sim(&spec, r)
+                single::run_sim(&spec, r)
                     .map_err(|err| anyhow::anyhow!("excitation {}: {err}", e.name))
             })
             .collect()
@@ -300,7 +300,7 @@ fn write_model(
         m.insert("controller".into(), c.into());
         m
     } else {
-        crate::orchestration::spec::model_table(&model)
+        crate::orchestration::runs::spec::model_table(&model)
     };
     let mut root = toml::Table::new();
     root.insert("model".into(), toml::Value::Table(table));

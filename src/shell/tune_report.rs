@@ -5,8 +5,8 @@
 
 use super::report::{draw_line, esc, legend, page_head};
 use crate::kernel::excitation::Reference;
-use crate::orchestration::sim::SimOutcome;
-use crate::orchestration::tune::{error_term, Tuned, Tuner};
+use crate::orchestration::preparation::tune::{error_term, Tuned, Tuner};
+use crate::orchestration::runs::single::SimOutcome;
 use plotters::prelude::*;
 use std::fmt::Write as _;
 
@@ -179,7 +179,7 @@ fn errors_table(
         )?;
     }
     let u_lim = tuner.spec.model.servovalve.u_lim;
-    let worst = |ev: &crate::orchestration::tune::Evaluation| {
+    let worst = |ev: &crate::orchestration::preparation::tune::Evaluation| {
         let n_e = tuner.spec.excitations.len();
         ev.rows
             .iter()
@@ -261,7 +261,7 @@ fn spectrum_svg(
 
 /// Each generation's best (points) and the best so far (line); the start as generation 0.
 fn generations_svg(t: &Tuned) -> Plot {
-    let pts = |f: &dyn Fn(&crate::orchestration::tune::GenerationSummary) -> f64| {
+    let pts = |f: &dyn Fn(&crate::orchestration::preparation::tune::GenerationSummary) -> f64| {
         t.generations
             .iter()
             .map(|g| (g.generation as f64, f(g)))

@@ -21,6 +21,8 @@ pub struct ActuatorLane {
     pub vd2: f64,
 }
 
+crate::lanes::soa!(ActuatorLane => ActuatorSoa { beta, a1, a2, l, vd1, vd2 });
+
 impl ActuatorLane {
     /// The coefficients of one parameter set's actuators.
     pub fn of(a: &ActuatorParams) -> Self {

@@ -6,10 +6,10 @@
 //! both on the same states). What only an effect reads (the supply flow, the openings) is not
 //! computed.
 
+use super::lane_params::LaneParams;
 use super::lanes::{Pack, Portable, Simd, AVX2, AVX512};
 use super::platen::Damping;
 use super::servovalve::FlowLaw;
-use super::simulate::LaneParams;
 use super::state::idx::*;
 use super::state::NP;
 

@@ -19,6 +19,8 @@ pub struct FrictionLane {
     pub kappa_neg: f64,
 }
 
+crate::lanes::soa!(FrictionLane => FrictionSoa { inv_y, kappa, kappa_neg });
+
 /// dz/dt of the friction law.
 #[inline(always)]
 pub(crate) fn dz_dt(c: &FrictionLane, v: f64, z: f64) -> f64 {

@@ -196,7 +196,7 @@ pub fn filtered_noise(g: &GroundParams, white: &[f64], dt: f64) -> Vec<f64> {
     m[3][1] = 2.0 * zg * wg * dt;
     m[3][2] = -wf * wf * dt;
     m[3][3] = -2.0 * zf * wf * dt;
-    let e = super::excitation::expm(&m);
+    let e = super::expm::expm(&m);
     let mut s = [0.0f64; 4];
     let mut out: Vec<f64> = white
         .iter()

@@ -21,6 +21,8 @@ pub struct PlatenLane {
     pub mu: f64,
 }
 
+crate::lanes::soa!(PlatenLane => PlatenSoa { inv_m, k, c, alpha, mu });
+
 /// How |v|^α is evaluated.
 pub trait Damping: Copy + Send + Sync + 'static {
     /// The published law (α = ½): the kernel's vector builds are made for it, for the other only

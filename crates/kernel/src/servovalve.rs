@@ -16,37 +16,13 @@
 //! q_in1 = K_q x, q_out2 = K_q (A2/A1) x with K_q = K_v w1 √(P_S − P1₀).
 //! The law is a type parameter of the kernel, chosen once per batch.
 
-use super::lanes::{Pack, Simd};
+use super::lanes::{inv_fourth_root, Pack, Simd};
 use super::params::{ModelParams, ValveLaw};
-use super::simulate::ValveSoa;
 
 /// Regularised orifice law sq(Δp) = Δp / (Δp² + p_tr²)^¼, with `p_tr2` = p_tr².
 #[inline(always)]
 pub fn sq(dp: f64, p_tr2: f64) -> f64 {
     dp * inv_fourth_root(dp * dp + p_tr2)
-}
-
-/// Seed of [`inv_fourth_root`]: the bits of s^(−¼) are about `FOURTH_ROOT_SEED − bits(s)/4`
-/// (the exponent field divided by −4, the mantissa approximated linearly). This constant
-/// minimises the seed's largest relative error, 3.1 % [found numerically over four octaves].
-pub(crate) const FOURTH_ROOT_SEED: u64 = 0x4feb_0c0b_ba5e_3540;
-
-/// s^(−¼) for a positive normal s, to within 2 ulp, with multiplications and additions only.
-///
-/// A seed from the bits of s (3.1 %) and four Newton steps on y⁻⁴ = s,
-/// y ← y·(5 − s·y⁴)/4, each squaring the relative error (times 2.5): 3.1e-2, 2.5e-3, 1.6e-5,
-/// 6.2e-10, then rounding. It replaces two square roots and a division, which share the one
-/// divide/square-root unit, with 26 operations on the multiply and add pipes; the kernel has
-/// spare room there and none on the divider. Integer and IEEE operations only, with no fused
-/// multiply-add, so every build and every CPU gives the same bits.
-#[inline(always)]
-pub fn inv_fourth_root(s: f64) -> f64 {
-    let mut y = f64::from_bits(FOURTH_ROOT_SEED.wrapping_sub(s.to_bits() >> 2));
-    for _ in 0..4 {
-        let y2 = y * y;
-        y *= 1.25 - 0.25 * s * (y2 * y2);
-    }
-    y
 }
 
 /// Per-lane valve coefficients, with the number of valves per actuator folded in.
@@ -63,6 +39,8 @@ pub struct ValveLane {
     pub kq1: f64,
     pub kq2: f64,
 }
+
+crate::lanes::soa!(ValveLane => ValveSoa { kw1, kw2, kw3, kw4, p_r, p_tr2, kq1, kq2 });
 
 impl ValveLane {
     /// The coefficients of one parameter set (docs/model.md §3; the linear valve's K_q at the

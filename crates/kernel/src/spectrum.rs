@@ -9,7 +9,7 @@
 //! acceleration is the straight line through its samples, and (u, u̇) advance by the exact
 //! solution of that interval: [u, u̇]ₖ₊₁ = A·[u, u̇]ₖ + B·[a_k, a_{k+1}]. A and B are the matrix
 //! exponential of the augmented system (u, u̇, a, ȧ) over one tick, computed here with the same
-//! scaled Taylor series as the reference filter ([`super::excitation::expm`]); they are the
+//! scaled Taylor series as the reference filter ([`super::expm::expm`]); they are the
 //! Nigam–Jennings coefficients without transcribing their formulas. The peak is taken at the
 //! ticks. `tests` check the recursion against the closed-form response to a ramp (exact for a
 //! piecewise-linear input) and to a harmonic input at resonance.
@@ -96,7 +96,7 @@ impl Oscillator {
         m[1][1] = -2.0 * zeta * w * dt;
         m[1][2] = -dt;
         m[2][3] = dt;
-        let e = super::excitation::expm(&m);
+        let e = super::expm::expm(&m);
         // [u, v](dt) = E[0..2][0..2]·[u, v] + E[·][2]·a_k + E[·][3]·(a_{k+1} − a_k)/dt.
         let b = |r: usize| [e[r][2] - e[r][3] / dt, e[r][3] / dt];
         Oscillator {

@@ -30,13 +30,13 @@
 //! [`EXPLAINS_TOGETHER`] of the residual beyond noise; a best candidate that
 //! explains less than [`EXPLAINS_ENOUGH`] (alone or with those added) is reported as such: the
 //! missing effect is probably not in the library, and the starting model's residual mapped onto
-//! the plant's states ([`super::statemap`]) names the state and term it follows. A named set that
+//! the plant's states ([`crate::diagnosis::statemap`]) names the state and term it follows. A named set that
 //! leaves more than [`NOISE_FACTOR`] times the noise floor is said to, with the state and term of
 //! what it leaves.
 
-use super::fit::{self, FeatureInfo, Free, Problem};
-use super::measured::AlignedTest;
-use super::statemap::StateMap;
+use crate::diagnosis::fit::{self, FeatureInfo, Free, Problem};
+use crate::diagnosis::statemap::StateMap;
+use crate::measured::aligned::AlignedTest;
 use rayon::prelude::*;
 use vshake_kernel::params::{EffectId, ModelParams};
 
@@ -170,12 +170,12 @@ pub struct Diagnosis {
     /// Each test's sample rate, Hz: a record's evidence is split by frequency band.
     pub rates_hz: Vec<f64>,
     /// The starting model's residual mapped onto the plant's states, when the caller made it
-    /// ([`super::statemap`]): a verdict of "not in the library" then names the state and term
+    /// ([`crate::diagnosis::statemap`]): a verdict of "not in the library" then names the state and term
     /// the residual follows.
-    pub state_map: Option<super::statemap::StateMap>,
+    pub state_map: Option<crate::diagnosis::statemap::StateMap>,
     /// The residual the named effects leave, mapped likewise (when the caller made it): a
     /// verdict whose effects do not take the residual to the noise names what is left.
-    pub state_map_after: Option<super::statemap::StateMap>,
+    pub state_map_after: Option<crate::diagnosis::statemap::StateMap>,
 }
 
 /// What the diagnosis concludes.
@@ -400,9 +400,9 @@ fn state_map(aligned: &[AlignedTest]) -> Option<StateMap> {
     let solver = Default::default();
     let compared: Result<Vec<_>, String> = aligned
         .par_iter()
-        .map(|t| super::compare::compare_test(t, &solver))
+        .map(|t| crate::diagnosis::compare::compare_test(t, &solver))
         .collect();
-    compared.ok().map(|c| super::statemap::map(&c))
+    compared.ok().map(|c| crate::diagnosis::statemap::map(&c))
 }
 
 /// The free parameters of `effect` at their values in `model`.

@@ -16,8 +16,8 @@
 //! reference with an acceleration correction added, its velocity and displacement integrated from
 //! rest (so the table starts where it stands), and the response is the recorded acceleration.
 
-use super::fourier::fft;
-use super::sim::{run_one, History};
+use crate::fourier::fft;
+use crate::runs::single::{run_one, History};
 use chacha20::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
 use rand_distr::StandardNormal;
@@ -544,8 +544,8 @@ mod tests {
     /// kept being the best iteration's.
     #[test]
     fn the_model_table_is_iterated_to_5_percent() {
-        use crate::quake;
-        use crate::spec::{ExcitationSpec, Realisation};
+        use crate::runs::quake;
+        use crate::runs::spec::{ExcitationSpec, Realisation};
         use vshake_kernel::ground::Processing;
         let exc = ExcitationSpec::Stochastic {
             duration_s: 20.0,

@@ -322,7 +322,7 @@ pub fn analyse(results: &Results<'_>, e: usize, y: &[f64], bootstrap: usize) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sampling::{Design, Distribution, UnitDesign};
+    use crate::study::sampling::{Design, Distribution, UnitDesign};
 
     /// Ishigami function with a = 7, b = 0.1 on [−π, π]³: S = (0.3139, 0.4424, 0),
     /// ST = (0.5576, 0.4424, 0.2437).

@@ -46,9 +46,9 @@
 //! `[model.*]`, `[spectrum]`, `[solver]` are a study's; `[output] dir` is the folder of results
 //! (default: the tuning's name).
 
-use super::spec::{self, ExcitationSpec};
-use super::study::{self, NamedExcitation, Variable};
-use super::toml_fields::{Fields, InputError, Issues};
+use crate::runs::spec::{self, ExcitationSpec};
+use crate::study::problem::{self, NamedExcitation, Variable};
+use crate::toml_fields::{Fields, InputError, Issues};
 use std::path::PathBuf;
 use vshake_kernel::params::{Component, ModelParams, ParamInfo};
 use vshake_kernel::simulate::Solver;
@@ -171,7 +171,7 @@ impl TuneSpec {
     /// Parses a tuning file's text on the model `base` (a model file's, or the defaults); `file`
     /// names it in errors.
     pub fn from_toml_on(text: &str, file: &str, base: ModelParams) -> Result<TuneSpec, InputError> {
-        let table = super::toml_fields::parse(text, file)?;
+        let table = crate::toml_fields::parse(text, file)?;
         let mut issues = Issues::default();
         let mut root = Fields::new("", &table);
         let (name, description, seed, search) = read_header(&mut root, &mut issues);
@@ -182,7 +182,7 @@ impl TuneSpec {
         spec::validate_model(&model, "model", &mut issues);
         let gains = read_gains(&mut root, &model, &mut issues);
         let mut weights = Vec::new();
-        let excitations = study::read_excitations_with(
+        let excitations = problem::read_excitations_with(
             &mut root,
             &model,
             &mut issues,
@@ -191,10 +191,10 @@ impl TuneSpec {
         );
         let objective = read_objective(&mut root, &excitations, model.controller.f_s, &mut issues);
         let valve_cmd_fraction = read_constraints(&mut root, &mut issues);
-        let uncertain = study::read_variables_at(&mut root, "uncertain", &model, &mut issues);
+        let uncertain = problem::read_variables_at(&mut root, "uncertain", &model, &mut issues);
         let (draws, statistic) = read_robust(&mut root, !uncertain.is_empty(), &mut issues);
-        let spectrum = study::read_spectrum(&mut root, &mut issues);
-        let (solver, _) = study::read_study_solver(&mut root, &mut issues);
+        let spectrum = problem::read_spectrum(&mut root, &mut issues);
+        let (solver, _) = problem::read_study_solver(&mut root, &mut issues);
         let output = read_output(&mut root, &mut issues);
         check_overlap(&gains, &uncertain, &excitations, &mut issues);
         root.finish(&ROOT_KEYS, &mut issues);
@@ -243,7 +243,7 @@ fn read_header(root: &mut Fields<'_>, issues: &mut Issues) -> Header {
     let name = t.str("name", issues).map(str::to_string);
     match &name {
         None => issues.push(t.path_of("name"), "missing"),
-        Some(n) if !study::is_word(n) => issues.push(
+        Some(n) if !problem::is_word(n) => issues.push(
             t.path_of("name"),
             format!("{n:?} must be a non-empty word of letters, digits, _ - ."),
         ),
@@ -318,7 +318,7 @@ fn read_gains(root: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues) -
     }
     let mut gains: Vec<Gain> = Vec::new();
     for mut f in list {
-        let info = study::read_parameter(&mut f, issues);
+        let info = problem::read_parameter(&mut f, issues);
         let (low, high) = (f.f64("low", issues), f.f64("high", issues));
         let start = f.f64("start", issues);
         for (k, v) in [("low", low), ("high", high)] {
@@ -386,7 +386,7 @@ fn read_objective(
         );
         return Vec::new();
     };
-    let all = study::all_metric_names();
+    let all = problem::all_metric_names();
     let keys: Vec<String> = t.keys().cloned().collect();
     let mut objective = Vec::new();
     for k in keys {

@@ -1,9 +1,9 @@
 //! The earthquake-type excitations of a spec (`stochastic`, `sweep`, `random`) and what record
 //! excitations share with them (the reference filter, the acceleration processing); read like
-//! [`super::spec`]'s sine and record, every problem at its key path.
+//! [`crate::runs::spec`]'s sine and record, every problem at its key path.
 
-use super::spec::{ExcitationSpec, Realisation};
-use super::toml_fields::{Fields, Issues};
+use crate::runs::excitation_spec::{ExcitationSpec, Realisation};
+use crate::toml_fields::{Fields, Issues};
 use vshake_kernel::ground::{GroundParams, Processing, Sweep, SweepLaw};
 use vshake_kernel::params::{ModelParams, G};
 
@@ -357,7 +357,7 @@ fn put_record(e: &ExcitationSpec, put: &mut Put<'_>) {
     put("kind", "record".into());
     put("signal", signal.name().into());
     put("file", file.display().to_string().into());
-    if !super::spec::is_at2(file) {
+    if !crate::runs::excitation_spec::is_at2(file) {
         put("column", column.clone().into());
         put("time_column", time_column.clone().into());
     }

@@ -5,7 +5,7 @@
 //! (the model interpolated there, [`vshake_kernel::resample`]):
 //! - a sine test, per channel (acceleration, displacement, force where the file has it), over
 //!   the analysis window, model minus measured: the complex harmonics k = 1…9 (those below the
-//!   file's Nyquist frequency), by least squares ([`super::compare::Projector`], built once per
+//!   file's Nyquist frequency), by least squares ([`crate::diagnosis::projector::Projector`], built once per
 //!   test); the mean (displacement and force: a static offset, e.g. of a leaking loop; the
 //!   accelerometer's mean is its bias, not physics); and the *remainder* ‖(I − P)(model −
 //!   measured)‖/σ, what neither the mean nor the harmonics hold (an oscillation at another
@@ -18,7 +18,7 @@
 //!   a fit could lower their χ² while raising the residual's rms. With every sample, χ² is the
 //!   time-domain χ² of the window (Σ e²/σ², channel by channel), which falls exactly when each
 //!   channel's residual rms falls; the evidence by frequency band is its split by Parseval
-//!   ([`super::fourier::band_energy`]).
+//!   ([`crate::fourier::band_energy`]).
 //!
 //! Each feature is divided by its noise standard deviation, so the sum of squares χ² is a
 //! chi-square when the model is right. The noise of a channel is estimated from the measured data
@@ -28,7 +28,7 @@
 //!   fundamental, over the window: σ² = RSS/(n − p). It holds at any sample rate (third
 //!   differences, which keep (2πf/R)³ of a smooth signal, do not at 256 Hz);
 //! - a record test: the level of the spectrum's top band, 0.4 to 0.5 of the rate
-//!   ([`super::fourier::noise_sigma`]): the motion is band-limited, the sensors' noise is not
+//!   ([`crate::fourier::noise_sigma`]): the motion is band-limited, the sensors' noise is not
 //!   (third differences, σ = rms(Δ³x)/√20, keep (2πf/R)³ of the motion and overstate it at the
 //!   rates where a table's broadband motion reaches 50 Hz; they remain the fallback for a record
 //!   too short for the band to hold 16 bins).
@@ -50,8 +50,8 @@
 //! still misfits), checked along each parameter by direct evaluation ([`profiled`]: never smaller
 //! than χ²'s own curvature where it rises by 4s²), mapped to the parameters' units.
 
-use super::campaign::Weights;
-use super::measured::{wrap_deg, AlignedTest, Samples};
+use crate::measured::aligned::{wrap_deg, AlignedTest, Samples};
+use crate::measured::campaign::Weights;
 use faer::prelude::*;
 use faer::Mat;
 use rayon::prelude::*;
@@ -106,7 +106,7 @@ pub struct TestData {
     scale: Vec<f64>,
     info: Vec<FeatureInfo>,
     /// The harmonic projector of the samples (sine tests), built once.
-    proj: Option<super::compare::Projector>,
+    proj: Option<crate::diagnosis::projector::Projector>,
     /// Degrees of freedom of the features ([`TestData::dof`]).
     dof: f64,
 }
@@ -130,7 +130,7 @@ pub(crate) fn noise_sigma_differences(x: &[f64]) -> f64 {
 /// a fundamental `f`, the residual of the periodic fit; without, third differences.
 pub fn noise_sigma(x: &[f64], tau: &[f64], rate_hz: f64, f: Option<f64>) -> f64 {
     let Some(f) = f else {
-        return super::fourier::noise_sigma(x)
+        return crate::fourier::noise_sigma(x)
             .unwrap_or_else(|| noise_sigma_differences(x))
             .max(NUMERICAL_FLOOR * rms_slice(x))
             .max(f64::MIN_POSITIVE);
@@ -178,7 +178,11 @@ pub fn noise_sigma(x: &[f64], tau: &[f64], rate_hz: f64, f: Option<f64>) -> f64 
 /// The unweighted linear features of channel `c` at the samples `s`: the harmonics below the
 /// Nyquist frequency and, for displacement and force, the mean (a sine, `proj` of the samples);
 /// or every sample (a record).
-fn channel_features(proj: Option<&super::compare::Projector>, c: usize, x: &[f64]) -> Vec<f64> {
+fn channel_features(
+    proj: Option<&crate::diagnosis::projector::Projector>,
+    c: usize,
+    x: &[f64],
+) -> Vec<f64> {
     match proj {
         Some(p) => {
             let h = p.apply(x);
@@ -219,7 +223,7 @@ impl TestData {
         let w = [weights.accel, weights.disp, weights.force];
         let proj = samples
             .fundamental_hz
-            .map(|f| super::compare::Projector::new(&samples.tau, f, samples.n_harm));
+            .map(|f| crate::diagnosis::projector::Projector::new(&samples.tau, f, samples.n_harm));
         let mut t = TestData {
             name,
             model,
@@ -513,8 +517,12 @@ impl Problem {
                     return vec![Err(format!("test {:?}: {msg}", t.name)); hi - lo];
                 }
                 let mut rs = Resampler::<LANES>::new(&t.samples.tau);
-                let res = match super::sim::run_lanes_single(&refs, &t.drive, &self.solver, &mut rs)
-                {
+                let res = match crate::runs::single::run_lanes_single(
+                    &refs,
+                    &t.drive,
+                    &self.solver,
+                    &mut rs,
+                ) {
                     Ok(r) => r,
                     Err(e) => return vec![Err(format!("test {:?}: {e}", t.name)); hi - lo],
                 };
@@ -1034,12 +1042,12 @@ fn uncertainty(j: &[Vec<f64>], after: &Eval, n: usize) -> (Vec<f64>, Vec<Vec<f64
 }
 
 /// [`FeatureInfo::harmonic`] of a record's residual in octave band `b` of
-/// [`super::fourier::octave_edges`], in [`grouped`]: `BAND + b`.
+/// [`crate::fourier::octave_edges`], in [`grouped`]: `BAND + b`.
 pub const BAND: usize = 200;
 
 /// χ² contributions grouped by (test, harmonic) — what a candidate explains. A record test's
 /// samples (harmonic 0; `rates_hz` per test) are split by octave band (Parseval,
-/// [`super::fourier::band_energy`]): key `BAND + b`.
+/// [`crate::fourier::band_energy`]): key `BAND + b`.
 pub fn grouped(
     features: &[FeatureInfo],
     rates_hz: &[f64],
@@ -1056,8 +1064,8 @@ pub fn grouped(
         }
         // One channel's samples of a record test: a contiguous run.
         let end = i + features[i..].iter().take_while(|&&h| h == f).count();
-        let edges = super::fourier::octave_edges(rates_hz[f.test]);
-        let e = super::fourier::band_energy(&r[i..end], rates_hz[f.test], &edges);
+        let edges = crate::fourier::octave_edges(rates_hz[f.test]);
+        let e = crate::fourier::band_energy(&r[i..end], rates_hz[f.test], &edges);
         for (b, v) in e.into_iter().enumerate() {
             *g.entry((f.test, BAND + b)).or_insert(0.0) += v;
         }
@@ -1069,7 +1077,7 @@ pub fn grouped(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::run_sampled;
+    use crate::runs::single::run_sampled;
     use vshake_kernel::excitation::Record;
 
     /// A record test (time-domain features) with a hidden baseline-parameter change: the fit of that

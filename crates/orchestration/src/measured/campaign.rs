@@ -17,11 +17,11 @@
 //! A sine test's reference states are analytic (docs/model.md §4); a record test's come from the named
 //! column of its data file. Where the excitation starts in the file is found from `ref_disp_m`
 //! (a sine) or is the first row (a record), unless `t0_s` says; a sine lasts until `ref_disp_m`
-//! leaves it, or `duration_s` when given ([`super::measured`]).
+//! leaves it, or `duration_s` when given ([`crate::measured::aligned`]).
 
-use super::columns::{self, Mapped};
-use super::spec::{self, ExcitationSpec};
-use super::toml_fields::{Fields, InputError, Issues};
+use crate::measured::channels::{self, Mapped};
+use crate::runs::spec::{self, ExcitationSpec};
+use crate::toml_fields::{Fields, InputError, Issues};
 use std::path::PathBuf;
 use vshake_kernel::params::ModelParams;
 
@@ -97,7 +97,7 @@ impl Campaign {
         file: &str,
         base_model: &ModelParams,
     ) -> Result<Campaign, InputError> {
-        let table = super::toml_fields::parse(text, file)?;
+        let table = crate::toml_fields::parse(text, file)?;
         let mut issues = Issues::default();
         let mut root = Fields::new("", &table);
         let (name, description, columns) = read_header(&mut root, &mut issues);
@@ -160,15 +160,15 @@ fn read_columns(
         return out;
     };
     let keys: Vec<String> = c.keys().cloned().collect();
-    let channels: Vec<&str> = columns::CHANNELS.iter().map(|ch| ch.1).collect();
+    let channels: Vec<&str> = channels::CHANNELS.iter().map(|ch| ch.1).collect();
     for key in keys {
-        if columns::channel(&key).is_none() {
+        if channels::channel(&key).is_none() {
             continue; // reported by finish below
         }
         let Some(m) = read_mapped(&mut c, &key, issues) else {
             continue;
         };
-        let key = columns::channel(&key).map_or(key, |ch| ch.1.to_string());
+        let key = channels::channel(&key).map_or(key, |ch| ch.1.to_string());
         out.retain(|(k, _)| *k != key);
         out.push((key, m));
     }
@@ -202,10 +202,10 @@ fn read_mapped(c: &mut Fields<'_>, key: &str, issues: &mut Issues) -> Option<Map
             return None;
         }
     }
-    if let Some(u) = m.unit.as_deref().filter(|u| columns::unit(u).is_none()) {
+    if let Some(u) = m.unit.as_deref().filter(|u| channels::unit(u).is_none()) {
         issues.push(
             format!("{path}.unit"),
-            format!("unknown unit {u:?}; vshake knows {}", columns::unit_list()),
+            format!("unknown unit {u:?}; vshake knows {}", channels::unit_list()),
         );
     }
     if m.name.is_some() == m.index.is_some() {
@@ -299,7 +299,7 @@ fn read_weights(t: &mut Fields<'_>, issues: &mut Issues) -> Weights {
 
 /// Reads a model file: `[model.<component>]` tables as in run files (other tables are refused).
 pub fn model_from_toml(text: &str, file: &str) -> Result<ModelParams, InputError> {
-    let table = super::toml_fields::parse(text, file)?;
+    let table = crate::toml_fields::parse(text, file)?;
     let mut issues = Issues::default();
     let mut root = Fields::new("", &table);
     let mut model = ModelParams::default();
@@ -320,7 +320,7 @@ mod tests {
     /// The campaign example of docs/formats.md, read from the page itself (the first `toml`
     /// block under "## Campaigns"), so that the page and this test cannot drift apart.
     fn formats_example() -> String {
-        let page = include_str!("../../../docs/formats.md");
+        let page = include_str!("../../../../docs/formats.md");
         let section = &page[page
             .find("\n## Campaigns")
             .expect("docs/formats.md: ## Campaigns")..];

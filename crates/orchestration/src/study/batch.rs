@@ -10,9 +10,9 @@
 //! - A sample whose parameters are invalid (e.g. a normal draw giving a negative mass) or whose run
 //!   fails is a row with its status, time and reason; the study goes on.
 
-use super::sampling::{saltelli_block, Design, UnitDesign};
-use super::spec::ExcitationSpec;
-use super::study::{Method, StudySpec};
+use crate::runs::spec::ExcitationSpec;
+use crate::study::problem::{Method, StudySpec};
+use crate::study::sampling::{saltelli_block, Design, UnitDesign};
 use rayon::prelude::*;
 use std::ops::Range;
 use std::sync::Arc;
@@ -54,14 +54,14 @@ pub struct Plan {
     /// For generated designs: which design dimension drives each column (None = fixed value).
     dims: Vec<Option<usize>>,
     fixed: Vec<f64>,
-    dists: Vec<super::sampling::Distribution>,
+    dists: Vec<crate::study::sampling::Distribution>,
     pub design: DesignSource,
     pub references: Vec<Reference>,
     /// Per excitation: its spec when its reference depends on the sample (a stochastic motion
     /// with a realisation per sample or sampled `ground.*`), made for each sample by
-    /// [`super::quake::generated`] from (seed, sample id); `references[e]` is then unused.
+    /// [`crate::runs::quake::generated`] from (seed, sample id); `references[e]` is then unused.
     pub per_sample: Vec<Option<ExcitationSpec>>,
-    /// The study's seed (the excitation noise's, [`super::quake`]) and response spectrum.
+    /// The study's seed (the excitation noise's, [`crate::runs::quake`]) and response spectrum.
     pub seed: u64,
     pub spectrum: SpectrumSpec,
     pub solver: simulate::Solver,
@@ -369,7 +369,7 @@ impl Plan {
             // Lanes without effects give the same bits in the effect set (it is neutral
             // there), and a lane's reference is its own, so the kernel `run_group` chooses
             // per group does not make a row depend on its neighbours.
-            let results = super::sim::run_group(&models, &refs, &self.solver);
+            let results = crate::runs::single::run_group(&models, &refs, &self.solver);
             for (lane, &i) in group.iter().enumerate() {
                 let (status, metrics) = lane_outcome(results.as_deref(), lane);
                 rows[i] = Some(self.row(&samples[i], e, status, metrics));
@@ -404,7 +404,12 @@ impl Plan {
         let mut runnable = Vec::new();
         for &i in valid {
             let s = &samples[i];
-            match super::quake::generated(exc, s.model.as_ref().expect("valid"), self.seed, s.id) {
+            match crate::runs::quake::generated(
+                exc,
+                s.model.as_ref().expect("valid"),
+                self.seed,
+                s.id,
+            ) {
                 Ok(r) => {
                     own[i] = Some(r.with_spectrum(self.spectrum.clone()));
                     runnable.push(i);

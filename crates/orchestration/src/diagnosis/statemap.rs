@@ -54,99 +54,18 @@
 //! as the sparse model.
 //!
 //! A load or a valve with dynamics of its own follows no state at the same instant; the platen's
-//! balance and the missing opening are also regressed on terms with memory ([`super::memory`]),
+//! balance and the missing opening are also regressed on terms with memory ([`crate::diagnosis::residual_memory`]),
 //! named instead when they explain [`MEMORY_MARGIN`] more.
 
-use super::compare::{ComparedTest, Projector};
-use super::memory::{self, Input, Kind, MemoryFit};
+use crate::diagnosis::compare::ComparedTest;
+use crate::diagnosis::projector::Projector;
+use crate::diagnosis::residual_memory::{self, Input, Kind, MemoryFit};
+use crate::diagnosis::states::State;
 use faer::prelude::*;
 use faer::Mat;
 use std::f64::consts::PI;
 use vshake_kernel::actuator::{self, ActuatorLane};
-use vshake_kernel::params::ModelParams;
 use vshake_kernel::servovalve::Valves;
-
-/// The plant's states the residual is mapped on.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum State {
-    SpoolOpening,
-    Velocity,
-    PressureDifference,
-    Displacement,
-    ValveFlow,
-}
-
-impl State {
-    pub const ALL: [State; 5] = [
-        State::SpoolOpening,
-        State::Velocity,
-        State::PressureDifference,
-        State::Displacement,
-        State::ValveFlow,
-    ];
-
-    /// The states residual `r` is regressed on: the platen's balance on the platen's states, the
-    /// chambers' on the valve's (a force on the platen depends on its motion, a flow on the
-    /// opening and the pressures; the missing opening on the opening and the pressures alone);
-    /// the residual force, a mix of both, on all.
-    pub fn of(r: Residual) -> &'static [State] {
-        match r {
-            Residual::PlatenForce => &[State::Velocity, State::Displacement],
-            Residual::ValveFlow => &[
-                State::SpoolOpening,
-                State::PressureDifference,
-                State::ValveFlow,
-            ],
-            // The flow read as an opening: the opening's own coordinates (the flow is made of them).
-            Residual::ValveOpening => &[State::SpoolOpening, State::PressureDifference],
-            Residual::Accel | Residual::Force => &State::ALL,
-        }
-    }
-
-    /// Column name in tables.
-    pub fn name(self) -> &'static str {
-        match self {
-            State::SpoolOpening => "spool_opening",
-            State::Velocity => "velocity",
-            State::PressureDifference => "pressure_difference",
-            State::Displacement => "displacement",
-            State::ValveFlow => "valve_flow",
-        }
-    }
-
-    /// In words.
-    pub fn label(self) -> &'static str {
-        match self {
-            State::SpoolOpening => "spool opening",
-            State::Velocity => "platen velocity",
-            State::PressureDifference => "chamber pressure difference",
-            State::Displacement => "platen displacement",
-            State::ValveFlow => "valve flow",
-        }
-    }
-
-    /// Its symbol in a term.
-    pub fn symbol(self) -> &'static str {
-        match self {
-            State::SpoolOpening => "x",
-            State::Velocity => "v",
-            State::PressureDifference => "Δp",
-            State::Displacement => "y",
-            State::ValveFlow => "q",
-        }
-    }
-
-    /// The unit of the scale the map divides it by.
-    pub fn scale_unit(self) -> &'static str {
-        match self {
-            State::SpoolOpening => "full stroke",
-            State::Velocity => "m/s",
-            State::PressureDifference => "Pa",
-            State::Displacement => "m",
-            State::ValveFlow => "m³/s",
-        }
-    }
-}
 
 /// Bins per state in the map.
 pub const N_BINS: usize = 10;
@@ -268,6 +187,24 @@ pub enum Residual {
 }
 
 impl Residual {
+    /// The states the residual is regressed on: the platen's balance on the platen's states, the
+    /// chambers' on the valve's (a force on the platen depends on its motion, a flow on the
+    /// opening and the pressures; the missing opening on the opening and the pressures alone);
+    /// the residual force, a mix of both, on all.
+    pub fn states(self) -> &'static [State] {
+        match self {
+            Residual::PlatenForce => &[State::Velocity, State::Displacement],
+            Residual::ValveFlow => &[
+                State::SpoolOpening,
+                State::PressureDifference,
+                State::ValveFlow,
+            ],
+            // The flow read as an opening: the opening's own coordinates (the flow is made of them).
+            Residual::ValveOpening => &[State::SpoolOpening, State::PressureDifference],
+            Residual::Accel | Residual::Force => &State::ALL,
+        }
+    }
+
     pub const ALL: [Residual; 5] = [
         Residual::Accel,
         Residual::Force,
@@ -293,31 +230,6 @@ impl Residual {
             Residual::ValveOpening => "missing valve opening",
         }
     }
-}
-
-/// The plant's states of one test at its compared samples (physical units; the spool opening as
-/// a fraction of the full stroke), in the order of [`State::ALL`].
-pub fn test_states(
-    model: &ModelParams,
-    spool_m: &[f64],
-    vel: &[f64],
-    p1: &[f64],
-    p2: &[f64],
-    disp: &[f64],
-) -> [Vec<f64>; 5] {
-    let stroke = model.servovalve.k_sp * model.servovalve.u_lim;
-    let valves = Valves::of(model);
-    [
-        spool_m.iter().map(|x| x / stroke).collect(),
-        vel.to_vec(),
-        p1.iter().zip(p2).map(|(a, b)| a - b).collect(),
-        disp.to_vec(),
-        spool_m
-            .iter()
-            .zip(p1.iter().zip(p2))
-            .map(|(&x, (&a, &b))| valves.flows(x, a, b).0)
-            .collect(),
-    ]
 }
 
 /// The actuators' force rate dF/dt the model's valves and chambers give at spool position `x`,
@@ -511,7 +423,7 @@ pub struct StateMap {
     pub per_state: Vec<Vec<Regression>>,
     /// Per residual: the regression on every state's terms together.
     pub joint: Vec<Regression>,
-    /// Residuals regressed on a term with memory ([`super::memory`]): the platen's force balance
+    /// Residuals regressed on a term with memory ([`crate::diagnosis::residual_memory`]): the platen's force balance
     /// (the residual force when the files have no force) on the force of an oscillator carried by
     /// the platen, the missing opening on a lag of the opening.
     pub memory: Vec<(Residual, MemoryFit)>,
@@ -638,7 +550,7 @@ fn memory_fits(
     for (kind, r) in [(Kind::Carried, platen), (Kind::Lag, Residual::ValveOpening)] {
         let Some(y) = &res[at(r)] else { continue };
         let y: Vec<f64> = y.iter().map(|v| v * res_scale[at(r)]).collect();
-        if let Some(mut fit) = memory::fit(
+        if let Some(mut fit) = residual_memory::fit(
             kind,
             &compared
                 .iter()
@@ -683,13 +595,15 @@ fn regressions(
             continue;
         };
         let idx = |st: State| State::ALL.iter().position(|&x| x == st).unwrap_or(0);
-        let mut v: Vec<Regression> = State::of(r)
+        let mut v: Vec<Regression> = r
+            .states()
             .iter()
             .map(|&st| stlsq(r, Some(st), &[(st, &states[idx(st)])], y))
             .collect();
         v.sort_by(|a, b| b.r2.total_cmp(&a.r2));
         per_state.push(v);
-        let all: Vec<(State, &Vec<f64>)> = State::of(r)
+        let all: Vec<(State, &Vec<f64>)> = r
+            .states()
             .iter()
             .map(|&st| (st, &states[idx(st)]))
             .collect();
@@ -698,7 +612,7 @@ fn regressions(
     (per_state, joint)
 }
 
-/// A test's input to a term with memory of family `kind` ([`memory::fit`]): the measured
+/// A test's input to a term with memory of family `kind` ([`residual_memory::fit`]): the measured
 /// displacement (for a record its second rate after the 10 ms average: the base acceleration)
 /// or the spool opening.
 fn input_of(kind: Kind, c: &ComparedTest) -> Input {
@@ -928,7 +842,7 @@ mod tests {
     #[test]
     fn the_force_rate_is_the_kernels_at_random_states() {
         use rand::{RngExt, SeedableRng};
-        use vshake_kernel::params::ValveLaw;
+        use vshake_kernel::params::{ModelParams, ValveLaw};
         use vshake_kernel::simulate::plant_derivatives;
         use vshake_kernel::state::{idx, NP};
         let mut rng = rand::rngs::StdRng::seed_from_u64(31);

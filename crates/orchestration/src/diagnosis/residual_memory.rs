@@ -6,7 +6,7 @@
 //! the table (a mass: a force against the acceleration), above it it stays behind (little force),
 //! and near it the force is large and in quadrature. Likewise a spool that lags its command: the
 //! opening it misses is in quadrature with the opening. A regression on the static terms of the
-//! states ([`super::statemap`]) finds little; the terms must have memory. Two families, each one
+//! states ([`crate::diagnosis::statemap`]) finds little; the terms must have memory. Two families, each one
 //! filter of natural frequency f_n and damping ratio ζ on one measured state ([`Kind`]):
 //! - [`Kind::Carried`], on the platen's balance: the force m·z̈ of an oscillator (mass m) whose
 //!   base moves as the measured platen displacement y: z̈ = −2ζω_n·u̇ − ω_n²·u with
@@ -27,7 +27,7 @@
 //! values), refined to ±1 grid step in 21 × 11 values, then polished within f_n 0.2–100 Hz and
 //! ζ 0.2–200 %.]
 
-use super::compare::Projector;
+use crate::diagnosis::projector::Projector;
 use std::f64::consts::PI;
 
 /// Natural frequencies of the coarse grid: 0.2 … 100 Hz, log-spaced.
@@ -67,10 +67,10 @@ impl Kind {
     }
 
     /// The state it filters.
-    pub fn state(self) -> super::statemap::State {
+    pub fn state(self) -> crate::diagnosis::states::State {
         match self {
-            Kind::Carried => super::statemap::State::Displacement,
-            Kind::Lag => super::statemap::State::SpoolOpening,
+            Kind::Carried => crate::diagnosis::states::State::Displacement,
+            Kind::Lag => crate::diagnosis::states::State::SpoolOpening,
         }
     }
 

@@ -1,5 +1,5 @@
 //! `study tune`: the controller gains that give the best fidelity on a test plan, chosen by
-//! CMA-ES ([`super::cmaes`]) on the virtual table.
+//! CMA-ES ([`crate::preparation::cmaes`]) on the virtual table.
 //!
 //! A candidate (one set of gains) runs every excitation of the plan on every uncertain draw: all
 //! candidates × draws of a generation are the samples of one batch ([`Plan`]), run on every core;
@@ -18,11 +18,11 @@
 //!   their mean or a quantile ([`Statistic`]); the mean and the 90th percentile (or the chosen
 //!   quantile) are reported for every candidate.
 
-use super::batch::{DesignSource, Plan, Row, RowStatus};
-use super::cmaes::Cmaes;
-use super::sampling::{Design, Distribution, UnitDesign};
-use super::study::{Method, StudySpec, Variable};
-use super::tune_spec::{Statistic, TuneSpec};
+use crate::preparation::cmaes::Cmaes;
+use crate::preparation::tune_spec::{Statistic, TuneSpec};
+use crate::study::batch::{DesignSource, Plan, Row, RowStatus};
+use crate::study::problem::{Method, StudySpec, Variable};
+use crate::study::sampling::{Design, Distribution, UnitDesign};
 use rayon::prelude::*;
 use vshake_kernel::excitation::Reference;
 use vshake_kernel::params::ParamInfo;
@@ -135,7 +135,7 @@ pub fn study_of(spec: &TuneSpec) -> StudySpec {
         model: spec.model.clone(),
         variables: gains.chain(spec.uncertain.iter().cloned()).collect(),
         excitations: spec.excitations.clone(),
-        metrics: super::study::all_metric_names(),
+        metrics: crate::study::problem::all_metric_names(),
         spectrum: spec.spectrum.clone(),
         output: spec.output.join("evaluations.parquet"),
         histories: Vec::new(),

@@ -1,9 +1,9 @@
 //! One configuration through the kernel (`study sim`): lane 0 of the same lane kernel the batch
 //! engine uses, with an [`Observer`] that keeps the time history of every channel of docs/model.md §5.
 
-use super::measured::{DataProblem, NumTable};
-use super::quake;
-use super::spec::{ExcitationSpec, SimSpec};
+use crate::measured::aligned::{DataProblem, NumTable};
+use crate::runs::quake;
+use crate::runs::spec::{ExcitationSpec, SimSpec};
 use vshake_kernel::builds;
 use vshake_kernel::effects::EffectId;
 use vshake_kernel::excitation::{Record, Reference};
@@ -232,7 +232,7 @@ pub fn run_lanes_single(
 /// or acceleration) come in `record`, read by the caller; rounded time is rebuilt into its
 /// uniform grid (a gap or a drift is refused), and a displacement beyond the stroke is refused
 /// at its row. A generated motion's noise is stream 0 of `seed` unless it names its own
-/// realisation ([`super::quake`]). Every reference but a sine carries the default response
+/// realisation ([`crate::runs::quake`]). Every reference but a sine carries the default response
 /// spectrum, and is checked against the table's limits.
 pub fn reference_for(
     excitation: &ExcitationSpec,

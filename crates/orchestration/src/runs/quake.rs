@@ -13,7 +13,7 @@
 //! every record (kernel::excitation::Record). Sweeps and random motions: exact, from their
 //! closed forms (kernel::ground::Jet).
 
-use super::spec::{ExcitationSpec, RecordUnit};
+use crate::runs::spec::{ExcitationSpec, RecordUnit};
 use chacha20::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
 use rand_distr::StandardNormal;
@@ -191,7 +191,7 @@ pub fn check_limits(r: &Reference, model: &ModelParams) -> Result<(), String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::spec::Realisation;
+    use crate::runs::spec::Realisation;
 
     fn stochastic(realisation: Realisation) -> ExcitationSpec {
         ExcitationSpec::Stochastic {

@@ -1,0 +1,6 @@
+//! The real test prepared on the virtual table: drive iteration, CMA-ES and controller tuning.
+
+pub mod cmaes;
+pub mod drive_iteration;
+pub mod tune;
+pub mod tune_spec;

@@ -1,0 +1,7 @@
+//! What one run is and running it: run specifications and their excitations, the earthquake-type references, one configuration through the kernel.
+
+pub mod excitation_spec;
+pub mod quake;
+pub mod quake_spec;
+pub mod single;
+pub mod spec;
