@@ -16,7 +16,7 @@ static PANIC: Mutex<Option<String>> = Mutex::new(None);
 
 fn main() {
     let cli = vshake::shell::cli::Cli::parse();
-    vshake::shell::interrupt::ignore_file_size_signal();
+    vshake::shell::job::interrupt::ignore_file_size_signal();
     std::panic::set_hook(Box::new(|info| {
         let place = info
             .location()
@@ -58,7 +58,7 @@ fn main() {
         }) {
             std::process::exit(0);
         }
-        if let Some(i) = e.downcast_ref::<vshake::shell::interrupt::Interrupted>() {
+        if let Some(i) = e.downcast_ref::<vshake::shell::job::interrupt::Interrupted>() {
             eprintln!("{i}");
             std::process::exit(i.exit_code());
         }

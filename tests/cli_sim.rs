@@ -41,7 +41,7 @@ fn bundled_example_prints_the_reference_metrics_and_writes_the_history() {
     assert!((value("amp_ratio") - 0.9987).abs() < 0.005 * 0.9987);
     assert!((value("h3_ratio") - 0.0309).abs() < 0.02 * 0.0309);
     assert!((value("max_abs_valve_cmd_v") - 3.40).abs() < 0.02);
-    let t = vshake::shell::tables::read_columns(
+    let t = vshake::shell::formats::measured_files::read_columns(
         &out,
         &[
             "time_s",
@@ -235,7 +235,7 @@ fn a_diverging_run_is_reported_with_time_and_reason() {
     assert!(stderr.contains("failed at t = "), "{stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
     // The history up to the failure is kept, for diagnosis.
-    let t = vshake::shell::tables::read_columns(&out, &["time_s"], &[]).unwrap();
+    let t = vshake::shell::formats::measured_files::read_columns(&out, &["time_s"], &[]).unwrap();
     assert!(t.rows() > 0 && t.rows() < 3072);
 }
 

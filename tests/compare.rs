@@ -19,8 +19,11 @@ fn synth(dir: &Path, extra: &[&str]) {
 }
 
 fn tests_table(report: &Path, col: &str) -> Vec<f64> {
-    let t = vshake::shell::tables::read_columns_allow_nan(&report.join("tests.parquet"), &[col])
-        .unwrap();
+    let t = vshake::shell::formats::measured_files::read_columns_allow_nan(
+        &report.join("tests.parquet"),
+        &[col],
+    )
+    .unwrap();
     t.column(col).unwrap().to_vec()
 }
 
@@ -48,7 +51,7 @@ fn the_models_own_output_compares_at_floating_point_level() {
             assert!(v.abs() < 1e-12, "{col} = {v}");
         }
     }
-    let h = vshake::shell::tables::read_columns_allow_nan(
+    let h = vshake::shell::formats::measured_files::read_columns_allow_nan(
         &report.join("harmonics.parquet"),
         &["residual_abs"],
     )
@@ -153,7 +156,7 @@ fn with_noise_the_residual_is_at_the_noise_level() {
     assert_eq!(code, 0, "{stderr}");
     // Expected: rms(noise)/rms(measured accel) over the window. The overlay table holds the
     // window's measured acceleration and the residual (= −noise).
-    let ov = vshake::shell::tables::read_columns_allow_nan(
+    let ov = vshake::shell::formats::measured_files::read_columns_allow_nan(
         &report.join("overlay.parquet"),
         &["accel_measured_mps2", "residual_mps2"],
     )
@@ -175,7 +178,7 @@ fn with_noise_the_residual_is_at_the_noise_level() {
         );
     }
     // The harmonic residuals sit at the noise floor: σ·√(2/n)/|H1(a_r)| is below 1e-3.
-    let h = vshake::shell::tables::read_columns_allow_nan(
+    let h = vshake::shell::formats::measured_files::read_columns_allow_nan(
         &report.join("harmonics.parquet"),
         &["residual_abs"],
     )
@@ -411,7 +414,8 @@ fn the_overlap_tutorial_campaign_points_at_small_spool_openings() {
 /// export has them; the lag on the opening, at the spool's frequency).
 #[test]
 fn effects_with_memory_are_named_through_a_filter_on_their_state() {
-    use vshake::shell::tables::{read_bools, read_columns_allow_nan, read_strings};
+    use vshake::shell::formats::measured_files::read_columns_allow_nan;
+    use vshake::shell::formats::parquet_read::{read_bools, read_strings};
     let diag = Path::new(env!("CARGO_MANIFEST_DIR")).join("studies/campaigns/diagnosis.toml");
     type Expected = (f64, f64, f64);
     let cases: [(&[&str], (&str, &str), Expected); 2] = [
@@ -463,7 +467,7 @@ fn effects_with_memory_are_named_through_a_filter_on_their_state() {
                     .iter()
                     .map(|&k| (k, t.column(k).unwrap().to_vec()))
                     .collect();
-                vshake::shell::synth_cmd::write_measured(&p, &cols, &[]).unwrap();
+                vshake::shell::commands::synth_cmd::write_measured(&p, &cols, &[]).unwrap();
             }
         }
         let rep = d.path().join("report");

@@ -22,7 +22,7 @@ use vshake::kernel::spectrum::SpectrumSpec;
 use vshake::orchestration::runs::single::run_group;
 use vshake::orchestration::study::batch::{LaneEngine, RowStatus};
 use vshake::orchestration::study::problem::StudySpec;
-use vshake::shell::job;
+use vshake::shell::job::study_job;
 
 const LANES: usize = 8;
 
@@ -461,7 +461,7 @@ fn same_rows_of_text(text: &str, study: &str, samples: usize) {
         .join("studies")
         .join("x.toml");
     let spec = StudySpec::from_toml(text, study).unwrap();
-    let mut plan = job::plan_for(&spec, path.parent().unwrap()).unwrap();
+    let mut plan = study_job::plan_for(&spec, path.parent().unwrap()).unwrap();
     let names: Vec<String> = spec.excitations.iter().map(|e| e.name.clone()).collect();
     assert_eq!(plan.engine_unsupported(&names), None, "{study} is covered");
     let step = (plan.samples() / samples).max(1);
@@ -528,7 +528,7 @@ fn a_device_failure_ends_the_run() {
     }
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("studies/smoke.toml");
     let spec = StudySpec::from_toml(&std::fs::read_to_string(&path).unwrap(), "smoke").unwrap();
-    let mut plan = job::plan_for(&spec, path.parent().unwrap()).unwrap();
+    let mut plan = study_job::plan_for(&spec, path.parent().unwrap()).unwrap();
     plan.engine = Some(Arc::new(Broken));
     let err = plan.run_samples(0..4).unwrap_err();
     assert!(err.to_string().contains("illegal address"), "{err}");

@@ -14,8 +14,9 @@ mod common;
 use common::{followed_state, study};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use vshake::shell::tables::{
-    read_bools, read_columns_allow_nan, read_f64_lists, read_string_lists, read_strings,
+use vshake::shell::formats::measured_files::read_columns_allow_nan;
+use vshake::shell::formats::parquet_read::{
+    read_bools, read_f64_lists, read_string_lists, read_strings,
 };
 
 /// Sensor noise of the synthetic campaigns: about 1 % of the smallest test's rms per channel.
@@ -469,13 +470,14 @@ fn write_hidden<E: vshake::kernel::effects::Effect<1>>(dir: &Path, effect: &E) {
     synth(dir, &[]);
     let model = ModelParams::default();
     let lc =
-        vshake::shell::campaign_io::load_campaign(&dir.join("diagnosis.toml"), &model).unwrap();
+        vshake::shell::formats::campaign_io::load_campaign(&dir.join("diagnosis.toml"), &model)
+            .unwrap();
     let mut noise = Noise::new(11);
-    let aligned = vshake::shell::campaign_io::load_tests(&lc, None).unwrap();
+    let aligned = vshake::shell::formats::campaign_io::load_tests(&lc, None).unwrap();
     for (test, at) in lc.campaign.tests.iter().zip(&aligned) {
         let path = lc.base.join(&test.data);
         // synth writes at the controller's rate from t = 0: the file's rows are the drive's ticks.
-        let rows = vshake::shell::campaign_io::read_measured(&path, &[])
+        let rows = vshake::shell::formats::campaign_io::read_measured(&path, &[])
             .unwrap()
             .rows();
         let mut reference = at.drive.clone();
@@ -505,7 +507,7 @@ fn write_hidden<E: vshake::kernel::effects::Effect<1>>(dir: &Path, effect: &E) {
             ("valve_cmd_v", h.channel("valve_cmd_v").unwrap().to_vec()),
             ("force_n", col("force_n", 2000.0)),
         ];
-        vshake::shell::synth_cmd::write_measured(&path, &cols, &[]).unwrap();
+        vshake::shell::commands::synth_cmd::write_measured(&path, &cols, &[]).unwrap();
     }
 }
 

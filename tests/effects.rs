@@ -67,8 +67,11 @@ fn hidden_compared(effect: &str, sets: &[&str], open_loop: Option<&str>) -> Repo
         "accel_over_disp_measured",
         "accel_over_disp_model",
     ];
-    let t = vshake::shell::tables::read_columns_allow_nan(&report.join("tests.parquet"), &cols)
-        .unwrap();
+    let t = vshake::shell::formats::measured_files::read_columns_allow_nan(
+        &report.join("tests.parquet"),
+        &cols,
+    )
+    .unwrap();
     let names = ["f2_a0p3", "f2_a1p5", "f6_a0p3", "f6_a1p5", "f3_a3p2"];
     let mut tests = HashMap::new();
     for (i, n) in names.iter().enumerate() {
@@ -79,7 +82,7 @@ fn hidden_compared(effect: &str, sets: &[&str], open_loop: Option<&str>) -> Repo
         tests.insert(n.to_string(), row);
     }
     // Residual magnitude of harmonics 2 and 3 per test (harmonics table: 9 rows per test).
-    let h = vshake::shell::tables::read_columns_allow_nan(
+    let h = vshake::shell::formats::measured_files::read_columns_allow_nan(
         &report.join("harmonics.parquet"),
         &["residual_abs"],
     )
@@ -90,7 +93,7 @@ fn hidden_compared(effect: &str, sets: &[&str], open_loop: Option<&str>) -> Repo
         row.insert("r3".into(), h.column("residual_abs").unwrap()[9 * i + 2]);
     }
     // Bins: velocity reversal and peak velocity residuals per test.
-    let b = vshake::shell::tables::read_columns_allow_nan(
+    let b = vshake::shell::formats::measured_files::read_columns_allow_nan(
         &report.join("bins.parquet"),
         &["rms_residual_ratio"],
     )
@@ -423,7 +426,8 @@ fn a_switched_off_effect_is_neutral() {
             .iter()
             .map(|c| c.name)
             .collect();
-        let t = vshake::shell::tables::read_columns_allow_nan(&out, &names).unwrap();
+        let t =
+            vshake::shell::formats::measured_files::read_columns_allow_nan(&out, &names).unwrap();
         names
             .iter()
             .map(|n| t.column(n).unwrap().iter().map(|v| v.to_bits()).collect())

@@ -4,8 +4,9 @@
 //! with channels of different lengths, are refused naming the file and the cause.
 
 use std::path::{Path, PathBuf};
-use vshake::orchestration::measured::channels::Mapped;
-use vshake::shell::tables::{self, NumTable};
+use vshake::orchestration::measured::campaign::Mapped;
+use vshake::shell::formats::measured_files;
+use vshake::shell::formats::measured_files::NumTable;
 
 const CHANNELS: [&str; 4] = ["time_s", "ref_disp_m", "disp_m", "accel_mps2"];
 
@@ -16,7 +17,7 @@ fn fixture(name: &str) -> PathBuf {
 }
 
 fn read(name: &str, map: &[(String, Mapped)]) -> Result<NumTable, String> {
-    let (table, bad) = tables::read_columns_lenient(&fixture(name), &CHANNELS, &[], map)
+    let (table, bad) = measured_files::read_columns_lenient(&fixture(name), &CHANNELS, &[], map)
         .map_err(|e| e.to_string())?;
     assert!(bad.is_empty(), "{name}: {bad:?}");
     Ok(table)
@@ -24,7 +25,7 @@ fn read(name: &str, map: &[(String, Mapped)]) -> Result<NumTable, String> {
 
 /// Every channel within `rel` (relative to the channel's peak) of expected.csv's.
 fn assert_expected(t: &NumTable, rel: f64) {
-    let want = tables::read_columns(&fixture("expected.csv"), &CHANNELS, &[]).unwrap();
+    let want = measured_files::read_columns(&fixture("expected.csv"), &CHANNELS, &[]).unwrap();
     for c in CHANNELS {
         let (a, b) = (t.column(c).unwrap(), want.column(c).unwrap());
         assert_eq!(a.len(), b.len(), "{c}");
@@ -106,7 +107,7 @@ fn a_truncated_mat_file_is_refused_without_printing_it() {
     for cut in [140, 1000, bytes.len() - 7] {
         let p = d.path().join("cut.mat");
         std::fs::write(&p, &bytes[..cut]).unwrap();
-        let err = tables::read_columns(&p, &CHANNELS, &[])
+        let err = measured_files::read_columns(&p, &CHANNELS, &[])
             .unwrap_err()
             .to_string();
         assert!(

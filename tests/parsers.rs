@@ -14,9 +14,10 @@ use proptest::test_runner::{Config, TestRunner};
 use std::fmt::Debug;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
-use vshake::shell::campaign_io::{load_campaign, load_tests};
-use vshake::shell::job::{load_study, plan_for};
-use vshake::shell::{exit_code, tables};
+use vshake::shell::exit_code;
+use vshake::shell::formats::campaign_io::{load_campaign, load_tests};
+use vshake::shell::formats::{measured_files, parquet_write};
+use vshake::shell::job::study_job::{load_study, plan_for};
 
 fn repo(p: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(p)
@@ -257,10 +258,10 @@ fn measured_parquet(dir: &Path) -> Vec<u8> {
     let csv = dir.join("seed.csv");
     std::fs::write(&csv, measured_csv()).unwrap();
     let names = ["time_s", "ref_disp_m", "disp_m", "accel_mps2"];
-    let t = tables::read_columns(&csv, &names, &[]).unwrap();
+    let t = measured_files::read_columns(&csv, &names, &[]).unwrap();
     let cols: Vec<(&str, &[f64])> = names.iter().map(|n| (*n, t.column(n).unwrap())).collect();
     let pq = dir.join("seed.parquet");
-    tables::write_parquet(&pq, &cols, &[]).unwrap();
+    parquet_write::write_parquet(&pq, &cols, &[]).unwrap();
     std::fs::read(&pq).unwrap()
 }
 
@@ -507,12 +508,13 @@ fn random_headers_never_panic() {
             proptest::option::of(proptest::collection::vec(header_field(), 0..12)),
         ),
         |(fields, units)| {
-            use vshake::orchestration::measured::channels;
+            use vshake::kernel::channels::unit as unit_of;
+            use vshake::shell::formats::headers as channels;
             for f in fields.iter().chain(units.iter().flatten()) {
                 let (name, unit) = channels::split(f);
                 let _ = channels::recognise(&name);
                 if let Some(u) = unit {
-                    let _ = channels::unit(&u);
+                    let _ = unit_of(&u);
                 }
             }
             let wanted = ["time_s", "ref_disp_m", "disp_m", "accel_mps2"];

@@ -12,7 +12,8 @@ use vshake::orchestration::runs::spec::RecordUnit;
 mod common;
 use common::content;
 use common::study;
-use vshake::shell::tables::{read_columns_allow_nan, read_strings};
+use vshake::shell::formats::measured_files::read_columns_allow_nan;
+use vshake::shell::formats::parquet_read::read_strings;
 
 fn ok(args: &[&str]) -> String {
     let (code, out, err) = study(args);
@@ -57,7 +58,7 @@ fn an_at2_record_round_trips_read_scaled_integrated() {
     write_at2(&at2, &rec, 0.01);
 
     // Read: every value back to the file's 8 significant digits, on the DT grid.
-    let t = vshake::shell::at2::read(&at2).unwrap();
+    let t = vshake::shell::formats::at2::read(&at2).unwrap();
     let (time, accel) = (t.column("time_s").unwrap(), t.column("accel_g").unwrap());
     assert_eq!(accel.len(), 3000);
     assert!((time[2999] - 29.99).abs() < 1e-12, "{}", time[2999]);

@@ -111,7 +111,7 @@ struct Results {
 
 impl Results {
     fn col(&self, name: &str) -> Vec<f64> {
-        let t = vshake::shell::tables::read_columns_allow_nan(
+        let t = vshake::shell::formats::measured_files::read_columns_allow_nan(
             &self.report.join("tests.parquet"),
             &[name],
         )
@@ -641,22 +641,22 @@ fn diagnosis_of_a_re_exported_campaign_is_the_clean_ones() {
         ]);
         assert_eq!(code, 0, "{stderr}");
         // The verdict and the candidate's estimates from the report's tables.
-        use vshake::shell::{meta, tables};
+        use vshake::shell::formats::{meta, parquet_read};
         let verdict = meta::get(
-            &tables::parquet_metadata(&report.join("candidates.parquet")).unwrap(),
+            &parquet_read::parquet_metadata(&report.join("candidates.parquet")).unwrap(),
             meta::Key::Verdict,
         )
         .unwrap()
         .to_string();
         let cands = report.join("candidates.parquet");
-        let effects = tables::read_strings(&cands, "effect").unwrap();
+        let effects = parquet_read::read_strings(&cands, "effect").unwrap();
         let i = effects
             .iter()
             .position(|e| e == "seal_friction")
             .unwrap_or_else(|| panic!("{effects:?}"));
         let (est, se) = (
-            tables::read_f64_lists(&cands, "estimates").unwrap(),
-            tables::read_f64_lists(&cands, "std_errors").unwrap(),
+            parquet_read::read_f64_lists(&cands, "estimates").unwrap(),
+            parquet_read::read_f64_lists(&cands, "std_errors").unwrap(),
         );
         let fitted: Vec<(f64, f64)> = est[i].iter().copied().zip(se[i].iter().copied()).collect();
         (verdict, fitted, stdout)
@@ -942,7 +942,7 @@ fn unknown_units_are_refused_naming_file_and_column() {
 /// reader is checked against SciPy-written files in tests/matlab.rs.)
 fn write_mat(path: &Path, vars: &[(&str, Vec<f64>)], compress: bool) {
     let v: Vec<(&str, &[f64])> = vars.iter().map(|(n, v)| (*n, v.as_slice())).collect();
-    let v5 = vshake::shell::matlab::v5_bytes(&v);
+    let v5 = vshake::shell::formats::matlab::v5_bytes(&v);
     if !compress {
         return std::fs::write(path, v5).unwrap();
     }

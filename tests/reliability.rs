@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
-use vshake::shell::tables::{parquet_batches, parquet_metadata};
+use vshake::shell::formats::parquet_read::{parquet_batches, parquet_metadata};
 
 fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_study"))

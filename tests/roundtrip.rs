@@ -9,7 +9,8 @@
 mod common;
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
-use vshake::shell::tables::{read_columns_allow_nan, read_strings};
+use vshake::shell::formats::measured_files::read_columns_allow_nan;
+use vshake::shell::formats::parquet_read::read_strings;
 
 /// Runs `study` with `args`: (success, stdout, stderr).
 fn study(args: &[&str]) -> (bool, String, String) {

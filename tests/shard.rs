@@ -67,12 +67,12 @@ fn merged_shards_equal_the_unsharded_run() {
         assert!(said.contains(&format!("{n} shards, 64 rows")), "{said}");
         assert_eq!(content(&merged), want, "N = {n}");
         // The merged file says what the unsharded one says (no shard keys left).
-        let meta = vshake::shell::tables::parquet_metadata(&merged).unwrap();
+        let meta = vshake::shell::formats::parquet_read::parquet_metadata(&merged).unwrap();
         assert!(
             meta.iter().all(|(k, _)| !k.starts_with("vshake.shard")),
             "{meta:?}"
         );
-        let full_meta = vshake::shell::tables::parquet_metadata(&full).unwrap();
+        let full_meta = vshake::shell::formats::parquet_read::parquet_metadata(&full).unwrap();
         let keys = |m: &[(String, String)]| {
             let mut v = m
                 .iter()

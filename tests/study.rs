@@ -8,7 +8,7 @@ use common::study;
 use std::path::{Path, PathBuf};
 use vshake::orchestration::study::batch::{self, Plan, Row};
 use vshake::orchestration::study::problem::StudySpec;
-use vshake::shell::job;
+use vshake::shell::job::study_job;
 
 fn studies_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("studies")
@@ -28,7 +28,7 @@ fn every_bundled_file_parses_and_validates() {
             let spec = StudySpec::from_toml(&text, &path.display().to_string())
                 .unwrap_or_else(|e| panic!("{e}"));
             // Its plan can be built (record files found, design sized).
-            let plan = job::plan_for(&spec, &studies_dir())
+            let plan = study_job::plan_for(&spec, &studies_dir())
                 .unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
             assert!(plan.rows() > 0);
         } else if table.contains_key("tune") {
@@ -163,7 +163,7 @@ fn run_rows(plan: &Plan, threads: usize, chunk: usize) -> Vec<Row> {
 #[test]
 fn results_are_identical_for_any_thread_count_and_chunk_size() {
     let spec = StudySpec::from_toml(MIXED, "mixed.toml").unwrap();
-    let plan = job::plan_for(&spec, Path::new(".")).unwrap();
+    let plan = study_job::plan_for(&spec, Path::new(".")).unwrap();
     let reference = run_rows(&plan, 1, 8);
     assert_eq!(reference.len(), 37 * 2);
     let key = |r: &Row| -> Vec<u64> {
@@ -318,8 +318,11 @@ fn smoke_study_results_open_in_pyarrow_and_duckdb() {
         stdout.contains("amp_ratio @ sine_3hz_1g") && stdout.contains("controller.l_a"),
         "{stdout}"
     );
-    let t =
-        vshake::shell::tables::read_columns_allow_nan(&sens, &["st", "s1", "src", "prcc"]).unwrap();
+    let t = vshake::shell::formats::measured_files::read_columns_allow_nan(
+        &sens,
+        &["st", "s1", "src", "prcc"],
+    )
+    .unwrap();
     assert_eq!(t.rows(), 2 * 2);
     // The acceleration lead dominates the amplitude ratio at 3 Hz (the displacement gain is
     // nearly inert there): its total index and SRC are the larger.
@@ -352,8 +355,11 @@ fn a_design_file_drives_a_study() {
     ]);
     assert_eq!(code, 0, "{stderr}");
     assert!(stdout.contains("3 rows"), "{stdout}");
-    let t =
-        vshake::shell::tables::read_columns_allow_nan(&out, &["g_d", "l_a", "amp_ratio"]).unwrap();
+    let t = vshake::shell::formats::measured_files::read_columns_allow_nan(
+        &out,
+        &["g_d", "l_a", "amp_ratio"],
+    )
+    .unwrap();
     assert_eq!(t.column("g_d").unwrap(), &[1.2, 1.8, 1.5]);
     // Row 3 is the published controller: the reference amplitude ratio.
     assert!((t.column("amp_ratio").unwrap()[2] - 0.9987).abs() < 0.005);
@@ -436,7 +442,7 @@ metrics = ["amp_ratio"]
     ]);
     assert_eq!(code, 0, "{stderr}");
     // Rows in design order: g_d, l_a, l_v.
-    let t = vshake::shell::tables::read_columns_allow_nan(&sens, &["st"]).unwrap();
+    let t = vshake::shell::formats::measured_files::read_columns_allow_nan(&sens, &["st"]).unwrap();
     let st = t.column("st").unwrap();
     assert_eq!(st.len(), 3, "{stdout}");
     assert_eq!(st[1], 0.0, "the constant dimension has no effect: {st:?}");
@@ -526,7 +532,7 @@ amp_g = 0.5
         "-q",
     ]);
     assert_eq!(code, 0, "{stderr}");
-    let names = vshake::shell::tables::column_names(&out).unwrap();
+    let names = vshake::shell::formats::measured_files::column_names(&out).unwrap();
     assert!(
         names.contains(&"accel_sensor_delay_s".to_string())
             && names.contains(&"disp_sensor_delay_s".to_string()),
@@ -566,6 +572,8 @@ amp_g = 0.5
         "-q",
     ]);
     assert_eq!(code, 0, "{stderr}");
-    let t = vshake::shell::tables::read_columns(&out2, &["disp_sensor_delay_s"], &[]).unwrap();
+    let t =
+        vshake::shell::formats::measured_files::read_columns(&out2, &["disp_sensor_delay_s"], &[])
+            .unwrap();
     assert_eq!(t.columns[0], vec![0.0005]);
 }

@@ -82,7 +82,7 @@ fn the_evaluations_table_holds_every_run_and_its_objective() {
     let out = d.path().join("o");
     let stdout = tune(file.to_str().unwrap(), &out, &[]);
     assert!(stdout.contains("the generation limit (3)"), "{stdout}");
-    let t = vshake::shell::tables::read_columns(
+    let t = vshake::shell::formats::measured_files::read_columns(
         &out.join("evaluations.parquet"),
         &[
             "spectral_err_mean",
@@ -108,7 +108,7 @@ fn the_evaluations_table_holds_every_run_and_its_objective() {
     let best = t.columns[2].iter().copied().fold(f64::INFINITY, f64::min);
     assert_eq!(format!("{start:.5}"), format!("{:.5}", t.columns[2][0]));
     assert_eq!(format!("{tuned:.5}"), format!("{best:.5}"));
-    let g = vshake::shell::tables::read_columns(
+    let g = vshake::shell::formats::measured_files::read_columns(
         &out.join("generations.parquet"),
         &["best_so_far"],
         &[],
@@ -152,7 +152,7 @@ fn the_robust_tuning_lowers_the_90th_percentile() {
         (start, tuned),
         "the objective is the 90th percentile"
     );
-    let t = vshake::shell::tables::read_columns(
+    let t = vshake::shell::formats::measured_files::read_columns(
         &d.path().join("o/evaluations.parquet"),
         &["draw", "draw_objective", "objective"],
         &[],
@@ -206,9 +206,11 @@ fn no_feasible_candidate_writes_no_tuned_model() {
     ]);
     assert_eq!(code, 1);
     assert!(!out.join("tuned.toml").exists());
-    let why =
-        vshake::shell::tables::read_strings(&out.join("evaluations.parquet"), "infeasible_reason")
-            .unwrap();
+    let why = vshake::shell::formats::parquet_read::read_strings(
+        &out.join("evaluations.parquet"),
+        "infeasible_reason",
+    )
+    .unwrap();
     assert!(
         why.iter().all(|w| w.starts_with("valve command")),
         "{why:?}"

@@ -190,8 +190,10 @@ fn plot_study(
     metrics: Option<Vec<String>>,
     bootstrap: usize,
 ) -> PyResult<PathBuf> {
-    py.detach(|| vshake::shell::plot_cmd::plot(&results, &out, metrics.as_deref(), bootstrap))
-        .map_err(py_err)
+    py.detach(|| {
+        vshake::shell::commands::plot_cmd::plot(&results, &out, metrics.as_deref(), bootstrap)
+    })
+    .map_err(py_err)
 }
 
 /// A parameter as `study params` lists it.

@@ -2,16 +2,16 @@
 //! command as a function of values. Tables are written where the caller says, the report a
 //! command prints is returned as text, and errors are the commands' own (file, key, row).
 
-use super::cli::{CompareArgs, DiagnoseArgs, FitArgs, RunArgs};
-use super::gpu::Backend;
-use super::job::{self, Job};
-use super::run_cmd;
-use super::BadInput;
 use crate::kernel::params::{ModelParams, ParamInfo};
 use crate::orchestration::runs::single;
 use crate::orchestration::runs::spec::SimSpec;
 use crate::orchestration::study::batch::Plan;
 use crate::orchestration::study::problem::StudySpec;
+use crate::shell::cli::{CompareArgs, DiagnoseArgs, FitArgs, RunArgs};
+use crate::shell::commands::run_cmd;
+use crate::shell::gpu::Backend;
+use crate::shell::job::study_job::{self, Job};
+use crate::shell::BadInput;
 use std::path::Path;
 
 /// A study: a file, or TOML text whose relative paths (records, design files) start at `base`.
@@ -23,7 +23,7 @@ pub enum Study<'a> {
 impl Study<'_> {
     fn text(&self) -> anyhow::Result<String> {
         match self {
-            Study::File(f) => super::tables::read_input_text(f)
+            Study::File(f) => crate::shell::formats::input::read_input_text(f)
                 .map_err(|e| BadInput(format!("{}: cannot read: {e}", f.display())).into()),
             Study::Text { toml, .. } => Ok(toml.to_string()),
         }
@@ -76,7 +76,7 @@ pub fn run_study(
     threads: usize,
 ) -> anyhow::Result<String> {
     let args = run_args(model, out, threads);
-    let base_model = super::campaign_io::load_model(model)?;
+    let base_model = crate::shell::formats::campaign_io::load_model(model)?;
     let label = study.label();
     let spec = StudySpec::from_toml_on(&study.text()?, &label, base_model)?;
     let job = Job::of_spec(&args, spec, study.base(), &label)?;
@@ -112,11 +112,15 @@ pub fn evaluate(
     }
     let label = study.label();
     let text = design_replaced(&study.text()?, &label, sets, metrics)?;
-    let spec = StudySpec::from_toml_on(&text, &label, super::campaign_io::load_model(model)?)?;
+    let spec = StudySpec::from_toml_on(
+        &text,
+        &label,
+        crate::shell::formats::campaign_io::load_model(model)?,
+    )?;
     let names: Vec<String> = columns.iter().map(|c| c.0.clone()).collect();
-    let infos = job::parameters_of_columns(&names, "parameters")?;
+    let infos = study_job::parameters_of_columns(&names, "parameters")?;
     let wanted: Vec<String> = infos.iter().map(|i| i.path()).collect();
-    let references = job::references(&spec, study.base(), &wanted)?;
+    let references = study_job::references(&spec, study.base(), &wanted)?;
     let rows: Vec<Vec<f64>> = (0..sets)
         .map(|r| columns.iter().map(|c| c.1[r]).collect())
         .collect();
@@ -207,11 +211,15 @@ pub fn simulate(
     model: Option<&Path>,
     out: &Path,
 ) -> anyhow::Result<Simulated> {
-    let spec = SimSpec::from_toml_on(toml, "(run text)", super::campaign_io::load_model(model)?)?;
-    let reference = super::run_spec::build_reference(&spec, base)?;
+    let spec = SimSpec::from_toml_on(
+        toml,
+        "(run text)",
+        crate::shell::formats::campaign_io::load_model(model)?,
+    )?;
+    let reference = crate::shell::run_spec::build_reference(&spec, base)?;
     let outcome = single::run_sim(&spec, &reference)?;
-    let status = super::sim_cmd::status_text(&outcome.result.status);
-    super::sim_cmd::write_history(out, &spec, &outcome, &status)?;
+    let status = crate::shell::commands::sim_cmd::status_text(&outcome.result.status);
+    crate::shell::commands::sim_cmd::write_history(out, &spec, &outcome, &status)?;
     Ok(Simulated {
         status,
         metrics: outcome.result.metrics.columns(),
@@ -234,7 +242,7 @@ pub fn compare(
         threads,
         log_progress: false,
     };
-    captured(|o| super::compare_cmd::run_to(&args, o))
+    captured(|o| crate::shell::commands::compare_cmd::run_to(&args, o))
 }
 
 /// `study diagnose CAMPAIGN --report DIR [--out MODEL]`: returns the printed report.
@@ -257,7 +265,7 @@ pub fn diagnose(
         backend: Backend::Auto,
         log_progress: false,
     };
-    captured(|o| super::diagnose_cmd::run_to(&args, o))
+    captured(|o| crate::shell::commands::diagnose_cmd::run_to(&args, o))
 }
 
 /// `study fit CAMPAIGN --effect E --free P --out MODEL`: returns the printed report.
@@ -282,7 +290,7 @@ pub fn fit(
         backend: Backend::Auto,
         log_progress: false,
     };
-    captured(|o| super::fit_cmd::run_to(&args, o))
+    captured(|o| crate::shell::commands::fit_cmd::run_to(&args, o))
 }
 
 fn captured(

@@ -3,12 +3,14 @@
 //! warnings about the data, the effects and parameters named on the command line, the progress
 //! of a long fit, and the fitted model written.
 
-use super::campaign_io::{load_campaign, load_tests, report_checks, LoadedCampaign};
-use super::progress::Progress;
-use super::BadInput;
 use crate::kernel::params::{EffectId, ModelParams, EFFECTS};
 use crate::orchestration::diagnosis::fit::{self, Free, Problem, TestData};
 use crate::orchestration::toml_fields::suggest;
+use crate::shell::formats::campaign_io::{
+    load_campaign, load_tests, report_checks, LoadedCampaign,
+};
+use crate::shell::job::progress::Progress;
+use crate::shell::BadInput;
 use std::io::Write;
 use std::path::Path;
 use std::sync::Arc;
@@ -205,7 +207,7 @@ pub(crate) fn write_fitted(
             .collect::<Vec<_>>()
             .join(", ")
     );
-    let out = super::tables::AtomicFile::new(out);
+    let out = crate::shell::formats::parquet_write::AtomicFile::new(out);
     std::fs::write(&out.tmp, header + &toml::to_string(&root)?)?;
     out.commit()?;
     Ok(())

@@ -8,12 +8,12 @@
 //! `auto` uses it where a GPU is found and the work is covered, else runs on the CPU and says
 //! why; `cuda` refuses (exit 2) with the cause, never silently running on the CPU.
 
-use super::BadInput;
 use crate::kernel::excitation::Reference;
 use crate::kernel::gpu_lanes::{self, Shared, Uniform, LANE_FIELDS};
 use crate::kernel::params::ModelParams;
 use crate::kernel::simulate::{LaneResult, SetupError, Solver};
 use crate::orchestration::study::batch::LaneEngine;
+use crate::shell::BadInput;
 use cudarc::driver::{
     CudaContext, CudaFunction, CudaModule, CudaSlice, CudaStream, LaunchConfig, PinnedHostSlice,
     PushKernelArg,

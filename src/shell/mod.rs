@@ -2,43 +2,18 @@
 //! maps them to the documented exit codes.
 
 pub mod api;
-pub mod at2;
-pub mod bench_cmd;
-pub mod campaign_io;
 pub mod cli;
-pub mod compare_cmd;
-pub mod diagnose_cmd;
-pub mod fit_cmd;
+pub mod commands;
 pub mod fit_problem;
+pub mod formats;
 pub mod gpu;
-pub(crate) mod integrity;
-pub mod interrupt;
-pub mod iterate_cmd;
 pub mod job;
 pub mod machine_rates;
-pub mod matlab;
-pub mod merge_cmd;
-pub mod meta;
-pub(crate) mod outputs;
-pub mod params_cmd;
-pub mod plot_cmd;
-pub mod progress;
 pub mod report;
-pub mod results_reader;
-pub mod resume;
-pub mod run_cmd;
 pub mod run_spec;
-pub mod sensitivity_cmd;
-pub mod sim_cmd;
-pub mod sizing;
-pub mod slurm_cmd;
-pub mod statemap_report;
-pub mod synth_cmd;
-pub mod tables;
-pub mod tune_cmd;
-pub mod tune_report;
 
 use crate::orchestration::toml_fields::InputError;
+use commands::*;
 
 /// Bad input that is not a TOML file (a missing file, a bad record row): exit code 2.
 #[derive(Debug, thiserror::Error)]
@@ -54,7 +29,8 @@ pub struct RunFailed(pub String);
 pub fn exit_code(e: &anyhow::Error) -> i32 {
     if e.downcast_ref::<InputError>().is_some()
         || e.downcast_ref::<BadInput>().is_some()
-        || e.downcast_ref::<tables::BadCheckpoint>().is_some()
+        || e.downcast_ref::<formats::parquet_write::BadCheckpoint>()
+            .is_some()
     {
         2
     } else {

@@ -2,7 +2,8 @@
 
 use std::path::Path;
 use std::process::Command;
-use vshake::shell::tables::{column_names, read_bools, read_columns_allow_nan, read_strings};
+use vshake::shell::formats::measured_files::{column_names, read_columns_allow_nan};
+use vshake::shell::formats::parquet_read::{read_bools, read_strings};
 
 /// The state and term a report's residual follows, from its `stateterms.parquet`: the row the
 /// map's sentence names (`named`), else (nothing named) the per-state regression of largest R²
@@ -77,7 +78,7 @@ pub fn content(path: &Path) -> Vec<(String, Cells)> {
     for n in nullable {
         out.push((
             n.into(),
-            vshake::shell::tables::read_opt_f64(path, n)
+            vshake::shell::formats::parquet_read::read_opt_f64(path, n)
                 .unwrap()
                 .iter()
                 .map(|v| v.map_or("-".into(), |x| x.to_bits().to_string()))

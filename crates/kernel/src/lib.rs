@@ -13,6 +13,7 @@
 pub mod actuator;
 mod bare;
 pub mod builds;
+pub mod channels;
 pub mod controller;
 pub mod effects;
 pub mod excitation;

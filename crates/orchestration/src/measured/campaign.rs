@@ -19,11 +19,19 @@
 //! (a sine) or is the first row (a record), unless `t0_s` says; a sine lasts until `ref_disp_m`
 //! leaves it, or `duration_s` when given ([`crate::measured::aligned`]).
 
-use crate::measured::channels::{self, Mapped};
 use crate::runs::spec::{self, ExcitationSpec};
 use crate::toml_fields::{Fields, InputError, Issues};
 use std::path::PathBuf;
+use vshake_kernel::channels;
 use vshake_kernel::params::ModelParams;
+
+/// A column named in a campaign's `columns` table: its header (or 1-based position) and unit.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Mapped {
+    pub name: Option<String>,
+    pub index: Option<usize>,
+    pub unit: Option<String>,
+}
 
 /// The keys of `[campaign]`, of each `[[test]]` and of a test's `weights`; docs/formats.md
 /// describes each (a test checks it).

@@ -57,10 +57,10 @@ keys! {
     RowsDone = "rows_done",
     RowsTotal = "rows_total",
     /// The CRC-32 of each row group as written (`crc32:` and a comma-separated list), checked by
-    /// `study run --resume` and `study merge` (shell::integrity).
+    /// `study run --resume` and `study merge` (formats::integrity).
     RowGroupCrc32 = "row_group_crc32",
     /// The CRC-32 of the file's own `vshake.*` metadata but the checksums (the study, seed and
-    /// shard its rows were made for), checked with the row groups' (shell::integrity).
+    /// shard its rows were made for), checked with the row groups' (formats::integrity).
     MetadataCrc32 = "metadata_crc32",
     /// The engines that computed a results file's rows, in the order they ran (`cpu`, `cuda`;
     /// [`list`]): a run resumed, or shards merged, across backends name both.

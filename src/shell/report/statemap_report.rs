@@ -1,8 +1,9 @@
 //! The state map in the shell: its printout (`study compare`, `study diagnose`) and its two
 //! Parquet tables.
 
-use super::tables::{self, Column};
 use crate::orchestration::diagnosis::statemap::{self, StateMap};
+use crate::shell::formats::parquet_write;
+use crate::shell::formats::parquet_write::Column;
 use std::io::Write;
 
 /// Where in state space the residual lies: per residual, the share each state's terms explain
@@ -83,8 +84,8 @@ pub fn write(
         cols.push((format!("mean_{}", r.name()), f(&|x| x.mean[i])));
         cols.push((format!("rms_{}", r.name()), f(&|x| x.rms[i])));
     }
-    tables::write_table(&dir.join("statemap.parquet"), cols, meta)?;
-    tables::write_table(
+    parquet_write::write_table(&dir.join("statemap.parquet"), cols, meta)?;
+    parquet_write::write_table(
         &dir.join("stateterms.parquet"),
         state_term_rows(map).into_columns(),
         meta,

@@ -1,25 +1,12 @@
 //! Output files: only regular files (or a path that does not exist yet) are written, and a
 //! results table has one writer at a time.
 
-use super::tables::not_regular;
-use super::BadInput;
+use crate::shell::formats::input::regular_output;
+use crate::shell::BadInput;
 use anyhow::Context;
 use std::fs::File;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
-
-/// Refuses an output path that exists and is not a regular file (a device such as /dev/null, a
-/// FIFO, a socket, a folder): renaming a finished table over it would replace it. The error's kind
-/// is `InvalidInput`, its text what the path is.
-pub(crate) fn regular_output(path: &Path) -> std::io::Result<()> {
-    match not_regular(path) {
-        None => Ok(()),
-        Some(what) => Err(std::io::Error::new(
-            std::io::ErrorKind::InvalidInput,
-            format!("{}: is {what}, not a regular file: vshake writes its outputs to regular files (or a new path); it was left untouched", path.display()),
-        )),
-    }
-}
 
 /// [`regular_output`] for a command's output, before any work: bad input (exit 2).
 pub(crate) fn check_output(path: &Path) -> anyhow::Result<()> {
@@ -51,8 +38,9 @@ pub(crate) fn check_replaceable(out: &Path) -> anyhow::Result<()> {
         .into());
     }
     let ours = md.is_file()
-        && super::tables::parquet_metadata(out)
-            .is_ok_and(|m| super::meta::get(&m, super::meta::Key::Kind).is_some());
+        && crate::shell::formats::parquet_read::parquet_metadata(out).is_ok_and(|m| {
+            crate::shell::formats::meta::get(&m, crate::shell::formats::meta::Key::Kind).is_some()
+        });
     if !ours {
         return Err(BadInput(format!(
             "{}: exists and is not a file vshake wrote (no vshake.kind in its Parquet metadata); nothing was replaced: choose another output, or remove it",
@@ -196,7 +184,7 @@ pub(crate) fn output_paths(
 
 /// `bytes` written to `path.tmp`, then renamed into place (removed if the write fails).
 pub(crate) fn write_whole(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
-    let file = super::tables::AtomicFile::new(path);
+    let file = crate::shell::formats::parquet_write::AtomicFile::new(path);
     std::fs::write(&file.tmp, bytes)
         .and_then(|_| file.commit())
         .with_context(|| format!("writing {}", path.display()))

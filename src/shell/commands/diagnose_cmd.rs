@@ -1,15 +1,21 @@
 //! `study diagnose`: fit every candidate effect and say which one is most likely missing.
 
-use super::cli::DiagnoseArgs;
-use super::fit_problem::{check_effect, load_problem, print_checks, residual_warnings};
-use super::meta::{self, Key, Kind};
-use super::report::{esc, legend};
-use super::tables::{self, Column};
-use super::BadInput;
-use super::{campaign_io::load_model, RunFailed};
 use crate::kernel::params::EffectId;
 use crate::orchestration::diagnosis::diagnose::{self, Diagnosis};
 use crate::orchestration::diagnosis::fit::Problem;
+use crate::shell::cli::DiagnoseArgs;
+use crate::shell::fit_problem::{
+    self, check_effect, load_problem, print_checks, residual_warnings,
+};
+use crate::shell::formats::campaign_io::load_model;
+use crate::shell::formats::meta::{self, Key, Kind};
+use crate::shell::formats::parquet_write;
+use crate::shell::formats::parquet_write::Column;
+use crate::shell::gpu;
+use crate::shell::job::study_job::pool;
+use crate::shell::report::kit::{esc, legend};
+use crate::shell::BadInput;
+use crate::shell::RunFailed;
 use plotters::prelude::*;
 use std::fmt::Write as _;
 use std::io::Write;
@@ -17,8 +23,7 @@ use std::io::Write;
 /// What a feature group is: a sine's harmonic, mean or remainder, or a record's frequency band
 /// (`rate_hz`: the test's sample rate).
 fn harmonic_label(k: usize, rate_hz: f64) -> String {
-    use crate::orchestration::diagnosis::fit;
-    use crate::orchestration::fourier;
+    use crate::orchestration::{diagnosis::fit, fourier};
     match k {
         fit::MEAN => "mean".into(),
         fit::REMAINDER => "beyond h1-h9".into(),
@@ -32,13 +37,13 @@ fn harmonic_label(k: usize, rate_hz: f64) -> String {
 }
 
 pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
-    super::outputs::check_outputs([args.out.as_ref()])?;
+    crate::shell::job::outputs::check_outputs([args.out.as_ref()])?;
     run_to(args, &mut std::io::stdout())
 }
 
 /// The command, its report printed to `o` (the Python package keeps it as text).
 pub(crate) fn run_to(args: &DiagnoseArgs, o: &mut dyn Write) -> anyhow::Result<()> {
-    let engine = super::gpu::uncovered(
+    let engine = gpu::uncovered(
         args.backend,
         "a diagnosis compares time histories (the CUDA kernel returns metrics only)",
     )?;
@@ -55,11 +60,10 @@ pub(crate) fn run_to(args: &DiagnoseArgs, o: &mut dyn Write) -> anyhow::Result<(
             .collect::<anyhow::Result<_>>()?
     };
     let mut loaded = load_problem(&args.campaign, &model, args.strict)?;
-    let progress =
-        super::fit_problem::with_progress(&mut loaded.problem, "diagnose", args.log_progress);
+    let progress = fit_problem::with_progress(&mut loaded.problem, "diagnose", args.log_progress);
     let problem = loaded.problem;
     let t0 = std::time::Instant::now();
-    let d = super::job::pool(args.threads)?.install(|| {
+    let d = pool(args.threads)?.install(|| {
         let mut d = diagnose::diagnose(&problem, &candidates);
         d.map_states(&loaded.aligned);
         d
@@ -75,7 +79,7 @@ pub(crate) fn run_to(args: &DiagnoseArgs, o: &mut dyn Write) -> anyhow::Result<(
             .and_then(|c| c.fit.as_ref().ok().map(|f| &f.after))
     });
     let mut implausible = residual_warnings(&problem, &d.baseline, best);
-    implausible.extend(super::fit_problem::noise_warnings(&problem, best));
+    implausible.extend(fit_problem::noise_warnings(&problem, best));
     if args.strict && !implausible.is_empty() {
         return Err(BadInput(format!("{} (--strict)", implausible.join("\n"))).into());
     }
@@ -94,7 +98,7 @@ pub(crate) fn run_to(args: &DiagnoseArgs, o: &mut dyn Write) -> anyhow::Result<(
     print_selection(o, &d)?;
     if let Some(map) = &d.state_map {
         writeln!(o, "\n  the starting model's residual:")?;
-        super::statemap_report::print(o, map)?;
+        crate::shell::report::statemap_report::print(o, map)?;
     }
     if let (Some(map), Some(true)) = (
         &d.state_map_after,
@@ -102,7 +106,7 @@ pub(crate) fn run_to(args: &DiagnoseArgs, o: &mut dyn Write) -> anyhow::Result<(
             .map(|(_, f)| f.after.residual_rms() > diagnose::NOISE_FACTOR * d.noise_rms),
     ) {
         writeln!(o, "\n  the residual the named effects leave:")?;
-        super::statemap_report::print(o, map)?;
+        crate::shell::report::statemap_report::print(o, map)?;
     }
     writeln!(o, "\n  verdict: {}", d.summary())?;
     if let Some(dir) = &args.report {
@@ -133,7 +137,7 @@ fn write_named(
         return Ok(());
     };
     let command = format!("diagnose {}", campaign.display());
-    super::fit_problem::write_fitted(out, &command, model, free, fit)?;
+    crate::shell::fit_problem::write_fitted(out, &command, model, free, fit)?;
     writeln!(
         o,
         "\n  wrote {} (the named effects fitted: {}; use it with --model)",
@@ -293,23 +297,23 @@ pub(crate) fn write_report(
         meta::pair(Key::Verdict, d.summary()),
     ]);
     if let Some(map) = &d.state_map {
-        super::statemap_report::write(dir, map, &meta)?;
+        crate::shell::report::statemap_report::write(dir, map, &meta)?;
     }
-    tables::write_table(
+    parquet_write::write_table(
         &dir.join("candidates.parquet"),
         candidates_columns(d),
         &meta,
     )?;
-    tables::write_table(&dir.join("selection.parquet"), selection_columns(d), &meta)?;
-    tables::write_table(&dir.join("tests.parquet"), tests_columns(problem, d), &meta)?;
-    tables::write_table(
+    parquet_write::write_table(&dir.join("selection.parquet"), selection_columns(d), &meta)?;
+    parquet_write::write_table(&dir.join("tests.parquet"), tests_columns(problem, d), &meta)?;
+    parquet_write::write_table(
         &dir.join("evidence.parquet"),
         evidence_columns(problem, d),
         &meta,
     )?;
     let page = html(campaign, problem, d)?;
     let path = dir.join("report.html");
-    let out = tables::AtomicFile::new(&path);
+    let out = parquet_write::AtomicFile::new(&path);
     std::fs::write(&out.tmp, page)?;
     out.commit()?;
     Ok(())
@@ -686,7 +690,7 @@ td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}} th{{background:#
         h.push_str("</table>\n");
     }
     if let Some(map) = &d.state_map {
-        h.push_str(&super::report::state_map_section(map)?);
+        h.push_str(&crate::shell::report::kit::state_map_section(map)?);
     }
     h.push_str("<p>The numbers are in the Parquet tables beside this page (candidates, selection, tests, evidence, statemap, stateterms).</p>\n</body></html>\n");
     Ok(h)

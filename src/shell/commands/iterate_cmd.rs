@@ -1,12 +1,15 @@
 //! `study iterate`: offline iteration of an earthquake test's drive on the virtual table.
 
-use super::cli::IterateArgs;
-use super::meta::{self, Key, Kind};
-use super::outputs::{output_paths, write_whole};
-use super::{run_spec, tables, BadInput, RunFailed};
 use crate::orchestration::preparation::drive_iteration::{
     iterate_on_model, IterationRow, IterationSettings, TableIteration, FRF_SEGMENT,
 };
+use crate::shell::cli::IterateArgs;
+use crate::shell::formats::meta::{self, Key, Kind};
+use crate::shell::formats::parquet_write;
+use crate::shell::job::outputs::{output_paths, write_whole};
+use crate::shell::run_spec;
+use crate::shell::BadInput;
+use crate::shell::RunFailed;
 use anyhow::Context;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -148,7 +151,7 @@ fn write_outputs(
     let mut m = meta::header(Kind::DriveIteration);
     m.push(meta::pair(Key::Spec, spec));
     let cols: [(&str, &[f64]); 2] = [("iteration", &iteration), ("rms_err_accel_ratio", &error)];
-    tables::write_parquet(&paths[0], &cols, &m)
+    parquet_write::write_parquet(&paths[0], &cols, &m)
         .with_context(|| format!("writing {}", paths[0].display()))?;
     let frf = &done.frf;
     let freq: Vec<f64> = (0..frf.re.len())
@@ -162,7 +165,7 @@ fn write_outputs(
         .collect();
     let cols: [(&str, &[f64]); 3] = [("freq_hz", &freq), ("gain", &gain), ("phase_deg", &phase)];
     let m = meta::header(Kind::FrequencyResponse);
-    tables::write_parquet(&paths[1], &cols, &m)
+    parquet_write::write_parquet(&paths[1], &cols, &m)
         .with_context(|| format!("writing {}", paths[1].display()))?;
     write_drive(&paths[2], done)?;
     write_history(&paths[3], done)?;
@@ -173,7 +176,7 @@ fn write_outputs(
 /// The error of each iteration (left) and the target against the achieved acceleration with the
 /// kept drive (right), as SVG.
 fn plot(done: &TableIteration) -> Result<String, Box<dyn std::error::Error>> {
-    use super::report::{draw_line, legend};
+    use crate::shell::report::kit::{draw_line, legend};
     use plotters::prelude::*;
     let mut s = String::new();
     {
@@ -250,7 +253,8 @@ fn write_history(path: &Path, done: &TableIteration) -> anyhow::Result<()> {
         ("drive_disp_m", &d.x),
     ];
     let m = meta::header(Kind::TimeHistory);
-    tables::write_parquet(path, &cols, &m).with_context(|| format!("writing {}", path.display()))
+    parquet_write::write_parquet(path, &cols, &m)
+        .with_context(|| format!("writing {}", path.display()))
 }
 
 /// The final drive's displacement per controller tick, as CSV (time_s, drive_disp_m).

@@ -1,11 +1,14 @@
 //! `study merge`: join the shard files of a sharded study into one table equal to the unsharded
 //! run, refusing missing, duplicate or mismatched shards.
 
-use super::cli::MergeArgs;
-use super::meta::{self, Key, SHARD_KEYS};
-use super::outputs::{check_output, check_replaceable, OutputLock};
-use super::tables::{self, ParquetStream};
-use super::{integrity, BadInput};
+use crate::shell::cli::MergeArgs;
+use crate::shell::formats::integrity;
+use crate::shell::formats::measured_files;
+use crate::shell::formats::meta::{self, Key, SHARD_KEYS};
+use crate::shell::formats::parquet_read;
+use crate::shell::formats::parquet_write::ParquetStream;
+use crate::shell::job::outputs::{check_output, check_replaceable, OutputLock};
+use crate::shell::BadInput;
 use anyhow::Context;
 use std::collections::BTreeMap;
 use std::io::Write;
@@ -119,7 +122,7 @@ fn read_shards(
     let mut list = Vec::new();
     let mut unfinished = Vec::new();
     for path in files {
-        let pairs = tables::parquet_metadata(&path).map_err(tables::input_if_user)?;
+        let pairs = parquet_read::parquet_metadata(&path).map_err(measured_files::input_if_user)?;
         if meta::is(&pairs, meta::Kind::StudyResults)
             && meta::get(&pairs, Key::ShardIndex).is_none()
         {
@@ -263,11 +266,13 @@ pub fn run(args: &MergeArgs) -> anyhow::Result<()> {
     }
     let first = &list[0];
     let meta = merged_metadata(&list);
-    let (fields, _) = tables::parquet_batches(&first.path).map_err(tables::input_if_user)?;
+    let (fields, _) =
+        parquet_read::parquet_batches(&first.path).map_err(measured_files::input_if_user)?;
     let mut stream = ParquetStream::create_with_fields(&out, fields.clone(), &meta)?;
     let mut rows = 0usize;
     for f in &list {
-        let (theirs, reader) = tables::parquet_batches(&f.path).map_err(tables::input_if_user)?;
+        let (theirs, reader) =
+            parquet_read::parquet_batches(&f.path).map_err(measured_files::input_if_user)?;
         let shape = |v: &[arrow_schema::Field]| {
             v.iter()
                 .map(|x| (x.name().clone(), x.data_type().clone()))

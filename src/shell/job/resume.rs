@@ -5,21 +5,24 @@
 //! computes exactly what the first one would have; every sample depends only on (seed, sample
 //! id), so the finished file equals an uninterrupted run's row for row, bit for bit.
 
-use super::job::{plan_for, Job, Kept, Shard};
-use super::meta::{self, Key, Kind};
-use super::outputs::{check_output, OutputLock};
-use super::tables::{self, input_if_user, Recovered};
-use super::BadInput;
 use crate::orchestration::study::problem::StudySpec;
+use crate::shell::formats::measured_files::input_if_user;
+use crate::shell::formats::meta::{self, Key, Kind};
+use crate::shell::formats::parquet_read;
+use crate::shell::formats::parquet_write;
+use crate::shell::formats::parquet_write::Recovered;
+use crate::shell::job::outputs::{check_output, OutputLock};
+use crate::shell::job::study_job::{plan_for, Job, Kept, Shard};
+use crate::shell::BadInput;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
 /// The file whose rows a resume of `file` (results table `out`) keeps, and whether it is a
 /// recovered one (`FILE.killed`, removed once its rows are safe).
 fn source(file: &Path, out: &Path) -> anyhow::Result<(PathBuf, bool)> {
-    let partial = tables::partial_path(out);
-    let killed = tables::killed_path(&partial);
-    let (source, temporary) = match tables::recover_killed(&partial)? {
+    let partial = parquet_write::partial_path(out);
+    let killed = parquet_write::killed_path(&partial);
+    let (source, temporary) = match parquet_write::recover_killed(&partial)? {
         Recovered::File(p) => (p, true),
         // A resume of a killed run, itself killed before its first checkpoint: the rows recovered
         // the first time are still in FILE.killed.
@@ -46,18 +49,18 @@ fn source(file: &Path, out: &Path) -> anyhow::Result<(PathBuf, bool)> {
 /// The job that continues `file` (the results table, `NAME.parquet`, or its partial one,
 /// `NAME.partial.parquet`), or None when it is already complete (said on stdout).
 pub fn job(file: &Path) -> anyhow::Result<Option<Job>> {
-    let out = tables::final_path(file);
+    let out = parquet_write::final_path(file);
     check_output(&out)?;
-    check_output(&tables::partial_path(&out))?;
+    check_output(&parquet_write::partial_path(&out))?;
     // Before anything is read or moved: another process may be writing these files.
     let lock = OutputLock::acquire(&out)?;
     let (source, temporary) = source(file, &out)?;
-    let meta = tables::parquet_metadata(&source).map_err(input_if_user)?;
+    let meta = parquet_read::parquet_metadata(&source).map_err(input_if_user)?;
     let get = |k: Key| meta::get(&meta, k);
     if !meta::is(&meta, Kind::StudyResults) {
         return Err(BadInput(format!("{}: not a results file of `study run` (no vshake.kind = study_results in its metadata)", file.display())).into());
     }
-    let rows = tables::parquet_rows(&source).map_err(input_if_user)?;
+    let rows = parquet_read::parquet_rows(&source).map_err(input_if_user)?;
     if !temporary && meta::incomplete(&meta).is_none() {
         writeln!(
             std::io::stdout(),
@@ -67,7 +70,7 @@ pub fn job(file: &Path) -> anyhow::Result<Option<Job>> {
         return Ok(None);
     }
     // The kept rows are checked against their checksums before one is used.
-    super::integrity::verify_file(&source)?;
+    crate::shell::formats::integrity::verify_file(&source)?;
     let need = |k: Key| {
         get(k).ok_or_else(|| {
             BadInput(format!(

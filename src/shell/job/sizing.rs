@@ -1,9 +1,9 @@
 //! The size of a run before it starts: `study run --dry-run` (samples, runs, estimated wall time
 //! from a short timed run, output size), and the question a run of more than a day asks first.
 
-use super::job::{Job, ResultsSink};
-use super::BadInput;
 use crate::orchestration::study::batch::{self, RowSink, Timing};
+use crate::shell::job::study_job::{Job, ResultsSink};
+use crate::shell::BadInput;
 use std::io::{IsTerminal, Write};
 use std::ops::Range;
 use std::time::Duration;

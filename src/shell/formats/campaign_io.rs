@@ -1,12 +1,13 @@
 //! Campaign and measured-test files: loading, and the error behaviour of measured data (every
 //! problem of every file of a campaign reported at once, exit code 2).
 
-use super::tables::{self, NumTable};
-use super::BadInput;
 use crate::kernel::params::ModelParams;
 use crate::orchestration::measured::aligned::{self, AlignedTest, OpenLoop, OPTIONAL, REQUIRED};
 use crate::orchestration::measured::campaign::{self, Campaign, TestSpec};
 use crate::orchestration::runs::spec::ExcitationSpec;
+use crate::shell::formats::measured_files;
+use crate::shell::formats::measured_files::NumTable;
+use crate::shell::BadInput;
 use std::path::{Path, PathBuf};
 
 /// A campaign with the folder its paths are relative to.
@@ -21,7 +22,7 @@ pub(crate) fn load_model(path: Option<&Path>) -> anyhow::Result<ModelParams> {
     match path {
         None => Ok(ModelParams::default()),
         Some(p) => {
-            let text = super::tables::read_input_text(p)
+            let text = crate::shell::formats::input::read_input_text(p)
                 .map_err(|e| BadInput(format!("{}: cannot read: {e}", p.display())))?;
             Ok(campaign::model_from_toml(&text, &p.display().to_string())?)
         }
@@ -29,7 +30,7 @@ pub(crate) fn load_model(path: Option<&Path>) -> anyhow::Result<ModelParams> {
 }
 
 pub fn load_campaign(file: &Path, model: &ModelParams) -> anyhow::Result<LoadedCampaign> {
-    let text = super::tables::read_input_text(file)
+    let text = crate::shell::formats::input::read_input_text(file)
         .map_err(|e| BadInput(format!("{}: cannot read: {e}", file.display())))?;
     let campaign = Campaign::from_toml(&text, &file.display().to_string(), model)?;
     Ok(LoadedCampaign {
@@ -45,9 +46,9 @@ pub fn load_campaign(file: &Path, model: &ModelParams) -> anyhow::Result<LoadedC
 /// `map` is the test's `columns` table.
 pub fn read_measured(
     path: &Path,
-    map: &[(String, crate::orchestration::measured::channels::Mapped)],
+    map: &[(String, crate::orchestration::measured::campaign::Mapped)],
 ) -> Result<NumTable, Vec<String>> {
-    match tables::read_columns_lenient(path, &REQUIRED, &OPTIONAL, map) {
+    match measured_files::read_columns_lenient(path, &REQUIRED, &OPTIONAL, map) {
         Ok((table, bad)) if bad.is_empty() => Ok(table),
         Ok((table, bad)) => Err(bad
             .iter()
@@ -66,7 +67,7 @@ fn load_test(
 ) -> anyhow::Result<Result<AlignedTest, Vec<String>>> {
     let path = lc.base.join(&test.data);
     if !path.is_file() {
-        let what = match super::tables::not_regular(&path) {
+        let what = match crate::shell::formats::input::not_regular(&path) {
             Some(kind) => format!("is {kind}, not a data file"),
             None => match std::fs::metadata(&path) {
                 Err(e) if e.kind() != std::io::ErrorKind::NotFound => format!("cannot read: {e}"),
@@ -92,7 +93,7 @@ fn load_test(
             time_column,
             ..
         } if file != &test.data => {
-            match tables::read_record(&lc.base.join(file), column, time_column) {
+            match measured_files::read_record(&lc.base.join(file), column, time_column) {
                 Ok(t) => Some(t),
                 Err(e) if e.is_input() => return Ok(Err(e.each())),
                 Err(e) => return Err(e.into()),

@@ -1,11 +1,11 @@
 //! `study slurm`: a Slurm job array (one task per shard, SLURM_ARRAY_TASK_ID → `--shard I/N`) and
 //! a merge job that runs after every task succeeded (`--dependency=afterok`), ready to submit.
 
-use super::cli::SlurmArgs;
-use super::job::{load_study, plan_for, Shard};
-use super::BadInput;
 use crate::orchestration::study::batch::Plan;
 use crate::orchestration::study::problem::StudySpec;
+use crate::shell::cli::SlurmArgs;
+use crate::shell::job::study_job::{load_study, plan_for, Shard};
+use crate::shell::BadInput;
 use anyhow::Context;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -37,7 +37,7 @@ fn slurm_value(flag: &str, v: &str) -> anyhow::Result<()> {
 /// Refuses (exit 2, before any script is written) a job script that exists with other contents: an
 /// earlier `study slurm` with other options, or one edited by hand, is not replaced silently.
 fn check_unchanged(path: &Path, text: &str) -> anyhow::Result<()> {
-    super::outputs::check_output(path)?;
+    crate::shell::job::outputs::check_output(path)?;
     match std::fs::read(path) {
         Ok(old) if old != text.as_bytes() => Err(BadInput(format!(
             "{}: exists with other contents (written by a `study slurm` with other options, or \

@@ -1,9 +1,9 @@
 //! `study params`: the parameter registry as a table.
 
-use super::cli::ParamsArgs;
-use super::BadInput;
 use crate::kernel::effects::LIBRARY;
 use crate::kernel::params::{Component, ModelParams};
+use crate::shell::cli::ParamsArgs;
+use crate::shell::BadInput;
 use std::io::Write;
 
 pub fn run(args: &ParamsArgs) -> anyhow::Result<()> {

@@ -1,22 +1,22 @@
 //! `study sim`: resolve a run file, build its reference, run, print, write.
 
-use super::cli::SimArgs;
-use super::meta::{self, Key, Kind};
-use super::run_spec::{build_reference, load_spec};
-use super::tables;
-use super::RunFailed;
 use crate::kernel::excitation::Reference;
 use crate::kernel::params::G;
 use crate::kernel::simulate::LaneStatus;
 use crate::kernel::spectrum::SpectrumSpec;
 use crate::orchestration::runs::single::{self, CHANNELS};
 use crate::orchestration::runs::spec::SimSpec;
+use crate::shell::cli::SimArgs;
+use crate::shell::formats::meta::{self, Key, Kind};
+use crate::shell::formats::parquet_write;
+use crate::shell::run_spec::{build_reference, load_spec};
+use crate::shell::RunFailed;
 use anyhow::Context;
 use std::io::Write;
 use std::path::Path;
 
 pub fn run(args: &SimArgs) -> anyhow::Result<()> {
-    super::outputs::check_parquet_outputs([args.out.as_ref(), args.spectrum.as_ref()])?;
+    crate::shell::job::outputs::check_parquet_outputs([args.out.as_ref(), args.spectrum.as_ref()])?;
     let spec = load_spec(&args.file, args.model.as_deref())?;
     let base = args.file.parent().unwrap_or(Path::new("."));
     let reference = build_reference(&spec, base)?;
@@ -96,10 +96,14 @@ pub(crate) fn write_history(
     let mut meta = meta::header(Kind::TimeHistory);
     meta.extend([
         meta::pair(Key::Spec, spec.resolved_toml()),
-        meta::pair(Key::SchemaVersion, super::job::SCHEMA_VERSION),
+        meta::pair(
+            Key::SchemaVersion,
+            crate::shell::job::study_job::SCHEMA_VERSION,
+        ),
         meta::pair(Key::Status, status),
     ]);
-    tables::write_parquet(path, &cols, &meta).with_context(|| format!("writing {}", path.display()))
+    parquet_write::write_parquet(path, &cols, &meta)
+        .with_context(|| format!("writing {}", path.display()))
 }
 
 /// The response spectra of the achieved and the target acceleration, printed and (with
@@ -148,7 +152,7 @@ fn write_spectrum(
         ];
         let mut m = meta::header(Kind::Spectrum);
         m.push(meta::pair(Key::Damping, spectrum.damping));
-        tables::write_parquet(path, &cols, &m)
+        parquet_write::write_parquet(path, &cols, &m)
             .with_context(|| format!("writing {}", path.display()))?;
         writeln!(o, "  wrote {}", path.display())?;
     }

@@ -1,24 +1,25 @@
 //! `study fit`: fit effects' parameters against a campaign and write the fitted model.
 
-use super::campaign_io::load_model;
-use super::cli::FitArgs;
-use super::{BadInput, RunFailed};
 use crate::orchestration::diagnosis::fit::{self, Free, Problem};
+use crate::shell::cli::FitArgs;
+use crate::shell::formats::campaign_io::load_model;
+use crate::shell::BadInput;
+use crate::shell::RunFailed;
 use std::io::Write;
 
-use super::fit_problem::{
+use crate::shell::fit_problem::{
     free_parameters, load_problem, noise_warnings, print_checks, residual_warnings, with_progress,
     write_fitted,
 };
 
 pub fn run(args: &FitArgs) -> anyhow::Result<()> {
-    super::outputs::check_output(&args.out)?;
+    crate::shell::job::outputs::check_output(&args.out)?;
     run_to(args, &mut std::io::stdout())
 }
 
 /// The command, its report printed to `o` (the Python package keeps it as text).
 pub(crate) fn run_to(args: &FitArgs, o: &mut dyn Write) -> anyhow::Result<()> {
-    let engine = super::gpu::uncovered(
+    let engine = crate::shell::gpu::uncovered(
         args.backend,
         "a fit compares time histories at the measured samples (the CUDA kernel returns metrics only)",
     )?;
@@ -28,7 +29,7 @@ pub(crate) fn run_to(args: &FitArgs, o: &mut dyn Write) -> anyhow::Result<()> {
     let progress = with_progress(&mut loaded.problem, "fit", args.log_progress);
     let problem = &loaded.problem;
     let t0 = std::time::Instant::now();
-    let pool = super::job::pool(args.threads)?;
+    let pool = crate::shell::job::study_job::pool(args.threads)?;
     // Each freed stage's start and scan (a mode's mass, a resonance's frequency, a lag), as a
     // diagnosis makes them.
     let free =

@@ -5,150 +5,11 @@
 //! spaces, `_` and camel case ignored; `Disp`/`Displacement`/`Position`, `Accel`/`Acceleration`,
 //! `Ref`/`Reference`/`Command`/`Target`), and the unit gives the factor to SI. A name written
 //! exactly as vshake's column (`accel_mps2`) is taken as it is. Pure: the readers in
-//! `shell::tables` apply what [`resolve`] finds.
+//! `formats::measured_files` apply what [`resolve`] finds; the channels and units are the
+//! kernel's vocabulary (`kernel::channels`).
 
-/// What a unit measures.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Quantity {
-    Time,
-    Length,
-    Acceleration,
-    Force,
-    Pressure,
-    Voltage,
-}
-
-impl Quantity {
-    /// The SI unit vshake's columns hold.
-    pub fn si(self) -> &'static str {
-        match self {
-            Quantity::Time => "s",
-            Quantity::Length => "m",
-            Quantity::Acceleration => "m/s²",
-            Quantity::Force => "N",
-            Quantity::Pressure => "Pa",
-            Quantity::Voltage => "V",
-        }
-    }
-}
-
-/// Standard gravity, m/s² [CGPM 1901; NIST SP 330].
-pub const G0: f64 = 9.80665;
-/// One pound-force in N [NIST SP 811, B.8: 4.448 222].
-const LBF: f64 = 4.448_221_615_260_5;
-
-/// Units read from headers: their spellings (lower case, compared case-insensitively), what they
-/// measure and the factor to SI [exact definitions: NIST SP 811 appendix B].
-const UNITS: &[(&[&str], Quantity, f64)] = &[
-    (
-        &["s", "sec", "secs", "second", "seconds"],
-        Quantity::Time,
-        1.0,
-    ),
-    (
-        &["ms", "msec", "millisecond", "milliseconds"],
-        Quantity::Time,
-        1e-3,
-    ),
-    (
-        &["m", "meter", "meters", "metre", "metres"],
-        Quantity::Length,
-        1.0,
-    ),
-    (
-        &["mm", "millimeter", "millimeters", "millimetre"],
-        Quantity::Length,
-        1e-3,
-    ),
-    (&["cm"], Quantity::Length, 1e-2),
-    (&["um", "µm", "micron", "microns"], Quantity::Length, 1e-6),
-    (&["in", "inch", "inches"], Quantity::Length, 0.0254),
-    (
-        &[
-            "m/s^2", "m/s2", "m/s²", "m/s/s", "mps2", "m s^-2", "ms-2", "m.s-2",
-        ],
-        Quantity::Acceleration,
-        1.0,
-    ),
-    (&["g", "gs", "g's"], Quantity::Acceleration, G0),
-    (
-        &["cm/s^2", "cm/s2", "cm/s²", "gal"],
-        Quantity::Acceleration,
-        1e-2,
-    ),
-    (&["mm/s^2", "mm/s2", "mm/s²"], Quantity::Acceleration, 1e-3),
-    (
-        &["in/s^2", "in/s2", "in/s²"],
-        Quantity::Acceleration,
-        0.0254,
-    ),
-    (&["n", "newton", "newtons"], Quantity::Force, 1.0),
-    (&["kn"], Quantity::Force, 1e3),
-    (&["lbf", "lb"], Quantity::Force, LBF),
-    (&["kip", "kips"], Quantity::Force, 1e3 * LBF),
-    (&["pa"], Quantity::Pressure, 1.0),
-    (&["kpa"], Quantity::Pressure, 1e3),
-    (&["mpa"], Quantity::Pressure, 1e6),
-    (&["bar"], Quantity::Pressure, 1e5),
-    (&["psi"], Quantity::Pressure, LBF / (0.0254 * 0.0254)),
-    (&["v", "volt", "volts"], Quantity::Voltage, 1.0),
-    (&["mv"], Quantity::Voltage, 1e-3),
-];
-
-/// A unit read from a header: what it measures and its factor to SI.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Unit {
-    pub quantity: Quantity,
-    pub to_si: f64,
-}
-
-/// The unit `text` names (case, spaces and a `mps2`-style spelling allowed), if it is one.
-pub fn unit(text: &str) -> Option<Unit> {
-    let t: String = text
-        .trim()
-        .to_lowercase()
-        .split_whitespace()
-        .collect::<Vec<_>>()
-        .join(" ");
-    let t = t.replace("**", "^");
-    UNITS
-        .iter()
-        .find(|(names, _, _)| {
-            names.contains(&t.as_str()) || names.contains(&t.replace(' ', "").as_str())
-        })
-        .map(|&(_, quantity, to_si)| Unit { quantity, to_si })
-}
-
-/// Every unit spelling, for messages.
-pub(crate) fn unit_list() -> String {
-    UNITS
-        .iter()
-        .map(|(n, _, _)| n[0])
-        .collect::<Vec<_>>()
-        .join(", ")
-}
-
-/// vshake's channels: the column name, the key of a campaign's `columns` table, what it measures.
-pub const CHANNELS: &[(&str, &str, Quantity)] = &[
-    ("time_s", "time", Quantity::Time),
-    ("ref_disp_m", "ref_disp", Quantity::Length),
-    ("disp_m", "disp", Quantity::Length),
-    ("accel_mps2", "accel", Quantity::Acceleration),
-    ("valve_cmd_v", "valve_cmd", Quantity::Voltage),
-    ("force_n", "force", Quantity::Force),
-    ("p1_pa", "p1", Quantity::Pressure),
-    ("p2_pa", "p2", Quantity::Pressure),
-    ("spool_m", "spool", Quantity::Length),
-];
-
-/// The channel row of a column name or a `columns` key.
-pub fn channel(name_or_key: &str) -> Option<(&'static str, &'static str, Quantity)> {
-    CHANNELS
-        .iter()
-        .copied()
-        .find(|(c, k, _)| *c == name_or_key || *k == name_or_key)
-}
-
+use crate::kernel::channels::*;
+use crate::orchestration::measured::campaign::Mapped;
 /// A header split into its name and the unit text written with it (`Accel (g)` → `Accel`, `g`;
 /// `disp_mm` → `disp`, `mm`); no unit text where none is written.
 pub fn split(header: &str) -> (String, Option<String>) {
@@ -250,14 +111,6 @@ pub struct Resolved {
     pub to_si: f64,
     /// What was read, when it was not vshake's own name (`` `Accel (g)` as accel_mps2, g → m/s² ``).
     pub note: Option<String>,
-}
-
-/// A column named in a campaign's `columns` table: its header (or 1-based position) and unit.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct Mapped {
-    pub name: Option<String>,
-    pub index: Option<usize>,
-    pub unit: Option<String>,
 }
 
 /// Why a column could not be read.

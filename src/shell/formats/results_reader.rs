@@ -2,10 +2,12 @@
 //! varied parameters, the excitations and metrics, and the indices of every (excitation, metric)
 //! computed on a pool.
 
-use super::meta::{self, Key, Kind};
-use super::tables::{self, input_if_user, NumTable};
-use super::BadInput;
 use crate::orchestration::study::sensitivity::{self, Indices, Results};
+use crate::shell::formats::measured_files;
+use crate::shell::formats::measured_files::{input_if_user, NumTable};
+use crate::shell::formats::meta::{self, Key, Kind};
+use crate::shell::formats::parquet_read;
+use crate::shell::BadInput;
 use rayon::prelude::*;
 use std::path::Path;
 
@@ -43,7 +45,7 @@ impl Loaded {
 /// Reads the metadata and the columns the analysis needs; refuses a file that is not a complete
 /// results file, unknown `--metrics`, and a design where nothing varies.
 pub(crate) fn load(file: &Path, wanted_metrics: Option<&[String]>) -> anyhow::Result<Loaded> {
-    let pairs = tables::parquet_metadata(file).map_err(input_if_user)?;
+    let pairs = parquet_read::parquet_metadata(file).map_err(input_if_user)?;
     let get = |k: Key| {
         meta::get(&pairs, k).ok_or_else(|| {
             BadInput(format!(
@@ -83,7 +85,7 @@ pub(crate) fn load(file: &Path, wanted_metrics: Option<&[String]>) -> anyhow::Re
         wanted.extend(["design_base", "design_block"]);
     }
     wanted.extend(all_columns.iter().chain(&metrics).map(String::as_str));
-    let table = tables::read_columns_allow_nan(file, &wanted).map_err(input_if_user)?;
+    let table = measured_files::read_columns_allow_nan(file, &wanted).map_err(input_if_user)?;
     // The design's parameters, in design order (recorded by `study run`); older files: the
     // parameter columns that vary.
     let varied: Vec<usize> = match meta::get(&pairs, Key::DesignParameters) {
@@ -127,7 +129,7 @@ pub(crate) fn analyse(
     let jobs: Vec<(usize, &String)> = (0..l.excitations.len())
         .flat_map(|e| l.metrics.iter().map(move |m| (e, m)))
         .collect();
-    let pool = super::job::pool(threads)?;
+    let pool = crate::shell::job::study_job::pool(threads)?;
     Ok(pool.install(|| {
         jobs.par_iter()
             .map(|&(e, m)| (e, m, sensitivity::analyse(&results, e, l.col(m), bootstrap)))

@@ -1,11 +1,6 @@
 //! `study tune`: CMA-ES over the controller's gains on a test plan; the tuned model file, every
 //! evaluation in Parquet and an HTML report.
 
-use super::cli::TuneArgs;
-use super::meta::{self, Key, Kind};
-use super::tables::{self, Column};
-use super::tune_report::Nominal;
-use super::{job, tune_report, BadInput, RunFailed};
 use crate::kernel::excitation::Reference;
 use crate::kernel::metrics::Metrics;
 use crate::kernel::params::ModelParams;
@@ -14,6 +9,15 @@ use crate::orchestration::preparation::tune_spec::{Statistic, TuneSpec};
 use crate::orchestration::runs::single::{self, SimOutcome};
 use crate::orchestration::runs::spec::SimSpec;
 use crate::orchestration::study::batch::{Row, RowStatus};
+use crate::shell::cli::TuneArgs;
+use crate::shell::formats::meta::{self, Key, Kind};
+use crate::shell::formats::parquet_write;
+use crate::shell::formats::parquet_write::Column;
+use crate::shell::job::study_job;
+use crate::shell::report::tune_report;
+use crate::shell::report::tune_report::Nominal;
+use crate::shell::BadInput;
+use crate::shell::RunFailed;
 use anyhow::Context;
 use std::io::Write;
 use std::path::Path;
@@ -29,15 +33,15 @@ const OUTPUTS: [&str; 5] = [
 ];
 
 pub fn run(args: &TuneArgs) -> anyhow::Result<()> {
-    let text = super::tables::read_input_text(&args.file)
+    let text = crate::shell::formats::input::read_input_text(&args.file)
         .map_err(|e| BadInput(format!("{}: cannot read: {e}", args.file.display())))?;
-    let base_model = super::campaign_io::load_model(args.model.as_deref())?;
+    let base_model = crate::shell::formats::campaign_io::load_model(args.model.as_deref())?;
     let spec = TuneSpec::from_toml_on(&text, &args.file.display().to_string(), base_model)?;
     let dir = args.out.clone().unwrap_or_else(|| spec.output.clone());
-    let paths = super::outputs::output_paths(&dir, &OUTPUTS, args.force)?;
+    let paths = crate::shell::job::outputs::output_paths(&dir, &OUTPUTS, args.force)?;
     let base = args.file.parent().unwrap_or(Path::new("."));
-    let references = job::references(&tune::study_of(&spec), base, &[])?;
-    let pool = job::pool(args.threads)?;
+    let references = study_job::references(&tune::study_of(&spec), base, &[])?;
+    let pool = study_job::pool(args.threads)?;
     std::fs::create_dir_all(&dir).map_err(|e| {
         BadInput(format!(
             "{}: cannot create the output folder: {e}",
@@ -72,7 +76,7 @@ pub fn run(args: &TuneArgs) -> anyhow::Result<()> {
     write_evaluations(&paths[2], &tuner, &tuned, &text, &command)?;
     write_generations(&paths[3], &tuned.generations)?;
     let page = tune_report::html(&tuner, &tuned, &nominal, &references, wall)?;
-    super::outputs::write_whole(&paths[4], page.as_bytes())?;
+    crate::shell::job::outputs::write_whole(&paths[4], page.as_bytes())?;
     if let Some(why) = &tuned.best.infeasible {
         // A model left by an earlier run (--force) would pass for this one's.
         for stale in &paths[..2] {
@@ -325,7 +329,7 @@ fn write_model(
         gains.join("\n")
     );
     let text = head + &toml::to_string(&root)?;
-    super::outputs::write_whole(path, text.as_bytes())
+    crate::shell::job::outputs::write_whole(path, text.as_bytes())
 }
 
 /// evaluations.parquet: a row per run (generation, candidate, draw, excitation).
@@ -362,7 +366,8 @@ fn write_evaluations(
     m.push(meta::pair(Key::Spec, text));
     m.push(meta::pair(Key::Seed, tuner.spec.seed));
     m.push(meta::pair(Key::Command, command));
-    tables::write_table(path, cols, &m).with_context(|| format!("writing {}", path.display()))
+    parquet_write::write_table(path, cols, &m)
+        .with_context(|| format!("writing {}", path.display()))
 }
 
 /// A value, or null where it is not finite.
@@ -431,5 +436,6 @@ fn write_generations(path: &Path, gens: &[GenerationSummary]) -> anyhow::Result<
         ("spread".into(), num(&|g| g.spread)),
     ];
     let m = meta::header(Kind::TuneGenerations);
-    tables::write_table(path, cols, &m).with_context(|| format!("writing {}", path.display()))
+    parquet_write::write_table(path, cols, &m)
+        .with_context(|| format!("writing {}", path.display()))
 }

@@ -2,16 +2,17 @@
 //! design), per excitation and metric; a Parquet table and a ranked printout. The analysis is
 //! `orchestration::study::sensitivity`; this reads the results table, prints and writes.
 
-use super::cli::SensitivityArgs;
-use super::meta::{self, Key, Kind};
-use super::results_reader::{analyse, load, Loaded};
-use super::tables::{self, Column};
 use crate::orchestration::study::sensitivity::{self, Indices, SobolIndex};
+use crate::shell::cli::SensitivityArgs;
+use crate::shell::formats::meta::{self, Key, Kind};
+use crate::shell::formats::parquet_write;
+use crate::shell::formats::parquet_write::Column;
+use crate::shell::formats::results_reader::{analyse, load, Loaded};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
 pub fn run(args: &SensitivityArgs) -> anyhow::Result<()> {
-    super::outputs::check_parquet_outputs([args.out.as_ref()])?;
+    crate::shell::job::outputs::check_parquet_outputs([args.out.as_ref()])?;
     let file = &args.file;
     let loaded = load(file, args.metrics.as_deref())?;
     let lines = analyse(&loaded, args.bootstrap, args.threads)?;
@@ -172,7 +173,10 @@ fn write(
     m.extend([
         meta::pair(Key::Source, file.display()),
         meta::pair(Key::Bootstrap, bootstrap),
-        meta::pair(Key::SchemaVersion, super::job::SCHEMA_VERSION),
+        meta::pair(
+            Key::SchemaVersion,
+            crate::shell::job::study_job::SCHEMA_VERSION,
+        ),
     ]);
-    tables::write_table(path, cols, &m)
+    parquet_write::write_table(path, cols, &m)
 }

@@ -14,16 +14,23 @@
 //! The values must be exactly NPTS (a last line of zero padding beyond NPTS is dropped, with a
 //! note); every problem names the file and its line.
 
-use super::tables::TableError;
 use crate::orchestration::measured::aligned::NumTable;
 use crate::orchestration::runs::quake_spec::{AT2_COLUMN, AT2_TIME};
+use crate::shell::formats::input::TableError;
 use std::path::Path;
 
 const KIND: &str = "PEER .AT2";
 
+/// Whether `path` names a PEER NGA acceleration file (extension `.AT2`, any case): the readers
+/// take such a file as a record in g, whatever its columns.
+pub fn is_at2(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("at2"))
+}
+
 /// Reads an `.AT2` file into the columns `time_s` (k·DT) and `accel_g`.
 pub fn read(path: &Path) -> Result<NumTable, TableError> {
-    let bytes = super::tables::read_input(path).map_err(|err| TableError::Io {
+    let bytes = crate::shell::formats::input::read_input(path).map_err(|err| TableError::Io {
         file: path.to_path_buf(),
         err,
     })?;

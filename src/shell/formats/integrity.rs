@@ -5,8 +5,8 @@
 //! on the disk or in a copy is refused, naming the file and the rows, instead of being carried into
 //! a file marked complete.
 
-use super::meta::Key;
-use super::BadInput;
+use crate::shell::formats::meta::Key;
+use crate::shell::BadInput;
 use parquet::file::metadata::{KeyValue, ParquetMetaData, RowGroupMetaData};
 use std::fs::File;
 use std::os::unix::fs::FileExt;

@@ -3,10 +3,10 @@
 //! response spectra of the target, the start and the tuned gains overlaid. The numbers behind it
 //! are in evaluations.parquet and generations.parquet beside it.
 
-use super::report::{draw_line, esc, legend, page_head};
 use crate::kernel::excitation::Reference;
 use crate::orchestration::preparation::tune::{error_term, Tuned, Tuner};
 use crate::orchestration::runs::single::SimOutcome;
+use crate::shell::report::kit::{draw_line, esc, legend, page_head};
 use plotters::prelude::*;
 use std::fmt::Write as _;
 

@@ -1,10 +1,8 @@
 //! `study bench`: throughput of the kernel in simulated seconds per wall second, the scalar path
 //! beside it, the limit set by the model's minimal operation count on this machine
-//! ([`super::machine_rates`]), and a CI gate on ratios measured in the same run (never on absolute
+//! ([`crate::shell::machine_rates`]), and a CI gate on ratios measured in the same run (never on absolute
 //! times: machines differ).
 
-use super::cli::BenchArgs;
-use super::machine_rates::{self, Rates, MINIMAL, TICK_OPS, WINDOW_OPS};
 use crate::kernel::builds;
 use crate::kernel::excitation::{Reference, Sine};
 use crate::kernel::ground::Processing;
@@ -13,6 +11,8 @@ use crate::kernel::simulate::{Isa, LaneParams, NoObserver, Solver};
 use crate::kernel::{EFFECT_LANES, LANES};
 use crate::orchestration::runs::quake;
 use crate::orchestration::runs::spec::{ExcitationSpec, Realisation};
+use crate::shell::cli::BenchArgs;
+use crate::shell::machine_rates::{self, Rates, MINIMAL, TICK_OPS, WINDOW_OPS};
 use anyhow::{bail, Context};
 use rayon::prelude::*;
 use std::io::Write;
@@ -185,7 +185,7 @@ fn read_baseline(path: &std::path::Path) -> anyhow::Result<(f64, f64)> {
 /// Times a diagnosis of `campaign` with every candidate of the library.
 fn bench_diagnose(campaign: &std::path::Path, max_seconds: Option<f64>) -> anyhow::Result<()> {
     let model = crate::kernel::params::ModelParams::default();
-    let problem = super::fit_problem::load_problem(campaign, &model, false)?.problem;
+    let problem = crate::shell::fit_problem::load_problem(campaign, &model, false)?.problem;
     let candidates = crate::kernel::params::EffectId::ALL;
     let simulated: f64 = problem
         .tests
@@ -219,7 +219,7 @@ fn bench_diagnose(campaign: &std::path::Path, max_seconds: Option<f64>) -> anyho
             if secs <= max { "ok" } else { "FAILED" }
         )?;
         if secs > max {
-            return Err(super::RunFailed(format!(
+            return Err(crate::shell::RunFailed(format!(
                 "the diagnosis took {secs:.1} s, more than {max} s"
             ))
             .into());
@@ -229,13 +229,13 @@ fn bench_diagnose(campaign: &std::path::Path, max_seconds: Option<f64>) -> anyho
 }
 
 pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
-    super::outputs::check_outputs([args.write_baseline.as_ref()])?;
+    crate::shell::job::outputs::check_outputs([args.write_baseline.as_ref()])?;
     let engine = match args.diagnose {
-        Some(_) => super::gpu::uncovered(
+        Some(_) => crate::shell::gpu::uncovered(
             args.backend,
             "a diagnosis compares time histories (the CUDA kernel returns metrics only)",
         )?,
-        None => super::gpu::choose(args.backend)?,
+        None => crate::shell::gpu::choose(args.backend)?,
     };
     println!("study bench: backend {}", engine.describe());
     if let Some(c) = &args.diagnose {
@@ -393,7 +393,7 @@ const GPU_LANES: usize = 1 << 16;
 /// warm-up run of the same size (a study's launches after its first find the kernel built, the
 /// device's memory pool and a page-locked output buffer in place), with where the time went and
 /// the largest difference from the CPU kernel on 256 of the lanes.
-fn bench_cuda(out: &mut dyn Write, cuda: &super::gpu::Cuda) -> anyhow::Result<()> {
+fn bench_cuda(out: &mut dyn Write, cuda: &crate::shell::gpu::Cuda) -> anyhow::Result<()> {
     use crate::orchestration::study::batch::LaneEngine;
     let reference = reference();
     let solver = Solver { substeps: 8 };

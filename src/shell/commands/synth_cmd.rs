@@ -1,11 +1,6 @@
 //! `study synth`: measurement files (docs/formats.md) made by the model, with hidden parameter changes
 //! and seeded sensor noise, for testing comparisons and diagnoses on data whose truth is known.
 
-use super::campaign_io::{load_campaign, load_model, LoadedCampaign};
-use super::cli::SynthArgs;
-use super::meta::{self, Key, Kind};
-use super::tables::{self, load_reference, Column};
-use super::{BadInput, RunFailed};
 use crate::kernel::excitation::Reference;
 use crate::kernel::params::ModelParams;
 use crate::kernel::resample::ch;
@@ -13,6 +8,14 @@ use crate::kernel::simulate::{LaneStatus, Solver};
 use crate::orchestration::measured::campaign::TestSpec;
 use crate::orchestration::runs::single;
 use crate::orchestration::runs::spec::{ExcitationSpec, SimSpec};
+use crate::shell::cli::SynthArgs;
+use crate::shell::formats::campaign_io::{load_campaign, load_model, LoadedCampaign};
+use crate::shell::formats::meta::{self, Key, Kind};
+use crate::shell::formats::parquet_write;
+use crate::shell::formats::parquet_write::Column;
+use crate::shell::run_spec::load_reference;
+use crate::shell::BadInput;
+use crate::shell::RunFailed;
 use anyhow::Context;
 use chacha20::ChaCha8Rng;
 use rand::SeedableRng;
@@ -34,7 +37,7 @@ pub(crate) fn apply_effects(model: &mut ModelParams, effects: &[String]) -> anyh
     for e in effects {
         *model
             .effects
-            .get_mut(super::fit_problem::check_effect(e, "--effect")?) = true;
+            .get_mut(crate::shell::fit_problem::check_effect(e, "--effect")?) = true;
     }
     Ok(())
 }
@@ -142,7 +145,7 @@ pub fn write_measured(
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("parquet") || e.eq_ignore_ascii_case("pq"))
     {
-        return tables::write_table(
+        return parquet_write::write_table(
             path,
             cols.iter()
                 .map(|(n, v)| (n.to_string(), Column::F64(v.clone())))
@@ -150,13 +153,13 @@ pub fn write_measured(
             meta,
         );
     }
-    let out = tables::AtomicFile::new(path);
+    let out = parquet_write::AtomicFile::new(path);
     if path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("mat"))
     {
         let vars: Vec<(&str, &[f64])> = cols.iter().map(|(n, v)| (*n, v.as_slice())).collect();
-        std::fs::write(&out.tmp, super::matlab::v5_bytes(&vars))
+        std::fs::write(&out.tmp, crate::shell::formats::matlab::v5_bytes(&vars))
             .with_context(|| format!("cannot write {}", out.tmp.display()))?;
         out.commit()?;
         return Ok(());
@@ -384,7 +387,7 @@ fn write_campaign(lc: &LoadedCampaign, dst: &Path, as_records: bool) -> anyhow::
          # signal = \"reference\" (docs/model.md §4).\n{table}",
         lc.file.display()
     );
-    let file = tables::AtomicFile::new(dst);
+    let file = parquet_write::AtomicFile::new(dst);
     std::fs::write(&file.tmp, out).with_context(|| format!("writing {}", file.tmp.display()))?;
     file.commit()?;
     Ok(records.len())

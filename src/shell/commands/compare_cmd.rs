@@ -1,18 +1,19 @@
 //! `study compare`: drive the model with each measured test's excitation and show where it
 //! differs: harmonics, amplitude, part of the cycle, envelope; per test and across the campaign.
 
-use super::campaign_io::{load_campaign, load_model, load_tests, report_checks};
-use super::cli::{CompareArgs, OpenLoop};
-use super::meta::{self, Key, Kind};
-use super::progress::Progress;
-use super::statemap_report;
-use super::tables::{self, Column};
-use super::RunFailed;
 use crate::kernel::metrics::N_HARM;
 use crate::orchestration::diagnosis::compare::{CompareSpec, ComparedTest, Comparison};
 use crate::orchestration::diagnosis::statemap::{self, StateMap};
 use crate::orchestration::measured::aligned::{self, fmt_row, Start};
 use crate::orchestration::measured::timebase::fmt_rate;
+use crate::shell::cli::{CompareArgs, OpenLoop};
+use crate::shell::formats::campaign_io::{load_campaign, load_model, load_tests, report_checks};
+use crate::shell::formats::meta::{self, Key, Kind};
+use crate::shell::formats::parquet_write;
+use crate::shell::formats::parquet_write::Column;
+use crate::shell::job::progress::Progress;
+use crate::shell::report::statemap_report;
+use crate::shell::RunFailed;
 use std::io::Write;
 use std::path::Path;
 
@@ -49,7 +50,7 @@ pub(crate) fn run_to(args: &CompareArgs, o: &mut dyn Write) -> anyhow::Result<()
         solver: Default::default(),
     };
     let progress = Progress::new("compare", spec.tests.len(), false, args.log_progress);
-    let results = super::job::pool(args.threads)?
+    let results = crate::shell::job::study_job::pool(args.threads)?
         .install(|| spec.run_with(&|| progress.inc(1)))
         .map_err(RunFailed)?;
     progress.finish();
@@ -90,10 +91,10 @@ pub(crate) fn run_to(args: &CompareArgs, o: &mut dyn Write) -> anyhow::Result<()
             spec.drive_label()
         );
         let path = dir.join("report.html");
-        let out = tables::AtomicFile::new(&path);
+        let out = parquet_write::AtomicFile::new(&path);
         std::fs::write(
             &out.tmp,
-            super::report::html(&title, &results, &state_map, &residual_warnings)?,
+            crate::shell::report::kit::html(&title, &results, &state_map, &residual_warnings)?,
         )?;
         out.commit()?;
         writeln!(o, "\n  wrote {} and its tables (tests, harmonics, bins, cycles, overlay, statemap, stateterms .parquet)", path.display())?;
@@ -278,16 +279,16 @@ pub(crate) fn write_tables(
     std::fs::create_dir_all(dir)?;
     let mut meta = meta::header(Kind::Compare);
     meta.push(meta::pair(Key::Drive, drive));
-    tables::write_table(&dir.join("tests.parquet"), tests_columns(results), &meta)?;
+    parquet_write::write_table(&dir.join("tests.parquet"), tests_columns(results), &meta)?;
     statemap_report::write(dir, map, &meta)?;
-    tables::write_table(
+    parquet_write::write_table(
         &dir.join("harmonics.parquet"),
         harmonics_columns(results),
         &meta,
     )?;
-    tables::write_table(&dir.join("bins.parquet"), bins_columns(results), &meta)?;
-    tables::write_table(&dir.join("cycles.parquet"), cycles_columns(results), &meta)?;
-    tables::write_table(
+    parquet_write::write_table(&dir.join("bins.parquet"), bins_columns(results), &meta)?;
+    parquet_write::write_table(&dir.join("cycles.parquet"), cycles_columns(results), &meta)?;
+    parquet_write::write_table(
         &dir.join("overlay.parquet"),
         overlay_columns(results),
         &meta,

@@ -3,12 +3,14 @@
 //! analysis), each metric against each varied parameter, and the failed runs in parameter space:
 //! SVG files and an index.html that shows them, in a folder of their own.
 
-use super::cli::PlotArgs;
-use super::report::{esc, legend, page_head};
-use super::results_reader::{analyse, load, Loaded};
-use super::tables::{self, input_if_user, AtomicFile};
-use super::BadInput;
 use crate::orchestration::study::sensitivity::Indices;
+use crate::shell::cli::PlotArgs;
+use crate::shell::formats::measured_files::input_if_user;
+use crate::shell::formats::parquet_read;
+use crate::shell::formats::parquet_write::AtomicFile;
+use crate::shell::formats::results_reader::{analyse, load, Loaded};
+use crate::shell::report::kit::{esc, legend, page_head};
+use crate::shell::BadInput;
 use plotters::prelude::*;
 use std::fmt::Write as _;
 use std::io::Write;
@@ -59,7 +61,7 @@ pub fn plot(
     bootstrap: usize,
 ) -> anyhow::Result<PathBuf> {
     let l = load(file, metrics)?;
-    let status = tables::read_strings(file, "status").map_err(input_if_user)?;
+    let status = parquet_read::read_strings(file, "status").map_err(input_if_user)?;
     check_folder(out)?;
     let indices = if l.saltelli() {
         analyse(&l, bootstrap, 0)?

@@ -1,23 +1,24 @@
 //! `study run`: a study file through the batch engine into a Parquet table.
 
-use super::cli::RunArgs;
-use super::meta::{self, Key, Kind};
-use super::progress::Progress;
-use super::tables::{self};
-use super::{interrupt, BadInput};
 use crate::kernel::simulate::Isa;
 use crate::kernel::LANES;
 use crate::orchestration::runs::single;
 use crate::orchestration::runs::spec::SimSpec;
 use crate::orchestration::study::batch::{self};
 use crate::orchestration::study::problem::Method;
+use crate::shell::cli::RunArgs;
+use crate::shell::formats::meta::{self, Key, Kind};
+use crate::shell::formats::parquet_write;
+use crate::shell::job::interrupt;
+use crate::shell::job::progress::Progress;
+use crate::shell::BadInput;
 use anyhow::Context;
 use std::io::Write;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use super::job::*;
+use crate::shell::job::study_job::*;
 
 /// Samples per chunk on a GPU (one kernel launch each): about twice the lanes an H100 holds at
 /// once (132 SMs; float64 lanes use many registers), while the next chunk's samples are drawn.
@@ -40,7 +41,7 @@ pub(crate) fn execute(
     o: &mut dyn Write,
     signals: bool,
 ) -> anyhow::Result<()> {
-    let engine = super::gpu::choose(args.backend)?;
+    let engine = crate::shell::gpu::choose(args.backend)?;
     let names: Vec<String> = job
         .spec
         .excitations
@@ -67,9 +68,9 @@ pub(crate) fn execute(
         writeln!(o, "  note        the kept rows and the new ones come from different backends ({b}): they differ by rounding (at most about 4e-11 relative)")?;
     }
     if args.dry_run {
-        return super::sizing::dry_run(&job, todo, &pool);
+        return crate::shell::job::sizing::dry_run(&job, todo, &pool);
     }
-    super::sizing::gate_long_run(&job, todo.clone(), &pool, args.yes)?;
+    crate::shell::job::sizing::gate_long_run(&job, todo.clone(), &pool, args.yes)?;
     let made = create_history_dir(&job)?;
     if signals {
         interrupt::install().context("catching SIGINT and SIGTERM")?;
@@ -97,7 +98,7 @@ fn write_rows(
     pool: &rayon::ThreadPool,
     chunk: usize,
 ) -> anyhow::Result<(batch::Summary, Progress)> {
-    let partial = tables::partial_path(&job.out);
+    let partial = parquet_write::partial_path(&job.out);
     let mut sink = ResultsSink::create(&partial, &job.plan, &job.spec, &job.meta)?
         .checkpoints(Duration::from_secs_f64(args.checkpoint_secs));
     if let Some(k) = &job.kept {
@@ -128,14 +129,14 @@ fn write_rows(
 fn failed_write(e: anyhow::Error, job: &Job, secs: f64) -> anyhow::Error {
     let Some(w) = e
         .chain()
-        .find_map(|c| c.downcast_ref::<tables::WriteFailed>())
+        .find_map(|c| c.downcast_ref::<parquet_write::WriteFailed>())
     else {
         return e;
     };
-    let partial = tables::partial_path(&job.out);
+    let partial = parquet_write::partial_path(&job.out);
     let (tmp, side) = (
-        tables::tmp_path(&partial),
-        tables::checkpoint_path(&partial),
+        parquet_write::tmp_path(&partial),
+        parquet_write::checkpoint_path(&partial),
     );
     let fix = if w.no_space {
         "make room (free disk space, or lift the file-size limit or quota)"
@@ -143,7 +144,7 @@ fn failed_write(e: anyhow::Error, job: &Job, secs: f64) -> anyhow::Error {
         "mend the cause"
     };
     let resume = format!("study run --resume {}", partial.display());
-    let kept = match (tables::checkpoint_rows(&side), &job.kept) {
+    let kept = match (parquet_write::checkpoint_rows(&side), &job.kept) {
         (Some(rows), _) if tmp.exists() => format!(
             "the {rows} of {} rows written by its last checkpoint are kept in {} (and {}); {fix}, then continue with: {resume}",
             job.rows_total(),
@@ -175,7 +176,7 @@ fn check_checkpoint_secs(secs: f64) -> anyhow::Result<()> {
 /// The job to run: a resumed one (none where there is nothing left to resume) or a fresh one.
 fn job_of(args: &RunArgs) -> anyhow::Result<Option<Job>> {
     match (&args.resume, &args.file) {
-        (Some(f), _) => super::resume::job(f),
+        (Some(f), _) => crate::shell::job::resume::job(f),
         (None, Some(file)) => Job::fresh(args, file).map(Some),
         (None, None) => Err(BadInput(
             "give a study file (study run STUDY.toml) or --resume RESULTS.parquet".into(),
@@ -205,14 +206,14 @@ fn create_history_dir(job: &Job) -> anyhow::Result<Option<PathBuf>> {
 /// turns a stopped run into the error that says how to continue it.
 fn finish_results(job: &Job, sink: ResultsSink, stopped: bool) -> anyhow::Result<()> {
     let (done, total) = (sink.rows(), job.rows_total());
-    let partial = tables::partial_path(&job.out);
+    let partial = parquet_write::partial_path(&job.out);
     sink.finish(&meta::completion(done, total))?;
     if let Some(k) = &job.kept {
         k.discard();
     }
     if !stopped {
         // Complete: the table takes its name (never a device's, or another special file's).
-        super::outputs::regular_output(&job.out)
+        crate::shell::formats::input::regular_output(&job.out)
             .and_then(|_| std::fs::rename(&partial, &job.out))
             .with_context(|| format!("renaming {} to {}", partial.display(), job.out.display()))?;
     }
@@ -372,7 +373,7 @@ fn write_histories(o: &mut dyn Write, job: &Job) -> anyhow::Result<()> {
                 meta::pair(Key::SampleId, id),
                 meta::pair(Key::SchemaVersion, SCHEMA_VERSION),
             ]);
-            tables::write_parquet(&path, &cols, &meta)?;
+            parquet_write::write_parquet(&path, &cols, &meta)?;
             writeln!(o, "  history     {}", path.display())?;
         }
     }
