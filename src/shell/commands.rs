@@ -1,4 +1,5 @@
-//! The commands of `study`, one file each: each a leaf that parses its arguments, calls the services and the orchestration, and prints; no command imports another (`tests/layout.rs`).
+//! The commands of `study`, one file each: each a leaf that parses its arguments, calls the
+//! services and the orchestration, and prints; no command imports another (`tests/layout.rs`).
 
 pub mod bench_cmd;
 pub mod compare_cmd;

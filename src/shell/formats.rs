@@ -1,4 +1,6 @@
-//! Every file format vshake reads or writes: inputs and their problems, measured files (CSV, MATLAB, Parquet), PEER .AT2 records, results tables written and read back, their metadata and checksums, campaigns' files.
+//! Every file format vshake reads or writes: inputs and their problems, measured files (CSV,
+//! MATLAB, Parquet), PEER .AT2 records, results tables written and read back, their metadata and
+//! checksums, campaigns' files.
 
 pub mod at2;
 pub mod campaign_io;

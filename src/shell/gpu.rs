@@ -3,8 +3,9 @@
 //! needs no CUDA toolkit and runs everywhere; their presence is checked before any call (cudarc's
 //! loader panics when a library is missing).
 //!
-//! The kernel is `crates/kernel/src/cuda/lane.cu` (CUDA C++), compiled at run time by NVRTC and cached
-//! as PTX; [`Cuda`] runs a plan's lanes with it ([`crate::orchestration::study::batch::LaneEngine`]).
+//! The kernel is `crates/kernel/src/cuda/lane.cu` (CUDA C++), compiled at run time by NVRTC and
+//! cached as PTX; [`Cuda`] runs a plan's lanes with it
+//! ([`crate::orchestration::study::batch::LaneEngine`]).
 //! `auto` uses it where a GPU is found and the work is covered, else runs on the CPU and says
 //! why; `cuda` refuses (exit 2) with the cause, never silently running on the CPU.
 

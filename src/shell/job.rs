@@ -1,4 +1,5 @@
-//! A study as a job: the study file read and planned, its outputs and what may stand there, progress, interruption, resuming and sizing.
+//! A study as a job: the study file read and planned, its outputs and what may stand there,
+//! progress, interruption, resuming and sizing.
 
 pub mod interrupt;
 pub(crate) mod outputs;

@@ -1,4 +1,5 @@
-//! Model versus measurement and the missing physics: the comparison, the harmonic projector, the residual on the plant's states, terms with memory, fitting and diagnosis.
+//! Model versus measurement and the missing physics: the comparison, the harmonic projector, the
+//! residual on the plant's states, terms with memory, fitting and diagnosis.
 
 pub mod compare;
 pub mod diagnose;

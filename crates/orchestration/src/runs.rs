@@ -1,4 +1,5 @@
-//! What one run is and running it: run specifications and their excitations, the earthquake-type references, one configuration through the kernel.
+//! What one run is and running it: run specifications and their excitations, the earthquake-type
+//! references, one configuration through the kernel.
 
 pub mod excitation_spec;
 pub mod quake;

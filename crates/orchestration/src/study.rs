@@ -1,4 +1,5 @@
-//! Design exploration: study files (a SALib-style problem), designs of experiments, the parallel batch engine, sensitivity analysis.
+//! Design exploration: study files (a SALib-style problem), designs of experiments, the parallel
+//! batch engine, sensitivity analysis.
 
 pub mod batch;
 pub mod problem;
