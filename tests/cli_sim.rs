@@ -105,6 +105,25 @@ fn a_sine_beyond_the_stroke_is_refused() {
     );
 }
 
+/// The force check counts the specimen: a 1500 t specimen at 1.2 g is refused before the run,
+/// naming the force needed ((144 t + 1500 t) · 1.2 g = 19.35 MN) and the table's capacity.
+#[test]
+fn a_specimen_beyond_the_force_is_refused() {
+    expect_input_error(
+        "[excitation]\nkind = \"sine\"\nfreq_hz = 3\namp_g = 1.2\n\n[model.specimen]\nm1 = 1500000\n",
+        &["excitation.amp_g", "needs 19.347 MN", "1500000 kg specimen", "controller.f_max = 6.8 MN"],
+    );
+    // The same motion on the bare table needs 1.70 MN: it runs.
+    let d = tempfile::tempdir().unwrap();
+    let bare = write(
+        d.path(),
+        "bare.toml",
+        "[excitation]\nkind = \"sine\"\nfreq_hz = 3\namp_g = 1.2\n",
+    );
+    let (code, stdout, stderr) = study(&["sim", bare.to_str().unwrap()]);
+    assert_eq!(code, 0, "{stdout}{stderr}");
+}
+
 #[test]
 fn malformed_toml_names_line_and_column() {
     expect_input_error(
@@ -139,6 +158,65 @@ fn a_record_with_nan_names_the_column_and_row() {
             && stderr.contains("NaN"),
         "{stderr}"
     );
+}
+
+/// A column named like an acceleration, given without a unit, is refused before the file is
+/// read (it would be read as a displacement in metres), saying which unit to give; with the unit
+/// it runs.
+#[test]
+fn an_acceleration_column_without_a_unit_is_refused_with_a_hint() {
+    let d = tempfile::tempdir().unwrap();
+    let mut csv = String::from("time_s,accel_g\n");
+    for k in 0..4096 {
+        let t = k as f64 / 200.0;
+        let taper = (t / 2.0).min(1.0).min((20.48 - t) / 2.0);
+        csv.push_str(&format!("{t},{}\n", 0.2 * taper * (2.0 * 3.0 * t).sin()));
+    }
+    write(d.path(), "lab.csv", &csv);
+    let run = "[excitation]\nkind = \"record\"\nfile = \"lab.csv\"\ncolumn = \"accel_g\"\n";
+    let f = write(d.path(), "run.toml", run);
+    let (code, _, stderr) = study(&["sim", f.to_str().unwrap()]);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains("excitation.unit")
+            && stderr.contains("\"accel_g\" is named like an acceleration")
+            && stderr.contains("unit = \"g\""),
+        "{stderr}"
+    );
+    let f = write(d.path(), "run_g.toml", &format!("{run}unit = \"g\"\n"));
+    let (code, stdout, stderr) = study(&["sim", f.to_str().unwrap()]);
+    assert_eq!(code, 0, "{stdout}{stderr}");
+}
+
+/// `[spectrum]` in a run file, as in a study: its damping and periods are the ones printed; a
+/// bad damping is refused naming the key.
+#[test]
+fn a_run_file_takes_a_spectrum_table() {
+    let d = tempfile::tempdir().unwrap();
+    let motion = "[excitation]\nkind = \"stochastic\"\npga_g = 0.5\n\n[spectrum]\n";
+    let f = write(
+        d.path(),
+        "run.toml",
+        &format!("{motion}damping = 0.02\nt_min_s = 0.1\nt_max_s = 2\ncount = 5\n"),
+    );
+    let (code, stdout, stderr) = study(&["sim", f.to_str().unwrap()]);
+    assert_eq!(code, 0, "{stdout}{stderr}");
+    assert!(
+        stdout.contains("response spectrum (2 % damping)"),
+        "{stdout}"
+    );
+    let rows: Vec<&str> = stdout
+        .lines()
+        .skip_while(|l| !l.contains("period s"))
+        .skip(1)
+        .take_while(|l| !l.trim().is_empty())
+        .collect();
+    assert_eq!(rows.len(), 5, "{stdout}");
+    assert!(rows[0].trim().starts_with("0.100") && rows[4].trim().starts_with("2.000"));
+    let f = write(d.path(), "bad.toml", &format!("{motion}damping = 2\n"));
+    let (code, _, stderr) = study(&["sim", f.to_str().unwrap()]);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("spectrum.damping"), "{stderr}");
 }
 
 fn metric(stdout: &str, name: &str) -> f64 {
@@ -253,7 +331,7 @@ fn iteration_errors(stdout: &str) -> Vec<f64> {
         .filter_map(|l| {
             let w: Vec<&str> = l.split_whitespace().collect();
             match w.as_slice() {
-                [i, e] if i.parse::<usize>().is_ok() => e.parse().ok(),
+                [i, e, _step] if i.parse::<usize>().is_ok() => e.parse().ok(),
                 _ => None,
             }
         })

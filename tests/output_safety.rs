@@ -490,7 +490,7 @@ fn a_link_loop_is_bad_input_and_a_huge_header_is_quoted_short() {
     let run = d.path().join("run.toml");
     std::fs::write(
         &run,
-        "[excitation]\nkind = \"record\"\nfile = \"a.csv\"\ncolumn = \"accel_g\"\n",
+        "[excitation]\nkind = \"record\"\nfile = \"a.csv\"\ncolumn = \"accel_g\"\nunit = \"g\"\n",
     )
     .unwrap();
     let (code, _, err) = study(&["sim", s(&run)]);
@@ -505,7 +505,7 @@ fn a_link_loop_is_bad_input_and_a_huge_header_is_quoted_short() {
     std::fs::write(d.path().join("huge.csv"), text).unwrap();
     std::fs::write(
         &run,
-        "[excitation]\nkind = \"record\"\nfile = \"huge.csv\"\ncolumn = \"accel_g\"\n",
+        "[excitation]\nkind = \"record\"\nfile = \"huge.csv\"\ncolumn = \"accel_g\"\nunit = \"g\"\n",
     )
     .unwrap();
     let (code, _, err) = study(&["sim", s(&run)]);

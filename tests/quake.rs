@@ -351,7 +351,7 @@ fn the_default_step_is_converged_on_ground_motions() {
         };
         let r = quake::generated(&exc, &ModelParams::default(), 20261123, 0)
             .unwrap()
-            .with_spectrum(quake::default_spectrum());
+            .with_spectrum(vshake::orchestration::runs::quake_spec::default_spectrum());
         for (g_d, l_v, l_a, g_f) in [
             (1.5, 0.38, 0.52, -1.5),
             (1.1, 0.29, 0.39, -1.9),

@@ -67,7 +67,7 @@ fn a_fifo_as_a_record_and_as_a_study_file_is_refused_at_once() {
     let run = dir.path().join("run.toml");
     std::fs::write(
         &run,
-        "[excitation]\nkind = \"record\"\nfile = \"record.csv\"\ncolumn = \"accel_g\"\n",
+        "[excitation]\nkind = \"record\"\nfile = \"record.csv\"\ncolumn = \"accel_g\"\nunit = \"g\"\n",
     )
     .unwrap();
     let (code, err, wall) = study_watched(&["sim", run.to_str().unwrap()]);

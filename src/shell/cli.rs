@@ -363,7 +363,8 @@ pub struct BenchArgs {
 
 #[derive(Debug, clap::Args)]
 pub struct SimArgs {
-    /// The run file (TOML): [model.<component>] overrides, [excitation], optional [solver].
+    /// The run file (TOML): [model.<component>] overrides, [excitation], optional [solver] and
+    /// [spectrum].
     pub file: PathBuf,
     /// A model file ([model.<component>] tables, e.g. `study fit`'s output) to run instead of
     /// the defaults; the run file's [model.*] tables change it further.
@@ -386,12 +387,16 @@ shake-table controller's transfer-function iteration does before the real test).
 
 The run file is the one `study sim` takes: [model.<component>] overrides (a fitted model, a specimen), the \
 target [excitation] (a record, a stochastic motion, a sweep) and [solver]. The target is the acceleration of \
-the excitation's reference. A band-limited random run (0.2-50 Hz, the target's rms) measures the table's \
-frequency response H; then, from the target itself as the drive, each iteration runs the drive and corrects \
-it, d <- d + gain * H^-1 (target - achieved), H inverted with Tikhonov regularisation, until the rms error over \
-the target's window reaches --goal, stops falling, or --iterations have run. Each iteration is printed; --out \
-writes iterations.parquet (the error of each), frf.parquet (H), history.parquet (per tick: the target and the \
-achieved acceleration, the drive), iteration.svg (the error per iteration, target against achieved) and drive.csv (the final drive's displacement at the controller rate, a \
+the excitation's reference. From the target itself as the drive, each iteration runs the drive and corrects \
+it, d <- d + step * H^-1 (target - achieved), H the table's frequency response estimated from the iteration's \
+own runs (H1 over the runs so far, at the record's resolution) and inverted with Tikhonov regularisation \
+(--epsilon). A drive outside the table's limits (stroke, velocity, force) is never run: the step is halved \
+until it fits; an update that raises the error is not kept and the next step is halved. It stops at --goal, \
+after --iterations, when the step falls below a sixteenth of --gain, or when the drive the target needs would \
+leave the limits; the outcome line says which, with the error left and the band it lies in. Each iteration \
+is printed; --out writes iterations.parquet (the error of each), frf.parquet (H), history.parquet (per tick: \
+the target and the achieved acceleration, the drive), iteration.svg (the error per iteration, target against \
+achieved) and drive.csv (the final drive's displacement at the controller rate, a \
 record a controller can take: kind = \"record\", column = \"drive_disp_m\", signal = \"reference\").";
 
 #[derive(Debug, clap::Args)]
@@ -415,9 +420,10 @@ pub struct IterateArgs {
     /// Stop when the rms acceleration error is below this fraction of the target's rms.
     #[arg(long, default_value_t = 0.01)]
     pub goal: f64,
-    /// Seed of the random run that measures the frequency response.
-    #[arg(long, default_value_t = 1)]
-    pub seed: u64,
+    /// Regularisation of the inverse FRF, a fraction of max |H|² (smaller: bolder steps where
+    /// the table barely responds, e.g. at a specimen's anti-resonance).
+    #[arg(long, default_value_t = 1e-4)]
+    pub epsilon: f64,
     /// Overwrite outputs already in --out.
     #[arg(long)]
     pub force: bool,
@@ -590,6 +596,9 @@ The run file is TOML:
 
   [solver]
   substeps = 4              # RK4 steps per controller tick (default 4: h = 244 µs at 1024 Hz)
+
+  [spectrum]                # an earthquake-type motion's response spectrum, as a study's:
+  damping = 0.05            # periods_s = [...] or t_min_s, t_max_s, count; band_s = [lo, hi]
 
 A record excitation drives the table with a sampled displacement:
 

@@ -23,9 +23,15 @@ pub(crate) fn load_spec(file: &Path, model: Option<&Path>) -> anyhow::Result<Sim
     )?)
 }
 
-/// Builds the reference of a spec, reading a record file relative to `base`.
+/// Builds the reference of a spec, reading a record file relative to `base`, with the spec's
+/// response spectrum.
 pub(crate) fn build_reference(spec: &SimSpec, base: &Path) -> anyhow::Result<Reference> {
-    load_reference(&spec.excitation, &spec.model, base, 0)
+    let r = load_reference(&spec.excitation, &spec.model, base, 0)?;
+    // An earthquake-type reference carries a spectrum (the default one); a sine none.
+    Ok(match r.spectrum {
+        Some(_) => r.with_spectrum(spec.spectrum.clone()),
+        None => r,
+    })
 }
 
 /// The reference of one excitation for `model`, reading a record's file relative to `base` (a

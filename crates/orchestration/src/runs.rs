@@ -1,7 +1,8 @@
 //! What one run is and running it: run specifications and their excitations, the earthquake-type
-//! references, one configuration through the kernel.
+//! references, the table's limits, one configuration through the kernel.
 
 pub mod excitation_spec;
+pub mod limits;
 pub mod quake;
 pub mod quake_spec;
 pub mod single;

@@ -46,7 +46,7 @@ pub fn record_reference() -> anyhow::Result<Reference> {
     };
     let r =
         quake::generated(&exc, &ModelParams::default(), 20261123, 0).map_err(anyhow::Error::msg)?;
-    Ok(r.with_spectrum(quake::default_spectrum()))
+    Ok(r.with_spectrum(crate::orchestration::runs::quake_spec::default_spectrum()))
 }
 
 /// Simulated seconds per wall second of `threads` workers each running batches of `r` for about
@@ -313,7 +313,7 @@ fn print_sine(out: &mut dyn Write, f: &Figures) -> anyhow::Result<()> {
 
 /// The record's figures (one and two threads) and the ratios the gate reads.
 fn print_record(out: &mut dyn Write, f: &Figures) -> anyhow::Result<()> {
-    let spectrum = quake::default_spectrum();
+    let spectrum = crate::orchestration::runs::quake_spec::default_spectrum();
     writeln!(
         out,
         "  record: 35 s stochastic ground motion (record_sweep.toml's firm_0p5g; reference from the 4th-order filter), {}-period {:.0} %-damped spectrum online",

@@ -1,7 +1,7 @@
 //! `study iterate`: offline iteration of an earthquake test's drive on the virtual table.
 
 use crate::orchestration::preparation::drive_iteration::{
-    iterate_on_model, IterationRow, IterationSettings, TableIteration, FRF_SEGMENT,
+    iterate_on_model, IterationRow, IterationSettings, TableIteration, MIN_TARGET_S,
 };
 use crate::shell::cli::IterateArgs;
 use crate::shell::formats::meta::{self, Key, Kind};
@@ -29,12 +29,12 @@ pub fn run(args: &IterateArgs) -> anyhow::Result<()> {
     let targets = outputs(args)?;
     let base = args.file.parent().unwrap_or(Path::new("."));
     let target = run_spec::build_reference(&spec, base)?;
-    if target.len() < 2 * FRF_SEGMENT {
+    let seconds = target.len() as f64 / target.f_s;
+    if seconds < MIN_TARGET_S {
         return Err(BadInput(format!(
-            "{}: the excitation is {:.2} s long; the frequency response needs at least {:.1} s",
+            "{}: the excitation is {seconds:.2} s long; the iteration needs at least \
+             {MIN_TARGET_S:.1} s",
             args.file.display(),
-            target.len() as f64 / target.f_s,
-            (2 * FRF_SEGMENT) as f64 / target.f_s
         ))
         .into());
     }
@@ -50,26 +50,28 @@ pub fn run(args: &IterateArgs) -> anyhow::Result<()> {
     writeln!(o, "  target      {}", spec.excitation.describe())?;
     writeln!(
         o,
-        "  settings    gain {}, at most {} iterations, goal {:.2} % rms, FRF from a random run (seed {})",
+        "  settings    gain {}, regularisation {:e}, at most {} iterations, goal {:.2} % rms, FRF from the iteration's own runs",
         settings.gain,
+        settings.epsilon,
         settings.max_iterations,
         100.0 * settings.goal,
-        args.seed
     )?;
-    writeln!(o, "\n  {:>9} {:>22}", "iteration", "rms accel error, %")?;
+    writeln!(
+        o,
+        "\n  {:>9} {:>22} {:>6}",
+        "iteration", "rms accel error, %", "step"
+    )?;
     let print = |r: &IterationRow| {
-        println!("  {:>9} {:>22.3}", r.iteration, 100.0 * r.rms_error_ratio);
+        println!(
+            "  {:>9} {:>22.3} {:>6.3}",
+            r.iteration,
+            100.0 * r.rms_error_ratio,
+            r.step * settings.gain
+        );
     };
-    let done = iterate_on_model(
-        &spec.model,
-        &spec.solver,
-        &target,
-        &settings,
-        args.seed,
-        print,
-    )
-    .map_err(|e| RunFailed(format!("{}: {e}", args.file.display())))?;
-    summary(&mut o, &done)?;
+    let done = iterate_on_model(&spec.model, &spec.solver, &target, &settings, print)
+        .map_err(|e| RunFailed(format!("{}: {e}", args.file.display())))?;
+    summary(&mut o, &done, &settings)?;
     if let Some(dir) = &args.out {
         write_outputs(dir, &targets, &done, &spec.resolved_toml())?;
         writeln!(
@@ -102,6 +104,9 @@ fn settings(args: &IterateArgs) -> anyhow::Result<IterationSettings> {
         ))
         .into());
     }
+    if !(args.epsilon > 0.0 && args.epsilon < 1.0) {
+        return Err(BadInput(format!("--epsilon {}: must be in (0, 1)", args.epsilon)).into());
+    }
     if args.iterations == 0 {
         return Err(BadInput("--iterations 0: at least one".into()).into());
     }
@@ -109,6 +114,7 @@ fn settings(args: &IterateArgs) -> anyhow::Result<IterationSettings> {
         gain: args.gain,
         goal: args.goal,
         max_iterations: args.iterations,
+        epsilon: args.epsilon,
         ..Default::default()
     })
 }
@@ -121,7 +127,11 @@ fn outputs(args: &IterateArgs) -> anyhow::Result<Vec<PathBuf>> {
     }
 }
 
-fn summary(o: &mut impl Write, done: &TableIteration) -> anyhow::Result<()> {
+fn summary(
+    o: &mut impl Write,
+    done: &TableIteration,
+    settings: &IterationSettings,
+) -> anyhow::Result<()> {
     let best = done
         .rows
         .iter()
@@ -133,6 +143,12 @@ fn summary(o: &mut impl Write, done: &TableIteration) -> anyhow::Result<()> {
         best.iteration,
         100.0 * best.rms_error_ratio,
         100.0 * done.rows[0].rms_error_ratio
+    )?;
+    let ran = done.rows.last().map_or(0, |r| r.iteration);
+    writeln!(
+        o,
+        "  outcome     {}",
+        done.outcome.describe(settings.goal, ran)
     )?;
     Ok(())
 }

@@ -353,6 +353,7 @@ fn write_histories(o: &mut dyn Write, job: &Job) -> anyhow::Result<()> {
                 model: model.clone(),
                 excitation: exc.spec.clone(),
                 solver: spec.solver,
+                spectrum: spec.spectrum.clone(),
             };
             // A per-sample motion is this sample's realisation; one that cannot run has no history.
             let own = match &plan.per_sample[e] {

@@ -49,7 +49,9 @@ pub fn run(args: &SimArgs) -> anyhow::Result<()> {
     for (name, v) in out.result.metrics.columns() {
         writeln!(stdout, "  {name:<22} {:>12}", fmt_value(v))?;
     }
-    if let Some((spectrum, target)) = &reference.spectrum {
+    let ran = matches!(out.result.status, LaneStatus::Ok);
+    // A failed run's spectrum would be of part of the motion: not printed, not written.
+    if let (Some((spectrum, target)), true) = (&reference.spectrum, ran) {
         write_spectrum(
             &mut stdout,
             args,

@@ -435,6 +435,7 @@ fn synth_test(
         model: test_model,
         excitation: test.excitation.clone(),
         solver: Default::default(),
+        spectrum: crate::orchestration::runs::quake_spec::default_spectrum(),
     };
     let cols = sample_test(&spec, &mut reference, rate, pre_rows)?
         .map_err(|e| RunFailed(format!("test {:?}: {e}", test.name)))?;

@@ -263,6 +263,7 @@ fn nominal_runs(tuner: &Tuner, t: &Tuned, refs: &[Reference]) -> anyhow::Result<
                     model: model.clone(),
                     excitation: e.spec.clone(),
                     solver: tuner.spec.solver,
+                    spectrum: tuner.spec.spectrum.clone(),
                 };
                 single::run_sim(&spec, r)
                     .map_err(|err| anyhow::anyhow!("excitation {}: {err}", e.name))

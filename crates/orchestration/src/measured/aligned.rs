@@ -780,7 +780,7 @@ fn record_reference(
         }
         .reference(f_s)
     };
-    crate::runs::quake::check_limits(&r, &test.model).map_err(|m| {
+    crate::runs::limits::check_limits(&r, &test.model).map_err(|m| {
         vec![source.problem(Some(column), None, format!("test {:?}: {m}", test.name))]
     })?;
     Ok(r)

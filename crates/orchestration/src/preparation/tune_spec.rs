@@ -193,7 +193,7 @@ impl TuneSpec {
         let valve_cmd_fraction = read_constraints(&mut root, &mut issues);
         let uncertain = problem::read_variables_at(&mut root, "uncertain", &model, &mut issues);
         let (draws, statistic) = read_robust(&mut root, !uncertain.is_empty(), &mut issues);
-        let spectrum = problem::read_spectrum(&mut root, &mut issues);
+        let spectrum = crate::runs::quake_spec::read_spectrum(&mut root, &mut issues);
         let (solver, _) = problem::read_study_solver(&mut root, &mut issues);
         let output = read_output(&mut root, &mut issues);
         check_overlap(&gains, &uncertain, &excitations, &mut issues);

@@ -20,16 +20,9 @@ use rand_distr::StandardNormal;
 use vshake_kernel::excitation::{Record, Reference, Signal};
 use vshake_kernel::ground::{self, GroundParams, Multisine, Processing};
 use vshake_kernel::params::{ModelParams, G};
-use vshake_kernel::spectrum::SpectrumSpec;
 
 /// Mixed into a study's seed for the excitation noise (so it never shares the design's streams).
 pub const NOISE_SALT: u64 = 0x6e6f_6973_655f_7631; // "noise_v1"
-
-/// The spectrum taken when a study does not say: 5 % damping, 20 periods log-spaced over
-/// 0.05–4 s [chosen: the usual range of design spectra], the error over all of them.
-pub fn default_spectrum() -> SpectrumSpec {
-    SpectrumSpec::log_spaced(0.05, 4.0, 20, 0.05)
-}
 
 /// The noise generator of stream `stream` of `seed` (see the module docs).
 fn noise_rng(seed: u64, stream: u64) -> ChaCha8Rng {
@@ -110,7 +103,7 @@ pub fn generated(
             unreachable!("sines and records are built by sim::reference_for")
         }
     };
-    check_limits(&r, model)?;
+    crate::runs::limits::check_limits(&r, model)?;
     Ok(r)
 }
 
@@ -152,40 +145,6 @@ pub fn scaled(values: &[f64], unit: RecordUnit, scale: f64, pga_g: Option<f64>) 
         None => v.iter_mut().for_each(|x| *x *= scale),
     }
     v
-}
-
-/// The table's limits against a reference's peaks: the stroke (actuator.l), the velocity
-/// (controller.v_max) and the force to accelerate the platen (platen.m · a ≤ controller.f_max).
-pub fn check_limits(r: &Reference, model: &ModelParams) -> Result<(), String> {
-    let (x, v, a) = r.peaks();
-    let (l, v_max, f_max, m) = (
-        model.actuator.l,
-        model.controller.v_max,
-        model.controller.f_max,
-        model.platen.m,
-    );
-    let mut over = Vec::new();
-    if x >= l {
-        over.push(format!(
-            "peak displacement {x:.4} m reaches the stroke (half stroke actuator.l = {l} m)"
-        ));
-    }
-    if v > v_max {
-        over.push(format!(
-            "peak velocity {v:.3} m/s exceeds controller.v_max = {v_max} m/s"
-        ));
-    }
-    if m * a > f_max {
-        over.push(format!("peak acceleration {:.3} g needs {:.3} MN on the {m} kg platen, beyond controller.f_max = {} MN", a / G, m * a / 1e6, f_max / 1e6));
-    }
-    if over.is_empty() {
-        Ok(())
-    } else {
-        Err(format!(
-            "the motion exceeds the table's limits: {}; scale it down",
-            over.join("; ")
-        ))
-    }
 }
 
 #[cfg(test)]

@@ -111,11 +111,9 @@ impl History {
             .expect("a history has accel_mps2")
             .1;
         let (w0, w1) = reference.window;
-        vshake_kernel::spectrum::psa(
-            &accel[w0..w1.min(accel.len())],
-            1.0 / reference.f_s,
-            spectrum,
-        )
+        // A failed run's history can end before the window, or inside it.
+        let end = w1.min(accel.len());
+        vshake_kernel::spectrum::psa(&accel[w0.min(end)..end], 1.0 / reference.f_s, spectrum)
     }
 
     pub fn with_capacity(n: usize) -> Self {
@@ -286,7 +284,8 @@ pub fn reference_for(
                 }
                 .reference(f_s)
             };
-            quake::check_limits(&r, model).map_err(|m| t.problem(Some(column), None, m))?;
+            crate::runs::limits::check_limits(&r, model)
+                .map_err(|m| t.problem(Some(column), None, m))?;
             r
         }
         (ExcitationSpec::Record { file, .. }, None) => panic!(
@@ -301,7 +300,7 @@ pub fn reference_for(
             })?
         }
     };
-    Ok(r.with_spectrum(quake::default_spectrum()))
+    Ok(r.with_spectrum(crate::runs::quake_spec::default_spectrum()))
 }
 
 /// Runs `spec` against a prepared reference (sine or record).

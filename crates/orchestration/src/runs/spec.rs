@@ -36,6 +36,7 @@ use std::path::PathBuf;
 use vshake_kernel::excitation::{Signal, Sine};
 use vshake_kernel::params::{Component, ModelParams, ValveLaw};
 use vshake_kernel::simulate::Solver;
+use vshake_kernel::spectrum::SpectrumSpec;
 
 /// A single-run specification (`study sim`).
 #[derive(Debug, Clone, PartialEq)]
@@ -43,6 +44,8 @@ pub struct SimSpec {
     pub model: ModelParams,
     pub excitation: ExcitationSpec,
     pub solver: Solver,
+    /// `[spectrum]`: the response spectrum of the earthquake-type metrics (as a study's).
+    pub spectrum: SpectrumSpec,
 }
 
 /// Reads `[model.<component>]` overrides into `model` (defaults for everything not named).
@@ -321,9 +324,64 @@ fn sine_amplitude(
     } else if x >= l {
         issues.push(f.path_of(key), format!("displacement amplitude {x:.4} m exceeds the stroke: |x| must stay below the half stroke actuator.l = {l} m"));
         None
+    } else if let Some(why) = freq.and_then(|fr| {
+        crate::runs::limits::force_exceeded(model, x * (2.0 * std::f64::consts::PI * fr).powi(2))
+    }) {
+        issues.push(f.path_of(key), why);
+        None
     } else {
         Some(x)
     }
+}
+
+/// The unit of a record's column: g for a PEER .AT2 file, else `unit` (metres when absent,
+/// where the column's name does not say acceleration).
+fn record_unit(
+    f: &mut Fields<'_>,
+    unit_key: Option<&str>,
+    at2: bool,
+    column: &str,
+    issues: &mut Issues,
+) -> RecordUnit {
+    match (unit_key, at2) {
+        (None, true) | (Some("g"), true) => RecordUnit::G,
+        (Some(u), true) => {
+            issues.push(
+                f.path_of("unit"),
+                format!("{u:?}: a PEER .AT2 file holds acceleration in g"),
+            );
+            RecordUnit::G
+        }
+        (None, false) if looks_like_acceleration(column) => {
+            issues.push(
+                f.path_of("unit"),
+                format!(
+                    "missing: column {column:?} is named like an acceleration, and without a \
+                     unit a record column is read as a displacement in metres; give unit = \"g\" \
+                     or \"m/s2\" (or unit = \"m\" if it is a displacement)"
+                ),
+            );
+            RecordUnit::M
+        }
+        (None, false) => RecordUnit::M,
+        (Some(u), false) => RecordUnit::parse(u).unwrap_or_else(|| {
+            issues.push(
+                f.path_of("unit"),
+                format!(
+                    "unknown unit {u:?}; expected one of {:?}",
+                    RecordUnit::NAMES
+                ),
+            );
+            RecordUnit::M
+        }),
+    }
+}
+
+/// Whether a column's name says acceleration: `acc` anywhere, or a unit suffix of g or m/s²
+/// (`_g`, `mps2`, `ms2`), in any case.
+fn looks_like_acceleration(column: &str) -> bool {
+    let c = column.to_ascii_lowercase();
+    c.contains("acc") || c.ends_with("_g") || c.ends_with("mps2") || c.ends_with("ms2")
 }
 
 /// A record: its file (or the campaign test's own data file), columns, the reference filter's
@@ -356,27 +414,7 @@ fn read_record(
         return None;
     };
     let at2 = is_at2(&file);
-    let unit = match (unit_key, at2) {
-        (None, true) | (Some("g"), true) => RecordUnit::G,
-        (Some(u), true) => {
-            issues.push(
-                f.path_of("unit"),
-                format!("{u:?}: a PEER .AT2 file holds acceleration in g"),
-            );
-            RecordUnit::G
-        }
-        (None, false) => RecordUnit::M,
-        (Some(u), false) => RecordUnit::parse(u).unwrap_or_else(|| {
-            issues.push(
-                f.path_of("unit"),
-                format!(
-                    "unknown unit {u:?}; expected one of {:?}",
-                    RecordUnit::NAMES
-                ),
-            );
-            RecordUnit::M
-        }),
-    };
+    let unit = record_unit(f, unit_key, at2, column, issues);
     if let Some(g) = pga_g {
         if !unit.is_acceleration() {
             issues.push(f.path_of("pga_g"), "scaling to a peak acceleration needs an acceleration record (unit = \"g\" or \"m/s2\", or a .AT2 file); use scale");
@@ -501,12 +539,14 @@ impl SimSpec {
             Some(s) => read_solver(s, &mut issues, &[]),
             None => Solver::default(),
         };
-        root.finish(&["model", "excitation", "solver"], &mut issues);
+        let spectrum = crate::runs::quake_spec::read_spectrum(&mut root, &mut issues);
+        root.finish(&["model", "excitation", "solver", "spectrum"], &mut issues);
         issues.into_result(file)?;
         Ok(SimSpec {
             model,
             excitation: excitation.expect("no issues means an excitation"),
             solver,
+            spectrum,
         })
     }
 
@@ -537,6 +577,16 @@ impl SimSpec {
         let mut s = toml::Table::new();
         s.insert("substeps".into(), (self.solver.substeps as i64).into());
         root.insert("solver".into(), toml::Value::Table(s));
+        let mut sp = toml::Table::new();
+        sp.insert("damping".into(), self.spectrum.damping.into());
+        let periods = self.spectrum.periods.iter().map(|&p| p.into()).collect();
+        sp.insert("periods_s".into(), toml::Value::Array(periods));
+        let (lo, hi) = self.spectrum.band;
+        sp.insert(
+            "band_s".into(),
+            toml::Value::Array(vec![lo.into(), hi.into()]),
+        );
+        root.insert("spectrum".into(), toml::Value::Table(sp));
         toml::to_string(&root).expect("TOML of plain values")
     }
 }

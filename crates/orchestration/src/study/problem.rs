@@ -365,110 +365,6 @@ pub(crate) fn read_excitations_with(
     excitations
 }
 
-/// `[spectrum]`: the response spectrum of the earthquake-type metrics — `damping` (default 0.05),
-/// the periods (`periods_s = [...]`, or `t_min_s`, `t_max_s`, `count`: log-spaced, default
-/// 0.05–4 s, 20) and the error band `band_s = [low, high]` (default every period).
-pub(crate) fn read_spectrum(root: &mut Fields<'_>, issues: &mut Issues) -> SpectrumSpec {
-    let mut spec = crate::runs::quake::default_spectrum();
-    let Some(mut t) = root.table("spectrum", issues) else {
-        return spec;
-    };
-    let damping = t.f64("damping", issues).unwrap_or(spec.damping);
-    if !(damping > 0.0 && damping < 1.0) {
-        issues.push(
-            t.path_of("damping"),
-            format!("{damping} must be in (0, 1) (a damping ratio)"),
-        );
-    }
-    let periods = spectrum_periods(&mut t, damping, issues);
-    let band = spectrum_band(&mut t, &periods, issues);
-    t.finish(
-        &[
-            "damping",
-            "periods_s",
-            "t_min_s",
-            "t_max_s",
-            "count",
-            "band_s",
-        ],
-        issues,
-    );
-    spec = SpectrumSpec {
-        periods,
-        damping,
-        band,
-    };
-    if spec.in_band().next().is_none() {
-        issues.push(
-            "spectrum.band_s",
-            "no period of the spectrum lies in the band",
-        );
-    }
-    spec
-}
-
-/// `[spectrum]`'s periods: `periods_s`, or log-spaced from `t_min_s`, `t_max_s`, `count` (not
-/// both), positive and increasing.
-fn spectrum_periods(t: &mut Fields<'_>, damping: f64, issues: &mut Issues) -> Vec<f64> {
-    let (t_min, t_max, count) = (
-        t.f64("t_min_s", issues),
-        t.f64("t_max_s", issues),
-        t.int("count", issues),
-    );
-    let periods = match t.f64_array("periods_s", issues) {
-        Some(p) => {
-            if t_min.or(t_max).is_some() || count.is_some() {
-                issues.push(
-                    t.path_of("periods_s"),
-                    "give periods_s or t_min_s/t_max_s/count, not both",
-                );
-            }
-            p
-        }
-        None => {
-            let (lo, hi, n) = (
-                t_min.unwrap_or(0.05),
-                t_max.unwrap_or(4.0),
-                count.unwrap_or(20),
-            );
-            if !(lo > 0.0 && hi > lo && (1..=200).contains(&n)) {
-                issues.push(t.path_of("count"), format!("t_min_s = {lo}, t_max_s = {hi}, count = {n}: need 0 < t_min_s < t_max_s and 1 ≤ count ≤ 200"));
-                Vec::new()
-            } else {
-                SpectrumSpec::log_spaced(lo, hi, n as usize, damping).periods
-            }
-        }
-    };
-    if periods.is_empty()
-        || periods.iter().any(|p| !(*p > 0.0))
-        || periods.windows(2).any(|w| w[1] <= w[0])
-    {
-        issues.push(
-            t.path_of("periods_s"),
-            "the periods must be positive and increasing (at least one)",
-        );
-    }
-    periods
-}
-
-/// `[spectrum]`'s error band `band_s = [low, high]`, s (default: the first to the last period).
-fn spectrum_band(t: &mut Fields<'_>, periods: &[f64], issues: &mut Issues) -> (f64, f64) {
-    match t.f64_array("band_s", issues) {
-        Some(b) if b.len() == 2 && b[0] <= b[1] => (b[0], b[1]),
-        Some(b) => {
-            issues.push(
-                t.path_of("band_s"),
-                format!("{b:?}: expected [low, high] periods in s, low ≤ high"),
-            );
-            (0.0, f64::INFINITY)
-        }
-        None => (
-            periods.first().copied().unwrap_or(0.0),
-            periods.last().copied().unwrap_or(0.0),
-        ),
-    }
-}
-
 /// A `ground.*` variable that a stochastic excitation also sets: the excitation's value would
 /// win, so the variable would vary nothing there.
 fn ground_overlap(variables: &[Variable], excitations: &[NamedExcitation], issues: &mut Issues) {
@@ -895,7 +791,7 @@ impl StudySpec {
         );
         let (output, histories) = read_output(&mut root, &mut issues);
         let (solver, chunk) = read_study_solver(&mut root, &mut issues);
-        let spectrum = read_spectrum(&mut root, &mut issues);
+        let spectrum = crate::runs::quake_spec::read_spectrum(&mut root, &mut issues);
         ground_overlap(&variables, &excitations, &mut issues);
         root.finish(
             &[
@@ -985,6 +881,7 @@ impl StudySpec {
                     model: self.model.clone(),
                     excitation: e.spec.clone(),
                     solver: self.solver,
+                    spectrum: self.spectrum.clone(),
                 };
                 let full: toml::Table = sim.resolved_toml().parse().expect("own TOML");
                 let mut t = full["excitation"].as_table().cloned().unwrap_or_default();
