@@ -368,6 +368,37 @@ fn iterate_reaches_five_percent_and_writes_its_outputs() {
         40961,
         "a row per tick of the 40 s reference"
     );
+    // The drive replayed by `study sim --target`: the achieved acceleration against the target
+    // (1.6 % rms, the drive's derivatives then from the record filter), against 24 % for the
+    // target itself as the drive; the spectra within 1 %.
+    let replay = write(
+        d.path(),
+        "replay.toml",
+        &format!(
+            "[excitation]\nkind = \"record\"\nfile = \"{}\"\ncolumn = \"drive_disp_m\"\nsignal = \"reference\"\n",
+            out.join("drive.csv").display()
+        ),
+    );
+    let against = |run: &str| {
+        let (code, stdout, stderr) = study(&["sim", run, "--target", file]);
+        assert_eq!(code, 0, "{stdout}{stderr}");
+        let after = stdout
+            .split("against the target")
+            .nth(1)
+            .expect("a target block");
+        (metric(after, "rms_err_accel_ratio"), after.to_string())
+    };
+    let (replayed, text) = against(replay.to_str().unwrap());
+    let (raw, _) = against(file);
+    assert!(replayed < 0.03 && raw > 0.2, "{replayed} {raw}\n{text}");
+    let ratios: Vec<f64> = text
+        .lines()
+        .skip_while(|l| !l.contains("period s"))
+        .skip(1)
+        .filter_map(|l| l.split_whitespace().nth(3)?.parse().ok())
+        .collect();
+    assert_eq!(ratios.len(), 20, "{text}");
+    assert!(ratios.iter().all(|r| (r - 1.0).abs() < 0.01), "{text}");
 
     let (code, _, stderr) = study(&["iterate", file, "--out", out_s]);
     assert_eq!(code, 2, "{stderr}");

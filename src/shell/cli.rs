@@ -380,6 +380,12 @@ pub struct SimArgs {
     /// Print only the metrics table (no header lines).
     #[arg(long, short)]
     pub quiet: bool,
+    /// A run file whose [excitation] is the motion the table should reproduce (e.g. the run file
+    /// `study iterate` took, when this run replays its drive.csv): the achieved acceleration is
+    /// also compared with it (rms error, peak ratio over its window), and the response spectra
+    /// are the target's against the achieved.
+    #[arg(long)]
+    pub target: Option<PathBuf>,
 }
 
 const ITERATE_HELP: &str = "Iterate the drive of an earthquake test on the virtual table (offline iteration, as a \

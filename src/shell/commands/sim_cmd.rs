@@ -20,6 +20,13 @@ pub fn run(args: &SimArgs) -> anyhow::Result<()> {
     let spec = load_spec(&args.file, args.model.as_deref())?;
     let base = args.file.parent().unwrap_or(Path::new("."));
     let reference = build_reference(&spec, base)?;
+    let target = match &args.target {
+        Some(t) => {
+            let ts = load_spec(t, args.model.as_deref())?;
+            Some(build_reference(&ts, t.parent().unwrap_or(Path::new(".")))?)
+        }
+        None => None,
+    };
     let out = single::run_sim(&spec, &reference)?;
     let mut stdout = std::io::stdout().lock();
     let h = 1.0 / (spec.model.controller.f_s * spec.solver.substeps as f64);
@@ -50,16 +57,13 @@ pub fn run(args: &SimArgs) -> anyhow::Result<()> {
         writeln!(stdout, "  {name:<22} {:>12}", fmt_value(v))?;
     }
     let ran = matches!(out.result.status, LaneStatus::Ok);
+    let compared = target.as_ref().unwrap_or(&reference);
+    if let (Some(t), true) = (&target, ran) {
+        against_target(&mut stdout, args, &out.history, t)?;
+    }
     // A failed run's spectrum would be of part of the motion: not printed, not written.
-    if let (Some((spectrum, target)), true) = (&reference.spectrum, ran) {
-        write_spectrum(
-            &mut stdout,
-            args,
-            &out.history,
-            &reference,
-            spectrum,
-            target,
-        )?;
+    if let (Some((spectrum, psa)), true) = (&compared.spectrum, ran) {
+        write_spectrum(&mut stdout, args, &out.history, compared, spectrum, psa)?;
     }
     if let Some(path) = &args.out {
         write_history(path, &spec, &out, &status)?;
@@ -106,6 +110,39 @@ pub(crate) fn write_history(
     ]);
     parquet_write::write_parquet(path, &cols, &meta)
         .with_context(|| format!("writing {}", path.display()))
+}
+
+/// The achieved acceleration against `--target`'s over the target's window (clipped to the
+/// run): the rms error and the peak ratio.
+fn against_target(
+    o: &mut impl Write,
+    args: &SimArgs,
+    history: &single::History,
+    target: &Reference,
+) -> anyhow::Result<()> {
+    let cols = history.named_columns();
+    let accel = cols
+        .iter()
+        .find(|(n, _)| *n == "accel_mps2")
+        .expect("a history has accel_mps2")
+        .1;
+    let end = target.window.1.min(accel.len()).min(target.a.len());
+    let start = target.window.0.min(end);
+    let (got, want) = (&accel[start..end], &target.a[start..end]);
+    let sq = |v: &mut dyn Iterator<Item = f64>| v.map(|x| x * x).sum::<f64>();
+    let err =
+        (sq(&mut got.iter().zip(want).map(|(a, b)| a - b)) / sq(&mut want.iter().copied())).sqrt();
+    let peak = |v: &[f64]| v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let path = args.target.as_ref().expect("a target was given");
+    writeln!(o, "\n  against the target {}", path.display())?;
+    writeln!(o, "  {:<22} {:>12}", "rms_err_accel_ratio", fmt_value(err))?;
+    writeln!(
+        o,
+        "  {:<22} {:>12}",
+        "pga_ratio",
+        fmt_value(peak(got) / peak(want))
+    )?;
+    Ok(())
 }
 
 /// The response spectra of the achieved and the target acceleration, printed and (with
