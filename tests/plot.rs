@@ -76,3 +76,42 @@ fn refuses_a_folder_of_other_files_and_a_file_that_is_not_results() {
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("nope"), "{err}");
 }
+
+/// A time history (`study sim --out`) is drawn channel by channel against time: an SVG per
+/// channel asked for, each a line through the run's samples (thinned to about 4 000), and an
+/// index; a channel the file lacks is refused naming those it has.
+#[test]
+fn draws_a_time_history_channel_by_channel() {
+    let d = tempfile::tempdir().unwrap();
+    let run = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("studies/sim_3hz_1p73g.toml");
+    let h = d.path().join("h.parquet");
+    let (code, _, err) = study(&["sim", run.to_str().unwrap(), "--out", h.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let out = d.path().join("plots");
+    let (h, o) = (h.to_str().unwrap(), out.to_str().unwrap());
+    let (code, _, err) = study(&["plot", h, "--out", o, "--metrics", "accel_mps2,p1_pa"]);
+    assert_eq!(code, 0, "{err}");
+    let mut svgs: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().to_string())
+        .filter(|n| n.ends_with(".svg"))
+        .collect();
+    svgs.sort();
+    assert_eq!(svgs, ["channel_accel_mps2.svg", "channel_p1_pa.svg"]);
+    let svg = std::fs::read_to_string(out.join("channel_accel_mps2.svg")).unwrap();
+    let points = svg
+        .split("<polyline")
+        .filter(|l| l.contains("#1F77B4"))
+        .map(|l| l.matches(',').count())
+        .sum::<usize>();
+    // 3 s at 1024 Hz: 3 072 samples, all drawn.
+    assert!(points >= 3000, "{points} points");
+    let index = std::fs::read_to_string(out.join("index.html")).unwrap();
+    assert!(index.contains("channel_p1_pa.svg") && index.contains("A time history"));
+    let (code, _, err) = study(&["plot", h, "--out", o, "--metrics", "nope"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("no channel \"nope\"") && err.contains("accel_mps2"),
+        "{err}"
+    );
+}

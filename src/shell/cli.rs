@@ -30,7 +30,7 @@ pub enum Command {
     Run(RunArgs),
     /// Sensitivity of each metric to each parameter: Sobol' indices (Saltelli designs), SRC and PRCC.
     Sensitivity(SensitivityArgs),
-    /// Draw a study's results: Sobol' indices with their intervals, each metric against each parameter, failed runs.
+    /// Draw a study's results (Sobol' indices with their intervals, each metric against each parameter, failed runs), or a time history channel by channel.
     Plot(PlotArgs),
     /// Compare the model with a campaign of measured tests: harmonics, amplitude, part of the cycle, envelope.
     #[command(long_about = COMPARE_HELP)]
@@ -172,13 +172,15 @@ pub struct SensitivityArgs {
 
 #[derive(Debug, clap::Args)]
 pub struct PlotArgs {
-    /// The results file of `study run` (or `study merge`).
+    /// The results file of `study run` (or `study merge`), or a time history (`study sim --out`,
+    /// `study iterate`'s history.parquet), drawn channel by channel against time.
     pub file: PathBuf,
     /// Folder for the plots (SVG) and index.html (default: RESULTS_plots beside the file). A
     /// folder holding other files is refused.
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Metrics to draw (comma-separated; default: every metric of the file).
+    /// Metrics to draw (comma-separated; default: every metric of the file); for a time
+    /// history, the channels.
     #[arg(long, value_delimiter = ',')]
     pub metrics: Option<Vec<String>>,
     /// Bootstrap resamples for the Sobol' indices' 95 % intervals (as `study sensitivity`).

@@ -1,11 +1,13 @@
 //! `study plot RESULTS.parquet`: a study's results drawn in the house style of the reports. The
 //! Sobol' indices with their bootstrap intervals (a Saltelli design; `study sensitivity`'s
 //! analysis), each metric against each varied parameter, and the failed runs in parameter space:
-//! SVG files and an index.html that shows them, in a folder of their own.
+//! SVG files and an index.html that shows them, in a folder of their own. A time history (`study
+//! sim --out`, `study iterate`'s history.parquet) is drawn channel by channel against time.
 
 use crate::orchestration::study::sensitivity::Indices;
 use crate::shell::cli::PlotArgs;
-use crate::shell::formats::measured_files::input_if_user;
+use crate::shell::formats::measured_files::{input_if_user, read_columns_allow_nan};
+use crate::shell::formats::meta::{self, Kind};
 use crate::shell::formats::parquet_read;
 use crate::shell::formats::parquet_write::AtomicFile;
 use crate::shell::formats::results_reader::{analyse, load, Loaded};
@@ -60,6 +62,10 @@ pub fn plot(
     metrics: Option<&[String]>,
     bootstrap: usize,
 ) -> anyhow::Result<PathBuf> {
+    let meta = parquet_read::parquet_metadata(file).map_err(input_if_user)?;
+    if meta::is(&meta, Kind::TimeHistory) {
+        return plot_history(file, out, metrics);
+    }
     let l = load(file, metrics)?;
     let status = parquet_read::read_strings(file, "status").map_err(input_if_user)?;
     check_folder(out)?;
@@ -98,6 +104,93 @@ pub fn plot(
     let index = out.join("index.html");
     write_atomic(&index, &page(file, &l, &status, &files)?)?;
     Ok(index)
+}
+
+/// A time history's channels (every numeric column but `time_s`, or those of `channels`), one
+/// SVG each against time, and an index.html; returns its path.
+fn plot_history(file: &Path, out: &Path, channels: Option<&[String]>) -> anyhow::Result<PathBuf> {
+    let (fields, _) = parquet_read::parquet_batches(file).map_err(input_if_user)?;
+    let numeric = |f: &&arrow_schema::Field| f.data_type().is_numeric();
+    let names: Vec<String> = fields
+        .iter()
+        .filter(numeric)
+        .map(|f| f.name().clone())
+        .filter(|n| n != "time_s")
+        .collect();
+    let wanted: Vec<String> = match channels {
+        None => names.clone(),
+        Some(c) => {
+            if let Some(bad) = c.iter().find(|c| !names.contains(c)) {
+                return Err(BadInput(format!(
+                    "{}: no channel {bad:?}; the file has {}",
+                    file.display(),
+                    names.join(", ")
+                ))
+                .into());
+            }
+            c.to_vec()
+        }
+    };
+    let mut read: Vec<&str> = vec!["time_s"];
+    read.extend(wanted.iter().map(String::as_str));
+    let t = read_columns_allow_nan(file, &read).map_err(input_if_user)?;
+    check_folder(out)?;
+    let time = t.column("time_s").expect("read above");
+    let mut files = Vec::new();
+    for name in &wanted {
+        let v = t.column(name).expect("read above");
+        files.push((
+            format!("channel_{name}.svg"),
+            history_svg(time, v, name).map_err(drawing)?,
+        ));
+    }
+    for (name, svg) in &files {
+        write_atomic(&out.join(name), svg)?;
+    }
+    let mut h = String::from(MARK);
+    h.push('\n');
+    page_head(&mut h, &format!("study plot: {}", file.display()), &[])?;
+    writeln!(
+        h,
+        "<p>A time history: {} rows, {} channels against time.</p>",
+        time.len(),
+        files.len()
+    )?;
+    section(
+        &mut h,
+        "Channels",
+        "channel_",
+        &files,
+        "Each channel over the whole run.",
+    )?;
+    h.push_str("</body></html>\n");
+    let index = out.join("index.html");
+    write_atomic(&index, &h)?;
+    Ok(index)
+}
+
+/// One channel against time (at most about 4 000 points: every k-th row beyond).
+fn history_svg(time: &[f64], v: &[f64], name: &str) -> Plot {
+    let mut s = String::new();
+    {
+        let root = SVGBackend::with_string(&mut s, (900, 300)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let (t0, t1) = span(time);
+        let (lo, hi) = span(v);
+        let mut c = ChartBuilder::on(&root)
+            .caption(name, ("sans-serif", 16))
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(60)
+            .build_cartesian_2d(t0..t1, lo..hi)?;
+        c.configure_mesh().x_desc("t (s)").y_desc(name).draw()?;
+        let pts = thinned(time.len(), 4000).map(|k| (time[k], v[k]));
+        for run in crate::shell::report::kit::finite_runs(pts) {
+            c.draw_series(LineSeries::new(run, FIRST.stroke_width(1)))?;
+        }
+        root.present()?;
+    }
+    Ok(s)
 }
 
 fn drawing(e: Box<dyn std::error::Error>) -> anyhow::Error {
