@@ -120,12 +120,9 @@ fn against_target(
     history: &single::History,
     target: &Reference,
 ) -> anyhow::Result<()> {
-    let cols = history.named_columns();
-    let accel = cols
-        .iter()
-        .find(|(n, _)| *n == "accel_mps2")
-        .expect("a history has accel_mps2")
-        .1;
+    let accel = history
+        .channel("accel_mps2")
+        .expect("a history has accel_mps2");
     let end = target.window.1.min(accel.len()).min(target.a.len());
     let start = target.window.0.min(end);
     let (got, want) = (&accel[start..end], &target.a[start..end]);

@@ -104,12 +104,9 @@ impl History {
     /// The response spectrum of the achieved acceleration (`accel_mps2`) over the reference's
     /// window, as the kernel's online spectrum takes it.
     pub fn accel_psa(&self, reference: &Reference, spectrum: &SpectrumSpec) -> Vec<f64> {
-        let cols = self.named_columns();
-        let accel = cols
-            .iter()
-            .find(|(n, _)| *n == "accel_mps2")
-            .expect("a history has accel_mps2")
-            .1;
+        let accel = self
+            .channel("accel_mps2")
+            .expect("a history has accel_mps2");
         let (w0, w1) = reference.window;
         // A failed run's history can end before the window, or inside it.
         let end = w1.min(accel.len());
