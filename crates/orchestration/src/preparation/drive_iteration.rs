@@ -244,8 +244,8 @@ impl Default for IterationSettings {
     /// α = 0.8, ε = 1e-4, 10 iterations, goal 1 %, no correction below 0.1 Hz [chosen: the
     /// usual settings of offline iteration, a partial step that tolerates an FRF error of a few
     /// tens of percent; ε = 1e-4 lets the step reach a specimen's anti-resonance (|H| down to
-    /// 0.01 of its peak), where 1e-3 left 3–10 % of error after 6 iterations on real records
-    /// with a 100 t, 3 Hz, 1 % specimen (1–2 % with 1e-4; docs/guide.md); 0.1 Hz is below the
+    /// 0.01 of its peak), where 1e-3 left 1.5–10 % of error after 6 iterations on real records
+    /// with a 100 t, 3 Hz, 1 % specimen (0.7–2 % with 1e-4; docs/guide.md); 0.1 Hz is below the
     /// usable band of a strong-motion record].
     fn default() -> Self {
         IterationSettings {
