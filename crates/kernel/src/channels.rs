@@ -3,6 +3,16 @@
 //! unit's factor to SI. The vocabulary the file readers (the shell's `formats::headers`) and the
 //! campaign reader (the orchestration's `measured::campaign`) share; pure data and lookups.
 
+use crate::params::G;
+use std::path::Path;
+
+/// Whether `path` names a PEER NGA acceleration file (extension `.AT2`, any case): read as a
+/// record in g, whatever its columns (the shell's reader and the run files' checks agree on it).
+pub fn is_at2(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("at2"))
+}
+
 /// What a unit measures.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Quantity {
@@ -28,8 +38,6 @@ impl Quantity {
     }
 }
 
-/// Standard gravity, m/s² [CGPM 1901; NIST SP 330].
-pub const G0: f64 = 9.80665;
 /// One pound-force in N [NIST SP 811, B.8: 4.448 222].
 const LBF: f64 = 4.448_221_615_260_5;
 
@@ -66,7 +74,7 @@ const UNITS: &[(&[&str], Quantity, f64)] = &[
         Quantity::Acceleration,
         1.0,
     ),
-    (&["g", "gs", "g's"], Quantity::Acceleration, G0),
+    (&["g", "gs", "g's"], Quantity::Acceleration, G),
     (
         &["cm/s^2", "cm/s2", "cm/s²", "gal"],
         Quantity::Acceleration,
@@ -152,7 +160,7 @@ mod tests {
     #[test]
     fn units_and_channels_are_found() {
         let g = unit("g").unwrap();
-        assert_eq!((g.to_si, g.quantity), (G0, Quantity::Acceleration));
+        assert_eq!((g.to_si, g.quantity), (G, Quantity::Acceleration));
         assert_eq!(unit("kN").unwrap().to_si, 1e3);
         assert!(unit("furlong").is_none());
         let (column, key, q) = channel("accel").unwrap();

@@ -21,13 +21,6 @@ use std::path::Path;
 
 const KIND: &str = "PEER .AT2";
 
-/// Whether `path` names a PEER NGA acceleration file (extension `.AT2`, any case): the readers
-/// take such a file as a record in g, whatever its columns.
-pub fn is_at2(path: &Path) -> bool {
-    path.extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("at2"))
-}
-
 /// Reads an `.AT2` file into the columns `time_s` (k·DT) and `accel_g`.
 pub fn read(path: &Path) -> Result<NumTable, TableError> {
     let bytes = crate::shell::formats::input::read_input(path).map_err(|err| TableError::Io {

@@ -525,7 +525,7 @@ mod tests {
     #[test]
     fn units_convert_to_si() {
         let f = |h: &str, c: &str| resolve(&s(&[h]), None, &[c], &[], &[]).unwrap()[0].to_si;
-        assert_eq!(f("Accel (g)", "accel_mps2"), G0);
+        assert_eq!(f("Accel (g)", "accel_mps2"), crate::kernel::params::G);
         assert_eq!(f("Disp (mm)", "disp_m"), 1e-3);
         assert_eq!(f("Time (ms)", "time_s"), 1e-3);
         assert_eq!(f("Accel (m/s^2)", "accel_mps2"), 1.0);
@@ -595,7 +595,7 @@ mod tests {
             &map,
         )
         .unwrap();
-        assert_eq!((r[1].index, r[1].to_si), (1, G0));
+        assert_eq!((r[1].index, r[1].to_si), (1, crate::kernel::params::G));
         let units = s(&["s", "[mm]"]);
         assert!(is_units_row(&units));
         let r = resolve(

@@ -134,7 +134,7 @@ pub(crate) fn read_record(
     column: &str,
     time_column: &str,
 ) -> Result<NumTable, TableError> {
-    if crate::shell::formats::at2::is_at2(path) {
+    if crate::kernel::channels::is_at2(path) {
         crate::shell::formats::at2::read(path)
     } else {
         read_columns(path, &[time_column, column], &[])

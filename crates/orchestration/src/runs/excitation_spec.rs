@@ -259,9 +259,3 @@ fn filter_words(signal: Signal, f_ref_hz: f64) -> String {
         Signal::Reference => format!("the tracked reference, zero-phase derivatives {f_ref_hz} Hz"),
     }
 }
-
-/// Whether `file` is a PEER NGA acceleration file (extension `.AT2`, any case).
-pub fn is_at2(file: &std::path::Path) -> bool {
-    file.extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("at2"))
-}

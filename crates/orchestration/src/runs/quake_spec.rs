@@ -358,7 +358,7 @@ fn put_record(e: &ExcitationSpec, put: &mut Put<'_>) {
     put("kind", "record".into());
     put("signal", signal.name().into());
     put("file", file.display().to_string().into());
-    if !crate::runs::excitation_spec::is_at2(file) {
+    if !vshake_kernel::channels::is_at2(file) {
         put("column", column.clone().into());
         put("time_column", time_column.clone().into());
     }

@@ -30,7 +30,7 @@
 //!
 //! Every problem is reported at once with its key path.
 
-pub use crate::runs::excitation_spec::{is_at2, ExcitationSpec, Realisation, RecordUnit};
+pub use crate::runs::excitation_spec::{ExcitationSpec, Realisation, RecordUnit};
 use crate::toml_fields::{Fields, InputError, Issues};
 use std::path::PathBuf;
 use vshake_kernel::excitation::{Signal, Sine};
@@ -413,7 +413,7 @@ fn read_record(
         );
         return None;
     };
-    let at2 = is_at2(&file);
+    let at2 = vshake_kernel::channels::is_at2(&file);
     let unit = record_unit(f, unit_key, at2, column, issues);
     if let Some(g) = pga_g {
         if !unit.is_acceleration() {
