@@ -575,6 +575,7 @@ impl ModelParams {
                 message: format!("{} is not a whole number of valves", sv.n_val),
             });
         }
+        issues.extend(super::effects::building::check(self));
         let c = &self.controller;
         let nyq = 0.5 * c.f_s;
         for (i, (f0, _bw, depth)) in c.notches().iter().enumerate() {

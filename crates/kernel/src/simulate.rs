@@ -149,6 +149,9 @@ pub struct TickView<'a, const N: usize> {
     /// Total actuator force, N.
     pub f: &'a [f64; N],
     pub state: &'a [[f64; N]; NP],
+    /// The effects' own channels of a lane ([`Effect::responses`]: a building's drifts, floor
+    /// accelerations, base shear), each given to the callback by name.
+    pub responses: &'a dyn Fn(usize, &mut dyn FnMut(&'static str, f64)),
 }
 
 /// Receives every tick (time histories, live plots). The batch engine passes [`NoObserver`].
@@ -1031,6 +1034,7 @@ impl<const N: usize, E: Effect<N>> Probe<N, E> {
             spool: &spool,
             f: &f,
             state: &self.s,
+            responses: &|l, out| effect.responses(l, &self.es, out),
         });
     }
 }
@@ -1355,6 +1359,7 @@ pub(crate) fn integrate<
             spool: &spool,
             f: &f_rec,
             state: &s,
+            responses: &|l, out| effect.responses(l, &es, out),
         });
         acc.every_tick(&u);
         if (w0..w1).contains(&k) {

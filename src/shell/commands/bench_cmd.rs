@@ -186,7 +186,10 @@ fn read_baseline(path: &std::path::Path) -> anyhow::Result<(f64, f64)> {
 fn bench_diagnose(campaign: &std::path::Path, max_seconds: Option<f64>) -> anyhow::Result<()> {
     let model = crate::kernel::params::ModelParams::default();
     let problem = crate::shell::fit_problem::load_problem(campaign, &model, false)?.problem;
-    let candidates = crate::kernel::params::EffectId::ALL;
+    let candidates: Vec<_> = crate::kernel::params::EffectId::ALL
+        .into_iter()
+        .filter(|e| e.screened())
+        .collect();
     let simulated: f64 = problem
         .tests
         .iter()

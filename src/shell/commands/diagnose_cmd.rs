@@ -51,7 +51,7 @@ pub(crate) fn run_to(args: &DiagnoseArgs, o: &mut dyn Write) -> anyhow::Result<(
     let candidates: Vec<EffectId> = if args.candidates.is_empty() {
         EffectId::ALL
             .into_iter()
-            .filter(|&e| !model.effects.get(e))
+            .filter(|&e| e.screened() && !model.effects.get(e))
             .collect()
     } else {
         args.candidates

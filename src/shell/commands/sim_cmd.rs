@@ -4,7 +4,8 @@ use crate::kernel::excitation::Reference;
 use crate::kernel::params::G;
 use crate::kernel::simulate::LaneStatus;
 use crate::kernel::spectrum::SpectrumSpec;
-use crate::orchestration::runs::single::{self, CHANNELS};
+use crate::orchestration::runs::building_response::{building_response, BuildingResponse};
+use crate::orchestration::runs::single;
 use crate::orchestration::runs::spec::SimSpec;
 use crate::shell::cli::SimArgs;
 use crate::shell::formats::meta::{self, Key, Kind};
@@ -65,6 +66,9 @@ pub fn run(args: &SimArgs) -> anyhow::Result<()> {
     if let (Some((spectrum, psa)), true) = (&compared.spectrum, ran) {
         write_spectrum(&mut stdout, args, &out.history, compared, spectrum, psa)?;
     }
+    if let Some(b) = building_response(&spec.model, &out.history) {
+        write_building(&mut stdout, &b)?;
+    }
     if let Some(path) = &args.out {
         write_history(path, &spec, &out, &status)?;
         writeln!(
@@ -72,7 +76,7 @@ pub fn run(args: &SimArgs) -> anyhow::Result<()> {
             "\nwrote {} ({} rows x {} channels)",
             path.display(),
             out.history.len(),
-            CHANNELS.len()
+            out.history.named_columns().len()
         )?;
     }
     match out.result.status {
@@ -81,6 +85,38 @@ pub fn run(args: &SimArgs) -> anyhow::Result<()> {
             Err(RunFailed(format!("{}: run {status}", args.file.display())).into())
         }
     }
+}
+
+/// What the building on the platen experienced, storey by storey.
+fn write_building(o: &mut impl Write, b: &BuildingResponse) -> std::io::Result<()> {
+    writeln!(
+        o,
+        "\n  the building: peak base shear {:.1} kN ({:.3} of its weight)",
+        b.base_shear_n / 1e3,
+        b.base_shear_n / b.weight_n
+    )?;
+    writeln!(
+        o,
+        "  {:>6} {:>10} {:>11} {:>10} {:>14} {:>12}",
+        "storey", "drift mm", "drift ratio", "ductility", "floor accel g", "work kJ"
+    )?;
+    for (i, s) in b.storeys.iter().enumerate() {
+        writeln!(
+            o,
+            "  {:>6} {:>10.2} {:>10.3}% {:>10} {:>14.3} {:>12.2}",
+            i + 1,
+            s.drift_m * 1e3,
+            s.drift_ratio * 100.0,
+            if s.ductility.is_nan() {
+                "-".to_string()
+            } else {
+                format!("{:.2}", s.ductility)
+            },
+            s.floor_accel_g,
+            s.energy_j / 1e3
+        )?;
+    }
+    Ok(())
 }
 
 /// A run's status in words: `ok`, or where and why it failed.

@@ -310,6 +310,7 @@ library! {
     accel_sensor::AccelSensor,
     disp_sensor::DispSensor,
     force_sensor::ForceSensor,
+    building::Building,
 }
 
 /// The measurement chain shared by the sensor effects.
@@ -327,6 +328,13 @@ impl EffectId {
     /// The effect's name.
     pub fn name(self) -> &'static str {
         self.info().name
+    }
+
+    /// Whether a diagnosis tries the effect when it is given no candidates: every effect but the
+    /// building, a specimen the user describes storey by storey (a screening's `specimen`, of the
+    /// same family, finds its modes; `study fit --effect building` then fits its storeys).
+    pub fn screened(self) -> bool {
+        self != EffectId::Building
     }
 }
 
@@ -527,6 +535,11 @@ pub trait Effect<const N: usize>: Sync {
     fn sensed(&self, c: hook::Sensed, _s: &Self::State) -> [f64; 3] {
         c.raw
     }
+
+    /// What the effect's own states say of lane `lane`, each channel given to `out` by name and
+    /// value in SI units (a building's storey drifts, floor accelerations and base shear): what a
+    /// specimen experiences, for the time histories. Observers call it; the step does not.
+    fn responses(&self, _lane: usize, _s: &Self::State, _out: &mut dyn FnMut(&'static str, f64)) {}
 }
 
 /// The baseline model: no extra effect.
@@ -608,6 +621,10 @@ impl<const N: usize, A: Effect<N>, B: Effect<N>> Effect<N> for Both<A, B> {
     fn sensed(&self, c: hook::Sensed, s: &Self::State) -> [f64; 3] {
         let raw = self.0.sensed(c, &s.0);
         self.1.sensed(hook::Sensed { raw, ..c }, &s.1)
+    }
+    fn responses(&self, lane: usize, s: &Self::State, out: &mut dyn FnMut(&'static str, f64)) {
+        self.0.responses(lane, &s.0, out);
+        self.1.responses(lane, &s.1, out);
     }
     #[inline(always)]
     fn derivs(&self, plant: &PlantView<'_, N>, s: &Self::State, ds: &mut Self::State) {
@@ -743,6 +760,11 @@ impl<const N: usize, E: Effect<N>> Effect<N> for Gated<E> {
             c.raw
         }
     }
+    fn responses(&self, lane: usize, s: &Self::State, out: &mut dyn FnMut(&'static str, f64)) {
+        if self.on {
+            self.effect.responses(lane, s, out);
+        }
+    }
     #[inline(always)]
     fn derivs(&self, plant: &PlantView<'_, N>, s: &Self::State, ds: &mut Self::State) {
         if self.on {
@@ -848,8 +870,14 @@ mod tests {
         assert_eq!(std::mem::size_of_val(s.as_ref()), std::mem::size_of_val(&s));
         assert_eq!(
             n,
-            transport_delay::STAGES + 2 * crate::N_ACT + 1 + 2 + 2 * specimen::MODES + 3 * 4,
-            "delay, spool, supply, reaction mass, specimen, three sensor chains"
+            transport_delay::STAGES
+                + 2 * crate::N_ACT
+                + 1
+                + 2
+                + 2 * specimen::MODES
+                + 3 * 4
+                + 4 * building::MAX_STOREYS,
+            "delay, spool, supply, reaction mass, specimen, three sensor chains, building"
         );
         // The supply pressure starts at P_S, every other state at 0.
         let ps = p.servovalve.p_s;

@@ -63,11 +63,23 @@ pub fn force_exceeded(model: &ModelParams, a: f64) -> Option<String> {
     })
 }
 
-/// The specimen's mass on the platen (its modal masses), kg; 0 when the effect is off.
+/// The specimens' mass on the platen (the modal specimen's modal masses, the building's floors),
+/// kg; 0 when neither is on.
 fn specimen_mass(model: &ModelParams) -> f64 {
-    if !model.effects.specimen {
-        return 0.0;
-    }
-    let q = vshake_kernel::effects::specimen::Params::of(model);
-    q.m1 + q.m2 + q.m3
+    use vshake_kernel::effects::{building, specimen};
+    let modal = if model.effects.specimen {
+        let q = specimen::Params::of(model);
+        q.m1 + q.m2 + q.m3
+    } else {
+        0.0
+    };
+    let floors = if model.effects.building {
+        building::storeys(building::Params::of(model))
+            .iter()
+            .map(|s| s.0)
+            .sum()
+    } else {
+        0.0
+    };
+    modal + floors
 }

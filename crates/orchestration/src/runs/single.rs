@@ -94,10 +94,14 @@ pub const CHANNELS: [Channel; 13] = [
     },
 ];
 
-/// Time history of lane 0, one vector per channel of [`CHANNELS`].
+/// Time history of lane 0, one vector per channel of [`CHANNELS`], then the effects' own
+/// channels ([`Effect::responses`](vshake_kernel::effects::Effect::responses): a building's
+/// drifts, floor accelerations, base shear) in the order the effects give them.
 #[derive(Debug, Clone, Default)]
 pub struct History {
     pub columns: Vec<Vec<f64>>,
+    /// The effects' channels, by name.
+    pub responses: Vec<(&'static str, Vec<f64>)>,
 }
 
 impl History {
@@ -116,6 +120,7 @@ impl History {
     pub fn with_capacity(n: usize) -> Self {
         History {
             columns: (0..CHANNELS.len()).map(|_| Vec::with_capacity(n)).collect(),
+            responses: Vec::new(),
         }
     }
     pub fn len(&self) -> usize {
@@ -126,10 +131,10 @@ impl History {
     }
     /// The channel called `name`.
     pub fn channel(&self, name: &str) -> Option<&[f64]> {
-        CHANNELS
-            .iter()
-            .position(|c| c.name == name)
-            .map(|i| self.columns[i].as_slice())
+        self.named_columns()
+            .into_iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, c)| c)
     }
     /// The columns with their names, for a table.
     pub fn named_columns(&self) -> Vec<(&'static str, &[f64])> {
@@ -137,6 +142,7 @@ impl History {
             .iter()
             .map(|c| c.name)
             .zip(self.columns.iter().map(Vec::as_slice))
+            .chain(self.responses.iter().map(|(n, c)| (*n, c.as_slice())))
             .collect()
     }
 }
@@ -146,6 +152,19 @@ impl Observer<1> for History {
         for (c, ch) in self.columns.iter_mut().zip(&CHANNELS) {
             c.push((ch.at)(v));
         }
+        let (ticks, responses) = (self.len(), &mut self.responses);
+        let mut j = 0;
+        (v.responses)(0, &mut |name, x| {
+            if j == responses.len() {
+                responses.push((name, Vec::with_capacity(ticks)));
+            }
+            debug_assert_eq!(
+                responses[j].0, name,
+                "an effect's channels keep their order"
+            );
+            responses[j].1.push(x);
+            j += 1;
+        });
     }
 }
 

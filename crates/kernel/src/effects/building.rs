@@ -1,0 +1,432 @@
+//! Effect `building`: a shear building of 1–10 storeys on the platen (docs/model.md, "The
+//! building"), whose storeys are linear, bilinear (kinematic hardening) or Bouc–Wen. Floor i
+//! (mass m_i) moves by u_i relative to the platen; storey i's drift is d_i = u_i − u_{i−1}
+//! (u_0 = 0) and its shear V_i = R_i + c_i ḋ_i. With a the platen's acceleration:
+//!
+//! ```text
+//! m_i (ü_i + a) = −V_i + V_{i+1}        (V_{N+1} = 0)
+//! R_i = α k_i d_i + (1 − α) r_i          r_i: the storey's hysteretic force, N
+//! ṙ_i = k_i ḋ_i g_i                      (linear: g = 1; bilinear: g = 0 while |r_i| is at F_y,i
+//!                                         and the drift moves away; Bouc–Wen, z = r/F_y:
+//!                                         g = A − |z|^n (β + γ sgn(ḋ z)))
+//! c_i = (2ζ/ω_1) k_i                     (stiffness-proportional damping: mode 1 has ζ)
+//! F_building = V_1                       (the base shear, on the platen)
+//! ```
+//!
+//! The bilinear law's force is r clamped to ±F_y (an integration step may carry r a little past
+//! it; the clamp keeps the force on the yield line). Bouc–Wen with A = 1, β + γ = 1 keeps
+//! |z| ≤ 1, and n → ∞ approaches the bilinear law. With every storey linear the building is the
+//! modal specimen of its modes ([`modes`]; `tests/building.rs` checks it). Its signature on the
+//! table: the modal specimen's anti-resonance, and once a storey yields, a softening (the
+//! frequency falls) with odd harmonics and a loss of the force at the peaks.
+
+use super::{hook, Effect, EffectInfo, LibraryEffect, PlantView, Stage};
+use crate::params::{params, ModelParams, ParamIssue, Range};
+
+/// Most storeys.
+pub const MAX_STOREYS: usize = 10;
+
+/// The effect's entry in the library.
+pub const INFO: EffectInfo = EffectInfo {
+    name: super::module_name(module_path!()),
+    family: "specimen",
+    summary: "a shear building of 1-10 storeys (linear, bilinear or Bouc-Wen storeys) on the platen",
+    params: Params::PARAMS,
+    // [chosen] A fit frees the first storey's stiffness and yield force: the storey that yields
+    // first under a base motion, and the one the base shear measures.
+    stages: &[Stage::free(&["k1", "fy1"])],
+};
+
+params! {
+    /// Effect `building`: a shear building on the platen, storeys 1 (bottom) to `storeys`; the
+    /// parameters of storeys above `storeys` are not used.
+    pub struct Params in effect {
+        storeys: "-", "", 3.0, Range::closed(1.0, 10.0), Chosen,
+            "Number of storeys, a whole number 1-10 [chosen: the 3-storey frame of docs/guide.md].";
+        law: "-", "", 1.0, Range::closed(0.0, 2.0), Chosen,
+            "Storey law: 0 linear, 1 bilinear (kinematic hardening), 2 Bouc-Wen [chosen: bilinear, a steel frame's].";
+        alpha: "-", "", 0.05, Range::closed(0.0, 1.0), Chosen,
+            "Post-yield stiffness ratio of every storey [chosen: 5 %, a steel moment frame's].";
+        zeta: "-", "", 0.02, Range::closed(0.0, 0.5), Chosen,
+            "Damping ratio of mode 1 (stiffness-proportional damping from the initial stiffness: mode j has zeta f_j/f_1) [chosen: 2 %, a steel frame].";
+        height: "m", "m", 3.0, Range::gt(0.0), Chosen,
+            "Storey height, for the drift ratio only [chosen: 3 m].";
+        bw_a: "-", "", 1.0, Range::gt(0.0), Literature,
+            "Bouc-Wen A [Wen, J. Eng. Mech. Div. ASCE 102(2), 1976; A = 1: the initial stiffness is k].";
+        bw_beta: "-", "", 0.5, Range::any(), Literature,
+            "Bouc-Wen beta [Wen 1976; beta = gamma = 0.5 with A = 1: |z| <= 1].";
+        bw_gamma: "-", "", 0.5, Range::any(), Literature,
+            "Bouc-Wen gamma [Wen 1976].";
+        bw_n: "-", "", 2.0, Range::closed(1.0, 50.0), Literature,
+            "Bouc-Wen exponent n: the sharpness of the yield (n -> inf: bilinear) [Wen 1976; 2].";
+        m1: "kg", "kg", 30.0e3, Range::gt(0.0), Chosen,
+            "Mass of floor 1 [chosen: 30 t, a floor of a reduced-scale steel frame on the LHPOST].";
+        m2: "kg", "kg", 30.0e3, Range::gt(0.0), Chosen,
+            "Mass of floor 2 [chosen: 30 t, a floor of a reduced-scale steel frame on the LHPOST].";
+        m3: "kg", "kg", 30.0e3, Range::gt(0.0), Chosen,
+            "Mass of floor 3 [chosen: 30 t, a floor of a reduced-scale steel frame on the LHPOST].";
+        m4: "kg", "kg", 30.0e3, Range::gt(0.0), Chosen,
+            "Mass of floor 4 [chosen: 30 t, a floor of a reduced-scale steel frame on the LHPOST].";
+        m5: "kg", "kg", 30.0e3, Range::gt(0.0), Chosen,
+            "Mass of floor 5 [chosen: 30 t, a floor of a reduced-scale steel frame on the LHPOST].";
+        m6: "kg", "kg", 30.0e3, Range::gt(0.0), Chosen,
+            "Mass of floor 6 [chosen: 30 t, a floor of a reduced-scale steel frame on the LHPOST].";
+        m7: "kg", "kg", 30.0e3, Range::gt(0.0), Chosen,
+            "Mass of floor 7 [chosen: 30 t, a floor of a reduced-scale steel frame on the LHPOST].";
+        m8: "kg", "kg", 30.0e3, Range::gt(0.0), Chosen,
+            "Mass of floor 8 [chosen: 30 t, a floor of a reduced-scale steel frame on the LHPOST].";
+        m9: "kg", "kg", 30.0e3, Range::gt(0.0), Chosen,
+            "Mass of floor 9 [chosen: 30 t, a floor of a reduced-scale steel frame on the LHPOST].";
+        m10: "kg", "kg", 30.0e3, Range::gt(0.0), Chosen,
+            "Mass of floor 10 [chosen: 30 t, a floor of a reduced-scale steel frame on the LHPOST].";
+        k1: "N/m", "n_per_m", 24.0e6, Range::gt(0.0), Chosen,
+            "Initial (elastic) stiffness of storey 1 [chosen: with 30 t floors, 3 storeys have f1 = 2.0 Hz].";
+        k2: "N/m", "n_per_m", 24.0e6, Range::gt(0.0), Chosen,
+            "Initial (elastic) stiffness of storey 2 [chosen: with 30 t floors, 3 storeys have f1 = 2.0 Hz].";
+        k3: "N/m", "n_per_m", 24.0e6, Range::gt(0.0), Chosen,
+            "Initial (elastic) stiffness of storey 3 [chosen: with 30 t floors, 3 storeys have f1 = 2.0 Hz].";
+        k4: "N/m", "n_per_m", 24.0e6, Range::gt(0.0), Chosen,
+            "Initial (elastic) stiffness of storey 4 [chosen: with 30 t floors, 3 storeys have f1 = 2.0 Hz].";
+        k5: "N/m", "n_per_m", 24.0e6, Range::gt(0.0), Chosen,
+            "Initial (elastic) stiffness of storey 5 [chosen: with 30 t floors, 3 storeys have f1 = 2.0 Hz].";
+        k6: "N/m", "n_per_m", 24.0e6, Range::gt(0.0), Chosen,
+            "Initial (elastic) stiffness of storey 6 [chosen: with 30 t floors, 3 storeys have f1 = 2.0 Hz].";
+        k7: "N/m", "n_per_m", 24.0e6, Range::gt(0.0), Chosen,
+            "Initial (elastic) stiffness of storey 7 [chosen: with 30 t floors, 3 storeys have f1 = 2.0 Hz].";
+        k8: "N/m", "n_per_m", 24.0e6, Range::gt(0.0), Chosen,
+            "Initial (elastic) stiffness of storey 8 [chosen: with 30 t floors, 3 storeys have f1 = 2.0 Hz].";
+        k9: "N/m", "n_per_m", 24.0e6, Range::gt(0.0), Chosen,
+            "Initial (elastic) stiffness of storey 9 [chosen: with 30 t floors, 3 storeys have f1 = 2.0 Hz].";
+        k10: "N/m", "n_per_m", 24.0e6, Range::gt(0.0), Chosen,
+            "Initial (elastic) stiffness of storey 10 [chosen: with 30 t floors, 3 storeys have f1 = 2.0 Hz].";
+        fy1: "N", "n", 250.0e3, Range::gt(0.0), Chosen,
+            "Yield force of storey 1 (bilinear, Bouc–Wen) [chosen: 0.28 of 3 floors' weight, drift at yield 10 mm].";
+        fy2: "N", "n", 250.0e3, Range::gt(0.0), Chosen,
+            "Yield force of storey 2 (bilinear, Bouc–Wen) [chosen: 0.28 of 3 floors' weight, drift at yield 10 mm].";
+        fy3: "N", "n", 250.0e3, Range::gt(0.0), Chosen,
+            "Yield force of storey 3 (bilinear, Bouc–Wen) [chosen: 0.28 of 3 floors' weight, drift at yield 10 mm].";
+        fy4: "N", "n", 250.0e3, Range::gt(0.0), Chosen,
+            "Yield force of storey 4 (bilinear, Bouc–Wen) [chosen: 0.28 of 3 floors' weight, drift at yield 10 mm].";
+        fy5: "N", "n", 250.0e3, Range::gt(0.0), Chosen,
+            "Yield force of storey 5 (bilinear, Bouc–Wen) [chosen: 0.28 of 3 floors' weight, drift at yield 10 mm].";
+        fy6: "N", "n", 250.0e3, Range::gt(0.0), Chosen,
+            "Yield force of storey 6 (bilinear, Bouc–Wen) [chosen: 0.28 of 3 floors' weight, drift at yield 10 mm].";
+        fy7: "N", "n", 250.0e3, Range::gt(0.0), Chosen,
+            "Yield force of storey 7 (bilinear, Bouc–Wen) [chosen: 0.28 of 3 floors' weight, drift at yield 10 mm].";
+        fy8: "N", "n", 250.0e3, Range::gt(0.0), Chosen,
+            "Yield force of storey 8 (bilinear, Bouc–Wen) [chosen: 0.28 of 3 floors' weight, drift at yield 10 mm].";
+        fy9: "N", "n", 250.0e3, Range::gt(0.0), Chosen,
+            "Yield force of storey 9 (bilinear, Bouc–Wen) [chosen: 0.28 of 3 floors' weight, drift at yield 10 mm].";
+        fy10: "N", "n", 250.0e3, Range::gt(0.0), Chosen,
+            "Yield force of storey 10 (bilinear, Bouc–Wen) [chosen: 0.28 of 3 floors' weight, drift at yield 10 mm].";
+    }
+}
+
+/// The building's storeys of `p`: floor masses, initial stiffnesses and yield forces, bottom up.
+pub fn storeys(p: &Params) -> Vec<(f64, f64, f64)> {
+    let m = [p.m1, p.m2, p.m3, p.m4, p.m5, p.m6, p.m7, p.m8, p.m9, p.m10];
+    let k = [p.k1, p.k2, p.k3, p.k4, p.k5, p.k6, p.k7, p.k8, p.k9, p.k10];
+    let fy = [p.fy1, p.fy2, p.fy3, p.fy4, p.fy5, p.fy6, p.fy7, p.fy8, p.fy9, p.fy10];
+    (0..(p.storeys as usize).clamp(1, MAX_STOREYS))
+        .map(|i| (m[i], k[i], fy[i]))
+        .collect()
+}
+
+/// What a model's building parameters break beyond their ranges: a count or a law that is not
+/// a whole number.
+pub fn check(m: &ModelParams) -> Vec<ParamIssue> {
+    let p = Params::of(m);
+    [("storeys", p.storeys), ("law", p.law)]
+        .into_iter()
+        .filter(|(_, v)| v.fract() != 0.0)
+        .map(|(name, v)| ParamIssue {
+            path: format!("building.{name}"),
+            message: format!("{v} is not a whole number"),
+        })
+        .collect()
+}
+
+/// A mode of the building's initial (elastic) stiffness.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Mode {
+    /// Natural frequency, Hz.
+    pub freq_hz: f64,
+    /// Effective modal mass for a base motion, kg (the modes' sum is the building's mass).
+    pub mass: f64,
+    /// Shape: floor displacements, the largest 1.
+    pub shape: Vec<f64>,
+}
+
+/// The modes of a shear building of floor masses and storey stiffnesses `storeys` (bottom up),
+/// lowest first: K φ = ω² M φ, solved by Jacobi rotations of M^-1/2 K M^-1/2.
+pub fn modes(storeys: &[(f64, f64, f64)]) -> Vec<Mode> {
+    let n = storeys.len();
+    let sm: Vec<f64> = storeys.iter().map(|s| s.0.sqrt()).collect();
+    let k = |i: usize| storeys.get(i).map_or(0.0, |s| s.1);
+    let mut a = vec![vec![0.0; n]; n];
+    for i in 0..n {
+        a[i][i] = (k(i) + k(i + 1)) / (sm[i] * sm[i]);
+        if i + 1 < n {
+            a[i][i + 1] = -k(i + 1) / (sm[i] * sm[i + 1]);
+            a[i + 1][i] = a[i][i + 1];
+        }
+    }
+    let (w2, v) = jacobi(a);
+    let mut out: Vec<Mode> = (0..n)
+        .map(|j| {
+            let psi: Vec<f64> = (0..n).map(|i| v[i][j] / sm[i]).collect();
+            let l: f64 = (0..n).map(|i| sm[i] * v[i][j]).sum();
+            let top = psi.iter().fold(0.0_f64, |t, x| if x.abs() > t.abs() { *x } else { t });
+            Mode {
+                freq_hz: w2[j].max(0.0).sqrt() / (2.0 * std::f64::consts::PI),
+                mass: l * l,
+                shape: psi.iter().map(|x| x / top).collect(),
+            }
+        })
+        .collect();
+    out.sort_by(|a, b| a.freq_hz.total_cmp(&b.freq_hz));
+    out
+}
+
+/// Eigenvalues and eigenvectors (columns) of the symmetric matrix `a` by cyclic Jacobi rotations.
+fn jacobi(mut a: Vec<Vec<f64>>) -> (Vec<f64>, Vec<Vec<f64>>) {
+    let n = a.len();
+    let mut v: Vec<Vec<f64>> = (0..n)
+        .map(|i| (0..n).map(|j| f64::from(u8::from(i == j))).collect())
+        .collect();
+    for _sweep in 0..100 {
+        let off: f64 = (0..n)
+            .flat_map(|i| (0..n).filter(move |&j| j != i).map(move |j| (i, j)))
+            .map(|(i, j)| a[i][j] * a[i][j])
+            .sum();
+        let diag: f64 = (0..n).map(|i| a[i][i] * a[i][i]).sum();
+        if off <= 1e-30 * diag {
+            break;
+        }
+        for p in 0..n {
+            for q in p + 1..n {
+                if a[p][q] == 0.0 {
+                    continue;
+                }
+                let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+                let t = if theta == 0.0 { 1.0 } else { t };
+                let c = 1.0 / (t * t + 1.0).sqrt();
+                let s = t * c;
+                for k in 0..n {
+                    let (akp, akq) = (a[k][p], a[k][q]);
+                    a[k][p] = c * akp - s * akq;
+                    a[k][q] = s * akp + c * akq;
+                }
+                for k in 0..n {
+                    let (apk, aqk) = (a[p][k], a[q][k]);
+                    a[p][k] = c * apk - s * aqk;
+                    a[q][k] = s * apk + c * aqk;
+                }
+                for k in 0..n {
+                    let (vkp, vkq) = (v[k][p], v[k][q]);
+                    v[k][p] = c * vkp - s * vkq;
+                    v[k][q] = s * vkp + c * vkq;
+                }
+            }
+        }
+    }
+    ((0..n).map(|i| a[i][i]).collect(), v)
+}
+
+/// State indices of storey i: floor displacement relative to the platen, m; its velocity, m/s;
+/// the hysteretic force r, N; the storey's work ∫ R dd, J.
+const fn u(i: usize) -> usize {
+    4 * i
+}
+const fn v(i: usize) -> usize {
+    4 * i + 1
+}
+const fn r(i: usize) -> usize {
+    4 * i + 2
+}
+const fn w(i: usize) -> usize {
+    4 * i + 3
+}
+
+/// The storey laws.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Law {
+    Linear,
+    Bilinear,
+    BoucWen,
+}
+
+/// The building of one lane (none where the effect is off).
+#[derive(Debug, Clone, PartialEq)]
+struct Lane {
+    law: Law,
+    alpha: f64,
+    /// Bouc–Wen A, β, γ, n.
+    bw: [f64; 4],
+    /// Per storey: 1/m, k, c, F_y.
+    inv_m: Vec<f64>,
+    k: Vec<f64>,
+    c: Vec<f64>,
+    fy: Vec<f64>,
+}
+
+pub struct Building<const N: usize> {
+    lanes: [Option<Lane>; N],
+}
+
+impl Lane {
+    fn new(p: &Params) -> Lane {
+        let st = storeys(p);
+        let w1 = 2.0 * std::f64::consts::PI * modes(&st)[0].freq_hz;
+        let a1 = 2.0 * p.zeta / w1;
+        Lane {
+            law: match p.law as u8 {
+                0 => Law::Linear,
+                1 => Law::Bilinear,
+                _ => Law::BoucWen,
+            },
+            alpha: p.alpha,
+            bw: [p.bw_a, p.bw_beta, p.bw_gamma, p.bw_n],
+            inv_m: st.iter().map(|s| 1.0 / s.0).collect(),
+            k: st.iter().map(|s| s.1).collect(),
+            c: st.iter().map(|s| a1 * s.1).collect(),
+            fy: st.iter().map(|s| s.2).collect(),
+        }
+    }
+
+    /// Storey i's drift and drift rate.
+    #[inline(always)]
+    fn drift(s: &[f64; 4 * MAX_STOREYS], i: usize) -> (f64, f64) {
+        if i == 0 {
+            (s[u(0)], s[v(0)])
+        } else {
+            (s[u(i)] - s[u(i - 1)], s[v(i)] - s[v(i - 1)])
+        }
+    }
+
+    /// Storey i's restoring force R at drift d and hysteretic force r, N.
+    #[inline(always)]
+    fn restoring(&self, i: usize, d: f64, r: f64) -> f64 {
+        let r = match self.law {
+            Law::Bilinear => r.clamp(-self.fy[i], self.fy[i]),
+            _ => r,
+        };
+        self.alpha * self.k[i] * d + (1.0 - self.alpha) * r
+    }
+
+    /// dr/dd of storey i over k at hysteretic force r moving at drift rate dd.
+    #[inline(always)]
+    fn tangent(&self, i: usize, r: f64, dd: f64) -> f64 {
+        match self.law {
+            Law::Linear => 1.0,
+            Law::Bilinear => {
+                let fy = self.fy[i];
+                if (r >= fy && dd > 0.0) || (r <= -fy && dd < 0.0) {
+                    0.0
+                } else {
+                    1.0
+                }
+            }
+            Law::BoucWen => {
+                let [a, beta, gamma, n] = self.bw;
+                let z = r / self.fy[i];
+                let sign = if dd * z > 0.0 { 1.0 } else if dd * z < 0.0 { -1.0 } else { 0.0 };
+                a - z.abs().powf(n) * (beta + gamma * sign)
+            }
+        }
+    }
+
+    /// Storey shears V_i = R_i + c_i ḋ_i, N.
+    #[inline(always)]
+    fn shears(&self, s: &[f64; 4 * MAX_STOREYS]) -> [f64; MAX_STOREYS] {
+        let mut out = [0.0; MAX_STOREYS];
+        for i in 0..self.k.len() {
+            let (d, dd) = Self::drift(s, i);
+            out[i] = self.restoring(i, d, s[r(i)]) + self.c[i] * dd;
+        }
+        out
+    }
+}
+
+impl<const N: usize> LibraryEffect<N> for Building<N> {
+    fn new(p: [&ModelParams; N]) -> Self {
+        let on = super::lane_mask::<N, Self>(&p);
+        Building {
+            lanes: std::array::from_fn(|l| (on[l] > 0.0).then(|| Lane::new(Params::of(p[l])))),
+        }
+    }
+}
+
+/// The response channels' names, storey by storey ([`Effect::responses`]).
+const DRIFT: [&str; MAX_STOREYS] = ["drift_1_m", "drift_2_m", "drift_3_m", "drift_4_m", "drift_5_m", "drift_6_m", "drift_7_m", "drift_8_m", "drift_9_m", "drift_10_m"];
+const FORCE: [&str; MAX_STOREYS] = ["storey_force_1_n", "storey_force_2_n", "storey_force_3_n", "storey_force_4_n", "storey_force_5_n", "storey_force_6_n", "storey_force_7_n", "storey_force_8_n", "storey_force_9_n", "storey_force_10_n"];
+const FLOOR_ACCEL: [&str; MAX_STOREYS] = ["floor_accel_1_mps2", "floor_accel_2_mps2", "floor_accel_3_mps2", "floor_accel_4_mps2", "floor_accel_5_mps2", "floor_accel_6_mps2", "floor_accel_7_mps2", "floor_accel_8_mps2", "floor_accel_9_mps2", "floor_accel_10_mps2"];
+const ENERGY: [&str; MAX_STOREYS] = ["energy_1_j", "energy_2_j", "energy_3_j", "energy_4_j", "energy_5_j", "energy_6_j", "energy_7_j", "energy_8_j", "energy_9_j", "energy_10_j"];
+
+impl<const N: usize> Building<N> {
+    /// Lane `l`'s states, storey by storey.
+    #[inline(always)]
+    fn lane_state(s: &[[f64; N]; 4 * MAX_STOREYS], l: usize) -> [f64; 4 * MAX_STOREYS] {
+        std::array::from_fn(|j| s[j][l])
+    }
+}
+
+impl<const N: usize> Effect<N> for Building<N> {
+    type State = [[f64; N]; 4 * MAX_STOREYS];
+
+    fn initial_state(&self) -> Self::State {
+        [[0.0; N]; 4 * MAX_STOREYS]
+    }
+
+    /// The base shear V_1 on the platen, N.
+    #[inline(always)]
+    fn extra_force(&self, c: hook::Motion, s: &Self::State) -> f64 {
+        match &self.lanes[c.lane] {
+            Some(b) => b.shears(&Self::lane_state(s, c.lane))[0],
+            None => 0.0,
+        }
+    }
+
+    #[inline(always)]
+    fn derivs(&self, plant: &PlantView<'_, N>, s: &Self::State, ds: &mut Self::State) {
+        for (l, b) in self.lanes.iter().enumerate() {
+            // Floors a lane does not have (and every floor of a lane without the building) stand
+            // still.
+            let present = b.as_ref().map_or(0, |b| b.k.len());
+            for d in &mut ds[4 * present..] {
+                d[l] = 0.0;
+            }
+            let Some(b) = b else {
+                continue;
+            };
+            let x = Self::lane_state(s, l);
+            let shear = b.shears(&x);
+            for i in 0..b.k.len() {
+                let above = shear.get(i + 1).copied().unwrap_or(0.0);
+                let (d, dd) = Lane::drift(&x, i);
+                ds[u(i)][l] = x[v(i)];
+                ds[v(i)][l] = (above - shear[i]) * b.inv_m[i] - plant.accel[l];
+                ds[r(i)][l] = b.k[i] * dd * b.tangent(i, x[r(i)], dd);
+                ds[w(i)][l] = b.restoring(i, d, x[r(i)]) * dd;
+            }
+        }
+    }
+
+    fn responses(&self, lane: usize, s: &Self::State, out: &mut dyn FnMut(&'static str, f64)) {
+        let Some(b) = &self.lanes[lane] else {
+            return;
+        };
+        let x = Self::lane_state(s, lane);
+        let shear = b.shears(&x);
+        out("base_shear_n", shear[0]);
+        for i in 0..b.k.len() {
+            let (d, _) = Lane::drift(&x, i);
+            let above = shear.get(i + 1).copied().unwrap_or(0.0);
+            out(DRIFT[i], d);
+            out(FORCE[i], b.restoring(i, d, x[r(i)]));
+            out(FLOOR_ACCEL[i], (above - shear[i]) * b.inv_m[i]);
+            out(ENERGY[i], x[w(i)]);
+        }
+    }
+}
