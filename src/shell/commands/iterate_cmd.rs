@@ -1,8 +1,13 @@
 //! `study iterate`: offline iteration of an earthquake test's drive on the virtual table.
 
+use crate::kernel::excitation::Reference;
+use crate::kernel::simulate::LaneStatus;
 use crate::orchestration::preparation::drive_iteration::{
     iterate_on_model, IterationRow, IterationSettings, TableIteration, MIN_TARGET_S,
 };
+use crate::orchestration::runs::building_response::{building_response, BuildingResponse};
+use crate::orchestration::runs::single::{run_one, History};
+use crate::orchestration::runs::spec::SimSpec;
 use crate::shell::cli::IterateArgs;
 use crate::shell::formats::meta::{self, Key, Kind};
 use crate::shell::formats::parquet_write;
@@ -72,6 +77,9 @@ pub fn run(args: &IterateArgs) -> anyhow::Result<()> {
     let done = iterate_on_model(&spec.model, &spec.solver, &target, &settings, print)
         .map_err(|e| RunFailed(format!("{}: {e}", args.file.display())))?;
     summary(&mut o, &done, &settings)?;
+    if let Some(b) = building_with(&spec, &done.drive) {
+        write!(o, "\n  with the kept drive\n{b}")?;
+    }
     if let Some(dir) = &args.out {
         write_outputs(dir, &targets, &done, &spec.resolved_toml())?;
         writeln!(
@@ -90,6 +98,17 @@ pub fn run(args: &IterateArgs) -> anyhow::Result<()> {
         )?;
     }
     Ok(())
+}
+
+/// What the building on the platen (if the model has one) experiences under `drive`.
+fn building_with(spec: &SimSpec, drive: &Reference) -> Option<BuildingResponse> {
+    if !spec.model.effects.building {
+        return None;
+    }
+    let mut h = History::with_capacity(drive.len());
+    let run = run_one(&spec.model, drive, &spec.solver, &mut h).ok()?;
+    (run.status == LaneStatus::Ok).then_some(())?;
+    building_response(&spec.model, &h)
 }
 
 /// The iteration's settings from the flags, each checked.

@@ -4,7 +4,7 @@ use crate::kernel::excitation::Reference;
 use crate::kernel::params::G;
 use crate::kernel::simulate::LaneStatus;
 use crate::kernel::spectrum::SpectrumSpec;
-use crate::orchestration::runs::building_response::{building_response, BuildingResponse};
+use crate::orchestration::runs::building_response::building_response;
 use crate::orchestration::runs::single;
 use crate::orchestration::runs::spec::SimSpec;
 use crate::shell::cli::SimArgs;
@@ -67,7 +67,7 @@ pub fn run(args: &SimArgs) -> anyhow::Result<()> {
         write_spectrum(&mut stdout, args, &out.history, compared, spectrum, psa)?;
     }
     if let Some(b) = building_response(&spec.model, &out.history) {
-        write_building(&mut stdout, &b)?;
+        write!(stdout, "\n{b}")?;
     }
     if let Some(path) = &args.out {
         write_history(path, &spec, &out, &status)?;
@@ -85,38 +85,6 @@ pub fn run(args: &SimArgs) -> anyhow::Result<()> {
             Err(RunFailed(format!("{}: run {status}", args.file.display())).into())
         }
     }
-}
-
-/// What the building on the platen experienced, storey by storey.
-fn write_building(o: &mut impl Write, b: &BuildingResponse) -> std::io::Result<()> {
-    writeln!(
-        o,
-        "\n  the building: peak base shear {:.1} kN ({:.3} of its weight)",
-        b.base_shear_n / 1e3,
-        b.base_shear_n / b.weight_n
-    )?;
-    writeln!(
-        o,
-        "  {:>6} {:>10} {:>11} {:>10} {:>14} {:>12}",
-        "storey", "drift mm", "drift ratio", "ductility", "floor accel g", "work kJ"
-    )?;
-    for (i, s) in b.storeys.iter().enumerate() {
-        writeln!(
-            o,
-            "  {:>6} {:>10.2} {:>10.3}% {:>10} {:>14.3} {:>12.2}",
-            i + 1,
-            s.drift_m * 1e3,
-            s.drift_ratio * 100.0,
-            if s.ductility.is_nan() {
-                "-".to_string()
-            } else {
-                format!("{:.2}", s.ductility)
-            },
-            s.floor_accel_g,
-            s.energy_j / 1e3
-        )?;
-    }
-    Ok(())
 }
 
 /// A run's status in words: `ok`, or where and why it failed.

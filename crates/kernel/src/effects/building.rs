@@ -249,112 +249,137 @@ const fn w(i: usize) -> usize {
     4 * i + 3
 }
 
-/// The storey laws.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Law {
-    Linear,
-    Bilinear,
-    BoucWen,
-}
+/// The bilinear storey law (`law`; 0 linear, 2 Bouc–Wen).
+const BILINEAR: f64 = 1.0;
 
-/// The building of one lane (none where the effect is off).
-#[derive(Debug, Clone, PartialEq)]
-struct Lane {
-    law: Law,
-    alpha: f64,
-    /// Bouc–Wen A, β, γ, n.
-    bw: [f64; 4],
-    /// Per storey: 1/m, k, c, F_y.
-    inv_m: Vec<f64>,
-    k: Vec<f64>,
-    c: Vec<f64>,
-    fy: Vec<f64>,
-}
-
+/// The building of every lane, storey by storey as arrays of lanes (zeros where a lane has no
+/// such storey or the effect is off, so that those states stand still without a branch).
 pub struct Building<const N: usize> {
-    lanes: [Option<Lane>; N],
+    /// Storeys of the tallest building of the batch (0 when no lane has one).
+    top: usize,
+    /// Whether some lane's storeys are Bouc–Wen (only then is its law evaluated).
+    any_bouc_wen: bool,
+    /// Per lane: the law, α, the Bouc–Wen A, β, γ, n.
+    law: [f64; N],
+    alpha: [f64; N],
+    bw: [[f64; N]; 4],
+    /// Per storey and lane: 1 where the floor exists, 1/m, k, c, F_y (1 where absent), and
+    /// where the bilinear law holds the hysteretic force (F_y; infinite for the other laws, so
+    /// that one branch-free expression serves every lane).
+    present: [[f64; N]; MAX_STOREYS],
+    inv_m: [[f64; N]; MAX_STOREYS],
+    k: [[f64; N]; MAX_STOREYS],
+    c: [[f64; N]; MAX_STOREYS],
+    fy: [[f64; N]; MAX_STOREYS],
+    cap: [[f64; N]; MAX_STOREYS],
 }
 
-impl Lane {
-    fn new(p: &Params) -> Lane {
-        let st = storeys(p);
-        let w1 = 2.0 * std::f64::consts::PI * modes(&st)[0].freq_hz;
-        let a1 = 2.0 * p.zeta / w1;
-        Lane {
-            law: match p.law as u8 {
-                0 => Law::Linear,
-                1 => Law::Bilinear,
-                _ => Law::BoucWen,
-            },
-            alpha: p.alpha,
-            bw: [p.bw_a, p.bw_beta, p.bw_gamma, p.bw_n],
-            inv_m: st.iter().map(|s| 1.0 / s.0).collect(),
-            k: st.iter().map(|s| s.1).collect(),
-            c: st.iter().map(|s| a1 * s.1).collect(),
-            fy: st.iter().map(|s| s.2).collect(),
-        }
-    }
-
-    /// Storey i's drift and drift rate.
-    #[inline(always)]
-    fn drift(s: &[f64; 4 * MAX_STOREYS], i: usize) -> (f64, f64) {
-        if i == 0 {
-            (s[u(0)], s[v(0)])
-        } else {
-            (s[u(i)] - s[u(i - 1)], s[v(i)] - s[v(i - 1)])
-        }
-    }
-
-    /// Storey i's restoring force R at drift d and hysteretic force r, N.
-    #[inline(always)]
-    fn restoring(&self, i: usize, d: f64, r: f64) -> f64 {
-        let r = match self.law {
-            Law::Bilinear => r.clamp(-self.fy[i], self.fy[i]),
-            _ => r,
-        };
-        self.alpha * self.k[i] * d + (1.0 - self.alpha) * r
-    }
-
-    /// dr/dd of storey i over k at hysteretic force r moving at drift rate dd.
-    #[inline(always)]
-    fn tangent(&self, i: usize, r: f64, dd: f64) -> f64 {
-        match self.law {
-            Law::Linear => 1.0,
-            Law::Bilinear => {
-                let fy = self.fy[i];
-                if (r >= fy && dd > 0.0) || (r <= -fy && dd < 0.0) {
-                    0.0
-                } else {
-                    1.0
-                }
-            }
-            Law::BoucWen => {
-                let [a, beta, gamma, n] = self.bw;
-                let z = r / self.fy[i];
-                let sign = if dd * z > 0.0 { 1.0 } else if dd * z < 0.0 { -1.0 } else { 0.0 };
-                a - z.abs().powf(n) * (beta + gamma * sign)
-            }
-        }
-    }
-
-    /// Storey shears V_i = R_i + c_i ḋ_i, N.
-    #[inline(always)]
-    fn shears(&self, s: &[f64; 4 * MAX_STOREYS]) -> [f64; MAX_STOREYS] {
-        let mut out = [0.0; MAX_STOREYS];
-        for i in 0..self.k.len() {
-            let (d, dd) = Self::drift(s, i);
-            out[i] = self.restoring(i, d, s[r(i)]) + self.c[i] * dd;
-        }
-        out
-    }
+/// A lane's building, storey by storey: m, k, c, F_y.
+fn lane_storeys(p: &Params) -> Vec<[f64; 4]> {
+    let st = storeys(p);
+    let w1 = 2.0 * std::f64::consts::PI * modes(&st)[0].freq_hz;
+    let a1 = 2.0 * p.zeta / w1;
+    st.iter().map(|s| [s.0, s.1, a1 * s.1, s.2]).collect()
 }
 
 impl<const N: usize> LibraryEffect<N> for Building<N> {
     fn new(p: [&ModelParams; N]) -> Self {
         let on = super::lane_mask::<N, Self>(&p);
+        let q = p.map(Params::of);
+        let lanes: [Vec<[f64; 4]>; N] =
+            std::array::from_fn(|l| if on[l] > 0.0 { lane_storeys(q[l]) } else { vec![] });
+        let table = |f: usize, absent: f64| -> [[f64; N]; MAX_STOREYS] {
+            std::array::from_fn(|i| {
+                std::array::from_fn(|l| lanes[l].get(i).map_or(absent, |s| s[f]))
+            })
+        };
         Building {
-            lanes: std::array::from_fn(|l| (on[l] > 0.0).then(|| Lane::new(Params::of(p[l])))),
+            top: lanes.iter().map(Vec::len).max().unwrap_or(0),
+            any_bouc_wen: (0..N).any(|l| on[l] > 0.0 && q[l].law > BILINEAR),
+            law: std::array::from_fn(|l| q[l].law),
+            alpha: std::array::from_fn(|l| q[l].alpha),
+            bw: [
+                std::array::from_fn(|l| q[l].bw_a),
+                std::array::from_fn(|l| q[l].bw_beta),
+                std::array::from_fn(|l| q[l].bw_gamma),
+                std::array::from_fn(|l| q[l].bw_n),
+            ],
+            present: std::array::from_fn(|i| {
+                std::array::from_fn(|l| f64::from(u8::from(i < lanes[l].len())))
+            }),
+            inv_m: std::array::from_fn(|i| {
+                std::array::from_fn(|l| lanes[l].get(i).map_or(0.0, |s| 1.0 / s[0]))
+            }),
+            k: table(1, 0.0),
+            c: table(2, 0.0),
+            fy: table(3, 1.0),
+            cap: std::array::from_fn(|i| {
+                std::array::from_fn(|l| match lanes[l].get(i) {
+                    Some(s) if q[l].law == BILINEAR => s[3],
+                    _ => f64::INFINITY,
+                })
+            }),
         }
+    }
+}
+
+impl<const N: usize> Building<N> {
+    /// Storey i's drift and drift rate in lane l.
+    #[inline(always)]
+    fn drift(s: &[[f64; N]; 4 * MAX_STOREYS], i: usize, l: usize) -> (f64, f64) {
+        if i == 0 {
+            (s[u(0)][l], s[v(0)][l])
+        } else {
+            (s[u(i)][l] - s[u(i - 1)][l], s[v(i)][l] - s[v(i - 1)][l])
+        }
+    }
+
+    /// The hysteretic force as the storey's force takes it: clamped to ±F_y for the bilinear law.
+    #[inline(always)]
+    fn held(&self, i: usize, l: usize, r: f64) -> f64 {
+        r.max(-self.cap[i][l]).min(self.cap[i][l])
+    }
+
+    /// Storey i's restoring force R in lane l at drift d and hysteretic force r, N.
+    #[inline(always)]
+    fn restoring(&self, i: usize, l: usize, d: f64, r: f64) -> f64 {
+        let a = self.alpha[l];
+        a * self.k[i][l] * d + (1.0 - a) * self.held(i, l, r)
+    }
+
+    /// Storey i's shear V = R + c ḋ in lane l, N.
+    #[inline(always)]
+    fn shear(&self, s: &[[f64; N]; 4 * MAX_STOREYS], i: usize, l: usize) -> f64 {
+        let (d, dd) = Self::drift(s, i, l);
+        self.restoring(i, l, d, s[r(i)][l]) + self.c[i][l] * dd
+    }
+
+    /// dr/dd over k of storey i in lane l at hysteretic force r and drift rate dd, for the
+    /// linear and bilinear laws: 0 while the force is held at ±F_y and the drift moves outwards.
+    #[inline(always)]
+    fn tangent(&self, i: usize, l: usize, r: f64, dd: f64) -> f64 {
+        let cap = self.cap[i][l];
+        let out = (r >= cap && dd > 0.0) || (r <= -cap && dd < 0.0);
+        if out {
+            0.0
+        } else {
+            1.0
+        }
+    }
+
+    /// The Bouc–Wen law's dr/dd over k in lane l (storey i): A − |z|^n (β + γ sgn(ḋ z)),
+    /// z = r/F_y.
+    #[inline(always)]
+    fn bouc_wen(&self, i: usize, l: usize, r: f64, dd: f64) -> f64 {
+        let z = r / self.fy[i][l];
+        let sign = if dd * z > 0.0 {
+            1.0
+        } else if dd * z < 0.0 {
+            -1.0
+        } else {
+            0.0
+        };
+        self.bw[0][l] - z.abs().powf(self.bw[3][l]) * (self.bw[1][l] + self.bw[2][l] * sign)
     }
 }
 
@@ -363,14 +388,6 @@ const DRIFT: [&str; MAX_STOREYS] = ["drift_1_m", "drift_2_m", "drift_3_m", "drif
 const FORCE: [&str; MAX_STOREYS] = ["storey_force_1_n", "storey_force_2_n", "storey_force_3_n", "storey_force_4_n", "storey_force_5_n", "storey_force_6_n", "storey_force_7_n", "storey_force_8_n", "storey_force_9_n", "storey_force_10_n"];
 const FLOOR_ACCEL: [&str; MAX_STOREYS] = ["floor_accel_1_mps2", "floor_accel_2_mps2", "floor_accel_3_mps2", "floor_accel_4_mps2", "floor_accel_5_mps2", "floor_accel_6_mps2", "floor_accel_7_mps2", "floor_accel_8_mps2", "floor_accel_9_mps2", "floor_accel_10_mps2"];
 const ENERGY: [&str; MAX_STOREYS] = ["energy_1_j", "energy_2_j", "energy_3_j", "energy_4_j", "energy_5_j", "energy_6_j", "energy_7_j", "energy_8_j", "energy_9_j", "energy_10_j"];
-
-impl<const N: usize> Building<N> {
-    /// Lane `l`'s states, storey by storey.
-    #[inline(always)]
-    fn lane_state(s: &[[f64; N]; 4 * MAX_STOREYS], l: usize) -> [f64; 4 * MAX_STOREYS] {
-        std::array::from_fn(|j| s[j][l])
-    }
-}
 
 impl<const N: usize> Effect<N> for Building<N> {
     type State = [[f64; N]; 4 * MAX_STOREYS];
@@ -382,51 +399,54 @@ impl<const N: usize> Effect<N> for Building<N> {
     /// The base shear V_1 on the platen, N.
     #[inline(always)]
     fn extra_force(&self, c: hook::Motion, s: &Self::State) -> f64 {
-        match &self.lanes[c.lane] {
-            Some(b) => b.shears(&Self::lane_state(s, c.lane))[0],
-            None => 0.0,
-        }
+        self.shear(s, 0, c.lane)
     }
 
     #[inline(always)]
     fn derivs(&self, plant: &PlantView<'_, N>, s: &Self::State, ds: &mut Self::State) {
-        for (l, b) in self.lanes.iter().enumerate() {
-            // Floors a lane does not have (and every floor of a lane without the building) stand
-            // still.
-            let present = b.as_ref().map_or(0, |b| b.k.len());
-            for d in &mut ds[4 * present..] {
-                d[l] = 0.0;
+        let mut above = [0.0; N];
+        for i in (0..self.top).rev() {
+            for l in 0..N {
+                let (d, dd) = Self::drift(s, i, l);
+                let x = s[r(i)][l];
+                let restoring = self.restoring(i, l, d, x);
+                let shear = restoring + self.c[i][l] * dd;
+                ds[u(i)][l] = s[v(i)][l];
+                ds[v(i)][l] =
+                    (above[l] - shear) * self.inv_m[i][l] - plant.accel[l] * self.present[i][l];
+                ds[r(i)][l] = self.k[i][l] * dd * self.tangent(i, l, x, dd);
+                ds[w(i)][l] = restoring * dd;
+                above[l] = shear;
             }
-            let Some(b) = b else {
-                continue;
-            };
-            let x = Self::lane_state(s, l);
-            let shear = b.shears(&x);
-            for i in 0..b.k.len() {
-                let above = shear.get(i + 1).copied().unwrap_or(0.0);
-                let (d, dd) = Lane::drift(&x, i);
-                ds[u(i)][l] = x[v(i)];
-                ds[v(i)][l] = (above - shear[i]) * b.inv_m[i] - plant.accel[l];
-                ds[r(i)][l] = b.k[i] * dd * b.tangent(i, x[r(i)], dd);
-                ds[w(i)][l] = b.restoring(i, d, x[r(i)]) * dd;
+        }
+        if self.any_bouc_wen {
+            for i in 0..self.top {
+                for l in (0..N).filter(|&l| self.law[l] > BILINEAR) {
+                    let (_, dd) = Self::drift(s, i, l);
+                    ds[r(i)][l] = self.k[i][l] * dd * self.bouc_wen(i, l, s[r(i)][l], dd);
+                }
             }
+        }
+        // Storeys no lane has stand still.
+        for d in &mut ds[4 * self.top..] {
+            *d = [0.0; N];
         }
     }
 
     fn responses(&self, lane: usize, s: &Self::State, out: &mut dyn FnMut(&'static str, f64)) {
-        let Some(b) = &self.lanes[lane] else {
+        let l = lane;
+        let floors = (0..self.top).filter(|&i| self.present[i][l] > 0.0).count();
+        if floors == 0 {
             return;
-        };
-        let x = Self::lane_state(s, lane);
-        let shear = b.shears(&x);
-        out("base_shear_n", shear[0]);
-        for i in 0..b.k.len() {
-            let (d, _) = Lane::drift(&x, i);
-            let above = shear.get(i + 1).copied().unwrap_or(0.0);
+        }
+        let shear = |i: usize| if i < floors { self.shear(s, i, l) } else { 0.0 };
+        out("base_shear_n", shear(0));
+        for i in 0..floors {
+            let (d, _) = Self::drift(s, i, l);
             out(DRIFT[i], d);
-            out(FORCE[i], b.restoring(i, d, x[r(i)]));
-            out(FLOOR_ACCEL[i], (above - shear[i]) * b.inv_m[i]);
-            out(ENERGY[i], x[w(i)]);
+            out(FORCE[i], self.restoring(i, l, d, s[r(i)][l]));
+            out(FLOOR_ACCEL[i], (shear(i + 1) - shear(i)) * self.inv_m[i][l]);
+            out(ENERGY[i], s[w(i)][l]);
         }
     }
 }

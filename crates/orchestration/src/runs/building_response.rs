@@ -78,3 +78,38 @@ impl BuildingResponse {
         self.storeys.iter().fold(0.0, |m, s| m.max(s.drift_ratio))
     }
 }
+
+/// Storey by storey, as `study sim` and `study iterate` print it.
+impl std::fmt::Display for BuildingResponse {
+    fn fmt(&self, o: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(
+            o,
+            "  the building: peak base shear {:.1} kN ({:.3} of its weight)",
+            self.base_shear_n / 1e3,
+            self.base_shear_n / self.weight_n
+        )?;
+        writeln!(
+            o,
+            "  {:>6} {:>10} {:>11} {:>10} {:>14} {:>12}",
+            "storey", "drift mm", "drift ratio", "ductility", "floor accel g", "work kJ"
+        )?;
+        for (i, s) in self.storeys.iter().enumerate() {
+            let ductility = if s.ductility.is_nan() {
+                "-".to_string()
+            } else {
+                format!("{:.2}", s.ductility)
+            };
+            writeln!(
+                o,
+                "  {:>6} {:>10.2} {:>10.3}% {:>10} {:>14.3} {:>12.2}",
+                i + 1,
+                s.drift_m * 1e3,
+                s.drift_ratio * 100.0,
+                ductility,
+                s.floor_accel_g,
+                s.energy_j / 1e3
+            )?;
+        }
+        Ok(())
+    }
+}
