@@ -477,7 +477,7 @@ pub(crate) struct Packed {
 /// The parameters of `models` ([`gpu_lanes::record`]s), made once each on the worker threads:
 /// each piece of lanes keeps the records of the fields that differ from the first lane's within
 /// it; the fields that differ anywhere are then placed row by row (a few fields of a study's
-/// varied parameters instead of all 131).
+/// varied parameters instead of all 177).
 pub(crate) fn pack(models: &[&ModelParams]) -> Result<Packed, SetupError> {
     let first = models[0];
     if let Some(lane) = models

@@ -4,7 +4,7 @@
 //! Pure data: no device, no I/O. The device engine (`shell::gpu`) uploads these arrays; the
 //! kernel's host build in `tests/cuda_host.rs` takes the same arrays, so what is tested without
 //! a GPU is what the GPU runs. The CUDA kernel covers the baseline model (both valve laws, every
-//! damping exponent), every library effect but the building ([`EFFECT_BITS`]), every drive, one
+//! damping exponent), every library effect ([`EFFECT_BITS`]), every drive, one
 //! reference for every lane or one per lane, with the harmonic, error, peak, valve and
 //! response-spectrum metrics; [`unsupported`] names what it does not.
 
@@ -19,11 +19,11 @@ use super::spectrum::oscillators;
 pub const SOURCE: &str = include_str!("cuda/lane.cu");
 
 /// Float64 fields per lane in the parameter record (lane.cu: `VS_LANE_FIELDS`).
-pub const LANE_FIELDS: usize = 131;
+pub const LANE_FIELDS: usize = 177;
 
 /// The library effects the CUDA kernel has, with their bit in its `effects` argument and build
 /// (lane.cu: `VS_E_*`): bit i for registry line i.
-pub const EFFECT_BITS: [(EffectId, i64); 16] = [
+pub const EFFECT_BITS: [(EffectId, i64); 17] = [
     (EffectId::TransportDelay, 1),
     (EffectId::SpoolDynamics, 1 << 1),
     (EffectId::FlowSaturation, 1 << 2),
@@ -40,11 +40,12 @@ pub const EFFECT_BITS: [(EffectId, i64); 16] = [
     (EffectId::AccelSensor, 1 << 13),
     (EffectId::DispSensor, 1 << 14),
     (EffectId::ForceSensor, 1 << 15),
+    (EffectId::Building, 1 << 16),
 ];
 
 /// The bit saying that the two actuators differ in some lane (lane.cu: `VS_E_TWO`): the kernel
 /// then integrates both, else one stands for both.
-pub const TWO_ACTUATORS: i64 = 1 << 16;
+pub const TWO_ACTUATORS: i64 = 1 << 17;
 
 /// The `effects` bits of a launch: every covered effect some lane switches on, and
 /// [`TWO_ACTUATORS`] where some lane's actuators differ.
@@ -231,6 +232,7 @@ fn lane_record(lp: &LaneParams<1>, m: &ModelParams) -> [f64; LANE_FIELDS] {
     r.extend(accel_sensor::AccelSensor::<1>::new([m]).lane(0));
     r.extend(disp_sensor::DispSensor::<1>::new([m]).lane(0));
     r.extend(force_sensor::ForceSensor::<1>::new([m]).lane(0));
+    r.extend(building::Building::<1>::new([m]).lane(0));
     r.try_into().expect("LANE_FIELDS fields")
 }
 
@@ -420,17 +422,12 @@ mod tests {
     #[test]
     fn every_effect_has_its_bit_in_registry_order() {
         for (i, id) in EffectId::ALL.into_iter().enumerate() {
-            if id == EffectId::Building {
-                // Not in the CUDA kernel: the last registry line, without a bit.
-                assert_eq!(i, EffectId::ALL.len() - 1);
-                continue;
-            }
             assert_eq!(EFFECT_BITS[i], (id, 1 << i), "{id}");
         }
-        assert_eq!(TWO_ACTUATORS, 1 << EFFECT_BITS.len());
+        assert_eq!(TWO_ACTUATORS, 1 << EffectId::ALL.len());
         let source = SOURCE.replace(' ', "");
         assert!(source.contains(&format!("VS_E_TWO={TWO_ACTUATORS}")));
-        assert!(source.contains("VS_LANE_FIELDS=VS_SENSOR+21"));
+        assert!(source.contains("VS_LANE_FIELDS=VS_BLD+6+4*10"));
         let m = ModelParams::default();
         assert_eq!(pack_params(&[&m]).unwrap().len(), LANE_FIELDS);
     }

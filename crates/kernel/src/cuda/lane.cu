@@ -34,6 +34,7 @@ VS_FN double vs_from_bits(vs_u64 b) { double x; std::memcpy(&x, &b, 8); return x
 VS_FN vs_u64 vs_to_bits(double x) { vs_u64 b; std::memcpy(&b, &x, 8); return b; }
 using std::fabs;
 using std::fmax;
+using std::fmin;
 using std::pow;
 using std::sqrt;
 #endif
@@ -64,7 +65,9 @@ enum {
   VS_HOLD = VS_RMASS + 3,        // hold_down: k3
   VS_SPEC = VS_HOLD + 1,         // specimen: per mode m (0 off), ω², 2ζω
   VS_SENSOR = VS_SPEC + 9,       // accel, disp, force sensors: on, ω², 2ζω, τ, Padé, 12/τ², 6/τ
-  VS_LANE_FIELDS = VS_SENSOR + 21
+  VS_BLD = VS_SENSOR + 21,       // building: law (0 off), α, Bouc–Wen A, β, γ, n, then per
+                                 // storey 1/m (0 absent), k, c, F_y
+  VS_LANE_FIELDS = VS_BLD + 6 + 4 * 10
 };
 
 // Which effects a build applies (gpu_lanes.rs: EFFECT_BITS), bit i = registry line i, and
@@ -73,7 +76,7 @@ enum {
   VS_E_DELAY = 1, VS_E_SPOOL = 2, VS_E_FSAT = 4, VS_E_FGAIN = 8, VS_E_ASYM = 16, VS_E_LEAK = 32,
   VS_E_SUPPLY = 64, VS_E_SEAL = 128, VS_E_COMP = 256, VS_E_BULK = 512, VS_E_RMASS = 1024,
   VS_E_HOLD = 2048, VS_E_SPEC = 4096, VS_E_ACCEL = 8192, VS_E_DISP = 16384, VS_E_FORCE = 32768,
-  VS_E_TWO = 65536
+  VS_E_BLD = 65536, VS_E_TWO = 131072
 };
 
 // Output record (gpu_lanes.rs: OUT_*). Status: 0 ok, 1 non-finite, 2 stroke, 3 pressure.
@@ -108,7 +111,8 @@ enum {
   VS_S_RMASS = 9,                // reaction_mass: y_r, v_r
   VS_S_SPEC = 11,                // specimen: u, u' per mode
   VS_S_SENSOR = 17,              // per sensor (accel, disp, force): y, y', z, z'
-  VS_NES = 29
+  VS_S_BLD = 29,                 // building: per storey u, u', r, ∫R dd
+  VS_NES = 69
 };
 
 // Whether extra state i is integrated in this build.
@@ -118,7 +122,8 @@ VS_FN bool vs_live(int i) {
   if (i < VS_S_RMASS) return VS_ON(VS_E_SUPPLY);
   if (i < VS_S_SPEC) return VS_ON(VS_E_RMASS);
   if (i < VS_S_SENSOR) return VS_ON(VS_E_SPEC);
-  return VS_ON(VS_E_ACCEL << ((i - VS_S_SENSOR) / 4));
+  if (i < VS_S_BLD) return VS_ON(VS_E_ACCEL << ((i - VS_S_SENSOR) / 4));
+  return VS_ON(VS_E_BLD);
 }
 
 // The run shared by every lane (gpu_lanes.rs: Shared).
@@ -146,7 +151,7 @@ struct VsState { double p1[2], p2[2], y, v, z, e[VS_NES]; };
 // Parameters that every lane of a launch shares (gpu_lanes.rs `Uniform`) are read from `vs_u`
 // (on the GPU a constant-bank operand); P holds the records of the varying fields alone,
 // field-major, in field order (lane l's value of the s-th varying field at P[s * n + l]). Which
-// fields vary is fixed when the kernel is compiled (NVRTC: -DVS_VARY0..2, bit f of the 131-bit
+// fields vary is fixed when the kernel is compiled (NVRTC: -DVS_VARY0..2, bit f of the 177-bit
 // mask for field f), so that each read is resolved then; the host build reads the mask per run
 // (`vs_vary`, set by the harness).
 VS_FN constexpr int vs_popc(vs_u64 x) {
@@ -271,16 +276,44 @@ VS_FN void vs_stiffness(const double *P, long long n, long long l, double p1, do
   }
 }
 
-// The `extra_force` hooks, summed as the Rust effect set nests them: seal + (hold + specimen).
+// +inf (a bilinear cap that never holds).
+VS_FN double vs_inf() { return vs_from_bits(0x7ff0000000000000ULL); }
+
+// building.rs: storey i's drift and its rate.
+VS_FN void vs_drift(const VsState &s, int i, double &d, double &dd) {
+  const int u = VS_S_BLD + 4 * i;
+  d = i == 0 ? s.e[u] : s.e[u] - s.e[u - 4];
+  dd = i == 0 ? s.e[u + 1] : s.e[u + 1] - s.e[u - 3];
+}
+
+// building.rs `restoring`: α k d + (1 − α) r, r held at ±F_y by the bilinear law (law 1).
+VS_FN double vs_restoring(const double *P, long long n, long long l, int i, double d, double r) {
+  const long long q = VS_BLD + 6 + 4 * i;
+  double cap = F(VS_BLD) == 1.0 && F(q) != 0.0 ? F(q + 3) : vs_inf();
+  double held = fmin(fmax(r, -cap), cap);
+  double a = F(VS_BLD + 1);
+  return a * F(q + 1) * d + (1.0 - a) * held;
+}
+
+// building.rs: storey i's shear, R + c ḋ.
+VS_FN double vs_shear(const double *P, long long n, long long l, int i, const VsState &s) {
+  double d, dd;
+  vs_drift(s, i, d, dd);
+  return vs_restoring(P, n, l, i, d, s.e[VS_S_BLD + 4 * i + 2]) + F(VS_BLD + 6 + 4 * i + 2) * dd;
+}
+
+// The `extra_force` hooks, summed as the Rust effect set nests them:
+// seal + (hold + (specimen + building)).
 VS_FN double vs_extra_force(const double *P, long long n, long long l, const VsState &s) {
   double fe = 0.0;
+  if (VS_ON(VS_E_BLD)) fe = vs_shear(P, n, l, 0, s) + 0.0;
   if (VS_ON(VS_E_SPEC)) {
     double sum = -0.0;
     for (int i = 0; i < 3; ++i) {
       const long long q = VS_SPEC + 3 * i;
       sum = sum + F(q) * (F(q + 1) * s.e[VS_S_SPEC + 2 * i] + F(q + 2) * s.e[VS_S_SPEC + 2 * i + 1]);
     }
-    fe = sum;
+    fe = sum + fe;
   }
   if (VS_ON(VS_E_HOLD)) fe = -F(VS_HOLD) * s.y * s.y * s.y + fe;
   if (VS_ON(VS_E_SEAL)) {
@@ -314,6 +347,35 @@ VS_FN double vs_sensed(const double *P, long long n, long long l, int c, double 
   double taylor = y - t * yd + 0.5 * t * t * ydd;
   double chain = taylor + F(q + 4) * (pade - taylor);
   return u + F(q) * (chain - u);
+}
+
+// building.rs `derivs`: the floors from the top down (each storey's shear is the floor above's
+// load), the hysteretic force by the storey's law, the storey's work.
+VS_FN void vs_building_derivs(const double *P, long long n, long long l, double accel,
+                              const VsState &s, VsState &d) {
+  double above = 0.0, law = F(VS_BLD);
+  for (int i = 9; i >= 0; --i) {
+    const long long q = VS_BLD + 6 + 4 * i;
+    const int u = VS_S_BLD + 4 * i;
+    double dr, dd, r = s.e[u + 2], inv_m = F(q), k = F(q + 1), fy = F(q + 3);
+    vs_drift(s, i, dr, dd);
+    double restoring = vs_restoring(P, n, l, i, dr, r);
+    double shear = restoring + F(q + 2) * dd;
+    double g;
+    if (law == 2.0) {
+      double z = r / fy;
+      double sign = dd * z > 0.0 ? 1.0 : (dd * z < 0.0 ? -1.0 : 0.0);
+      g = F(VS_BLD + 2) - pow(fabs(z), F(VS_BLD + 5)) * (F(VS_BLD + 3) + F(VS_BLD + 4) * sign);
+    } else {
+      double cap = law == 1.0 && inv_m != 0.0 ? fy : vs_inf();
+      g = (r >= cap && dd > 0.0) || (r <= -cap && dd < 0.0) ? 0.0 : 1.0;
+    }
+    d.e[u] = s.e[u + 1];
+    d.e[u + 1] = (above - shear) * inv_m - accel * (inv_m != 0.0 ? 1.0 : 0.0);
+    d.e[u + 2] = k * dd * g;
+    d.e[u + 3] = restoring * dd;
+    above = shear;
+  }
 }
 
 // The `derivs` of the effects with states, in registry order, given the plant's quantities:
@@ -357,6 +419,7 @@ VS_FN void vs_effect_derivs(const double *P, long long n, long long l, double x_
   const double input[3] = {accel, stroke, f};
   for (int c = 0; c < 3; ++c)
     if (VS_ON(VS_E_ACCEL << c)) vs_sensor_derivs(P, n, l, c, input[c], s, d);
+  if (VS_ON(VS_E_BLD)) vs_building_derivs(P, n, l, accel, s, d);
 }
 
 // The actuator stroke (what the chambers and the LVDT follow): reaction_mass's `stroke`.

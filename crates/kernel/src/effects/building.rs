@@ -259,7 +259,7 @@ pub struct Building<const N: usize> {
     top: usize,
     /// Whether some lane's storeys are Bouc–Wen (only then is its law evaluated).
     any_bouc_wen: bool,
-    /// Per lane: the law, α, the Bouc–Wen A, β, γ, n.
+    /// Per lane: the law (0 where the effect is off), α, the Bouc–Wen A, β, γ, n.
     law: [f64; N],
     alpha: [f64; N],
     bw: [[f64; N]; 4],
@@ -296,7 +296,7 @@ impl<const N: usize> LibraryEffect<N> for Building<N> {
         Building {
             top: lanes.iter().map(Vec::len).max().unwrap_or(0),
             any_bouc_wen: (0..N).any(|l| on[l] > 0.0 && q[l].law > BILINEAR),
-            law: std::array::from_fn(|l| q[l].law),
+            law: std::array::from_fn(|l| if on[l] > 0.0 { q[l].law } else { 0.0 }),
             alpha: std::array::from_fn(|l| q[l].alpha),
             bw: [
                 std::array::from_fn(|l| q[l].bw_a),
@@ -324,6 +324,31 @@ impl<const N: usize> LibraryEffect<N> for Building<N> {
 }
 
 impl<const N: usize> Building<N> {
+    /// Lane `l`'s coefficients in the order the CUDA kernel reads them (lane.cu `VS_BLD`): the
+    /// law (0 where the effect is off), α, the Bouc–Wen A, β, γ, n, then per storey 1/m (0 where
+    /// the lane has no such storey), k, c, F_y.
+    pub fn lane(&self, l: usize) -> [f64; 6 + 4 * MAX_STOREYS] {
+        let mut out = [0.0; 6 + 4 * MAX_STOREYS];
+        out[..6].copy_from_slice(&[
+            self.law[l],
+            self.alpha[l],
+            self.bw[0][l],
+            self.bw[1][l],
+            self.bw[2][l],
+            self.bw[3][l],
+        ]);
+        for i in 0..MAX_STOREYS {
+            let at = 6 + 4 * i;
+            out[at..at + 4].copy_from_slice(&[
+                self.inv_m[i][l],
+                self.k[i][l],
+                self.c[i][l],
+                self.fy[i][l],
+            ]);
+        }
+        out
+    }
+
     /// Storey i's drift and drift rate in lane l.
     #[inline(always)]
     fn drift(s: &[[f64; N]; 4 * MAX_STOREYS], i: usize, l: usize) -> (f64, f64) {
