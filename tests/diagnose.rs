@@ -64,16 +64,24 @@ fn diagnose(dir: &Path) -> Diagnosis {
 
 /// Diagnoses the campaign `toml`, with its report in `report/` beside it.
 fn diagnose_file(toml: &Path) -> Diagnosis {
-    let report = toml.parent().unwrap().join("report");
-    let fitted = toml.parent().unwrap().join("fitted.toml");
-    let (code, stdout, stderr) = study(&[
+    diagnose_named(toml, "report", &[])
+}
+
+/// Diagnoses the campaign `toml` with `extra` arguments, its report in `name/` beside it and the
+/// fitted model in `name.toml`.
+fn diagnose_named(toml: &Path, name: &str, extra: &[&str]) -> Diagnosis {
+    let report = toml.parent().unwrap().join(name);
+    let fitted = toml.parent().unwrap().join(format!("{name}.toml"));
+    let mut args = vec![
         "diagnose",
         toml.to_str().unwrap(),
         "--report",
         report.to_str().unwrap(),
         "--out",
         fitted.to_str().unwrap(),
-    ]);
+    ];
+    args.extend_from_slice(extra);
+    let (code, stdout, stderr) = study(&args);
     assert_eq!(code, 0, "{stdout}{stderr}");
     let c = report.join("candidates.parquet");
     let num = read_columns_allow_nan(&c, &["rank", "explained"]).unwrap();
@@ -938,6 +946,57 @@ fn records_hiding_compressibility() {
     let truth = [("dead_volume", 0.04), ("air_fraction", 0.02)];
     let t = [("compressibility", "compressibility", &truth[..])];
     accepted("broadband.toml", &["--as-records"], &t, &[]);
+}
+
+/// Issue 50's acceptance: a yielding 3-storey building (a soft first storey: 21 MN/m and 180 kN
+/// where the design says 24 MN/m and 250 kN) hidden in record tests. A screening (the building
+/// is not among a diagnosis's default candidates) names the family, specimen; the building
+/// named as the candidate then recovers the first storey's yield force within two standard
+/// errors and leaves at most 1.5× the noise floor.
+#[test]
+#[ignore = "issue 50 acceptance, a CI step: cargo test --release --test diagnose -- --ignored"]
+fn records_hiding_a_yielding_building() {
+    let d = tempfile::tempdir().unwrap();
+    let c = Path::new(env!("CARGO_MANIFEST_DIR")).join("studies/campaigns/broadband.toml");
+    let truth = [("k1", 21.0e6), ("fy1", 180.0e3)];
+    let mut args = vec!["--as-records", "--effect", "building"];
+    let sets: Vec<String> = truth
+        .iter()
+        .map(|(p, v)| format!("building.{p}={v}"))
+        .collect();
+    for s in &sets {
+        args.extend(["--set", s.as_str()]);
+    }
+    synth_from(&c, NOISE_ACCEPTANCE, d.path(), &args);
+    let toml = d.path().join("broadband.toml");
+    // The screening among the effects that also change the platen's force or its motion at the
+    // building's frequencies (the whole library takes about 3 min here).
+    let rivals = "specimen,reaction_mass,hold_down,seal_friction,compressibility,supply";
+    let screened = diagnose_named(&toml, "report", &["--candidates", rivals]);
+    let (first, cand) = screened.first();
+    assert_eq!(cand.family, "specimen", "{first}: {}", screened.stdout);
+    let named = diagnose_named(&toml, "building", &["--candidates", "building"]);
+    println!("{}", named.stdout);
+    let b = &named.cands["building"];
+    let after = named.residual["building"];
+    assert!(
+        after <= 1.5 * named.noise_floor,
+        "the building leaves {after}, noise floor {}",
+        named.noise_floor
+    );
+    for (p, v) in truth {
+        let i = b
+            .params
+            .iter()
+            .position(|n| *n == format!("building.{p}"))
+            .unwrap();
+        assert!(
+            (b.estimates[i] - v).abs() <= 2.0 * b.std_errors[i],
+            "building.{p}: {} ± {} does not cover the truth {v}",
+            b.estimates[i],
+            b.std_errors[i]
+        );
+    }
 }
 
 const SPECIMEN_1: [(&str, f64); 3] = [("m1", 60_000.0), ("f1", 2.5), ("zeta1", 0.03)];
