@@ -151,8 +151,11 @@ pub struct TickView<'a, const N: usize> {
     pub state: &'a [[f64; N]; NP],
     /// The effects' own channels of a lane ([`Effect::responses`]: a building's drifts, floor
     /// accelerations, base shear), each given to the callback by name.
-    pub responses: &'a dyn Fn(usize, &mut dyn FnMut(&'static str, f64)),
+    pub responses: &'a dyn Fn(usize, &mut ResponseSink<'_>),
 }
+
+/// Where an effect's channels go, by name and value ([`Effect::responses`]).
+pub type ResponseSink<'a> = dyn FnMut(&'static str, f64) + 'a;
 
 /// Receives every tick (time histories, live plots). The batch engine passes [`NoObserver`].
 ///
@@ -988,19 +991,33 @@ impl<const N: usize, E: Effect<N>> Probe<N, E> {
         if delta > 0.0 {
             let [k2, k3, k4, ka] = &mut self.k;
             let [ek2, ek3, ek4, eka] = &mut self.ek;
+            let live = effect.live_states();
             plant_axpy::<N, A>(&mut self.tmp, s, 0.5 * delta, k1);
-            axpy(self.etmp.as_mut(), es.as_ref(), 0.5 * delta, ek1.as_ref());
+            axpy(
+                live,
+                self.etmp.as_mut(),
+                es.as_ref(),
+                0.5 * delta,
+                ek1.as_ref(),
+            );
             rhs::<N, A, SIMD, Q, D, E, P>(lp, effect, x_c, &self.tmp, &self.etmp, k2, ek2);
             plant_axpy::<N, A>(&mut self.tmp, s, 0.5 * delta, k2);
-            axpy(self.etmp.as_mut(), es.as_ref(), 0.5 * delta, ek2.as_ref());
+            axpy(
+                live,
+                self.etmp.as_mut(),
+                es.as_ref(),
+                0.5 * delta,
+                ek2.as_ref(),
+            );
             rhs::<N, A, SIMD, Q, D, E, P>(lp, effect, x_c, &self.tmp, &self.etmp, k3, ek3);
             plant_axpy::<N, A>(&mut self.tmp, s, delta, k3);
-            axpy(self.etmp.as_mut(), es.as_ref(), delta, ek3.as_ref());
+            axpy(live, self.etmp.as_mut(), es.as_ref(), delta, ek3.as_ref());
             rhs::<N, A, SIMD, Q, D, E, P>(lp, effect, x_c, &self.tmp, &self.etmp, k4, ek4);
             self.s = *s;
             self.es = *es;
             plant_combine::<N, A>(&mut self.s, delta / 6.0, [k1, k2, k3, k4]);
             rk4_combine(
+                live,
                 self.es.as_mut(),
                 delta / 6.0,
                 ek1.as_ref(),
@@ -1073,8 +1090,14 @@ fn motion<const N: usize>(lane: usize, s: &[[f64; N]; NP]) -> hook::Motion {
 }
 
 #[inline(always)]
-fn axpy<const N: usize>(out: &mut [[f64; N]], base: &[[f64; N]], h: f64, k: &[[f64; N]]) {
-    for ((o, b), k) in out.iter_mut().zip(base).zip(k) {
+fn axpy<const N: usize>(
+    live: usize,
+    out: &mut [[f64; N]],
+    base: &[[f64; N]],
+    h: f64,
+    k: &[[f64; N]],
+) {
+    for ((o, b), k) in out[..live].iter_mut().zip(&base[..live]).zip(&k[..live]) {
         for l in 0..N {
             o[l] = b[l] + h * k[l];
         }
@@ -1083,6 +1106,7 @@ fn axpy<const N: usize>(out: &mut [[f64; N]], base: &[[f64; N]], h: f64, k: &[[f
 
 #[inline(always)]
 fn rk4_combine<const N: usize>(
+    live: usize,
     s: &mut [[f64; N]],
     h6: f64,
     k1: &[[f64; N]],
@@ -1090,7 +1114,7 @@ fn rk4_combine<const N: usize>(
     k3: &[[f64; N]],
     k4: &[[f64; N]],
 ) {
-    for j in 0..s.len() {
+    for j in 0..live {
         for l in 0..N {
             // 2·m as m + m (the same bits, on an adder rather than a multiplier).
             let m = k2[j][l] + k3[j][l];
@@ -1118,7 +1142,7 @@ fn plant_axpy<const N: usize, const A: usize>(
     k: &[[f64; N]; NP],
 ) {
     for &j in plant_rows::<A>() {
-        axpy(&mut out[j..=j], &base[j..=j], h, &k[j..=j]);
+        axpy(1, &mut out[j..=j], &base[j..=j], h, &k[j..=j]);
     }
 }
 
@@ -1133,6 +1157,7 @@ fn plant_combine<const N: usize, const A: usize>(
     for &j in plant_rows::<A>() {
         let r = j..=j;
         rk4_combine(
+            1,
             &mut s[r.clone()],
             h6,
             &k[0][r.clone()],
@@ -1298,6 +1323,8 @@ pub(crate) fn integrate<
         [[0.0; N]; NP],
     );
     let (mut ek1, mut ek2, mut ek3, mut ek4, mut etmp) = (es, es, es, es, es);
+    // The effects' states that move in this batch; the rest keep their values at t = 0.
+    let live = effect.live_states();
     let mut u = [0.0; N];
     let mut x_c = [0.0; N];
     let mut spool = [0.0; N];
@@ -1412,16 +1439,17 @@ pub(crate) fn integrate<
                 pending = probe_slot(obs, next_probe);
             }
             plant_axpy::<N, A>(&mut tmp, &s, 0.5 * h, &k1);
-            axpy(etmp.as_mut(), es.as_ref(), 0.5 * h, ek1.as_ref());
+            axpy(live, etmp.as_mut(), es.as_ref(), 0.5 * h, ek1.as_ref());
             rhs::<N, A, SIMD, Q, D, E, P>(lp, effect, &x_c, &tmp, &etmp, &mut k2, &mut ek2);
             plant_axpy::<N, A>(&mut tmp, &s, 0.5 * h, &k2);
-            axpy(etmp.as_mut(), es.as_ref(), 0.5 * h, ek2.as_ref());
+            axpy(live, etmp.as_mut(), es.as_ref(), 0.5 * h, ek2.as_ref());
             rhs::<N, A, SIMD, Q, D, E, P>(lp, effect, &x_c, &tmp, &etmp, &mut k3, &mut ek3);
             plant_axpy::<N, A>(&mut tmp, &s, h, &k3);
-            axpy(etmp.as_mut(), es.as_ref(), h, ek3.as_ref());
+            axpy(live, etmp.as_mut(), es.as_ref(), h, ek3.as_ref());
             rhs::<N, A, SIMD, Q, D, E, P>(lp, effect, &x_c, &tmp, &etmp, &mut k4, &mut ek4);
             plant_combine::<N, A>(&mut s, h / 6.0, [&k1, &k2, &k3, &k4]);
             rk4_combine(
+                live,
                 es.as_mut(),
                 h / 6.0,
                 ek1.as_ref(),

@@ -421,6 +421,12 @@ impl<const N: usize> Effect<N> for Building<N> {
         [[0.0; N]; 4 * MAX_STOREYS]
     }
 
+    /// The storeys of the tallest building of the batch (those above it stand still).
+    #[inline(always)]
+    fn live_states(&self) -> usize {
+        4 * self.top
+    }
+
     /// The base shear V_1 on the platen, N.
     #[inline(always)]
     fn extra_force(&self, c: hook::Motion, s: &Self::State) -> f64 {
@@ -451,10 +457,6 @@ impl<const N: usize> Effect<N> for Building<N> {
                     ds[r(i)][l] = self.k[i][l] * dd * self.bouc_wen(i, l, s[r(i)][l], dd);
                 }
             }
-        }
-        // Storeys no lane has stand still.
-        for d in &mut ds[4 * self.top..] {
-            *d = [0.0; N];
         }
     }
 

@@ -463,6 +463,15 @@ pub trait Effect<const N: usize>: Sync {
     /// Extra states at t = 0.
     fn initial_state(&self) -> Self::State;
 
+    /// How many of the extra states (arrays of lanes, from the start of `State`) move in this
+    /// batch: the integrator advances those alone, the others keeping their values at t = 0. All
+    /// of them, unless the effect knows that fewer move (a building lower than its most storeys;
+    /// an effect no lane switches on).
+    #[inline(always)]
+    fn live_states(&self) -> usize {
+        state_len::<N, Self::State>()
+    }
+
     /// Whether the two actuators stay identical in every lane under this effect (it treats them
     /// alike). Then the kernel integrates one equivalent actuator and doubles its force and its
     /// supply flow: the same numbers, bit for bit, at half the valve and chamber work. An effect
@@ -542,6 +551,11 @@ pub trait Effect<const N: usize>: Sync {
     fn responses(&self, _lane: usize, _s: &Self::State, _out: &mut dyn FnMut(&'static str, f64)) {}
 }
 
+/// The number of arrays of lanes in a state type `S` of N lanes.
+pub const fn state_len<const N: usize, S>() -> usize {
+    std::mem::size_of::<S>() / (8 * N)
+}
+
 /// The baseline model: no extra effect.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Baseline;
@@ -579,6 +593,15 @@ impl<const N: usize, A: Effect<N>, B: Effect<N>> Effect<N> for Both<A, B> {
 
     fn initial_state(&self) -> Self::State {
         Pair(self.0.initial_state(), self.1.initial_state())
+    }
+    /// A's states, then B's that move; A's that move where B has none.
+    #[inline(always)]
+    fn live_states(&self) -> usize {
+        if state_len::<N, B::State>() == 0 {
+            self.0.live_states()
+        } else {
+            state_len::<N, A::State>() + self.1.live_states()
+        }
     }
     fn symmetric(&self) -> bool {
         self.0.symmetric() && self.1.symmetric()
@@ -692,6 +715,14 @@ impl<const N: usize, E: Effect<N>> Effect<N> for Gated<E> {
 
     fn initial_state(&self) -> Self::State {
         self.effect.initial_state()
+    }
+    #[inline(always)]
+    fn live_states(&self) -> usize {
+        if self.on {
+            self.effect.live_states()
+        } else {
+            0
+        }
     }
     fn symmetric(&self) -> bool {
         !self.on || self.effect.symmetric()
