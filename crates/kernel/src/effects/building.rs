@@ -30,7 +30,8 @@ pub const MAX_STOREYS: usize = 10;
 pub const INFO: EffectInfo = EffectInfo {
     name: super::module_name(module_path!()),
     family: "specimen",
-    summary: "a shear building of 1-10 storeys (linear, bilinear or Bouc-Wen storeys) on the platen",
+    summary:
+        "a shear building of 1-10 storeys (linear, bilinear or Bouc-Wen storeys) on the platen",
     params: Params::PARAMS,
     // [chosen] A fit frees the first storey's stiffness and yield force: the storey that yields
     // first under a base motion, and the one the base shear measures.
@@ -126,7 +127,9 @@ params! {
 pub fn storeys(p: &Params) -> Vec<(f64, f64, f64)> {
     let m = [p.m1, p.m2, p.m3, p.m4, p.m5, p.m6, p.m7, p.m8, p.m9, p.m10];
     let k = [p.k1, p.k2, p.k3, p.k4, p.k5, p.k6, p.k7, p.k8, p.k9, p.k10];
-    let fy = [p.fy1, p.fy2, p.fy3, p.fy4, p.fy5, p.fy6, p.fy7, p.fy8, p.fy9, p.fy10];
+    let fy = [
+        p.fy1, p.fy2, p.fy3, p.fy4, p.fy5, p.fy6, p.fy7, p.fy8, p.fy9, p.fy10,
+    ];
     (0..(p.storeys as usize).clamp(1, MAX_STOREYS))
         .map(|i| (m[i], k[i], fy[i]))
         .collect()
@@ -176,7 +179,9 @@ pub fn modes(storeys: &[(f64, f64, f64)]) -> Vec<Mode> {
         .map(|j| {
             let psi: Vec<f64> = (0..n).map(|i| v[i][j] / sm[i]).collect();
             let l: f64 = (0..n).map(|i| sm[i] * v[i][j]).sum();
-            let top = psi.iter().fold(0.0_f64, |t, x| if x.abs() > t.abs() { *x } else { t });
+            let top = psi
+                .iter()
+                .fold(0.0_f64, |t, x| if x.abs() > t.abs() { *x } else { t });
             Mode {
                 freq_hz: w2[j].max(0.0).sqrt() / (2.0 * std::f64::consts::PI),
                 mass: l * l,
@@ -286,8 +291,13 @@ impl<const N: usize> LibraryEffect<N> for Building<N> {
     fn new(p: [&ModelParams; N]) -> Self {
         let on = super::lane_mask::<N, Self>(&p);
         let q = p.map(Params::of);
-        let lanes: [Vec<[f64; 4]>; N] =
-            std::array::from_fn(|l| if on[l] > 0.0 { lane_storeys(q[l]) } else { vec![] });
+        let lanes: [Vec<[f64; 4]>; N] = std::array::from_fn(|l| {
+            if on[l] > 0.0 {
+                lane_storeys(q[l])
+            } else {
+                vec![]
+            }
+        });
         let table = |f: usize, absent: f64| -> [[f64; N]; MAX_STOREYS] {
             std::array::from_fn(|i| {
                 std::array::from_fn(|l| lanes[l].get(i).map_or(absent, |s| s[f]))
@@ -409,10 +419,54 @@ impl<const N: usize> Building<N> {
 }
 
 /// The response channels' names, storey by storey ([`Effect::responses`]).
-const DRIFT: [&str; MAX_STOREYS] = ["drift_1_m", "drift_2_m", "drift_3_m", "drift_4_m", "drift_5_m", "drift_6_m", "drift_7_m", "drift_8_m", "drift_9_m", "drift_10_m"];
-const FORCE: [&str; MAX_STOREYS] = ["storey_force_1_n", "storey_force_2_n", "storey_force_3_n", "storey_force_4_n", "storey_force_5_n", "storey_force_6_n", "storey_force_7_n", "storey_force_8_n", "storey_force_9_n", "storey_force_10_n"];
-const FLOOR_ACCEL: [&str; MAX_STOREYS] = ["floor_accel_1_mps2", "floor_accel_2_mps2", "floor_accel_3_mps2", "floor_accel_4_mps2", "floor_accel_5_mps2", "floor_accel_6_mps2", "floor_accel_7_mps2", "floor_accel_8_mps2", "floor_accel_9_mps2", "floor_accel_10_mps2"];
-const ENERGY: [&str; MAX_STOREYS] = ["energy_1_j", "energy_2_j", "energy_3_j", "energy_4_j", "energy_5_j", "energy_6_j", "energy_7_j", "energy_8_j", "energy_9_j", "energy_10_j"];
+const DRIFT: [&str; MAX_STOREYS] = [
+    "drift_1_m",
+    "drift_2_m",
+    "drift_3_m",
+    "drift_4_m",
+    "drift_5_m",
+    "drift_6_m",
+    "drift_7_m",
+    "drift_8_m",
+    "drift_9_m",
+    "drift_10_m",
+];
+const FORCE: [&str; MAX_STOREYS] = [
+    "storey_force_1_n",
+    "storey_force_2_n",
+    "storey_force_3_n",
+    "storey_force_4_n",
+    "storey_force_5_n",
+    "storey_force_6_n",
+    "storey_force_7_n",
+    "storey_force_8_n",
+    "storey_force_9_n",
+    "storey_force_10_n",
+];
+const FLOOR_ACCEL: [&str; MAX_STOREYS] = [
+    "floor_accel_1_mps2",
+    "floor_accel_2_mps2",
+    "floor_accel_3_mps2",
+    "floor_accel_4_mps2",
+    "floor_accel_5_mps2",
+    "floor_accel_6_mps2",
+    "floor_accel_7_mps2",
+    "floor_accel_8_mps2",
+    "floor_accel_9_mps2",
+    "floor_accel_10_mps2",
+];
+const ENERGY: [&str; MAX_STOREYS] = [
+    "energy_1_j",
+    "energy_2_j",
+    "energy_3_j",
+    "energy_4_j",
+    "energy_5_j",
+    "energy_6_j",
+    "energy_7_j",
+    "energy_8_j",
+    "energy_9_j",
+    "energy_10_j",
+];
 
 impl<const N: usize> Effect<N> for Building<N> {
     type State = [[f64; N]; 4 * MAX_STOREYS];
