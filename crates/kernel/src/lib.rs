@@ -23,6 +23,7 @@ pub mod gpu_lanes;
 pub mod ground;
 pub mod lane_params;
 pub mod lanes;
+pub mod linalg;
 pub mod metrics;
 pub mod params;
 pub mod platen;

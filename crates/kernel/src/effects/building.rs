@@ -174,7 +174,7 @@ pub fn modes(storeys: &[(f64, f64, f64)]) -> Vec<Mode> {
             a[i + 1][i] = a[i][i + 1];
         }
     }
-    let (w2, v) = jacobi(a);
+    let (w2, v) = crate::linalg::symmetric_eigen(a);
     let mut out: Vec<Mode> = (0..n)
         .map(|j| {
             let psi: Vec<f64> = (0..n).map(|i| v[i][j] / sm[i]).collect();
@@ -191,52 +191,6 @@ pub fn modes(storeys: &[(f64, f64, f64)]) -> Vec<Mode> {
         .collect();
     out.sort_by(|a, b| a.freq_hz.total_cmp(&b.freq_hz));
     out
-}
-
-/// Eigenvalues and eigenvectors (columns) of the symmetric matrix `a` by cyclic Jacobi rotations.
-fn jacobi(mut a: Vec<Vec<f64>>) -> (Vec<f64>, Vec<Vec<f64>>) {
-    let n = a.len();
-    let mut v: Vec<Vec<f64>> = (0..n)
-        .map(|i| (0..n).map(|j| f64::from(u8::from(i == j))).collect())
-        .collect();
-    for _sweep in 0..100 {
-        let off: f64 = (0..n)
-            .flat_map(|i| (0..n).filter(move |&j| j != i).map(move |j| (i, j)))
-            .map(|(i, j)| a[i][j] * a[i][j])
-            .sum();
-        let diag: f64 = (0..n).map(|i| a[i][i] * a[i][i]).sum();
-        if off <= 1e-30 * diag {
-            break;
-        }
-        for p in 0..n {
-            for q in p + 1..n {
-                if a[p][q] == 0.0 {
-                    continue;
-                }
-                let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
-                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-                let t = if theta == 0.0 { 1.0 } else { t };
-                let c = 1.0 / (t * t + 1.0).sqrt();
-                let s = t * c;
-                for k in 0..n {
-                    let (akp, akq) = (a[k][p], a[k][q]);
-                    a[k][p] = c * akp - s * akq;
-                    a[k][q] = s * akp + c * akq;
-                }
-                for k in 0..n {
-                    let (apk, aqk) = (a[p][k], a[q][k]);
-                    a[p][k] = c * apk - s * aqk;
-                    a[q][k] = s * apk + c * aqk;
-                }
-                for k in 0..n {
-                    let (vkp, vkq) = (v[k][p], v[k][q]);
-                    v[k][p] = c * vkp - s * vkq;
-                    v[k][q] = s * vkp + c * vkq;
-                }
-            }
-        }
-    }
-    ((0..n).map(|i| a[i][i]).collect(), v)
 }
 
 /// State indices of storey i: floor displacement relative to the platen, m; its velocity, m/s;
