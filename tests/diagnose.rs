@@ -62,16 +62,17 @@ fn diagnose(dir: &Path) -> Diagnosis {
     diagnose_file(&dir.join("diagnosis.toml"))
 }
 
-/// Diagnoses the campaign `toml`, with its report in `report/` beside it.
+/// Diagnoses the campaign `toml`, with its report in `report/` and the fitted model in
+/// `fitted.toml` beside it.
 fn diagnose_file(toml: &Path) -> Diagnosis {
-    diagnose_named(toml, "report", &[])
+    diagnose_named(toml, ("report", "fitted.toml"), &[])
 }
 
-/// Diagnoses the campaign `toml` with `extra` arguments, its report in `name/` beside it and the
-/// fitted model in `name.toml`.
-fn diagnose_named(toml: &Path, name: &str, extra: &[&str]) -> Diagnosis {
-    let report = toml.parent().unwrap().join(name);
-    let fitted = toml.parent().unwrap().join(format!("{name}.toml"));
+/// Diagnoses the campaign `toml` with `extra` arguments, its report in the folder `names.0`
+/// beside it and the fitted model in the file `names.1`.
+fn diagnose_named(toml: &Path, names: (&str, &str), extra: &[&str]) -> Diagnosis {
+    let report = toml.parent().unwrap().join(names.0);
+    let fitted = toml.parent().unwrap().join(names.1);
     let mut args = vec![
         "diagnose",
         toml.to_str().unwrap(),
@@ -972,10 +973,14 @@ fn records_hiding_a_yielding_building() {
     // The screening among the effects that also change the platen's force or its motion at the
     // building's frequencies (the whole library takes about 3 min here).
     let rivals = "specimen,reaction_mass,hold_down,seal_friction,compressibility,supply";
-    let screened = diagnose_named(&toml, "report", &["--candidates", rivals]);
+    let screened = diagnose_named(&toml, ("report", "fitted.toml"), &["--candidates", rivals]);
     let (first, cand) = screened.first();
     assert_eq!(cand.family, "specimen", "{first}: {}", screened.stdout);
-    let named = diagnose_named(&toml, "building", &["--candidates", "building"]);
+    let named = diagnose_named(
+        &toml,
+        ("building", "building.toml"),
+        &["--candidates", "building"],
+    );
     println!("{}", named.stdout);
     let b = &named.cands["building"];
     let after = named.residual["building"];
