@@ -40,7 +40,30 @@ fn history(model: &ModelParams, reference: &Reference) -> History {
 }
 
 fn peak(v: &[f64]) -> f64 {
-    v.iter().fold(0.0f64, |m, x| m.max(x.abs()))
+    worst(v.iter().map(|x| x.abs()))
+}
+
+/// The largest of 0 and `values`, NaN if any is NaN (`f64::max` would drop it and hide a failed
+/// run).
+fn worst(values: impl Iterator<Item = f64>) -> f64 {
+    largest(0.0, values)
+}
+
+/// The largest of `start` and `values`, NaN if any is NaN.
+fn largest(start: f64, values: impl Iterator<Item = f64>) -> f64 {
+    values.fold(start, |m, x| {
+        if x.is_nan() || m.is_nan() {
+            f64::NAN
+        } else {
+            m.max(x)
+        }
+    })
+}
+
+/// The largest |a − b| over the samples, NaN if any is NaN.
+fn worst_diff(a: &[f64], b: &[f64]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    worst(a.iter().zip(b).map(|(x, y)| (x - y).abs()))
 }
 
 /// A uniform shear building's modes: ω² = λ k/m with λ the eigenvalues of the tridiagonal
@@ -101,16 +124,12 @@ fn a_linear_building_is_the_modal_specimen_of_its_modes() {
         hb.channel("accel_mps2").unwrap(),
         hs.channel("accel_mps2").unwrap(),
     );
-    let worst = ab
-        .iter()
-        .zip(a_s)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max);
+    let gap = worst_diff(ab, a_s);
     let scale = peak(a_s);
     assert!(scale > 1.0, "the run moves: {scale}");
     assert!(
-        worst <= 1e-6 * scale,
-        "building vs modal specimen: {worst:e} of {scale} m/s²"
+        gap <= 1e-6 * scale,
+        "building vs modal specimen: {gap:e} of {scale} m/s²"
     );
     // The base shear is the specimen's: the building's mass times its absolute accelerations.
     let shear = hb.channel("base_shear_n").unwrap();
@@ -121,11 +140,7 @@ fn a_linear_building_is_the_modal_specimen_of_its_modes() {
                 .sum::<f64>()
         })
         .collect();
-    let off = shear
-        .iter()
-        .zip(&inertia)
-        .map(|(v, f)| (v + f).abs())
-        .fold(0.0, f64::max);
+    let off = worst(shear.iter().zip(&inertia).map(|(v, f)| (v + f).abs()));
     assert!(
         off <= 1e-9 * peak(shear),
         "V_1 = -sum m_i a_i: {off:e} of {}",
@@ -145,11 +160,12 @@ fn a_yielding_storey_follows_the_bilinear_law_and_dissipates() {
     let (k, fy, alpha) = (q.k1, q.fy1, q.alpha);
     let d = h.channel("drift_1_m").unwrap();
     let r = h.channel("storey_force_1_n").unwrap();
-    let over = d
-        .iter()
-        .zip(r)
-        .map(|(d, r)| r.abs() - ((1.0 - alpha) * fy + alpha * k * d.abs()))
-        .fold(f64::MIN, f64::max);
+    let over = largest(
+        f64::MIN,
+        d.iter()
+            .zip(r)
+            .map(|(d, r)| r.abs() - ((1.0 - alpha) * fy + alpha * k * d.abs())),
+    );
     assert!(over <= 1e-6 * fy, "beyond the yield line by {over} N");
     assert!(peak(r) >= fy, "the storey yields: peak {} N", peak(r));
     assert!(peak(d) > 2.0 * fy / k, "ductility {}", peak(d) * k / fy);
@@ -170,12 +186,8 @@ fn a_yielding_storey_follows_the_bilinear_law_and_dissipates() {
         lin.channel("drift_1_m").unwrap(),
         lin.channel("energy_1_j").unwrap(),
     );
-    let top = w.iter().fold(0.0f64, |m, x| m.max(*x));
-    let off = d
-        .iter()
-        .zip(w)
-        .map(|(d, w)| (w - 0.5 * k * d * d).abs())
-        .fold(0.0, f64::max);
+    let top = worst(w.iter().copied());
+    let off = worst(d.iter().zip(w).map(|(d, w)| (w - 0.5 * k * d * d).abs()));
     assert!(
         off <= 1e-6 * top,
         "linear: work - k d²/2 = {off:e} of {top} J"
@@ -194,11 +206,7 @@ fn a_sharp_bouc_wen_storey_approaches_the_bilinear_one() {
         bilinear.channel("drift_1_m").unwrap(),
         bw.channel("drift_1_m").unwrap(),
     );
-    let diff = a
-        .iter()
-        .zip(b)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max);
+    let diff = worst_diff(a, b);
     assert!(diff < 0.05 * peak(a), "{diff} of {}", peak(a));
 }
 
