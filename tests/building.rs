@@ -222,3 +222,81 @@ fn a_fractional_count_of_storeys_is_refused() {
         "{e:?}"
     );
 }
+
+/// The specimen's metrics (`peak_drift_ratio`, `peak_base_shear_n`, `ductility_demand`,
+/// `hysteretic_energy_j`) are the peaks of the building's own channels over the run and the
+/// storeys' work less what they hold at its end; the same in a batch beside a lane without a
+/// building, where they are NaN; and a linear building dissipates nothing.
+#[test]
+fn the_specimen_metrics_are_the_peaks_of_its_channels() {
+    let reference = sine(2.0, 0.5);
+    let model = building_model(1.0);
+    let mut h = History::with_capacity(reference.len());
+    let m = run_one(&model, &reference, &Default::default(), &mut h)
+        .unwrap()
+        .metrics;
+    let q = model.effect_params.building.clone();
+    let storey = [(q.k1, q.fy1), (q.k2, q.fy2), (q.k3, q.fy3)];
+    let ch = |name: String| h.channel(&name).unwrap().to_vec();
+    let drifts: Vec<Vec<f64>> = (1..=3).map(|i| ch(format!("drift_{i}_m"))).collect();
+    let drift = worst(drifts.iter().map(|d| peak(d)));
+    let ductility = worst(
+        drifts
+            .iter()
+            .zip(storey)
+            .map(|(d, (k, fy))| peak(d) * k / fy),
+    );
+    let held = |i: usize, (k, _): (f64, f64)| {
+        let (d, r) = (
+            *drifts[i].last().unwrap(),
+            *ch(format!("storey_force_{}_n", i + 1)).last().unwrap(),
+        );
+        let r_h = (r - q.alpha * k * d) / (1.0 - q.alpha);
+        0.5 * q.alpha * k * d * d + (1.0 - q.alpha) * r_h * r_h / (2.0 * k)
+    };
+    let energy: f64 = (0..3)
+        .map(|i| ch(format!("energy_{}_j", i + 1)).last().unwrap() - held(i, storey[i]))
+        .sum();
+    let close = |got: f64, want: f64, what: &str| {
+        let rel = (got - want).abs() / want.abs();
+        assert!(rel <= 1e-9, "{what}: {got} against {want} ({rel:e})");
+    };
+    close(m.peak_drift_ratio, drift / q.height, "peak drift ratio");
+    close(
+        m.peak_base_shear_n,
+        peak(&ch("base_shear_n".into())),
+        "peak base shear",
+    );
+    close(m.ductility_demand, ductility, "ductility demand");
+    close(m.hysteretic_energy_j, energy, "dissipated energy");
+    assert!(
+        m.ductility_demand > 1.5 && m.hysteretic_energy_j > 100.0,
+        "{m:?}"
+    );
+
+    // In a batch beside a bare lane: the same bits, and NaN where there is no building.
+    let bare = ModelParams::default();
+    let solver = Default::default();
+    let got =
+        vshake::orchestration::runs::single::run_group(&[&model, &bare], &[&reference], &solver)
+            .unwrap();
+    assert_eq!(got[0].metrics.bits(), m.bits());
+    let names = vshake::kernel::metrics::Metrics::SPECIMEN;
+    let bare_cols = got[1].metrics.columns();
+    for (n, v) in bare_cols.iter().filter(|(n, _)| names.contains(n)) {
+        assert!(v.is_nan(), "{n} = {v} without a building");
+    }
+    assert_eq!(bare_cols.len(), m.columns().len());
+
+    // Linear storeys hold all their work: nothing dissipated, to rounding.
+    let mut h = History::with_capacity(reference.len());
+    let lin = run_one(&building_model(0.0), &reference, &solver, &mut h).unwrap();
+    let work: f64 = (1..=3)
+        .map(|i| worst(h.channel(&format!("energy_{i}_j")).unwrap().iter().copied()))
+        .sum();
+    let e = lin.metrics.hysteretic_energy_j;
+    assert!(
+        e.abs() <= 1e-9 * work,
+        "linear: {e} J dissipated of {work} J of work"
+    );
+}

@@ -222,7 +222,10 @@ pub fn simulate(
     crate::shell::commands::sim_cmd::write_history(out, &spec, &outcome, &status)?;
     Ok(Simulated {
         status,
-        metrics: outcome.result.metrics.columns(),
+        metrics: outcome
+            .result
+            .metrics
+            .columns_for(spec.model.effects.building),
     })
 }
 

@@ -19,7 +19,7 @@ use super::spectrum::oscillators;
 pub const SOURCE: &str = include_str!("cuda/lane.cu");
 
 /// Float64 fields per lane in the parameter record (lane.cu: `VS_LANE_FIELDS`).
-pub const LANE_FIELDS: usize = 177;
+pub const LANE_FIELDS: usize = 178;
 
 /// The library effects the CUDA kernel has, with their bit in its `effects` argument and build
 /// (lane.cu: `VS_E_*`): bit i for registry line i.
@@ -64,8 +64,11 @@ pub fn effect_bits(models: &[&ModelParams]) -> i64 {
 /// Most response-spectrum periods a lane accumulates (lane.cu: `VS_MAX_OSC`).
 pub const MAX_OSC: usize = 128;
 
+/// The first of the specimen's four metrics in the output (lane.cu: `VS_SPECIMEN`).
+const OUT_SPECIMEN: usize = 42;
+
 /// Output fields before the oscillator peaks (lane.cu: `VS_OSC_PEAK`).
-const OUT_FIXED: usize = 42;
+const OUT_FIXED: usize = OUT_SPECIMEN + 4;
 
 /// Output fields per lane for a run with `n_osc` response-spectrum periods.
 pub fn out_fields(n_osc: usize) -> usize {
@@ -379,6 +382,7 @@ impl Finisher {
             a_re: std::array::from_fn(|h| o(24 + h)),
             a_im: std::array::from_fn(|h| o(24 + N_HARM + h)),
             osc_peak: (0..self.n_osc).map(|i| o(OUT_FIXED + i)).collect(),
+            specimen: std::array::from_fn(|i| o(OUT_SPECIMEN + i)),
         };
         let harmonics = reference
             .fundamental_hz
@@ -389,7 +393,11 @@ impl Finisher {
             .map(|(s, psa)| (s, psa.as_slice()));
         LaneResult {
             status,
-            metrics: self.template.with_sums(&sums).finish(0, harmonics, target),
+            metrics: self
+                .template
+                .with_sums(&sums)
+                .finish(0, harmonics, target)
+                .with_specimen(sums.specimen),
         }
     }
 }
@@ -427,7 +435,7 @@ mod tests {
         assert_eq!(TWO_ACTUATORS, 1 << EffectId::ALL.len());
         let source = SOURCE.replace(' ', "");
         assert!(source.contains(&format!("VS_E_TWO={TWO_ACTUATORS}")));
-        assert!(source.contains("VS_LANE_FIELDS=VS_BLD+6+4*10"));
+        assert!(source.contains("VS_LANE_FIELDS=VS_BLD+7+4*10"));
         let m = ModelParams::default();
         assert_eq!(pack_params(&[&m]).unwrap().len(), LANE_FIELDS);
     }

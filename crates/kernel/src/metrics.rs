@@ -43,6 +43,14 @@ pub struct Metrics {
     pub pgd_ratio: f64,
     pub spectral_err_mean: f64,
     pub spectral_err_max: f64,
+    /// What a building on the platen experiences over the whole run ([`SpecimenAcc`]; NaN
+    /// without one): the largest storey drift over the storey height, the largest |base shear|
+    /// (N), the largest storey drift over its yield drift F_y/k, and the energy its storeys
+    /// dissipated (J).
+    pub peak_drift_ratio: f64,
+    pub peak_base_shear_n: f64,
+    pub ductility_demand: f64,
+    pub hysteretic_energy_j: f64,
 }
 
 impl Metrics {
@@ -73,7 +81,39 @@ impl Metrics {
         pgd_ratio: f64::NAN,
         spectral_err_mean: f64::NAN,
         spectral_err_max: f64::NAN,
+        peak_drift_ratio: f64::NAN,
+        peak_base_shear_n: f64::NAN,
+        ductility_demand: f64::NAN,
+        hysteretic_energy_j: f64::NAN,
     };
+
+    /// The names of the specimen's metrics ([`SpecimenAcc`]), in column order.
+    pub const SPECIMEN: [&'static str; 4] = [
+        "peak_drift_ratio",
+        "peak_base_shear_n",
+        "ductility_demand",
+        "hysteretic_energy_j",
+    ];
+
+    /// [`Metrics::columns`], without the specimen's unless the run carries one (`specimen`).
+    pub fn columns_for(&self, specimen: bool) -> Vec<(&'static str, f64)> {
+        let mut v = self.columns();
+        if !specimen {
+            v.retain(|(n, _)| !Self::SPECIMEN.contains(n));
+        }
+        v
+    }
+
+    /// These metrics with the specimen's, in [`Metrics::SPECIMEN`] order.
+    pub fn with_specimen(mut self, v: [f64; 4]) -> Metrics {
+        [
+            self.peak_drift_ratio,
+            self.peak_base_shear_n,
+            self.ductility_demand,
+            self.hysteretic_energy_j,
+        ] = v;
+        self
+    }
 
     /// Every metric's bit pattern, in [`Metrics::columns`] order: to compare two runs bit for
     /// bit (`==` on the struct fails on the NaN of a metric that does not apply).
@@ -116,6 +156,13 @@ impl Metrics {
             ("spectral_err_mean", self.spectral_err_mean),
             ("spectral_err_max", self.spectral_err_max),
         ]);
+        let specimen = [
+            self.peak_drift_ratio,
+            self.peak_base_shear_n,
+            self.ductility_demand,
+            self.hysteretic_energy_j,
+        ];
+        v.extend(Self::SPECIMEN.into_iter().zip(specimen));
         v
     }
 }
@@ -159,6 +206,43 @@ impl Basis {
             b.sin[h] = s1 * b.cos[h - 1] + c1 * b.sin[h - 1];
         }
         b
+    }
+}
+
+/// What a specimen experiences, per lane, over every tick of the run: NaN until an effect with a
+/// specimen ([`crate::effects::Effect::watch`]) writes it, so lanes without one report NaN.
+#[derive(Debug, Clone, Copy)]
+pub struct SpecimenAcc<const N: usize> {
+    /// max over ticks and storeys of |drift| / storey height.
+    pub drift_ratio: [f64; N],
+    /// max over ticks of |base shear|, N.
+    pub base_shear: [f64; N],
+    /// max over ticks and storeys of |drift| / (F_y / k).
+    pub ductility: [f64; N],
+    /// The energy dissipated by the storeys so far (their work less what they store), J.
+    pub energy: [f64; N],
+}
+
+impl<const N: usize> Default for SpecimenAcc<N> {
+    fn default() -> Self {
+        SpecimenAcc {
+            drift_ratio: [f64::NAN; N],
+            base_shear: [f64::NAN; N],
+            ductility: [f64::NAN; N],
+            energy: [f64::NAN; N],
+        }
+    }
+}
+
+impl<const N: usize> SpecimenAcc<N> {
+    /// Lane `l`'s values, in [`Metrics::SPECIMEN`] order.
+    pub fn lane(&self, l: usize) -> [f64; 4] {
+        [
+            self.drift_ratio[l],
+            self.base_shear[l],
+            self.ductility[l],
+            self.energy[l],
+        ]
     }
 }
 
@@ -224,6 +308,8 @@ pub struct LaneSums {
     pub xr2: f64,
     /// The response-spectrum oscillators' peak displacements, m (empty: no spectrum).
     pub osc_peak: Vec<f64>,
+    /// The specimen's metrics ([`SpecimenAcc::lane`]).
+    pub specimen: [f64; 4],
 }
 
 impl MetricsAcc<1> {

@@ -30,7 +30,7 @@ use super::excitation::{Drive, Reference};
 use super::friction;
 pub use super::lane_params::{LaneParams, SetupError};
 use super::lanes::{AVX512, PORTABLE};
-use super::metrics::{Basis, Metrics, MetricsAcc, WindowTick};
+use super::metrics::{Basis, Metrics, MetricsAcc, SpecimenAcc, WindowTick};
 use super::params::{ModelParams, ValveLaw};
 use super::platen::{self, Damping, PowDamping, SqrtDamping};
 use super::servovalve::{FlowLaw, Linear, Orifice};
@@ -1314,6 +1314,7 @@ pub(crate) fn integrate<
             .as_ref()
             .map(|(spec, _)| (spec, 1.0 / lp.f_s)),
     );
+    let mut specimen = SpecimenAcc::<N>::default();
 
     let (mut k1, mut k2, mut k3, mut k4, mut tmp) = (
         [[0.0; N]; NP],
@@ -1389,6 +1390,7 @@ pub(crate) fn integrate<
             responses: &|l, out| effect.responses(l, &es, out),
         });
         acc.every_tick(&u);
+        effect.watch(&es, &mut specimen);
         if (w0..w1).contains(&k) {
             let basis = fundamental.map(|f0| Basis::at(k, lp.f_s, f0));
             for l in 0..N {
@@ -1494,14 +1496,16 @@ pub(crate) fn integrate<
     std::array::from_fn(|l| match status[l] {
         LaneStatus::Ok => LaneResult {
             status: status[l],
-            metrics: acc.finish(
-                l,
-                fundamental.map(|f0| Metrics::highest_harmonic(f0, lp.f_s)),
-                refs[l]
-                    .spectrum
-                    .as_ref()
-                    .map(|(spec, psa)| (spec, psa.as_slice())),
-            ),
+            metrics: acc
+                .finish(
+                    l,
+                    fundamental.map(|f0| Metrics::highest_harmonic(f0, lp.f_s)),
+                    refs[l]
+                        .spectrum
+                        .as_ref()
+                        .map(|(spec, psa)| (spec, psa.as_slice())),
+                )
+                .with_specimen(specimen.lane(l)),
         },
         failed => LaneResult {
             status: failed,

@@ -54,7 +54,7 @@ pub fn run(args: &SimArgs) -> anyhow::Result<()> {
     writeln!(stdout, "  status      {status}")?;
     writeln!(stdout)?;
     writeln!(stdout, "  {:<22} {:>12}", "metric", "value")?;
-    for (name, v) in out.result.metrics.columns() {
+    for (name, v) in out.result.metrics.columns_for(spec.model.effects.building) {
         writeln!(stdout, "  {name:<22} {:>12}", fmt_value(v))?;
     }
     let ran = matches!(out.result.status, LaneStatus::Ok);

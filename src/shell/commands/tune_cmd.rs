@@ -347,10 +347,17 @@ fn write_evaluations(
         .iter()
         .flat_map(|e| (0..e.rows.len()).map(move |i| (e, i)))
         .collect();
-    let metrics: Vec<&str> = Metrics::NAN.columns().iter().map(|c| c.0).collect();
+    let specimen = tuner.carries_building();
+    let metrics: Vec<&str> = Metrics::NAN
+        .columns_for(specimen)
+        .iter()
+        .map(|c| c.0)
+        .collect();
     for (k, m) in metrics.iter().enumerate() {
         // A metric of a run that did not end, or one the run does not define, is null.
-        let v = runs.iter().map(|(e, i)| e.rows[*i].metrics.columns()[k].1);
+        let v = runs
+            .iter()
+            .map(|(e, i)| e.rows[*i].metrics.columns_for(specimen)[k].1);
         cols.push((m.to_string(), Column::OptF64(v.map(finite).collect())));
     }
     let n_e = tuner.spec.excitations.len();

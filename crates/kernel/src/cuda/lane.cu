@@ -66,8 +66,8 @@ enum {
   VS_SPEC = VS_HOLD + 1,         // specimen: per mode m (0 off), ω², 2ζω
   VS_SENSOR = VS_SPEC + 9,       // accel, disp, force sensors: on, ω², 2ζω, τ, Padé, 12/τ², 6/τ
   VS_BLD = VS_SENSOR + 21,       // building: law (0 off), α, Bouc–Wen A, β, γ, n, then per
-                                 // storey 1/m (0 absent), k, c, F_y
-  VS_LANE_FIELDS = VS_BLD + 6 + 4 * 10
+                                 // storey 1/m (0 absent), k, c, F_y, then 1/height
+  VS_LANE_FIELDS = VS_BLD + 7 + 4 * 10
 };
 
 // Which effects a build applies (gpu_lanes.rs: EFFECT_BITS), bit i = registry line i, and
@@ -86,7 +86,8 @@ enum {
   VS_PEAK, VS_PEAK_R = VS_PEAK + 3,
   VS_AR_RE = VS_PEAK_R + 3, VS_AR_IM, VS_XR_RE, VS_XR_IM, VS_AR2, VS_XR2, VS_X_RE, VS_X_IM,
   VS_A_RE, VS_A_IM = VS_A_RE + 9,
-  VS_OSC_PEAK = VS_A_IM + 9,     // one per oscillator of the response spectrum
+  VS_SPECIMEN = VS_A_IM + 9,     // the building's peak drift ratio, base shear, ductility, energy
+  VS_OSC_PEAK = VS_SPECIMEN + 4,     // one per oscillator of the response spectrum
 };
 
 // The effects are fixed when the kernel is compiled (NVRTC: -DVS_EFFECTS=bits, one build per
@@ -300,6 +301,28 @@ VS_FN double vs_shear(const double *P, long long n, long long l, int i, const Vs
   double d, dd;
   vs_drift(s, i, d, dd);
   return vs_restoring(P, n, l, i, d, s.e[VS_S_BLD + 4 * i + 2]) + F(VS_BLD + 6 + 4 * i + 2) * dd;
+}
+
+// building.rs `watch`, once per tick: the peaks of the drift ratio, the base shear and the
+// ductility demand, and the energy the storeys dissipated (work less the elastic energy held).
+VS_FN void vs_watch(const double *P, long long n, long long l, const VsState &s, double *spec) {
+  if (F(VS_BLD + 6) == 0.0) return;
+  double drift = 0.0, ductility = 0.0, energy = 0.0, a = F(VS_BLD + 1);
+  for (int i = 0; i < 10 && F(VS_BLD + 6 + 4 * i) != 0.0; ++i) {
+    const long long q = VS_BLD + 6 + 4 * i;
+    const int u = VS_S_BLD + 4 * i;
+    double d, dd, k = F(q + 1);
+    vs_drift(s, i, d, dd);
+    double cap = F(VS_BLD) == 1.0 ? F(q + 3) : vs_inf();
+    double held = fmin(fmax(s.e[u + 2], -cap), cap);
+    drift = fmax(drift, fabs(d));
+    ductility = fmax(ductility, fabs(d) * k / F(q + 3));
+    energy += s.e[u + 3] - 0.5 * a * k * d * d - 0.5 * (1.0 - a) * held * held / k;
+  }
+  spec[0] = fmax(spec[0], drift * F(VS_BLD + 6 + 4 * 10));
+  spec[1] = fmax(spec[1], fabs(vs_shear(P, n, l, 0, s)));
+  spec[2] = fmax(spec[2], ductility);
+  spec[3] = energy;
 }
 
 // The `extra_force` hooks, summed as the Rust effect set nests them:
@@ -569,6 +592,7 @@ struct VsAcc {
   double n, max_u, err_a2, err_x2, peak_err_a, peak_err_x, peak[3], peak_r[3];
   double ar_re, ar_im, xr_re, xr_im, ar2, xr2, x_re, x_im, a_re[9], a_im[9];
   double osc_u[VS_MAX_OSC], osc_v[VS_MAX_OSC], osc_peak[VS_MAX_OSC], prev;
+  double spec[4];
 };
 
 VS_FN void vs_window(const VsRun &r, long long k, long long at, VsAcc &c, double a, double v,
@@ -640,6 +664,7 @@ VS_FN void vs_store(const VsRun &r, double *out, long long n, long long l, const
     O(VS_A_RE + h) = c.a_re[h];
     O(VS_A_IM + h) = c.a_im[h];
   }
+  for (int i = 0; i < 4; ++i) O(VS_SPECIMEN + i) = c.spec[i];
   for (long long i = 0; i < r.n_osc; ++i) O(VS_OSC_PEAK + i) = c.osc_peak[i];
 #undef O
 }
@@ -708,6 +733,7 @@ VS_FN void vs_lane(const VsRun &r, const double *P, double *out, long long n, lo
   vs_initial(P, n, l, s);
   VsCtrl m = {};
   VsAcc c = {};
+  for (int i = 0; i < 4; ++i) c.spec[i] = vs_from_bits(0x7ff8000000000000ULL);  // NaN: no building
   m.f_prev = vs_force(P, n, l, s);
   double status = 0.0, fail_tick = 0.0, value = 0.0, chamber = 0.0;
   bool linear = r.linear_valve != 0;
@@ -717,6 +743,7 @@ VS_FN void vs_lane(const VsRun &r, const double *P, double *out, long long n, lo
     double x_c = vs_command(P, n, l, r, k, m, x, f, u);
     vs_rhs(P, n, l, linear, x_c, s, k1);
     c.max_u = fmax(c.max_u, fabs(u));
+    if (VS_ON(VS_E_BLD)) vs_watch(P, n, l, s, c.spec);
     if (k >= r.w0 && k < r.w1) {
       // The metrics see the channels as recorded (the sensors' chains), the controller the plant's.
       double a_rec = vs_sensed(P, n, l, 0, k1.v, s), x_rec = vs_sensed(P, n, l, 1, x, s);

@@ -21,6 +21,7 @@
 //! frequency falls) with odd harmonics and a loss of the force at the peaks.
 
 use super::{hook, Effect, EffectInfo, LibraryEffect, PlantView, Stage};
+use crate::metrics::SpecimenAcc;
 use crate::params::{params, ModelParams, ParamIssue, Range};
 
 /// Most storeys.
@@ -231,6 +232,8 @@ pub struct Building<const N: usize> {
     c: [[f64; N]; MAX_STOREYS],
     fy: [[f64; N]; MAX_STOREYS],
     cap: [[f64; N]; MAX_STOREYS],
+    /// Per lane: 1 / the storey height, 1/m (for the drift ratio only).
+    inv_h: [f64; N],
 }
 
 /// A lane's building, storey by storey: m, k, c, F_y.
@@ -283,6 +286,7 @@ impl<const N: usize> LibraryEffect<N> for Building<N> {
                     _ => f64::INFINITY,
                 })
             }),
+            inv_h: std::array::from_fn(|l| 1.0 / q[l].height),
         }
     }
 }
@@ -290,9 +294,10 @@ impl<const N: usize> LibraryEffect<N> for Building<N> {
 impl<const N: usize> Building<N> {
     /// Lane `l`'s coefficients in the order the CUDA kernel reads them (lane.cu `VS_BLD`): the
     /// law (0 where the effect is off), α, the Bouc–Wen A, β, γ, n, then per storey 1/m (0 where
-    /// the lane has no such storey), k, c, F_y.
-    pub fn lane(&self, l: usize) -> [f64; 6 + 4 * MAX_STOREYS] {
-        let mut out = [0.0; 6 + 4 * MAX_STOREYS];
+    /// the lane has no such storey), k, c, F_y, and last 1 / the storey height.
+    pub fn lane(&self, l: usize) -> [f64; 7 + 4 * MAX_STOREYS] {
+        let mut out = [0.0; 7 + 4 * MAX_STOREYS];
+        out[6 + 4 * MAX_STOREYS] = self.inv_h[l];
         out[..6].copy_from_slice(&[
             self.law[l],
             self.alpha[l],
@@ -465,6 +470,27 @@ impl<const N: usize> Effect<N> for Building<N> {
                     ds[r(i)][l] = self.k[i][l] * dd * self.bouc_wen(i, l, s[r(i)][l], dd);
                 }
             }
+        }
+    }
+
+    /// The peaks of the drift ratio, the base shear and the ductility demand, and the energy the
+    /// storeys dissipated: their work ∫R dd less the elastic energy they hold,
+    /// α k d²/2 + (1 − α) r²/(2k) (0 for a linear storey, whatever its drift).
+    #[inline(always)]
+    fn watch(&self, s: &Self::State, acc: &mut SpecimenAcc<N>) {
+        for l in (0..N).filter(|&l| self.present[0][l] > 0.0) {
+            let (mut drift, mut ductility, mut energy) = (0.0f64, 0.0f64, 0.0);
+            for i in (0..self.top).take_while(|&i| self.present[i][l] > 0.0) {
+                let (d, _) = Self::drift(s, i, l);
+                let (k, a, held) = (self.k[i][l], self.alpha[l], self.held(i, l, s[r(i)][l]));
+                drift = drift.max(d.abs());
+                ductility = ductility.max(d.abs() * k / self.fy[i][l]);
+                energy += s[w(i)][l] - 0.5 * a * k * d * d - 0.5 * (1.0 - a) * held * held / k;
+            }
+            acc.drift_ratio[l] = acc.drift_ratio[l].max(drift * self.inv_h[l]);
+            acc.base_shear[l] = acc.base_shear[l].max(self.shear(s, 0, l).abs());
+            acc.ductility[l] = acc.ductility[l].max(ductility);
+            acc.energy[l] = energy;
         }
     }
 

@@ -84,6 +84,7 @@
 //! their derivatives in [`Effect::derivs`]. A throwaway effect (a test's specimen) needs only
 //! [`Effect`]: `simulate::run` takes any.
 
+use super::metrics::SpecimenAcc;
 use super::params::{Component, ModelParams, ParamInfo};
 
 /// What the rest of the tool knows about a library effect: its name (the model-file table and
@@ -549,6 +550,12 @@ pub trait Effect<const N: usize>: Sync {
     /// value in SI units (a building's storey drifts, floor accelerations and base shear): what a
     /// specimen experiences, for the time histories. Observers call it; the step does not.
     fn responses(&self, _lane: usize, _s: &Self::State, _out: &mut dyn FnMut(&'static str, f64)) {}
+
+    /// Once per controller tick, over the whole run: what the specimen in the effect's states
+    /// experiences, kept in `acc` (peaks, dissipated energy) for the metrics of
+    /// [`crate::metrics::Metrics::SPECIMEN`]. Lanes the effect leaves alone stay NaN there.
+    #[inline(always)]
+    fn watch(&self, _s: &Self::State, _acc: &mut SpecimenAcc<N>) {}
 }
 
 /// The number of arrays of lanes in a state type `S` of N lanes.
@@ -648,6 +655,11 @@ impl<const N: usize, A: Effect<N>, B: Effect<N>> Effect<N> for Both<A, B> {
     fn responses(&self, lane: usize, s: &Self::State, out: &mut dyn FnMut(&'static str, f64)) {
         self.0.responses(lane, &s.0, out);
         self.1.responses(lane, &s.1, out);
+    }
+    #[inline(always)]
+    fn watch(&self, s: &Self::State, acc: &mut SpecimenAcc<N>) {
+        self.0.watch(&s.0, acc);
+        self.1.watch(&s.1, acc);
     }
     #[inline(always)]
     fn derivs(&self, plant: &PlantView<'_, N>, s: &Self::State, ds: &mut Self::State) {
@@ -794,6 +806,12 @@ impl<const N: usize, E: Effect<N>> Effect<N> for Gated<E> {
     fn responses(&self, lane: usize, s: &Self::State, out: &mut dyn FnMut(&'static str, f64)) {
         if self.on {
             self.effect.responses(lane, s, out);
+        }
+    }
+    #[inline(always)]
+    fn watch(&self, s: &Self::State, acc: &mut SpecimenAcc<N>) {
+        if self.on {
+            self.effect.watch(s, acc);
         }
     }
     #[inline(always)]

@@ -190,6 +190,11 @@ impl Tuner {
         }
     }
 
+    /// Whether the runs may carry a building (then the specimen's metrics are written).
+    pub fn carries_building(&self) -> bool {
+        crate::study::problem::carries_building(&self.spec.model, &self.spec.uncertain)
+    }
+
     /// The parameters written beside each run: the gains, then the uncertain ones.
     pub fn columns(&self) -> &[&'static ParamInfo] {
         &self.plan.columns

@@ -50,6 +50,7 @@ use crate::runs::spec::{self, ExcitationSpec};
 use crate::study::problem::{self, NamedExcitation, Variable};
 use crate::toml_fields::{Fields, InputError, Issues};
 use std::path::PathBuf;
+use vshake_kernel::metrics::Metrics;
 use vshake_kernel::params::{Component, ModelParams, ParamInfo};
 use vshake_kernel::simulate::Solver;
 use vshake_kernel::spectrum::SpectrumSpec;
@@ -140,7 +141,7 @@ pub fn measures(metric: &str, e: &ExcitationSpec, f_s: f64) -> bool {
     let ExcitationSpec::Sine { sine, .. } = e else {
         return applies(metric, false);
     };
-    let top = vshake_kernel::metrics::Metrics::highest_harmonic(sine.freq_hz, f_s);
+    let top = Metrics::highest_harmonic(sine.freq_hz, f_s);
     let lowest = match metric {
         "thd_odd_ratio" => 3,
         "thd_even_ratio" => 2,
@@ -394,6 +395,12 @@ fn read_objective(
             continue; // reported as unknown by finish
         };
         let Some(w) = t.f64(&k, issues) else { continue };
+        if Metrics::SPECIMEN.contains(&metric) {
+            issues.push(
+                t.path_of(&k),
+                format!("{metric} is what the specimen experiences, not a tracking error: it is not tuned for (evaluations.parquet has it as a column)"),
+            );
+        }
         if !(w.is_finite() && w > 0.0) {
             issues.push(t.path_of(&k), format!("{w} must be a positive weight"));
         }

@@ -388,12 +388,24 @@ fn ground_overlap(variables: &[Variable], excitations: &[NamedExcitation], issue
     }
 }
 
-/// `[responses] metrics`: the metrics written (every one when absent), and whether the list
-/// was written.
-fn read_responses(root: &mut Fields<'_>, issues: &mut Issues) -> (Vec<&'static str>, bool) {
+/// Whether a study's runs may carry a building: on in its model, or one of its parameters varied.
+pub(crate) fn carries_building(model: &ModelParams, variables: &[Variable]) -> bool {
+    model.effects.building || variables.iter().any(|v| v.path().starts_with("building."))
+}
+
+/// `[responses] metrics`: the metrics written, and whether the list was written. When absent,
+/// every metric, but the specimen's ([`Metrics::SPECIMEN`]) only where the study carries one
+/// (`specimen`): a bare table's results have no building columns.
+fn read_responses(
+    root: &mut Fields<'_>,
+    specimen: bool,
+    issues: &mut Issues,
+) -> (Vec<&'static str>, bool) {
     let all = all_metric_names();
     let Some(mut r) = root.table("responses", issues) else {
-        return (all, false);
+        let mut metrics = all;
+        metrics.retain(|m| specimen || !Metrics::SPECIMEN.contains(m));
+        return (metrics, false);
     };
     let listed = r.has("metrics");
     let mut metrics = all.clone();
@@ -781,7 +793,8 @@ impl StudySpec {
         spec::validate_model(&model, "model", &mut issues);
         let variables = read_variables(&mut root, &model, &mut issues);
         let excitations = read_excitations(&mut root, &model, &mut issues);
-        let (metrics, metrics_listed) = read_responses(&mut root, &mut issues);
+        let specimen = carries_building(&model, &variables);
+        let (metrics, metrics_listed) = read_responses(&mut root, specimen, &mut issues);
         let notes = aliased_harmonics(
             &excitations,
             &metrics,
