@@ -478,6 +478,11 @@ pub struct TuneArgs {
     /// Print only the result (no line per generation).
     #[arg(long, short)]
     pub quiet: bool,
+    /// Continue a tuning stopped by a signal (Ctrl-C, SIGTERM) or killed, from the journal in
+    /// its output folder (tune.journal): the same tuning file and --model, the generations done
+    /// are not run again, and the result is the uninterrupted run's, bit for bit.
+    #[arg(long, conflicts_with = "force")]
+    pub resume: bool,
 }
 
 #[derive(Debug, clap::Args)]

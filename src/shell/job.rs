@@ -7,3 +7,4 @@ pub mod progress;
 pub mod resume;
 pub mod sizing;
 pub mod study_job;
+pub mod tune_journal_file;

@@ -124,6 +124,41 @@ impl Metrics {
             .collect()
     }
 
+    /// The metrics whose [`Metrics::bits`] are `bits` (None when the count differs): a stored
+    /// run read back bit for bit.
+    pub fn from_bits(bits: &[u64]) -> Option<Metrics> {
+        let mut m = Metrics::NAN;
+        let mut slots: Vec<&mut f64> = vec![&mut m.amp_ratio, &mut m.phase_err_deg];
+        slots.extend(m.h.iter_mut());
+        slots.extend([
+            &mut m.thd_odd,
+            &mut m.thd_even,
+            &mut m.rms_err_accel_ratio,
+            &mut m.rms_err_disp_ratio,
+            &mut m.peak_err_accel_mps2,
+            &mut m.max_abs_u_v,
+            &mut m.disp_amp_ratio,
+            &mut m.disp_phase_err_deg,
+            &mut m.peak_err_disp_m,
+            &mut m.pga_ratio,
+            &mut m.pgv_ratio,
+            &mut m.pgd_ratio,
+            &mut m.spectral_err_mean,
+            &mut m.spectral_err_max,
+            &mut m.peak_drift_ratio,
+            &mut m.peak_base_shear_n,
+            &mut m.ductility_demand,
+            &mut m.hysteretic_energy_j,
+        ]);
+        if slots.len() != bits.len() {
+            return None;
+        }
+        for (slot, b) in slots.into_iter().zip(bits) {
+            *slot = f64::from_bits(*b);
+        }
+        Some(m)
+    }
+
     /// h_k for k = 2…9.
     pub fn h(&self, k: usize) -> f64 {
         self.h[k - 2]
@@ -487,6 +522,16 @@ impl<const N: usize> MetricsAcc<N> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn metrics_read_back_from_their_bits_are_the_same_in_column_order() {
+        let n = Metrics::NAN.columns().len();
+        let bits: Vec<u64> = (0..n).map(|i| (1.5 + i as f64).to_bits()).collect();
+        let m = Metrics::from_bits(&bits).unwrap();
+        assert_eq!(m.bits(), bits);
+        assert_eq!(m.columns()[3], ("h3_ratio", 4.5));
+        assert!(Metrics::from_bits(&bits[1..]).is_none());
+    }
 
     #[test]
     fn projection_recovers_a_known_signal() {

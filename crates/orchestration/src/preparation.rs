@@ -3,4 +3,5 @@
 pub mod cmaes;
 pub mod drive_iteration;
 pub mod tune;
+pub mod tune_journal;
 pub mod tune_spec;

@@ -5,6 +5,7 @@ use crate::kernel::excitation::Reference;
 use crate::kernel::metrics::Metrics;
 use crate::kernel::params::ModelParams;
 use crate::orchestration::preparation::tune::{self, Evaluation, GenerationSummary, Tuned, Tuner};
+use crate::orchestration::preparation::tune_journal;
 use crate::orchestration::preparation::tune_spec::{Statistic, TuneSpec};
 use crate::orchestration::runs::single::{self, SimOutcome};
 use crate::orchestration::runs::spec::SimSpec;
@@ -13,13 +14,17 @@ use crate::shell::cli::TuneArgs;
 use crate::shell::formats::meta::{self, Key, Kind};
 use crate::shell::formats::parquet_write;
 use crate::shell::formats::parquet_write::Column;
+use crate::shell::job::interrupt;
+use crate::shell::job::outputs::output_paths;
 use crate::shell::job::study_job;
+use crate::shell::job::tune_journal_file::{JournalFile, JOURNAL};
 use crate::shell::report::tune_report;
 use crate::shell::report::tune_report::Nominal;
 use crate::shell::BadInput;
 use crate::shell::RunFailed;
 use anyhow::Context;
 use std::io::Write;
+use std::ops::ControlFlow;
 use std::path::Path;
 use std::time::Instant;
 
@@ -32,13 +37,20 @@ const OUTPUTS: [&str; 5] = [
     "report.html",
 ];
 
+/// The interrupted tuning's evaluations, in the output folder until it is resumed.
+const PARTIAL: &str = "evaluations.partial.parquet";
+
 pub fn run(args: &TuneArgs) -> anyhow::Result<()> {
-    let text = crate::shell::formats::input::read_input_text(&args.file)
-        .map_err(|e| BadInput(format!("{}: cannot read: {e}", args.file.display())))?;
+    let read = |p: &Path| {
+        crate::shell::formats::input::read_input_text(p)
+            .map_err(|e| BadInput(format!("{}: cannot read: {e}", p.display())))
+    };
+    let text = read(&args.file)?;
+    let model_text = args.model.as_deref().map(read).transpose()?;
     let base_model = crate::shell::formats::campaign_io::load_model(args.model.as_deref())?;
     let spec = TuneSpec::from_toml_on(&text, &args.file.display().to_string(), base_model)?;
     let dir = args.out.clone().unwrap_or_else(|| spec.output.clone());
-    let paths = crate::shell::job::outputs::output_paths(&dir, &OUTPUTS, args.force)?;
+    let paths = outputs(args, &dir)?;
     let base = args.file.parent().unwrap_or(Path::new("."));
     let references = study_job::references(&tune::study_of(&spec), base, &[])?;
     let pool = study_job::pool(args.threads)?;
@@ -48,43 +60,37 @@ pub fn run(args: &TuneArgs) -> anyhow::Result<()> {
             dir.display()
         ))
     })?;
+    let mut tuner = Tuner::new(spec, references.clone());
+    let (journal, replayed) = open_journal(args, &dir, &text, model_text.as_deref(), &mut tuner)?;
     // stdout is not held while the search runs: its lines are printed from a pool thread.
+    let threads = pool.current_num_threads();
     header(
         &mut std::io::stdout().lock(),
         args,
-        &spec,
-        pool.current_num_threads(),
+        &tuner.spec,
+        threads,
+        replayed,
     )?;
-    let mut tuner = Tuner::new(spec, references.clone());
+    interrupt::install().context("installing the signal handlers")?;
     let t0 = Instant::now();
-    let quiet = args.quiet;
-    let tuned = pool.install(|| {
-        tuner.run(|g, _| {
-            if !quiet {
-                print_generation(g);
-            }
-        })
-    })?;
+    let (tuned, journal) = pool.install(|| search(&mut tuner, journal, replayed, args.quiet))?;
     let wall = t0.elapsed().as_secs_f64();
+    let command = command_line(args);
+    if tuned.interrupted {
+        return Err(stopped(args, &dir, &tuner, &tuned, &text, &command));
+    }
     let mut o = std::io::stdout().lock();
     result(&mut o, &tuner, &tuned, wall)?;
     let nominal = nominal_runs(&tuner, &tuned, &references)?;
-    let command = match &args.model {
-        Some(m) => format!("tune {} --model {}", args.file.display(), m.display()),
-        None => format!("tune {}", args.file.display()),
-    };
     write_evaluations(&paths[2], &tuner, &tuned, &text, &command)?;
     write_generations(&paths[3], &tuned.generations)?;
     let page = tune_report::html(&tuner, &tuned, &nominal, &references, wall)?;
     crate::shell::job::outputs::write_whole(&paths[4], page.as_bytes())?;
+    journal.remove()?;
+    remove_stale(&[dir.join(PARTIAL)])?;
     if let Some(why) = &tuned.best.infeasible {
         // A model left by an earlier run (--force) would pass for this one's.
-        for stale in &paths[..2] {
-            if stale.exists() {
-                std::fs::remove_file(stale)
-                    .with_context(|| format!("removing {}", stale.display()))?;
-            }
-        }
+        remove_stale(&paths[..2])?;
         return Err(RunFailed(format!(
             "no candidate met the constraints (the start: {why}); nothing tuned is written: {} says why each failed; loosen [constraints], the gains' bounds or the uncertain parameters",
             paths[2].display()
@@ -104,13 +110,146 @@ pub fn run(args: &TuneArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The tuning's output files in `dir`, refused where they stand (unless `--force`); a fresh
+/// start also refuses an interrupted tuning's files, and `--resume` needs its journal.
+fn outputs(args: &TuneArgs, dir: &Path) -> anyhow::Result<Vec<std::path::PathBuf>> {
+    if args.resume && !dir.join(JOURNAL).exists() {
+        let done = dir.join(OUTPUTS[0]).exists();
+        return Err(BadInput(format!(
+            "{}: no interrupted tuning to resume (no {JOURNAL}){}",
+            dir.display(),
+            if done {
+                "; the tuning there is complete"
+            } else {
+                ""
+            }
+        ))
+        .into());
+    }
+    // A fresh start refuses an interrupted tuning's files too (--resume continues it).
+    let guarded = match args.resume {
+        true => OUTPUTS.to_vec(),
+        false => [&OUTPUTS[..], &[JOURNAL, PARTIAL]].concat(),
+    };
+    let mut paths = output_paths(dir, &guarded, args.force)?;
+    paths.truncate(OUTPUTS.len());
+    Ok(paths)
+}
+
+/// A new journal, or with `--resume` the interrupted tuning's, its generations handed to the
+/// tuner to replay: the journal and how many generations it holds.
+fn open_journal(
+    args: &TuneArgs,
+    dir: &Path,
+    text: &str,
+    model_text: Option<&str>,
+    tuner: &mut Tuner,
+) -> anyhow::Result<(JournalFile, usize)> {
+    if !args.resume {
+        return Ok((JournalFile::start(dir, text, model_text)?, 0));
+    }
+    let (journal, done) = JournalFile::resume(dir, text, model_text)?;
+    let n = done.len();
+    tuner.resume(done);
+    Ok((journal, n))
+}
+
+/// The search, each generation printed and journaled (those replayed from the journal are not
+/// written again), stopped after the generation in which a signal came.
+fn search(
+    tuner: &mut Tuner,
+    mut journal: JournalFile,
+    replayed: usize,
+    quiet: bool,
+) -> anyhow::Result<(Tuned, JournalFile)> {
+    let mut failed = None;
+    let tuned = tuner.run(|g, evals| {
+        if !quiet {
+            print_generation(g);
+        }
+        if g.generation >= replayed {
+            let runs = evals
+                .iter()
+                .map(|e| (e.candidate, &e.gains[..], &e.rows[..]));
+            if let Err(e) = journal.append(&tune_journal::generation(g.generation, runs)) {
+                failed = Some(e);
+                return ControlFlow::Break(());
+            }
+        }
+        match interrupt::requested() {
+            Some(_) => ControlFlow::Break(()),
+            None => ControlFlow::Continue(()),
+        }
+    })?;
+    match failed {
+        Some(e) => Err(e),
+        None => Ok((tuned, journal)),
+    }
+}
+
+/// A tuning stopped by a signal: every evaluation so far in evaluations.partial.parquet, the
+/// journal kept for `--resume`, and the error that exits with 128 + the signal.
+fn stopped(
+    args: &TuneArgs,
+    dir: &Path,
+    tuner: &Tuner,
+    t: &Tuned,
+    text: &str,
+    command: &str,
+) -> anyhow::Error {
+    let partial = dir.join(PARTIAL);
+    if let Err(e) = write_evaluations(&partial, tuner, t, text, command) {
+        return e;
+    }
+    let signal = interrupt::requested().unwrap_or(signal_hook::consts::SIGTERM);
+    let last = t.generations.last().map_or(0, |g| g.generation);
+    let out = format!("--out {}", dir.display());
+    interrupt::Interrupted {
+        signal,
+        message: format!(
+            "stopped by {} after generation {last} of at most {}: {} evaluations kept in {} and {}; continue with: study {} {out} --resume",
+            interrupt::name(signal),
+            tuner.spec.search.generations,
+            t.evaluations.len(),
+            partial.display(),
+            dir.join(JOURNAL).display(),
+            command_line(args),
+        ),
+    }
+    .into()
+}
+
+/// The command as the files record it: `tune FILE [--model M]`.
+fn command_line(args: &TuneArgs) -> String {
+    match &args.model {
+        Some(m) => format!("tune {} --model {}", args.file.display(), m.display()),
+        None => format!("tune {}", args.file.display()),
+    }
+}
+
+/// Files of an earlier run that would pass for this one's, removed.
+fn remove_stale(paths: &[std::path::PathBuf]) -> anyhow::Result<()> {
+    for stale in paths.iter().filter(|p| p.exists()) {
+        std::fs::remove_file(stale).with_context(|| format!("removing {}", stale.display()))?;
+    }
+    Ok(())
+}
+
 fn header(
     o: &mut impl Write,
     args: &TuneArgs,
     spec: &TuneSpec,
     threads: usize,
+    replayed: usize,
 ) -> anyhow::Result<()> {
     writeln!(o, "study tune {}", args.file.display())?;
+    if args.resume {
+        writeln!(
+            o,
+            "  resumed     {replayed} generation{} from the journal, not run again",
+            if replayed == 1 { "" } else { "s" }
+        )?;
+    }
     if let Some(m) = &args.model {
         writeln!(
             o,

@@ -19,11 +19,13 @@
 //!   quantile) are reported for every candidate.
 
 use crate::preparation::cmaes::Cmaes;
+use crate::preparation::tune_journal::Stored;
 use crate::preparation::tune_spec::{Statistic, TuneSpec};
 use crate::study::batch::{DesignSource, Plan, Row, RowStatus};
 use crate::study::problem::{Method, StudySpec, Variable};
 use crate::study::sampling::{Design, Distribution, UnitDesign};
 use rayon::prelude::*;
+use std::ops::ControlFlow;
 use vshake_kernel::excitation::Reference;
 use vshake_kernel::params::ParamInfo;
 use vshake_kernel::LANES;
@@ -114,6 +116,8 @@ pub struct Tuned {
     pub evaluations: Vec<Evaluation>,
     /// Why the search stopped.
     pub stopped: String,
+    /// Whether `each` stopped it before its end (a signal): the search is not finished.
+    pub interrupted: bool,
 }
 
 /// The study a tuning's runs are: its model, plan, spectrum and solver, the gains and the
@@ -175,6 +179,8 @@ pub struct Tuner {
     pub spec: TuneSpec,
     plan: Plan,
     pub draws: Vec<Vec<f64>>,
+    /// Generations of an interrupted tuning ([`Tuner::resume`]), taken instead of running them.
+    replay: std::collections::VecDeque<Vec<Stored>>,
 }
 
 impl Tuner {
@@ -187,7 +193,42 @@ impl Tuner {
             draws: draws(&spec),
             spec,
             plan,
+            replay: Default::default(),
         }
+    }
+
+    /// Continue an interrupted tuning: its journal's generations are judged again from their
+    /// stored runs (checked against the candidates the search asks for), not run.
+    pub fn resume(&mut self, generations: Vec<Vec<Stored>>) {
+        self.replay = generations.into();
+    }
+
+    /// The stored generation `generation`'s evaluations, when it is the next to replay; `Err`
+    /// when its candidates are not `candidates` (the journal is another tuning's).
+    fn replayed(
+        &mut self,
+        generation: usize,
+        candidates: &[Vec<f64>],
+    ) -> anyhow::Result<Option<Vec<Evaluation>>> {
+        let Some(stored) = self.replay.pop_front() else {
+            return Ok(None);
+        };
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        let same = stored.len() == candidates.len()
+            && stored.iter().zip(candidates).all(|(s, c)| {
+                s.generation == generation
+                    && bits(&s.gains) == bits(c)
+                    && s.rows.len() == self.draws.len() * self.spec.excitations.len()
+            });
+        if !same {
+            anyhow::bail!("the journal's generation {generation} is not this tuning's: its candidates differ from the search's (the tuning file, the model or the build changed)");
+        }
+        Ok(Some(
+            stored
+                .into_iter()
+                .map(|s| self.judge(generation, s.candidate, s.gains, s.rows))
+                .collect(),
+        ))
     }
 
     /// Whether the runs may carry a building (then the specimen's metrics are written).
@@ -215,6 +256,9 @@ impl Tuner {
         generation: usize,
         candidates: &[Vec<f64>],
     ) -> anyhow::Result<Vec<Evaluation>> {
+        if let Some(done) = self.replayed(generation, candidates)? {
+            return Ok(done);
+        }
         let n_d = self.draws.len();
         let rows: Vec<Vec<f64>> = candidates
             .iter()
@@ -318,10 +362,11 @@ impl Tuner {
     }
 
     /// The search from the starting gains: generation 0 is the start, then CMA-ES until the
-    /// spread falls below the tolerance or the generation limit; `each` sees every generation.
+    /// spread falls below the tolerance or the generation limit; `each` sees every generation
+    /// (replayed ones included) and may stop the search after it ([`Tuned::interrupted`]).
     pub fn run(
         &mut self,
-        mut each: impl FnMut(&GenerationSummary, &[Evaluation]),
+        mut each: impl FnMut(&GenerationSummary, &[Evaluation]) -> ControlFlow<()>,
     ) -> anyhow::Result<Tuned> {
         let s = self.spec.search;
         let (lo, hi): (Vec<f64>, Vec<f64>) =
@@ -339,9 +384,9 @@ impl Tuner {
         let mut evaluations = vec![start.clone()];
         let mut generations = Vec::new();
         let summary0 = summary(0, std::slice::from_ref(&start), &best, &es);
-        each(&summary0, std::slice::from_ref(&start));
+        let mut flow = each(&summary0, std::slice::from_ref(&start));
         generations.push(summary0);
-        while es.generation() < s.generations && es.spread() > s.tolerance {
+        while flow.is_continue() && es.generation() < s.generations && es.spread() > s.tolerance {
             let x = es.ask();
             let evals = self.evaluate(es.generation() + 1, &x)?;
             es.tell(&x, &evals.iter().map(|e| e.rank).collect::<Vec<_>>());
@@ -351,11 +396,14 @@ impl Tuner {
                 }
             }
             let line = summary(es.generation(), &evals, &best, &es);
-            each(&line, &evals);
+            flow = each(&line, &evals);
             generations.push(line);
             evaluations.extend(evals);
         }
-        let stopped = if es.spread() <= s.tolerance {
+        let interrupted = flow.is_break();
+        let stopped = if interrupted {
+            format!("stopped after generation {}", es.generation())
+        } else if es.spread() <= s.tolerance {
             format!("the search spread fell below {} of the ranges", s.tolerance)
         } else {
             format!("the generation limit ({})", s.generations)
@@ -366,6 +414,7 @@ impl Tuner {
             generations,
             evaluations,
             stopped,
+            interrupted,
         })
     }
 }
