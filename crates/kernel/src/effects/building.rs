@@ -348,19 +348,6 @@ impl<const N: usize> Building<N> {
         self.restoring(i, l, d, s[r(i)][l]) + self.c[i][l] * dd
     }
 
-    /// dr/dd over k of storey i in lane l at hysteretic force r and drift rate dd, for the
-    /// linear and bilinear laws: 0 while the force is held at ±F_y and the drift moves outwards.
-    #[inline(always)]
-    fn tangent(&self, i: usize, l: usize, r: f64, dd: f64) -> f64 {
-        let cap = self.cap[i][l];
-        let out = (r >= cap && dd > 0.0) || (r <= -cap && dd < 0.0);
-        if out {
-            0.0
-        } else {
-            1.0
-        }
-    }
-
     /// The Bouc–Wen law's dr/dd over k in lane l (storey i): A − |z|^n (β + γ sgn(ḋ z)),
     /// z = r/F_y.
     #[inline(always)]
@@ -448,18 +435,30 @@ impl<const N: usize> Effect<N> for Building<N> {
 
     #[inline(always)]
     fn derivs(&self, plant: &PlantView<'_, N>, s: &Self::State, ds: &mut Self::State) {
-        let mut above = [0.0; N];
+        let (mut above, rest) = ([0.0; N], [0.0; N]);
+        // Storey by storey, its lanes in one branch-free pass (they vectorise): the floor below
+        // as rows (the platen's: zeros, and x − 0 = x, so the drift is the same bits).
         for i in (0..self.top).rev() {
+            let (below_u, below_v) = match i {
+                0 => (&rest, &rest),
+                _ => (&s[u(i - 1)], &s[v(i - 1)]),
+            };
+            let [su, sv, sr, _]: &[[f64; N]; 4] = s[4 * i..4 * i + 4].try_into().unwrap();
+            let [du, dv, dr, dw]: &mut [[f64; N]; 4] =
+                (&mut ds[4 * i..4 * i + 4]).try_into().unwrap();
+            let (k, c, cap) = (&self.k[i], &self.c[i], &self.cap[i]);
             for l in 0..N {
-                let (d, dd) = Self::drift(s, i, l);
-                let x = s[r(i)][l];
-                let restoring = self.restoring(i, l, d, x);
-                let shear = restoring + self.c[i][l] * dd;
-                ds[u(i)][l] = s[v(i)][l];
-                ds[v(i)][l] =
-                    (above[l] - shear) * self.inv_m[i][l] - plant.accel[l] * self.present[i][l];
-                ds[r(i)][l] = self.k[i][l] * dd * self.tangent(i, l, x, dd);
-                ds[w(i)][l] = restoring * dd;
+                let (d, dd, x) = (su[l] - below_u[l], sv[l] - below_v[l], sr[l]);
+                let a = self.alpha[l];
+                let restoring = a * k[l] * d + (1.0 - a) * x.max(-cap[l]).min(cap[l]);
+                let shear = restoring + c[l] * dd;
+                du[l] = sv[l];
+                dv[l] = (above[l] - shear) * self.inv_m[i][l] - plant.accel[l] * self.present[i][l];
+                // The linear and bilinear laws' dr/dd over k: 0 while the force is held at ±F_y
+                // and the drift moves outwards, else 1 (without a short-circuit or a branch).
+                let out = ((x >= cap[l]) & (dd > 0.0)) | ((x <= -cap[l]) & (dd < 0.0));
+                dr[l] = k[l] * dd * f64::from(u8::from(!out));
+                dw[l] = restoring * dd;
                 above[l] = shear;
             }
         }
