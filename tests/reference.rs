@@ -118,7 +118,7 @@ fn default_step_is_converged() {
         ) = (g_d, l_v, l_a, g_f);
         corners.push(p);
     }
-    let mut worst = (0.0f64, String::new());
+    let mut worst = common::Worst::default();
     for (c, p) in corners.iter().enumerate() {
         for g in [1.73, 3.20] {
             let lp = LaneParams::<1>::new(&[p]).unwrap();
@@ -156,20 +156,13 @@ fn default_step_is_converged() {
                 if x.is_nan() && y.is_nan() && name.starts_with("spectral_err") {
                     continue;
                 }
-                if !((x - y).abs() <= worst.0) {
-                    worst = (
-                        (x - y).abs(),
-                        format!("corner {c}, {g} g, {name}: {x} against {y}"),
-                    );
-                }
+                worst.see(x, y, || {
+                    format!("corner {c}, {g} g, {name}: {x} against {y}")
+                });
             }
         }
     }
-    assert!(
-        worst.0 <= 1e-5,
-        "{n} substeps are not converged: {}",
-        worst.1
-    );
+    worst.assert_within(1e-5, &format!("{n} substeps are not converged"));
     let p = ModelParams::default();
     for g in [1.73, 3.20] {
         let a = metrics(&p, g, n);
@@ -336,4 +329,33 @@ fn a_diverging_lane_fails_alone() {
         LaneStatus::Ok => panic!("g_d = 400 should diverge"),
     }
     assert!(r[1].metrics.amp_ratio.is_nan());
+}
+
+/// The shared comparisons fail on a NaN wherever it comes: the largest difference of a loop
+/// ([`common::Worst`]) when the NaN is in the first column and a later one is smaller (the masked
+/// case of a `!(d <= worst)` loop), a loop that compared nothing, and one pair
+/// ([`common::assert_close`]).
+#[test]
+fn a_nan_in_a_compared_metric_fails_the_comparison() {
+    let fails = |f: &dyn Fn()| std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).is_err();
+    let mut w = common::Worst::default();
+    w.see(f64::NAN, 1.0, || "first column".into());
+    w.see(1.0, 1.0 + 1e-9, || "second column".into());
+    assert!(w.what == "first column" && w.diff.is_infinite(), "{w:?}");
+    assert!(fails(&|| w.assert_within(1e-5, "NaN first")));
+    assert!(fails(
+        &|| common::Worst::default().assert_within(1.0, "empty")
+    ));
+    assert!(fails(&|| common::assert_close(
+        f64::NAN,
+        0.0,
+        1.0,
+        "row 1, amp_ratio"
+    )));
+    assert!(!fails(&|| common::assert_close(
+        1.0,
+        1.0 + 1e-12,
+        1e-9,
+        "row 1, amp_ratio"
+    )));
 }

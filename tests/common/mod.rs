@@ -148,3 +148,51 @@ pub fn wait_for(path: &Path, extra: std::time::Duration) {
     }
     std::thread::sleep(extra);
 }
+
+/// The largest difference over a loop of compared values, NaN-aware: a NaN on either side counts
+/// as an infinite difference (it can never hide behind a later, smaller one, as
+/// `if !(d <= worst)` let it), and the comparisons are counted, so that a loop that compared
+/// nothing fails too. A metric that does not apply is left out by the caller, by name.
+#[allow(dead_code)] // used by the convergence tests, not by every test crate
+#[derive(Debug, Default)]
+pub struct Worst {
+    pub diff: f64,
+    pub what: String,
+    pub count: usize,
+}
+
+#[allow(dead_code)]
+impl Worst {
+    /// |x − y| (infinite when either is NaN), kept with `what` if it is the largest so far.
+    pub fn see(&mut self, x: f64, y: f64, what: impl FnOnce() -> String) {
+        self.count += 1;
+        let d = match (x - y).abs() {
+            d if d.is_nan() => f64::INFINITY,
+            d => d,
+        };
+        if self.count == 1 || d > self.diff {
+            (self.diff, self.what) = (d, what());
+        }
+    }
+
+    /// Fails unless something was compared and the largest difference is within `tol`.
+    pub fn assert_within(&self, tol: f64, context: &str) {
+        assert!(self.count > 0, "{context}: nothing was compared");
+        assert!(
+            self.diff <= tol,
+            "{context}: {:e} > {tol:e} at {}",
+            self.diff,
+            self.what
+        );
+    }
+}
+
+/// Fails unless |a − b| ≤ tol, NaN included, naming `what` (the column and row).
+#[allow(dead_code)]
+pub fn assert_close(a: f64, b: f64, tol: f64, what: &str) {
+    let d = (a - b).abs();
+    assert!(
+        d <= tol,
+        "{what}: {a} against {b} (|difference| {d:e}, tolerance {tol:e})"
+    );
+}
