@@ -8,7 +8,7 @@ use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::OnceLock;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 use vshake::shell::formats::parquet_read::{parquet_batches, parquet_metadata};
 
 fn bin() -> Command {
@@ -436,7 +436,6 @@ fn dry_run_sizes_the_run_and_writes_nothing() {
 #[test]
 fn huge_designs_are_refused_or_announced() {
     let d = tempfile::tempdir().unwrap();
-    let t = Instant::now();
     let st = small_study(d.path(), "1000000000", "lhs", SINE, "");
     let (code, out, err) = study(&["run", s(&st)]);
     assert_eq!(code, 2, "{out}{err}");
@@ -444,10 +443,7 @@ fn huge_designs_are_refused_or_announced() {
         err.contains("study.samples") && err.contains("7.5 GiB") && err.contains("monte_carlo"),
         "{err}"
     );
-    assert!(
-        t.elapsed() < Duration::from_secs(10),
-        "refused before allocating"
-    );
+    assert!(!out.contains("done"), "refused before any run: {out}");
     let (code, _, err) = study(&[
         "run",
         s(&small_study(d.path(), "64", "lhs", SINE, "")),

@@ -14,9 +14,10 @@ fn mkfifo(path: &Path) {
     assert!(ok, "mkfifo {}", path.display());
 }
 
-/// `study ARGS` with a watchdog: killed after 20 s (a blocked read); returns the exit code, stderr
-/// and the wall time.
-fn study_watched(args: &[&str]) -> (i32, String, Duration) {
+/// `study ARGS` with a guard against a hang (a read blocked on a FIFO never ends): killed after
+/// 20 s. Not a speed limit: a refusal is shown by its message and exit code, not by its time.
+/// Returns the exit code and stderr.
+fn study_watched(args: &[&str]) -> (i32, String) {
     let t0 = Instant::now();
     let mut child = Command::new(env!("CARGO_BIN_EXE_study"))
         .args(args)
@@ -33,7 +34,7 @@ fn study_watched(args: &[&str]) -> (i32, String, Duration) {
     }
     let out = child.wait_with_output().unwrap();
     let err = String::from_utf8_lossy(&out.stderr).to_string();
-    (out.status.code().unwrap_or(-1), err, t0.elapsed())
+    (out.status.code().unwrap_or(-1), err)
 }
 
 #[test]
@@ -46,7 +47,7 @@ fn a_fifo_as_a_tests_data_is_refused_at_once() {
         "[campaign]\nname = \"c\"\n[[test]]\nname = \"f1\"\ndata = \"f1.csv\"\nexcitation = { kind = \"sine\", freq_hz = 3.0, amp_g = 1.0 }\n",
     )
     .unwrap();
-    let (code, err, wall) = study_watched(&["compare", campaign.to_str().unwrap()]);
+    let (code, err) = study_watched(&["compare", campaign.to_str().unwrap()]);
     assert_eq!(code, 2, "{err}");
     assert!(
         err.contains("f1.csv: is a FIFO (named pipe), not a data file"),
@@ -57,7 +58,6 @@ fn a_fifo_as_a_tests_data_is_refused_at_once() {
         1,
         "the file named once: {err}"
     );
-    assert!(wall < Duration::from_secs(1), "refused in {wall:?}");
 }
 
 #[test]
@@ -70,22 +70,19 @@ fn a_fifo_as_a_record_and_as_a_study_file_is_refused_at_once() {
         "[excitation]\nkind = \"record\"\nfile = \"record.csv\"\ncolumn = \"accel_g\"\nunit = \"g\"\n",
     )
     .unwrap();
-    let (code, err, wall) = study_watched(&["sim", run.to_str().unwrap()]);
+    let (code, err) = study_watched(&["sim", run.to_str().unwrap()]);
     assert_eq!(code, 2, "{err}");
     assert!(
         err.contains("record.csv: is a FIFO (named pipe), not a regular file"),
         "{err}"
     );
-    assert!(wall < Duration::from_secs(1), "refused in {wall:?}");
     mkfifo(&dir.path().join("study.toml"));
-    let (code, err, wall) =
-        study_watched(&["run", dir.path().join("study.toml").to_str().unwrap()]);
+    let (code, err) = study_watched(&["run", dir.path().join("study.toml").to_str().unwrap()]);
     assert_eq!(code, 2, "{err}");
     assert!(
         err.contains("study.toml: cannot read: is a FIFO (named pipe)"),
         "{err}"
     );
-    assert!(wall < Duration::from_secs(1), "refused in {wall:?}");
 }
 
 #[test]
@@ -97,7 +94,7 @@ fn a_device_as_data_is_refused_not_read() {
         "[campaign]\nname = \"c\"\n[[test]]\nname = \"z\"\ndata = \"/dev/zero\"\nexcitation = { kind = \"sine\", freq_hz = 3.0, amp_g = 1.0 }\n",
     )
     .unwrap();
-    let (code, err, _) = study_watched(&["compare", campaign.to_str().unwrap()]);
+    let (code, err) = study_watched(&["compare", campaign.to_str().unwrap()]);
     assert_eq!(code, 2, "{err}");
     assert!(
         err.contains("/dev/zero: is a device, not a data file"),
