@@ -127,6 +127,13 @@ fn outputs(args: &TuneArgs, dir: &Path) -> anyhow::Result<Vec<std::path::PathBuf
         .into());
     }
     // A fresh start refuses an interrupted tuning's files too (--resume continues it).
+    if !args.resume && !args.force && dir.join(JOURNAL).exists() {
+        return Err(BadInput(format!(
+            "{}: holds an interrupted tuning ({JOURNAL}): continue it with --resume, or start over with --force",
+            dir.display()
+        ))
+        .into());
+    }
     let guarded = match args.resume {
         true => OUTPUTS.to_vec(),
         false => [&OUTPUTS[..], &[JOURNAL, PARTIAL]].concat(),
@@ -163,6 +170,7 @@ fn search(
     quiet: bool,
 ) -> anyhow::Result<(Tuned, JournalFile)> {
     let mut failed = None;
+    let journal_path = journal.path().to_path_buf();
     let tuned = tuner.run(|g, evals| {
         if !quiet {
             print_generation(g);
@@ -180,6 +188,14 @@ fn search(
             Some(_) => ControlFlow::Break(()),
             None => ControlFlow::Continue(()),
         }
+    });
+    let tuned = tuned.map_err(|e| match e.downcast_ref::<tune::NotThisTuning>() {
+        Some(n) => BadInput(format!(
+            "{}: {n}; start over with --force",
+            journal_path.display()
+        ))
+        .into(),
+        None => e,
     })?;
     match failed {
         Some(e) => Err(e),
@@ -207,10 +223,11 @@ fn stopped(
     interrupt::Interrupted {
         signal,
         message: format!(
-            "stopped by {} after generation {last} of at most {}: {} evaluations kept in {} and {}; continue with: study {} {out} --resume",
+            "stopped by {} after generation {last} of at most {}: {} candidates ({} runs) kept in {} and {}; continue with: study {} {out} --resume",
             interrupt::name(signal),
             tuner.spec.search.generations,
             t.evaluations.len(),
+            t.evaluations.iter().map(|e| e.rows.len()).sum::<usize>(),
             partial.display(),
             dir.join(JOURNAL).display(),
             command_line(args),

@@ -69,6 +69,11 @@ impl JournalFile {
         Ok(JournalFile { path, file })
     }
 
+    /// Where the journal is.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
     /// One generation's lines, appended and flushed to the disk.
     pub fn append(&mut self, lines: &str) -> anyhow::Result<()> {
         self.file

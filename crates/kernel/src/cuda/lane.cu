@@ -321,7 +321,7 @@ VS_FN void vs_watch(const double *P, long long n, long long l, const VsState &s,
   }
   spec[0] = fmax(spec[0], drift * F(VS_BLD + 6 + 4 * 10));
   spec[1] = fmax(spec[1], fabs(vs_shear(P, n, l, 0, s)));
-  spec[2] = fmax(spec[2], ductility);
+  if (F(VS_BLD) > 0.0) spec[2] = fmax(spec[2], ductility);  // linear storeys: none (NaN)
   spec[3] = energy;
 }
 

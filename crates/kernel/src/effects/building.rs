@@ -488,7 +488,10 @@ impl<const N: usize> Effect<N> for Building<N> {
             }
             acc.drift_ratio[l] = acc.drift_ratio[l].max(drift * self.inv_h[l]);
             acc.base_shear[l] = acc.base_shear[l].max(self.shear(s, 0, l).abs());
-            acc.ductility[l] = acc.ductility[l].max(ductility);
+            // A linear storey has no yield, so no ductility demand (NaN, as in `study sim`'s table).
+            if self.law[l] > 0.0 {
+                acc.ductility[l] = acc.ductility[l].max(ductility);
+            }
             acc.energy[l] = energy;
         }
     }

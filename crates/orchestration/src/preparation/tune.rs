@@ -174,6 +174,14 @@ pub fn draws(spec: &TuneSpec) -> Vec<Vec<f64>> {
         .collect()
 }
 
+/// A journal whose generation's candidates are not those the search asks for: another tuning's
+/// (the tuning file, the model or the build changed, or the journal was edited).
+#[derive(Debug, thiserror::Error)]
+#[error("generation {generation} is not this tuning's: its candidates differ from the search's (the tuning file, the model or the build changed since it was written)")]
+pub struct NotThisTuning {
+    pub generation: usize,
+}
+
 /// Runs a tuning: the plan's batches and the search.
 pub struct Tuner {
     pub spec: TuneSpec,
@@ -221,7 +229,7 @@ impl Tuner {
                     && s.rows.len() == self.draws.len() * self.spec.excitations.len()
             });
         if !same {
-            anyhow::bail!("the journal's generation {generation} is not this tuning's: its candidates differ from the search's (the tuning file, the model or the build changed)");
+            return Err(NotThisTuning { generation }.into());
         }
         Ok(Some(
             stored

@@ -9,12 +9,14 @@
 //! model <the --model file's text in hex, or ->
 //! E <generation> <candidate> <gains' bits ...>
 //! R <sample id> <excitation> <values' bits ...> | <status> | <metrics' bits ...>
-//! end <generation>
+//! end <generation> <checksum>
 //! ```
 //!
 //! A status is `ok`, `failed <time> nonfinite`, `failed <time> stroke <disp>`, `failed <time>
 //! pressure <actuator> <chamber> <pa>` or `invalid <category> <reason in hex>`. Only generations
-//! closed by their `end` line count: a line cut short by a kill is dropped with its generation.
+//! closed by their `end` line count: a line cut short by a kill is dropped with its generation. The
+//! `end` line carries the FNV-1a hash of the generation's lines, so that an edited or damaged
+//! journal is refused rather than resumed into another result.
 
 use crate::study::batch::{Row, RowStatus, INVALID_MOTION, INVALID_PARAMETERS, INVALID_SETUP};
 use vshake_kernel::metrics::Metrics;
@@ -69,7 +71,15 @@ pub fn generation<'a>(
             );
         }
     }
-    out + &format!("end {generation}\n")
+    let sum = fnv1a(&out);
+    out + &format!("end {generation} {sum:016x}\n")
+}
+
+/// The 64-bit FNV-1a hash of `text` (not cryptographic: it catches an edit or damage).
+fn fnv1a(text: &str) -> u64 {
+    text.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+    })
 }
 
 /// Reads a journal; `Err` names the line that is not one (a trailing generation without its
@@ -93,9 +103,14 @@ pub fn read(text: &str) -> Result<Journal, String> {
         h => Some(unhex_text(h, 3)?),
     };
     let (mut generations, mut open) = (Vec::new(), Vec::<Stored>::new());
+    let mut since_end = String::new();
     for (i, line) in lines {
         let n = i + 1;
         let (kind, rest) = line.split_once(' ').unwrap_or((line, ""));
+        if kind != "end" {
+            since_end += line;
+            since_end.push('\n');
+        }
         match kind {
             "E" => open.push(evaluation(rest, n)?),
             "R" => open
@@ -103,7 +118,14 @@ pub fn read(text: &str) -> Result<Journal, String> {
                 .ok_or(format!("line {n}: a run before its evaluation"))?
                 .rows
                 .push(row(rest, n)?),
-            "end" => generations.push(std::mem::take(&mut open)),
+            "end" => {
+                let sum = rest.split(' ').nth(1);
+                if sum != Some(&format!("{:016x}", fnv1a(&since_end))[..]) {
+                    return Err(format!("line {n}: the generation does not match its checksum (the journal was edited or damaged)"));
+                }
+                since_end.clear();
+                generations.push(std::mem::take(&mut open));
+            }
             _ => return Err(format!("line {n}: unknown record {kind:?}")),
         }
     }
@@ -337,6 +359,11 @@ mod tests {
         assert!(read("something else\n")
             .unwrap_err()
             .contains("not a tuning journal"));
+        // One value edited: refused by the generation's checksum, not resumed.
+        let edited = text.replacen("3fb999999999999a", "3fb999999999999b", 1);
+        assert_ne!(edited, text);
+        let why = read(&edited).unwrap_err();
+        assert!(why.contains("checksum"), "{why}");
         let bad = text.replace("R 7 1", "R x 1");
         assert!(
             read(&bad).unwrap_err().contains("no sample id"),
