@@ -9,7 +9,9 @@
 //!
 //! Each build is compiled at a site of its own ([`crate::simulate::Site`]: a module, so a codegen
 //! unit, so an LLVM module optimised on its own core), so that the builds are compiled in
-//! parallel. What is built, per valve law and damping law (four pairs):
+//! parallel. What is built, for the published laws (orifice flow, α = ½) and, once more, for
+//! every other pair of valve law and damping law (one build that reads the law from the lanes:
+//! `servovalve::EitherLaw` and `platen::PowDamping`, the same bits as a build for each pair):
 //! - one lane ([`run_lane`]: a single run, its history or its probes): the bare plant and the
 //!   effect set, portable and AVX2 (the AVX2 build of one lane is about 20 % faster: wider
 //!   moves of the state, `study bench`'s scalar path);
@@ -20,8 +22,11 @@
 //! - [`EFFECT_LANES`] lanes with one library effect alone ([`run_single_effect`], a diagnosis's
 //!   screening): the usual configuration, AVX2.
 //!
-//! Outside the bare plant's full batches, the AVX2 builds are made for the published laws only
-//! (orifice flow, α = ½: `simulate`'s `dispatch`); the other laws run the portable build there.
+//! The portable build is the law-reading one for every configuration (a CPU without AVX2, or a
+//! caller that asks for it); the AVX2 builds are made for the published laws only, outside the
+//! bare plant's full batches, where the law-reading pair has its vector builds too
+//! (`simulate`'s `dispatch`). 36 copies of the integrator in all (`cargo llvm-lines`), where
+//! a build per law pair made 59.
 
 use crate::effects::{effect_set, with_single, Baseline, Effect, EffectFn, EffectId};
 use crate::excitation::Reference;

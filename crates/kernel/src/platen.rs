@@ -34,18 +34,27 @@ pub trait Damping: Copy + Send + Sync + 'static {
     /// [`Damping::pow`] in every lane.
     #[inline(always)]
     fn pow_lanes<S: Simd, const G: usize>(v_abs: Pack<S, G>, alpha: Pack<S, G>) -> Pack<S, G> {
-        let mut r = v_abs;
-        let (mut v, mut a) = ([0.0; 16], [0.0; 16]);
-        for g in 0..G {
-            v_abs.0[g].store(&mut v);
-            alpha.0[g].store(&mut a);
-            for i in 0..S::LANES {
-                v[i] = Self::pow(v[i], a[i]);
-            }
-            r.0[g] = S::load(&v);
-        }
-        r
+        lane_by_lane::<Self, S, G>(v_abs, alpha)
     }
+}
+
+/// [`Damping::pow`] taken in each lane in turn.
+#[inline(always)]
+fn lane_by_lane<D: Damping, S: Simd, const G: usize>(
+    v_abs: Pack<S, G>,
+    alpha: Pack<S, G>,
+) -> Pack<S, G> {
+    let mut r = v_abs;
+    let (mut v, mut a) = ([0.0; 16], [0.0; 16]);
+    for g in 0..G {
+        v_abs.0[g].store(&mut v);
+        alpha.0[g].store(&mut a);
+        for i in 0..S::LANES {
+            v[i] = D::pow(v[i], a[i]);
+        }
+        r.0[g] = S::load(&v);
+    }
+    r
 }
 
 /// α = 0.5 for every lane: |v|^α = √|v|.
@@ -63,8 +72,10 @@ impl Damping for SqrtDamping {
     }
 }
 
-/// Any α: |v|^α = powf (not vectorised; used only when some lane has α ≠ 0.5). A lane with
-/// α = 0.5 still takes the square root, so its result does not depend on its batch neighbours.
+/// Any α: |v|^α = powf, lane by lane. A lane with α = 0.5 still takes the square root, so its
+/// result does not depend on its batch neighbours, and where every lane has α = 0.5 the roots
+/// are taken in vector registers: the same bits as [`SqrtDamping`] (the kernel's builds for the
+/// rarer configurations take this law for both, `crate::builds`).
 #[derive(Debug, Clone, Copy, Default)]
 pub struct PowDamping;
 impl Damping for PowDamping {
@@ -74,6 +85,21 @@ impl Damping for PowDamping {
             v_abs.sqrt()
         } else {
             v_abs.powf(alpha)
+        }
+    }
+
+    #[inline(always)]
+    fn pow_lanes<S: Simd, const G: usize>(v_abs: Pack<S, G>, alpha: Pack<S, G>) -> Pack<S, G> {
+        let mut a = [0.0; 16];
+        let mut every_half = true;
+        for g in 0..G {
+            alpha.0[g].store(&mut a);
+            every_half &= a[..S::LANES].iter().all(|&a| a == 0.5);
+        }
+        if every_half {
+            v_abs.sqrt()
+        } else {
+            lane_by_lane::<Self, S, G>(v_abs, alpha)
         }
     }
 }

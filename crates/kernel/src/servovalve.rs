@@ -38,9 +38,12 @@ pub struct ValveLane {
     /// Linear valve: n_val·K_q (m²/s) and n_val·K_q·A2/A1.
     pub kq1: f64,
     pub kq2: f64,
+    /// 1 where the set's valves follow the linear law, 0 for the orifice law: read by
+    /// [`EitherLaw`] (a batch shares one law).
+    pub linear: f64,
 }
 
-crate::lanes::soa!(ValveLane => ValveSoa { kw1, kw2, kw3, kw4, p_r, p_tr2, kq1, kq2 });
+crate::lanes::soa!(ValveLane => ValveSoa { kw1, kw2, kw3, kw4, p_r, p_tr2, kq1, kq2, linear });
 
 impl ValveLane {
     /// The coefficients of one parameter set (docs/model.md §3; the linear valve's K_q at the
@@ -59,6 +62,7 @@ impl ValveLane {
             p_tr2: sv.p_tr * sv.p_tr,
             kq1: kq,
             kq2: kq * m.actuator.a2 / m.actuator.a1,
+            linear: f64::from(u8::from(m.valve_law == ValveLaw::Linear)),
         }
     }
 }
@@ -181,6 +185,38 @@ impl FlowLaw for Linear {
     }
 }
 
+/// Either law, as each lane's [`ValveLane::linear`] says (a batch shares one law): the same
+/// operations as [`Orifice`] or [`Linear`], bit for bit, behind a branch that every evaluation of
+/// a batch takes the same way. The kernel's builds for the rarer configurations take it, so that
+/// one build serves both laws (`crate::builds`).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct EitherLaw;
+
+impl FlowLaw for EitherLaw {
+    const NAME: &'static str = "either";
+    #[inline(always)]
+    fn flows(c: &ValveLane, x: f64, p1: f64, p2: f64, p_s: f64) -> (f64, f64) {
+        if c.linear != 0.0 {
+            Linear::flows(c, x, p1, p2, p_s)
+        } else {
+            Orifice::flows(c, x, p1, p2, p_s)
+        }
+    }
+
+    #[inline(always)]
+    fn flows_lanes<const N: usize, S: Simd, const G: usize>(
+        c: &ValveSoa<N>,
+        l0: usize,
+        xs: [Pack<S, G>; 4],
+    ) -> (Pack<S, G>, Pack<S, G>) {
+        if c.linear[l0] != 0.0 {
+            Linear::flows_lanes(c, l0, xs)
+        } else {
+            Orifice::flows_lanes(c, l0, xs)
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -230,6 +266,7 @@ mod tests {
             p_tr2: 1e-6,
             kq1: 0.0,
             kq2: 0.0,
+            linear: 0.0,
         };
         let (p1, p2, ps) = (8e6, 12e6, 20e6);
         let (q1, q2) = Orifice::flows(&c, 0.01, p1, p2, ps);

@@ -33,7 +33,7 @@ use super::lanes::{AVX512, PORTABLE};
 use super::metrics::{Basis, Metrics, MetricsAcc, SpecimenAcc, WindowTick};
 use super::params::{ModelParams, ValveLaw};
 use super::platen::{self, Damping, PowDamping, SqrtDamping};
-use super::servovalve::{FlowLaw, Linear, Orifice};
+use super::servovalve::{EitherLaw, FlowLaw, Linear, Orifice};
 use super::N_ACT;
 use std::fmt;
 
@@ -299,19 +299,13 @@ pub(crate) fn run_each_on<const N: usize, E: Effect<N>, O: Observer<N> + ?Sized,
     check(lp.f_s, refs, solver)?;
     // Never more than the CPU has: asking for more runs the widest build it has.
     let isa = isa.min(Isa::detected());
+    // The published laws (orifice flow, α = ½) have builds of their own; every other pair runs
+    // one build that reads the law from the lanes (`EitherLaw`, `PowDamping`: the same bits).
     Ok(match (lp.valve_law, lp.alpha_half) {
         (ValveLaw::Orifice, true) => {
             actuators::<N, Orifice, SqrtDamping, E, O, P>(isa, lp, effect, refs, solver, obs)
         }
-        (ValveLaw::Orifice, false) => {
-            actuators::<N, Orifice, PowDamping, E, O, P>(isa, lp, effect, refs, solver, obs)
-        }
-        (ValveLaw::Linear, true) => {
-            actuators::<N, Linear, SqrtDamping, E, O, P>(isa, lp, effect, refs, solver, obs)
-        }
-        (ValveLaw::Linear, false) => {
-            actuators::<N, Linear, PowDamping, E, O, P>(isa, lp, effect, refs, solver, obs)
-        }
+        _ => actuators::<N, EitherLaw, PowDamping, E, O, P>(isa, lp, effect, refs, solver, obs),
     })
 }
 
@@ -491,8 +485,9 @@ fn dispatch<
             Isa::Portable => {}
         }
     }
+    // One portable build serves every law (the same bits as a build for the law).
     let _ = isa;
-    P::portable::<N, A, Q, D, E, O>(lp, effect, refs, solver, obs)
+    P::portable::<N, A, EitherLaw, PowDamping, E, O>(lp, effect, refs, solver, obs)
 }
 
 /// Where the builds of the integrator are compiled. rustc compiles a generic function's copies in
@@ -1519,6 +1514,116 @@ mod tests {
     use super::*;
     use crate::effects::Baseline;
     use crate::excitation::Sine;
+
+    /// A build for one law pair, on every instruction set this CPU has: the lanes' results.
+    fn each_isa<const N: usize, Q: FlowLaw, D: Damping, E: Effect<N>>(
+        lp: &LaneParams<N>,
+        effect: &E,
+        r: &Reference,
+    ) -> Vec<[LaneResult; N]> {
+        let (refs, solver, obs) = (&[r; N], &Solver::default(), &mut NoObserver);
+        let mut out = vec![here::Here::portable::<N, 1, Q, D, E, _>(
+            lp, effect, refs, solver, obs,
+        )];
+        #[cfg(target_arch = "x86_64")]
+        if Isa::detected() >= Isa::Avx2 {
+            // SAFETY: the CPU reports AVX2 and FMA.
+            out.push(unsafe {
+                here::Here::avx2::<N, 1, Q, D, E, _>(lp, effect, refs, solver, obs)
+            });
+        }
+        #[cfg(target_arch = "x86_64")]
+        if E::BARE && Isa::detected() >= Isa::Avx512 {
+            // SAFETY: the CPU reports AVX-512.
+            out.push(unsafe {
+                here::Here::avx512::<N, 1, Q, D, E, _>(lp, effect, refs, solver, obs)
+            });
+        }
+        out
+    }
+
+    /// The builds that read the law from the lanes (`EitherLaw`, `PowDamping`, which serve every
+    /// configuration but the published one) give the bits of a build made for each law pair:
+    /// the orifice and the linear valve, α = ½ and α ≠ ½ (some lanes, then all), bare and with
+    /// effects, on every instruction set this CPU has a build for.
+    #[test]
+    fn the_build_for_every_law_equals_a_build_for_each_law() {
+        let r = Sine {
+            freq_hz: 3.0,
+            amp_m: Sine::amp_from_g(1.5, 3.0),
+            taper_s: 0.5,
+            duration_s: 1.5,
+            window_cycles: Some(2),
+        }
+        .reference(1024.0);
+        for (law, alphas) in [
+            (ValveLaw::Orifice, [0.5; 8]),
+            (ValveLaw::Orifice, [0.5, 0.7, 0.5, 0.3, 0.5, 0.5, 0.9, 0.5]),
+            (ValveLaw::Linear, [0.5; 8]),
+            (ValveLaw::Linear, [0.6; 8]),
+        ] {
+            let sets: Vec<ModelParams> = (0..8)
+                .map(|i| {
+                    let mut p = ModelParams {
+                        valve_law: law,
+                        ..ModelParams::default()
+                    };
+                    p.platen.alpha = alphas[i];
+                    p.controller.g_d = 0.9 + 0.2 * i as f64;
+                    *p.effects.get_mut(crate::effects::EffectId::Supply) = i % 2 == 0;
+                    p
+                })
+                .collect();
+            let refs: Vec<&ModelParams> = sets.iter().collect();
+            let lp = LaneParams::<8>::new(&refs).unwrap();
+            let set = crate::effects::effect_set::<8>(&refs);
+            let either = (
+                each_isa::<8, EitherLaw, PowDamping, _>(&lp, &Baseline, &r),
+                each_isa::<8, EitherLaw, PowDamping, _>(&lp, &set, &r),
+            );
+            let own = match (law, lp.alpha_half) {
+                (ValveLaw::Orifice, true) => (
+                    each_isa::<8, Orifice, SqrtDamping, _>(&lp, &Baseline, &r),
+                    each_isa::<8, Orifice, SqrtDamping, _>(&lp, &set, &r),
+                ),
+                (ValveLaw::Orifice, false) => (
+                    each_isa::<8, Orifice, PowDamping, _>(&lp, &Baseline, &r),
+                    each_isa::<8, Orifice, PowDamping, _>(&lp, &set, &r),
+                ),
+                (ValveLaw::Linear, true) => (
+                    each_isa::<8, Linear, SqrtDamping, _>(&lp, &Baseline, &r),
+                    each_isa::<8, Linear, SqrtDamping, _>(&lp, &set, &r),
+                ),
+                (ValveLaw::Linear, false) => (
+                    each_isa::<8, Linear, PowDamping, _>(&lp, &Baseline, &r),
+                    each_isa::<8, Linear, PowDamping, _>(&lp, &set, &r),
+                ),
+            };
+            let pairs = either
+                .0
+                .iter()
+                .zip(&own.0)
+                .chain(either.1.iter().zip(&own.1));
+            let mut compared = 0;
+            for (a, b) in pairs {
+                for (l, (a, b)) in a.iter().zip(b).enumerate() {
+                    assert_eq!(a.status, LaneStatus::Ok, "{law:?} {alphas:?} lane {l}");
+                    assert_eq!(a.status, b.status);
+                    for ((name, x), (_, y)) in
+                        a.metrics.columns().into_iter().zip(b.metrics.columns())
+                    {
+                        assert_eq!(
+                            x.to_bits(),
+                            y.to_bits(),
+                            "{law:?} {alphas:?} lane {l} {name}"
+                        );
+                        compared += 1;
+                    }
+                }
+            }
+            assert!(compared >= 2 * 8 * 10, "{compared} numbers compared");
+        }
+    }
 
     /// The equivalent actuator (A = 1) gives the two-actuator step's numbers bit for bit, on both
     /// instruction sets, with differing lanes and a lane that fails, bare and with effects.
