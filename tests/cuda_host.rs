@@ -159,7 +159,7 @@ fn random_effects(rng: &mut StdRng, p: &mut ModelParams) {
     for i in 1..=10 {
         for (name, lo, hi) in [("m", 5e3, 4e4), ("k", 5e6, 5e7), ("fy", 2e4, 3e5)] {
             let info = ModelParams::lookup(&format!("building.{name}{i}")).unwrap();
-            (info.set)(p, u(lo, hi));
+            info.set(p, u(lo, hi));
         }
     }
     for (id, _) in gpu_lanes::EFFECT_BITS {

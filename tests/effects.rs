@@ -456,8 +456,8 @@ fn switched_on(
     let info = e.info();
     let p =
         vshake::kernel::params::ModelParams::lookup(&format!("{e}.{}", info.free()[0])).unwrap();
-    let v = 1.1 * (p.get)(&m);
-    (p.set)(&mut m, v);
+    let v = 1.1 * p.get(&m);
+    p.set(&mut m, v);
     m
 }
 
@@ -569,8 +569,8 @@ fn a_kernel_for_one_effect_equals_the_effect_set_bit_for_bit() {
             let mut m = switched_on(&base, e);
             let info = e.info();
             let p = ModelParams::lookup(&format!("{e}.{}", info.free()[0])).unwrap();
-            let v = (p.get)(&m) * (1.0 + 0.05 * k as f64);
-            (p.set)(&mut m, v);
+            let v = p.get(&m) * (1.0 + 0.05 * k as f64);
+            p.set(&mut m, v);
             sets.push(m);
         }
         let refs: Vec<&ModelParams> = sets.iter().collect();

@@ -45,7 +45,7 @@ fn cases() -> Vec<Case> {
 fn run(case: &Case, base: &ModelParams) -> LaneResult {
     let mut model = base.clone();
     for (path, v) in &case.gains {
-        (ModelParams::lookup(path).unwrap().set)(&mut model, *v);
+        ModelParams::lookup(path).unwrap().set(&mut model, *v);
     }
     let lp = LaneParams::<1>::new(&[&model]).unwrap();
     let solver = Solver { substeps: 4 };

@@ -129,7 +129,7 @@ pub(crate) fn free_parameters(
             .iter()
             .any(|f| std::ptr::eq(f.info, info) || f.info.path() == info.path())
         {
-            free.push(Free::new(info, (info.get)(model)));
+            free.push(Free::new(info, info.get(model)));
         }
     }
     if free.is_empty() {

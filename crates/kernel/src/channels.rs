@@ -3,8 +3,10 @@
 //! unit's factor to SI. The vocabulary the file readers (the shell's `formats::headers`) and the
 //! campaign reader (the orchestration's `measured::campaign`) share; pure data and lookups.
 
-use crate::params::G;
 use std::path::Path;
+
+/// Standard gravity, m/s² (used for amplitudes in g and for the bearing force F_V = M·g).
+pub const G: f64 = 9.80665;
 
 /// Whether `path` names a PEER NGA acceleration file (extension `.AT2`, any case): read as a
 /// record in g, whatever its columns (the shell's reader and the run files' checks agree on it).

@@ -8,7 +8,7 @@
 //! reference for every lane or one per lane, with the harmonic, error, peak, valve and
 //! response-spectrum metrics; [`unsupported`] names what it does not.
 
-use super::effects::{self, Effect, EffectId, LibraryEffect};
+use super::effects::{self, Effect, EffectId, LibraryEffect, ModelView};
 use super::excitation::{Drive, Reference};
 use super::metrics::{Basis, LaneSums, Metrics, MetricsAcc, N_HARM};
 use super::params::{ModelParams, ValveLaw};
@@ -52,7 +52,7 @@ pub const TWO_ACTUATORS: i64 = 1 << 17;
 pub fn effect_bits(models: &[&ModelParams]) -> i64 {
     // One pass over the models (a study's launch has many, each a few kilobytes).
     models.iter().fold(0, |bits, m| {
-        let two = !effects::asymmetry::Asymmetry::<1>::new([m]).symmetric();
+        let two = !effects::asymmetry::Asymmetry::<1>::new([*m as &dyn ModelView]).symmetric();
         EFFECT_BITS
             .iter()
             .filter(|(id, _)| m.effects.get(*id))

@@ -22,14 +22,15 @@
 //!   whose velocity, acceleration and jerk are their exact derivatives, computed by third-order
 //!   Taylor arithmetic ([`Jet`]) — no filter, no lag.
 
-use super::params::{params, Component, Range, G};
+use super::channels::G;
+use super::param_table::{params, Range};
 use std::f64::consts::PI;
 use std::ops::{Add, Mul};
 
 params! {
     /// A stochastic ground motion's parameters (docs/model.md §4b). The plant never reads them:
     /// they sit in the model so that studies sample them like any other parameter (`ground.*`).
-    pub struct GroundParams in ground as (Component::Ground) {
+    pub struct GroundParams {
         pga_g: "g", "g", 0.5, Range::gt(0.0), Chosen,
             "Peak ground acceleration the realisation is scaled to.";
         f_g_hz: "Hz", "hz", 2.5, Range::gt(0.0), Literature,

@@ -12,6 +12,7 @@
 
 pub mod actuator;
 mod bare;
+pub mod baseline_params;
 pub mod builds;
 pub mod channels;
 pub mod controller;
@@ -25,6 +26,7 @@ pub mod lane_params;
 pub mod lanes;
 pub mod linalg;
 pub mod metrics;
+pub mod param_table;
 pub mod params;
 pub mod platen;
 pub mod resample;

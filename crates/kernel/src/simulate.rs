@@ -1512,7 +1512,7 @@ pub(crate) fn integrate<
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::effects::Baseline;
+    use crate::effects::{Baseline, LibraryEffect, ModelView};
     use crate::excitation::Sine;
 
     /// A build for one law pair, on every instruction set this CPU has: the lanes' results.
@@ -1544,8 +1544,9 @@ mod tests {
 
     /// The builds that read the law from the lanes (`EitherLaw`, `PowDamping`, which serve every
     /// configuration but the published one) give the bits of a build made for each law pair:
-    /// the orifice and the linear valve, α = ½ and α ≠ ½ (some lanes, then all), bare and with
-    /// effects, on every instruction set this CPU has a build for.
+    /// the orifice and the linear valve, α = ½ and α ≠ ½ (some lanes, then all), bare (the bare
+    /// plant's right-hand side) and with an effect (the general one), on every instruction set
+    /// this CPU has a build for.
     #[test]
     fn the_build_for_every_law_equals_a_build_for_each_law() {
         let r = Sine {
@@ -1576,7 +1577,9 @@ mod tests {
                 .collect();
             let refs: Vec<&ModelParams> = sets.iter().collect();
             let lp = LaneParams::<8>::new(&refs).unwrap();
-            let set = crate::effects::effect_set::<8>(&refs);
+            // One library effect (on in half the lanes) takes the general right-hand side.
+            let lanes: [&dyn ModelView; 8] = std::array::from_fn(|l| refs[l] as &dyn ModelView);
+            let set = crate::effects::supply::Supply::<8>::new(lanes);
             let either = (
                 each_isa::<8, EitherLaw, PowDamping, _>(&lp, &Baseline, &r),
                 each_isa::<8, EitherLaw, PowDamping, _>(&lp, &set, &r),

@@ -58,7 +58,7 @@ pub(crate) fn apply_sets(model: &mut ModelParams, sets: &[String]) -> anyhow::Re
             .trim()
             .parse()
             .map_err(|_| BadInput(format!("--set {s:?}: {value:?} is not a number")))?;
-        (info.set)(model, v);
+        info.set(model, v);
     }
     if let Err(list) = model.validate() {
         return Err(BadInput(format!(

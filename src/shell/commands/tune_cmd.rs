@@ -437,7 +437,7 @@ fn nominal_runs(tuner: &Tuner, t: &Tuned, refs: &[Reference]) -> anyhow::Result<
 pub(crate) fn with_gains(tuner: &Tuner, gains: &[f64]) -> ModelParams {
     let mut m = tuner.spec.model.clone();
     for (g, v) in tuner.spec.gains.iter().zip(gains) {
-        (g.info.set)(&mut m, *v);
+        g.info.set(&mut m, *v);
     }
     m
 }

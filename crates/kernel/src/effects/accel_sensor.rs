@@ -6,14 +6,14 @@
 
 use super::sensor_chain::sensor_effect;
 use super::{EffectInfo, Stage};
-use crate::params::{params, ModelParams, Range};
+use crate::param_table::{params, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
     name: super::module_name(module_path!()),
     family: "measurement chain",
     summary: "the acceleration channel's sensor and anti-alias filter: a low-pass and a delay",
-    params: Params::PARAMS,
+    params: Params::FIELDS,
     stages: &[Stage {
         label: "",
         free: &["f_c", "delay"],
@@ -25,7 +25,7 @@ pub const INFO: EffectInfo = EffectInfo {
 params! {
     /// Effect `accel_sensor`: the recorded acceleration channel through a second-order low-pass
     /// and a delay (`sensor_chain`).
-    pub struct Params in effect {
+    pub struct Params {
         f_c: "Hz", "hz", 80.0, Range::closed(2.0, 400.0), Chosen,
             "Corner of the channel's low-pass [chosen: an anti-alias filter below a 1 kHz acquisition].";
         zeta: "-", "", std::f64::consts::FRAC_1_SQRT_2, Range::closed(0.05, 2.0), Chosen,

@@ -3,22 +3,22 @@
 //! by `act2_gain` against actuator 1's. Its signature: even harmonics (h2) and a shifted
 //! displacement, from a table that extends and retracts differently.
 
-use super::{hook, Effect, EffectInfo, LibraryEffect, Stage};
-use crate::params::{params, ModelParams, Range};
+use super::{hook, Effect, EffectInfo, LibraryEffect, ModelView, Stage};
+use crate::param_table::{params, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
     name: super::module_name(module_path!()),
     family: "asymmetry",
     summary: "the valve flows of extension and retraction, or of the two actuators, differ",
-    params: Params::PARAMS,
+    params: Params::FIELDS,
     stages: &[Stage::free(&["extend_gain"])],
 };
 
 params! {
     /// Effect `asymmetry`: port/valve asymmetry. The flow gain for extension (x > 0) differs from
     /// that for retraction, and actuator 2's valves differ from actuator 1's.
-    pub struct Params in effect {
+    pub struct Params {
         extend_gain: "-", "", 1.05, Range::gt(0.0), Chosen,
             "Flow gain for x > 0 relative to x < 0 [chosen: a 5 % port mismatch].";
         act2_gain: "-", "", 1.0, Range::gt(0.0), Chosen,
@@ -32,7 +32,7 @@ pub struct Asymmetry<const N: usize> {
 }
 
 impl<const N: usize> LibraryEffect<N> for Asymmetry<N> {
-    fn new(p: [&ModelParams; N]) -> Self {
+    fn new(p: [&dyn ModelView; N]) -> Self {
         let on = super::lane_mask::<N, Self>(&p);
         // Off: both gains exactly 1.
         Asymmetry {

@@ -20,9 +20,9 @@
 //! table: the modal specimen's anti-resonance, and once a storey yields, a softening (the
 //! frequency falls) with odd harmonics and a loss of the force at the peaks.
 
-use super::{hook, Effect, EffectInfo, LibraryEffect, PlantView, Stage};
+use super::{hook, Effect, EffectInfo, LibraryEffect, ModelView, PlantView, Stage};
 use crate::metrics::SpecimenAcc;
-use crate::params::{params, ModelParams, ParamIssue, Range};
+use crate::param_table::{params, ParamIssue, Range};
 
 /// Most storeys.
 pub const MAX_STOREYS: usize = 10;
@@ -33,7 +33,7 @@ pub const INFO: EffectInfo = EffectInfo {
     family: "specimen",
     summary:
         "a shear building of 1-10 storeys (linear, bilinear or Bouc-Wen storeys) on the platen",
-    params: Params::PARAMS,
+    params: Params::FIELDS,
     // [chosen] A fit frees the first storey's stiffness and yield force: the storey that yields
     // first under a base motion, and the one the base shear measures.
     stages: &[Stage::free(&["k1", "fy1"])],
@@ -42,7 +42,7 @@ pub const INFO: EffectInfo = EffectInfo {
 params! {
     /// Effect `building`: a shear building on the platen, storeys 1 (bottom) to `storeys`; the
     /// parameters of storeys above `storeys` are not used.
-    pub struct Params in effect {
+    pub struct Params {
         storeys: "-", "", 3.0, Range::closed(1.0, 10.0), Chosen,
             "Number of storeys, a whole number 1-10 [chosen: the 3-storey frame of docs/guide.md].";
         law: "-", "", 1.0, Range::closed(0.0, 2.0), Chosen,
@@ -138,8 +138,7 @@ pub fn storeys(p: &Params) -> Vec<(f64, f64, f64)> {
 
 /// What a model's building parameters break beyond their ranges: a count or a law that is not
 /// a whole number.
-pub fn check(m: &ModelParams) -> Vec<ParamIssue> {
-    let p = Params::of(m);
+pub fn check(p: &Params) -> Vec<ParamIssue> {
     [("storeys", p.storeys), ("law", p.law)]
         .into_iter()
         .filter(|(_, v)| v.fract() != 0.0)
@@ -245,7 +244,7 @@ fn lane_storeys(p: &Params) -> Vec<[f64; 4]> {
 }
 
 impl<const N: usize> LibraryEffect<N> for Building<N> {
-    fn new(p: [&ModelParams; N]) -> Self {
+    fn new(p: [&dyn ModelView; N]) -> Self {
         let on = super::lane_mask::<N, Self>(&p);
         let q = p.map(Params::of);
         let lanes: [Vec<[f64; 4]>; N] = std::array::from_fn(|l| {

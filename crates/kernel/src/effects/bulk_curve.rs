@@ -16,15 +16,15 @@
 //! campaign of sine tests determines a level, a slope and a bend of the curve, not more; three
 //! parameters also keep a diagnosis's fit of it cheap. b ≡ 1 is the baseline.]
 
-use super::{hook, Effect, EffectInfo, LibraryEffect, Stage};
-use crate::params::{params, ModelParams, Range};
+use super::{hook, Effect, EffectInfo, LibraryEffect, ModelView, Stage};
+use crate::param_table::{params, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
     name: super::module_name(module_path!()),
     family: "compressibility",
     summary: "a bulk modulus of unknown form: its gain against chamber pressure at three knots",
-    params: Params::PARAMS,
+    params: Params::FIELDS,
     stages: &[Stage::free(&["b0", "b1", "b2"])],
 };
 
@@ -33,7 +33,7 @@ pub const KNOTS: [f64; 3] = [0.0, 0.5, 1.0];
 
 params! {
     /// Effect `bulk_curve`: β_e(p) = β·b(p/P_S), b piecewise linear through three knots.
-    pub struct Params in effect {
+    pub struct Params {
         b0: "-", "", 1.0, Range::closed(0.01, 10.0), Chosen,
             "Bulk-modulus gain at p = 0 (gauge) relative to the oil's [chosen: 1 = the baseline].";
         b1: "-", "", 1.0, Range::closed(0.01, 10.0), Chosen,
@@ -50,13 +50,13 @@ pub struct BulkCurve<const N: usize> {
 }
 
 impl<const N: usize> LibraryEffect<N> for BulkCurve<N> {
-    fn new(p: [&ModelParams; N]) -> Self {
+    fn new(p: [&dyn ModelView; N]) -> Self {
         let on = super::lane_mask::<N, Self>(&p);
         let q = p.map(Params::of);
         let knot = |l: usize, k: usize| [q[l].b0, q[l].b1, q[l].b2][k];
         BulkCurve {
             b: std::array::from_fn(|k| std::array::from_fn(|l| 1.0 + on[l] * (knot(l, k) - 1.0))),
-            inv_p_s: p.map(|m| 1.0 / m.servovalve.p_s),
+            inv_p_s: p.map(|m| 1.0 / m.servovalve().p_s),
         }
     }
 }
@@ -112,15 +112,15 @@ mod tests {
     /// The curve passes through its knots, is linear between them and constant outside.
     #[test]
     fn the_gain_interpolates_the_knots() {
-        let mut m = ModelParams::default();
+        let mut m = super::super::tests::Defaults::default();
         m.effects.bulk_curve = true;
         m.effect_params.bulk_curve = Params {
             b0: 0.2,
             b1: 1.0,
             b2: 1.5,
         };
-        let e = BulkCurve::<1>::new([&m]);
-        let p_s = m.servovalve.p_s;
+        let e = BulkCurve::<1>::new([&m as &dyn ModelView]);
+        let p_s = m.servovalve().p_s;
         for (r, want) in [
             (-0.1, 0.2),
             (0.0, 0.2),

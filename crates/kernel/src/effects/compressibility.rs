@@ -13,15 +13,15 @@
 //! Isothermal air (polytropic exponent 1) is a choice: bubbles in oil exchange heat quickly, and
 //! it avoids a `powf` in the step.
 
-use super::{hook, Effect, EffectInfo, LibraryEffect, Stage};
-use crate::params::{params, ModelParams, Range};
+use super::{hook, Effect, EffectInfo, LibraryEffect, ModelView, Stage};
+use crate::param_table::{params, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
     name: super::module_name(module_path!()),
     family: "compressibility",
     summary: "a softer oil column: dead volume, entrained air, hose compliance",
-    params: Params::PARAMS,
+    params: Params::FIELDS,
     stages: &[Stage::free(&["dead_volume", "air_fraction"])],
 };
 
@@ -29,7 +29,7 @@ params! {
     /// Effect `compressibility`: effective bulk modulus and dead volume. Each chamber gains a dead
     /// volume (hoses, manifold) and its oil an entrained-air fraction and a wall compliance:
     /// 1/β_e = 1/(beta_ratio·β) + air_fraction·p_atm/p², with p the absolute chamber pressure.
-    pub struct Params in effect {
+    pub struct Params {
         dead_volume: "m³", "m3", 0.02, Range::closed(0.0, 1.0), Chosen,
             "Dead volume added to every chamber (hoses, manifold, valve block) [chosen: 20 L].";
         beta_ratio: "-", "", 1.0, Range::closed(0.05, 1.0), Chosen,
@@ -55,11 +55,11 @@ pub struct Compressibility<const N: usize> {
 }
 
 impl<const N: usize> LibraryEffect<N> for Compressibility<N> {
-    fn new(p: [&ModelParams; N]) -> Self {
+    fn new(p: [&dyn ModelView; N]) -> Self {
         Compressibility {
             on: super::lane_mask::<N, Self>(&p),
-            beta: p.map(|m| m.actuator.beta),
-            inv_beta_e: p.map(|m| 1.0 / (Params::of(m).beta_ratio * m.actuator.beta)),
+            beta: p.map(|m| m.actuator().beta),
+            inv_beta_e: p.map(|m| 1.0 / (Params::of(m).beta_ratio * m.actuator().beta)),
             air: p.map(|m| Params::of(m).air_fraction * P_ATM),
             v_x: p.map(|m| Params::of(m).dead_volume),
         }

@@ -15,15 +15,15 @@
 //! linear between them — enough for a monotone or a null-region shape, few enough for a campaign
 //! of eight tests to determine; g ≡ 1 is the baseline.]
 
-use super::{hook, Effect, EffectInfo, LibraryEffect, Stage};
-use crate::params::{params, ModelParams, Range};
+use super::{hook, Effect, EffectInfo, LibraryEffect, ModelView, Stage};
+use crate::param_table::{params, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
     name: super::module_name(module_path!()),
     family: "valve flow nonlinearity",
     summary: "a flow-gain curve of unknown form: gain against spool opening at five knots",
-    params: Params::PARAMS,
+    params: Params::FIELDS,
     stages: &[Stage::free(&["g0", "g1", "g2", "g3", "g4"])],
 };
 
@@ -32,7 +32,7 @@ pub const KNOTS: [f64; 5] = [0.0, 0.05, 0.15, 0.35, 0.7];
 
 params! {
     /// Effect `flow_gain`: x_eff = x·g(|x|/x_ref), g piecewise linear through the knots.
-    pub struct Params in effect {
+    pub struct Params {
         g0: "-", "", 1.0, Range::closed(0.0, 10.0), Chosen,
             "Flow gain at null (|x| = 0) relative to the baseline [chosen: 1 = the baseline].";
         g1: "-", "", 1.0, Range::closed(0.0, 10.0), Chosen,
@@ -55,7 +55,7 @@ pub struct FlowGain<const N: usize> {
 }
 
 impl<const N: usize> LibraryEffect<N> for FlowGain<N> {
-    fn new(p: [&ModelParams; N]) -> Self {
+    fn new(p: [&dyn ModelView; N]) -> Self {
         let on = super::lane_mask::<N, Self>(&p);
         let q = p.map(Params::of);
         let knot = |l: usize, k: usize| [q[l].g0, q[l].g1, q[l].g2, q[l].g3, q[l].g4][k];

@@ -3,22 +3,22 @@
 //! velocity, so a lower amplitude ratio and more odd distortion at large amplitude, nothing at
 //! small amplitude.
 
-use super::{hook, Effect, EffectInfo, LibraryEffect, Stage};
-use crate::params::{params, ModelParams, Range};
+use super::{hook, Effect, EffectInfo, LibraryEffect, ModelView, Stage};
+use crate::param_table::{params, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
     name: super::module_name(module_path!()),
     family: "valve flow nonlinearity",
     summary: "the metering area of the valves saturates toward large openings",
-    params: Params::PARAMS,
+    params: Params::FIELDS,
     stages: &[Stage::free(&["x_sat"])],
 };
 
 params! {
     /// Effect `flow_saturation`: spool-to-flow nonlinearity; the metering area saturates,
     /// x_eff = x_sat·tanh(x/x_sat).
-    pub struct Params in effect {
+    pub struct Params {
         x_sat: "m", "m", 0.012, Range::gt(0.0), Chosen,
             "Spool opening scale of the saturation x_eff = x_sat·tanh(x/x_sat) [chosen: 12 mm of the 19.05 mm stroke].";
     }
@@ -31,7 +31,7 @@ pub struct FlowSaturation<const N: usize> {
 }
 
 impl<const N: usize> LibraryEffect<N> for FlowSaturation<N> {
-    fn new(p: [&ModelParams; N]) -> Self {
+    fn new(p: [&dyn ModelView; N]) -> Self {
         FlowSaturation {
             on: super::lane_mask::<N, Self>(&p),
             x_sat: p.map(|m| Params::of(m).x_sat),

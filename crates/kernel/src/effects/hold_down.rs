@@ -2,21 +2,21 @@
 //! −K·y of the baseline. Its signature: odd harmonics and a changed amplitude ratio where the
 //! displacement is large (low frequency, large amplitude), nothing at small displacement.
 
-use super::{hook, Effect, EffectInfo, LibraryEffect, Stage};
-use crate::params::{params, ModelParams, Range};
+use super::{hook, Effect, EffectInfo, LibraryEffect, ModelView, Stage};
+use crate::param_table::{params, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
     name: super::module_name(module_path!()),
     family: "hold-down stiffness",
     summary: "a cubic hardening of the hold-down struts",
-    params: Params::PARAMS,
+    params: Params::FIELDS,
     stages: &[Stage::free(&["k3"])],
 };
 
 params! {
     /// Effect `hold_down`: hold-down strut stiffness nonlinearity, F = −k3·y³ on top of −K·y.
-    pub struct Params in effect {
+    pub struct Params {
         k3: "N/m³", "n_per_m3", 1.0e8, Range::any(), Chosen,
             "Cubic stiffness of the hold-down struts, positive = hardening [chosen: k3·y³ equals K·y at y = 11 cm].";
     }
@@ -27,7 +27,7 @@ pub struct HoldDown<const N: usize> {
 }
 
 impl<const N: usize> LibraryEffect<N> for HoldDown<N> {
-    fn new(p: [&ModelParams; N]) -> Self {
+    fn new(p: [&dyn ModelView; N]) -> Self {
         let on = super::lane_mask::<N, Self>(&p);
         HoldDown {
             k3: std::array::from_fn(|l| {

@@ -4,22 +4,22 @@
 //! that are largest where the force is (low frequency, large amplitude); neutral when off
 //! (both coefficients 0).
 
-use super::{hook, Effect, EffectInfo, LibraryEffect, Stage};
-use crate::params::{params, ModelParams, Range};
+use super::{hook, Effect, EffectInfo, LibraryEffect, ModelView, Stage};
+use crate::param_table::{params, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
     name: super::module_name(module_path!()),
     family: "leakage",
     summary: "internal leakage across the piston and external leakage to drain",
-    params: Params::PARAMS,
+    params: Params::FIELDS,
     stages: &[Stage::free(&["c_int"])],
 };
 
 params! {
     /// Effect `leakage`: internal leakage across the piston, q = c_int (P1 − P2), and external
     /// leakage from each chamber to drain, q = c_ext·P.
-    pub struct Params in effect {
+    pub struct Params {
         c_int: "m³/(s·Pa)", "m3_per_s_pa", 2.0e-11, Range::ge(0.0), Chosen,
             "Internal (cross-piston) leakage coefficient [chosen: 12 L/min at 10 MPa across the piston].";
         c_ext: "m³/(s·Pa)", "m3_per_s_pa", 0.0, Range::ge(0.0), Chosen,
@@ -33,7 +33,7 @@ pub struct Leakage<const N: usize> {
 }
 
 impl<const N: usize> LibraryEffect<N> for Leakage<N> {
-    fn new(p: [&ModelParams; N]) -> Self {
+    fn new(p: [&dyn ModelView; N]) -> Self {
         let on = super::lane_mask::<N, Self>(&p);
         Leakage {
             c_int: std::array::from_fn(|l| on[l] * Params::of(p[l]).c_int),

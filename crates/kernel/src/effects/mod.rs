@@ -84,8 +84,11 @@
 //! their derivatives in [`Effect::derivs`]. A throwaway effect (a test's specimen) needs only
 //! [`Effect`]: `simulate::run` takes any.
 
+use super::baseline_params::{
+    ActuatorParams, ControllerParams, FrictionParams, PlatenParams, ValveParams,
+};
 use super::metrics::SpecimenAcc;
-use super::params::{Component, ModelParams, ParamInfo};
+use super::param_table::{FieldInfo, Fields};
 
 /// What the rest of the tool knows about a library effect: its name (the model-file table and
 /// the parameter paths `name.param`), its family, its parameters and the ones a diagnosis frees.
@@ -101,7 +104,7 @@ pub struct EffectInfo {
     /// One line: what it adds to the model.
     pub summary: &'static str,
     /// Its parameters (unit, default, range, source), from its `params!` table.
-    pub params: &'static [ParamInfo],
+    pub params: &'static [FieldInfo],
     /// What a fit or a diagnosis frees, in stages: the first stage is the effect itself (a fit's
     /// default `--free`), each further one a part a diagnosis may add on top once the effect is
     /// chosen (a specimen's second mode). Each frees the parameters its signature determines;
@@ -165,7 +168,23 @@ pub const SENSED: [&str; 3] = ["accel", "disp", "force"];
 /// An effect of the library: built per batch from the lanes' parameter sets.
 pub trait LibraryEffect<const N: usize>: Effect<N> + Sized {
     /// The effect for N lanes; neutral in the lanes that do not switch it on.
-    fn new(lanes: [&ModelParams; N]) -> Self;
+    fn new(lanes: [&dyn ModelView; N]) -> Self;
+}
+
+/// What an effect reads of a lane's parameter set when it is built ([`LibraryEffect::new`]): the
+/// baseline's tables, which effects are on and the effects' tables. `params::ModelParams`, the
+/// model's parameter set, is the one that vshake runs; the library sees it through this view so
+/// that it stays below the model, whose registry names every effect.
+pub trait ModelView {
+    fn servovalve(&self) -> &ValveParams;
+    fn actuator(&self) -> &ActuatorParams;
+    fn platen(&self) -> &PlatenParams;
+    fn friction(&self) -> &FrictionParams;
+    fn controller(&self) -> &ControllerParams;
+    /// Which library effects are on.
+    fn switches(&self) -> &EffectSwitches;
+    /// The library effects' parameters.
+    fn effect_params(&self) -> &EffectParams;
 }
 
 /// The registry: one line per effect, `module::Type`, the one place its name is spelt. It declares
@@ -225,17 +244,9 @@ macro_rules! library {
         }
 
         $(impl $module::Params {
-            /// The component these parameters belong to.
-            pub const COMPONENT: Component = Component::Effect(EffectId::$Type);
-
             /// This effect's parameters in `m`.
-            pub fn of(m: &ModelParams) -> &Self {
-                &m.effect_params.$module
-            }
-
-            /// This effect's parameters in `m`, to change.
-            pub(crate) fn of_mut(m: &mut ModelParams) -> &mut Self {
-                &mut m.effect_params.$module
+            pub fn of(m: &dyn ModelView) -> &Self {
+                &m.effect_params().$module
             }
         })*
 
@@ -274,6 +285,21 @@ macro_rules! library {
             $(pub $module: $module::Params,)*
         }
 
+        impl EffectParams {
+            /// The table of effect `id`.
+            pub fn table(&self, id: EffectId) -> &dyn Fields {
+                match id {
+                    $(EffectId::$Type => &self.$module,)*
+                }
+            }
+            /// The table of effect `id`, to change.
+            pub fn table_mut(&mut self, id: EffectId) -> &mut dyn Fields {
+                match id {
+                    $(EffectId::$Type => &mut self.$module,)*
+                }
+            }
+        }
+
         $(impl<const N: usize> Named for $module::$Type<N> {
             const ID: EffectId = EffectId::$Type;
         })*
@@ -282,7 +308,8 @@ macro_rules! library {
         pub type EffectSet<const N: usize> = library!(@nest N; $($module::$Type),*);
 
         /// Calls `f` with library effect `id` alone, built for `lanes` (see [`EffectFn`]).
-        pub fn with_single<const N: usize, F: EffectFn<N>>(id: EffectId, lanes: [&ModelParams; N], f: F) -> F::Output {
+        pub fn with_single<const N: usize, M: ModelView, F: EffectFn<N>>(id: EffectId, lanes: [&M; N], f: F) -> F::Output {
+            let lanes = lanes.map(|m| m as &dyn ModelView);
             match id {
                 $(EffectId::$Type => f.call(&<$module::$Type<N> as LibraryEffect<N>>::new(lanes)),)*
             }
@@ -346,14 +373,16 @@ impl std::fmt::Display for EffectId {
 }
 
 /// The library's effects for up to N lanes (missing lanes repeat the last parameter set).
-pub fn effect_set<const N: usize>(sets: &[&ModelParams]) -> EffectSet<N> {
-    EffectSet::<N>::new(std::array::from_fn(|l| sets[l.min(sets.len() - 1)]))
+pub fn effect_set<const N: usize>(sets: &[&impl ModelView]) -> EffectSet<N> {
+    EffectSet::<N>::new(std::array::from_fn(|l| {
+        sets[l.min(sets.len() - 1)] as &dyn ModelView
+    }))
 }
 
 /// 1.0 where effect `id` is switched on in `m`, 0.0 where it is off: the factor an effect's
 /// coefficients are multiplied by, so an off lane is neutral without a branch in the step.
-pub fn switch(m: &ModelParams, id: EffectId) -> f64 {
-    if m.effects.get(id) {
+pub fn switch(m: &dyn ModelView, id: EffectId) -> f64 {
+    if m.switches().get(id) {
         1.0
     } else {
         0.0
@@ -361,7 +390,7 @@ pub fn switch(m: &ModelParams, id: EffectId) -> f64 {
 }
 
 /// [`switch`] of effect `E` for every lane (an effect's constructor calls it with `Self`).
-pub(crate) fn lane_mask<const N: usize, E: Named>(p: &[&ModelParams; N]) -> [f64; N] {
+pub(crate) fn lane_mask<const N: usize, E: Named>(p: &[&dyn ModelView; N]) -> [f64; N] {
     std::array::from_fn(|l| switch(p[l], E::ID))
 }
 
@@ -576,7 +605,7 @@ impl<const N: usize> Effect<N> for Baseline {
 }
 
 impl<const N: usize> LibraryEffect<N> for Baseline {
-    fn new(_lanes: [&ModelParams; N]) -> Self {
+    fn new(_lanes: [&dyn ModelView; N]) -> Self {
         Baseline
     }
 }
@@ -588,7 +617,7 @@ impl<const N: usize> LibraryEffect<N> for Baseline {
 pub struct Both<A, B>(pub A, pub B);
 
 impl<const N: usize, A: LibraryEffect<N>, B: LibraryEffect<N>> LibraryEffect<N> for Both<A, B> {
-    fn new(lanes: [&ModelParams; N]) -> Self {
+    fn new(lanes: [&dyn ModelView; N]) -> Self {
         Both(A::new(lanes), B::new(lanes))
     }
 }
@@ -712,9 +741,9 @@ pub struct Gated<E> {
 }
 
 impl<const N: usize, E: LibraryEffect<N> + Named> LibraryEffect<N> for Gated<E> {
-    fn new(lanes: [&ModelParams; N]) -> Self {
+    fn new(lanes: [&dyn ModelView; N]) -> Self {
         Gated {
-            on: lanes.iter().any(|p| p.effects.get(E::ID)),
+            on: lanes.iter().any(|p| p.switches().get(E::ID)),
             effect: E::new(lanes),
         }
     }
@@ -829,7 +858,42 @@ impl<const N: usize, E: Effect<N>> Effect<N> for Gated<E> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::params::Component;
+
+    /// A parameter set of defaults, as the library sees one.
+    #[derive(Default)]
+    pub(crate) struct Defaults {
+        pub servovalve: ValveParams,
+        pub actuator: ActuatorParams,
+        pub platen: PlatenParams,
+        pub friction: FrictionParams,
+        pub controller: ControllerParams,
+        pub effects: EffectSwitches,
+        pub effect_params: EffectParams,
+    }
+
+    impl ModelView for Defaults {
+        fn servovalve(&self) -> &ValveParams {
+            &self.servovalve
+        }
+        fn actuator(&self) -> &ActuatorParams {
+            &self.actuator
+        }
+        fn platen(&self) -> &PlatenParams {
+            &self.platen
+        }
+        fn friction(&self) -> &FrictionParams {
+            &self.friction
+        }
+        fn controller(&self) -> &ControllerParams {
+            &self.controller
+        }
+        fn switches(&self) -> &EffectSwitches {
+            &self.effects
+        }
+        fn effect_params(&self) -> &EffectParams {
+            &self.effect_params
+        }
+    }
 
     /// Every registered effect is complete: a family, free parameters that it has, a name that is
     /// its switch, its parameter table and its module (so a misspelt or half-registered effect
@@ -856,13 +920,6 @@ mod tests {
                     e.name
                 );
             }
-            assert!(
-                e.params
-                    .iter()
-                    .all(|p| p.component == Component::Effect(id)),
-                "{}: its parameters belong to another component",
-                e.name
-            );
             assert_eq!(
                 id.module(),
                 e.name,
@@ -912,7 +969,7 @@ mod tests {
     /// The composed states are the effects' states side by side: the layout follows the types.
     #[test]
     fn composed_states_are_contiguous() {
-        let p = ModelParams::default();
+        let p = Defaults::default();
         let set = effect_set::<4>(&[&p]);
         let s = set.initial_state();
         let n = s.as_ref().len();

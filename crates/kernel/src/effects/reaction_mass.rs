@@ -11,15 +11,15 @@
 //! reaction path is not in docs/model.md). Its signature: the measured acceleration and displacement
 //! stop being one body's (a₁ ≠ −ω²·x₁), increasingly with frequency, as (m/m_r)·(f/f_r)²/(1 − (f/f_r)²).
 
-use super::{hook, Effect, EffectInfo, LibraryEffect, PlantView, Stage};
-use crate::params::{params, ModelParams, Range};
+use super::{hook, Effect, EffectInfo, LibraryEffect, ModelView, PlantView, Stage};
+use crate::param_table::{params, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
     name: super::module_name(module_path!()),
     family: "reaction mass",
     summary: "the actuators push against a reaction mass on a compliant foundation",
-    params: Params::PARAMS,
+    params: Params::FIELDS,
     stages: &[Stage {
         label: "",
         free: &["m_r", "f_r"],
@@ -33,7 +33,7 @@ params! {
     /// Effect `reaction_mass`: the actuators push against a reaction mass on a compliant
     /// foundation, m_r ÿ_r = −F − k_r y_r − c_r ẏ_r. The actuator stroke (and the LVDT) is y − y_r;
     /// the accelerometer sees the platen's absolute acceleration.
-    pub struct Params in effect {
+    pub struct Params {
         m_r: "kg", "kg", 2.0e6, Range::gt(0.0), Chosen,
             "Reaction mass [chosen: order of a large table's foundation block].";
         f_r: "Hz", "hz", 12.0, Range::closed(0.5, 200.0), Chosen,
@@ -55,7 +55,7 @@ pub struct ReactionMass<const N: usize> {
 }
 
 impl<const N: usize> LibraryEffect<N> for ReactionMass<N> {
-    fn new(p: [&ModelParams; N]) -> Self {
+    fn new(p: [&dyn ModelView; N]) -> Self {
         let on = super::lane_mask::<N, Self>(&p);
         let q = p.map(Params::of);
         let w = q.map(|q| 2.0 * std::f64::consts::PI * q.f_r);

@@ -3,22 +3,22 @@
 //! every velocity reversal, so relative odd harmonics (h3) that are largest at small amplitude,
 //! and a residual concentrated near velocity reversal; neutral when off (forces 0).
 
-use super::{hook, Effect, EffectInfo, LibraryEffect, Stage};
-use crate::params::{params, ModelParams, Range};
+use super::{hook, Effect, EffectInfo, LibraryEffect, ModelView, Stage};
+use crate::param_table::{params, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
     name: super::module_name(module_path!()),
     family: "friction",
     summary: "actuator seal friction with a Stribeck term",
-    params: Params::PARAMS,
+    params: Params::FIELDS,
     stages: &[Stage::free(&["f_c", "f_s"])],
 };
 
 params! {
     /// Effect `seal_friction`: actuator seal friction with a Stribeck term,
     /// F = −tanh(v/v_eps)·(f_c + (f_s − f_c)·exp(−(v/v_s)²)) − sigma·v.
-    pub struct Params in effect {
+    pub struct Params {
         f_c: "N", "n", 5000.0, Range::ge(0.0), Chosen,
             "Coulomb seal friction, all actuators together [chosen].";
         f_s: "N", "n", 8000.0, Range::ge(0.0), Chosen,
@@ -41,7 +41,7 @@ pub struct SealFriction<const N: usize> {
 }
 
 impl<const N: usize> LibraryEffect<N> for SealFriction<N> {
-    fn new(p: [&ModelParams; N]) -> Self {
+    fn new(p: [&dyn ModelView; N]) -> Self {
         let on = super::lane_mask::<N, Self>(&p);
         let q = p.map(Params::of);
         SealFriction {

@@ -121,7 +121,7 @@ macro_rules! sensor_effect {
         pub struct $Type<const N: usize>(super::sensor_chain::Chain<N>);
 
         impl<const N: usize> super::LibraryEffect<N> for $Type<N> {
-            fn new(p: [&ModelParams; N]) -> Self {
+            fn new(p: [&dyn super::ModelView; N]) -> Self {
                 let on = super::lane_mask::<N, Self>(&p);
                 let lanes = p.map(|m| {
                     let q = Params::of(m);

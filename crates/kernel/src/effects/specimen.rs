@@ -15,8 +15,8 @@
 //! frequency (a resonance makes the fit non-convex in it); forward selection may add mode 2, then
 //! mode 3, the same way.
 
-use super::{hook, Effect, EffectInfo, LibraryEffect, PlantView, Stage};
-use crate::params::{params, ModelParams, Range};
+use super::{hook, Effect, EffectInfo, LibraryEffect, ModelView, PlantView, Stage};
+use crate::param_table::{params, Range};
 
 /// Start frequencies a diagnosis scans for a mode, Hz [chosen: 12 % apart (a 5 %-damped mode's
 /// half-power band is 10 % wide, so the scan lands in its valley) over the band where a structure
@@ -32,7 +32,7 @@ pub const INFO: EffectInfo = EffectInfo {
     name: super::module_name(module_path!()),
     family: "specimen",
     summary: "a linear structure on the platen: up to three modes (modal mass, frequency, damping)",
-    params: Params::PARAMS,
+    params: Params::FIELDS,
     stages: &[
         Stage {
             label: "mode 1",
@@ -60,7 +60,7 @@ params! {
     /// Effect `specimen`: a linear structure on the platen, up to three modes relative to it,
     /// ü_i = −ω_i² u_i − 2ζ_iω_i u̇_i − a; the base shear Σ m_i(ω_i² u_i + 2ζ_iω_i u̇_i) acts on
     /// the platen. A mode with zero mass is absent.
-    pub struct Params in effect {
+    pub struct Params {
         m1: "kg", "kg", 20.0e3, Range::ge(0.0), Chosen,
             "Modal mass of mode 1 [chosen: 20 t, a mid-size specimen of the LHPOST (payload up to 2 000 t)].";
         f1: "Hz", "hz", 3.0, Range::closed(0.1, 100.0), Chosen,
@@ -96,7 +96,7 @@ pub struct Specimen<const N: usize> {
 }
 
 impl<const N: usize> LibraryEffect<N> for Specimen<N> {
-    fn new(p: [&ModelParams; N]) -> Self {
+    fn new(p: [&dyn ModelView; N]) -> Self {
         let on = super::lane_mask::<N, Self>(&p);
         let q = p.map(Params::of);
         let modes = |l: usize| {

@@ -2,8 +2,8 @@
 //! ẍ_s = ω²(x_c − x_s) − 2ζω ẋ_s, ω = 2π·freq_hz. Its signature: a phase lag that grows with
 //! frequency, and a smaller amplitude ratio at higher frequencies.
 
-use super::{hook, Effect, EffectInfo, LibraryEffect, PlantView, Stage};
-use crate::params::{params, ModelParams, Range};
+use super::{hook, Effect, EffectInfo, LibraryEffect, ModelView, PlantView, Stage};
+use crate::param_table::{params, Range};
 use crate::N_ACT;
 
 /// The effect's entry in the library.
@@ -11,7 +11,7 @@ pub const INFO: EffectInfo = EffectInfo {
     name: super::module_name(module_path!()),
     family: "valve dynamics",
     summary: "a second-order lag between the valve command and the spool",
-    params: Params::PARAMS,
+    params: Params::FIELDS,
     stages: &[Stage {
         label: "",
         free: &["freq_hz"],
@@ -24,7 +24,7 @@ pub const INFO: EffectInfo = EffectInfo {
 params! {
     /// Effect `spool_dynamics`: the servo-valve spool follows its command through a second-order
     /// lag, ẍ = ω²(x_c − x) − 2ζω ẋ (the baseline has x = x_c).
-    pub struct Params in effect {
+    pub struct Params {
         freq_hz: "Hz", "hz", 80.0, Range::closed(1.0, 1000.0), Chosen,
             "Spool natural frequency [chosen: 80 Hz; with 40 Hz the published TVC loop oscillates at small amplitude].";
         zeta: "-", "", 0.7, Range::closed(0.05, 5.0), Chosen,
@@ -44,7 +44,7 @@ pub struct SpoolDynamics<const N: usize> {
 }
 
 impl<const N: usize> LibraryEffect<N> for SpoolDynamics<N> {
-    fn new(p: [&ModelParams; N]) -> Self {
+    fn new(p: [&dyn ModelView; N]) -> Self {
         let w = p.map(|m| 2.0 * std::f64::consts::PI * Params::of(m).freq_hz);
         SpoolDynamics {
             on: super::lane_mask::<N, Self>(&p),

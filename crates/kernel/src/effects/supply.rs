@@ -4,15 +4,15 @@
 //! draw of a test exceeds the pump, the supply droops, more at large amplitude, and the envelope
 //! of the acceleration sinks from cycle to cycle.
 
-use super::{hook, Effect, EffectInfo, LibraryEffect, PlantView, Stage};
-use crate::params::{params, ModelParams, Range};
+use super::{hook, Effect, EffectInfo, LibraryEffect, ModelView, PlantView, Stage};
+use crate::param_table::{params, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
     name: super::module_name(module_path!()),
     family: "supply pressure",
     summary: "supply pressure droop: a pump of limited flow and an accumulator",
-    params: Params::PARAMS,
+    params: Params::FIELDS,
     stages: &[Stage::free(&["q_pump", "c_acc"])],
 };
 
@@ -20,7 +20,7 @@ params! {
     /// Effect `supply`: supply pressure dynamics. A pressure-compensated pump delivers
     /// Q_p = q_pump·clamp((P_S − P_s)/dp_band, 0, 1) into an accumulator of capacitance c_acc;
     /// the valves draw Q from it: c_acc dP_s/dt = Q_p − Q. The valves see P_s instead of P_S.
-    pub struct Params in effect {
+    pub struct Params {
         q_pump: "m³/s", "m3_per_s", 0.2, Range::gt(0.0), Chosen,
             "Pump flow at full stroke [chosen: below the peak draw of large tests, so accumulators carry the peaks].";
         c_acc: "m³/Pa", "m3_per_pa", 3.5e-8, Range::gt(0.0), Chosen,
@@ -40,10 +40,10 @@ pub struct Supply<const N: usize> {
 }
 
 impl<const N: usize> LibraryEffect<N> for Supply<N> {
-    fn new(p: [&ModelParams; N]) -> Self {
+    fn new(p: [&dyn ModelView; N]) -> Self {
         Supply {
             on: super::lane_mask::<N, Self>(&p),
-            p_s0: p.map(|m| m.servovalve.p_s),
+            p_s0: p.map(|m| m.servovalve().p_s),
             q_pump: p.map(|m| Params::of(m).q_pump),
             inv_c: p.map(|m| 1.0 / Params::of(m).c_acc),
             inv_band: p.map(|m| 1.0 / Params::of(m).dp_band),

@@ -11,15 +11,15 @@
 //! phase is within 0.01 % of −ωτ and the magnitude within 0.02 % of 1 (a choice; documented in the
 //! docs/guide.md's effects table).
 
-use super::{hook, Effect, EffectInfo, LibraryEffect, PlantView, Stage};
-use crate::params::{params, ModelParams, Range};
+use super::{hook, Effect, EffectInfo, LibraryEffect, ModelView, PlantView, Stage};
+use crate::param_table::{params, Range};
 
 /// The effect's entry in the library.
 pub const INFO: EffectInfo = EffectInfo {
     name: super::module_name(module_path!()),
     family: "valve dynamics",
     summary: "a pure delay between the valve command and the spool",
-    params: Params::PARAMS,
+    params: Params::FIELDS,
     stages: &[Stage {
         label: "",
         free: &["tau"],
@@ -32,7 +32,7 @@ pub const INFO: EffectInfo = EffectInfo {
 params! {
     /// Effect `transport_delay`: a pure delay τ between the controller's command and the spool
     /// (pilot stages, driver electronics, digital I/O), before the spool dynamics if those are on.
-    pub struct Params in effect {
+    pub struct Params {
         tau: "s", "s", 2.0e-3, Range::closed(0.5e-3, 20.0e-3), Chosen,
             "Delay between the valve command and the spool [chosen: 2 ms; realised as 4 equal first-order lags, see the effect's doc].";
     }
@@ -48,7 +48,7 @@ pub struct TransportDelay<const N: usize> {
 }
 
 impl<const N: usize> LibraryEffect<N> for TransportDelay<N> {
-    fn new(p: [&ModelParams; N]) -> Self {
+    fn new(p: [&dyn ModelView; N]) -> Self {
         let on = super::lane_mask::<N, Self>(&p);
         let default_tau = Params::default().tau;
         TransportDelay {

@@ -419,7 +419,7 @@ pub(crate) fn free_of_stage(effect: EffectId, stage: usize, model: &ModelParams)
         .map(|n| {
             let info = ModelParams::lookup(&format!("{effect}.{n}"))
                 .expect("default free parameters are registered");
-            let v = (info.get)(model);
+            let v = info.get(model);
             let start = s.start.iter().find(|(name, _)| name == n).map(|x| x.1);
             Free::new(info, start.filter(|_| v == 0.0).unwrap_or(v))
         })

@@ -655,7 +655,7 @@ fn with_values(
         if let Some(e) = f.info.component.effect() {
             *m.effects.get_mut(e) = true;
         }
-        (f.info.set)(&mut m, v);
+        f.info.set(&mut m, v);
     }
     m
 }

@@ -339,7 +339,7 @@ fn read_gains(root: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues) -
         if gains.iter().any(|g| std::ptr::eq(g.info, info)) {
             issues.push(&path, format!("{} is listed twice", info.path()));
         }
-        let start = start.unwrap_or((info.get)(model));
+        let start = start.unwrap_or(info.get(model));
         let here = path.trim_end_matches(".name");
         if !(low < high) {
             issues.push(

@@ -4,6 +4,7 @@
 use std::path::PathBuf;
 use vshake_kernel::excitation::{Signal, Sine};
 use vshake_kernel::ground::{Processing, Sweep};
+use vshake_kernel::params::{Component, ModelParams};
 
 /// The excitation of a run, as written in a spec (a record's file is not read yet).
 #[derive(Debug, Clone, PartialEq)]
@@ -167,8 +168,7 @@ impl ExcitationSpec {
                 ..
             } => {
                 *realisation == Realisation::PerSample
-                    || vshake_kernel::ground::GroundParams::PARAMS
-                        .iter()
+                    || ModelParams::rows(Component::Ground)
                         .any(|p| varied(&p.path()) && !ground.iter().any(|(n, _)| *n == p.name))
             }
             ExcitationSpec::Random { realisation, .. } => *realisation == Realisation::PerSample,

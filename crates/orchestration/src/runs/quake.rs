@@ -18,8 +18,8 @@ use chacha20::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
 use rand_distr::StandardNormal;
 use vshake_kernel::excitation::{Record, Reference, Signal};
-use vshake_kernel::ground::{self, GroundParams, Multisine, Processing};
-use vshake_kernel::params::{ModelParams, G};
+use vshake_kernel::ground::{self, Multisine, Processing};
+use vshake_kernel::params::{Component, ModelParams, G};
 
 /// Mixed into a study's seed for the excitation noise (so it never shares the design's streams).
 pub const NOISE_SALT: u64 = 0x6e6f_6973_655f_7631; // "noise_v1"
@@ -61,11 +61,10 @@ pub fn generated(
             // The model's ground.* (a study's sampled values), the excitation's own keys over them.
             let mut m = model.clone();
             for (name, v) in given {
-                let info = GroundParams::PARAMS
-                    .iter()
+                let info = ModelParams::rows(Component::Ground)
                     .find(|p| p.name == *name)
                     .expect("a ground parameter name");
-                (info.set)(&mut m, *v);
+                info.set(&mut m, *v);
             }
             let g = m.ground;
             let n = (duration_s * f_s).round() as usize;

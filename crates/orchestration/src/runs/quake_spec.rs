@@ -4,8 +4,8 @@
 
 use crate::runs::excitation_spec::{ExcitationSpec, Realisation};
 use crate::toml_fields::{Fields, Issues};
-use vshake_kernel::ground::{GroundParams, Processing, Sweep, SweepLaw};
-use vshake_kernel::params::{ModelParams, G};
+use vshake_kernel::ground::{Processing, Sweep, SweepLaw};
+use vshake_kernel::params::{Component, ModelParams, G};
 use vshake_kernel::spectrum::SpectrumSpec;
 
 /// The columns an `.AT2` file is read into (shell::at2).
@@ -139,7 +139,7 @@ pub(crate) fn read_stochastic(
     let f_ref_hz = read_f_ref(f, model, issues);
     let processing = read_processing(f, issues);
     let mut ground = Vec::new();
-    for p in GroundParams::PARAMS {
+    for p in ModelParams::rows(Component::Ground) {
         if let Some(v) = f.f64(p.name, issues) {
             if p.range.contains(v) {
                 ground.push((p.name, v));
@@ -569,9 +569,12 @@ mod tests {
 
     #[test]
     fn the_stochastic_keys_name_every_ground_parameter() {
-        for p in GroundParams::PARAMS {
+        for p in ModelParams::rows(Component::Ground) {
             assert!(STOCHASTIC_KEYS.contains(&p.name), "{}", p.name);
         }
-        assert_eq!(STOCHASTIC_KEYS.len(), 7 + GroundParams::PARAMS.len());
+        assert_eq!(
+            STOCHASTIC_KEYS.len(),
+            7 + ModelParams::rows(Component::Ground).count()
+        );
     }
 }

@@ -80,7 +80,7 @@ pub(crate) fn read_model(mut f: Fields<'_>, model: &mut ModelParams, issues: &mu
         for name in &names {
             if let Some(v) = t.f64(name, issues) {
                 let info = ModelParams::lookup(&format!("{comp}.{name}")).expect("registry name");
-                (info.set)(model, v);
+                info.set(model, v);
             }
         }
         t.finish(&expected, issues);
@@ -607,7 +607,7 @@ pub fn model_table(model: &ModelParams) -> toml::Table {
             continue;
         }
         for p in ModelParams::registry().filter(|p| p.component == comp) {
-            t.insert(p.name.into(), (p.get)(model).into());
+            t.insert(p.name.into(), p.get(model).into());
         }
         m.insert(comp.name().into(), toml::Value::Table(t));
     }

@@ -268,7 +268,7 @@ impl Plan {
         };
         let mut model = self.base.clone();
         for (info, v) in self.columns.iter().zip(&values) {
-            (info.set)(&mut model, *v);
+            info.set(&mut model, *v);
         }
         let model = model.validate().map(|_| model).map_err(|list| {
             list.iter()
