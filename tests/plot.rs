@@ -47,9 +47,35 @@ fn draws_indices_scatter_and_index_then_redraws_its_own_folder() {
         index.contains("No run failed"),
         "the smoke study has no failed run"
     );
-    // Its own folder is redrawn.
+    // Its own folder is redrawn (every metric this time): the same drawings come out the same,
+    // and the new index links every drawing in the folder.
+    let drawn = |f: &str| std::fs::read_to_string(plots.join(f)).unwrap();
+    let first: Vec<(&str, String)> = [
+        "sobol_sine_3hz_1g_amp_ratio.svg",
+        "sobol_sine_3hz_1g_thd_odd_ratio.svg",
+        "scatter_amp_ratio.svg",
+        "scatter_thd_odd_ratio.svg",
+    ]
+    .map(|f| (f, drawn(f)))
+    .into();
     let (code, _, err) = study(&["plot", results.to_str().unwrap()]);
     assert_eq!(code, 0, "{err}");
+    for (f, svg) in &first {
+        assert_eq!(&drawn(f), svg, "{f} drawn again differently");
+    }
+    let index = drawn("index.html");
+    let svgs: Vec<String> = std::fs::read_dir(&plots)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".svg"))
+        .collect();
+    assert!(svgs.len() > first.len(), "every metric drawn: {svgs:?}");
+    for f in &svgs {
+        assert!(
+            index.contains(f.as_str()),
+            "{f} not in the redrawn index.html"
+        );
+    }
 }
 
 #[test]

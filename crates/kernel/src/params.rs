@@ -23,41 +23,28 @@ use super::ground::GroundParams;
 use super::param_table::Fields;
 pub use super::param_table::{FieldInfo, ParamIssue, Range, Source};
 
-/// One entry of the parameter registry: a row of a component's table ([`FieldInfo`]), with
-/// its component and its place there.
+/// One entry of the parameter registry: a row of a component's table (its [`FieldInfo`]:
+/// `name`, `unit`, `default`, `range`, ... read through it), with its component and its place
+/// there.
 #[derive(Clone, Copy)]
 pub struct ParamInfo {
     /// The part of the model it belongs to: a baseline part or a library effect.
     pub component: Component,
-    /// Field name inside the component; the full path is `component.name`.
-    pub name: &'static str,
-    /// Unit as printed for humans.
-    pub unit: &'static str,
-    /// Unit suffix for table column names (empty for dimensionless).
-    pub unit_suffix: &'static str,
-    pub default: f64,
-    pub range: Range,
-    pub source: Source,
-    /// What the parameter means, and for [chosen] values why this value.
-    pub doc: &'static str,
+    /// The row itself; its `name` is the field's inside the component, the full path is
+    /// `component.name`.
+    row: &'static FieldInfo,
     /// Its row in the component's table.
     index: usize,
 }
 
-impl ParamInfo {
-    fn new(component: Component, index: usize, f: &FieldInfo) -> Self {
-        ParamInfo {
-            component,
-            name: f.name,
-            unit: f.unit,
-            unit_suffix: f.unit_suffix,
-            default: f.default,
-            range: f.range,
-            source: f.source,
-            doc: f.doc,
-            index,
-        }
+impl std::ops::Deref for ParamInfo {
+    type Target = FieldInfo;
+    fn deref(&self) -> &FieldInfo {
+        self.row
     }
+}
+
+impl ParamInfo {
     /// Its value in `m`.
     pub fn get(&self, m: &ModelParams) -> f64 {
         m.table(self.component).field(self.index)
@@ -249,7 +236,11 @@ impl ModelParams {
         Self::components()
             .flat_map(|c| {
                 let fields = Self::fields(c).iter().enumerate();
-                fields.map(move |(i, f)| ParamInfo::new(c, i, f))
+                fields.map(move |(index, row)| ParamInfo {
+                    component: c,
+                    row,
+                    index,
+                })
             })
             .collect()
     }
