@@ -189,9 +189,10 @@ pub trait ModelView {
 
 /// The registry: one line per effect, `module::Type`, the one place its name is spelt. It declares
 /// the module (one file in this directory), lists its `INFO` in [`LIBRARY`], adds its switch to
-/// [`EffectSwitches`] and its parameters to [`EffectParams`] (with their accessors `Params::of`
-/// and component, so `study params`, model files, `synth --effect`, `fit --effect` and
-/// `diagnose` know it), and composes it into [`EffectSet`].
+/// [`EffectSwitches`] and its parameters to [`EffectParams`] (with their accessor `Params::of`
+/// and [`EffectParams::table`], from which `params` makes the effect's registry rows, so `study
+/// params`, model files, `synth --effect`, `fit --effect` and `diagnose` know it), and composes
+/// it into [`EffectSet`].
 ///
 /// **The order is the order of composition** where effects act on the same quantity: the
 /// command passes through the effects in list order on its way to the valve opening (a delay,
