@@ -20,13 +20,17 @@
 //! - [`LANES`] lanes of the bare plant ([`run_bare_lanes`]: design exploration): portable, AVX2
 //!   and AVX-512;
 //! - [`EFFECT_LANES`] lanes with one library effect alone ([`run_single_effect`], a diagnosis's
-//!   screening): the usual configuration, AVX2.
+//!   screening): the usual configuration, AVX2;
+//! - [`LANES`] lanes with one library effect alone that leaves the hydraulics alone
+//!   ([`run_wide_single_effect`]: a study or a tuning with a specimen): the usual configuration,
+//!   AVX2.
 //!
 //! The portable build is the law-reading one for every configuration (a CPU without AVX2, or a
 //! caller that asks for it); the AVX2 builds are made for the published laws only, outside the
 //! bare plant's full batches, where the law-reading pair has its vector builds too
 //! (`simulate`'s `dispatch`). 36 copies of the integrator in all (`cargo llvm-lines`), where
-//! a build per law pair made 59.
+//! a build per law pair made 59, before the wide batches of one effect added one for each of the
+//! seven effects that leave the hydraulics alone.
 
 use crate::effects::{effect_set, with_single, Baseline, Effect, EffectFn, EffectId};
 use crate::excitation::Reference;
@@ -59,6 +63,10 @@ site! {
 site! {
     /// One library effect alone.
     single
+}
+site! {
+    /// [`LANES`] lanes with one library effect alone, one that leaves the hydraulics alone.
+    wide_single
 }
 
 /// The lanes of `lp` (made from `models`; `refs[l]` is lane l's reference) through the effect
@@ -132,6 +140,53 @@ pub fn run_bare_lanes(
         solver,
         obs,
     )
+}
+
+/// Up to [`LANES`] models that switch on library effect `id` alone, an effect that leaves the
+/// hydraulics alone (a specimen, a building, a measurement chain:
+/// [`crate::effects::Effect::HYDRAULIC`]), as the lanes of one batch with the plant in the bare
+/// plant's AVX2 registers, in the usual configuration ([`simulate::run_platen_forces`]);
+/// `None` elsewhere (the caller then runs batches of [`EFFECT_LANES`], the same numbers bit for
+/// bit). `refs[l]` is lane l's reference.
+pub fn run_wide_single_effect(
+    id: EffectId,
+    models: &[&ModelParams],
+    refs: &[&Reference; LANES],
+    solver: &Solver,
+) -> Option<Result<[LaneResult; LANES], SetupError>> {
+    let lp = match LaneParams::<LANES>::new(models) {
+        Ok(lp) => lp,
+        Err(e) => return Some(Err(e)),
+    };
+    let lanes: [&ModelParams; LANES] = std::array::from_fn(|l| models[l.min(models.len() - 1)]);
+    with_single(
+        id,
+        lanes,
+        WideSingle {
+            lp: &lp,
+            refs,
+            solver,
+        },
+    )
+}
+
+/// [`run_wide_single_effect`]'s call, generic over the effect.
+struct WideSingle<'a> {
+    lp: &'a LaneParams<LANES>,
+    refs: &'a [&'a Reference; LANES],
+    solver: &'a Solver,
+}
+
+impl EffectFn<LANES> for WideSingle<'_> {
+    type Output = Option<Result<[LaneResult; LANES], SetupError>>;
+    fn call<E: Effect<LANES>>(self, effect: &E) -> Self::Output {
+        // Built for the effects that leave the hydraulics alone only.
+        if const { E::HYDRAULIC } {
+            return None;
+        }
+        let (lp, refs, solver, obs) = (self.lp, self.refs, self.solver, &mut NoObserver);
+        simulate::run_platen_forces::<LANES, E, _, wide_single::Here>(lp, effect, refs, solver, obs)
+    }
 }
 
 /// Up to [`EFFECT_LANES`] models that switch on library effect `id` alone, with a kernel made

@@ -29,7 +29,7 @@ use super::effects::{hook, Effect, PlantView};
 use super::excitation::{Drive, Reference};
 use super::friction;
 pub use super::lane_params::{LaneParams, SetupError};
-use super::lanes::{AVX512, PORTABLE};
+use super::lanes::{AVX2, AVX512, PORTABLE};
 use super::metrics::{Basis, Metrics, MetricsAcc, SpecimenAcc, WindowTick};
 use super::params::{ModelParams, ValveLaw};
 use super::platen::{self, Damping, PowDamping, SqrtDamping};
@@ -444,6 +444,40 @@ fn actuators<
     }
 }
 
+/// [`run_each`] for effects that leave the hydraulics alone ([`Effect::hydraulic`]: a specimen, a
+/// building, a measurement chain) in a batch the bare plant's AVX2 registers take
+/// ([`bare::fits`]: up to 16 lanes), in the usual configuration (orifice valves, α = ½, identical
+/// actuators) on a CPU with AVX2 and FMA; `None` elsewhere (the caller then runs [`run_each`] in
+/// narrower batches: lanes are independent, the same numbers bit for bit). The AVX2 build, not
+/// the AVX-512 one: with an effect's states in the loop, the AVX-512 build of 16 lanes ran 1.4
+/// times slower than this one here (docs/performance.md).
+pub(crate) fn run_platen_forces<const N: usize, E: Effect<N>, O: Observer<N> + ?Sized, P: Site>(
+    lp: &LaneParams<N>,
+    effect: &E,
+    refs: &[&Reference; N],
+    solver: &Solver,
+    obs: &mut O,
+) -> Option<Result<[LaneResult; N], SetupError>> {
+    #[cfg(target_arch = "x86_64")]
+    if const { bare::fits::<AVX2>(N) }
+        && matches!(lp.valve_law, ValveLaw::Orifice)
+        && lp.alpha_half
+        && Isa::detected() >= Isa::Avx2
+        && !effect.hydraulic()
+        && effect.symmetric()
+    {
+        if let Err(e) = check(lp.f_s, refs, solver) {
+            return Some(Err(e));
+        }
+        // SAFETY: the CPU reports AVX2 and FMA (`Isa::detected`).
+        return Some(Ok(unsafe {
+            P::avx2::<N, 1, Orifice, SqrtDamping, E, O>(lp, effect, refs, solver, obs)
+        }));
+    }
+    let _ = (lp, effect, refs, solver, obs);
+    None
+}
+
 /// An effect that does not declare [`Effect::SPLITS`] keeps the actuators identical.
 fn assert_symmetric<const N: usize, E: Effect<N>>(effect: &E) {
     assert!(
@@ -804,7 +838,7 @@ fn rhs<
     des: &mut E::State,
 ) {
     if const { E::BARE && A == 1 && bare::fits::<SIMD>(N) } {
-        bare::rhs::<N, SIMD, Q, D>(lp, x_c, s, ds);
+        bare::rhs::<N, SIMD, Q, D>(lp, x_c, s, ds, None, None);
         return;
     }
     // The bare plant's single lane (`study sim`, a comparison's runs) is small code, and a call per
@@ -838,6 +872,12 @@ pub(crate) fn rhs_general<
     ds: &mut [[f64; N]; NP],
     des: &mut E::State,
 ) {
+    // Effects that leave the hydraulics alone (a force on the platen, a measurement chain) take
+    // the bare plant's vector path, their force added to the actuators' (the same bits).
+    if const { A == 1 && bare::fits::<SIMD>(N) } && !effect.hydraulic() {
+        rhs_platen_forces::<N, SIMD, Q, D, E>(lp, effect, x_c, s, es, ds, des);
+        return;
+    }
     let mut q_in1 = [[0.0; N]; N_ACT];
     let mut q_out2 = [[0.0; N]; N_ACT];
     let mut xs = [[0.0; N]; N_ACT];
@@ -923,6 +963,42 @@ pub(crate) fn rhs_general<
         f_act: &f_act,
         accel: &ds[VEL],
         stroke: &stroke,
+    };
+    effect.derivs(&view, es, des);
+}
+
+/// [`rhs_general`] for an effect that leaves the hydraulics alone ([`Effect::hydraulic`] says
+/// false): its force on the platen, lane by lane, then the plant in the registers of the build
+/// `SIMD` ([`bare::rhs`], the batch fits), then the effect's derivatives from the same view of
+/// the plant as [`rhs_general`] gives them.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn rhs_platen_forces<const N: usize, const SIMD: u8, Q: FlowLaw, D: Damping, E: Effect<N>>(
+    lp: &LaneParams<N>,
+    effect: &E,
+    x_c: &[f64; N],
+    s: &[[f64; N]; NP],
+    es: &E::State,
+    ds: &mut [[f64; N]; NP],
+    des: &mut E::State,
+) {
+    let f_ext: [f64; N] = std::array::from_fn(|lane| {
+        let (y, v) = (s[Y][lane], s[VEL][lane]);
+        effect.extra_force(hook::Motion { lane, y, v }, es)
+    });
+    let mut h = bare::Hydraulics::default();
+    bare::rhs::<N, SIMD, Q, D>(lp, x_c, s, ds, Some(&f_ext), Some(&mut h));
+    let view = PlantView {
+        x_c,
+        opening: &[*x_c; N_ACT],
+        q_supply: &h.q_supply,
+        state: s,
+        q_in1: &[h.q1; N_ACT],
+        q_out2: &[h.q2; N_ACT],
+        p_s: &lp.p_s,
+        f_act: &h.f_act,
+        accel: &ds[VEL],
+        stroke: &s[Y],
     };
     effect.derivs(&view, es, des);
 }
@@ -1540,6 +1616,305 @@ mod tests {
             });
         }
         out
+    }
+
+    /// An effect as it is, declared hydraulic: the kernel then takes the general right-hand side.
+    struct Hydraulic<'a, E>(&'a E);
+
+    impl<const N: usize, E: Effect<N>> Effect<N> for Hydraulic<'_, E> {
+        type State = E::State;
+        const MOVES_SPOOL: bool = E::MOVES_SPOOL;
+        const SPLITS: bool = E::SPLITS;
+        fn initial_state(&self) -> Self::State {
+            self.0.initial_state()
+        }
+        fn live_states(&self) -> usize {
+            self.0.live_states()
+        }
+        fn symmetric(&self) -> bool {
+            self.0.symmetric()
+        }
+        fn supply(&self, c: hook::Supply, s: &Self::State) -> f64 {
+            self.0.supply(c, s)
+        }
+        fn opening(&self, c: hook::Opening, s: &Self::State) -> f64 {
+            self.0.opening(c, s)
+        }
+        fn spool_position(&self, c: hook::Opening, s: &Self::State) -> f64 {
+            self.0.spool_position(c, s)
+        }
+        fn stroke(&self, c: hook::Motion, s: &Self::State) -> (f64, f64) {
+            self.0.stroke(c, s)
+        }
+        fn chamber_stiffness(&self, c: hook::Chambers, s: &Self::State) -> (f64, f64) {
+            self.0.chamber_stiffness(c, s)
+        }
+        fn flows(&self, c: hook::Flows, s: &Self::State) -> (f64, f64) {
+            self.0.flows(c, s)
+        }
+        fn extra_force(&self, c: hook::Motion, s: &Self::State) -> f64 {
+            self.0.extra_force(c, s)
+        }
+        fn derivs(&self, plant: &PlantView<'_, N>, s: &Self::State, ds: &mut Self::State) {
+            self.0.derivs(plant, s, ds)
+        }
+        fn sensed(&self, c: hook::Sensed, s: &Self::State) -> [f64; 3] {
+            self.0.sensed(c, s)
+        }
+        fn watch(&self, s: &Self::State, acc: &mut crate::metrics::SpecimenAcc<N>) {
+            self.0.watch(s, acc)
+        }
+        fn responses(&self, l: usize, s: &Self::State, out: &mut dyn FnMut(&'static str, f64)) {
+            self.0.responses(l, s, out)
+        }
+    }
+
+    /// Every library effect that leaves the hydraulics alone, run through the bare plant's vector
+    /// path and through the general right-hand side ([`Hydraulic`]), 16 lanes (the wide batches)
+    /// and 8, on every instruction set this CPU has a build for: the same bits.
+    struct VectorPathEqualsGeneral<'a, const N: usize> {
+        lp: &'a LaneParams<N>,
+        r: &'a Reference,
+        compared: &'a mut Vec<crate::effects::EffectId>,
+        id: crate::effects::EffectId,
+    }
+
+    impl<const N: usize> crate::effects::EffectFn<N> for VectorPathEqualsGeneral<'_, N> {
+        type Output = ();
+        fn call<E: Effect<N>>(self, effect: &E) {
+            if E::HYDRAULIC {
+                return;
+            }
+            assert!(!effect.hydraulic(), "{}", self.id);
+            let (lp, r) = (self.lp, self.r);
+            let fast = each_isa::<N, Orifice, SqrtDamping, _>(lp, effect, r);
+            let general = each_isa::<N, Orifice, SqrtDamping, _>(lp, &Hydraulic(effect), r);
+            let mut compared = 0;
+            for (a, b) in fast.iter().flatten().zip(general.iter().flatten()) {
+                assert_eq!(a.status, LaneStatus::Ok, "{}", self.id);
+                assert_eq!(a.status, b.status, "{}", self.id);
+                for ((name, x), (_, y)) in a.metrics.columns().into_iter().zip(b.metrics.columns())
+                {
+                    assert_eq!(x.to_bits(), y.to_bits(), "{} lanes {N}: {name}", self.id);
+                    compared += 1;
+                }
+            }
+            assert!(compared >= 2 * N * 10, "{}: {compared} compared", self.id);
+            self.compared.push(self.id);
+        }
+    }
+
+    #[test]
+    fn effects_that_leave_the_hydraulics_alone_give_the_same_bits_in_the_vector_path() {
+        use crate::effects::{with_single, EffectId};
+        let r = Sine {
+            freq_hz: 3.0,
+            amp_m: Sine::amp_from_g(1.2, 3.0),
+            taper_s: 0.5,
+            duration_s: 1.5,
+            window_cycles: Some(2),
+        }
+        .reference(1024.0);
+        let mut compared = Vec::new();
+        for id in EffectId::ALL {
+            // The effect on in three lanes of four, the plant different in each lane.
+            let sets: Vec<ModelParams> = (0..16)
+                .map(|i| {
+                    let mut p = ModelParams::default();
+                    p.controller.g_d = 0.9 + 0.05 * i as f64;
+                    *p.effects.get_mut(id) = i % 4 != 3;
+                    p
+                })
+                .collect();
+            let refs: Vec<&ModelParams> = sets.iter().collect();
+            let lanes16: [&ModelParams; 16] = std::array::from_fn(|l| refs[l]);
+            let lp16 = LaneParams::<16>::new(&refs).unwrap();
+            let (mut c16, mut c8) = (Vec::new(), Vec::new());
+            let f = VectorPathEqualsGeneral {
+                lp: &lp16,
+                r: &r,
+                compared: &mut c16,
+                id,
+            };
+            with_single(id, lanes16, f);
+            let lanes8: [&ModelParams; 8] = std::array::from_fn(|l| refs[l]);
+            let lp8 = LaneParams::<8>::new(&refs[..8]).unwrap();
+            let f = VectorPathEqualsGeneral {
+                lp: &lp8,
+                r: &r,
+                compared: &mut c8,
+                id,
+            };
+            with_single(id, lanes8, f);
+            assert_eq!(c16, c8);
+            compared.extend(c16);
+        }
+        // A specimen, a building, the three sensors, the hold-down and the seal friction.
+        assert_eq!(compared.len(), 7, "{compared:?}");
+    }
+
+    /// An effect that leaves the hydraulics alone and copies into its derivatives every field of
+    /// the plant's view; its force on the platen is its first state.
+    struct ViewProbe;
+
+    impl<const N: usize> Effect<N> for ViewProbe {
+        type State = [[f64; N]; 12];
+        const HYDRAULIC: bool = false;
+        fn initial_state(&self) -> Self::State {
+            [[0.0; N]; 12]
+        }
+        fn extra_force(&self, c: hook::Motion, s: &Self::State) -> f64 {
+            s[0][c.lane]
+        }
+        fn derivs(&self, v: &PlantView<'_, N>, _s: &Self::State, ds: &mut Self::State) {
+            *ds = [
+                *v.x_c,
+                v.opening[0],
+                v.opening[1],
+                *v.q_supply,
+                v.q_in1[0],
+                v.q_in1[1],
+                v.q_out2[0],
+                v.q_out2[1],
+                *v.p_s,
+                *v.f_act,
+                *v.accel,
+                *v.stroke,
+            ];
+        }
+    }
+
+    /// The vector path's right-hand side gives the general one's derivatives and the same view of
+    /// the plant to the effect (flows both ways, supply flow, force, acceleration, stroke), bit
+    /// for bit, at states on both sides of a closed valve.
+    #[test]
+    fn the_vector_path_gives_the_effects_the_general_view_of_the_plant() {
+        let sets: Vec<ModelParams> = (0..8)
+            .map(|i| {
+                let mut p = ModelParams::default();
+                p.servovalve.p_s *= 1.0 + 0.01 * i as f64;
+                p
+            })
+            .collect();
+        let refs: Vec<&ModelParams> = sets.iter().collect();
+        let lp = LaneParams::<8>::new(&refs).unwrap();
+        let mut s = initial_state(&lp);
+        let p_s = lp.p_s[0];
+        for l in 0..8 {
+            let t = l as f64 - 3.5;
+            s[P1[0]][l] = p_s * (0.5 + 0.05 * t);
+            s[P2[0]][l] = p_s * (0.45 - 0.04 * t);
+            s[P1[1]][l] = s[P1[0]][l];
+            s[P2[1]][l] = s[P2[0]][l];
+            s[Y][l] = 0.01 * t;
+            s[VEL][l] = -0.2 * t;
+            s[Z][l] = 0.3 * t.signum();
+        }
+        let x_c: [f64; 8] = std::array::from_fn(|l| 2e-4 * (l as f64 - 3.5) * (l % 3) as f64);
+        let mut es = [[0.0; 8]; 12];
+        es[0] = std::array::from_fn(|l| 1e4 * (l as f64 - 2.0));
+        let run = |hydraulic: bool| {
+            let (mut ds, mut des) = ([[0.0; 8]; NP], [[0.0; 8]; 12]);
+            let probe = &ViewProbe;
+            if hydraulic {
+                let e = &Hydraulic(probe);
+                rhs_general::<8, 1, PORTABLE, Orifice, SqrtDamping, _>(
+                    &lp, e, &x_c, &s, &es, &mut ds, &mut des,
+                );
+            } else {
+                rhs_general::<8, 1, PORTABLE, Orifice, SqrtDamping, _>(
+                    &lp, probe, &x_c, &s, &es, &mut ds, &mut des,
+                );
+            }
+            (ds, des)
+        };
+        let (general, vector) = (run(true), run(false));
+        let bits =
+            |a: &[[f64; 8]]| -> Vec<u64> { a.iter().flatten().map(|x| x.to_bits()).collect() };
+        assert_eq!(bits(&general.0), bits(&vector.0), "the plant's derivatives");
+        for (k, (a, b)) in general.1.iter().zip(&vector.1).enumerate() {
+            assert_eq!(bits(&[*a]), bits(&[*b]), "the view's field {k}");
+        }
+        // The view is not empty: flows both ways, a force, an acceleration.
+        let mut open = (0..8).filter(|&l| x_c[l] != 0.0);
+        assert!(open.clone().count() >= 4 && open.clone().any(|l| x_c[l] < 0.0));
+        assert!(open.all(|l| general.1[3][l] != 0.0) && general.1[9][0] != 0.0);
+    }
+
+    /// An effect that declares it leaves the hydraulics alone passes every hydraulic hook's input
+    /// through, whatever its states, and keeps the actuators identical.
+    struct HooksAreIdentities {
+        id: crate::effects::EffectId,
+        checked: usize,
+    }
+
+    impl crate::effects::EffectFn<4> for &mut HooksAreIdentities {
+        type Output = ();
+        fn call<E: Effect<4>>(self, effect: &E) {
+            if E::HYDRAULIC {
+                return;
+            }
+            let id = self.id;
+            assert!(effect.symmetric(), "{id}");
+            let mut s = effect.initial_state();
+            for (k, row) in s.as_mut().iter_mut().enumerate() {
+                *row = std::array::from_fn(|l| 1e-3 * (k as f64 + 1.0) * (l as f64 - 1.5));
+            }
+            for lane in 0..4 {
+                for (x, y, v, p1, p2) in [
+                    (3e-4, 0.02, 0.3, 9e6, 12e6),
+                    (-1e-4, -0.1, -0.7, 2e5, 2.5e7),
+                ] {
+                    let p_s = 2.07e7;
+                    assert_eq!(effect.supply(hook::Supply { lane, p_s }, &s), p_s, "{id}");
+                    assert_eq!(
+                        effect.stroke(hook::Motion { lane, y, v }, &s),
+                        (y, v),
+                        "{id}"
+                    );
+                    for act in 0..N_ACT {
+                        let o = hook::Opening { lane, act, x };
+                        assert_eq!(effect.opening(o, &s), x, "{id}");
+                        let b = (4e12, 5e12);
+                        let c = hook::Chambers {
+                            lane,
+                            act,
+                            b,
+                            p1,
+                            p2,
+                        };
+                        assert_eq!(effect.chamber_stiffness(c, &s), b, "{id}");
+                        let q = (0.01, -0.02);
+                        let c = hook::Flows {
+                            lane,
+                            act,
+                            q,
+                            p1,
+                            p2,
+                            p_s,
+                        };
+                        assert_eq!(effect.flows(c, &s), q, "{id}");
+                        self.checked += 1;
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn an_effect_that_leaves_the_hydraulics_alone_passes_their_hooks_through() {
+        use crate::effects::{with_single, EffectId};
+        let mut checked = Vec::new();
+        for id in EffectId::ALL {
+            let mut p = ModelParams::default();
+            *p.effects.get_mut(id) = true;
+            let mut f = HooksAreIdentities { id, checked: 0 };
+            with_single(id, [&p; 4], &mut f);
+            if f.checked > 0 {
+                checked.push(id);
+            }
+        }
+        assert_eq!(checked.len(), 7, "{checked:?}");
     }
 
     /// The builds that read the law from the lanes (`EitherLaw`, `PowDamping`, which serve every

@@ -415,6 +415,7 @@ const ENERGY: [&str; MAX_STOREYS] = [
 
 impl<const N: usize> Effect<N> for Building<N> {
     type State = [[f64; N]; 4 * MAX_STOREYS];
+    const HYDRAULIC: bool = false; // a force on the platen alone
 
     fn initial_state(&self) -> Self::State {
         [[0.0; N]; 4 * MAX_STOREYS]

@@ -50,6 +50,7 @@ impl<const N: usize> HoldDown<N> {
 
 impl<const N: usize> Effect<N> for HoldDown<N> {
     type State = [[f64; N]; 0];
+    const HYDRAULIC: bool = false; // a force on the platen alone
 
     fn initial_state(&self) -> Self::State {
         []

@@ -491,6 +491,21 @@ pub trait Effect<const N: usize>: Sync {
     /// says `false` without it.
     const SPLITS: bool = false;
 
+    /// Whether the effect may change the hydraulics: the supply pressure, the opening, the
+    /// stroke, the chamber stiffness or the flows (any hook but [`Effect::extra_force`],
+    /// [`Effect::derivs`] and the recording's). One that does not (a force on the platen, a
+    /// measurement chain) declares `false`, and its batches run the plant in the bare plant's
+    /// vector registers (the same bits; the kernel's tests check every hook of such an effect is
+    /// its identity).
+    const HYDRAULIC: bool = true;
+
+    /// [`Effect::HYDRAULIC`] for this batch: a composition is hydraulic where any effect that
+    /// some lane switches on is.
+    #[inline(always)]
+    fn hydraulic(&self) -> bool {
+        Self::HYDRAULIC
+    }
+
     /// Extra states at t = 0.
     fn initial_state(&self) -> Self::State;
 
@@ -600,6 +615,7 @@ pub struct Baseline;
 impl<const N: usize> Effect<N> for Baseline {
     type State = [[f64; N]; 0];
     const BARE: bool = true;
+    const HYDRAULIC: bool = false;
     fn initial_state(&self) -> Self::State {
         []
     }
@@ -627,9 +643,14 @@ impl<const N: usize, A: Effect<N>, B: Effect<N>> Effect<N> for Both<A, B> {
     type State = Pair<A::State, B::State>;
     const MOVES_SPOOL: bool = A::MOVES_SPOOL || B::MOVES_SPOOL;
     const SPLITS: bool = A::SPLITS || B::SPLITS;
+    const HYDRAULIC: bool = A::HYDRAULIC || B::HYDRAULIC;
 
     fn initial_state(&self) -> Self::State {
         Pair(self.0.initial_state(), self.1.initial_state())
+    }
+    #[inline(always)]
+    fn hydraulic(&self) -> bool {
+        self.0.hydraulic() || self.1.hydraulic()
     }
     /// A's states, then B's that move; A's that move where B has none.
     #[inline(always)]
@@ -754,9 +775,14 @@ impl<const N: usize, E: Effect<N>> Effect<N> for Gated<E> {
     type State = E::State;
     const MOVES_SPOOL: bool = E::MOVES_SPOOL;
     const SPLITS: bool = E::SPLITS;
+    const HYDRAULIC: bool = E::HYDRAULIC;
 
     fn initial_state(&self) -> Self::State {
         self.effect.initial_state()
+    }
+    #[inline(always)]
+    fn hydraulic(&self) -> bool {
+        self.on && self.effect.hydraulic()
     }
     #[inline(always)]
     fn live_states(&self) -> usize {

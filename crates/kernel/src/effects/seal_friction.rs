@@ -69,6 +69,7 @@ impl<const N: usize> SealFriction<N> {
 
 impl<const N: usize> Effect<N> for SealFriction<N> {
     type State = [[f64; N]; 0];
+    const HYDRAULIC: bool = false; // a force on the platen alone
 
     fn initial_state(&self) -> Self::State {
         []

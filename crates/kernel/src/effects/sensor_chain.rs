@@ -140,6 +140,7 @@ macro_rules! sensor_effect {
 
         impl<const N: usize> super::Effect<N> for $Type<N> {
             type State = super::sensor_chain::State<N>;
+            const HYDRAULIC: bool = false; // the recording alone
 
             fn initial_state(&self) -> Self::State {
                 [[0.0; N]; 4]

@@ -126,6 +126,7 @@ impl<const N: usize> Specimen<N> {
 
 impl<const N: usize> Effect<N> for Specimen<N> {
     type State = [[f64; N]; 2 * MODES];
+    const HYDRAULIC: bool = false; // a force on the platen alone
 
     fn initial_state(&self) -> Self::State {
         [[0.0; N]; 2 * MODES]

@@ -188,8 +188,11 @@ pub fn run_one(
 
 /// The lanes of up to [`LANES`] models (`refs[i]` for `models[i]`; one reference is every
 /// lane's), without an observer: lanes without effects in one batch of the bare plant's
-/// [`LANES`], lanes with effects in batches of [`EFFECT_LANES`] (lanes are independent, bit for
-/// bit, so the split does not change a lane). A setup error of any batch is the group's.
+/// [`LANES`], lanes with one effect that leaves the hydraulics alone (a specimen, a building) in
+/// one such batch where the CPU has AVX2 ([`builds::run_wide_single_effect`]), other lanes
+/// with effects
+/// in batches of [`EFFECT_LANES`] (lanes are independent, bit for bit, so the split does not
+/// change a lane). A setup error of any batch is the group's.
 pub fn run_group(
     models: &[&ModelParams],
     refs: &[&Reference],
@@ -202,6 +205,9 @@ pub fn run_group(
         let refs: [&Reference; LANES] = std::array::from_fn(|l| refs[l.min(refs.len() - 1)]);
         let r = builds::run_bare_lanes(&lp, &refs, solver)?;
         return Ok(r[..models.len()].to_vec());
+    }
+    if let Some(r) = run_wide(models, refs, solver) {
+        return Ok(r?[..models.len()].to_vec());
     }
     let mut out = Vec::with_capacity(models.len());
     for (k, m) in models.chunks(EFFECT_LANES).enumerate() {
@@ -216,6 +222,32 @@ pub fn run_group(
         out.extend_from_slice(&got[..m.len()]);
     }
     Ok(out)
+}
+
+/// More than [`EFFECT_LANES`] models that switch on one library effect, one that leaves the
+/// hydraulics alone, as one batch of [`LANES`] ([`builds::run_wide_single_effect`]); `None` where
+/// that kernel does not apply.
+fn run_wide(
+    models: &[&ModelParams],
+    refs: &[&Reference],
+    solver: &Solver,
+) -> Option<Result<[LaneResult; LANES], SetupError>> {
+    if models.len() <= EFFECT_LANES {
+        return None;
+    }
+    let [id] = effects_on(models)[..] else {
+        return None;
+    };
+    let refs: [&Reference; LANES] = std::array::from_fn(|l| refs[l.min(refs.len() - 1)]);
+    builds::run_wide_single_effect(id, models, &refs, solver)
+}
+
+/// The library effects that any of `models` switches on.
+fn effects_on(models: &[&ModelParams]) -> Vec<EffectId> {
+    EffectId::ALL
+        .into_iter()
+        .filter(|&e| models.iter().any(|m| m.effects.get(e)))
+        .collect()
 }
 
 /// Up to [`EFFECT_LANES`] models with effects as the lanes of one batch (`refs[l]` for lane l):
@@ -245,11 +277,7 @@ pub fn run_lanes_single(
     solver: &Solver,
     obs: &mut dyn Observer<EFFECT_LANES>,
 ) -> Result<[LaneResult; EFFECT_LANES], SetupError> {
-    let on: Vec<EffectId> = EffectId::ALL
-        .into_iter()
-        .filter(|&e| models.iter().any(|m| m.effects.get(e)))
-        .collect();
-    if let [id] = on[..] {
+    if let [id] = effects_on(models)[..] {
         if let Some(done) = builds::run_single_effect(id, models, reference, solver, obs) {
             return done;
         }
