@@ -223,6 +223,40 @@ fn a_fractional_count_of_storeys_is_refused() {
     );
 }
 
+/// A study or a tuning that varies a storey's parameter above the building's storeys is refused,
+/// naming the variable and the count; with the count varied too, or the storey present, it is not.
+#[test]
+fn a_variable_of_a_storey_the_building_lacks_is_refused() {
+    use vshake::orchestration::study::problem::StudySpec;
+    let study = |storeys: &str, vars: &[(&str, f64, f64)]| {
+        let mut t = String::from("[study]\nname = \"s\"\nsamples = 4\n");
+        for (name, low, high) in vars {
+            t += &format!("[[variables]]\nname = \"{name}\"\ndistribution = \"uniform\"\nlow = {low}\nhigh = {high}\n");
+        }
+        t += "[[excitations]]\nname = \"s\"\nkind = \"sine\"\nfreq_hz = 3.0\namp_g = 0.5\nduration_s = 4.0\n";
+        t += &format!("[model.building]\nstoreys = {storeys}\n");
+        StudySpec::from_toml(&t, "s.toml")
+    };
+    let e = study("3", &[("building.k5", 1e7, 2e7)])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("variables[0].name: building.k5 is storey 5's, but the building has 3 storeys"),
+        "{e}"
+    );
+    let e = study("2", &[("building.fy3", 1e5, 2e5)])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("building.fy3 is storey 3's"), "{e}");
+    study("5", &[("building.k5", 1e7, 2e7)]).unwrap();
+    study("3", &[("building.m3", 2e4, 4e4)]).unwrap();
+    study(
+        "3",
+        &[("building.k5", 1e7, 2e7), ("building.storeys", 3.0, 6.0)],
+    )
+    .unwrap();
+}
+
 /// The specimen's metrics (`peak_drift_ratio`, `peak_base_shear_n`, `ductility_demand`,
 /// `hysteretic_energy_j`) are the peaks of the building's own channels over the run and the
 /// storeys' work less what they hold at its end; the same in a batch beside a lane without a

@@ -124,6 +124,26 @@ params! {
     }
 }
 
+/// The storey whose floor mass, stiffness or yield force parameter `name` is (`k5`: 5), if it is
+/// one of those.
+pub fn storey_of(name: &str) -> Option<usize> {
+    ["m", "k", "fy"]
+        .iter()
+        .find_map(|pre| name.strip_prefix(pre)?.parse::<usize>().ok())
+}
+
+/// Why parameter `name` changes nothing in the building `p`: a storey above its `storeys`.
+pub fn unused(name: &str, p: &Params) -> Option<String> {
+    let storey = storey_of(name)?;
+    let storeys = p.storeys as usize;
+    (storey > storeys).then(|| {
+        format!(
+            "building.{name} is storey {storey}'s, but the building has {storeys} storeys \
+             (building.storeys): it would change nothing"
+        )
+    })
+}
+
 /// The building's storeys of `p`: floor masses, initial stiffnesses and yield forces, bottom up.
 pub fn storeys(p: &Params) -> Vec<(f64, f64, f64)> {
     let m = [p.m1, p.m2, p.m3, p.m4, p.m5, p.m6, p.m7, p.m8, p.m9, p.m10];

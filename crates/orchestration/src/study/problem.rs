@@ -49,8 +49,9 @@ use crate::runs::spec::{self, ExcitationSpec};
 use crate::study::sampling::{Design, Distribution, SOBOL_MAX_DIMS, SOBOL_MAX_POINTS};
 use crate::toml_fields::{Fields, InputError, Issues};
 use std::path::PathBuf;
+use vshake_kernel::effects::{building, EffectId};
 use vshake_kernel::metrics::Metrics;
-use vshake_kernel::params::{ModelParams, ParamInfo};
+use vshake_kernel::params::{Component, ModelParams, ParamInfo};
 use vshake_kernel::simulate::Solver;
 use vshake_kernel::spectrum::SpectrumSpec;
 
@@ -297,6 +298,9 @@ pub(crate) fn read_variables_at(
                 format!("effect `{comp}` is not switched on: add a [model.{comp}] table"),
             );
         }
+        if let Some(why) = unused_storey(v, &variables, model) {
+            issues.push(format!("{key}[{i}].name"), why);
+        }
         if variables[..i].iter().any(|w| std::ptr::eq(w.info, v.info)) {
             issues.push(
                 format!("{key}[{i}].name"),
@@ -305,6 +309,19 @@ pub(crate) fn read_variables_at(
         }
     }
     variables
+}
+
+/// Why variable `v` changes nothing: a storey's parameter above the building's storeys, where
+/// the number of storeys is not itself varied.
+fn unused_storey(v: &Variable, all: &[Variable], model: &ModelParams) -> Option<String> {
+    let building = Component::Effect(EffectId::Building);
+    let storeys_vary = all
+        .iter()
+        .any(|w| w.info.component == building && w.info.name == "storeys");
+    if v.info.component != building || storeys_vary || !model.effects.get(EffectId::Building) {
+        return None;
+    }
+    building::unused(v.info.name, building::Params::of(model))
 }
 
 /// `[[excitations]]`: at least one, each with a distinct name that is a word ([`is_word`]).
