@@ -250,11 +250,28 @@ fn a_variable_of_a_storey_the_building_lacks_is_refused() {
     assert!(e.contains("building.fy3 is storey 3's"), "{e}");
     study("5", &[("building.k5", 1e7, 2e7)]).unwrap();
     study("3", &[("building.m3", 2e4, 4e4)]).unwrap();
-    study(
+    // The count of storeys takes whole numbers: a uniform one is refused, a list is not.
+    let e = study(
         "3",
         &[("building.k5", 1e7, 2e7), ("building.storeys", 3.0, 6.0)],
     )
-    .unwrap();
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("variables[1].distribution: building.storeys takes whole numbers only"),
+        "{e}"
+    );
+    let listed = |values: &str| {
+        let mut t = String::from("[study]\nname = \"s\"\nsamples = 4\n");
+        t += &format!("[[variables]]\nname = \"building.storeys\"\ndistribution = \"list\"\nvalues = {values}\n");
+        t += "[[variables]]\nname = \"building.k5\"\ndistribution = \"uniform\"\nlow = 1e7\nhigh = 2e7\n";
+        t += "[[excitations]]\nname = \"s\"\nkind = \"sine\"\nfreq_hz = 3.0\namp_g = 0.5\nduration_s = 4.0\n";
+        t += "[model.building]\nstoreys = 3\n";
+        StudySpec::from_toml(&t, "s.toml")
+    };
+    listed("[3, 5, 6]").unwrap();
+    let e = listed("[3, 4.5]").unwrap_err().to_string();
+    assert!(e.contains("every value must be one"), "{e}");
 }
 
 /// The specimen's metrics (`peak_drift_ratio`, `peak_base_shear_n`, `ductility_demand`,

@@ -298,6 +298,9 @@ pub(crate) fn read_variables_at(
                 format!("effect `{comp}` is not switched on: add a [model.{comp}] table"),
             );
         }
+        if let Some(why) = not_whole(v) {
+            issues.push(format!("{key}[{i}].distribution"), why);
+        }
         if let Some(why) = unused_storey(v, &variables, model) {
             issues.push(format!("{key}[{i}].name"), why);
         }
@@ -309,6 +312,28 @@ pub(crate) fn read_variables_at(
         }
     }
     variables
+}
+
+/// The parameters that take whole numbers only (a count, a law's number).
+const WHOLE_NUMBERS: [&str; 3] = ["building.storeys", "building.law", "servovalve.n_val"];
+
+/// Why variable `v` would make runs that fail validation: a continuous distribution of a
+/// parameter that takes whole numbers only, or a listed value that is not one.
+fn not_whole(v: &Variable) -> Option<String> {
+    let path = v.path();
+    if !WHOLE_NUMBERS.contains(&path.as_str()) {
+        return None;
+    }
+    match &v.dist {
+        Distribution::Fixed { value } if value.fract() == 0.0 => None,
+        Distribution::List { values } if values.iter().all(|x| x.fract() == 0.0) => None,
+        Distribution::Fixed { .. } | Distribution::List { .. } => Some(format!(
+            "{path} takes whole numbers only: every value must be one"
+        )),
+        _ => Some(format!(
+            "{path} takes whole numbers only: use distribution = \"list\" with values = [...]"
+        )),
+    }
 }
 
 /// Why variable `v` changes nothing: a storey's parameter above the building's storeys, where
