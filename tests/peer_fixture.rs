@@ -7,7 +7,7 @@
 //! 0.01 % moves some metric by far more than that (`a_small_change_of_beta_is_caught`).
 
 mod common;
-use vshake::kernel::effects::Baseline;
+use vshake::kernel::effects::{effect_set, Baseline, EffectId};
 use vshake::kernel::params::ModelParams;
 use vshake::kernel::simulate::{self, LaneParams, LaneResult, LaneStatus, NoObserver, Solver};
 
@@ -118,4 +118,156 @@ fn a_small_change_of_beta_is_caught() {
             "β x (1 + {change}) moved the metrics by only {d:e} ({name})"
         );
     }
+}
+
+/// One case of tests/fixtures/numpy_peer_effects.csv: an effect, its parameters, the peer's
+/// metrics.
+struct EffectCase {
+    effect: String,
+    amp_g: f64,
+    params: Vec<(String, f64)>,
+    case: Case,
+}
+
+/// The committed fixture, or the file `VSHAKE_PEER_EFFECTS` names (CI's step regenerates it with
+/// the peer and runs this test on what the peer printed).
+fn effect_cases() -> Vec<EffectCase> {
+    let committed = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/fixtures/numpy_peer_effects.csv"
+    );
+    let path = std::env::var("VSHAKE_PEER_EFFECTS").unwrap_or_else(|_| committed.into());
+    let mut r = csv::Reader::from_path(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
+    let header: Vec<String> = r.headers().unwrap().iter().map(str::to_string).collect();
+    r.records()
+        .map(|rec| {
+            let rec = rec.unwrap();
+            let params = rec[2]
+                .split(';')
+                .filter(|kv| !kv.is_empty())
+                .map(|kv| {
+                    let (k, v) = kv.split_once('=').unwrap();
+                    (k.to_string(), v.parse().unwrap())
+                })
+                .collect();
+            let metrics = (3..header.len())
+                .map(|i| (header[i].clone(), rec[i].parse().unwrap()))
+                .collect();
+            let amp_g = rec[1].parse().unwrap();
+            EffectCase {
+                effect: rec[0].to_string(),
+                amp_g,
+                params,
+                case: Case {
+                    amp_g,
+                    gains: Vec::new(),
+                    metrics,
+                },
+            }
+        })
+        .collect()
+}
+
+/// The kernel with the case's effect switched on and its parameters set (default gains).
+fn run_effect(c: &EffectCase) -> LaneResult {
+    let mut model = ModelParams::default();
+    let id = EffectId::parse(&c.effect).unwrap();
+    *model.effects.get_mut(id) = true;
+    for (path, v) in &c.params {
+        ModelParams::lookup(path).unwrap().set(&mut model, *v);
+    }
+    let lp = LaneParams::<1>::new(&[&model]).unwrap();
+    let set = effect_set::<1>(&[&model]);
+    let solver = Solver { substeps: 4 };
+    let reference = common::reference_sine(c.amp_g);
+    let [r] = simulate::run(&lp, &set, &reference, &solver, &mut NoObserver).unwrap();
+    r
+}
+
+/// Every effect the peer has (benches/peers/effects.py: every library effect but the building,
+/// which CI checks against OpenSees, and the force sensor, which no metric reads), 50 random
+/// parameter sets each away from the defaults and one at the documented defaults (the kernel's
+/// own: a changed default fails): every metric within 1e-9 of the peer's.
+#[test]
+fn each_effect_agrees_with_the_numpy_peer_to_1e_9() {
+    let cases = effect_cases();
+    let mut per_effect: Vec<(String, usize, f64)> = Vec::new();
+    for (i, c) in cases.iter().enumerate() {
+        let (d, name) = deviation(&c.case, &run_effect(c));
+        assert!(
+            d <= TOLERANCE,
+            "row {} ({}, {:?}): {name} deviates by {d:e} from the NumPy peer",
+            i + 2,
+            c.effect,
+            c.params
+        );
+        match per_effect.iter_mut().find(|(e, ..)| *e == c.effect) {
+            Some((_, n, worst)) => (*n, *worst) = (*n + 1, worst.max(d)),
+            None => per_effect.push((c.effect.clone(), 1, d)),
+        }
+    }
+    for (effect, n, worst) in &per_effect {
+        println!("{effect}: {n} sets, largest deviation {worst:e}");
+        assert!(*n >= 51, "{effect}: {n} sets");
+        // The last set is the documented defaults, the kernel's own (no parameter set).
+        let last = cases.iter().rev().find(|c| c.effect == *effect).unwrap();
+        assert!(last.params.is_empty(), "{effect}: no row at the defaults");
+    }
+    assert_eq!(per_effect.len(), 15, "{per_effect:?}");
+}
+
+/// The effects' pin can fail: a 1 % change of any parameter of any effect the peer has (here,
+/// the first set's each), or its force's or flow's sign flipped (the hold-down's k3 and the
+/// leakage's c_int negated), moves some metric far beyond the tolerance.
+#[test]
+fn a_small_change_of_an_effect_is_caught() {
+    let cases = effect_cases();
+    let mut effects: Vec<&str> = cases.iter().map(|c| c.effect.as_str()).collect();
+    effects.dedup();
+    let mut changed = 0;
+    let moved = |c: &EffectCase, k: usize, factor: f64| {
+        let mut off = EffectCase {
+            effect: c.effect.clone(),
+            amp_g: c.amp_g,
+            params: c.params.clone(),
+            case: Case {
+                amp_g: c.amp_g,
+                gains: Vec::new(),
+                metrics: c.case.metrics.clone(),
+            },
+        };
+        off.params[k].1 *= factor;
+        deviation(&c.case, &run_effect(&off))
+    };
+    for effect in &effects {
+        let c = cases.iter().find(|c| c.effect == *effect).unwrap();
+        for (k, (path, v)) in c.params.iter().enumerate() {
+            // A mode that is absent (zero mass) has no frequency or damping to change.
+            let absent = path.starts_with("specimen.") && {
+                let mode = &path[path.len() - 1..];
+                c.params
+                    .iter()
+                    .any(|(p, m)| *p == format!("specimen.m{mode}") && *m == 0.0)
+            };
+            if absent || *v == 0.0 {
+                continue;
+            }
+            let (d, name) = moved(c, k, 1.01);
+            assert!(
+                d > 100.0 * TOLERANCE,
+                "{path} x 1.01 moved {name} by only {d:e}"
+            );
+            changed += 1;
+        }
+    }
+    for (effect, k) in [("hold_down", 0), ("leakage", 0)] {
+        let c = cases.iter().find(|c| c.effect == effect).unwrap();
+        let (d, name) = moved(c, k, -1.0);
+        assert!(
+            d > 100.0 * TOLERANCE,
+            "{} negated moved {name} by only {d:e}",
+            c.params[k].0
+        );
+    }
+    assert!(changed >= 40, "{changed} parameters changed");
 }

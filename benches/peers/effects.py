@@ -1,0 +1,425 @@
+"""Library effects for the NumPy peer, written from docs/model.md §7's table (the laws, the
+parameter names of `study params NAME`), not from vshake's Rust: each is a few hooks on the
+peer's plant (model.py), vectorised over samples.
+
+An effect is an object with
+* `names`: its parameters, in the order `params` holds them (arrays, one value per sample);
+* `n`: its extra states per sample;
+* `opening(x, es)`: the valve opening from the spool command (identity unless it changes it);
+* `flows(q1, q2, p1, p2)`: the net flows into chamber 1 and out of chamber 2 of one actuator;
+* `force(y, v, es)`: its force on the platen, N;
+* `derivs(x_c, a, y, v, es)`: the derivatives of its states (a: the platen's acceleration).
+
+`simulate(name, params, ref, substeps)` runs the baseline with one effect switched on and returns
+the metrics of model.py.
+"""
+
+import math
+
+import numpy as np
+
+import model as m
+
+
+class Effect:
+    n = 0
+
+    def __init__(self, params):
+        self.p = {k: np.asarray(v, dtype=float) for k, v in params.items()}
+
+    def supply(self, es):
+        """The supply pressure the valves see, Pa."""
+        return m.P["p_s"]
+
+    def stroke(self, y, v, es):
+        """The actuators' stroke and its rate (chambers, LVDT) from the platen's motion."""
+        return y, v
+
+    def opening(self, x, es):
+        return x
+
+    def flows(self, q1, q2, p1, p2, x, act):
+        """The net flows into chamber 1 and out of chamber 2 of actuator `act` (0, 1)."""
+        return q1, q2
+
+    def stiffness(self, v1, v2, p1, p2):
+        """β/V of the two chambers of volumes v1, v2 at pressures p1, p2."""
+        return m.P["beta"] / v1, m.P["beta"] / v2
+
+    def force(self, y, v, es):
+        return 0.0
+
+    def derivs(self, plant, es):
+        """The derivatives of the states; `plant`: x_c, a (the platen's acceleration), y, v,
+        q_supply (the valves' draw), f_act (the actuators' force), stroke."""
+        return ()
+
+    def recorded(self, a, x, es, plant):
+        """The acceleration and displacement as recorded at a tick (the plant's unless a
+        measurement chain changes them)."""
+        return a, x
+
+
+class Specimen(Effect):
+    """Up to three modes on the platen in relative coordinates u_i:
+    ü_i = −ω_i² u_i − 2ζ_iω_i u̇_i − a; the platen receives Σ m_i(ω_i² u_i + 2ζ_iω_i u̇_i)."""
+
+    names = ["m1", "f1", "zeta1", "m2", "f2", "zeta2", "m3", "f3", "zeta3"]
+    n = 6
+
+    def _modes(self):
+        for i in (1, 2, 3):
+            w = 2.0 * math.pi * self.p[f"f{i}"]
+            yield i - 1, self.p[f"m{i}"], w * w, 2.0 * self.p[f"zeta{i}"] * w
+
+    def force(self, y, v, es):
+        total = 0.0
+        for i, mass, w2, c in self._modes():
+            total = total + np.where(mass > 0.0, mass * (w2 * es[2 * i] + c * es[2 * i + 1]), 0.0)
+        return total
+
+    def derivs(self, plant, es):
+        out = []
+        for i, mass, w2, c in self._modes():
+            u, ud = es[2 * i], es[2 * i + 1]
+            on = mass > 0.0
+            out += [np.where(on, ud, 0.0), np.where(on, -w2 * u - c * ud - plant["a"], 0.0)]
+        return tuple(out)
+
+
+class HoldDown(Effect):
+    """Extra strut force −k3·y³."""
+
+    names = ["k3"]
+
+    def force(self, y, v, es):
+        return -self.p["k3"] * y ** 3
+
+
+class SealFriction(Effect):
+    """F = −tanh(v/v_eps)(f_c + (f_s − f_c) e^{−(v/v_s)²}) − σ v, all actuators together."""
+
+    names = ["f_c", "f_s", "v_s", "sigma", "v_eps"]
+
+    def force(self, y, v, es):
+        p = self.p
+        stribeck = p["f_c"] + (p["f_s"] - p["f_c"]) * np.exp(-((v / p["v_s"]) ** 2))
+        return -np.tanh(v / p["v_eps"]) * stribeck - p["sigma"] * v
+
+
+class SpoolDynamics(Effect):
+    """The spool follows the command: ẍ_s = ω²(x_c − x_s) − 2ζω ẋ_s; the valves open x_s."""
+
+    names = ["freq_hz", "zeta"]
+    n = 2
+
+    def opening(self, x, es):
+        return es[0]
+
+    def derivs(self, plant, es):
+        w = 2.0 * math.pi * self.p["freq_hz"]
+        return es[1], w * w * (plant["x_c"] - es[0]) - 2.0 * self.p["zeta"] * w * es[1]
+
+
+class TransportDelay(Effect):
+    """A delay τ between the command and the spool as four equal first-order lags of τ/4."""
+
+    names = ["tau"]
+    n = 4
+
+    def opening(self, x, es):
+        return es[3]
+
+    def derivs(self, plant, es):
+        rate = 4.0 / self.p["tau"]
+        inputs = (plant["x_c"], es[0], es[1], es[2])
+        return tuple(rate * (u - x) for u, x in zip(inputs, es))
+
+
+class FlowSaturation(Effect):
+    """Metering opening x_eff = x_sat·tanh(x/x_sat)."""
+
+    names = ["x_sat"]
+
+    def opening(self, x, es):
+        return self.p["x_sat"] * np.tanh(x / self.p["x_sat"])
+
+
+class FlowGain(Effect):
+    """x_eff = x·g(|x|/x_ref), g piecewise linear through (0, g0), (0.05, g1), (0.15, g2),
+    (0.35, g3), (0.7, g4), constant beyond 0.7."""
+
+    names = ["g0", "g1", "g2", "g3", "g4", "x_ref"]
+    KNOTS = (0.0, 0.05, 0.15, 0.35, 0.7)
+
+    def opening(self, x, es):
+        r = np.abs(x) / self.p["x_ref"]
+        g = [self.p[f"g{i}"] for i in range(5)]
+        gain = np.where(r >= 0.7, g[4], 0.0)
+        for i in range(4):
+            lo, hi = self.KNOTS[i], self.KNOTS[i + 1]
+            inside = (r >= lo) & (r < hi)
+            gain = np.where(inside, g[i] + (g[i + 1] - g[i]) * (r - lo) / (hi - lo), gain)
+        return x * gain
+
+
+class Asymmetry(Effect):
+    """Extension flows (x > 0) × extend_gain; actuator 2's valves × act2_gain."""
+
+    names = ["extend_gain", "act2_gain"]
+
+    def flows(self, q1, q2, p1, p2, x, act):
+        gain = np.where(x > 0.0, self.p["extend_gain"], 1.0)
+        if act == 1:
+            gain = gain * self.p["act2_gain"]
+        return q1 * gain, q2 * gain
+
+
+class Leakage(Effect):
+    """Across the piston q_i = c_int (P1 − P2), chamber 1 to chamber 2; to drain c_ext·P from
+    each chamber."""
+
+    names = ["c_int", "c_ext"]
+
+    def flows(self, q1, q2, p1, p2, x, act):
+        qi = self.p["c_int"] * (p1 - p2)
+        return q1 - qi - self.p["c_ext"] * p1, q2 - qi + self.p["c_ext"] * p2
+
+
+class Supply(Effect):
+    """Pump Q_p = q_pump·clamp((P_S − P_s)/dp_band, 0, 1) into an accumulator,
+    c_acc dP_s/dt = Q_p − Q; the valves see P_s (P_S: the nominal supply pressure)."""
+
+    names = ["q_pump", "c_acc", "dp_band"]
+    n = 1
+
+    def supply(self, es):
+        return es[0]
+
+    def derivs(self, plant, es):
+        p = self.p
+        pump = p["q_pump"] * np.clip((m.P["p_s"] - es[0]) / p["dp_band"], 0.0, 1.0)
+        return ((pump - plant["q_supply"]) / p["c_acc"],)
+
+
+class Compressibility(Effect):
+    """Dead volume V_x per chamber; 1/β_e(p) = 1/(beta_ratio·β) + ε·p_atm/p², p the absolute
+    chamber pressure, floored at p_atm/10."""
+
+    names = ["dead_volume", "beta_ratio", "air_fraction"]
+    P_ATM = 101_325.0
+
+    def stiffness(self, v1, v2, p1, p2):
+        p = self.p
+
+        def b(vol, gauge):
+            pa = np.maximum(gauge + self.P_ATM, 0.1 * self.P_ATM)
+            inv = 1.0 / (p["beta_ratio"] * m.P["beta"]) + p["air_fraction"] * self.P_ATM / pa**2
+            return 1.0 / inv / (vol + p["dead_volume"])
+
+        return b(v1, p1), b(v2, p2)
+
+
+class BulkCurve(Effect):
+    """β_e(p) = β·b(p/P_S), b piecewise linear through (0, b0), (0.5, b1), (1, b2), constant
+    outside [0, 1]; p the chamber's gauge pressure."""
+
+    names = ["b0", "b1", "b2"]
+
+    def stiffness(self, v1, v2, p1, p2):
+        b0, b1, b2 = self.p["b0"], self.p["b1"], self.p["b2"]
+
+        def gain(pr):
+            r = np.clip(pr / m.P["p_s"], 0.0, 1.0)
+            return np.where(r < 0.5, b0 + (b1 - b0) * r / 0.5, b1 + (b2 - b1) * (r - 0.5) / 0.5)
+
+        return m.P["beta"] * gain(p1) / v1, m.P["beta"] * gain(p2) / v2
+
+
+class ReactionMass(Effect):
+    """m_r ÿ_r = −F − k_r y_r − c_r ẏ_r (F: the actuators' force); the stroke, the chambers and
+    the LVDT follow y − y_r; k_r = m_r(2π f_r)², c_r = 2ζ_r m_r 2π f_r."""
+
+    names = ["m_r", "f_r", "zeta_r"]
+    n = 2
+
+    def stroke(self, y, v, es):
+        return y - es[0], v - es[1]
+
+    def derivs(self, plant, es):
+        p = self.p
+        w = 2.0 * math.pi * p["f_r"]
+        acc = (-plant["f_act"] - p["m_r"] * w * w * es[0] - 2.0 * p["zeta_r"] * p["m_r"] * w * es[1]) / p["m_r"]
+        return es[1], acc
+
+
+class Sensor(Effect):
+    """A recorded channel through ÿ = ω_c²(u − y) − 2ζω_c ẏ, then delayed by τ: its (2,2) Padé
+    all-pass for τ ≥ 0.5 ms (τ²/12·z̈ + τ/2·ż + z = y, recorded y − τż), its Taylor series
+    y − τẏ + τ²ÿ/2 below."""
+
+    names = ["f_c", "zeta", "delay"]
+    n = 4
+    channel = None
+
+    def _input(self, plant):
+        return plant["a"] if self.channel == "a" else plant["stroke"]
+
+    def derivs(self, plant, es):
+        p = self.p
+        w = 2.0 * math.pi * p["f_c"]
+        y, yd, z, zd = es
+        ydd = w * w * (self._input(plant) - y) - 2.0 * p["zeta"] * w * yd
+        tau = p["delay"]
+        pade = tau >= 0.5e-3
+        t = np.where(pade, tau, 1.0)
+        zdd = np.where(pade, 12.0 / (t * t) * (y - z - 0.5 * t * zd), 0.0)
+        return yd, ydd, np.where(pade, zd, 0.0), zdd
+
+    def recorded(self, a, x, es, plant):
+        p = self.p
+        w = 2.0 * math.pi * p["f_c"]
+        y, yd, z, zd = es
+        tau = p["delay"]
+        ydd = w * w * (self._input(plant) - y) - 2.0 * p["zeta"] * w * yd
+        out = np.where(tau >= 0.5e-3, y - tau * zd, y - tau * yd + 0.5 * tau * tau * ydd)
+        return (out, x) if self.channel == "a" else (a, out)
+
+
+class AccelSensor(Sensor):
+    channel = "a"
+
+
+class DispSensor(Sensor):
+    channel = "x"
+
+
+EFFECTS = {
+    "specimen": Specimen,
+    "hold_down": HoldDown,
+    "seal_friction": SealFriction,
+    "spool_dynamics": SpoolDynamics,
+    "transport_delay": TransportDelay,
+    "flow_saturation": FlowSaturation,
+    "flow_gain": FlowGain,
+    "asymmetry": Asymmetry,
+    "leakage": Leakage,
+    "supply": Supply,
+    "compressibility": Compressibility,
+    "bulk_curve": BulkCurve,
+    "reaction_mass": ReactionMass,
+    "accel_sensor": AccelSensor,
+    "disp_sensor": DispSensor,
+}
+
+
+def rhs(fx, x_c, s, es, plant=None):
+    """The plant's derivatives (model.rhs's, with the effect's hooks, both actuators: s = y, v,
+    z, then P1 and P2 of each) and the effect's; `plant` (a dict) receives what the effect's
+    derivatives and the recording read."""
+    y, v, z = s[:3]
+    p_s = fx.supply(es)
+    ys, vs = fx.stroke(y, v, es)
+    x = fx.opening(x_c, es)
+    pos = x > 0.0
+    vol1 = m.P["a1"] * (m.P["l"] + ys) + m.P["vd1"]
+    vol2 = m.P["a2"] * (m.P["l"] - ys) + m.P["vd2"]
+    dps, q_supply, f_act = [], 0.0, 0.0
+    for act in (0, 1):
+        p1, p2 = s[3 + 2 * act], s[4 + 2 * act]
+        dp1 = np.where(pos, p_s - p1, p1 - m.P["p_r"])
+        dp2 = np.where(pos, p2 - m.P["p_r"], p_s - p2)
+        k1 = np.where(pos, m.KW1, m.KW3)
+        k2 = np.where(pos, m.KW2, m.KW4)
+        q1 = k1 * x * dp1 * (dp1 * dp1 + m.P_TR2) ** -0.25
+        q2 = k2 * x * dp2 * (dp2 * dp2 + m.P_TR2) ** -0.25
+        q_supply = q_supply + np.where(pos, q1, -q2)
+        q1, q2 = fx.flows(q1, q2, p1, p2, x, act)
+        b1, b2 = fx.stiffness(vol1, vol2, p1, p2)
+        dps += [b1 * (q1 - m.P["a1"] * vs), b2 * (m.P["a2"] * vs - q2)]
+        f_act = f_act + (p1 * m.P["a1"] - p2 * m.P["a2"])
+    f = f_act + fx.force(y, v, es)
+    dv = (f - m.P["k"] * y - (m.P["c"] * np.sqrt(np.abs(v)) + m.MU) * z) / m.P["m"]
+    zv = z * v
+    bracket = np.where(zv > 0.0, 1.0, np.where(zv < 0.0, m.KAPPA_NEG, m.P["kappa"]))
+    dz = v / m.P["y_yield"] * (1.0 - z * z * bracket)
+    view = dict(x_c=x_c, a=dv, y=y, v=v, q_supply=q_supply, f_act=f_act, stroke=ys)
+    if plant is not None:
+        plant.update(view)
+    return (v, dv, dz, *dps), tuple(fx.derivs(view, es))
+
+
+def rk4_tick(fx, x_c, s, es, substeps):
+    """One controller tick: `substeps` RK4 steps of the plant and the effect's states together."""
+    h = 1.0 / (m.P["f_s"] * substeps)
+
+    def axpy(a, b, k):
+        return tuple(x + k * d for x, d in zip(a, b))
+
+    for _ in range(substeps):
+        k1 = rhs(fx, x_c, s, es)
+        k2 = rhs(fx, x_c, axpy(s, k1[0], 0.5 * h), axpy(es, k1[1], 0.5 * h))
+        k3 = rhs(fx, x_c, axpy(s, k2[0], 0.5 * h), axpy(es, k2[1], 0.5 * h))
+        k4 = rhs(fx, x_c, axpy(s, k3[0], h), axpy(es, k3[1], h))
+
+        def combine(x, j):
+            return tuple(a + h / 6.0 * (b1 + 2.0 * (b2 + b3) + b4)
+                         for a, b1, b2, b3, b4 in zip(x, k1[j], k2[j], k3[j], k4[j]))
+
+        s, es = combine(s, 0), combine(es, 1)
+    return s, es
+
+
+def actuators_force(s):
+    """The two actuators' force on the platen, N."""
+    return (s[3] * m.P["a1"] - s[4] * m.P["a2"]) + (s[5] * m.P["a1"] - s[6] * m.P["a2"])
+
+
+def failed(fx, s, es):
+    """The guard (model.failed) on the stroke and on both actuators' pressures."""
+    y, v, z = s[:3]
+    ys = fx.stroke(y, v, es)[0]
+    bad = np.zeros(np.shape(y), bool)
+    for act in (0, 1):
+        bad |= m.failed(np, (ys, v, z, s[3 + 2 * act], s[4 + 2 * act]))
+    return bad | ~np.isfinite(y)
+
+
+def simulate(name, params, ref, substeps):
+    """Metrics per sample (model.py's) of the baseline with effect `name` on, its parameters
+    `params` (dict of equal-length arrays, every one of the effect's names), default gains."""
+    fx = EFFECTS[name](params)
+    c = m.coefficients({})
+    n_s = len(next(iter(params.values())))
+    zeros = np.zeros(n_s)
+    p1, p2 = np.full(n_s, m.P1_0), np.full(n_s, m.P2_0)
+    s = (zeros, zeros, zeros, p1, p2, p1, p2)
+    es = tuple(np.full(n_s, m.P["p_s"]) if isinstance(fx, Supply) else zeros for _ in range(fx.n))
+    f_prev = actuators_force(s)
+    f_hp = zeros
+    acc = dict(a_re=np.zeros((m.N_HARM, n_s)), a_im=np.zeros((m.N_HARM, n_s)), x_re=zeros, x_im=zeros,
+               err_a2=zeros, err_x2=zeros, peak_err_a=zeros, max_u=zeros, failed=np.zeros(n_s, bool))
+    rx, rv, ra, rj, win, cos, sin = ref["x"], ref["v"], ref["a"], ref["j"], ref["win"], ref["cos"], ref["sin"]
+    for k in range(len(rx)):
+        f = actuators_force(s)
+        f_hp = m.HP_B * (f - f_prev) + m.HP_A * f_hp
+        f_prev = f
+        x = fx.stroke(s[0], s[1], es)[0]
+        u = m.command(np, c, (rx[k], rv[k], ra[k], rj[k]), x, f_hp)
+        x_c = m.P["k_sp"] * u
+        plant = {}
+        a = rhs(fx, x_c, s, es, plant)[0][1]
+        a, x = fx.recorded(a, x, es, plant)
+        acc["max_u"] = np.maximum(acc["max_u"], np.abs(u))
+        if win[k]:
+            ea, ex = a - ra[k], x - rx[k]
+            acc["err_a2"] = acc["err_a2"] + ea * ea
+            acc["err_x2"] = acc["err_x2"] + ex * ex
+            acc["peak_err_a"] = np.maximum(acc["peak_err_a"], np.abs(ea))
+            acc["a_re"] += np.outer(cos[:, k], a)
+            acc["a_im"] += np.outer(sin[:, k], a)
+            acc["x_re"] = acc["x_re"] + x * cos[0, k]
+            acc["x_im"] = acc["x_im"] + x * sin[0, k]
+        s, es = rk4_tick(fx, x_c, s, es, substeps)
+        acc["failed"] |= failed(fx, s, es)
+    return m.finish(acc, m.reference_sums(ref))

@@ -1,0 +1,131 @@
+#!/usr/bin/env python3
+"""Writes tests/fixtures/numpy_peer_effects.csv: the NumPy peer's metrics with one library effect
+switched on (effects.py, a transcription of docs/model.md §7's laws and the effects' documented
+laws, sharing no code with vshake), 50 random parameter sets per effect (every library effect
+but the building, which CI checks against OpenSees, and the force sensor, which no metric reads), drawn away from the defaults and across each range
+(seed 2027), on the 3 Hz reference sine at 1.73 g (3 s, 1 s taper, the last 4 cycles), default
+gains, RK4 with 4 substeps. `cargo test` (tests/peer_fixture.rs) runs the same cases through the
+kernel and holds every metric to 1e-9 of these values, relative to max(|value|, 1).
+
+One row per case: the effect, the amplitude, its parameters as `path=value` joined by `;`, then
+the metrics; values with 17 significant digits. A run the peer stops has every metric `nan`.
+Each effect's last row has no parameters: the peer runs the documented defaults (`DEFAULTS`), the
+kernel its own, so that a default changed in either fails the test.
+
+    python3 benches/peers/make_effects_fixture.py [--out tests/fixtures/numpy_peer_effects.csv]
+
+Needs numpy. Regenerate only when docs/model.md changes; the file is committed.
+"""
+
+import argparse
+import csv
+import os
+import sys
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+import effects  # noqa: E402
+import model  # noqa: E402
+
+SETS = 50
+SUBSTEPS = 4
+AMP_G = 1.73
+
+
+def draws(name, rng):
+    """SETS parameter sets of effect `name`: each parameter over a range around (not at) its
+    default, in its own units."""
+    u = lambda lo, hi: rng.uniform(lo, hi, SETS)  # noqa: E731
+    if name == "specimen":
+        on2, on3 = rng.uniform(size=SETS) < 0.6, rng.uniform(size=SETS) < 0.3
+        f1 = u(1.0, 10.0)
+        return dict(m1=u(5e3, 150e3), f1=f1, zeta1=u(0.005, 0.1),
+                    m2=np.where(on2, u(2e3, 60e3), 0.0), f2=f1 * u(2.0, 4.0), zeta2=u(0.005, 0.1),
+                    m3=np.where(on3, u(1e3, 30e3), 0.0), f3=f1 * u(4.5, 7.0), zeta3=u(0.005, 0.1))
+    if name == "hold_down":
+        return dict(k3=u(-1e9, 5e9))
+    if name == "seal_friction":
+        f_c = u(1e3, 4e4)
+        return dict(f_c=f_c, f_s=f_c * u(1.0, 2.5), v_s=u(0.002, 0.05), sigma=u(0.0, 2e5),
+                    v_eps=u(2e-4, 5e-3))
+    if name == "spool_dynamics":
+        return dict(freq_hz=u(40.0, 300.0), zeta=u(0.3, 1.5))
+    if name == "flow_saturation":
+        return dict(x_sat=u(0.004, 0.03))
+    if name == "leakage":
+        return dict(c_int=u(0.0, 2e-10), c_ext=u(0.0, 2e-11))
+    if name == "transport_delay":
+        return dict(tau=u(0.5e-3, 0.01))
+    if name == "flow_gain":
+        return dict(g0=u(0.5, 1.5), g1=u(0.5, 1.5), g2=u(0.5, 1.5), g3=u(0.5, 1.5), g4=u(0.5, 1.5),
+                    x_ref=u(0.012, 0.03))
+    if name == "asymmetry":
+        return dict(extend_gain=u(0.85, 1.2), act2_gain=u(0.8, 1.2))
+    if name == "supply":
+        return dict(q_pump=u(0.05, 0.4), c_acc=u(1e-8, 1e-7), dp_band=u(2e5, 3e6))
+    if name == "compressibility":
+        return dict(dead_volume=u(0.0, 0.05), beta_ratio=u(0.3, 1.0), air_fraction=u(0.0, 0.05))
+    if name == "bulk_curve":
+        return dict(b0=u(0.3, 2.0), b1=u(0.3, 2.0), b2=u(0.3, 2.0))
+    if name == "reaction_mass":
+        return dict(m_r=u(2e5, 5e6), f_r=u(5.0, 40.0), zeta_r=u(0.02, 0.5))
+    if name in ("accel_sensor", "disp_sensor"):
+        # Both realisations of the delay: its Taylor series below 0.5 ms, the Padé states above.
+        short = rng.uniform(size=SETS) < 0.3
+        return dict(f_c=u(20.0, 300.0), zeta=u(0.3, 1.5),
+                    delay=np.where(short, u(0.0, 0.5e-3), u(0.5e-3, 5e-3)))
+    raise KeyError(name)
+
+
+# Each effect's defaults, as docs/model.md §7's table and `study params NAME` give them: one more
+# row per effect, whose parameters the kernel leaves at its own defaults (an empty `params`), so
+# that a changed default fails the test.
+DEFAULTS = {
+    "specimen": dict(m1=20e3, f1=3.0, zeta1=0.03, m2=0.0, f2=9.0, zeta2=0.03, m3=0.0, f3=15.0, zeta3=0.03),
+    "hold_down": dict(k3=1e8),
+    "seal_friction": dict(f_c=5e3, f_s=8e3, v_s=0.01, sigma=0.0, v_eps=1e-3),
+    "spool_dynamics": dict(freq_hz=80.0, zeta=0.7),
+    "transport_delay": dict(tau=2e-3),
+    "flow_saturation": dict(x_sat=0.012),
+    "flow_gain": dict(g0=1.0, g1=1.0, g2=1.0, g3=1.0, g4=1.0, x_ref=0.01905),
+    "asymmetry": dict(extend_gain=1.05, act2_gain=1.0),
+    "leakage": dict(c_int=2e-11, c_ext=0.0),
+    "supply": dict(q_pump=0.2, c_acc=3.5e-8, dp_band=1e6),
+    "compressibility": dict(dead_volume=0.02, beta_ratio=1.0, air_fraction=0.01),
+    "bulk_curve": dict(b0=1.0, b1=1.0, b2=1.0),
+    "reaction_mass": dict(m_r=2e6, f_r=12.0, zeta_r=0.1),
+    "accel_sensor": dict(f_c=80.0, zeta=2.0 ** -0.5, delay=1e-3),
+    "disp_sensor": dict(f_c=100.0, zeta=2.0 ** -0.5, delay=1e-3),
+}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--out", default=os.path.join(HERE, "..", "..", "tests", "fixtures", "numpy_peer_effects.csv"))
+    a = ap.parse_args()
+    rng = np.random.default_rng(2027)
+    ref = model.sine_reference(freq_hz=3.0, amp_g=AMP_G, taper_s=1.0, duration_s=3.0, window_cycles=4)
+    rows = []
+    for name, cls in effects.EFFECTS.items():
+        params = draws(name, rng)
+        assert sorted(params) == sorted(cls.names), name
+        out = effects.simulate(name, params, ref, SUBSTEPS)
+        for i in range(SETS):
+            set_ = ";".join(f"{name}.{k}={float(params[k][i])!r}" for k in cls.names)
+            rows.append([name, repr(AMP_G), set_] + [repr(float(out[k][i])) for k in model.METRICS])
+        defaults = {k: np.array([v]) for k, v in DEFAULTS[name].items()}
+        at_defaults = effects.simulate(name, defaults, ref, SUBSTEPS)
+        rows.append([name, repr(AMP_G), ""] + [repr(float(at_defaults[k][0])) for k in model.METRICS])
+        failed = int(np.isnan(out["amp_ratio"]).sum())
+        print(f"{name}: {SETS} sets, {failed} stopped by the guard")
+    with open(a.out, "w", newline="") as f:
+        w = csv.writer(f, lineterminator="\n")
+        w.writerow(["effect", "amp_g", "params"] + model.METRICS)
+        w.writerows(rows)
+    print(f"{len(rows)} rows -> {os.path.normpath(a.out)}")
+
+
+if __name__ == "__main__":
+    main()
