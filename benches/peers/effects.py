@@ -54,10 +54,17 @@ class Effect:
         q_supply (the valves' draw), f_act (the actuators' force), stroke."""
         return ()
 
-    def recorded(self, a, x, es, plant):
-        """The acceleration and displacement as recorded at a tick (the plant's unless a
-        measurement chain changes them)."""
-        return a, x
+    def recorded(self, a, x, f, es, plant):
+        """The acceleration, displacement and actuator force as recorded at a tick (the plant's
+        unless a measurement chain changes them)."""
+        return a, x, f
+
+    def watch(self, es):
+        """Once per controller tick, at the tick's states (a specimen's peaks)."""
+
+    def specimen_metrics(self):
+        """A building's metrics over the run, or none."""
+        return {}
 
 
 class Specimen(Effect):
@@ -263,7 +270,7 @@ class Sensor(Effect):
     channel = None
 
     def _input(self, plant):
-        return plant["a"] if self.channel == "a" else plant["stroke"]
+        return plant[{"a": "a", "x": "stroke", "f": "f_act"}[self.channel]]
 
     def derivs(self, plant, es):
         p = self.p
@@ -276,14 +283,15 @@ class Sensor(Effect):
         zdd = np.where(pade, 12.0 / (t * t) * (y - z - 0.5 * t * zd), 0.0)
         return yd, ydd, np.where(pade, zd, 0.0), zdd
 
-    def recorded(self, a, x, es, plant):
+    def recorded(self, a, x, f, es, plant):
         p = self.p
         w = 2.0 * math.pi * p["f_c"]
         y, yd, z, zd = es
         tau = p["delay"]
         ydd = w * w * (self._input(plant) - y) - 2.0 * p["zeta"] * w * yd
         out = np.where(tau >= 0.5e-3, y - tau * zd, y - tau * yd + 0.5 * tau * tau * ydd)
-        return (out, x) if self.channel == "a" else (a, out)
+        return (out if self.channel == "a" else a, out if self.channel == "x" else x,
+                out if self.channel == "f" else f)
 
 
 class AccelSensor(Sensor):
@@ -292,6 +300,114 @@ class AccelSensor(Sensor):
 
 class DispSensor(Sensor):
     channel = "x"
+
+
+class ForceSensor(Sensor):
+    channel = "f"
+
+
+STOREYS = 10
+
+
+class Building(Effect):
+    """A shear building of 1-10 storeys on the platen (docs/model.md, "The building"): floor i of
+    mass m_i, storey i of stiffness k_i and yield force F_y,i; u_i relative to the platen,
+    d_i = u_i − u_{i−1}, m_i (ü_i + a) = −V_i + V_{i+1}, V_i = R_i + c_i ḋ_i,
+    R_i = α k_i d_i + (1 − α) r_i (r clamped to ±F_y for the bilinear law), ṙ_i = k_i ḋ_i g_i;
+    c_i = (2ζ/ω_1) k_i, ω_1 the elastic building's first mode; the platen receives V_1. States
+    per storey: u, u̇, r and the storey's work w (ẇ = R ḋ)."""
+
+    names = (["storeys", "law", "alpha", "zeta", "height", "bw_a", "bw_beta", "bw_gamma", "bw_n"]
+             + [f"m{i}" for i in range(1, STOREYS + 1)] + [f"k{i}" for i in range(1, STOREYS + 1)]
+             + [f"fy{i}" for i in range(1, STOREYS + 1)])
+    n = 4 * STOREYS
+
+    def __init__(self, params):
+        super().__init__(params)
+        p = self.p
+        n_s = len(p["storeys"])
+        self.on = [i < p["storeys"] for i in range(STOREYS)]
+        self.m = [p[f"m{i + 1}"] for i in range(STOREYS)]
+        self.k = [p[f"k{i + 1}"] for i in range(STOREYS)]
+        self.fy = [p[f"fy{i + 1}"] for i in range(STOREYS)]
+        w1 = np.empty(n_s)
+        for j in range(n_s):
+            n = int(p["storeys"][j])
+            k = [self.k[i][j] for i in range(n)] + [0.0]
+            stiff = np.zeros((n, n))
+            for i in range(n):
+                stiff[i, i] = k[i] + k[i + 1]
+                if i + 1 < n:
+                    stiff[i, i + 1] = stiff[i + 1, i] = -k[i + 1]
+            s = 1.0 / np.sqrt([self.m[i][j] for i in range(n)])
+            w1[j] = math.sqrt(np.linalg.eigvalsh(stiff * np.outer(s, s))[0])
+        self.c = [2.0 * p["zeta"] / w1 * self.k[i] for i in range(STOREYS)]
+        self.peak_drift = np.zeros(n_s)
+        self.peak_shear = np.zeros(n_s)
+        self.ductility = np.zeros(n_s)
+        self.energy = np.zeros(n_s)
+
+    def _storeys(self, es):
+        """Per storey: drift, drift rate, restoring force R and shear V (0 above the building);
+        kept for the same states (the force, then the derivatives, of one evaluation)."""
+        if getattr(self, "_last", (None,))[0] is es:
+            return self._last[1]
+        out = self._storeys_of(es)
+        self._last = (es, out)
+        return out
+
+    def _storeys_of(self, es):
+        p, out = self.p, []
+        below_u = below_v = 0.0
+        for i in range(STOREYS):
+            u, v, r = es[4 * i], es[4 * i + 1], es[4 * i + 2]
+            d, dd = u - below_u, v - below_v
+            held = np.where(p["law"] == 1, np.clip(r, -self.fy[i], self.fy[i]), r)
+            restoring = p["alpha"] * self.k[i] * d + (1.0 - p["alpha"]) * held
+            on = self.on[i]
+            out.append((np.where(on, d, 0.0), np.where(on, dd, 0.0), np.where(on, restoring, 0.0),
+                        np.where(on, restoring + self.c[i] * dd, 0.0), held))
+            below_u, below_v = u, v
+        return out
+
+    def force(self, y, v, es):
+        return self._storeys(es)[0][3]
+
+    def derivs(self, plant, es):
+        p, st, out = self.p, self._storeys(es), []
+        for i in range(STOREYS):
+            d, dd, restoring, shear, _ = st[i]
+            above = st[i + 1][3] if i + 1 < STOREYS else 0.0
+            r = es[4 * i + 2]
+            out_ward = ((r >= self.fy[i]) & (dd > 0.0)) | ((r <= -self.fy[i]) & (dd < 0.0))
+            z = r / self.fy[i]
+            g = np.select([p["law"] == 0, p["law"] == 1],
+                          [1.0, np.where(out_ward, 0.0, 1.0)],
+                          p["bw_a"] - np.abs(z) ** p["bw_n"] * (p["bw_beta"] + p["bw_gamma"] * np.sign(dd * z)))
+            on = self.on[i]
+            out += [np.where(on, es[4 * i + 1], 0.0),
+                    np.where(on, (above - shear) / self.m[i] - plant["a"], 0.0),
+                    np.where(on, self.k[i] * dd * g, 0.0),
+                    np.where(on, restoring * dd, 0.0)]
+        return tuple(out)
+
+    def watch(self, es):
+        p, st = self.p, self._storeys(es)
+        energy = 0.0
+        for i in range(STOREYS):
+            d, _, _, _, held = st[i]
+            on = self.on[i]
+            self.peak_drift = np.maximum(self.peak_drift, np.abs(d) / p["height"])
+            self.ductility = np.maximum(self.ductility, np.abs(d) * self.k[i] / self.fy[i])
+            stored = 0.5 * p["alpha"] * self.k[i] * d * d + 0.5 * (1.0 - p["alpha"]) * held * held / self.k[i]
+            energy = energy + np.where(on, es[4 * i + 3] - stored, 0.0)
+        self.peak_shear = np.maximum(self.peak_shear, np.abs(st[0][3]))
+        self.energy = energy
+
+    def specimen_metrics(self):
+        return dict(peak_drift_ratio=self.peak_drift, peak_base_shear_n=self.peak_shear,
+                    ductility_demand=np.where(self.p["law"] == 0, np.nan, self.ductility),
+                    hysteretic_energy_j=self.energy)
 
 
 EFFECTS = {
@@ -310,6 +426,8 @@ EFFECTS = {
     "reaction_mass": ReactionMass,
     "accel_sensor": AccelSensor,
     "disp_sensor": DispSensor,
+    "force_sensor": ForceSensor,
+    "building": Building,
 }
 
 
@@ -398,7 +516,8 @@ def simulate(name, params, ref, substeps):
     f_prev = actuators_force(s)
     f_hp = zeros
     acc = dict(a_re=np.zeros((m.N_HARM, n_s)), a_im=np.zeros((m.N_HARM, n_s)), x_re=zeros, x_im=zeros,
-               err_a2=zeros, err_x2=zeros, peak_err_a=zeros, max_u=zeros, failed=np.zeros(n_s, bool))
+               err_a2=zeros, err_x2=zeros, peak_err_a=zeros, max_u=zeros, failed=np.zeros(n_s, bool),
+               fa=zeros, fv=zeros)
     rx, rv, ra, rj, win, cos, sin = ref["x"], ref["v"], ref["a"], ref["j"], ref["win"], ref["cos"], ref["sin"]
     for k in range(len(rx)):
         f = actuators_force(s)
@@ -409,7 +528,8 @@ def simulate(name, params, ref, substeps):
         x_c = m.P["k_sp"] * u
         plant = {}
         a = rhs(fx, x_c, s, es, plant)[0][1]
-        a, x = fx.recorded(a, x, es, plant)
+        a, x, f_rec = fx.recorded(a, x, f, es, plant)
+        fx.watch(es)
         acc["max_u"] = np.maximum(acc["max_u"], np.abs(u))
         if win[k]:
             ea, ex = a - ra[k], x - rx[k]
@@ -420,6 +540,16 @@ def simulate(name, params, ref, substeps):
             acc["a_im"] += np.outer(sin[:, k], a)
             acc["x_re"] = acc["x_re"] + x * cos[0, k]
             acc["x_im"] = acc["x_im"] + x * sin[0, k]
+            acc["fa"] = acc["fa"] + f_rec * ra[k]
+            acc["fv"] = acc["fv"] + f_rec * rv[k]
         s, es = rk4_tick(fx, x_c, s, es, substeps)
         acc["failed"] |= failed(fx, s, es)
-    return m.finish(acc, m.reference_sums(ref))
+    out = m.finish(acc, m.reference_sums(ref))
+    # The recorded actuator force's projections on the reference's acceleration and velocity
+    # over the window (no metric reads the force; the test takes them from the kernel's ticks).
+    w = ref["win"] > 0
+    out["force_a_kg"] = np.where(acc["failed"], np.nan, acc["fa"] / np.sum(ra[w] ** 2))
+    out["force_v_n_s_per_m"] = np.where(acc["failed"], np.nan, acc["fv"] / np.sum(rv[w] ** 2))
+    for k, v in fx.specimen_metrics().items():
+        out[k] = np.where(acc["failed"], np.nan, v)
+    return out

@@ -1,14 +1,15 @@
 #!/usr/bin/env python3
 """Writes tests/fixtures/numpy_peer_effects.csv: the NumPy peer's metrics with one library effect
 switched on (effects.py, a transcription of docs/model.md §7's laws and the effects' documented
-laws, sharing no code with vshake), 50 random parameter sets per effect (every library effect
-but the building, which CI checks against OpenSees, and the force sensor, which no metric reads), drawn away from the defaults and across each range
+laws, sharing no code with vshake), 50 random parameter sets per effect, every library effect, drawn away from the defaults and across each range
 (seed 2027), on the 3 Hz reference sine at 1.73 g (3 s, 1 s taper, the last 4 cycles), default
 gains, RK4 with 4 substeps. `cargo test` (tests/peer_fixture.rs) runs the same cases through the
 kernel and holds every metric to 1e-9 of these values, relative to max(|value|, 1).
 
 One row per case: the effect, the amplitude, its parameters as `path=value` joined by `;`, then
-the metrics; values with 17 significant digits. A run the peer stops has every metric `nan`.
+the metrics, the recorded actuator force's projections on the reference's acceleration and
+velocity over the window (`force_a_kg`, `force_v_n_s_per_m`: the force sensor changes only those) and the building's metrics (empty for the other effects); values with 17
+significant digits. A run the peer stops has every metric `nan`.
 Each effect's last row has no parameters: the peer runs the documented defaults (`DEFAULTS`), the
 kernel its own, so that a default changed in either fails the test.
 
@@ -71,7 +72,14 @@ def draws(name, rng):
         return dict(b0=u(0.3, 2.0), b1=u(0.3, 2.0), b2=u(0.3, 2.0))
     if name == "reaction_mass":
         return dict(m_r=u(2e5, 5e6), f_r=u(5.0, 40.0), zeta_r=u(0.02, 0.5))
-    if name in ("accel_sensor", "disp_sensor"):
+    if name == "building":
+        sets = dict(storeys=rng.integers(1, 11, SETS).astype(float), law=rng.integers(0, 3, SETS).astype(float),
+                    alpha=u(0.0, 0.2), zeta=u(0.005, 0.05), height=u(2.5, 4.0), bw_a=u(0.9, 1.1),
+                    bw_beta=u(0.3, 0.7), bw_gamma=u(0.3, 0.7), bw_n=u(1.5, 8.0))
+        for i in range(1, 11):
+            sets[f"m{i}"], sets[f"k{i}"], sets[f"fy{i}"] = u(5e3, 40e3), u(10e6, 60e6), u(50e3, 400e3)
+        return sets
+    if name in ("accel_sensor", "disp_sensor", "force_sensor"):
         # Both realisations of the delay: its Taylor series below 0.5 ms, the Padé states above.
         short = rng.uniform(size=SETS) < 0.3
         return dict(f_c=u(20.0, 300.0), zeta=u(0.3, 1.5),
@@ -98,7 +106,20 @@ DEFAULTS = {
     "reaction_mass": dict(m_r=2e6, f_r=12.0, zeta_r=0.1),
     "accel_sensor": dict(f_c=80.0, zeta=2.0 ** -0.5, delay=1e-3),
     "disp_sensor": dict(f_c=100.0, zeta=2.0 ** -0.5, delay=1e-3),
+    "force_sensor": dict(f_c=100.0, zeta=2.0 ** -0.5, delay=1e-3),
+    "building": dict(storeys=3.0, law=1.0, alpha=0.05, zeta=0.02, height=3.0, bw_a=1.0, bw_beta=0.5,
+                     bw_gamma=0.5, bw_n=2.0,
+                     **{f"m{i}": 30e3 for i in range(1, 11)}, **{f"k{i}": 24e6 for i in range(1, 11)},
+                     **{f"fy{i}": 250e3 for i in range(1, 11)}),
 }
+# Columns beyond model.METRICS: the recorded force's projections over the window, and the building's
+# metrics (empty in the other effects' rows).
+EXTRA = ["force_a_kg", "force_v_n_s_per_m", "peak_drift_ratio", "peak_base_shear_n", "ductility_demand", "hysteretic_energy_j"]
+
+
+def cells(out, i):
+    """Row i's metrics as text; empty where the effect has none."""
+    return [repr(float(out[k][i])) if k in out else "" for k in model.METRICS + EXTRA]
 
 
 def main():
@@ -114,15 +135,15 @@ def main():
         out = effects.simulate(name, params, ref, SUBSTEPS)
         for i in range(SETS):
             set_ = ";".join(f"{name}.{k}={float(params[k][i])!r}" for k in cls.names)
-            rows.append([name, repr(AMP_G), set_] + [repr(float(out[k][i])) for k in model.METRICS])
+            rows.append([name, repr(AMP_G), set_] + cells(out, i))
         defaults = {k: np.array([v]) for k, v in DEFAULTS[name].items()}
         at_defaults = effects.simulate(name, defaults, ref, SUBSTEPS)
-        rows.append([name, repr(AMP_G), ""] + [repr(float(at_defaults[k][0])) for k in model.METRICS])
+        rows.append([name, repr(AMP_G), ""] + cells(at_defaults, 0))
         failed = int(np.isnan(out["amp_ratio"]).sum())
         print(f"{name}: {SETS} sets, {failed} stopped by the guard")
     with open(a.out, "w", newline="") as f:
         w = csv.writer(f, lineterminator="\n")
-        w.writerow(["effect", "amp_g", "params"] + model.METRICS)
+        w.writerow(["effect", "amp_g", "params"] + model.METRICS + EXTRA)
         w.writerows(rows)
     print(f"{len(rows)} rows -> {os.path.normpath(a.out)}")
 
