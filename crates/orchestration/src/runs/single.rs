@@ -189,10 +189,9 @@ pub fn run_one(
 /// The lanes of up to [`LANES`] models (`refs[i]` for `models[i]`; one reference is every
 /// lane's), without an observer: lanes without effects in one batch of the bare plant's
 /// [`LANES`], lanes with one effect that leaves the hydraulics alone (a specimen, a building) in
-/// one such batch where the CPU has AVX2 ([`builds::run_wide_single_effect`]), other lanes
-/// with effects
-/// in batches of [`EFFECT_LANES`] (lanes are independent, bit for bit, so the split does not
-/// change a lane). A setup error of any batch is the group's.
+/// one such batch where the CPU has AVX2 ([`builds::run_wide_single_effect`]), other lanes with
+/// effects in batches of [`EFFECT_LANES`] (lanes are independent, bit for bit, so the split does
+/// not change a lane). A setup error of any batch is the group's.
 pub fn run_group(
     models: &[&ModelParams],
     refs: &[&Reference],
