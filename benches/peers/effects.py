@@ -27,6 +27,10 @@ class Effect:
     def __init__(self, params):
         self.p = {k: np.asarray(v, dtype=float) for k, v in params.items()}
 
+    def initial(self, n_s):
+        """The states at t = 0: zeros."""
+        return tuple(np.zeros(n_s) for _ in range(self.n))
+
     def supply(self, es):
         """The supply pressure the valves see, Pa."""
         return m.P["p_s"]
@@ -200,6 +204,9 @@ class Supply(Effect):
     names = ["q_pump", "c_acc", "dp_band"]
     n = 1
 
+    def initial(self, n_s):
+        return (np.full(n_s, m.P["p_s"]),)
+
     def supply(self, es):
         return es[0]
 
@@ -314,95 +321,83 @@ class Building(Effect):
     mass m_i, storey i of stiffness k_i and yield force F_y,i; u_i relative to the platen,
     d_i = u_i − u_{i−1}, m_i (ü_i + a) = −V_i + V_{i+1}, V_i = R_i + c_i ḋ_i,
     R_i = α k_i d_i + (1 − α) r_i (r clamped to ±F_y for the bilinear law), ṙ_i = k_i ḋ_i g_i;
-    c_i = (2ζ/ω_1) k_i, ω_1 the elastic building's first mode; the platen receives V_1. States
-    per storey: u, u̇, r and the storey's work w (ẇ = R ḋ)."""
+    c_i = (2ζ/ω_1) k_i, ω_1 the elastic building's first mode; the platen receives V_1. Its
+    states are four arrays of storeys × samples: u, u̇, r and the storey's work w (ẇ = R ḋ)."""
 
     names = (["storeys", "law", "alpha", "zeta", "height", "bw_a", "bw_beta", "bw_gamma", "bw_n"]
              + [f"m{i}" for i in range(1, STOREYS + 1)] + [f"k{i}" for i in range(1, STOREYS + 1)]
              + [f"fy{i}" for i in range(1, STOREYS + 1)])
-    n = 4 * STOREYS
+    n = 4
 
     def __init__(self, params):
         super().__init__(params)
         p = self.p
         n_s = len(p["storeys"])
-        self.on = [i < p["storeys"] for i in range(STOREYS)]
-        self.m = [p[f"m{i + 1}"] for i in range(STOREYS)]
-        self.k = [p[f"k{i + 1}"] for i in range(STOREYS)]
-        self.fy = [p[f"fy{i + 1}"] for i in range(STOREYS)]
+        self.on = np.arange(STOREYS)[:, None] < p["storeys"][None, :]
+        self.m = np.array([p[f"m{i + 1}"] for i in range(STOREYS)])
+        self.k = np.array([p[f"k{i + 1}"] for i in range(STOREYS)])
+        self.fy = np.array([p[f"fy{i + 1}"] for i in range(STOREYS)])
         w1 = np.empty(n_s)
         for j in range(n_s):
             n = int(p["storeys"][j])
-            k = [self.k[i][j] for i in range(n)] + [0.0]
+            k = list(self.k[:n, j]) + [0.0]
             stiff = np.zeros((n, n))
             for i in range(n):
                 stiff[i, i] = k[i] + k[i + 1]
                 if i + 1 < n:
                     stiff[i, i + 1] = stiff[i + 1, i] = -k[i + 1]
-            s = 1.0 / np.sqrt([self.m[i][j] for i in range(n)])
+            s = 1.0 / np.sqrt(self.m[:n, j])
             w1[j] = math.sqrt(np.linalg.eigvalsh(stiff * np.outer(s, s))[0])
-        self.c = [2.0 * p["zeta"] / w1 * self.k[i] for i in range(STOREYS)]
+        self.c = 2.0 * p["zeta"] / w1 * self.k
+        self.row0 = np.zeros((1, n_s))
         self.peak_drift = np.zeros(n_s)
         self.peak_shear = np.zeros(n_s)
         self.ductility = np.zeros(n_s)
         self.energy = np.zeros(n_s)
 
+    def initial(self, n_s):
+        return tuple(np.zeros((STOREYS, n_s)) for _ in range(self.n))
+
     def _storeys(self, es):
-        """Per storey: drift, drift rate, restoring force R and shear V (0 above the building);
-        kept for the same states (the force, then the derivatives, of one evaluation)."""
+        """Drift, drift rate, restoring force R and shear V of every storey (0 above the
+        building), and the hysteretic force as R takes it; kept for the same states (the force,
+        then the derivatives, of one evaluation)."""
         if getattr(self, "_last", (None,))[0] is es:
             return self._last[1]
-        out = self._storeys_of(es)
-        self._last = (es, out)
-        return out
-
-    def _storeys_of(self, es):
-        p, out = self.p, []
-        below_u = below_v = 0.0
-        for i in range(STOREYS):
-            u, v, r = es[4 * i], es[4 * i + 1], es[4 * i + 2]
-            d, dd = u - below_u, v - below_v
-            held = np.where(p["law"] == 1, np.clip(r, -self.fy[i], self.fy[i]), r)
-            restoring = p["alpha"] * self.k[i] * d + (1.0 - p["alpha"]) * held
-            on = self.on[i]
-            out.append((np.where(on, d, 0.0), np.where(on, dd, 0.0), np.where(on, restoring, 0.0),
-                        np.where(on, restoring + self.c[i] * dd, 0.0), held))
-            below_u, below_v = u, v
-        return out
+        p = self.p
+        u, v, r, _ = es
+        d = u - np.vstack([self.row0, u[:-1]])
+        dd = v - np.vstack([self.row0, v[:-1]])
+        held = np.where(p["law"] == 1, np.clip(r, -self.fy, self.fy), r)
+        restoring = p["alpha"] * self.k * d + (1.0 - p["alpha"]) * held
+        out = tuple(np.where(self.on, x, 0.0) for x in (d, dd, restoring, restoring + self.c * dd))
+        self._last = (es, out + (held,))
+        return self._last[1]
 
     def force(self, y, v, es):
-        return self._storeys(es)[0][3]
+        return self._storeys(es)[3][0]
 
     def derivs(self, plant, es):
-        p, st, out = self.p, self._storeys(es), []
-        for i in range(STOREYS):
-            d, dd, restoring, shear, _ = st[i]
-            above = st[i + 1][3] if i + 1 < STOREYS else 0.0
-            r = es[4 * i + 2]
-            out_ward = ((r >= self.fy[i]) & (dd > 0.0)) | ((r <= -self.fy[i]) & (dd < 0.0))
-            z = r / self.fy[i]
-            g = np.select([p["law"] == 0, p["law"] == 1],
-                          [1.0, np.where(out_ward, 0.0, 1.0)],
-                          p["bw_a"] - np.abs(z) ** p["bw_n"] * (p["bw_beta"] + p["bw_gamma"] * np.sign(dd * z)))
-            on = self.on[i]
-            out += [np.where(on, es[4 * i + 1], 0.0),
-                    np.where(on, (above - shear) / self.m[i] - plant["a"], 0.0),
-                    np.where(on, self.k[i] * dd * g, 0.0),
-                    np.where(on, restoring * dd, 0.0)]
-        return tuple(out)
+        p = self.p
+        d, dd, restoring, shear, _ = self._storeys(es)
+        above = np.vstack([shear[1:], self.row0])
+        r = es[2]
+        out_ward = ((r >= self.fy) & (dd > 0.0)) | ((r <= -self.fy) & (dd < 0.0))
+        z = r / self.fy
+        bouc_wen = p["bw_a"] - np.abs(z) ** p["bw_n"] * (p["bw_beta"] + p["bw_gamma"] * np.sign(dd * z))
+        g = np.select([p["law"] == 0, p["law"] == 1], [1.0, np.where(out_ward, 0.0, 1.0)], bouc_wen)
+        on = self.on
+        return (np.where(on, es[1], 0.0), np.where(on, (above - shear) / self.m - plant["a"], 0.0),
+                np.where(on, self.k * dd * g, 0.0), np.where(on, restoring * dd, 0.0))
 
     def watch(self, es):
-        p, st = self.p, self._storeys(es)
-        energy = 0.0
-        for i in range(STOREYS):
-            d, _, _, _, held = st[i]
-            on = self.on[i]
-            self.peak_drift = np.maximum(self.peak_drift, np.abs(d) / p["height"])
-            self.ductility = np.maximum(self.ductility, np.abs(d) * self.k[i] / self.fy[i])
-            stored = 0.5 * p["alpha"] * self.k[i] * d * d + 0.5 * (1.0 - p["alpha"]) * held * held / self.k[i]
-            energy = energy + np.where(on, es[4 * i + 3] - stored, 0.0)
-        self.peak_shear = np.maximum(self.peak_shear, np.abs(st[0][3]))
-        self.energy = energy
+        p = self.p
+        d, _, _, shear, held = self._storeys(es)
+        self.peak_drift = np.maximum(self.peak_drift, np.max(np.abs(d), axis=0) / p["height"])
+        self.ductility = np.maximum(self.ductility, np.max(np.abs(d) * self.k / self.fy, axis=0))
+        stored = 0.5 * p["alpha"] * self.k * d * d + 0.5 * (1.0 - p["alpha"]) * held * held / self.k
+        self.energy = np.sum(np.where(self.on, es[3] - stored, 0.0), axis=0)
+        self.peak_shear = np.maximum(self.peak_shear, np.abs(shear[0]))
 
     def specimen_metrics(self):
         return dict(peak_drift_ratio=self.peak_drift, peak_base_shear_n=self.peak_shear,
@@ -512,7 +507,7 @@ def simulate(name, params, ref, substeps):
     zeros = np.zeros(n_s)
     p1, p2 = np.full(n_s, m.P1_0), np.full(n_s, m.P2_0)
     s = (zeros, zeros, zeros, p1, p2, p1, p2)
-    es = tuple(np.full(n_s, m.P["p_s"]) if isinstance(fx, Supply) else zeros for _ in range(fx.n))
+    es = fx.initial(n_s)
     f_prev = actuators_force(s)
     f_hp = zeros
     acc = dict(a_re=np.zeros((m.N_HARM, n_s)), a_im=np.zeros((m.N_HARM, n_s)), x_re=zeros, x_im=zeros,
