@@ -37,7 +37,7 @@ fn assert_rel(name: &str, got: f64, want: f64, tol: f64) {
 /// digit (5e-5 on the ratios and h_k, 0.005° on the phase, 0.005 V on max |u|), far inside the
 /// contract's own tolerance (±0.5 % on ratios, ±0.2° on phase, ±2 % on h_k), which a sign flip
 /// of the phase or a 0.3 % regression would pass. The full-precision pin is the NumPy peer's
-/// (tests/peer_fixture.rs, 1e-9).
+/// (crates/kernel/tests/peers.rs, 1e-9).
 #[test]
 fn reference_table_of_model_md_section_5() {
     let p = ModelParams::default();

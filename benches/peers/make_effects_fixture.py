@@ -3,7 +3,7 @@
 switched on (effects.py, a transcription of docs/model.md §7's laws and the effects' documented
 laws, sharing no code with vshake), 50 random parameter sets per effect, every library effect, drawn away from the defaults and across each range
 (seed 2027), on the 3 Hz reference sine at 1.73 g (3 s, 1 s taper, the last 4 cycles), default
-gains, RK4 with 4 substeps. `cargo test` (tests/peer_fixture.rs) runs the same cases through the
+gains, RK4 with 4 substeps. `cargo test` (crates/kernel/tests/peers.rs) runs the same cases through the
 kernel and holds every metric to 1e-9 of these values, relative to max(|value|, 1).
 
 One row per case: the effect, the amplitude, its parameters as `path=value` joined by `;`, then

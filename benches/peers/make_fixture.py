@@ -2,7 +2,7 @@
 """Writes tests/fixtures/numpy_peer_metrics.csv: the NumPy peer's metrics (numpy_peer.py, an
 independent transcription of docs/model.md) for 16 gain sets at three amplitudes of the 3 Hz
 reference sine (3 s, 1 s taper, the last 4 cycles), RK4 with 4 substeps per tick. `cargo test`
-(tests/peer_fixture.rs) runs the same cases through the kernel and holds every metric to 1e-9
+(crates/kernel/tests/peers.rs) runs the same cases through the kernel and holds every metric to 1e-9
 of these values, relative to max(|value|, 1).
 
 The first set is the default gains (the docs/model.md §5 reference cases at 1.73 g and 3.20 g);

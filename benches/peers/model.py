@@ -80,19 +80,32 @@ def coefficients(gains):
                 c_j=10.0 * g["l_j"] / P["j_max"], c_f=10.0 * g["g_f"] / P["f_max"])
 
 
-# Derived constants of the plant.
-_K = P["n_val"] * P["kv"] * P["w3"]
-KW1, KW2, KW3, KW4 = _K * P["r1"], _K * P["r2"], _K, _K * P["r4"]
-P_TR2 = P["p_tr"] ** 2
-MU = P["mu_coef"] * P["m"] * G
-KAPPA_NEG = 2.0 * P["kappa"] - 1.0
-TWO_FS = 2.0 * P["f_s"]
-W_HP = 2.0 * math.pi * P["f_hp"]
-HP_B = TWO_FS / (TWO_FS + W_HP)
-HP_A = (TWO_FS - W_HP) / (TWO_FS + W_HP)
-_R = P["a1"] / P["a2"]
-P1_0 = (P["p_s"] + P["p_r"]) / (1.0 + _R)
-P2_0 = P1_0 * _R
+# Derived constants of the plant (module globals, read by the functions below at each call).
+def derive():
+    """Sets the constants derived from P; again after `set_plant` changes P."""
+    global _K, KW1, KW2, KW3, KW4, P_TR2, MU, KAPPA_NEG, TWO_FS, W_HP, HP_B, HP_A, _R, P1_0, P2_0
+    _K = P["n_val"] * P["kv"] * P["w3"]
+    KW1, KW2, KW3, KW4 = _K * P["r1"], _K * P["r2"], _K, _K * P["r4"]
+    P_TR2 = P["p_tr"] ** 2
+    MU = P["mu_coef"] * P["m"] * G
+    KAPPA_NEG = 2.0 * P["kappa"] - 1.0
+    TWO_FS = 2.0 * P["f_s"]
+    W_HP = 2.0 * math.pi * P["f_hp"]
+    HP_B = TWO_FS / (TWO_FS + W_HP)
+    HP_A = (TWO_FS - W_HP) / (TWO_FS + W_HP)
+    _R = P["a1"] / P["a2"]
+    P1_0 = (P["p_s"] + P["p_r"]) / (1.0 + _R)
+    P2_0 = P1_0 * _R
+
+
+def set_plant(values):
+    """Replaces entries of P (a scalar, or an array with one value per sample: the plant then
+    differs from sample to sample) and derives the constants again. f_s stays a scalar."""
+    P.update(values)
+    derive()
+
+
+derive()
 
 
 def force(p1, p2):

@@ -543,6 +543,54 @@ fn solve3(a: [[f64; 3]; 3], b: [f64; 3]) -> [f64; 3] {
 mod tests {
     use super::*;
 
+    /// The extension after a record's end lies on the parabola through its last values: exactly
+    /// where they are a parabola, with three values (the fewest that fit one) or more.
+    #[test]
+    fn the_extension_continues_a_parabola() {
+        let u: Vec<f64> = (0..8)
+            .map(|k| 0.5 * (k as f64 - 2.0).powi(2) - 3.0)
+            .collect();
+        let next = |k: usize| 0.5 * (k as f64 - 2.0).powi(2) - 3.0;
+        for fit in [3, 5, 8] {
+            let e = extrapolate(&u, fit, 3);
+            for (i, got) in e.iter().enumerate() {
+                let want = next(8 + i);
+                assert!(
+                    (got - want).abs() < 1e-9,
+                    "fit {fit}, {i}: {got} against {want}"
+                );
+            }
+        }
+        // Fewer than three values: the last one, held.
+        assert_eq!(extrapolate(&u[..2], 5, 2), vec![u[1]; 2]);
+    }
+
+    /// The peaks are the largest magnitudes inside the window, of x, v and a in that order: a
+    /// 3 Hz sine's amplitude, ω times it and ω² times it (the window holds whole cycles of the
+    /// untapered sine; a tick need not fall on a crest, hence the 1e-3).
+    #[test]
+    fn peaks_are_the_window_maxima_of_each_state() {
+        let amp = 0.05;
+        let r = Sine {
+            freq_hz: 3.0,
+            amp_m: amp,
+            taper_s: 1.0,
+            duration_s: 3.0,
+            window_cycles: Some(4),
+        }
+        .reference(1024.0);
+        let w = 2.0 * std::f64::consts::PI * 3.0;
+        let (x, v, a) = r.peaks();
+        for (got, want) in [(x, amp), (v, amp * w), (a, amp * w * w)] {
+            assert!((got / want - 1.0).abs() < 1e-3, "{got} against {want}");
+            assert!(got <= want * (1.0 + 1e-12), "{got} beyond {want}");
+        }
+        // The taper (outside the window) is never counted: a spike there changes nothing.
+        let mut spiked = r.clone();
+        spiked.a[0] = 1e6;
+        assert_eq!(spiked.peaks(), (x, v, a));
+    }
+
     #[test]
     fn sine_derivatives_are_consistent() {
         let s = Sine {

@@ -436,6 +436,35 @@ mod tests {
         }
     }
 
+    /// The displacement is the trapezoidal double integral of the processed acceleration, from
+    /// rest: d[k+1] − 2 d[k] + d[k−1] = dt²/4 (a[k−1] + 2 a[k] + a[k+1]) at every tick, and the
+    /// drift is the last displacement's magnitude.
+    #[test]
+    fn the_displacement_is_the_double_integral_of_the_processed_acceleration() {
+        let dt = 0.01;
+        let accel: Vec<f64> = (0..1500)
+            .map(|k| {
+                let t = k as f64 * dt;
+                3.0 * (2.0 * PI * 1.3 * t).sin() + 1.5 * (2.0 * PI * 0.4 * t).cos() + 0.2
+            })
+            .collect();
+        let p = to_displacement(&accel, dt, &Processing::default());
+        let (a, d) = (&p.accel_mps2, &p.disp_m);
+        assert_eq!(a.len(), d.len());
+        assert_eq!(d[0], 0.0);
+        let scale = d.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        assert!(scale > 0.1, "{scale}");
+        for k in 1..d.len() - 1 {
+            let lhs = d[k + 1] - 2.0 * d[k] + d[k - 1];
+            let rhs = dt * dt / 4.0 * (a[k - 1] + 2.0 * a[k] + a[k + 1]);
+            assert!(
+                (lhs - rhs).abs() < 1e-12 * scale,
+                "tick {k}: {lhs} against {rhs}"
+            );
+        }
+        assert_eq!(p.drift_m, d[d.len() - 1].abs());
+    }
+
     #[test]
     fn sweep_and_multisine_derivatives_are_exact() {
         for law in [SweepLaw::Linear, SweepLaw::Log] {
