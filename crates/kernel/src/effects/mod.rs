@@ -948,7 +948,7 @@ mod tests {
         let mut sw = EffectSwitches::default();
         for (id, e) in EffectId::ALL.into_iter().zip(LIBRARY) {
             // By name, not by address: two uses of one `const` need not share an address (they
-            // do not at opt-level 1 with incremental builds, the mutation profile's).
+            // did not at opt-level 1 with incremental builds, tried for benches/mutants.sh).
             assert_eq!(id.info().name, e.name, "registry order");
             assert!(!e.family.trim().is_empty(), "{}: no family", e.name);
             assert!(!e.summary.trim().is_empty(), "{}: no summary", e.name);
