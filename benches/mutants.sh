@@ -29,7 +29,7 @@ copy=$(mktemp -d "${TMPDIR:-/tmp}/vshake-mutants.XXXXXX")
 trap 'rm -rf "$copy"' EXIT
 # The files git knows or would add (not ignored), less those deleted in the work tree.
 (cd "$root" && git ls-files -z --cached --others --exclude-standard |
-    while IFS= read -r -d '' f; do [ -e "$f" ] && printf '%s\0' "$f"; done |
+    while IFS= read -r -d '' f; do if [ -e "$f" ]; then printf '%s\0' "$f"; fi; done |
     tar --null -T - -cf -) | tar -xf - -C "$copy"
 
 effects="$copy/crates/kernel/src/effects"
@@ -48,6 +48,7 @@ effects="$copy/crates/kernel/src/effects"
 export VSHAKE_PEERS_EVERY=${VSHAKE_PEERS_EVERY:-10}
 mkdir -p "$root/target/mutants-out"
 cd "$copy"
-exec cargo mutants --dir "$copy" --profile mutants \
+# Not `exec`: the trap removes the copy when cargo-mutants ends, whatever its status.
+cargo mutants --dir "$copy" --profile mutants \
     --package vshake-kernel --test-package vshake-kernel \
     --output "$root/target/mutants-out" "$@"
