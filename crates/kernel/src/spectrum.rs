@@ -284,11 +284,13 @@ mod tests {
         assert_eq!(s.periods.len(), 20);
         assert!((s.periods[0] - 0.05).abs() < 1e-15 && (s.periods[19] - 4.0).abs() < 1e-12);
         assert_eq!(s.in_band().count(), 20);
-        let target = vec![1.0; 20];
-        let mut got = vec![1.0; 20];
-        got[3] = 2.0;
-        got[7] = 0.5;
+        // A target of its own at each period: the error is a ratio, not a product.
+        let target: Vec<f64> = (0..20).map(|i| 0.3 + 0.1 * i as f64).collect();
+        let mut got = target.clone();
+        got[3] *= 2.0;
+        got[7] *= 0.5;
         let (mean, max) = s.error(&got, &target);
-        assert!((max - 2f64.ln()).abs() < 1e-15 && (mean - 2.0 * 2f64.ln() / 20.0).abs() < 1e-15);
+        assert!((max - 2f64.ln()).abs() < 1e-15, "{max}");
+        assert!((mean - 2.0 * 2f64.ln() / 20.0).abs() < 1e-15, "{mean}");
     }
 }
