@@ -10,6 +10,9 @@
 #   benches/mutants.sh --shard 0/100        # every 100th mutant: a sample across every file
 #   benches/mutants.sh --in-diff my.diff    # the mutants on the lines a change touched
 #   benches/mutants.sh --list               # what would be tested
+#   benches/mutants.sh --random 24 --seed 1 # 24 mutants drawn at random from the list (shards of
+#                                           #   one stride with neighbouring starts revisit the
+#                                           #   same lines: docs/testing.md)
 #
 # Any other argument goes to cargo-mutants (`cargo install --locked cargo-mutants`). Results go to
 # target/mutants-out/mutants.out (outcomes.json, caught.txt, missed.txt, unviable.txt, timeout.txt).
@@ -26,7 +29,7 @@ command -v cargo-mutants >/dev/null || {
     exit 2
 }
 copy=$(mktemp -d "${TMPDIR:-/tmp}/vshake-mutants.XXXXXX")
-trap 'rm -rf "$copy"' EXIT
+trap 'rm -rf "$copy" "$copy.list"' EXIT
 # The files git knows or would add (not ignored), less those deleted in the work tree.
 (cd "$root" && git ls-files -z --cached --others --exclude-standard |
     while IFS= read -r -d '' f; do if [ -e "$f" ]; then printf '%s\0' "$f"; fi; done |
@@ -48,6 +51,33 @@ effects="$copy/crates/kernel/src/effects"
 export VSHAKE_PEERS_EVERY=${VSHAKE_PEERS_EVERY:-10}
 mkdir -p "$root/target/mutants-out"
 cd "$copy"
+
+# --random N [--seed S]: N names drawn from the list (Python's random.sample, seed S, default 1),
+# examined by one regex of the exact names (-F, matched against `--list`'s names) and written to
+# target/mutants-out/random_selection.txt. cargo-mutants 27.1 applies no -F/-E filter to its
+# "delete field ... from struct ... expression" mutants: the nine in effects/mod.rs (`Both`) come
+# along with any selection; read them apart.
+if [ "${1:-}" = --random ]; then
+    count=${2:?"--random needs a count"}
+    shift 2
+    seed=1
+    if [ "${1:-}" = --seed ]; then seed=${2:?"--seed needs a value"}; shift 2; fi
+    cargo mutants --dir "$copy" --package vshake-kernel --list >"$copy.list"
+    pattern=$(python3 - "$copy.list" "$count" "$seed" "$root/target/mutants-out/random_selection.txt" <<'PY'
+import random, sys
+names = [l.rstrip("\n") for l in open(sys.argv[1]) if l.strip()]
+count, seed = int(sys.argv[2]), int(sys.argv[3])
+if not 0 < count <= len(names):
+    sys.exit(f"benches/mutants.sh: --random {count}: the list has {len(names)} mutants")
+meta = set("\\.+*?()|[]{}^$#&-~")  # regex-syntax's meta characters, escaped
+esc = lambda n: "".join("\\" + c if c in meta else c for c in n)
+picked = random.Random(seed).sample(names, count)
+open(sys.argv[4], "w").write("".join(n + "\n" for n in sorted(picked)))
+print("^(?:" + "|".join(esc(n) for n in picked) + ")$")
+PY
+)
+    set -- -F "$pattern" "$@"
+fi
 # Not `exec`: the trap removes the copy when cargo-mutants ends, whatever its status.
 cargo mutants --dir "$copy" --profile mutants \
     --package vshake-kernel --test-package vshake-kernel \
