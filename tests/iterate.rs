@@ -115,3 +115,94 @@ fn every_motion_with_a_heavy_lightly_damped_specimen() {
 fn every_motion_with_a_medium_specimen() {
     every_motion_with(Some((60e3, 2.0, 0.03)));
 }
+
+/// The runs an iteration's journal holds (its `run` lines).
+fn journaled(journal: &Path) -> usize {
+    std::fs::read_to_string(journal)
+        .map(|t| t.lines().filter(|l| l.starts_with("run ")).count())
+        .unwrap_or(0)
+}
+
+/// An iteration stopped by SIGTERM keeps its runs (the journal) and exits 143 with nothing else
+/// written; `--resume` continues it, even after a write cut short by a kill, to files
+/// byte-identical to an uninterrupted iteration's; other settings, or a fresh start over the
+/// journal, are refused (issue 50, point 6).
+#[test]
+fn a_stopped_iteration_resumes_to_the_uninterrupted_files() {
+    let d = tempfile::tempdir().unwrap();
+    let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("studies/iterate_firm.toml");
+    let file = file.to_str().unwrap();
+    let (whole, part) = (d.path().join("whole"), d.path().join("part"));
+    // Nine runs: the goal is out of reach in 8 iterations.
+    let flags = ["--goal", "0.0001", "--iterations", "8"];
+    let w = whole.to_str().unwrap();
+    let (code, _, stderr) = study(&[&["iterate", file, "--out", w][..], &flags].concat());
+    assert_eq!(code, 0, "{stderr}");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_study"))
+        .args(
+            [
+                &["iterate", file, "--out", part.to_str().unwrap()][..],
+                &flags,
+            ]
+            .concat(),
+        )
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let journal = part.join("iterate.journal");
+    // Stopped once three runs are journaled (an event, not a time).
+    while journaled(&journal) < 3 && child.try_wait().unwrap().is_none() {
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    let term = std::process::Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(term.success());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(143), "{stderr}");
+    assert!(stderr.contains("--resume"), "{stderr}");
+    let done = journaled(&journal);
+    assert!((3..9).contains(&done), "{done} runs journaled");
+    assert!(!part.join("drive.csv").exists() && !part.join("iterations.parquet").exists());
+    // A kill in the middle of the next write: a torn line after the last whole run.
+    let mut j = std::fs::OpenOptions::new()
+        .append(true)
+        .open(&journal)
+        .unwrap();
+    std::io::Write::write_all(&mut j, b"run 99 00ff ok 3fd").unwrap();
+    let p = part.to_str().unwrap();
+    let (code, _, stderr) = study(&[&["iterate", file, "--out", p][..], &flags].concat());
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains("holds an interrupted iteration"),
+        "{stderr}"
+    );
+    let other = ["--goal", "0.0001", "--iterations", "9", "--resume"];
+    let (code, _, stderr) = study(&[&["iterate", file, "--out", p][..], &other].concat());
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("the settings"), "{stderr}");
+    let again = [&["iterate", file, "--out", p][..], &flags, &["--resume"]].concat();
+    let (code, stdout, stderr) = study(&again);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stdout.contains(&format!("resumed     {done} runs")),
+        "{stdout}"
+    );
+    for f in [
+        "iterations.parquet",
+        "frf.parquet",
+        "drive.csv",
+        "history.parquet",
+        "iteration.svg",
+    ] {
+        let read = |dir: &Path| std::fs::read(dir.join(f)).unwrap();
+        assert!(
+            read(&whole) == read(&part),
+            "{f} differs from the uninterrupted iteration's"
+        );
+    }
+    assert!(!journal.exists());
+}

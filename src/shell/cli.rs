@@ -405,7 +405,10 @@ leave the limits; the outcome line says which, with the error left and the band 
 is printed; --out writes iterations.parquet (the error of each), frf.parquet (H), history.parquet (per tick: \
 the target and the achieved acceleration, the drive), iteration.svg (the error per iteration, target against \
 achieved) and drive.csv (the final drive's displacement at the controller rate, a \
-record a controller can take: kind = \"record\", column = \"drive_disp_m\", signal = \"reference\").";
+record a controller can take: kind = \"record\", column = \"drive_disp_m\", signal = \"reference\"). \
+With --out, each run is journaled in iterate.journal as it ends: SIGINT or SIGTERM stops the iteration \
+before its next run (exit 130 or 143, the journal kept) and --resume continues it to the uninterrupted \
+result, bit for bit.";
 
 #[derive(Debug, clap::Args)]
 pub struct IterateArgs {
@@ -435,6 +438,11 @@ pub struct IterateArgs {
     /// Overwrite outputs already in --out.
     #[arg(long)]
     pub force: bool,
+    /// Continue an iteration stopped by a signal (Ctrl-C, SIGTERM) or killed, from the journal in
+    /// --out (iterate.journal): the same run file, --model and settings; the runs done are not
+    /// made again, and the result is the uninterrupted iteration's, bit for bit.
+    #[arg(long, requires = "out", conflicts_with = "force")]
+    pub resume: bool,
 }
 
 const TUNE_HELP: &str = "Choose the controller's gains (the TVC gains and leads, optionally the notches) that give \

@@ -2,6 +2,7 @@
 //! progress, interruption, resuming and sizing.
 
 pub mod interrupt;
+pub mod iterate_journal_file;
 pub(crate) mod outputs;
 pub mod progress;
 pub mod resume;

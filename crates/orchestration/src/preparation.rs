@@ -2,6 +2,7 @@
 
 pub mod cmaes;
 pub mod drive_iteration;
+pub mod iterate_journal;
 pub mod tune;
 pub mod tune_journal;
 pub mod tune_spec;

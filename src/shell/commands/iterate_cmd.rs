@@ -3,7 +3,7 @@
 use crate::kernel::excitation::Reference;
 use crate::kernel::simulate::LaneStatus;
 use crate::orchestration::preparation::drive_iteration::{
-    iterate_on_model, IterationRow, IterationSettings, TableIteration, MIN_TARGET_S,
+    iterate_on_model, IterationRow, IterationSettings, NoLog, RunLog, TableIteration, MIN_TARGET_S,
 };
 use crate::orchestration::runs::building_response::{building_response, BuildingResponse};
 use crate::orchestration::runs::single::{run_one, History};
@@ -11,6 +11,8 @@ use crate::orchestration::runs::spec::SimSpec;
 use crate::shell::cli::IterateArgs;
 use crate::shell::formats::meta::{self, Key, Kind};
 use crate::shell::formats::parquet_write;
+use crate::shell::job::interrupt;
+use crate::shell::job::iterate_journal_file::{Inputs, IterateLog, JOURNAL};
 use crate::shell::job::outputs::{output_paths, write_whole};
 use crate::shell::run_spec;
 use crate::shell::BadInput;
@@ -43,6 +45,7 @@ pub fn run(args: &IterateArgs) -> anyhow::Result<()> {
         ))
         .into());
     }
+    let mut journal = open_journal(args, &settings)?;
     let mut o = std::io::stdout().lock();
     writeln!(o, "study iterate {}", args.file.display())?;
     if let Some(m) = &args.model {
@@ -74,14 +77,34 @@ pub fn run(args: &IterateArgs) -> anyhow::Result<()> {
             r.step * settings.gain
         );
     };
-    let done = iterate_on_model(&spec.model, &spec.solver, &target, &settings, print)
-        .map_err(|e| RunFailed(format!("{}: {e}", args.file.display())))?;
+    if let Some(j) = &journal {
+        if j.replayed_runs() > 0 {
+            writeln!(
+                o,
+                "  resumed     {} runs in {}, replayed, not made again",
+                j.replayed_runs(),
+                j.path().display()
+            )?;
+        }
+    }
+    let log: &mut dyn RunLog = match journal.as_mut() {
+        Some(j) => j,
+        None => &mut NoLog,
+    };
+    let done = iterate_on_model(&spec.model, &spec.solver, &target, &settings, log, print);
+    let done = match done {
+        Ok(done) => done,
+        Err(e) => return Err(not_done(args, journal, e)),
+    };
     summary(&mut o, &done, &settings)?;
     if let Some(b) = building_with(&spec, &done.drive) {
         write!(o, "\n  with the kept drive\n{b}")?;
     }
     if let Some(dir) = &args.out {
         write_outputs(dir, &targets, &done, &spec.resolved_toml())?;
+        if let Some(j) = journal {
+            j.remove()?;
+        }
         writeln!(
             o,
             "\n  wrote       {}",
@@ -138,12 +161,111 @@ fn settings(args: &IterateArgs) -> anyhow::Result<IterationSettings> {
     })
 }
 
-/// The output paths, refused before any work where one exists and --force is not given.
+/// The output paths, refused before any work where one exists and --force is not given; a
+/// fresh start also refuses an interrupted iteration's journal, and `--resume` needs it.
 fn outputs(args: &IterateArgs) -> anyhow::Result<Vec<PathBuf>> {
-    match &args.out {
-        Some(dir) => output_paths(dir, &OUTPUTS, args.force),
-        None => Ok(Vec::new()),
+    let Some(dir) = &args.out else {
+        return Ok(Vec::new());
+    };
+    let journal = dir.join(JOURNAL).exists();
+    if args.resume && !journal {
+        return Err(BadInput(format!(
+            "{}: no interrupted iteration to resume (no {JOURNAL})",
+            dir.display()
+        ))
+        .into());
     }
+    if !args.resume && !args.force && journal {
+        return Err(BadInput(format!(
+            "{}: holds an interrupted iteration ({JOURNAL}): continue it with --resume, or start over with --force",
+            dir.display()
+        ))
+        .into());
+    }
+    output_paths(dir, &OUTPUTS, args.force)
+}
+
+/// With --out, the iteration's journal (a new one, or with --resume the interrupted one's, its
+/// inputs checked) and the signal handlers that stop it between runs.
+fn open_journal(
+    args: &IterateArgs,
+    settings: &IterationSettings,
+) -> anyhow::Result<Option<IterateLog>> {
+    let Some(dir) = &args.out else {
+        return Ok(None);
+    };
+    let read = |p: &Path| {
+        crate::shell::formats::input::read_input_text(p)
+            .map_err(|e| BadInput(format!("{}: cannot read: {e}", p.display())))
+    };
+    let spec_text = read(&args.file)?;
+    let model_text = args.model.as_deref().map(read).transpose()?;
+    let settings = format!(
+        "gain {:x} epsilon {:x} iterations {} goal {:x}",
+        settings.gain.to_bits(),
+        settings.epsilon.to_bits(),
+        settings.max_iterations,
+        settings.goal.to_bits()
+    );
+    let inputs = Inputs {
+        spec_text: &spec_text,
+        model_text: model_text.as_deref(),
+        settings: &settings,
+    };
+    std::fs::create_dir_all(dir).map_err(|e| {
+        BadInput(format!(
+            "{}: cannot create the output folder: {e}",
+            dir.display()
+        ))
+    })?;
+    let log = match args.resume {
+        true => IterateLog::resume(dir, &inputs)?,
+        false => IterateLog::start(dir, &inputs)?,
+    };
+    interrupt::install().context("installing the signal handlers")?;
+    Ok(Some(log))
+}
+
+/// The error of an iteration that did not finish: stopped ([`stopped`]), or failed (its journal
+/// removed: there is nothing to resume).
+fn not_done(args: &IterateArgs, journal: Option<IterateLog>, e: String) -> anyhow::Error {
+    match journal {
+        Some(j) if j.stop() => stopped(args, &j),
+        Some(j) => match j.remove() {
+            Ok(()) => RunFailed(format!("{}: {e}", args.file.display())).into(),
+            Err(removing) => removing,
+        },
+        None => RunFailed(format!("{}: {e}", args.file.display())).into(),
+    }
+}
+
+/// An iteration stopped before its next run: by a signal (exit 128 + it, the journal kept for
+/// --resume), or by a fault of its journal.
+fn stopped(args: &IterateArgs, j: &IterateLog) -> anyhow::Error {
+    if let Some(fault) = &j.fault {
+        return BadInput(fault.clone()).into();
+    }
+    let signal = interrupt::requested().unwrap_or(signal_hook::consts::SIGTERM);
+    let model = args
+        .model
+        .as_ref()
+        .map_or(String::new(), |m| format!(" --model {}", m.display()));
+    let out = args.out.as_ref().expect("a journal needs --out").display();
+    interrupt::Interrupted {
+        signal,
+        message: format!(
+            "stopped by {} after {} runs, kept in {}; continue with: study iterate {}{model} --out {out} --iterations {} --gain {} --goal {} --epsilon {} --resume",
+            interrupt::name(signal),
+            j.runs(),
+            j.path().display(),
+            args.file.display(),
+            args.iterations,
+            args.gain,
+            args.goal,
+            args.epsilon,
+        ),
+    }
+    .into()
 }
 
 fn summary(

@@ -528,12 +528,41 @@ pub(crate) fn table_accel(
         .to_vec())
 }
 
+/// What happens around each run of an iteration on the model ([`iterate_on_model`]): a run made
+/// before is replayed (a resumed iteration), each new run is kept, and a stop asked for between
+/// runs ends the iteration before the next one.
+pub trait RunLog {
+    /// The result journaled for the next run of `drive`, where this run was made before.
+    fn replay(&mut self, drive: &[f64]) -> Option<Result<Vec<f64>, String>>;
+    /// A run just made (not replayed), with its result.
+    fn keep(&mut self, drive: &[f64], result: &Result<Vec<f64>, String>);
+    /// Whether to stop before the next run is made.
+    fn stop(&self) -> bool;
+}
+
+/// No journal: every run is made, none is kept, nothing stops the iteration.
+pub struct NoLog;
+
+impl RunLog for NoLog {
+    fn replay(&mut self, _drive: &[f64]) -> Option<Result<Vec<f64>, String>> {
+        None
+    }
+    fn keep(&mut self, _drive: &[f64], _result: &Result<Vec<f64>, String>) {}
+    fn stop(&self) -> bool {
+        false
+    }
+}
+
 /// The model's table driven by references made from a target's: a drive (acceleration per
-/// tick) is the target's reference with the difference added ([`with_correction`]).
+/// tick) is the target's reference with the difference added ([`with_correction`]); each run
+/// goes through `log`.
 struct ModelTable<'a> {
     model: &'a ModelParams,
     solver: &'a Solver,
     target: &'a Reference,
+    log: &'a mut dyn RunLog,
+    /// Whether a run was refused because `log` asked to stop.
+    stopped: bool,
 }
 
 impl ModelTable<'_> {
@@ -557,7 +586,16 @@ impl Table for ModelTable<'_> {
         }
     }
     fn run(&mut self, drive: &[f64]) -> Result<Vec<f64>, String> {
-        table_accel(self.model, self.solver, &self.reference(drive))
+        if let Some(result) = self.log.replay(drive) {
+            return result;
+        }
+        if self.log.stop() {
+            self.stopped = true;
+            return Err("stopped before this run".into());
+        }
+        let result = table_accel(self.model, self.solver, &self.reference(drive));
+        self.log.keep(drive, &result);
+        result
     }
 }
 
@@ -579,13 +617,14 @@ pub struct TableIteration {
 }
 
 /// Iterates the drive of `target` (its acceleration is the target) on `model` with [`iterate`],
-/// the error over the target's window. A target outside the table's limits, or whose own run
-/// fails, is refused.
+/// the error over the target's window, each run through `log`. A target outside the table's
+/// limits, or whose own run fails, is refused; an iteration that `log` stopped is `Err` too.
 pub fn iterate_on_model(
     model: &ModelParams,
     solver: &Solver,
     target: &Reference,
     settings: &IterationSettings,
+    log: &mut dyn RunLog,
     progress: impl FnMut(&IterationRow),
 ) -> Result<TableIteration, String> {
     let seconds = target.len() as f64 / target.f_s;
@@ -603,9 +642,14 @@ pub fn iterate_on_model(
         model,
         solver,
         target,
+        log,
+        stopped: false,
     };
-    let done = iterate(&target.a, target.f_s, &settings, &mut table, progress)
-        .map_err(|e| format!("the target itself as the drive: {e}"))?;
+    let done = iterate(&target.a, target.f_s, &settings, &mut table, progress);
+    if table.stopped {
+        return Err("stopped before its next run".into());
+    }
+    let done = done.map_err(|e| format!("the target itself as the drive: {e}"))?;
     let drive = table.reference(&done.drive);
     let achieved = table_accel(model, solver, &drive)?;
     Ok(TableIteration {
@@ -877,9 +921,14 @@ mod tests {
             goal: 0.01,
             ..Default::default()
         };
-        let out = iterate_on_model(&model, &Solver::default(), &target, &settings, |r| {
-            eprintln!("{r:?}")
-        })
+        let out = iterate_on_model(
+            &model,
+            &Solver::default(),
+            &target,
+            &settings,
+            &mut NoLog,
+            |r| eprintln!("{r:?}"),
+        )
         .unwrap();
         let rows = &out.rows;
         assert!(rows[0].rms_error_ratio > 0.2, "{rows:?}");

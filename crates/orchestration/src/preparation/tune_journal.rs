@@ -76,7 +76,7 @@ pub fn generation<'a>(
 }
 
 /// The 64-bit FNV-1a hash of `text` (not cryptographic: it catches an edit or damage).
-fn fnv1a(text: &str) -> u64 {
+pub(crate) fn fnv1a(text: &str) -> u64 {
     text.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| {
         (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
     })
@@ -149,7 +149,7 @@ pub fn complete(text: &str) -> &str {
     &text[..keep.unwrap_or(text.len())]
 }
 
-fn field<'a>(line: &'a str, key: &str, n: usize) -> Result<&'a str, String> {
+pub(crate) fn field<'a>(line: &'a str, key: &str, n: usize) -> Result<&'a str, String> {
     line.strip_prefix(key)
         .and_then(|r| r.strip_prefix(' '))
         .ok_or(format!("line {n}: expected `{key} ...`"))
@@ -258,7 +258,7 @@ fn failed(time_s: f64, failure: Failure) -> RowStatus {
     RowStatus::Failed { time_s, failure }
 }
 
-fn bits_line(v: &[f64]) -> String {
+pub(crate) fn bits_line(v: &[f64]) -> String {
     v.iter()
         .map(|x| format!("{:x}", x.to_bits()))
         .collect::<Vec<_>>()
@@ -271,15 +271,15 @@ fn words_bits<'a>(w: impl Iterator<Item = &'a str>, n: usize) -> Result<Vec<u64>
         .collect()
 }
 
-fn floats<'a>(w: impl Iterator<Item = &'a str>, n: usize) -> Result<Vec<f64>, String> {
+pub(crate) fn floats<'a>(w: impl Iterator<Item = &'a str>, n: usize) -> Result<Vec<f64>, String> {
     Ok(words_bits(w, n)?.into_iter().map(f64::from_bits).collect())
 }
 
-fn hex_text(t: &str) -> String {
+pub(crate) fn hex_text(t: &str) -> String {
     t.bytes().map(|b| format!("{b:02x}")).collect()
 }
 
-fn unhex_text(h: &str, n: usize) -> Result<String, String> {
+pub(crate) fn unhex_text(h: &str, n: usize) -> Result<String, String> {
     let bad = || format!("line {n}: text not in hex");
     if !h.len().is_multiple_of(2) {
         return Err(bad());
