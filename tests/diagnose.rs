@@ -1004,6 +1004,65 @@ fn records_hiding_a_yielding_building() {
     }
 }
 
+/// Issue 50, the general case: a yielding 3-storey building whose every storey differs from the
+/// design (stiffness 21, 27 and 19 MN/m where the design says 24; yield forces 180, 290 and
+/// 210 kN where it says 250) and whose damping is 3 % (the design's 2 %), hidden in record tests.
+/// The building named as the candidate, forward selection adds its second stage (every storey
+/// and the damping); the fit leaves at most 1.5× the noise floor and recovers what the tests
+/// determine: the three stiffnesses, the damping and the first storey's yield force, each within
+/// 1e-5 of the truth (measured: 1e-7). The storeys above carry less shear and do not yield under
+/// these motions: the tests bound their yield forces from below only, and they are not asserted.
+/// Not asserted either, and open: "within two standard errors". Here the errors reported are the
+/// profile's lower bound, not a measure (`fit::profiled` did not settle within its rounds: every
+/// standard error is 2.56e-10 of its estimate, where the χ² at the truth equals the fit's to five
+/// digits), so they cannot judge the estimates.
+#[test]
+#[ignore = "issue 50 acceptance, a CI step: cargo test --release --test diagnose -- --ignored"]
+fn records_hiding_a_building_whose_storeys_all_differ() {
+    let d = tempfile::tempdir().unwrap();
+    let c = Path::new(env!("CARGO_MANIFEST_DIR")).join("studies/campaigns/broadband.toml");
+    let truth = [
+        ("k1", 21.0e6),
+        ("k2", 27.0e6),
+        ("k3", 19.0e6),
+        ("fy1", 180.0e3),
+        ("zeta", 0.03),
+    ];
+    let hidden = [truth.to_vec(), vec![("fy2", 290.0e3), ("fy3", 210.0e3)]].concat();
+    let sets: Vec<String> = hidden
+        .iter()
+        .map(|(p, v)| format!("building.{p}={v}"))
+        .collect();
+    let mut args = vec!["--as-records", "--effect", "building"];
+    for s in &sets {
+        args.extend(["--set", s.as_str()]);
+    }
+    synth_from(&c, NOISE_ACCEPTANCE, d.path(), &args);
+    let toml = d.path().join("broadband.toml");
+    let r = diagnose_named(
+        &toml,
+        ("report", "fitted.toml"),
+        &["--candidates", "building"],
+    );
+    println!("{}", r.stdout);
+    let verdict = r.stdout.lines().find(|l| l.contains("verdict:")).unwrap();
+    assert!(verdict.contains("building (specimen)"), "{verdict}");
+    assert!(
+        verdict.contains("building's every storey and the damping"),
+        "{verdict}"
+    );
+    let (names, est, _, after, noise) = named_fit(d.path(), &r, "building");
+    assert!(
+        after <= 1.5 * noise,
+        "the fit leaves {after}, noise floor {noise}"
+    );
+    for (p, v) in truth {
+        let i = (names.iter().position(|n| *n == format!("building.{p}")))
+            .unwrap_or_else(|| panic!("building.{p} not fitted: {names:?}"));
+        common::assert_close(est[i], v, 1e-5 * v, &format!("building.{p}"));
+    }
+}
+
 const SPECIMEN_1: [(&str, f64); 3] = [("m1", 60_000.0), ("f1", 2.5), ("zeta1", 0.03)];
 const SPECIMEN_2: [(&str, f64); 6] = [
     ("m1", 40_000.0),

@@ -64,6 +64,16 @@ pub fn run(args: &IterateArgs) -> anyhow::Result<()> {
         settings.max_iterations,
         100.0 * settings.goal,
     )?;
+    if let Some(j) = &journal {
+        if j.replayed_runs() > 0 {
+            writeln!(
+                o,
+                "  resumed     {} runs in {}, replayed, not made again",
+                j.replayed_runs(),
+                j.path().display()
+            )?;
+        }
+    }
     writeln!(
         o,
         "\n  {:>9} {:>22} {:>6}",
@@ -77,16 +87,6 @@ pub fn run(args: &IterateArgs) -> anyhow::Result<()> {
             r.step * settings.gain
         );
     };
-    if let Some(j) = &journal {
-        if j.replayed_runs() > 0 {
-            writeln!(
-                o,
-                "  resumed     {} runs in {}, replayed, not made again",
-                j.replayed_runs(),
-                j.path().display()
-            )?;
-        }
-    }
     let log: &mut dyn RunLog = match journal.as_mut() {
         Some(j) => j,
         None => &mut NoLog,
@@ -200,12 +200,10 @@ fn open_journal(
     };
     let spec_text = read(&args.file)?;
     let model_text = args.model.as_deref().map(read).transpose()?;
+    // The flags as a user gives them (each number's shortest form that reads back to its bits).
     let settings = format!(
-        "gain {:x} epsilon {:x} iterations {} goal {:x}",
-        settings.gain.to_bits(),
-        settings.epsilon.to_bits(),
-        settings.max_iterations,
-        settings.goal.to_bits()
+        "--iterations {} --gain {} --goal {} --epsilon {}",
+        settings.max_iterations, settings.gain, settings.goal, settings.epsilon
     );
     let inputs = Inputs {
         spec_text: &spec_text,

@@ -61,11 +61,14 @@ impl IterateLog {
         let j = iterate_journal::read(&text)
             .map_err(|e| BadInput(format!("{}: {e}", path.display())))?;
         let differs = if j.spec_text != inputs.spec_text {
-            Some("the run file differs")
+            Some("the run file differs".to_string())
         } else if j.model_text.as_deref() != inputs.model_text {
-            Some("the --model file (or its absence) differs")
+            Some("the --model file (or its absence) differs".to_string())
         } else if j.settings != inputs.settings {
-            Some("the settings (--iterations, --gain, --goal, --epsilon) differ")
+            Some(format!(
+                "the settings differ ({} here, {} there)",
+                inputs.settings, j.settings
+            ))
         } else {
             None
         };

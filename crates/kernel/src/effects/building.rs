@@ -34,9 +34,28 @@ pub const INFO: EffectInfo = EffectInfo {
     summary:
         "a shear building of 1-10 storeys (linear, bilinear or Bouc-Wen storeys) on the platen",
     params: Params::FIELDS,
-    // [chosen] A fit frees the first storey's stiffness and yield force: the storey that yields
-    // first under a base motion, and the one the base shear measures.
-    stages: &[Stage::free(&["k1", "fy1"])],
+    // [chosen] A fit frees first the first storey's stiffness and yield force: the storey that
+    // yields first under a base motion, and the one the base shear measures. A diagnosis's
+    // forward selection may then add every other storey's stiffness and yield force and the
+    // damping (a building whose storeys all differ from the design); a storey above the
+    // building's `storeys` is not freed (`unused`).
+    stages: &[
+        Stage {
+            label: "storey 1",
+            free: &["k1", "fy1"],
+            scan: None,
+            start: &[],
+        },
+        Stage {
+            label: "every storey and the damping",
+            free: &[
+                "k2", "k3", "k4", "k5", "k6", "k7", "k8", "k9", "k10", "fy2", "fy3", "fy4", "fy5",
+                "fy6", "fy7", "fy8", "fy9", "fy10", "zeta",
+            ],
+            scan: None,
+            start: &[],
+        },
+    ],
 };
 
 params! {

@@ -38,6 +38,7 @@ use crate::diagnosis::fit::{self, FeatureInfo, Free, Problem};
 use crate::diagnosis::statemap::StateMap;
 use crate::measured::aligned::AlignedTest;
 use rayon::prelude::*;
+use vshake_kernel::effects::building;
 use vshake_kernel::params::{EffectId, ModelParams};
 
 /// The family of the sensors' effects: a verdict naming it says which channel's measurement.
@@ -411,11 +412,16 @@ pub fn free_of(effect: EffectId, model: &ModelParams) -> Vec<Free> {
 }
 
 /// The free parameters of stage `stage` of `effect` at their values in `model` (where that is 0,
-/// at the stage's start value, if it has one).
+/// at the stage's start value, if it has one); a building's storeys above its `storeys` are not
+/// freed (they change nothing).
 pub(crate) fn free_of_stage(effect: EffectId, stage: usize, model: &ModelParams) -> Vec<Free> {
     let s = &effect.info().stages[stage];
+    let unused = |n: &&&str| {
+        effect == EffectId::Building && building::unused(n, building::Params::of(model)).is_some()
+    };
     s.free
         .iter()
+        .filter(|n| !unused(n))
         .map(|n| {
             let info = ModelParams::lookup(&format!("{effect}.{n}"))
                 .expect("default free parameters are registered");

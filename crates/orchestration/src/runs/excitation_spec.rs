@@ -197,11 +197,13 @@ impl ExcitationSpec {
                 f_ref_hz,
                 unit,
                 signal,
+                scale,
                 ..
             } if !unit.is_acceleration() => {
                 format!(
-                    "record {}:{column}, {}",
+                    "record {}:{column}{}, {}",
                     file.display(),
+                    scaled_by(*scale),
                     filter_words(*signal, *f_ref_hz)
                 )
             }
@@ -213,12 +215,13 @@ impl ExcitationSpec {
                 pga_g,
                 processing,
                 signal,
+                scale,
                 ..
             } => format!(
                 "acceleration record {}:{column} ({}){}, high-pass {} Hz, {}",
                 file.display(),
                 unit.name(),
-                pga_g.map_or(String::new(), |g| format!(" scaled to {g} g")),
+                pga_g.map_or(scaled_by(*scale), |g| format!(" scaled to {g} g")),
                 processing.highpass_hz,
                 filter_words(*signal, *f_ref_hz)
             ),
@@ -257,5 +260,14 @@ fn filter_words(signal: Signal, f_ref_hz: f64) -> String {
     match signal {
         Signal::Command => format!("a command through the state-variable filter {f_ref_hz} Hz"),
         Signal::Reference => format!("the tracked reference, zero-phase derivatives {f_ref_hz} Hz"),
+    }
+}
+
+/// A record's `scale` in its description: nothing at 1, else " × scale".
+fn scaled_by(scale: f64) -> String {
+    if scale == 1.0 {
+        String::new()
+    } else {
+        format!(" × {scale}")
     }
 }
