@@ -47,38 +47,7 @@ pub fn run(args: &IterateArgs) -> anyhow::Result<()> {
     }
     let mut journal = open_journal(args, &settings)?;
     let mut o = std::io::stdout().lock();
-    writeln!(o, "study iterate {}", args.file.display())?;
-    if let Some(m) = &args.model {
-        writeln!(
-            o,
-            "  model       {} (the run file's [model.*] on top)",
-            m.display()
-        )?;
-    }
-    writeln!(o, "  target      {}", spec.excitation.describe())?;
-    writeln!(
-        o,
-        "  settings    gain {}, regularisation {:e}, at most {} iterations, goal {:.2} % rms, FRF from the iteration's own runs",
-        settings.gain,
-        settings.epsilon,
-        settings.max_iterations,
-        100.0 * settings.goal,
-    )?;
-    if let Some(j) = &journal {
-        if j.replayed_runs() > 0 {
-            writeln!(
-                o,
-                "  resumed     {} runs in {}, replayed, not made again",
-                j.replayed_runs(),
-                j.path().display()
-            )?;
-        }
-    }
-    writeln!(
-        o,
-        "\n  {:>9} {:>22} {:>6}",
-        "iteration", "rms accel error, %", "step"
-    )?;
+    header(&mut o, args, &spec, &settings, journal.as_ref())?;
     let print = |r: &IterationRow| {
         println!(
             "  {:>9} {:>22.3} {:>6.3}",
@@ -120,6 +89,50 @@ pub fn run(args: &IterateArgs) -> anyhow::Result<()> {
             targets[2].display()
         )?;
     }
+    Ok(())
+}
+
+/// The lines before the iteration's table: the file, the model, the target, the settings, what
+/// a resumed iteration replays, and the table's header.
+fn header(
+    o: &mut impl Write,
+    args: &IterateArgs,
+    spec: &SimSpec,
+    settings: &IterationSettings,
+    journal: Option<&IterateLog>,
+) -> std::io::Result<()> {
+    writeln!(o, "study iterate {}", args.file.display())?;
+    if let Some(m) = &args.model {
+        writeln!(
+            o,
+            "  model       {} (the run file's [model.*] on top)",
+            m.display()
+        )?;
+    }
+    writeln!(o, "  target      {}", spec.excitation.describe())?;
+    writeln!(
+        o,
+        "  settings    gain {}, regularisation {:e}, at most {} iterations, goal {:.2} % rms, FRF from the iteration's own runs",
+        settings.gain,
+        settings.epsilon,
+        settings.max_iterations,
+        100.0 * settings.goal,
+    )?;
+    if let Some(j) = journal {
+        if j.replayed_runs() > 0 {
+            writeln!(
+                o,
+                "  resumed     {} runs in {}, replayed, not made again",
+                j.replayed_runs(),
+                j.path().display()
+            )?;
+        }
+    }
+    writeln!(
+        o,
+        "\n  {:>9} {:>22} {:>6}",
+        "iteration", "rms accel error, %", "step"
+    )?;
     Ok(())
 }
 
