@@ -1010,12 +1010,9 @@ fn records_hiding_a_yielding_building() {
 /// The building named as the candidate, forward selection adds its second stage (every storey
 /// and the damping); the fit leaves at most 1.5× the noise floor and recovers what the tests
 /// determine: the three stiffnesses, the damping and the first storey's yield force, each within
-/// 1e-5 of the truth (measured: 1e-7). The storeys above carry less shear and do not yield under
-/// these motions: the tests bound their yield forces from below only, and they are not asserted.
-/// Not asserted either, and open: "within two standard errors". Here the errors reported are the
-/// profile's lower bound, not a measure (`fit::profiled` did not settle within its rounds: every
-/// standard error is 2.56e-10 of its estimate, where the χ² at the truth equals the fit's to five
-/// digits), so they cannot judge the estimates.
+/// 1e-5 of the truth (measured: 1e-7) and within two standard errors. The storeys above carry
+/// less shear and do not yield under these motions: the tests bound their yield forces from below
+/// only, so their errors must be wide (over 10 % of the estimate) and still cover the truth.
 #[test]
 #[ignore = "issue 50 acceptance, a CI step: cargo test --release --test diagnose -- --ignored"]
 fn records_hiding_a_building_whose_storeys_all_differ() {
@@ -1051,15 +1048,24 @@ fn records_hiding_a_building_whose_storeys_all_differ() {
         verdict.contains("building's every storey and the damping"),
         "{verdict}"
     );
-    let (names, est, _, after, noise) = named_fit(d.path(), &r, "building");
+    let (names, est, se, after, noise) = named_fit(d.path(), &r, "building");
     assert!(
         after <= 1.5 * noise,
         "the fit leaves {after}, noise floor {noise}"
     );
+    let at = |p: &str| {
+        (names.iter().position(|n| *n == format!("building.{p}")))
+            .unwrap_or_else(|| panic!("building.{p} not fitted: {names:?}"))
+    };
     for (p, v) in truth {
-        let i = (names.iter().position(|n| *n == format!("building.{p}")))
-            .unwrap_or_else(|| panic!("building.{p} not fitted: {names:?}"));
+        let i = at(p);
         common::assert_close(est[i], v, 1e-5 * v, &format!("building.{p}"));
+        common::assert_close(est[i], v, 2.0 * se[i], &format!("building.{p} (2 SE)"));
+    }
+    for (p, v) in [("fy2", 290.0e3), ("fy3", 210.0e3)] {
+        let i = at(p);
+        assert!(se[i] > 0.1 * est[i], "building.{p}: {} ± {}", est[i], se[i]);
+        common::assert_close(est[i], v, 2.0 * se[i], &format!("building.{p} (2 SE)"));
     }
 }
 

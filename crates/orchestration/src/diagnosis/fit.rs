@@ -943,7 +943,7 @@ fn damped_step(a: &[Vec<f64>], g: &[f64], l: f64, u: &[f64], free: &[Free]) -> V
 const PROFILE_ROUNDS: usize = 12;
 
 /// The fit checked along each parameter by direct evaluation: χ² at u ± δ, from δ = 2 standard
-/// errors up (×4 a round), until both sides rise by at least 4·s² (the conditional 2σ bound).
+/// errors ([`first_probe`]) up (×4 a round), until both sides rise by at least 4·s² (the conditional 2σ bound).
 /// A side lower than u moves the estimate there. The standard error is then the larger of the
 /// Gauss–Newton one and δ·√(2s²/(Δχ²₊ + Δχ²₋)), the curvature χ² has at that scale: where the
 /// model is not smooth (a friction law's stick and slip, a clamp), χ² is rough at the scale of
@@ -959,7 +959,7 @@ fn profiled(
     s2: f64,
 ) -> (Vec<f64>, Eval, Vec<f64>) {
     let p = free.len();
-    let mut delta: Vec<Option<f64>> = se.iter().map(|s| Some(2.0 * s.max(1e-12))).collect();
+    let mut delta: Vec<Option<f64>> = se.iter().map(|&s| Some(first_probe(s))).collect();
     for _ in 0..PROFILE_ROUNDS {
         let probes: Vec<(usize, Vec<f64>)> = (0..p)
             .filter_map(|i| delta[i].map(|d| (i, d)))
@@ -971,7 +971,11 @@ fn profiled(
         let ev = problem.evaluate(probes.len(), &|k, m| apply(m, free, &probes[k].1));
         let chi0 = at.chi2();
         let best = (0..ev.len()).min_by(|&a, &b| ev[a].chi2().total_cmp(&ev[b].chi2()));
-        if let Some(b) = best.filter(|&b| ev[b].chi2() < chi0 - 1e-9 * chi0) {
+        // A lower side moves the estimate only where it is lower by a share of s² that matters:
+        // smaller ones (rounding, the roughness of a stick-slip law) would use up the rounds in
+        // moves of no consequence and leave the probes unsettled.
+        let lower = chi0 - (1e-9 * chi0).max(MOVE_SHARE * s2);
+        if let Some(b) = best.filter(|&b| ev[b].chi2() < lower) {
             (u, at) = (probes[b].1.clone(), ev[b].clone());
             continue;
         }
@@ -979,10 +983,14 @@ fn profiled(
             let (i, d) = (probes[2 * k].0, delta[probes[2 * k].0].unwrap_or(0.0));
             let rise = [0, 1].map(|s| rise_of(&probes[2 * k + s].1, &u, &pair[s], chi0));
             if rise.iter().all(|r| *r >= 4.0 * s2) || d > 2.0 {
-                let finite: Vec<f64> = rise.into_iter().filter(|r| r.is_finite()).collect();
-                if !finite.is_empty() {
-                    let curv = finite.iter().sum::<f64>() / finite.len() as f64;
-                    se[i] = se[i].max(d * (s2 / curv.max(f64::MIN_POSITIVE)).sqrt());
+                if let Some(curv) = curvature(rise, s2) {
+                    // No rise at all on a side: the tests do not bound the parameter there.
+                    let wide = if curv > 0.0 {
+                        d * (s2 / curv).sqrt()
+                    } else {
+                        f64::INFINITY
+                    };
+                    se[i] = se[i].max(wide);
                 }
                 delta[i] = None;
             } else {
@@ -997,6 +1005,41 @@ fn profiled(
         }
     }
     (u, at, se)
+}
+
+/// The rise of χ² that gives a parameter's curvature from the `rise` of its two probes (infinite
+/// where the range stops one): their mean where both sides rose by 4·s² or more; else the side
+/// that did not, since the features do not bound the parameter that way (a storey's yield force
+/// above the largest force it carries: χ² is flat there, and the error is infinite).
+fn curvature(rise: [f64; 2], s2: f64) -> Option<f64> {
+    let finite: Vec<f64> = rise.into_iter().filter(|r| r.is_finite()).collect();
+    if finite.is_empty() {
+        None
+    } else if finite.iter().all(|&r| r >= 4.0 * s2) {
+        Some(finite.iter().sum::<f64>() / finite.len() as f64)
+    } else {
+        Some(finite.iter().copied().fold(f64::INFINITY, f64::min))
+    }
+}
+
+/// The share of s² by which a probe must lower χ² to move the estimate in [`profiled`]: a move
+/// smaller than this shifts the estimate by under a tenth of its standard error.
+const MOVE_SHARE: f64 = 0.01;
+
+/// The smallest first probe of [`profiled`] in u (a relative 1e-6 of a log-scaled value). Below
+/// it the features' rounding is felt; above it a smooth χ² still gives its curvature, since a
+/// quadratic's rise over δ² is the same at every δ. A Gauss–Newton error that is not a number
+/// (a singular JᵀJ: a parameter the features do not see) starts there too.
+const MIN_PROBE: f64 = 1e-6;
+
+/// The first probe of [`profiled`] for a Gauss–Newton standard error `se` (in u): 2 `se`, at
+/// least [`MIN_PROBE`].
+fn first_probe(se: f64) -> f64 {
+    if (2.0 * se).is_finite() {
+        (2.0 * se).max(MIN_PROBE)
+    } else {
+        MIN_PROBE
+    }
 }
 
 /// `u` with parameter `i` moved by `d`, kept inside its valid range.
@@ -1026,19 +1069,52 @@ fn uncertainty(j: &[Vec<f64>], after: &Eval, n: usize) -> (Vec<f64>, Vec<Vec<f64
     } else {
         1.0
     };
-    // Columns of (JᵀJ)⁻¹ (symmetric).
-    let inv: Vec<Vec<f64>> = (0..p)
-        .map(|k| {
-            let e: Vec<f64> = (0..p).map(|i| if i == k { 1.0 } else { 0.0 }).collect();
-            solve(&a, &e)
-        })
-        .collect();
+    let inv = seen_inverse(&a);
     let cov = |i: usize, k: usize| s2 * inv[k][i];
     let se_u: Vec<f64> = (0..p).map(|i| cov(i, i).max(0.0).sqrt()).collect();
     let corr = (0..p)
-        .map(|i| (0..p).map(|k| cov(i, k) / (se_u[i] * se_u[k])).collect())
+        .map(|i| {
+            (0..p)
+                .map(|k| correlation(cov(i, k), se_u[i], se_u[k], i == k))
+                .collect()
+        })
         .collect();
     (se_u, corr)
+}
+
+/// (JᵀJ)⁻¹ over the parameters the features see (a column of J that is zero, e.g. the yield
+/// force of a storey that never yields, would make JᵀJ singular and every error a number of
+/// nothing); an unseen parameter's row and column are 0, its error left to [`profiled`].
+fn seen_inverse(a: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    let p = a.len();
+    let dmax = (0..p).map(|i| a[i][i]).fold(0.0, f64::max);
+    let seen: Vec<usize> = (0..p).filter(|&i| a[i][i] > 1e-24 * dmax).collect();
+    let sub: Vec<Vec<f64>> = seen
+        .iter()
+        .map(|&i| seen.iter().map(|&k| a[i][k]).collect())
+        .collect();
+    let mut inv = vec![vec![0.0; p]; p];
+    for (c, &k) in seen.iter().enumerate() {
+        let e: Vec<f64> = (0..seen.len())
+            .map(|i| f64::from(u8::from(i == c)))
+            .collect();
+        for (x, &i) in solve(&sub, &e).into_iter().zip(&seen) {
+            inv[k][i] = x;
+        }
+    }
+    inv
+}
+
+/// The correlation of a covariance `c` between errors `si` and `sk` (1 on the diagonal, 0 where
+/// an error is 0).
+fn correlation(c: f64, si: f64, sk: f64, diagonal: bool) -> f64 {
+    if diagonal {
+        1.0
+    } else if si > 0.0 && sk > 0.0 {
+        c / (si * sk)
+    } else {
+        0.0
+    }
 }
 
 /// [`FeatureInfo::harmonic`] of a record's residual in octave band `b` of
