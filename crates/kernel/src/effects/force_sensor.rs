@@ -16,7 +16,8 @@ pub const INFO: EffectInfo = EffectInfo {
     params: Params::FIELDS,
     stages: &[Stage {
         label: "",
-        free: &["f_c", "delay"],
+        // Corner, damping and delay: the filter's whole shape (issue 51).
+        free: &["f_c", "zeta", "delay"],
         scan: Some(("f_c", &[15.0, 30.0, 60.0, 120.0, 240.0])),
         start: &[],
     }],

@@ -14,7 +14,9 @@ pub const INFO: EffectInfo = EffectInfo {
     params: Params::FIELDS,
     stages: &[Stage {
         label: "",
-        free: &["freq_hz"],
+        // The lag's shape with its speed: a spool damped away from 0.7 (0.3–1.5 on real valves)
+        // fitted with ζ held there is found as another effect (issue 51).
+        free: &["freq_hz", "zeta"],
         // [chosen] Starts a fit scans for `freq_hz` (a spool slow enough to matter can drive the loop into a limit cycle, whose misfit has other valleys).
         scan: Some(("freq_hz", &[15.0, 25.0, 40.0, 60.0, 90.0, 140.0, 220.0])),
         start: &[],
