@@ -943,13 +943,15 @@ fn damped_step(a: &[Vec<f64>], g: &[f64], l: f64, u: &[f64], free: &[Free]) -> V
 const PROFILE_ROUNDS: usize = 12;
 
 /// The fit checked along each parameter by direct evaluation: χ² at u ± δ, from δ = 2 standard
-/// errors ([`first_probe`]) up (×4 a round), until both sides rise by at least 4·s² (the conditional 2σ bound).
-/// A side lower than u moves the estimate there. The standard error is then the larger of the
-/// Gauss–Newton one and δ·√(2s²/(Δχ²₊ + Δχ²₋)), the curvature χ² has at that scale: where the
-/// model is not smooth (a friction law's stick and slip, a clamp), χ² is rough at the scale of
-/// a forward-difference step, its jumps inflate JᵀJ, and the Gauss–Newton errors claim a
-/// precision the χ² surface does not have (a noise-free channel's jumps of 40 σ at a step of
-/// 1e-3: a standard error 45× too small). On a smooth χ² both agree.
+/// errors ([`first_probe`]) up (×4 a round), until both sides rise by at least 4·s² (the
+/// conditional 2σ bound). A side lower than u by [`MOVE_SHARE`]·s² or more moves the estimate
+/// there. The standard error is then the larger of the Gauss–Newton one and δ·√(s²/Δχ²), with
+/// Δχ² the mean rise of the two sides ([`curvature`]: the smaller where one side stays below
+/// 4·s²; where that side does not rise at all, the error is `inf`), the curvature χ² has at that
+/// scale: where the model is not smooth (a friction law's stick and slip, a clamp), χ² is rough
+/// at the scale of a forward-difference step, its jumps inflate JᵀJ, and the Gauss–Newton errors
+/// claim a precision the χ² surface does not have (a noise-free channel's jumps of 40 σ at a step
+/// of 1e-3: a standard error 45× too small). On a smooth χ² both agree.
 fn profiled(
     problem: &Problem,
     free: &[Free],
