@@ -6,5 +6,6 @@ pub mod diagnose;
 pub mod fit;
 pub mod projector;
 pub mod residual_memory;
+pub mod signals;
 pub mod statemap;
 pub mod states;

@@ -52,7 +52,7 @@ pub(crate) fn fft(re: &mut [f64], im: &mut [f64]) {
 }
 
 /// |X_k|² for k = 0…N/2 of `x` (its mean removed, times the window `w`) zero-padded to N, and N.
-fn power_windowed(x: &[f64], w: impl Fn(usize) -> f64) -> (Vec<f64>, usize) {
+pub(crate) fn power_windowed(x: &[f64], w: impl Fn(usize) -> f64) -> (Vec<f64>, usize) {
     let n_fft = x.len().max(2).next_power_of_two();
     let mean = x.iter().sum::<f64>() / x.len().max(1) as f64;
     let mut re: Vec<f64> = x

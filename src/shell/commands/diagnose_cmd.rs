@@ -65,7 +65,7 @@ pub(crate) fn run_to(args: &DiagnoseArgs, o: &mut dyn Write) -> anyhow::Result<(
     let t0 = std::time::Instant::now();
     let d = pool(args.threads)?.install(|| {
         let mut d = diagnose::diagnose(&problem, &candidates);
-        d.map_states(&loaded.aligned);
+        d.map_states(&problem, &loaded.aligned);
         d
     });
     progress.finish();
@@ -96,6 +96,8 @@ pub(crate) fn run_to(args: &DiagnoseArgs, o: &mut dyn Write) -> anyhow::Result<(
     print_candidates(o, &d)?;
     print_evidence(o, &problem, &d)?;
     print_selection(o, &d)?;
+    print_misfit(o, &problem, &d)?;
+    print_signals(o, &d)?;
     if let Some(map) = &d.state_map {
         writeln!(o, "\n  the starting model's residual:")?;
         crate::shell::report::statemap_report::print(o, map)?;
@@ -283,6 +285,59 @@ fn print_selection(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
     Ok(())
 }
 
+/// The weighted misfit the fit minimises, per test and channel: the baseline's, and the named
+/// effects' where the verdict names any.
+fn print_misfit(o: &mut dyn Write, problem: &Problem, d: &Diagnosis) -> std::io::Result<()> {
+    let before = problem.chi2_table(&d.baseline);
+    let after = d.named_fit().map(|(_, f)| problem.chi2_table(&f.after));
+    let what = if after.is_some() {
+        "the baseline -> the named effects"
+    } else {
+        "the baseline"
+    };
+    writeln!(
+        o,
+        "\n  misfit per test and channel (chi2 / its degrees of freedom, about 1 at the noise; {what}):"
+    )?;
+    writeln!(
+        o,
+        "  {:<16} {:>19} {:>19} {:>19}",
+        "test", "acceleration", "displacement", "force"
+    )?;
+    for (t, test) in problem.tests.iter().enumerate() {
+        let cell = |c: usize| match &after {
+            _ if before[t][c].is_nan() => "-".to_string(),
+            Some(a) => format!("{:.3e} -> {:.2e}", before[t][c], a[t][c]),
+            None => format!("{:.3e}", before[t][c]),
+        };
+        writeln!(
+            o,
+            "  {:<16} {:>19} {:>19} {:>19}",
+            test.name,
+            cell(0),
+            cell(1),
+            cell(2)
+        )?;
+    }
+    Ok(())
+}
+
+/// What the signals show in the starting model's residual, one finding a line.
+fn print_signals(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
+    let s = d.signals.sentences();
+    if s.is_empty() {
+        return Ok(());
+    }
+    writeln!(
+        o,
+        "\n  what the signals show (the starting model's residual, measured - model):"
+    )?;
+    for line in s {
+        writeln!(o, "  - {line}")?;
+    }
+    Ok(())
+}
+
 /// The Parquet tables and the HTML page of a diagnosis.
 pub(crate) fn write_report(
     dir: &std::path::Path,
@@ -460,6 +515,14 @@ fn selection_columns(d: &Diagnosis) -> Vec<(String, Column)> {
         (
             "explained".into(),
             Column::F64(steps.iter().map(|s| s.4).collect()),
+        ),
+        (
+            "own_share".into(),
+            Column::F64(
+                (0..steps.len())
+                    .map(|i| d.own.get(i).copied().unwrap_or(f64::NAN))
+                    .collect(),
+            ),
         ),
         (
             "residual_rms".into(),

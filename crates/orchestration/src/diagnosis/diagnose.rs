@@ -8,26 +8,31 @@
 //! freedom, p parameters added). With the features scaled by their noise, χ² of a right model is
 //! ≈ n − p, so:
 //! - a candidate is *significant* when ΔBIC > [`SIGNIFICANT_BIC`] (Kass & Raftery's "very strong"
-//!   evidence; fitting p parameters to noise alone lowers χ² by about p, far below p·ln n) and its
-//!   fit does not leave a larger residual than the baseline's (the χ² weighs each channel by its
-//!   noise, the residual by its signal, so a fit may trade one channel against another; a
-//!   candidate that makes what the user sees worse is never called significant), and it explains
-//!   at least [`EXPLAINS_SOME`] of the residual beyond noise. Significant candidates rank first,
-//!   each group by ΔBIC;
-//! - the share of the residual it *explains* is 1 − (R_c² − N²)/(R_b² − N²), with R the residual
-//!   rms over every test and channel (what a user sees fall) of the baseline and the candidate and
-//!   N the noise floor of that rms: the part of the baseline's residual beyond noise that the
-//!   candidate removes. (A χ² share would overstate a candidate that mimics the few features of
-//!   largest signal-to-noise ratio while leaving the residual as it was.)
+//!   evidence; fitting p parameters to noise alone lowers χ² by about p, far below p·ln n) and it
+//!   explains at least [`EXPLAINS_SOME`] of the misfit beyond noise. Significant candidates rank
+//!   first, each group by ΔBIC;
+//! - the share of the misfit it *explains* is (χ²_b − χ²_c)/(χ²_b − n): the part of the
+//!   baseline's χ² beyond what noise leaves that the candidate removes. It is the one measure the
+//!   fit minimises, so a fit that lowers χ² never reports 0 %. (Until issue 51 the share was
+//!   taken from the residual rms over tests and channels, each relative to its signal, which
+//!   weighs the channels differently from the fit: a spool lag that cut χ² threefold was reported
+//!   as explaining nothing because the rms of one channel rose. The rms is still reported beside
+//!   the χ², per test and channel, and the verdict says how far the named effects leave it from
+//!   its noise floor.)
 //!
 //! **Several missing effects: forward selection with refit.** When the best candidate is
 //! significant and the χ² it leaves is still above what noise leaves by more than any further
 //! parameter's BIC penalty, every remaining candidate is fitted again *on top of it*, its
 //! parameters freed together with the chosen ones' (starting from their estimates); the best is
 //! added if its ΔBIC over the chosen set is significant and it removes at least [`ADDS_ENOUGH`]
-//! of the residual beyond noise the set leaves, and so on, up to [`MAX_EFFECTS`]. The verdict
+//! of the χ² beyond noise the set leaves, and so on, up to [`MAX_EFFECTS`]. The final set is then
+//! checked (`prune`): each effect added is refitted out of it, and one that does not, in the final
+//! joint fit, remove [`ADDS_ENOUGH`] of what the others leave without it, with a significant ΔBIC,
+//! is dropped (a later effect may have taken over what it had removed). Each named effect's share
+//! is reported as it stands in the final joint fit: the share of the baseline's misfit beyond
+//! noise that the set loses without it. The verdict
 //! names "A + B" and the share each adds when together they explain at least
-//! [`EXPLAINS_TOGETHER`] of the residual beyond noise; a best candidate that
+//! [`EXPLAINS_TOGETHER`] of the misfit beyond noise; a best candidate that
 //! explains less than [`EXPLAINS_ENOUGH`] (alone or with those added) is reported as such: the
 //! missing effect is probably not in the library, and the starting model's residual mapped onto
 //! the plant's states ([`crate::diagnosis::statemap`]) names the state and term it follows. A named set that
@@ -35,6 +40,7 @@
 //! what it leaves.
 
 use crate::diagnosis::fit::{self, FeatureInfo, Free, Problem};
+use crate::diagnosis::signals::{self, Signals};
 use crate::diagnosis::statemap::StateMap;
 use crate::measured::aligned::AlignedTest;
 use rayon::prelude::*;
@@ -46,14 +52,14 @@ pub const MEASUREMENT_FAMILY: &str = "measurement chain";
 
 /// ΔBIC above which a candidate counts as significant.
 pub const SIGNIFICANT_BIC: f64 = 10.0;
-/// Share of the residual beyond noise a candidate must explain to be called significant at all
+/// Share of the misfit beyond noise (χ²) a candidate must explain to be called significant at all
 /// [chosen: 1 %. Over thousands of features a flexible effect lowers χ² by more than the BIC
 /// penalty by absorbing a sliver of the misfit (a numerical floor, an unmodelled detail); a
 /// candidate that removes under a hundredth of what the user sees is not evidence of anything.]
 pub const EXPLAINS_SOME: f64 = 0.01;
-/// Share of the residual beyond noise a candidate must explain to be named the missing effect.
+/// Share of the misfit beyond noise a candidate must explain to be named the missing effect.
 pub const EXPLAINS_ENOUGH: f64 = 0.5;
-/// Share of the residual beyond noise several effects must explain together to be named
+/// Share of the misfit beyond noise several effects must explain together to be named
 /// together: more than one effect is a claim that the library holds the whole of what is missing,
 /// so they must take the residual (nearly) to the noise; otherwise two wrong effects could each
 /// mimic part of an effect the library does not have.
@@ -64,7 +70,7 @@ pub const POLISHED: usize = 3;
 pub const MAX_ITER: usize = 25;
 /// Most effects forward selection names together.
 pub const MAX_EFFECTS: usize = 3;
-/// Share of the residual beyond noise left by the effects chosen so far that a further effect
+/// Share of the misfit beyond noise (χ²) left by the effects chosen so far that a further effect
 /// must remove to be added. [chosen: a quarter. When the library's closest form of an effect is
 /// only close (a flow-gain curve standing in for a sharp dead band), what it leaves is large in
 /// χ² over thousands of features, and other flexible effects each take a sliver of it with a
@@ -81,9 +87,8 @@ pub struct Candidate {
     pub free: Vec<Free>,
     pub fit: Result<fit::FitResult, fit::FitError>,
     pub delta_bic: f64,
+    /// Share of the baseline's χ² beyond noise the fit removes.
     pub explained: f64,
-    /// Whether the fit leaves a campaign residual rms no larger than the baseline's.
-    pub lowers_residual: bool,
 }
 
 impl Step {
@@ -105,13 +110,23 @@ impl Candidate {
         }
     }
 
-    /// ΔBIC above [`SIGNIFICANT_BIC`], a residual no larger than the baseline's, and at least
-    /// [`EXPLAINS_SOME`] of the residual beyond noise explained.
+    /// ΔBIC above [`SIGNIFICANT_BIC`] and at least [`EXPLAINS_SOME`] of the misfit beyond noise
+    /// explained.
     pub fn significant(&self) -> bool {
-        self.delta_bic > SIGNIFICANT_BIC && self.lowers_residual && self.explained >= EXPLAINS_SOME
+        self.delta_bic > SIGNIFICANT_BIC && self.explained >= EXPLAINS_SOME
     }
     pub fn chi2(&self) -> f64 {
         self.fit.as_ref().map_or(f64::INFINITY, |f| f.chi2_after())
+    }
+}
+
+/// A share as a percentage, to two significant figures below 1 % (a share is never shown as
+/// "0 %" unless it is nil).
+pub fn percent(share: f64) -> String {
+    match 100.0 * share {
+        p if p >= 1.0 || p == 0.0 || !p.is_finite() => format!("{p:.0} %"),
+        p if p >= 0.01 => format!("{p:.2} %"),
+        p => format!("{p:.1e} %"),
     }
 }
 
@@ -149,7 +164,7 @@ pub struct Step {
     pub fit: fit::FitResult,
     /// ΔBIC over the effects chosen before it.
     pub delta_bic: f64,
-    /// Share of the baseline's residual beyond noise that the chosen effects explain together,
+    /// Share of the baseline's misfit beyond noise (χ²) that the chosen effects explain together,
     /// this one included.
     pub explained: f64,
 }
@@ -167,6 +182,10 @@ pub struct Diagnosis {
     pub candidates: Vec<Candidate>,
     /// Effects forward selection added on top of the best candidate, in order.
     pub more: Vec<Step>,
+    /// Each named part's share of the baseline's misfit beyond noise (χ²) on its own in the
+    /// final joint fit (the χ² it leaves refitted without it): the best candidate's, then each
+    /// step's; empty when forward selection added nothing.
+    pub own: Vec<f64>,
     pub features: Vec<FeatureInfo>,
     /// Each test's sample rate, Hz: a record's evidence is split by frequency band.
     pub rates_hz: Vec<f64>,
@@ -177,6 +196,11 @@ pub struct Diagnosis {
     /// The residual the named effects leave, mapped likewise (when the caller made it): a
     /// verdict whose effects do not take the residual to the noise names what is left.
     pub state_map_after: Option<crate::diagnosis::statemap::StateMap>,
+    /// The plain evidence in the starting model's residual (when the caller read it,
+    /// [`crate::diagnosis::signals`]): offsets, spectral lines, tests that differ.
+    pub signals: Signals,
+    /// Per test, the starting model's residual in units of its noise (√(χ²/dof)).
+    pub test_misfit: Vec<f64>,
 }
 
 /// What the diagnosis concludes.
@@ -285,38 +309,36 @@ impl Diagnosis {
         let best = self.candidates.first();
         match self.verdict() {
             Verdict::NothingSignificant => match best {
-                Some(c) if c.delta_bic > SIGNIFICANT_BIC && !c.lowers_residual => format!(
-                    "no candidate explains the residual significantly (best: {}, dBIC = {:.1}, but its fit leaves a larger residual than the baseline's); no significant missing effect{}",
-                    c.effect,
-                    c.delta_bic,
-                    self.where_it_fails()
-                ),
                 Some(c) if c.delta_bic > SIGNIFICANT_BIC => format!(
-                    "no candidate explains the residual significantly (best: {}, dBIC = {:.1}, but it explains {:.1} % of the residual beyond noise, under {:.0} %); no significant missing effect{}",
+                    "no candidate explains the residual significantly (best: {}, dBIC = {:.1}, but it explains {:.1} % of the misfit beyond noise, under {:.0} %); {}{}{}",
                     c.effect,
                     c.delta_bic,
                     100.0 * c.explained,
                     100.0 * EXPLAINS_SOME,
-                    self.where_it_fails()
+                    self.nothing_missing(),
+                    self.where_it_fails(),
+                    self.signal_note()
                 ),
                 _ => format!(
-                    "no candidate explains the residual significantly (best: {}, dBIC = {:.1} <= {SIGNIFICANT_BIC}); no significant missing effect{}",
+                    "no candidate explains the residual significantly (best: {}, dBIC = {:.1} <= {SIGNIFICANT_BIC}); {}{}{}",
                     best.map_or("-", |c| c.effect.name()),
                     best.map_or(f64::NAN, |c| c.delta_bic),
-                    self.where_it_fails()
+                    self.nothing_missing(),
+                    self.where_it_fails(),
+                    self.signal_note()
                 ),
             },
             Verdict::Missing { effects, explained } if effects.len() == 1 => format!(
-                "most likely missing: {} ({}); it explains {:.0} % of the residual beyond noise (dBIC = {:.0}){}{}",
+                "most likely missing: {} ({}); it explains {:.0} % of the misfit beyond noise (dBIC = {:.0}){}{}",
                 effects[0],
                 effects[0].effect.info().family,
                 100.0 * explained,
                 best.map_or(f64::NAN, |c| c.delta_bic),
                 self.short_of_noise(),
                 self.measurement_note(&effects)
-            ),
+            ) + &self.signal_note_if_short(),
             Verdict::Missing { effects, explained } => format!(
-                "most likely missing: {}; together they explain {:.0} % of the residual beyond noise ({}){}{}",
+                "most likely missing: {}; together they explain {:.0} % of the misfit beyond noise (what the joint fit loses without each: {}){}{}",
                 effects.iter().map(|e| match e.stage {
                     0 => format!("{e} ({})", e.effect.info().family),
                     _ => e.to_string(),
@@ -325,20 +347,61 @@ impl Diagnosis {
                 self.shares(),
                 self.short_of_noise(),
                 self.measurement_note(&effects)
-            ),
+            ) + &self.signal_note_if_short(),
             Verdict::Unexplained { effects, explained } if effects.len() == 1 => format!(
-                "the best candidate, {}, explains only {:.0} % of the residual beyond noise: the missing effect is probably not in the library{}",
+                "the best candidate, {}, explains only {:.0} % of the misfit beyond noise: the missing effect is probably not in the library{}{}",
                 effects[0],
                 100.0 * explained,
-                self.where_it_fails()
+                self.where_it_fails(),
+                self.signal_note()
             ),
             Verdict::Unexplained { effects, explained } => format!(
-                "the best candidates together, {}, explain only {:.0} % of the residual beyond noise ({}): the missing effect is probably not in the library{}",
+                "the best candidates together, {}, explain only {:.0} % of the misfit beyond noise (what the joint fit loses without each: {}): the missing effect is probably not in the library{}{}",
                 effects.iter().map(|e| e.to_string()).collect::<Vec<_>>().join(" + "),
                 100.0 * explained,
                 self.shares(),
-                self.where_it_fails()
+                self.where_it_fails(),
+                self.signal_note()
             ),
+        }
+    }
+
+    /// "no significant missing effect", unless some test's residual is over
+    /// [`signals::TEST_CARRIES`] times its noise, or the signals show something: then that is
+    /// said instead.
+    fn nothing_missing(&self) -> String {
+        let worst = (self.test_misfit.iter().enumerate())
+            .filter(|(_, m)| m.is_finite())
+            .max_by(|a, b| a.1.total_cmp(b.1));
+        match worst {
+            Some((t, &m)) if m > signals::TEST_CARRIES => format!(
+                "yet the residual of test {} is {m:.1}x its noise: something is missing that no candidate of the library reproduces",
+                self.signals.names.get(t).map_or("?", |n| n.as_str())
+            ),
+            _ if !self.signals.is_empty() => {
+                "no effect of the library explains it".to_string()
+            }
+            _ => "no significant missing effect".to_string(),
+        }
+    }
+
+    /// "; the signals show …" (offsets, spectral lines, tests that differ); empty when they show
+    /// nothing.
+    fn signal_note(&self) -> String {
+        if self.signals.is_empty() {
+            return String::new();
+        }
+        format!("; the signals show {}", self.signals.sentences().join("; "))
+    }
+
+    /// [`Self::signal_note`] when the named effects leave more than [`NOISE_FACTOR`] times the
+    /// noise floor; empty otherwise.
+    fn signal_note_if_short(&self) -> String {
+        match self.named_fit() {
+            Some((_, f)) if f.after.residual_rms() > NOISE_FACTOR * self.noise_rms => {
+                self.signal_note()
+            }
+            _ => String::new(),
         }
     }
 
@@ -357,32 +420,41 @@ impl Diagnosis {
 }
 
 impl Diagnosis {
-    /// What each chosen effect adds, in order: "A 60 %, + B 35 %" (shares of the residual beyond
-    /// noise, each over the effects before it).
+    /// What each chosen effect removes on its own in the final joint fit: "A 60 %, + B 35 %"
+    /// (shares of the baseline's misfit beyond noise).
     fn shares(&self) -> String {
         let Some(first) = self.candidates.first() else {
             return String::new();
         };
-        let mut prev = first.explained;
-        let mut parts = vec![format!("{} {:.0} %", first.effect, 100.0 * prev)];
-        for s in &self.more {
-            parts.push(format!(
-                "+ {} {:.0} %",
-                s.part(),
-                100.0 * (s.explained - prev)
-            ));
-            prev = s.explained;
-        }
-        parts.join(", ")
+        let parts = std::iter::once(first.part()).chain(self.more.iter().map(Step::part));
+        let own = self.own.iter().copied().chain(std::iter::repeat(f64::NAN));
+        parts
+            .zip(own)
+            .enumerate()
+            .map(|(i, (p, s))| {
+                let plus = if i == 0 { "" } else { "+ " };
+                format!("{plus}{p} {}", percent(s))
+            })
+            .collect::<Vec<_>>()
+            .join(", ")
     }
 }
 
 impl Diagnosis {
-    /// Maps the starting model's residual onto the plant's states, and the residual the named
-    /// effects leave (both stay None when a test's model run fails: the diagnosis reports that
-    /// itself).
-    pub fn map_states(&mut self, aligned: &[AlignedTest]) {
-        self.state_map = state_map(aligned);
+    /// Maps the starting model's residual onto the plant's states, reads the signals' own
+    /// evidence in it, and maps the residual the named effects leave (the maps stay None, the
+    /// signals empty, when a test's model run fails: the diagnosis reports that itself).
+    pub fn map_states(&mut self, problem: &Problem, aligned: &[AlignedTest]) {
+        let solver = Default::default();
+        let compared: Result<Vec<_>, String> = aligned
+            .par_iter()
+            .map(|t| crate::diagnosis::compare::compare_test(t, &solver))
+            .collect();
+        if let Ok(c) = &compared {
+            self.state_map = Some(crate::diagnosis::statemap::map(c));
+            let sigma: Vec<[f64; 3]> = problem.tests.iter().map(|t| t.sigma).collect();
+            self.signals = signals::read(c, &sigma, &self.test_misfit);
+        }
         if let Some((free, fit)) = self.named_fit() {
             let fitted: Vec<AlignedTest> = aligned
                 .iter()
@@ -439,17 +511,27 @@ fn scanned(problem: &Problem, free: &[Free], effect: EffectId, stage: usize) -> 
     fit::scanned(problem, free, path.as_deref().zip(scan.map(|(_, v)| v)))
 }
 
-/// How a candidate's fit is scored against the baseline (χ², residual rms, its noise floor²).
+/// How a candidate's fit is scored against the baseline: its χ², the χ² noise leaves (the
+/// features' degrees of freedom) and ln of it (the BIC's penalty per parameter).
 struct Scoring {
     chi2_b: f64,
-    rb: f64,
-    n2: f64,
+    n: f64,
     ln_n: f64,
 }
 
 impl Scoring {
-    /// The candidate `effect` with its parameters `free` and their fit: its ΔBIC, the share of
-    /// the residual beyond noise it explains, and whether it lowers the residual.
+    /// Share of the baseline's χ² beyond noise that a fit leaving `chi2` removes, in [0, 1].
+    fn share(&self, chi2: f64) -> f64 {
+        let excess = self.chi2_b - self.n;
+        if excess > 0.0 && chi2.is_finite() {
+            ((self.chi2_b - chi2) / excess).clamp(0.0, 1.0)
+        } else {
+            0.0
+        }
+    }
+
+    /// The candidate `effect` with its parameters `free` and their fit: its ΔBIC and the share of
+    /// the misfit beyond noise it explains.
     fn candidate(
         &self,
         effect: EffectId,
@@ -457,21 +539,11 @@ impl Scoring {
         fit: Result<fit::FitResult, fit::FitError>,
     ) -> Candidate {
         let p = free.len() as f64;
-        let lowers_residual = fit
-            .as_ref()
-            .is_ok_and(|f| f.after.residual_rms() <= self.rb);
         let (delta_bic, explained) = match &fit {
-            Ok(f) => {
-                let rc = f.after.residual_rms();
-                let excess = self.rb * self.rb - self.n2;
-                // A candidate that fits the features worse than the baseline explains nothing.
-                let e = if excess > 0.0 && f.chi2_after() < self.chi2_b {
-                    (1.0 - (rc * rc - self.n2) / excess).clamp(0.0, 1.0)
-                } else {
-                    0.0
-                };
-                (self.chi2_b - f.chi2_after() - p * self.ln_n, e)
-            }
+            Ok(f) => (
+                self.chi2_b - f.chi2_after() - p * self.ln_n,
+                self.share(f.chi2_after()),
+            ),
             Err(_) => (f64::NEG_INFINITY, 0.0),
         };
         Candidate {
@@ -481,7 +553,6 @@ impl Scoring {
             fit,
             delta_bic,
             explained,
-            lowers_residual,
         }
     }
 }
@@ -552,14 +623,10 @@ pub fn scan_starts(problem: &Problem, free: &[Free]) -> Vec<Free> {
 pub fn diagnose(problem: &Problem, candidates: &[EffectId]) -> Diagnosis {
     let baseline = problem.evaluate(1, &|_, m| m.clone()).remove(0);
     let n = problem.dof().round() as usize;
-    let chi2_b = baseline.chi2();
-    let noise = problem.noise_rms();
-    let (rb, n2) = (baseline.residual_rms(), noise * noise);
     let model0 = &problem.tests[0].model;
     let score = Scoring {
-        chi2_b,
-        rb,
-        n2,
+        chi2_b: baseline.chi2(),
+        n: n as f64,
         ln_n: (n as f64).ln(),
     };
     let mut out: Vec<Candidate> = candidates
@@ -572,39 +639,31 @@ pub fn diagnose(problem: &Problem, candidates: &[EffectId]) -> Diagnosis {
         .collect();
     rank(&mut out);
     polish_leaders(problem, &mut out, &baseline, &score);
-    let more = forward_selection(problem, &out, n, (rb, n2));
+    let more = forward_selection(problem, &out, &score);
+    let (more, own) = prune(problem, &out, more, &score);
     Diagnosis {
+        test_misfit: problem.test_misfit(&baseline),
+        noise_rms: problem.noise_rms(),
+        channel_noise: std::array::from_fn(|c| problem.channel_noise_rms(c)),
         baseline,
         n,
-        noise_rms: noise,
-        channel_noise: std::array::from_fn(|c| problem.channel_noise_rms(c)),
         candidates: out,
         more,
+        own,
         features: problem.features(),
         rates_hz: problem.tests.iter().map(|t| t.samples.rate_hz).collect(),
         state_map: None,
         state_map_after: None,
+        signals: Signals {
+            names: problem.tests.iter().map(|t| t.name.clone()).collect(),
+            ..Default::default()
+        },
     }
 }
 
 /// Forward selection on top of the best candidate (see the module docs): the effects it adds.
-/// `baseline_rms` is the baseline's residual rms and the square of its noise floor.
-fn forward_selection(
-    problem: &Problem,
-    ranked: &[Candidate],
-    n: usize,
-    baseline_rms: (f64, f64),
-) -> Vec<Step> {
-    let (rb, n2) = baseline_rms;
-    let ln_n = (n as f64).ln();
-    let excess = rb * rb - n2;
-    let share = |e: &fit::Eval| {
-        if excess > 0.0 {
-            (1.0 - (e.residual_rms().powi(2) - n2) / excess).clamp(0.0, 1.0)
-        } else {
-            0.0
-        }
-    };
+fn forward_selection(problem: &Problem, ranked: &[Candidate], score: &Scoring) -> Vec<Step> {
+    let n = score.n;
     let Some(best) = ranked.first().filter(|c| c.significant()) else {
         return Vec::new();
     };
@@ -620,11 +679,10 @@ fn forward_selection(
         // Room left: even a perfect further effect of one parameter must beat its penalty, and
         // the χ² left must exceed what noise leaves by more than its own spread (a χ² of n
         // degrees of freedom has standard deviation √(2n); [chosen: three of them]).
-        if at.chi2() - n as f64 <= (ln_n + SIGNIFICANT_BIC).max(3.0 * (2.0 * n as f64).sqrt()) {
+        if at.chi2() - n <= (score.ln_n + SIGNIFICANT_BIC).max(3.0 * (2.0 * n).sqrt()) {
             break;
         }
-        let Some((part, f, r, dbic)) =
-            best_addition(problem, ranked, (&chosen, &free, &at), (ln_n, n2))
+        let Some((part, f, r, dbic)) = best_addition(problem, ranked, (&chosen, &free, &at), score)
         else {
             break;
         };
@@ -637,12 +695,127 @@ fn forward_selection(
             stage: part.stage,
             family: part.effect.info().family,
             free: f,
-            explained: share(&r.after),
+            explained: score.share(r.chi2_after()),
             fit: r,
             delta_bic: dbic,
         });
     }
     steps
+}
+
+/// The named set (the best candidate, then `steps`) checked in its final joint fit: each part is
+/// refitted out of it, and the weakest added part that does not remove [`ADDS_ENOUGH`] of the
+/// misfit beyond noise the others leave without it, with ΔBIC > [`SIGNIFICANT_BIC`], is dropped,
+/// the set refitted without it, until every one does. Returns the steps kept and each named
+/// part's share of the baseline's misfit beyond noise on its own in the final joint fit (empty
+/// when only the best candidate is named).
+fn prune(
+    problem: &Problem,
+    ranked: &[Candidate],
+    mut steps: Vec<Step>,
+    score: &Scoring,
+) -> (Vec<Step>, Vec<f64>) {
+    while let Some(last) = steps.last() {
+        let parts: Vec<Part> = std::iter::once(ranked[0].part())
+            .chain(steps.iter().map(Step::part))
+            .collect();
+        let ranges = param_ranges(ranked[0].free.len(), &steps);
+        let chi2 = last.fit.chi2_after();
+        let without: Vec<Option<(Vec<Free>, fit::FitResult)>> = (0..parts.len())
+            .into_par_iter()
+            .map(|i| refit_without(problem, last, &parts, &ranges, i))
+            .collect();
+        // (share of the baseline's misfit, share of what the others leave, ΔBIC); a part whose
+        // removal leaves no parameter leaves the baseline.
+        let own: Vec<(f64, f64, f64)> = without
+            .iter()
+            .enumerate()
+            .map(|(i, w)| {
+                let c = match w {
+                    Some((_, r)) => r.chi2_after(),
+                    None if kept(&parts, &ranges, i).is_empty() => score.chi2_b,
+                    None => f64::INFINITY,
+                };
+                let p = ranges[i].len() as f64;
+                let left = (c - chi2) / (c - score.n);
+                let base = score.share(chi2) - score.share(c);
+                (base, left, c - chi2 - p * score.ln_n)
+            })
+            .collect();
+        let weakest = (1..parts.len())
+            .filter(|&i| !(own[i].1 >= ADDS_ENOUGH && own[i].2 > SIGNIFICANT_BIC))
+            .min_by(|&a, &b| own[a].1.total_cmp(&own[b].1));
+        let Some(i) = weakest else {
+            return (steps, own.iter().map(|o| o.0).collect());
+        };
+        let last_part = parts.len() - 1;
+        let alone = !(0..parts.len()).any(|j| j != i && parts[j].effect == parts[i].effect);
+        let refit = without.into_iter().nth(i).flatten();
+        match refit {
+            // The last part dropped: the fit before it stands.
+            _ if i == last_part => steps.truncate(i - 1),
+            Some((f, r)) if alone => {
+                steps.remove(i - 1);
+                let k = steps.len();
+                let before = match k {
+                    1 => ranked[0].chi2(),
+                    _ => steps[k - 2].fit.chi2_after(),
+                };
+                let s = &mut steps[k - 1];
+                let p_new = ranges[last_part].len() as f64;
+                s.delta_bic = before - r.chi2_after() - p_new * score.ln_n;
+                s.explained = score.share(r.chi2_after());
+                s.free = f;
+                s.fit = r;
+            }
+            _ => steps.truncate(i - 1),
+        }
+    }
+    (steps, Vec::new())
+}
+
+/// The indices of each named part's parameters in the final joint fit's: the best candidate's
+/// first (`n_best` of them), then each step's.
+fn param_ranges(n_best: usize, steps: &[Step]) -> Vec<std::ops::Range<usize>> {
+    let mut out = Vec::with_capacity(steps.len() + 1);
+    out.push(0..n_best);
+    for s in steps {
+        let start = out.last().map_or(0, |r| r.end);
+        out.push(start..s.free.len());
+    }
+    out
+}
+
+/// The indices of the joint fit's parameters kept without part `i` and the further stages of its
+/// effect that follow it.
+fn kept(parts: &[Part], ranges: &[std::ops::Range<usize>], i: usize) -> Vec<usize> {
+    let dropped = |j: usize| {
+        j == i || (parts[j].effect == parts[i].effect && parts[j].stage > parts[i].stage)
+    };
+    (0..parts.len())
+        .filter(|&j| !dropped(j))
+        .flat_map(|j| ranges[j].clone())
+        .collect()
+}
+
+/// The final joint fit `last` refitted from its estimates without part `i` (and the further
+/// stages of its effect that follow it): its parameters and fit, None where the fit fails.
+fn refit_without(
+    problem: &Problem,
+    last: &Step,
+    parts: &[Part],
+    ranges: &[std::ops::Range<usize>],
+    i: usize,
+) -> Option<(Vec<Free>, fit::FitResult)> {
+    let free: Vec<Free> = kept(parts, ranges, i)
+        .iter()
+        .map(|&k| Free::new(last.free[k].info, last.fit.estimate[k]))
+        .collect();
+    if free.is_empty() {
+        return None;
+    }
+    let r = fit::fit_from(problem, &free, MAX_ITER, last.fit.before.clone()).ok()?;
+    Some((free, r))
 }
 
 /// The parameters `free` at the values `estimate`.
@@ -679,12 +852,12 @@ fn additions(ranked: &[Candidate], chosen: &[Part]) -> Vec<Part> {
 
 /// The candidate that adds most to the chosen parts (their parameters `free`, leaving the
 /// evaluation `at`): what it adds, the joint parameters, their fit and its ΔBIC; None where no
-/// addition is significant, lowers the residual and removes enough of what is left of it.
+/// addition is significant and removes [`ADDS_ENOUGH`] of the misfit left.
 fn best_addition(
     problem: &Problem,
     ranked: &[Candidate],
     (chosen, free, at): (&[Part], &[Free], &fit::Eval),
-    (ln_n, n2): (f64, f64),
+    score: &Scoring,
 ) -> Option<(Part, Vec<Free>, fit::FitResult, f64)> {
     let model0 = &problem.tests[0].model;
     let rest = additions(ranked, chosen);
@@ -699,16 +872,15 @@ fn best_addition(
         })
         .collect();
     let chi2_at = at.chi2();
-    let rms_at = at.residual_rms();
-    let excess_at = rms_at * rms_at - n2;
+    let excess_at = chi2_at - score.n;
     tried
         .into_iter()
         .filter_map(|(part, f, r)| {
             let r = r.ok()?;
             let p_new = (f.len() - free.len()) as f64;
-            let dbic = chi2_at - r.chi2_after() - p_new * ln_n;
-            let removes = (rms_at * rms_at - r.after.residual_rms().powi(2)) / excess_at;
-            (dbic > SIGNIFICANT_BIC && r.after.residual_rms() <= rms_at && removes >= ADDS_ENOUGH)
+            let drop = chi2_at - r.chi2_after();
+            let dbic = drop - p_new * score.ln_n;
+            (dbic > SIGNIFICANT_BIC && drop >= ADDS_ENOUGH * excess_at)
                 .then_some((part, f, r, dbic))
         })
         .max_by(|a, b| a.3.total_cmp(&b.3))

@@ -109,6 +109,8 @@ pub struct TestData {
     proj: Option<crate::diagnosis::projector::Projector>,
     /// Degrees of freedom of the features ([`TestData::dof`]).
     dof: f64,
+    /// The same, per channel (acceleration, displacement, force).
+    dof_ch: [f64; 3],
 }
 
 fn rms_slice(v: &[f64]) -> f64 {
@@ -237,6 +239,7 @@ impl TestData {
             info: Vec::new(),
             proj,
             dof: 0.0,
+            dof_ch: [0.0; 3],
         };
         let s = &t.samples;
         let sine = s.fundamental_hz.is_some();
@@ -269,7 +272,7 @@ impl TestData {
                     channel: c,
                     harmonic,
                 });
-                t.dof += 1.0;
+                t.dof_ch[c] += 1.0;
             }
             if let Some(p) = &t.proj {
                 // The remainder ‖(I − P)(model − measured)‖/σ: its square is a χ² of n − p degrees
@@ -281,9 +284,10 @@ impl TestData {
                     channel: c,
                     harmonic: REMAINDER,
                 });
-                t.dof += n.saturating_sub(p.n_functions()) as f64;
+                t.dof_ch[c] += n.saturating_sub(p.n_functions()) as f64;
             }
         }
+        t.dof = t.dof_ch.iter().sum();
         t
     }
 
@@ -476,6 +480,43 @@ impl Problem {
                     mi + e.r[start + 1] * t.scale[1],
                 );
                 wrap_deg((xi.atan2(xr) - mi.atan2(mr)).to_degrees())
+            })
+            .collect()
+    }
+
+    /// The weighted misfit the fit minimises, per test and channel (acceleration, displacement,
+    /// force): χ² over its degrees of freedom, about 1 for a model right to the noise (NaN where
+    /// the test has no features of the channel, or the evaluation failed).
+    pub fn chi2_table(&self, e: &Eval) -> Vec<[f64; 3]> {
+        let mut sum = vec![[0.0; 3]; self.tests.len()];
+        let features = self.features();
+        if e.failure.is_none() {
+            for (f, r) in features.iter().zip(&e.r) {
+                sum[f.test][f.channel] += r * r;
+            }
+        }
+        let failed = e.failure.is_some();
+        (self.tests.iter().zip(sum))
+            .map(|(t, s)| {
+                std::array::from_fn(|c| match t.dof_ch[c] {
+                    d if d > 0.0 && !failed => s[c] / d,
+                    _ => f64::NAN,
+                })
+            })
+            .collect()
+    }
+
+    /// Per test, √(χ²/dof) over its channels: the residual in units of its noise (about 1 at
+    /// the noise; NaN where the evaluation failed).
+    pub fn test_misfit(&self, e: &Eval) -> Vec<f64> {
+        let mut sum = vec![0.0; self.tests.len()];
+        for (f, r) in self.features().iter().zip(&e.r) {
+            sum[f.test] += r * r;
+        }
+        (self.tests.iter().zip(sum))
+            .map(|(t, s)| match e.failure {
+                None if t.dof > 0.0 => (s / t.dof).sqrt(),
+                _ => f64::NAN,
             })
             .collect()
     }

@@ -1,0 +1,529 @@
+//! The plain evidence in the signals: what the residual (measured − model, the starting model run
+//! as each test was driven) shows before any candidate is fitted.
+//!
+//! - **Offsets.** Per test and channel, the residual's mean m. It is reported when it is
+//!   [`OFFSET_Z`] standard errors of the noise from zero (σ/√n, σ the channel's noise estimated
+//!   from the data), makes at least [`OFFSET_SHARE`] of the residual's mean square, and is steady:
+//!   the means of the window's two halves differ by less than [`OFFSET_STEADY`] of m (a drift or a
+//!   slow misfit is not an offset). The same offset in every test that has the channel is a
+//!   constant of the set-up (a sensor's zero, a preload); one in some tests only, a change between
+//!   tests.
+//! - **Spectral lines.** Per test and channel, the periodogram of the residual under a Hann window
+//!   (zero-padded to a power of two, [`crate::fourier`]). A bin is a line where it is a local
+//!   maximum standing [`LINE_RATIO`] times above the median of its neighbours (±[`LINE_SPAN`]
+//!   resolutions, its own main lobe left out: a local floor, so a residual that is not white
+//!   does not make lines), the sinusoid it implies carries at least [`LINE_SHARE`] of the
+//!   residual's mean square, and, for a sine test, it is not within two resolutions of a harmonic
+//!   k·f₀ of the excitation (nor below three resolutions: drift). Its amplitude is
+//!   2|X_k|/Σw (the Hann window's coherent gain), its frequency the peak refined by a parabola
+//!   through the log-power of the three bins around it. Lines at one frequency in several tests
+//!   (within the coarser resolution) are one line: *fixed* in frequency when the sine tests'
+//!   f₀ differ and the line does not move, *locked* to the excitation when f/f₀ is the same in
+//!   every sine test that has it.
+//! - **Tests that differ.** Per test, the weighted misfit the fit minimises (√(χ²/dof), about 1
+//!   at the noise). When some tests are above [`TEST_CARRIES`] and others at most
+//!   [`TEST_CLEAN`], the residual is in some tests only: the set-up changed between them, or an
+//!   effect acts in some tests only.
+//!
+//! [chosen: the thresholds below; each says why.]
+
+use crate::diagnosis::compare::ComparedTest;
+use crate::fourier;
+use std::f64::consts::PI;
+
+/// An offset is reported at this many standard errors of the noise from zero. [chosen: 5; the
+/// residual is not white, so a smaller multiple of a white-noise error is too easy to reach.]
+pub const OFFSET_Z: f64 = 5.0;
+/// … when it makes at least this share of the residual's mean square. [chosen: a fifth: an
+/// offset that is a sliver of the misfit is not its cause.]
+pub const OFFSET_SHARE: f64 = 0.2;
+/// … and the two halves' means differ by less than this share of it. [chosen: a quarter.]
+pub const OFFSET_STEADY: f64 = 0.25;
+/// A periodogram bin is a line at this many times the median of its neighbours. [chosen: 40.
+/// Under a Hann window a bin's power over the local median is, for noise or a smooth residual,
+/// exponential with median 1, so 40 is exceeded with probability e^(−40 ln 2) ≈ 1e-12 per bin.]
+pub const LINE_RATIO: f64 = 40.0;
+/// The neighbours of a bin whose median is its local floor: ± this many resolutions (1/T).
+/// [chosen: 40; wide enough that a line's own lobe is a small part of it.]
+pub const LINE_SPAN: f64 = 40.0;
+/// A line is reported when its sinusoid carries this share of the residual's mean square.
+/// [chosen: 0.5 %: a line smaller than that changes nothing a fit could see.]
+pub const LINE_SHARE: f64 = 0.005;
+/// A test carries the residual above this misfit (√(χ²/dof)). [chosen: 5, the issue's "many
+/// times its noise".]
+pub const TEST_CARRIES: f64 = 5.0;
+/// A test is at the noise at or below this misfit. [chosen: 1.5, the diagnosis's NOISE_FACTOR.]
+pub const TEST_CLEAN: f64 = 1.5;
+
+/// The channels' names and units.
+pub const CHANNELS: [(&str, &str); 3] = [
+    ("acceleration", "m/s2"),
+    ("displacement", "m"),
+    ("force", "N"),
+];
+
+/// A steady difference between measurement and model in one test and channel.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Offset {
+    pub test: usize,
+    pub channel: usize,
+    /// Mean of measured − model, in the channel's unit.
+    pub value: f64,
+    /// The same in standard errors of the noise.
+    pub z: f64,
+    /// Its share of the residual's mean square.
+    pub share: f64,
+}
+
+/// A spectral line of the residual in one test and channel.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Hit {
+    pub test: usize,
+    pub channel: usize,
+    pub freq_hz: f64,
+    /// Amplitude of the sinusoid, in the channel's unit.
+    pub amplitude: f64,
+    /// Its share of the residual's mean square.
+    pub share: f64,
+}
+
+/// A spectral line, over the tests that show it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Line {
+    pub freq_hz: f64,
+    pub hits: Vec<Hit>,
+    /// f/f₀ where every sine test that shows it has the same ratio (and there are two sine tests
+    /// or more of different f₀).
+    pub locked: Option<f64>,
+    /// Whether it stays at one frequency across sine tests of different f₀.
+    pub fixed: bool,
+}
+
+/// Tests with their misfit √(χ²/dof): (test, misfit).
+pub type Misfits = Vec<(usize, f64)>;
+
+/// What the signals show.
+#[derive(Debug, Clone, Default)]
+pub struct Signals {
+    pub offsets: Vec<Offset>,
+    pub lines: Vec<Line>,
+    /// Tests above [`TEST_CARRIES`] and tests at most [`TEST_CLEAN`] (√(χ²/dof)), when both are
+    /// there.
+    pub split: Option<(Misfits, Misfits)>,
+    /// The tests' names, for the sentences.
+    pub names: Vec<String>,
+}
+
+/// The residual measured − model of channel `c` of a compared test (None without the channel).
+fn residual(t: &ComparedTest, c: usize) -> Option<Vec<f64>> {
+    let m = &t.test.measured;
+    let (x, y): (&[f64], &[f64]) = match c {
+        0 => (&m.accel, &t.accel_model),
+        1 => (&m.disp, &t.disp_model),
+        _ => (m.force.as_deref()?, &t.force_model),
+    };
+    Some(x.iter().zip(y).map(|(a, b)| a - b).collect())
+}
+
+/// The signals' evidence of the compared tests (the starting model), with each test's noise σ
+/// per channel (NaN or 0 where unknown) and misfit √(χ²/dof) per test.
+pub fn read(compared: &[ComparedTest], sigma: &[[f64; 3]], misfit: &[f64]) -> Signals {
+    let mut offsets = Vec::new();
+    let mut hits = Vec::new();
+    for (i, t) in compared.iter().enumerate() {
+        for c in 0..3 {
+            let Some(e) = residual(t, c) else { continue };
+            if let Some(o) = offset(&e, sigma[i][c]) {
+                offsets.push(Offset {
+                    test: i,
+                    channel: c,
+                    ..o
+                });
+            }
+            let rate = t.test.samples.rate_hz;
+            let f0 = t.test.samples.fundamental_hz;
+            hits.extend(lines_of(&e, rate, f0).into_iter().map(|h| Hit {
+                test: i,
+                channel: c,
+                ..h
+            }));
+        }
+    }
+    let f0: Vec<Option<f64>> = compared
+        .iter()
+        .map(|t| t.test.samples.fundamental_hz)
+        .collect();
+    let res: Vec<f64> = compared
+        .iter()
+        .map(|t| t.test.samples.rate_hz / t.test.samples.len().max(1) as f64)
+        .collect();
+    Signals {
+        offsets,
+        lines: group_lines(hits, &f0, &res),
+        split: split(misfit),
+        names: compared.iter().map(|t| t.test.name.clone()).collect(),
+    }
+}
+
+/// The offset of the residual `e` (test and channel left 0), if it is one; `sigma` the noise.
+fn offset(e: &[f64], sigma: f64) -> Option<Offset> {
+    let n = e.len();
+    if n < 8 || !(sigma > 0.0) {
+        return None;
+    }
+    let mean = |s: &[f64]| s.iter().sum::<f64>() / s.len() as f64;
+    let m = mean(e);
+    let ms = e.iter().map(|v| v * v).sum::<f64>() / n as f64;
+    let (a, b) = (mean(&e[..n / 2]), mean(&e[n / 2..]));
+    let z = m / (sigma / (n as f64).sqrt());
+    let share = m * m / ms;
+    let steady = (a - b).abs() < OFFSET_STEADY * m.abs();
+    (z.abs() >= OFFSET_Z && share >= OFFSET_SHARE && steady).then_some(Offset {
+        test: 0,
+        channel: 0,
+        value: m,
+        z,
+        share,
+    })
+}
+
+/// The spectral lines of the residual `e` sampled at `rate` Hz (test and channel left 0); `f0`
+/// a sine test's frequency, whose harmonics are not lines.
+fn lines_of(e: &[f64], rate: f64, f0: Option<f64>) -> Vec<Hit> {
+    let n = e.len();
+    if n < 64 {
+        return Vec::new();
+    }
+    let hann = |j: usize| (PI * (j as f64 + 0.5) / n as f64).sin().powi(2);
+    let sum_w: f64 = (0..n).map(hann).sum();
+    let (p, n_fft) = fourier::power_windowed(e, hann);
+    let ms = e.iter().map(|v| v * v).sum::<f64>() / n as f64;
+    let pad = n_fft as f64 / n as f64;
+    let span = (LINE_SPAN * pad).round() as usize;
+    let lobe = (3.0 * pad).ceil() as usize;
+    let df = rate / n_fft as f64;
+    let resolution = rate / n as f64;
+    let mut out = Vec::new();
+    for k in (lobe + 1)..p.len().saturating_sub(1) {
+        if !(p[k] > p[k - 1] && p[k] >= p[k + 1]) {
+            continue;
+        }
+        let f = refined(&p, k) * df;
+        if f < 3.0 * resolution || is_harmonic(f, f0, resolution) {
+            continue;
+        }
+        if p[k] < LINE_RATIO * local_median(&p, k, span, lobe) {
+            continue;
+        }
+        let amplitude = amplitude_at(e, f / rate, &hann, sum_w);
+        // (The window's estimate may exceed the whole by a little where the line is all.)
+        let share = (0.5 * amplitude * amplitude / ms).min(1.0);
+        if share >= LINE_SHARE {
+            out.push(Hit {
+                test: 0,
+                channel: 0,
+                freq_hz: f,
+                amplitude,
+                share,
+            });
+        }
+    }
+    out
+}
+
+/// Whether the peak frequency `f` lies within half a resolution of a harmonic k·f₀ (k ≥ 1) of the
+/// sine `f0`. (A sine test's window holds whole cycles, so its harmonics fall on bins and a
+/// harmonic's refined peak is at its bin; a line between harmonics is not.)
+fn is_harmonic(f: f64, f0: Option<f64>, resolution: f64) -> bool {
+    f0.is_some_and(|f0| {
+        let k = (f / f0).round().max(1.0);
+        (f - k * f0).abs() <= 0.5 * resolution
+    })
+}
+
+/// The amplitude of the sinusoid at `f` cycles per sample in `e` under the window `w` (of sum
+/// `sum_w`): 2|Σ w_j e_j e^(−2πi f j)|/Σw, the DFT at the frequency itself (no scalloping).
+fn amplitude_at(e: &[f64], f: f64, w: &dyn Fn(usize) -> f64, sum_w: f64) -> f64 {
+    let (mut re, mut im) = (0.0, 0.0);
+    for (j, x) in e.iter().enumerate() {
+        let (s, c) = (2.0 * PI * f * j as f64).sin_cos();
+        re += w(j) * x * c;
+        im -= w(j) * x * s;
+    }
+    2.0 * re.hypot(im) / sum_w
+}
+
+/// The median of `p` over k ± `span` without k ± `lobe`.
+fn local_median(p: &[f64], k: usize, span: usize, lobe: usize) -> f64 {
+    let lo = k.saturating_sub(span);
+    let hi = (k + span).min(p.len() - 1);
+    let mut v: Vec<f64> = (lo..=hi)
+        .filter(|&j| j + lobe < k || j > k + lobe)
+        .map(|j| p[j])
+        .collect();
+    if v.is_empty() {
+        return f64::INFINITY;
+    }
+    v.sort_by(|a, b| a.total_cmp(b));
+    v[v.len() / 2]
+}
+
+/// The peak bin k refined by a parabola through the log-power of k − 1, k, k + 1.
+fn refined(p: &[f64], k: usize) -> f64 {
+    let (a, b, c) = (
+        p[k - 1].max(1e-300).ln(),
+        p[k].max(1e-300).ln(),
+        p[k + 1].max(1e-300).ln(),
+    );
+    let den = a - 2.0 * b + c;
+    let d = if den < 0.0 { 0.5 * (a - c) / den } else { 0.0 };
+    k as f64 + d.clamp(-0.5, 0.5)
+}
+
+/// The hits grouped into lines (a hit joins a line within the coarser of their tests'
+/// resolutions, twice), largest share first; `f0` each test's sine frequency, `res` its
+/// resolution (Hz).
+fn group_lines(mut hits: Vec<Hit>, f0: &[Option<f64>], res: &[f64]) -> Vec<Line> {
+    hits.sort_by(|a, b| b.share.total_cmp(&a.share));
+    let mut lines: Vec<Line> = Vec::new();
+    for h in hits {
+        let near = lines.iter_mut().find(|l| {
+            let r = l
+                .hits
+                .iter()
+                .map(|x| res[x.test])
+                .fold(res[h.test], f64::max);
+            (l.freq_hz - h.freq_hz).abs() <= 2.0 * r
+        });
+        match near {
+            Some(l) => l.hits.push(h),
+            None => lines.push(Line {
+                freq_hz: h.freq_hz,
+                hits: vec![h],
+                locked: None,
+                fixed: false,
+            }),
+        }
+    }
+    for l in &mut lines {
+        classify(l, f0);
+    }
+    lines
+}
+
+/// Whether a line stays at one frequency or moves with the excitation, over its sine tests.
+fn classify(l: &mut Line, f0: &[Option<f64>]) {
+    let sines: Vec<(f64, f64)> = l
+        .hits
+        .iter()
+        .filter_map(|h| f0[h.test].map(|f| (h.freq_hz, f)))
+        .collect();
+    let f0s: Vec<f64> = sines.iter().map(|s| s.1).collect();
+    let spread = |v: &[f64]| {
+        let (lo, hi) = v
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+                (a.min(x), b.max(x))
+            });
+        hi / lo - 1.0
+    };
+    if f0s.len() < 2 || spread(&f0s) < 0.05 {
+        return;
+    }
+    let freqs: Vec<f64> = sines.iter().map(|s| s.0).collect();
+    let ratios: Vec<f64> = sines.iter().map(|s| s.0 / s.1).collect();
+    l.fixed = spread(&freqs) < 0.01;
+    if !l.fixed && spread(&ratios) < 0.01 {
+        l.locked = Some(ratios.iter().sum::<f64>() / ratios.len() as f64);
+    }
+}
+
+/// The tests above [`TEST_CARRIES`] and those at most [`TEST_CLEAN`], when both are there.
+fn split(misfit: &[f64]) -> Option<(Misfits, Misfits)> {
+    let pick = |keep: &dyn Fn(f64) -> bool| -> Vec<(usize, f64)> {
+        misfit
+            .iter()
+            .enumerate()
+            .filter(|(_, &m)| keep(m))
+            .map(|(i, &m)| (i, m))
+            .collect()
+    };
+    let carry = pick(&|m| m > TEST_CARRIES);
+    let clean = pick(&|m| m <= TEST_CLEAN);
+    (!carry.is_empty() && !clean.is_empty()).then_some((carry, clean))
+}
+
+impl Signals {
+    /// The evidence in plain words, one sentence per finding, each with its numbers.
+    pub fn sentences(&self) -> Vec<String> {
+        let mut out = self.offset_sentences();
+        out.extend(self.lines.iter().map(|l| self.line_sentence(l)));
+        out.extend(self.split_sentence());
+        out
+    }
+
+    /// Whether the signals show anything.
+    pub fn is_empty(&self) -> bool {
+        self.offsets.is_empty() && self.lines.is_empty() && self.split.is_none()
+    }
+
+    fn offset_sentences(&self) -> Vec<String> {
+        (0..3)
+            .filter_map(|c| {
+                let o: Vec<&Offset> = self.offsets.iter().filter(|o| o.channel == c).collect();
+                let first = o.first()?;
+                let (name, unit) = CHANNELS[c];
+                let values: Vec<f64> = o.iter().map(|o| o.value).collect();
+                let same_sign = values.iter().all(|v| v.signum() == first.value.signum());
+                let (lo, hi) = values.iter().fold((f64::INFINITY, 0.0f64), |(a, b), v| {
+                    (a.min(v.abs()), b.max(v.abs()))
+                });
+                let share = o.iter().map(|o| o.share).fold(0.0, f64::max);
+                let z = o.iter().map(|o| o.z.abs()).fold(0.0, f64::max);
+                let which = if o.len() == self.names.len() {
+                    format!("in every test ({} of {})", o.len(), self.names.len())
+                } else {
+                    format!("in {} only", self.list(o.iter().map(|o| o.test)))
+                };
+                let what = if same_sign && hi <= 1.25 * lo {
+                    format!("{:+.3e} {unit}", values.iter().sum::<f64>() / values.len() as f64)
+                } else {
+                    format!("{:.2e} to {:.2e} {unit}", lo, hi)
+                };
+                Some(format!(
+                    "a steady offset of the {name} (measured - model) of {what} {which}, up to {z:.0} noise errors and {:.0} % of that residual",
+                    100.0 * share
+                ))
+            })
+            .collect()
+    }
+
+    fn line_sentence(&self, l: &Line) -> String {
+        let mut channels: Vec<usize> = l.hits.iter().map(|h| h.channel).collect();
+        channels.sort_unstable();
+        channels.dedup();
+        let ch: Vec<&str> = channels.iter().map(|&c| CHANNELS[c].0).collect();
+        let mut tests: Vec<usize> = l.hits.iter().map(|h| h.test).collect();
+        tests.sort_unstable();
+        tests.dedup();
+        let amp: Vec<String> = channels
+            .iter()
+            .map(|&c| {
+                let a = (l.hits.iter().filter(|h| h.channel == c))
+                    .map(|h| h.amplitude)
+                    .fold(0.0, f64::max);
+                format!("{a:.2e} {}", CHANNELS[c].1)
+            })
+            .collect();
+        let share = l.hits.iter().map(|h| h.share).fold(0.0, f64::max);
+        let kind = match (l.locked, l.fixed) {
+            (Some(r), _) => format!("locked to the excitation at {r:.3} f0"),
+            (None, true) => "at one frequency whatever the excitation's".to_string(),
+            _ => "not a harmonic of the excitation".to_string(),
+        };
+        format!(
+            "a spectral line at {:.2} Hz in the {} ({} of {} tests: {}; amplitude up to {}, {:.0} % of that residual; {kind})",
+            l.freq_hz,
+            join_and(&ch),
+            tests.len(),
+            self.names.len(),
+            self.list(tests.iter().copied()),
+            amp.join(", "),
+            100.0 * share
+        )
+    }
+
+    fn split_sentence(&self) -> Option<String> {
+        let (carry, clean) = self.split.as_ref()?;
+        let show = |v: &[(usize, f64)]| -> String {
+            v.iter()
+                .map(|&(t, m)| format!("{} {m:.1}x", self.names[t]))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        Some(format!(
+            "the residual is in some tests only: {} (misfit over noise), while {} are at the noise: the set-up changed between them, or an effect acts in those tests only",
+            show(carry),
+            show(clean)
+        ))
+    }
+
+    /// "a, b and c" of the tests' names.
+    fn list(&self, tests: impl Iterator<Item = usize>) -> String {
+        let v: Vec<&str> = tests.map(|t| self.names[t].as_str()).collect();
+        join_and(&v)
+    }
+}
+
+/// "a, b and c".
+fn join_and(v: &[&str]) -> String {
+    match v {
+        [] => String::new(),
+        [a] => a.to_string(),
+        [rest @ .., last] => format!("{} and {last}", rest.join(", ")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Deterministic white noise of standard deviation `sd`: a hash of `j` made uniform, then
+    /// Gaussian by Box–Muller.
+    fn noise(j: usize, sd: f64) -> f64 {
+        let u = |k: u64| {
+            let mut x = k.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0xD1B5_4A32_D192_ED03;
+            x ^= x >> 31;
+            x = x.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            x ^= x >> 29;
+            ((x >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+        };
+        let (a, b) = (u(2 * j as u64), u(2 * j as u64 + 1));
+        sd * (-2.0 * a.ln()).sqrt() * (2.0 * PI * b).cos()
+    }
+
+    #[test]
+    fn a_line_is_found_with_its_frequency_and_amplitude() {
+        let rate = 1024.0;
+        let e: Vec<f64> = (0..4096)
+            .map(|j| {
+                let t = j as f64 / rate;
+                0.1 * (2.0 * PI * 37.3 * t + 0.4).sin() + noise(j, 0.02)
+            })
+            .collect();
+        let hits = lines_of(&e, rate, Some(3.0));
+        assert_eq!(hits.len(), 1, "{hits:?}");
+        assert!((hits[0].freq_hz - 37.3).abs() < 0.05, "{hits:?}");
+        assert!((hits[0].amplitude - 0.1).abs() < 0.01, "{hits:?}");
+    }
+
+    #[test]
+    fn harmonics_of_the_excitation_are_not_lines() {
+        let rate = 1024.0;
+        let e: Vec<f64> = (0..4096)
+            .map(|j| {
+                let t = j as f64 / rate;
+                0.1 * (2.0 * PI * 9.0 * t).sin() + noise(j, 0.02)
+            })
+            .collect();
+        assert!(lines_of(&e, rate, Some(3.0)).is_empty());
+        assert_eq!(lines_of(&e, rate, None).len(), 1);
+    }
+
+    #[test]
+    fn a_steady_offset_is_found_and_a_drift_is_not() {
+        let steady: Vec<f64> = (0..2000).map(|j| 1e-3 + noise(j, 1e-5)).collect();
+        let o = offset(&steady, 1e-5).unwrap();
+        assert!((o.value - 1e-3).abs() < 1e-6 && o.share > 0.99, "{o:?}");
+        let drift: Vec<f64> = (0..2000).map(|j| 1e-6 * j as f64).collect();
+        assert_eq!(offset(&drift, 1e-5), None);
+    }
+
+    #[test]
+    fn tests_split_only_when_some_are_at_the_noise() {
+        let s = split(&[12.0, 1.1, 0.9, 30.0]).unwrap();
+        assert_eq!(s.0, vec![(0, 12.0), (3, 30.0)]);
+        assert_eq!(s.1, vec![(1, 1.1), (2, 0.9)]);
+        assert_eq!(split(&[12.0, 3.0, 30.0]), None);
+    }
+}
