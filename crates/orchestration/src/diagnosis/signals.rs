@@ -12,7 +12,10 @@
 //!   (zero-padded to a power of two, [`crate::fourier`]). A bin is a line where it is a local
 //!   maximum standing [`LINE_RATIO`] times above the median of its neighbours (±[`LINE_SPAN`]
 //!   resolutions, its own main lobe left out: a local floor, so a residual that is not white
-//!   does not make lines), the sinusoid it implies carries at least [`LINE_SHARE`] of the
+//!   does not make lines), it is as narrow as the window makes a sinusoid (at ±[`LINE_WIDTH`]
+//!   resolutions its power is below [`LINE_SKIRT`] of the peak's: a resonance, a specimen's mode
+//!   in a record's residual, is as wide as its damping and is not a line), the sinusoid it
+//!   implies carries at least [`LINE_SHARE`] of the
 //!   residual's mean square, and, for a sine test, it is not within two resolutions of a harmonic
 //!   k·f₀ of the excitation (nor below three resolutions: drift). Its amplitude is
 //!   2|X_k|/Σw (the Hann window's coherent gain), its frequency the peak refined by a parabola
@@ -46,6 +49,13 @@ pub const LINE_RATIO: f64 = 40.0;
 /// The neighbours of a bin whose median is its local floor: ± this many resolutions (1/T).
 /// [chosen: 40; wide enough that a line's own lobe is a small part of it.]
 pub const LINE_SPAN: f64 = 40.0;
+/// A line is as narrow as the window: at this many resolutions from its peak … [chosen: 3, just
+/// beyond the Hann window's main lobe (±2)]
+pub const LINE_WIDTH: f64 = 3.0;
+/// … its power is below this share of the peak's. [chosen: 1 %. A sinusoid's Hann spectrum is
+/// below −31 dB (8e-4) there wherever it falls between bins; a resonance of damping ζ at f, with
+/// a record of T s, keeps 1/(1 + (3/(2ζfT))²) of its peak: 0.4 at 1.4 Hz, ζ 5 %, 35 s.]
+pub const LINE_SKIRT: f64 = 0.01;
 /// A line is reported when its sinusoid carries this share of the residual's mean square.
 /// [chosen: 0.5 %: a line smaller than that changes nothing a fit could see.]
 pub const LINE_SHARE: f64 = 0.005;
@@ -212,7 +222,7 @@ fn lines_of(e: &[f64], rate: f64, f0: Option<f64>) -> Vec<Hit> {
         if f < 3.0 * resolution || is_harmonic(f, f0, resolution) {
             continue;
         }
-        if p[k] < LINE_RATIO * local_median(&p, k, span, lobe) {
+        if p[k] < LINE_RATIO * local_median(&p, k, span, lobe) || !narrow(&p, k, pad) {
             continue;
         }
         let amplitude = amplitude_at(e, f / rate, &hann, sum_w);
@@ -229,6 +239,16 @@ fn lines_of(e: &[f64], rate: f64, f0: Option<f64>) -> Vec<Hit> {
         }
     }
     out
+}
+
+/// Whether the peak at bin k is as narrow as the window makes a sinusoid: at ±[`LINE_WIDTH`]
+/// resolutions (`pad` bins each) its power has fallen below [`LINE_SKIRT`] of the peak on both
+/// sides. A resonance driven by a broadband motion (a specimen's mode in a record's residual) is
+/// a peak too, but as wide as its damping: 2ζf is several resolutions for any record of useful
+/// length.
+fn narrow(p: &[f64], k: usize, pad: f64) -> bool {
+    let off = (LINE_WIDTH * pad).round() as usize;
+    k >= off && k + off < p.len() && p[k - off].max(p[k + off]) < LINE_SKIRT * p[k]
 }
 
 /// Whether the peak frequency `f` lies within half a resolution of a harmonic k·f₀ (k ≥ 1) of the
@@ -495,6 +515,24 @@ mod tests {
         assert_eq!(hits.len(), 1, "{hits:?}");
         assert!((hits[0].freq_hz - 37.3).abs() < 0.05, "{hits:?}");
         assert!((hits[0].amplitude - 0.1).abs() < 0.01, "{hits:?}");
+    }
+
+    #[test]
+    fn a_resonance_driven_by_noise_is_not_a_line() {
+        // White noise through a mode at 1.4 Hz, 5 % damping (semi-implicit Euler at 1024 Hz),
+        // 35 s: its response is a peak in the spectrum, but as wide as its damping.
+        let (rate, w, zeta) = (1024.0, 2.0 * PI * 1.4, 0.05);
+        let dt = 1.0 / rate;
+        let (mut x, mut v) = (0.0, 0.0);
+        let e: Vec<f64> = (0..35 * 1024)
+            .map(|j| {
+                v += dt * (noise(j, 50.0) - 2.0 * zeta * w * v - w * w * x);
+                x += dt * v;
+                x
+            })
+            .collect();
+        let peak = lines_of(&e, rate, None);
+        assert!(peak.is_empty(), "{peak:?}");
     }
 
     #[test]
