@@ -65,6 +65,12 @@ pub const TEST_CARRIES: f64 = 5.0;
 /// A test is at the noise at or below this misfit. [chosen: 1.5, the diagnosis's NOISE_FACTOR.]
 pub const TEST_CLEAN: f64 = 1.5;
 
+/// Offsets and lines smaller than this share of the measured channel's rms are not reported:
+/// [docs/model.md §4: the model's numerical floor, 1e-4 of the signal's rms. The model's own
+/// output compared with itself leaves residuals at that level, with narrow peaks of resampling
+/// error that are not evidence of anything.]
+pub const SIGNAL_FLOOR: f64 = 1e-4;
+
 /// The channels' names and units.
 pub const CHANNELS: [(&str, &str); 3] = [
     ("acceleration", "m/s2"),
@@ -135,6 +141,17 @@ fn residual(t: &ComparedTest, c: usize) -> Option<Vec<f64>> {
     Some(x.iter().zip(y).map(|(a, b)| a - b).collect())
 }
 
+/// The rms of the measured channel `c` of a compared test (0 without it).
+fn measured_rms(t: &ComparedTest, c: usize) -> f64 {
+    let m = &t.test.measured;
+    let x: &[f64] = match c {
+        0 => &m.accel,
+        1 => &m.disp,
+        _ => m.force.as_deref().unwrap_or(&[]),
+    };
+    (x.iter().map(|v| v * v).sum::<f64>() / x.len().max(1) as f64).sqrt()
+}
+
 /// The signals' evidence of the compared tests (the starting model), with each test's noise σ
 /// per channel (NaN or 0 where unknown) and misfit √(χ²/dof) per test.
 pub fn read(compared: &[ComparedTest], sigma: &[[f64; 3]], misfit: &[f64]) -> Signals {
@@ -143,7 +160,8 @@ pub fn read(compared: &[ComparedTest], sigma: &[[f64; 3]], misfit: &[f64]) -> Si
     for (i, t) in compared.iter().enumerate() {
         for c in 0..3 {
             let Some(e) = residual(t, c) else { continue };
-            if let Some(o) = offset(&e, sigma[i][c]) {
+            let floor = SIGNAL_FLOOR * measured_rms(t, c);
+            if let Some(o) = offset(&e, sigma[i][c]).filter(|o| o.value.abs() >= floor) {
                 offsets.push(Offset {
                     test: i,
                     channel: c,
@@ -152,7 +170,8 @@ pub fn read(compared: &[ComparedTest], sigma: &[[f64; 3]], misfit: &[f64]) -> Si
             }
             let rate = t.test.samples.rate_hz;
             let f0 = t.test.samples.fundamental_hz;
-            hits.extend(lines_of(&e, rate, f0).into_iter().map(|h| Hit {
+            let lines = lines_of(&e, rate, f0).into_iter();
+            hits.extend(lines.filter(|h| h.amplitude >= floor).map(|h| Hit {
                 test: i,
                 channel: c,
                 ..h
