@@ -39,6 +39,7 @@
 //! leaves more than [`NOISE_FACTOR`] times the noise floor is said to, with the state and term of
 //! what it leaves.
 
+use crate::diagnosis::compare::ComparedTest;
 use crate::diagnosis::fit::{self, FeatureInfo, Free, Problem};
 use crate::diagnosis::signals::{self, Signals};
 use crate::diagnosis::statemap::StateMap;
@@ -445,12 +446,7 @@ impl Diagnosis {
     /// evidence in it, and maps the residual the named effects leave (the maps stay None, the
     /// signals empty, when a test's model run fails: the diagnosis reports that itself).
     pub fn map_states(&mut self, problem: &Problem, aligned: &[AlignedTest]) {
-        let solver = Default::default();
-        let compared: Result<Vec<_>, String> = aligned
-            .par_iter()
-            .map(|t| crate::diagnosis::compare::compare_test(t, &solver))
-            .collect();
-        if let Ok(c) = &compared {
+        if let Ok(c) = &compared(aligned) {
             self.state_map = Some(crate::diagnosis::statemap::map(c));
             let sigma: Vec<[f64; 3]> = problem.tests.iter().map(|t| t.sigma).collect();
             self.signals = signals::read(c, &sigma, &self.test_misfit);
@@ -468,14 +464,20 @@ impl Diagnosis {
     }
 }
 
-/// The residual of `aligned` mapped onto the plant's states (None when a model run fails).
-fn state_map(aligned: &[AlignedTest]) -> Option<StateMap> {
+/// Each test of `aligned` run as it was driven and compared (the first model failure if any).
+fn compared(aligned: &[AlignedTest]) -> Result<Vec<ComparedTest>, String> {
     let solver = Default::default();
-    let compared: Result<Vec<_>, String> = aligned
+    aligned
         .par_iter()
         .map(|t| crate::diagnosis::compare::compare_test(t, &solver))
-        .collect();
-    compared.ok().map(|c| crate::diagnosis::statemap::map(&c))
+        .collect()
+}
+
+/// The residual of `aligned` mapped onto the plant's states (None when a model run fails).
+fn state_map(aligned: &[AlignedTest]) -> Option<StateMap> {
+    compared(aligned)
+        .ok()
+        .map(|c| crate::diagnosis::statemap::map(&c))
 }
 
 /// The free parameters of `effect` at their values in `model`.
