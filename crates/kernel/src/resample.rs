@@ -75,6 +75,17 @@ impl<const N: usize> Resampler<N> {
     pub fn channel(&self, c: usize, l: usize) -> Vec<f64> {
         self.out.iter().map(|row| row[c][l]).collect()
     }
+    /// Channel `c` of every lane, in one pass over the samples (what N calls of
+    /// [`Resampler::channel`] give, without reading the samples N times).
+    pub fn lanes(&self, c: usize) -> [Vec<f64>; N] {
+        let mut out: [Vec<f64>; N] = std::array::from_fn(|_| Vec::with_capacity(self.out.len()));
+        for row in &self.out {
+            for (o, &v) in out.iter_mut().zip(&row[c]) {
+                o.push(v);
+            }
+        }
+        out
+    }
 }
 
 impl<const N: usize> Observer<N> for Resampler<N> {
@@ -136,6 +147,22 @@ mod tests {
             .map(|(p, q)| (p - q).abs())
             .fold(0.0, f64::max)
             / rms
+    }
+
+    /// [`Resampler::lanes`] gives each lane's channel as [`Resampler::channel`] does.
+    #[test]
+    fn every_lane_at_once_equals_each_lane_alone() {
+        let mut rs = Resampler::<3>::new(&[0.0, 0.1, 0.2]);
+        for k in 0..3 {
+            let mut row = [[0.0; 3]; C];
+            row[ch::DISP] = [k as f64, 10.0 + k as f64, 20.0 + k as f64];
+            rs.out.push(row);
+        }
+        let all = rs.lanes(ch::DISP);
+        for (l, lane) in all.iter().enumerate() {
+            assert_eq!(*lane, rs.channel(ch::DISP, l));
+            assert_eq!(lane[2], 10.0 * l as f64 + 2.0);
+        }
     }
 
     /// Samples at 500 Hz (no common tick with 1024 Hz) from 8 substeps against the

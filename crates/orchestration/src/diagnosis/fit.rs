@@ -371,12 +371,7 @@ pub struct Problem {
 impl TestData {
     /// The weighted residual features of lane `l` of a run resampled at the test's samples, and
     /// the rms residual / rms measured of each channel (acceleration, displacement, force).
-    fn lane_features(&self, rs: &Resampler<LANES>, l: usize) -> (Vec<f64>, [f64; 3]) {
-        let model_ch: [Vec<f64>; 3] = [
-            rs.channel(ch::ACCEL, l),
-            rs.channel(ch::DISP, l),
-            rs.channel(ch::FORCE, l),
-        ];
+    fn lane_features(&self, model_ch: [&[f64]; 3]) -> (Vec<f64>, [f64; 3]) {
         let mut r = Vec::with_capacity(self.len());
         let mut at = 0;
         for c in 0..3 {
@@ -384,9 +379,15 @@ impl TestData {
             if self.measured[c].is_none() || !(self.sigma[c] > 0.0) {
                 continue;
             }
-            for v in channel_features(self.proj.as_ref(), c, &model_ch[c]) {
+            let push = |v: f64| {
                 r.push((v - self.meas[at]) / self.scale[at]);
                 at += 1;
+            };
+            match &self.proj {
+                Some(p) => channel_features(Some(p), c, model_ch[c])
+                    .into_iter()
+                    .for_each(push),
+                None => model_ch[c].iter().copied().for_each(push),
             }
             if let (Some(p), Some(x)) = (&self.proj, &self.measured[c]) {
                 let e: Vec<f64> = model_ch[c].iter().zip(x).map(|(a, b)| a - b).collect();
@@ -398,7 +399,7 @@ impl TestData {
             Some(x) => {
                 let num: f64 = x
                     .iter()
-                    .zip(&model_ch[c])
+                    .zip(model_ch[c])
                     .map(|(a, b)| (b - a).powi(2))
                     .sum();
                 let den: f64 = x.iter().map(|a| a * a).sum();
@@ -570,13 +571,16 @@ impl Problem {
                 if let Some(p) = &self.progress {
                     p(hi - lo);
                 }
+                let model_ch = [ch::ACCEL, ch::DISP, ch::FORCE].map(|c| rs.lanes(c));
                 (0..hi - lo)
                     .map(|l| match res[l].status {
                         LaneStatus::Failed { time_s, reason } => Err(format!(
                             "test {:?}: the model failed at t = {time_s:.4} s: {reason}",
                             t.name
                         )),
-                        LaneStatus::Ok => Ok(t.lane_features(&rs, l)),
+                        LaneStatus::Ok => {
+                            Ok(t.lane_features(model_ch.each_ref().map(|c| &c[l][..])))
+                        }
                     })
                     .collect()
             })
