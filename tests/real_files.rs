@@ -382,6 +382,51 @@ fn a_static_offset_without_a_quiet_lead_is_found_from_the_sine() {
     assert!(!base.stdout.contains("static offset"), "{}", base.stdout);
 }
 
+/// A displacement transducer not zeroed (`disp_m` alone 2 mm off) in files that start with the
+/// excitation: measured where the reference rests at zero, removed, named; the displacement
+/// residual as in the clean files.
+#[test]
+fn a_feedback_offset_without_a_quiet_lead_is_found_where_the_reference_rests() {
+    let d = tempfile::tempdir().unwrap();
+    let noise = ["--noise", "accel=0.05,disp=2e-5"];
+    let base = compare(&synth(&d.path().join("clean"), &noise), &[]);
+    let off = transform(&d.path().join("clean"), &d.path().join("off"), |csv| {
+        csv.map("disp_m", |x| format!("{:?}", x + 0.002));
+    });
+    let off = compare(&off, &[]);
+    assert_eq!(off.col("start_row"), base.col("start_row"));
+    // The offset removed is 2 mm to within 4 standard errors of a median of the noise (σ 2e-5 m)
+    // over the rows it was measured on.
+    let note = off.stdout.split("disp_m is ").nth(1).expect(&off.stdout);
+    let mm: f64 = note.split(" mm").next().unwrap().parse().unwrap();
+    let rows: f64 = note
+        .split("its first ")
+        .nth(1)
+        .unwrap()
+        .split(' ')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    let se = 1.25 * 2e-5 / rows.sqrt();
+    assert!(
+        (mm * 1e-3 - 0.002).abs() < 4.0 * se,
+        "{mm} mm over {rows} rows"
+    );
+    assert!(note.contains("where the reference rests"), "{}", off.stdout);
+    for (x, y) in off
+        .col("phase_measured_deg")
+        .iter()
+        .zip(base.col("phase_measured_deg"))
+    {
+        assert!(
+            (x - y).abs() <= 0.1,
+            "phase {x}° with the offset, {y}° clean"
+        );
+    }
+    assert!(!base.stdout.contains("from ref_disp_m"), "{}", base.stdout);
+}
+
 /// Columns in another order, columns vshake does not read, `;` with decimal commas and tabs:
 /// the clean results exactly, and a note on the separator.
 #[test]

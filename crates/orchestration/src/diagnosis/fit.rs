@@ -58,7 +58,7 @@ use rayon::prelude::*;
 use vshake_kernel::excitation::Reference;
 use vshake_kernel::params::{ModelParams, ParamInfo};
 use vshake_kernel::resample::{ch, Resampler};
-use vshake_kernel::simulate::{LaneStatus, Solver};
+use vshake_kernel::simulate::{LaneResult, LaneStatus, Solver};
 use vshake_kernel::EFFECT_LANES as LANES;
 
 /// Forward-difference step in the scaled coordinates.
@@ -368,7 +368,24 @@ pub struct Problem {
     pub progress: Option<std::sync::Arc<dyn Fn(usize) + Send + Sync>>,
 }
 
+/// One lane's weighted residual features and rms residuals, or why its run failed.
+type Lane = Result<(Vec<f64>, [f64; 3]), String>;
+
 impl TestData {
+    /// [`TestData::lane_features`] of the lanes `runs` of a run resampled at the test's samples.
+    fn lanes_features(&self, rs: &Resampler<LANES>, runs: &[LaneResult]) -> Vec<Lane> {
+        let model_ch = [ch::ACCEL, ch::DISP, ch::FORCE].map(|c| rs.lanes(c));
+        (runs.iter().enumerate())
+            .map(|(l, r)| match r.status {
+                LaneStatus::Failed { time_s, reason } => Err(format!(
+                    "test {:?}: the model failed at t = {time_s:.4} s: {reason}",
+                    self.name
+                )),
+                LaneStatus::Ok => Ok(self.lane_features(model_ch.each_ref().map(|c| &c[l][..]))),
+            })
+            .collect()
+    }
+
     /// The weighted residual features of lane `l` of a run resampled at the test's samples, and
     /// the rms residual / rms measured of each channel (acceleration, displacement, force).
     fn lane_features(&self, model_ch: [&[f64]; 3]) -> (Vec<f64>, [f64; 3]) {
@@ -541,7 +558,6 @@ impl Problem {
             .flat_map(|t| (0..n_sets.div_ceil(LANES)).map(move |c| (t, c)))
             .collect();
         // Per (test, chunk): per lane, the weighted features and rms, or a failure.
-        type Lane = Result<(Vec<f64>, [f64; 3]), String>;
         let done: Vec<Vec<Lane>> = chunks
             .par_iter()
             .map(|&(ti, c)| {
@@ -571,18 +587,7 @@ impl Problem {
                 if let Some(p) = &self.progress {
                     p(hi - lo);
                 }
-                let model_ch = [ch::ACCEL, ch::DISP, ch::FORCE].map(|c| rs.lanes(c));
-                (0..hi - lo)
-                    .map(|l| match res[l].status {
-                        LaneStatus::Failed { time_s, reason } => Err(format!(
-                            "test {:?}: the model failed at t = {time_s:.4} s: {reason}",
-                            t.name
-                        )),
-                        LaneStatus::Ok => {
-                            Ok(t.lane_features(model_ch.each_ref().map(|c| &c[l][..])))
-                        }
-                    })
-                    .collect()
+                t.lanes_features(&rs, &res[..hi - lo])
             })
             .collect();
         (0..n_sets)

@@ -413,7 +413,8 @@ fn remove_static_offsets(data: &mut NumTable, rate_hz: f64) -> Vec<String> {
 /// where the reference has one ([`remove_static_offsets`]); else, for a sine test, the
 /// reference's offset from the campaign's sine, removed from both columns
 /// ([`remove_sine_offset`]; a lead of `disp_m` alone, shorter than the reference's, holds the
-/// first motion too); else a lead of `disp_m` alone. Returns the notes.
+/// first motion too); else a lead of `disp_m` alone, or without one its mean difference from
+/// the reference ([`remove_feedback_offset`]). Returns the notes.
 fn remove_offsets(test: &TestSpec, data: &mut NumTable, time: &TimeBase) -> Vec<String> {
     let ref_lead = (data.column("ref_disp_m")).and_then(|r| static_offset(r, time.rate_hz));
     if let (None, ExcitationSpec::Sine { sine, .. }) = (ref_lead, &test.excitation) {
@@ -421,7 +422,12 @@ fn remove_offsets(test: &TestSpec, data: &mut NumTable, time: &TimeBase) -> Vec<
             return vec![note];
         }
     }
-    remove_static_offsets(data, time.rate_hz)
+    let mut notes = remove_static_offsets(data, time.rate_hz);
+    let no_lead = |x: &[f64]| quiet_lead(x, time.rate_hz).is_none();
+    if data.column("disp_m").is_some_and(no_lead) {
+        notes.extend(remove_feedback_offset(data));
+    }
+    notes
 }
 
 /// Removes a static offset of a sine test's `ref_disp_m` (and the same from `disp_m`: the table
@@ -480,28 +486,79 @@ fn remove_sine_offset(
 /// The static offset of column `x` and the rows of its quiet lead (see
 /// [`remove_static_offsets`]), or None where there is none to remove.
 fn static_offset(x: &[f64], rate_hz: f64) -> Option<(f64, usize)> {
+    let (lead, sigma) = quiet_lead(x, rate_hz)?;
+    let offset = x[..lead].iter().sum::<f64>() / lead as f64;
+    let motion = x.iter().map(|v| (v - offset).abs()).fold(0.0, f64::max);
+    (offset.abs() > (10.0 * sigma).max(1e-3 * motion)).then_some((offset, lead))
+}
+
+/// The rows of column `x`'s quiet lead (before it first leaves its starting level by more than
+/// its noise), with that noise σ; None where the lead is shorter than [`OFFSET_MIN_LEAD_S`] or
+/// the column never moves.
+fn quiet_lead(x: &[f64], rate_hz: f64) -> Option<(usize, f64)> {
     let n = x.len();
     let head = &x[..n.min(16)];
     let mut sorted = head.to_vec();
     sorted.sort_by(f64::total_cmp);
     let level = sorted[sorted.len() / 2];
-    // The noise from the first differences of the first rows (robust: their median absolute
-    // value; a difference of white noise has √2 its standard deviation).
-    let mut d: Vec<f64> = (x[..n.min(64)].windows(2))
-        .map(|w| (w[1] - w[0]).abs())
-        .collect();
-    d.sort_by(f64::total_cmp);
-    let sigma = d.get(d.len() / 2).map_or(0.0, |m| 1.4826 * m / 2f64.sqrt());
+    let sigma = noise_of(&x[..n.min(64)]);
     let amplitude = x.iter().map(|v| (v - level).abs()).fold(0.0, f64::max);
     let band = (8.0 * sigma).max(1e-6 * amplitude);
     let lead = x.iter().position(|v| (v - level).abs() > band).unwrap_or(n);
-    if (lead as f64) < OFFSET_MIN_LEAD_S * rate_hz || lead == n {
+    ((lead as f64) >= OFFSET_MIN_LEAD_S * rate_hz && lead < n).then_some((lead, sigma))
+}
+
+/// The noise σ of `x` from its second differences (robust: their median absolute value; the
+/// second difference of white noise has √6 its standard deviation, that of a smooth motion
+/// sampled finely almost none, so a column moving from its first row does not pass its motion
+/// off as noise).
+fn noise_of(x: &[f64]) -> f64 {
+    let mut d: Vec<f64> = x
+        .windows(3)
+        .map(|w| (w[2] - 2.0 * w[1] + w[0]).abs())
+        .collect();
+    d.sort_by(f64::total_cmp);
+    d.get(d.len() / 2).map_or(0.0, |m| 1.4826 * m / 6f64.sqrt())
+}
+
+/// Removes a steady offset of `disp_m` from `ref_disp_m` where `disp_m` has no quiet lead to
+/// measure it over (the file starts with the motion): the median of disp_m − ref_disp_m over the
+/// first rows, while the reference is at rest at zero (within [chosen: 0.1 %] of its peak, and
+/// moving at under 0.1 % of its peak rate), where there are [`OFFSET_MIN_ROWS`] such rows and the offset
+/// exceeds 0.1 % of the reference's motion and ten of their noise's standard errors. There the
+/// loop has nothing to track, so what is left is the transducer's zero; over the motion the
+/// tracking error would be mixed in. Returns the note.
+fn remove_feedback_offset(data: &mut NumTable) -> Option<String> {
+    let (r, y) = (data.column("ref_disp_m")?, data.column("disp_m")?);
+    let motion = r.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let rate = |i: usize| r[(i + 1).min(r.len() - 1)] - r[i.saturating_sub(1)];
+    let peak_rate = (0..r.len()).fold(0.0f64, |m, i| m.max(rate(i).abs()));
+    let mut e: Vec<f64> = (0..r.len())
+        .take_while(|&i| r[i].abs() <= 1e-3 * motion && rate(i).abs() <= 1e-3 * peak_rate)
+        .map(|i| y[i] - r[i])
+        .collect();
+    if e.len() < OFFSET_MIN_ROWS {
         return None;
     }
-    let offset = x[..lead].iter().sum::<f64>() / lead as f64;
-    let motion = x.iter().map(|v| (v - offset).abs()).fold(0.0, f64::max);
-    (offset.abs() > (10.0 * sigma).max(1e-3 * motion)).then_some((offset, lead))
+    e.sort_by(f64::total_cmp);
+    let offset = e[e.len() / 2];
+    let mut dev: Vec<f64> = e.iter().map(|v| (v - offset).abs()).collect();
+    dev.sort_by(f64::total_cmp);
+    let sd = 1.4826 * dev[dev.len() / 2];
+    if !(offset.abs() > (1e-3 * motion).max(10.0 * sd / (e.len() as f64).sqrt())) {
+        return None;
+    }
+    let i = data.names.iter().position(|c| c == "disp_m")?;
+    data.columns[i].iter_mut().for_each(|v| *v -= offset);
+    Some(format!(
+        "disp_m is {:+.4} mm from ref_disp_m where the reference rests at zero (its first {} rows; the file has no quiet lead to measure an offset over): a transducer not zeroed; removed",
+        offset * 1e3,
+        e.len()
+    ))
 }
+
+/// Rows at rest a feedback offset is measured over at least [chosen].
+const OFFSET_MIN_ROWS: usize = 8;
 
 /// Where the test's excitation sits in the file, by its kind.
 fn locate(
