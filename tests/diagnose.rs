@@ -433,6 +433,18 @@ struct Specimen {
     c: f64,
 }
 
+impl Specimen {
+    /// Mass `m` (kg) on a spring at `f` Hz with damping ratio `zeta`.
+    fn new(m: f64, f: f64, zeta: f64) -> Specimen {
+        let w = 2.0 * std::f64::consts::PI * f;
+        Specimen {
+            m,
+            k: m * w * w,
+            c: 2.0 * zeta * m * w,
+        }
+    }
+}
+
 impl vshake::kernel::effects::Effect<1> for Specimen {
     type State = [[f64; 1]; 2];
     fn initial_state(&self) -> Self::State {
@@ -564,15 +576,7 @@ fn run_history<E: vshake::kernel::effects::Effect<1>>(
 #[ignore = "slow (about 100 s in all): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
 fn a_specimen_written_apart_from_the_library_is_named_and_fitted() {
     let d = tempfile::tempdir().unwrap();
-    let w = 2.0 * std::f64::consts::PI * 5.0;
-    write_hidden(
-        d.path(),
-        &Specimen {
-            m: 20_000.0,
-            k: 20_000.0 * w * w,
-            c: 2.0 * 0.05 * 20_000.0 * w,
-        },
-    );
+    write_hidden(d.path(), &Specimen::new(20_000.0, 5.0, 0.05));
     let r = diagnose(d.path());
     println!("{}", r.stdout);
     let (first, best) = r.first();
@@ -1405,12 +1409,7 @@ fn a_spectral_line_is_stated_from_the_signals() {
 #[ignore = "slow (about 100 s): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
 fn tests_that_differ_are_stated_from_the_signals() {
     let d = tempfile::tempdir().unwrap();
-    let w = 2.0 * std::f64::consts::PI * 5.0;
-    let specimen = Specimen {
-        m: 20_000.0,
-        k: 20_000.0 * w * w,
-        c: 2.0 * 0.05 * 20_000.0 * w,
-    };
+    let specimen = Specimen::new(20_000.0, 5.0, 0.05);
     write_altered(d.path(), &specimen, &|i| i % 2 == 0, &|_, _, _, _| {});
     let r = diagnose(d.path());
     println!("{}", r.stdout);
