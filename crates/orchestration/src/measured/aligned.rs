@@ -385,9 +385,8 @@ pub fn align(
 pub const OFFSET_MIN_LEAD_S: f64 = 0.05;
 
 /// Removes a static offset of `ref_disp_m` and `disp_m` (a table homed off zero, a transducer
-/// not zeroed): the mean over the file's quiet lead (for `disp_m`, of its difference from
-/// `ref_disp_m`), the rows before the column first leaves its starting level by more than its
-/// noise, where that lead lasts [`OFFSET_MIN_LEAD_S`] or more and
+/// not zeroed): the mean over the file's quiet lead, the rows before the column first leaves its
+/// starting level by more than its noise, where that lead lasts [`OFFSET_MIN_LEAD_S`] or more and
 /// the offset exceeds both its noise and 0.1 % of the column's motion about it. The model starts
 /// at rest at zero (docs/model.md §4), so an offset would otherwise read as motion: the start of
 /// the excitation found at the first row, the phase of a sine off. Returns a note per column.
@@ -397,14 +396,7 @@ fn remove_static_offsets(data: &mut NumTable, rate_hz: f64) -> Vec<String> {
         let Some(i) = data.names.iter().position(|n| n == name) else {
             continue;
         };
-        // The feedback against the reference (its own offset removed first): a lead that is
-        // only nearly at rest (a record starting with small motion) holds the loop's tracking
-        // of that motion, not a rest away from zero.
-        let against = (name == "disp_m")
-            .then(|| data.column("ref_disp_m").map(<[f64]>::to_vec))
-            .flatten();
-        let Some((offset, lead)) = static_offset(&data.columns[i], against.as_deref(), rate_hz)
-        else {
+        let Some((offset, lead)) = static_offset(&data.columns[i], rate_hz) else {
             continue;
         };
         data.columns[i].iter_mut().for_each(|x| *x -= offset);
@@ -424,7 +416,7 @@ fn remove_static_offsets(data: &mut NumTable, rate_hz: f64) -> Vec<String> {
 /// first motion too); else a lead of `disp_m` alone, or without one its mean difference from
 /// the reference ([`remove_feedback_offset`]). Returns the notes.
 fn remove_offsets(test: &TestSpec, data: &mut NumTable, time: &TimeBase) -> Vec<String> {
-    let ref_lead = (data.column("ref_disp_m")).and_then(|r| static_offset(r, None, time.rate_hz));
+    let ref_lead = (data.column("ref_disp_m")).and_then(|r| static_offset(r, time.rate_hz));
     if let (None, ExcitationSpec::Sine { sine, .. }) = (ref_lead, &test.excitation) {
         if let Some(note) = remove_sine_offset(test, sine, data, time) {
             return vec![note];
@@ -493,10 +485,9 @@ fn remove_sine_offset(
 
 /// The static offset of column `x` and the rows of its quiet lead (see
 /// [`remove_static_offsets`]), or None where there is none to remove.
-fn static_offset(x: &[f64], against: Option<&[f64]>, rate_hz: f64) -> Option<(f64, usize)> {
+fn static_offset(x: &[f64], rate_hz: f64) -> Option<(f64, usize)> {
     let (lead, sigma) = quiet_lead(x, rate_hz)?;
-    let base = |k: usize| against.map_or(0.0, |r| r[k]);
-    let offset = (0..lead).map(|k| x[k] - base(k)).sum::<f64>() / lead as f64;
+    let offset = x[..lead].iter().sum::<f64>() / lead as f64;
     let motion = x.iter().map(|v| (v - offset).abs()).fold(0.0, f64::max);
     (offset.abs() > (10.0 * sigma).max(1e-3 * motion)).then_some((offset, lead))
 }
