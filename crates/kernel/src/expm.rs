@@ -14,7 +14,7 @@ fn matmul<const M: usize>(a: &[[f64; M]; M], b: &[[f64; M]; M]) -> [[f64; M]; M]
 }
 
 /// exp(m) by a 20-term Taylor series after scaling m to norm ≤ ¼, then squaring back.
-pub fn expm<const M: usize>(m: &[[f64; M]; M]) -> [[f64; M]; M] {
+pub(crate) fn expm<const M: usize>(m: &[[f64; M]; M]) -> [[f64; M]; M] {
     let norm = m
         .iter()
         .map(|r| r.iter().map(|v| v.abs()).sum::<f64>())

@@ -29,6 +29,7 @@
 
 use crate::diagnosis::projector::Projector;
 use std::f64::consts::PI;
+use vshake_kernel::spectrum::Oscillator;
 
 /// Natural frequencies of the coarse grid: 0.2 … 100 Hz, log-spaced.
 const F_LO: f64 = 0.2;
@@ -137,7 +138,9 @@ impl Input {
                     Kind::Carried => -c * w - k * u,
                     Kind::Lag => u - s,
                 };
-                let step = ExactStep::new(k, c, g, *dt);
+                // The response-spectrum oscillator's exact step (input linear between samples),
+                // whose base acceleration is −g·s.
+                let step = Oscillator::new(1.0 / f_n, zeta, *dt);
                 // The lag starts at rest at the first value (no step at t = 0).
                 let mut u = match kind {
                     Kind::Lag => x.first().copied().unwrap_or(0.0),
@@ -147,39 +150,10 @@ impl Input {
                 for i in 0..x.len() {
                     out.push(output(u, w, x[i]));
                     let (a0, a1) = (x[i], *x.get(i + 1).unwrap_or(&x[i]));
-                    (u, w) = step.apply(u, w, a0, a1);
+                    (u, w) = step.step(u, w, -g * a0, -g * a1);
                 }
             }
         }
-    }
-}
-
-/// One sample interval of u'' + c·u' + k·u = g·s(t), s linear between the samples, solved
-/// exactly (the matrix exponential of the system with the input's level and slope as states):
-/// the filter's error is rounding alone, whatever ω_n·Δt.
-struct ExactStep {
-    /// Rows u and u' of exp(M): on (u, u', s₀, s₁ − s₀).
-    e: [[f64; 4]; 2],
-}
-
-impl ExactStep {
-    fn new(k: f64, c: f64, g: f64, dt: f64) -> ExactStep {
-        let m = [
-            [0.0, dt, 0.0, 0.0],
-            [-k * dt, -c * dt, g * dt, 0.0],
-            [0.0, 0.0, 0.0, 1.0],
-            [0.0, 0.0, 0.0, 0.0],
-        ];
-        let e = vshake_kernel::expm::expm(&m);
-        ExactStep { e: [e[0], e[1]] }
-    }
-
-    /// (u, u') one interval on, from (u, u') with the input going from `a0` to `a1`.
-    #[inline]
-    fn apply(&self, u: f64, w: f64, a0: f64, a1: f64) -> (f64, f64) {
-        let z = [u, w, a0, a1 - a0];
-        let row = |r: &[f64; 4]| r.iter().zip(z).map(|(a, b)| a * b).sum::<f64>();
-        (row(&self.e[0]), row(&self.e[1]))
     }
 }
 
