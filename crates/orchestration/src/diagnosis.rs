@@ -6,6 +6,7 @@ pub mod diagnose;
 pub mod fit;
 pub mod projector;
 pub mod residual_memory;
+pub mod seeds;
 pub mod signals;
 pub mod statemap;
 pub mod states;

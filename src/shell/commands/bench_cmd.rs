@@ -185,7 +185,8 @@ fn read_baseline(path: &std::path::Path) -> anyhow::Result<(f64, f64)> {
 /// Times a diagnosis of `campaign` with every candidate of the library.
 fn bench_diagnose(campaign: &std::path::Path, max_seconds: Option<f64>) -> anyhow::Result<()> {
     let model = crate::kernel::params::ModelParams::default();
-    let problem = crate::shell::fit_problem::load_problem(campaign, &model, false)?.problem;
+    let loaded = crate::shell::fit_problem::load_problem(campaign, &model, false)?;
+    let problem = &loaded.problem;
     let candidates: Vec<_> = crate::kernel::params::EffectId::ALL
         .into_iter()
         .filter(|e| e.screened())
@@ -196,7 +197,11 @@ fn bench_diagnose(campaign: &std::path::Path, max_seconds: Option<f64>) -> anyho
         .map(|t| t.drive.len() as f64 / t.drive.f_s)
         .sum();
     let t0 = std::time::Instant::now();
-    let d = crate::orchestration::diagnosis::diagnose::diagnose(&problem, &candidates);
+    let d = crate::orchestration::diagnosis::diagnose::diagnose_campaign(
+        problem,
+        &candidates,
+        &loaded.aligned,
+    );
     let secs = t0.elapsed().as_secs_f64();
     let runs: usize = d
         .candidates

@@ -63,11 +63,8 @@ pub(crate) fn run_to(args: &DiagnoseArgs, o: &mut dyn Write) -> anyhow::Result<(
     let progress = fit_problem::with_progress(&mut loaded.problem, "diagnose", args.log_progress);
     let problem = loaded.problem;
     let t0 = std::time::Instant::now();
-    let d = pool(args.threads)?.install(|| {
-        let mut d = diagnose::diagnose(&problem, &candidates);
-        d.map_states(&problem, &loaded.aligned);
-        d
-    });
+    let d = pool(args.threads)?
+        .install(|| diagnose::diagnose_campaign(&problem, &candidates, &loaded.aligned));
     progress.finish();
     let secs = t0.elapsed().as_secs_f64();
     if let Some(f) = &d.baseline.failure {
@@ -191,6 +188,15 @@ fn print_candidates(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
                 Ok(_) => "no".into(),
             }
         )?;
+    }
+    for c in &d.candidates {
+        if let Some(finding) = &c.origin {
+            writeln!(
+                o,
+                "  {}: fitted from {finding} ends better than from the library's start",
+                c.effect
+            )?;
+        }
     }
     Ok(())
 }

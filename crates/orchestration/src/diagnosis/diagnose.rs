@@ -41,6 +41,7 @@
 
 use crate::diagnosis::compare::ComparedTest;
 use crate::diagnosis::fit::{self, FeatureInfo, Free, Problem};
+use crate::diagnosis::seeds::{self, Seed};
 use crate::diagnosis::signals::{self, Signals};
 use crate::diagnosis::statemap::StateMap;
 use crate::measured::aligned::AlignedTest;
@@ -90,6 +91,9 @@ pub struct Candidate {
     pub delta_bic: f64,
     /// Share of the baseline's χ² beyond noise the fit removes.
     pub explained: f64,
+    /// The finding of the state map its fit started from, where that start was the better
+    /// ([`crate::diagnosis::seeds`]); None where it started from the effect's own.
+    pub origin: Option<String>,
 }
 
 impl Step {
@@ -330,9 +334,10 @@ impl Diagnosis {
                 ),
             },
             Verdict::Missing { effects, explained } if effects.len() == 1 => format!(
-                "most likely missing: {} ({}); it explains {:.0} % of the misfit beyond noise (dBIC = {:.0}){}{}",
+                "most likely missing: {} ({}){}; it explains {:.0} % of the misfit beyond noise (dBIC = {:.0}){}{}",
                 effects[0],
                 effects[0].effect.info().family,
+                self.fitted_values(),
                 100.0 * explained,
                 best.map_or(f64::NAN, |c| c.delta_bic),
                 self.short_of_noise(),
@@ -420,7 +425,45 @@ impl Diagnosis {
     }
 }
 
+/// `v` to three significant figures, in plain notation between 0.001 and 10⁶: "29.9", "0.787",
+/// "1.25e-10".
+pub fn three_figures(v: f64) -> String {
+    match v.abs() {
+        a if a == 0.0 || !a.is_finite() => format!("{v}"),
+        a if !(1e-3..1e6).contains(&a) => format!("{v:.2e}"),
+        a => {
+            let decimals = (2 - a.log10().floor() as i32).max(0) as usize;
+            format!("{v:.decimals$}")
+        }
+    }
+}
+
 impl Diagnosis {
+    /// " with freq_hz = 29.9 Hz, zeta = 0.787 (its fit started from the state map's lag of the
+    /// opening (…))": the named candidate's fitted parameters, and the finding its fit started
+    /// from where it did; empty when the verdict names none.
+    fn fitted_values(&self) -> String {
+        let (Some((free, f)), Some(c)) = (self.named_fit(), self.candidates.first()) else {
+            return String::new();
+        };
+        let values: Vec<String> = free
+            .iter()
+            .zip(&f.estimate)
+            .map(|(p, &v)| {
+                let unit = match p.info.unit {
+                    "-" | "" => String::new(),
+                    u => format!(" {u}"),
+                };
+                format!("{} = {}{unit}", p.info.name, three_figures(v))
+            })
+            .collect();
+        let origin = c
+            .origin
+            .as_ref()
+            .map_or(String::new(), |o| format!(" (its fit started from {o})"));
+        format!(" with {}{origin}", values.join(", "))
+    }
+
     /// What each chosen effect removes on its own in the final joint fit: "A 60 %, + B 35 %"
     /// (shares of the baseline's misfit beyond noise).
     fn shares(&self) -> String {
@@ -442,15 +485,8 @@ impl Diagnosis {
 }
 
 impl Diagnosis {
-    /// Maps the starting model's residual onto the plant's states, reads the signals' own
-    /// evidence in it, and maps the residual the named effects leave (the maps stay None, the
-    /// signals empty, when a test's model run fails: the diagnosis reports that itself).
-    pub fn map_states(&mut self, problem: &Problem, aligned: &[AlignedTest]) {
-        if let Ok(c) = &compared(aligned) {
-            self.state_map = Some(crate::diagnosis::statemap::map(c));
-            let sigma: Vec<[f64; 3]> = problem.tests.iter().map(|t| t.sigma).collect();
-            self.signals = signals::read(c, &sigma, &self.test_misfit);
-        }
+    /// Maps the residual the named effects leave (None when a test's model run fails).
+    fn map_after(&mut self, aligned: &[AlignedTest]) {
         if let Some((free, fit)) = self.named_fit() {
             let fitted: Vec<AlignedTest> = aligned
                 .iter()
@@ -539,6 +575,7 @@ impl Scoring {
         effect: EffectId,
         free: Vec<Free>,
         fit: Result<fit::FitResult, fit::FitError>,
+        origin: Option<String>,
     ) -> Candidate {
         let p = free.len() as f64;
         let (delta_bic, explained) = match &fit {
@@ -555,6 +592,7 @@ impl Scoring {
             fit,
             delta_bic,
             explained,
+            origin,
         }
     }
 }
@@ -584,7 +622,9 @@ fn polish_leaders(problem: &Problem, out: &mut [Candidate], baseline: &fit::Eval
             let f = c.fit.as_ref().ok()?;
             let restart = at_estimates(&c.free, &f.estimate);
             let r = fit::fit_from(problem, &restart, 4 * MAX_ITER, baseline.clone()).ok()?;
-            (r.chi2_after() < f.chi2_after()).then(|| (i, s.candidate(c.effect, restart, Ok(r))))
+            let origin = c.origin.clone();
+            (r.chi2_after() < f.chi2_after())
+                .then(|| (i, s.candidate(c.effect, restart, Ok(r), origin)))
         })
         .collect();
     for (i, c) in again {
@@ -621,8 +661,32 @@ pub fn scan_starts(problem: &Problem, free: &[Free]) -> Vec<Free> {
     out
 }
 
-/// Fits every candidate and ranks them.
-pub fn diagnose(problem: &Problem, candidates: &[EffectId]) -> Diagnosis {
+/// The campaign diagnosed: the starting model's residual mapped onto the states and read for
+/// the signals' evidence, every candidate fitted (those of the map's findings from there,
+/// [`crate::diagnosis::seeds`]) and ranked, and the residual the named effects leave mapped.
+/// The maps stay None, the signals empty, where a test's model run fails (the diagnosis
+/// reports that itself).
+pub fn diagnose_campaign(
+    problem: &Problem,
+    candidates: &[EffectId],
+    aligned: &[AlignedTest],
+) -> Diagnosis {
+    let c = compared(aligned).ok();
+    let map = c.as_ref().map(|c| crate::diagnosis::statemap::map(c));
+    let seeds = map.as_ref().map_or_else(Vec::new, seeds::from_map);
+    let mut d = diagnose(problem, candidates, &seeds);
+    if let Some(c) = &c {
+        let sigma: Vec<[f64; 3]> = problem.tests.iter().map(|t| t.sigma).collect();
+        d.signals = signals::read(c, &sigma, &d.test_misfit);
+    }
+    d.state_map = map;
+    d.map_after(aligned);
+    d
+}
+
+/// Fits every candidate (from its own start and from each of its seeds', keeping the better
+/// fit: [`crate::diagnosis::seeds`]) and ranks them.
+pub fn diagnose(problem: &Problem, candidates: &[EffectId], seeds: &[Seed]) -> Diagnosis {
     let baseline = problem.evaluate(1, &|_, m| m.clone()).remove(0);
     let n = problem.dof().round() as usize;
     let model0 = &problem.tests[0].model;
@@ -634,9 +698,17 @@ pub fn diagnose(problem: &Problem, candidates: &[EffectId]) -> Diagnosis {
     let mut out: Vec<Candidate> = candidates
         .par_iter()
         .map(|&effect| {
-            let free = scanned(problem, &free_of(effect, model0), effect, 0);
-            let fit = fit::fit_from(problem, &free, MAX_ITER, baseline.clone());
-            score.candidate(effect, free, fit)
+            let own = scanned(problem, &free_of(effect, model0), effect, 0);
+            let seeded = seeds::starts(&own, effect, seeds);
+            let starts =
+                std::iter::once((own, None)).chain(seeded.into_iter().map(|(f, o)| (f, Some(o))));
+            // The first of equal fits: the effect's own start.
+            (starts.map(|(free, origin)| {
+                let fit = fit::fit_from(problem, &free, MAX_ITER, baseline.clone());
+                score.candidate(effect, free, fit, origin)
+            }))
+            .min_by(|a, b| a.chi2().total_cmp(&b.chi2()))
+            .expect("the effect's own start")
         })
         .collect();
     rank(&mut out);

@@ -33,7 +33,8 @@ use vshake_kernel::spectrum::Oscillator;
 
 /// Natural frequencies of the coarse grid: 0.2 … 100 Hz, log-spaced.
 const F_LO: f64 = 0.2;
-const F_HI: f64 = 100.0;
+/// The top of that grid: a fit there says only "fast" (a rigid mass, a short delay).
+pub(crate) const F_HI: f64 = 100.0;
 const N_F: usize = 60;
 /// Damping ratios of the coarse grid.
 const ZETAS: [f64; 6] = [0.01, 0.02, 0.05, 0.1, 0.2, 0.5];
