@@ -371,7 +371,7 @@ class Diagnosis(_Result):
 
     @property
     def verdict(self) -> str:
-        """The verdict line: ``most likely missing: NAME (family); ...``."""
+        """The verdict line: ``most likely missing: NAME (family) with p = v, ...; ...``."""
         m = re.search(r"^\s*verdict: (.*)$", self.text, re.M)
         return m.group(1) if m else ""
 

@@ -185,7 +185,13 @@ fn read_baseline(path: &std::path::Path) -> anyhow::Result<(f64, f64)> {
 /// Times a diagnosis of `campaign` with every candidate of the library.
 fn bench_diagnose(campaign: &std::path::Path, max_seconds: Option<f64>) -> anyhow::Result<()> {
     let model = crate::kernel::params::ModelParams::default();
-    let loaded = crate::shell::fit_problem::load_problem(campaign, &model, false)?;
+    let mut loaded = crate::shell::fit_problem::load_problem(campaign, &model, false)?;
+    // Every batch the diagnosis runs (one per test and group of lanes), counted as it finishes.
+    let batches = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(0));
+    let counter = batches.clone();
+    loaded.problem.progress = Some(std::sync::Arc::new(move |_| {
+        counter.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    }));
     let problem = &loaded.problem;
     let candidates: Vec<_> = crate::kernel::params::EffectId::ALL
         .into_iter()
@@ -203,12 +209,13 @@ fn bench_diagnose(campaign: &std::path::Path, max_seconds: Option<f64>) -> anyho
         &loaded.aligned,
     );
     let secs = t0.elapsed().as_secs_f64();
-    let runs: usize = d
+    let iterations: usize = d
         .candidates
         .iter()
         .filter_map(|c| c.fit.as_ref().ok())
-        .map(|f| f.iterations + 1)
+        .map(|f| f.iterations)
         .sum();
+    let per_test = batches.load(std::sync::atomic::Ordering::Relaxed) / problem.tests.len();
     let mut out = std::io::stdout().lock();
     writeln!(
         out,
@@ -218,7 +225,7 @@ fn bench_diagnose(campaign: &std::path::Path, max_seconds: Option<f64>) -> anyho
         candidates.len(),
         rayon::current_num_threads()
     )?;
-    writeln!(out, "  wall time {secs:.1} s; {runs} batches of {EFFECT_LANES} lanes per test (one per Levenberg-Marquardt iteration, Jacobian included)")?;
+    writeln!(out, "  wall time {secs:.1} s; {per_test} batches of {EFFECT_LANES} lanes per test, {iterations} of them the candidates' Levenberg-Marquardt iterations (each with its Jacobian); the rest their start scans and profiles, forward selection and the state maps' model runs")?;
     writeln!(out, "  verdict: {}", d.summary())?;
     if let Some(max) = max_seconds {
         writeln!(

@@ -746,6 +746,11 @@ pub struct FitResult {
     pub estimate: Vec<f64>,
     /// Standard errors in the parameters' units.
     pub se: Vec<f64>,
+    /// Standard errors in the scaled coordinates.
+    pub se_u: Vec<f64>,
+    /// Whether the fit was checked along each parameter ([`FitResult::profile`]); else its
+    /// standard errors are Gauss–Newton's.
+    pub profiled: bool,
     /// Correlation matrix of the estimates.
     pub corr: Vec<Vec<f64>>,
     /// Scaled coordinates of the estimate.
@@ -883,13 +888,20 @@ pub fn fit(problem: &Problem, free: &[Free], max_iter: usize) -> Result<FitResul
 }
 
 /// [`fit`], given the evaluation of the models as given (a diagnosis evaluates it once for every
-/// candidate). Levenberg–Marquardt: each iteration tries several damping factors at once
-/// ([`lambdas`]) and keeps the best step that lowers χ².
-pub(crate) fn fit_from(
+/// candidate), without the check along each parameter ([`FitResult::profile`]): its standard
+/// errors are Gauss–Newton's. Levenberg–Marquardt: each iteration tries several damping factors
+/// at once ([`lambdas`]) and keeps the best step that lowers χ².
+///
+/// A fit that cannot matter stops early: after [`SCREEN_ITER`] iterations, when χ² would stay
+/// above `reach` even if it fell at [`PACE_MARGIN`] times its last iteration's pace in every
+/// iteration left (a diagnosis's candidate that cannot explain enough to be significant;
+/// `f64::INFINITY`: never). It is then not converged.
+pub(crate) fn fit_unprofiled(
     problem: &Problem,
     free: &[Free],
     max_iter: usize,
     before: Eval,
+    reach: f64,
 ) -> Result<FitResult, FitError> {
     let p = free.len();
     let mut u = vec![0.0; p];
@@ -929,6 +941,9 @@ pub(crate) fn fit_from(
                     converged = true;
                     break;
                 }
+                if it + 1 >= SCREEN_ITER && out_of_reach(chi2, new, max_iter - it - 1, reach) {
+                    break;
+                }
             }
             _ => {
                 lambda = lams[lams.len() - 1] * 10.0;
@@ -942,24 +957,70 @@ pub(crate) fn fit_from(
     }
     let n = problem.dof().round() as usize;
     let (se_gn, corr) = uncertainty(&j, &at, n);
-    let s2 = (at.chi2() / n.saturating_sub(p).max(1) as f64).max(1.0);
-    let (u, after, se_u) = profiled(problem, free, u, at, se_gn, s2);
-    Ok(FitResult {
-        estimate: free.iter().zip(&u).map(|(f, &x)| f.value(x)).collect(),
-        se: free
-            .iter()
-            .zip(&u)
-            .zip(&se_u)
-            .map(|((f, &x), s)| f.slope(x) * s)
-            .collect(),
+    let mut r = FitResult {
+        estimate: Vec::new(),
+        se: Vec::new(),
+        se_u: se_gn,
         corr,
         u,
         before,
-        after,
+        after: at,
         n,
         iterations,
         converged,
-    })
+        profiled: false,
+    };
+    r.set_values(free);
+    Ok(r)
+}
+
+/// Iterations a fit makes before it may stop as out of reach ([`fit_unprofiled`]). [chosen: a
+/// candidate that matters takes most of its share in its first few iterations.]
+pub const SCREEN_ITER: usize = 6;
+
+/// How much faster than its last iteration's pace a fit is allowed to fall in each iteration
+/// left before it is called out of reach. [chosen: 3; Levenberg–Marquardt's steps lengthen as
+/// its damping falls, but not threefold an iteration for the rest of a fit.]
+pub const PACE_MARGIN: f64 = 3.0;
+
+/// Whether a fit whose χ² fell from `chi2` to `new` in its last iteration stays above `reach`
+/// after `left` more at [`PACE_MARGIN`] times that pace.
+fn out_of_reach(chi2: f64, new: f64, left: usize, reach: f64) -> bool {
+    new - PACE_MARGIN * left as f64 * (chi2 - new) > reach
+}
+
+impl FitResult {
+    /// The estimates and standard errors in the parameters' units, from `u` and `se_u`.
+    fn set_values(&mut self, free: &[Free]) {
+        self.estimate = free.iter().zip(&self.u).map(|(f, &x)| f.value(x)).collect();
+        self.se = (free.iter().zip(&self.u).zip(&self.se_u))
+            .map(|((f, &x), s)| f.slope(x) * s)
+            .collect();
+    }
+
+    /// The fit checked along each parameter by direct evaluation ([`profiled`]): its standard
+    /// errors where χ² is not smooth, its estimate where a probe finds a lower χ². Once.
+    pub(crate) fn profile(mut self, problem: &Problem, free: &[Free]) -> FitResult {
+        if self.profiled {
+            return self;
+        }
+        let p = free.len();
+        let s2 = (self.after.chi2() / self.n.saturating_sub(p).max(1) as f64).max(1.0);
+        let (u, after, se_u) = profiled(problem, free, self.u, self.after, self.se_u, s2);
+        (self.u, self.after, self.se_u, self.profiled) = (u, after, se_u, true);
+        self.set_values(free);
+        self
+    }
+}
+
+/// [`fit_from`] checked along each parameter ([`FitResult::profile`]).
+pub(crate) fn fit_from(
+    problem: &Problem,
+    free: &[Free],
+    max_iter: usize,
+    before: Eval,
+) -> Result<FitResult, FitError> {
+    fit_unprofiled(problem, free, max_iter, before, f64::INFINITY).map(|r| r.profile(problem, free))
 }
 
 /// The point a damped Gauss–Newton step with factor `l` reaches from `u`, on the normal

@@ -157,8 +157,14 @@ mod tests {
 
     #[test]
     fn a_seed_is_clamped_into_the_parameters_range() {
-        let m = vshake_kernel::params::ModelParams::default();
-        let free = crate::diagnosis::diagnose::free_of(EffectId::SpoolDynamics, &m);
+        use vshake_kernel::params::ModelParams;
+        let m = ModelParams::default();
+        let free: Vec<Free> = ["freq_hz", "zeta"]
+            .map(|n| {
+                let info = ModelParams::lookup(&format!("spool_dynamics.{n}")).unwrap();
+                Free::new(info, info.get(&m))
+            })
+            .to_vec();
         let seed = Seed {
             effect: EffectId::SpoolDynamics,
             values: vec![("zeta", 9.0)],
