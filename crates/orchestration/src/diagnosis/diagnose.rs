@@ -2,8 +2,11 @@
 //!
 //! Every candidate effect of the library is fitted to the campaign (the free parameters of the
 //! first of its `EffectInfo::stages`, from the best point of the stage's start scan where it has
-//! one; the candidates in parallel; the leading ones whose fits stop at [`MAX_ITER`] go on,
-//! [`polish_leaders`]) and ranked by the Bayesian
+//! one, and from the state map's finding of its law where there is one, [`seeds`], the better fit
+//! kept; the candidates in parallel; a fit that cannot reach significance stops early,
+//! [`fit::fit_unprofiled`]; the leading ones whose fits stop at [`MAX_ITER`] go on,
+//! [`polish_leaders`], and the leading ones are checked along each parameter,
+//! [`profile_leaders`]) and ranked by the Bayesian
 //! information criterion: ΔBIC = χ²_baseline − χ²_candidate − p·ln n (n the features' degrees of
 //! freedom, p parameters added). With the features scaled by their noise, χ² of a right model is
 //! ≈ n − p, so:
