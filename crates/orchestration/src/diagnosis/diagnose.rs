@@ -428,8 +428,8 @@ impl Diagnosis {
     }
 }
 
-/// `v` to three significant figures, in plain notation between 0.001 and 10⁶: "29.9", "0.787",
-/// "1.25e-10".
+/// `v` with at least three significant figures (whole numbers from 1000 up keep all their
+/// digits), in plain notation between 0.001 and 10⁶: "29.9", "0.787", "6997", "1.25e-10".
 pub fn three_figures(v: f64) -> String {
     match v.abs() {
         a if a == 0.0 || !a.is_finite() => format!("{v}"),
