@@ -18,9 +18,9 @@
 //! scan's best point) and from each seed's, and the fit that ends with the lower χ² is kept; the
 //! candidate then says it started from the finding. The library's scan covers a resonance's
 //! frequency only, at the library's damping; the map's point covers the damping and the mass
-//! too. [chosen: a second fit, not a choice of start by the χ² at the start: on the guide's
-//! sine tests hiding a specimen, the map's point (0.68 Hz, ζ 40 %, 2.3 t) fits better than the
-//! scan's at the start, yet Levenberg–Marquardt from it ends 4× worse than from the scan's.]
+//! too. [chosen: a second fit, not a choice of start by the χ² at the start: a start that fits
+//! better need not end better (Levenberg–Marquardt from either may stop in another valley), and
+//! the candidate that wins a diagnosis is the one whose fit ends lowest.]
 
 use crate::diagnosis::fit::Free;
 use crate::diagnosis::residual_memory::{self, Kind, MemoryFit};
@@ -87,20 +87,18 @@ fn with_seed(free: &[Free], effect: EffectId, seed: &Seed) -> Vec<Free> {
         .collect()
 }
 
-/// `v` inside the valid range of `f`'s parameter (a bound that is open moved in by a millionth).
+/// `v` inside the valid range of `f`'s parameter (a finite bound that is open moved in by a
+/// millionth; an infinite one stays).
 fn clamp_into(f: &Free, v: f64) -> f64 {
     let r = f.info.range;
-    let inside = |x: f64| r.contains(x);
-    let lo = if inside(r.lo) {
-        r.lo
-    } else {
-        r.lo + 1e-6 * r.lo.abs().max(1e-12)
+    let inward = |b: f64, dir: f64| {
+        if !b.is_finite() || r.contains(b) {
+            b
+        } else {
+            b + dir * 1e-6 * b.abs().max(1e-12)
+        }
     };
-    let hi = if inside(r.hi) {
-        r.hi
-    } else {
-        r.hi - 1e-6 * r.hi.abs().max(1e-12)
-    };
+    let (lo, hi) = (inward(r.lo, 1.0), inward(r.hi, -1.0));
     v.clamp(lo, hi.max(lo))
 }
 
@@ -175,5 +173,12 @@ mod tests {
         assert_eq!(zeta.start, 5.0);
         let freq = s.iter().find(|f| f.info.name == "freq_hz").unwrap();
         assert_eq!(freq.start, m.effect_params.spool_dynamics.freq_hz);
+        // A range open to infinity (a mass, ≥ 0): the value stays; below it, the bound.
+        let mass = Free::new(ModelParams::lookup("specimen.m1").unwrap(), 20e3);
+        assert_eq!(clamp_into(&mass, 2.3e3), 2.3e3);
+        assert_eq!(clamp_into(&mass, -5.0), 0.0);
+        // An open finite bound (a pump's flow, > 0): moved in.
+        let q = Free::new(ModelParams::lookup("supply.q_pump").unwrap(), 0.2);
+        assert!(clamp_into(&q, 0.0) > 0.0);
     }
 }
