@@ -437,11 +437,18 @@ fn what_the_cuda_kernel_does_not_cover_is_named() {
     let mut p = ModelParams::default();
     let r = sine(1.0, 3.0);
     assert_eq!(gpu_lanes::unsupported(&[&p], &r), None);
-    // Every library effect is covered, all of them at once included.
-    for id in EffectId::ALL {
+    // Every library effect is covered, all of them at once included, but the expressions
+    // (interpreted on the CPU), which are named.
+    for id in EffectId::ALL
+        .into_iter()
+        .filter(|&e| e != EffectId::Expression)
+    {
         *p.effects.get_mut(id) = true;
         assert_eq!(gpu_lanes::unsupported(&[&p], &r), None, "{id}");
     }
+    *p.effects.get_mut(EffectId::Expression) = true;
+    let why = gpu_lanes::unsupported(&[&p], &r).expect("the expressions run on the CPU");
+    assert!(why.contains("the effect expression"), "{why}");
     let many = r.with_spectrum(SpectrumSpec::log_spaced(0.05, 4.0, 200, 0.05));
     let why = gpu_lanes::unsupported(&[&ModelParams::default()], &many).expect("too many periods");
     assert!(why.contains("200 periods"), "{why}");

@@ -19,6 +19,7 @@ pub mod controller;
 pub mod effects;
 pub mod excitation;
 pub mod expm;
+pub mod expr;
 pub mod friction;
 pub mod gpu_lanes;
 pub mod ground;

@@ -10,13 +10,14 @@
 //! a run, and reports every problem together ([`ModelParams::validate`]).
 
 use std::fmt;
-use std::sync::LazyLock;
+use std::sync::{LazyLock, Mutex};
 
 pub use super::baseline_params::{
     ActuatorParams, ControllerParams, FrictionParams, PlatenParams, ValveLaw, ValveParams,
     KV_DEFAULT,
 };
 pub use super::channels::G;
+use super::effects::expression::{self, Expressions};
 use super::effects::ModelView;
 pub use super::effects::{EffectId, EffectParams, EffectSwitches, EFFECTS};
 use super::ground::GroundParams;
@@ -52,6 +53,10 @@ impl ParamInfo {
     /// Sets it to `v` in `m`.
     pub fn set(&self, m: &mut ModelParams, v: f64) {
         m.table_mut(self.component).set_field(self.index, v)
+    }
+    /// Its row in the component's table (an expression parameter's: its slot).
+    pub fn index(&self) -> usize {
+        self.index
     }
     /// `component.name`.
     pub fn path(&self) -> String {
@@ -178,6 +183,8 @@ pub struct ModelParams {
     pub effect_params: EffectParams,
     /// The stochastic ground motion's parameters (read only by the excitation, never the plant).
     pub ground: GroundParams,
+    /// The `expression` effect's expressions and the names of its parameters' slots.
+    pub expression: Expressions,
 }
 
 impl ModelParams {
@@ -245,11 +252,79 @@ impl ModelParams {
             .collect()
     }
 
-    /// The registry row of `component.name`, if any.
+    /// The registry row of `component.name`, if any: a table's row, or a named parameter of the
+    /// expressions ([`ModelParams::declare_expression_param`]).
     pub fn lookup(path: &str) -> Option<&'static ParamInfo> {
         let (c, n) = path.split_once('.')?;
         let c = Component::parse(c)?;
-        Self::registry().find(|p| p.component == c && p.name == n)
+        let declared = || {
+            let d = DECLARED.lock().unwrap_or_else(|e| e.into_inner());
+            d.iter()
+                .rev()
+                .find(|p| p.component == c && p.name == n)
+                .copied()
+        };
+        Self::registry()
+            .find(|p| p.component == c && p.name == n)
+            .or_else(declared)
+    }
+
+    /// Declares `name` a parameter of the `expression` effect, of `unit` and valid `range`: its
+    /// row (`expression.<name>`, found by [`ModelParams::lookup`] from then on), on the slot the
+    /// name took when it was first declared in this process (a new name takes the next free one
+    /// of [`expression::SLOTS`]). Declared again with another unit or range, the name keeps its
+    /// slot and the new row is the one looked up.
+    pub fn declare_expression_param(
+        name: &str,
+        unit: &str,
+        range: Range,
+    ) -> Result<&'static ParamInfo, String> {
+        check_param_name(name)?;
+        let mut d = DECLARED.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(same) =
+            (d.iter().rev()).find(|p| p.name == name && p.unit == unit && p.range == range)
+        {
+            return Ok(same);
+        }
+        let names = |d: &[&ParamInfo]| {
+            let mut v: Vec<&str> = Vec::new();
+            for p in d
+                .iter()
+                .filter(|p| !v.contains(&p.name))
+                .collect::<Vec<_>>()
+            {
+                v.push(p.name);
+            }
+            v.join(", ")
+        };
+        let slot = match d.iter().find(|p| p.name == name) {
+            Some(p) => p.index,
+            None => d.iter().map(|p| p.index + 1).max().unwrap_or(0),
+        };
+        if slot >= expression::SLOTS {
+            return Err(format!(
+                "at most {} named expression parameters (already named: {})",
+                expression::SLOTS,
+                names(&d)
+            ));
+        }
+        let leak = |s: &str| -> &'static str { Box::leak(s.to_string().into_boxed_str()) };
+        let row: &'static FieldInfo = Box::leak(Box::new(FieldInfo {
+            name: leak(name),
+            unit: leak(unit),
+            unit_suffix: "",
+            default: 0.0,
+            range,
+            source: Source::Chosen,
+            doc: "A named parameter of the model file's expressions [chosen: by the model file].",
+        }));
+        let info: &'static ParamInfo = Box::leak(Box::new(ParamInfo {
+            component: Component::Effect(EffectId::Expression),
+            row,
+            index: slot,
+        }));
+        d.push(info);
+        Ok(info)
     }
 
     /// The components (in registry order): the baseline's parts, then the library effects.
@@ -291,6 +366,7 @@ impl ModelParams {
         issues.extend(super::effects::building::check(
             super::effects::building::Params::of(self),
         ));
+        issues.extend(self.expression_issues());
         let c = &self.controller;
         let nyq = 0.5 * c.f_s;
         for (i, (f0, _bw, depth)) in c.notches().iter().enumerate() {
@@ -306,6 +382,39 @@ impl ModelParams {
         } else {
             Err(issues)
         }
+    }
+
+    /// Names the expression parameter `name` (declared as [`ModelParams::declare_expression_param`]
+    /// does) in this parameter set, at `value`, so that its expressions may read it.
+    pub fn name_expression_param(
+        &mut self,
+        name: &str,
+        unit: &str,
+        range: Range,
+        value: f64,
+    ) -> Result<&'static ParamInfo, String> {
+        let info = Self::declare_expression_param(name, unit, range)?;
+        self.expression.names[info.index] = name.to_string();
+        info.set(self, value);
+        Ok(info)
+    }
+
+    /// The named expression parameters whose values are outside their declared ranges.
+    fn expression_issues(&self) -> Vec<ParamIssue> {
+        let named = self.expression.names.iter().filter(|n| !n.is_empty());
+        named
+            .filter_map(|n| Self::lookup(&format!("expression.{n}")))
+            .filter(|p| !p.range.contains(p.get(self)))
+            .map(|p| ParamIssue {
+                path: p.path(),
+                message: format!(
+                    "{} {} is outside the valid range {}",
+                    p.get(self),
+                    p.unit,
+                    p.range
+                ),
+            })
+            .collect()
     }
 
     /// Coulomb friction force μ = mu_coef · M · g, in N.
@@ -324,6 +433,39 @@ impl ModelParams {
 
 /// The registry's rows, made once from the components' tables.
 static REGISTRY: LazyLock<Vec<ParamInfo>> = LazyLock::new(ModelParams::make_registry);
+
+/// The named parameters of expressions declared in this process, in the order declared: rows
+/// with the user's name, unit and range on a slot of the `expression` table (leaked: a few per
+/// model file read).
+static DECLARED: Mutex<Vec<&'static ParamInfo>> = Mutex::new(Vec::new());
+
+/// Why `name` cannot name an expression parameter: not an identifier, or a name the expressions
+/// already use (a hook's quantity, a function, `pi`, a slot's or a hook's key).
+fn check_param_name(name: &str) -> Result<(), String> {
+    let ident = name
+        .chars()
+        .next()
+        .is_some_and(|c| c.is_alphabetic() || c == '_')
+        && name.chars().all(|c| c.is_alphanumeric() || c == '_');
+    if !ident {
+        return Err(format!(
+            "{name:?} is not a name (letters, digits and _, not first a digit)"
+        ));
+    }
+    let hooks = expression::Hook::ALL;
+    let taken = hooks
+        .iter()
+        .any(|h| h.vars().contains(&name) || h.key() == name)
+        || crate::expr::FUNCTIONS.iter().any(|(f, _)| *f == name)
+        || ["pi", "enabled"].contains(&name)
+        || expression::Params::FIELDS.iter().any(|f| f.name == name);
+    if taken {
+        return Err(format!(
+            "{name:?} is taken (a hook's quantity or key, a function, pi, enabled or a slot p1..p8)"
+        ));
+    }
+    Ok(())
+}
 
 /// What the effect library reads of a parameter set.
 impl ModelView for ModelParams {
@@ -347,6 +489,9 @@ impl ModelView for ModelParams {
     }
     fn effect_params(&self) -> &EffectParams {
         &self.effect_params
+    }
+    fn expressions(&self) -> &Expressions {
+        &self.expression
     }
 }
 

@@ -49,9 +49,11 @@ pub(crate) fn run_to(args: &DiagnoseArgs, o: &mut dyn Write) -> anyhow::Result<(
     )?;
     let model = load_model(args.model.as_deref())?;
     let candidates: Vec<EffectId> = if args.candidates.is_empty() {
+        // The model file's expressions, switched off there, are a candidate too.
+        let written = |e: EffectId| e == EffectId::Expression && !model.expression.hooks.is_empty();
         EffectId::ALL
             .into_iter()
-            .filter(|&e| e.screened() && !model.effects.get(e))
+            .filter(|&e| (e.screened() || written(e)) && !model.effects.get(e))
             .collect()
     } else {
         args.candidates

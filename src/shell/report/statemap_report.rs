@@ -47,7 +47,15 @@ pub fn print(o: &mut dyn Write, map: &StateMap) -> std::io::Result<()> {
         }
     }
     match map.sentence() {
-        Some(s) => writeln!(o, "  -> {s}")?,
+        Some(s) => {
+            writeln!(o, "  -> {s}")?;
+            if let Some(e) = map.expression() {
+                writeln!(o, "     as an expression to fit (docs/formats.md, \"Expressions\"), in a model file:")?;
+                for line in e.lines() {
+                    writeln!(o, "       {line}")?;
+                }
+            }
+        }
         None => writeln!(o, "  -> no state's terms explain the residual (R^2 < {}): noise, or an effect neither a static term nor an oscillator holds", statemap::MIN_R2)?,
     }
     Ok(())

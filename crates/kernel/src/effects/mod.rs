@@ -185,6 +185,8 @@ pub trait ModelView {
     fn switches(&self) -> &EffectSwitches;
     /// The library effects' parameters.
     fn effect_params(&self) -> &EffectParams;
+    /// The expressions of the `expression` effect.
+    fn expressions(&self) -> &expression::Expressions;
 }
 
 /// The registry: one line per effect, `module::Type`, the one place its name is spelt. It declares
@@ -340,6 +342,7 @@ library! {
     disp_sensor::DispSensor,
     force_sensor::ForceSensor,
     building::Building,
+    expression::Expression,
 }
 
 /// The measurement chain shared by the sensor effects.
@@ -361,9 +364,10 @@ impl EffectId {
 
     /// Whether a diagnosis tries the effect when it is given no candidates: every effect but the
     /// building, a specimen the user describes storey by storey (a screening's `specimen`, of the
-    /// same family, finds its modes; `study fit --effect building` then fits its storeys).
+    /// same family, finds its modes; `study fit --effect building` then fits its storeys), and
+    /// the expressions, which are a candidate where a model file writes some.
     pub fn screened(self) -> bool {
-        self != EffectId::Building
+        !matches!(self, EffectId::Building | EffectId::Expression)
     }
 }
 
@@ -896,6 +900,7 @@ mod tests {
         pub controller: ControllerParams,
         pub effects: EffectSwitches,
         pub effect_params: EffectParams,
+        pub expressions: expression::Expressions,
     }
 
     impl ModelView for Defaults {
@@ -919,6 +924,9 @@ mod tests {
         }
         fn effect_params(&self) -> &EffectParams {
             &self.effect_params
+        }
+        fn expressions(&self) -> &expression::Expressions {
+            &self.expressions
         }
     }
 
@@ -952,8 +960,9 @@ mod tests {
             assert_eq!(id.info().name, e.name, "registry order");
             assert!(!e.family.trim().is_empty(), "{}: no family", e.name);
             assert!(!e.summary.trim().is_empty(), "{}: no summary", e.name);
+            // The expressions' free parameters are the ones a model file names.
             assert!(
-                !e.free().is_empty(),
+                !e.free().is_empty() || id == EffectId::Expression,
                 "{}: no parameter a diagnosis frees",
                 e.name
             );
@@ -1027,8 +1036,10 @@ mod tests {
                 + 2
                 + 2 * specimen::MODES
                 + 3 * 4
-                + 4 * building::MAX_STOREYS,
-            "delay, spool, supply, reaction mass, specimen, three sensor chains, building"
+                + 4 * building::MAX_STOREYS
+                + 1,
+            "delay, spool, supply, reaction mass, specimen, three sensor chains, building, \
+             the expressions' time"
         );
         // The supply pressure starts at P_S, every other state at 0.
         let ps = p.servovalve.p_s;

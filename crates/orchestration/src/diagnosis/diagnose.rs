@@ -209,6 +209,9 @@ pub struct Diagnosis {
     pub signals: Signals,
     /// Per test, the starting model's residual in units of its noise (√(χ²/dof)).
     pub test_misfit: Vec<f64>,
+    /// The model's expressions as written (`opening = "x - c*sign(x)"`), which a verdict that
+    /// names the `expression` effect gives as its form; empty where it writes none.
+    pub written: String,
 }
 
 /// What the diagnosis concludes.
@@ -312,6 +315,14 @@ impl Diagnosis {
         }
     }
 
+    /// The family a verdict gives for `effect`: the library's, or the expressions as written.
+    fn family(&self, effect: EffectId) -> &str {
+        match effect {
+            EffectId::Expression if !self.written.is_empty() => &self.written,
+            _ => effect.info().family,
+        }
+    }
+
     /// The verdict in plain words.
     pub fn summary(&self) -> String {
         let best = self.candidates.first();
@@ -339,7 +350,7 @@ impl Diagnosis {
             Verdict::Missing { effects, explained } if effects.len() == 1 => format!(
                 "most likely missing: {} ({}){}; it explains {:.0} % of the misfit beyond noise (dBIC = {:.0}){}{}",
                 effects[0],
-                effects[0].effect.info().family,
+                self.family(effects[0].effect),
                 self.fitted_values(),
                 100.0 * explained,
                 best.map_or(f64::NAN, |c| c.delta_bic),
@@ -349,7 +360,7 @@ impl Diagnosis {
             Verdict::Missing { effects, explained } => format!(
                 "most likely missing: {}; together they explain {:.0} % of the misfit beyond noise (what the joint fit loses without each: {}){}{}",
                 effects.iter().map(|e| match e.stage {
-                    0 => format!("{e} ({})", e.effect.info().family),
+                    0 => format!("{e} ({})", self.family(e.effect)),
                     _ => e.to_string(),
                 }).collect::<Vec<_>>().join(" + "),
                 100.0 * explained,
@@ -528,6 +539,9 @@ pub fn free_of(effect: EffectId, model: &ModelParams) -> Vec<Free> {
 /// at the stage's start value, if it has one); a building's storeys above its `storeys` are not
 /// freed (they change nothing).
 pub(crate) fn free_of_stage(effect: EffectId, stage: usize, model: &ModelParams) -> Vec<Free> {
+    if effect == EffectId::Expression {
+        return expression_free(model);
+    }
     let s = &effect.info().stages[stage];
     let unused = |n: &&&str| {
         effect == EffectId::Building && building::unused(n, building::Params::of(model)).is_some()
@@ -542,6 +556,16 @@ pub(crate) fn free_of_stage(effect: EffectId, stage: usize, model: &ModelParams)
             let start = s.start.iter().find(|(name, _)| name == n).map(|x| x.1);
             Free::new(info, start.filter(|_| v == 0.0).unwrap_or(v))
         })
+        .collect()
+}
+
+/// The expressions' free parameters: the named ones some expression of `model` reads, at their
+/// values there (a model file's value is the fit's start).
+fn expression_free(model: &ModelParams) -> Vec<Free> {
+    let e = &model.expression;
+    (e.slots_read().into_iter())
+        .filter_map(|slot| ModelParams::lookup(&format!("expression.{}", e.names[slot])))
+        .map(|info| Free::new(info, info.get(model)))
         .collect()
 }
 
@@ -762,7 +786,17 @@ pub fn diagnose(problem: &Problem, candidates: &[EffectId], seeds: &[Seed]) -> D
             names: problem.tests.iter().map(|t| t.name.clone()).collect(),
             ..Default::default()
         },
+        written: written(model0),
     }
+}
+
+/// `model`'s expressions as written: `opening = "…", force = "…"`.
+fn written(model: &ModelParams) -> String {
+    let hooks = model.expression.hooks.iter();
+    let each: Vec<String> = hooks
+        .map(|h| format!("{} = {:?}", h.hook.key(), h.source))
+        .collect();
+    each.join(", ")
 }
 
 /// Forward selection on top of the best candidate (see the module docs): the effects it adds.

@@ -120,6 +120,21 @@ impl Term {
         }
     }
 
+    /// The term in the language of expressions (docs/formats.md), of `s` in SI units where the
+    /// near-null width is `width` in those units, and its degree (the power of the state's
+    /// scale it carries: a written term is the scaled one times scale^degree).
+    pub(crate) fn expression(self, s: &str, width: f64) -> (String, f64) {
+        match self {
+            Term::Linear => (s.to_string(), 1.0),
+            Term::SignedSquare => (format!("{s} * abs({s})"), 2.0),
+            Term::Cube => (format!("{s}^3"), 3.0),
+            Term::SignedSqrt => (format!("sign({s}) * sqrt(abs({s}))"), 0.5),
+            Term::Sign => (format!("sign({s})"), 0.0),
+            Term::NearNull => (format!("sign({s}) * min(abs({s}), {width:.3e})"), 1.0),
+            Term::Abs => (format!("abs({s})"), 1.0),
+        }
+    }
+
     /// The term written in the state's symbol.
     pub(crate) fn formula(self, s: &str) -> String {
         match self {
@@ -393,6 +408,10 @@ pub struct TermFit {
     pub term: Term,
     /// Coefficient with the term and the residual at unit rms.
     pub coef: f64,
+    /// The same, as the residual over its scale ([`StateMap::res_scale`]) per unit of the term of
+    /// the scaled state (neither centred nor at unit rms): what a term written in the state's
+    /// own units is multiplied by.
+    pub slope: f64,
     /// R² of this term alone (with a constant): how much of the residual it explains by itself.
     pub alone: f64,
 }
@@ -430,6 +449,12 @@ pub struct StateMap {
     /// The lowest and highest fundamental of the sine tests, Hz (None: no sine).
     pub band: Option<(f64, f64)>,
     pub samples: usize,
+    /// Each residual's scale ([`Residual::ALL`] order; the opening's is 1, a fraction of the
+    /// full stroke) and each state's ([`State::ALL`] order; the opening's is 1 likewise).
+    pub res_scale: [f64; 5],
+    pub state_scale: [f64; 5],
+    /// The spool's full stroke k_sp·u_lim, m.
+    pub stroke_m: f64,
 }
 
 /// What the map names: a static term of one state, or a term with memory.
@@ -476,6 +501,7 @@ pub fn map(compared: &[ComparedTest]) -> StateMap {
         .flat_map(|(i, &st)| bins_of(st, scales[i], &states[i], &res))
         .collect();
     let (per_state, joint) = regressions(&states, &res);
+    let valve = &compared[0].test.model.servovalve;
     StateMap {
         bins,
         per_state,
@@ -483,6 +509,9 @@ pub fn map(compared: &[ComparedTest]) -> StateMap {
         memory,
         band,
         samples: n,
+        res_scale,
+        state_scale: scales,
+        stroke_m: valve.k_sp * valve.u_lim,
     }
 }
 
@@ -682,6 +711,29 @@ fn lstsq(cols: &[Vec<f64>], y: &[f64]) -> (Vec<f64>, f64) {
     (coef[1..].to_vec(), rss)
 }
 
+/// The regression's columns: each term of each state, centred and at unit rms, constant ones
+/// left out; with each column's (state, term) and its standard deviation before scaling.
+#[allow(clippy::type_complexity)]
+fn term_columns(
+    states: &[(State, &Vec<f64>)],
+    n: usize,
+) -> (Vec<(State, Term)>, Vec<Vec<f64>>, Vec<f64>) {
+    let (mut labels, mut cols, mut sds) = (Vec::new(), Vec::new(), Vec::new());
+    for &(st, x) in states {
+        for term in TERMS {
+            let c: Vec<f64> = x.iter().map(|&v| term.eval(v)).collect();
+            let m = c.iter().sum::<f64>() / n as f64;
+            let sd = (c.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n as f64).sqrt();
+            if sd > 1e-9 {
+                cols.push(c.iter().map(|v| (v - m) / sd).collect::<Vec<f64>>());
+                labels.push((st, term));
+                sds.push(sd);
+            }
+        }
+    }
+    (labels, cols, sds)
+}
+
 /// Sequentially thresholded least squares of `y` on the terms of `states`.
 fn stlsq(
     residual: Residual,
@@ -706,20 +758,7 @@ fn stlsq(
     }
     let ys = (tss / n as f64).sqrt();
     let y: Vec<f64> = y.iter().map(|v| (v - ym) / ys).collect();
-    // Columns: each term of each state, centred and at unit rms; constant columns left out.
-    let mut labels = Vec::new();
-    let mut cols = Vec::new();
-    for &(st, x) in states {
-        for term in TERMS {
-            let c: Vec<f64> = x.iter().map(|&v| term.eval(v)).collect();
-            let m = c.iter().sum::<f64>() / n as f64;
-            let sd = (c.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n as f64).sqrt();
-            if sd > 1e-9 {
-                cols.push(c.iter().map(|v| (v - m) / sd).collect::<Vec<f64>>());
-                labels.push((st, term));
-            }
-        }
-    }
+    let (labels, cols, sds) = term_columns(states, n);
     let tss = n as f64;
     let mut active: Vec<usize> = (0..cols.len()).collect();
     let mut coef = Vec::new();
@@ -751,6 +790,7 @@ fn stlsq(
             state: labels[j].0,
             term: labels[j].1,
             coef: coef[i],
+            slope: coef[i] * ys / sds[j],
             alone: (1.0 - lstsq(std::slice::from_ref(&cols[j]), &y).1 / tss).max(0.0),
         })
         .collect();
@@ -802,6 +842,54 @@ impl StateMap {
                 .filter(|(reg, _)| reg.r2 >= MIN_R2)
                 .map(|(reg, t)| Named::Static(reg, t)),
         }
+    }
+
+    /// The static term the residual follows written as an expression effect
+    /// (`[model.expression]`, docs/formats.md), where its residual is one a hook adds: the
+    /// missing opening (the `opening` hook, in the spool's `x`) or the missing platen force
+    /// (`force`, in `v` or `y`). Its coefficient, named `c_<hook>`, starts at the regression's
+    /// value in SI units, so that `study fit --effect expression` starts near it.
+    pub fn expression(&self) -> Option<String> {
+        let Some(Named::Static(reg, t)) = self.named() else {
+            return None;
+        };
+        let st = reg.state?;
+        let at = |r: Residual| Residual::ALL.iter().position(|&x| x == r).unwrap_or(0);
+        let si = State::ALL.iter().position(|&x| x == st).unwrap_or(0);
+        // The residual in SI units per unit of the term in the state's SI units: the opening's
+        // residual and state are fractions of the stroke; the platen's balance is the force
+        // the model lacks with the sign reversed (r_F − M·r_a = −F).
+        let (hook, unit, sign, to_si, scale) = match (reg.residual, st) {
+            (Residual::ValveOpening, State::SpoolOpening) => {
+                ("opening", "m", 1.0, self.stroke_m, self.stroke_m)
+            }
+            (Residual::PlatenForce, State::Velocity | State::Displacement) => (
+                "force",
+                "N",
+                -1.0,
+                self.res_scale[at(Residual::PlatenForce)],
+                self.state_scale[si],
+            ),
+            _ => return None,
+        };
+        let (written, degree) = t.term.expression(st.symbol(), NULL_WIDTH * scale);
+        let c = sign * t.slope * to_si / scale.powf(degree);
+        let form = match (hook, t.term) {
+            // A step with the opening's sign: lands that overlap (c < 0, no flow while
+            // |x| ≤ −c) or underlap (c > 0); the same as x + c·sign(x) outside the band.
+            ("opening", Term::Sign) => "sign(x) * max(abs(x) + c_opening, 0)".to_string(),
+            ("opening", _) => format!("x + c_opening * {written}"),
+            _ => format!("c_{hook} * {written}"),
+        };
+        let of = if st == State::Velocity { "m/s" } else { "m" };
+        let unit = match degree {
+            0.0 => unit.to_string(),
+            1.0 => format!("{unit}/({of})"),
+            d => format!("{unit}/({of})^{d}"),
+        };
+        Some(format!(
+            "[model.expression]\nenabled = false   # a candidate: `fit --effect expression` or a diagnosis switches it on\n{hook} = \"{form}\"\nc_{hook} = {{ value = {c:.4e}, unit = \"{unit}\" }}"
+        ))
     }
 
     /// One sentence: which state and term the residual follows, and what that suggests.

@@ -33,8 +33,9 @@
 pub use crate::runs::excitation_spec::{ExcitationSpec, Realisation, RecordUnit};
 use crate::toml_fields::{Fields, InputError, Issues};
 use std::path::PathBuf;
+use vshake_kernel::effects::expression::Hook;
 use vshake_kernel::excitation::{Signal, Sine};
-use vshake_kernel::params::{Component, ModelParams, ValveLaw};
+use vshake_kernel::params::{Component, EffectId, ModelParams, Range, ValveLaw};
 use vshake_kernel::simulate::Solver;
 use vshake_kernel::spectrum::SpectrumSpec;
 
@@ -59,6 +60,10 @@ pub(crate) fn read_model(mut f: Fields<'_>, model: &mut ModelParams, issues: &mu
             .map(|p| p.name)
             .collect();
         let mut expected = names.clone();
+        if comp == Component::Effect(EffectId::Expression) {
+            read_expression(&mut t, model, issues);
+            continue;
+        }
         if let Some(e) = comp.effect() {
             // An optional effect is on when its table is given (`enabled = false` switches it off).
             expected.push("enabled");
@@ -91,6 +96,105 @@ pub(crate) fn read_model(mut f: Fields<'_>, model: &mut ModelParams, issues: &mu
             .collect::<Vec<_>>(),
         issues,
     );
+}
+
+/// Reads `[model.expression]`: `enabled`, each hook's expression (`force = "-c * v"`, keys of
+/// [`Hook`]) and every other key a named parameter, `c = 4.0e4` or `c = { value = 4.0e4, unit =
+/// "N·s/m", range = [0, inf] }` (unit "-" and any value unless given).
+fn read_expression(t: &mut Fields<'_>, model: &mut ModelParams, issues: &mut Issues) {
+    model.effects.expression = t.bool("enabled", issues).unwrap_or(true);
+    let keys: Vec<&String> = t.keys().filter(|k| k.as_str() != "enabled").collect();
+    let (hooks, params): (Vec<&String>, Vec<&String>) =
+        keys.into_iter().partition(|k| Hook::parse(k).is_some());
+    for name in params {
+        read_expression_param(t, name, model, issues);
+    }
+    for key in &hooks {
+        let (Some(src), Some(hook)) = (t.str(key, issues), Hook::parse(key)) else {
+            continue;
+        };
+        if let Err(e) = model.expression.set(hook, src) {
+            issues.push(t.path_of(key), format!("{e}, in {src:?}"));
+        }
+    }
+    if hooks.is_empty() {
+        let keys: Vec<&str> = Hook::ALL.iter().map(|h| h.key()).collect();
+        issues.push(
+            t.path_of("force"),
+            format!("no expression: give one or more of {}", keys.join(", ")),
+        );
+    }
+}
+
+/// Reads the named parameter `name` of `[model.expression]` into `model`.
+fn read_expression_param(
+    t: &mut Fields<'_>,
+    name: &str,
+    model: &mut ModelParams,
+    issues: &mut Issues,
+) {
+    let path = t.path_of(name);
+    let (value, unit, range) = match t.value(name) {
+        Some(toml::Value::Table(_)) => {
+            let Some(mut f) = t.table(name, issues) else {
+                return;
+            };
+            let value = f.f64("value", issues);
+            let unit = f.str("unit", issues).unwrap_or("-").to_string();
+            let range = read_range(&mut f, issues);
+            f.finish(&["value", "unit", "range"], issues);
+            let Some(value) = value else {
+                issues.push(format!("{path}.value"), "missing: the parameter's value");
+                return;
+            };
+            (value, unit, range.unwrap_or(Range::any()))
+        }
+        _ => match t.f64(name, issues) {
+            Some(v) => (v, "-".to_string(), Range::any()),
+            None => return,
+        },
+    };
+    if let Err(e) = model.name_expression_param(name, &unit, range, value) {
+        issues.push(path, e);
+    }
+}
+
+/// A parameter's `range = [lo, hi]` (either end may be ±inf).
+fn read_range(f: &mut Fields<'_>, issues: &mut Issues) -> Option<Range> {
+    let v = f.value("range")?;
+    let ends: Option<Vec<f64>> = v.as_array().and_then(|a| {
+        a.iter()
+            .map(|x| x.as_float().or(x.as_integer().map(|n| n as f64)))
+            .collect()
+    });
+    match ends.as_deref() {
+        Some(&[lo, hi]) if lo < hi && !lo.is_nan() && !hi.is_nan() => Some(Range::closed(lo, hi)),
+        _ => {
+            issues.push(
+                f.path_of("range"),
+                format!("expected [lo, hi] with lo < hi, found {v}"),
+            );
+            None
+        }
+    }
+}
+
+/// The `[model.expression]` table of `model`: its hooks' expressions and its named parameters.
+fn expression_table(model: &ModelParams) -> toml::Table {
+    let mut t = toml::Table::new();
+    for h in &model.expression.hooks {
+        t.insert(h.hook.key().into(), h.source.clone().into());
+    }
+    let named = model.expression.names.iter().filter(|n| !n.is_empty());
+    for info in named.filter_map(|n| ModelParams::lookup(&format!("expression.{n}"))) {
+        let mut p = toml::Table::new();
+        p.insert("value".into(), info.get(model).into());
+        p.insert("unit".into(), info.unit.into());
+        let range = vec![info.range.lo.into(), info.range.hi.into()];
+        p.insert("range".into(), toml::Value::Array(range));
+        t.insert(info.name.into(), toml::Value::Table(p));
+    }
+    t
 }
 
 /// Validates a model, prefixing every path with `prefix` (e.g. `model`).
@@ -604,6 +708,10 @@ pub fn model_table(model: &ModelParams) -> toml::Table {
             t.insert("law".into(), law.into());
         }
         if comp.effect().is_some_and(|e| !model.effects.get(e)) {
+            continue;
+        }
+        if comp == Component::Effect(EffectId::Expression) {
+            m.insert(comp.name().into(), expression_table(model).into());
             continue;
         }
         for p in ModelParams::registry().filter(|p| p.component == comp) {

@@ -1,0 +1,292 @@
+//! Effect `expression`: physics written as expressions in a model file, no rebuild. Each of its
+//! hooks ([`Hook`]: a force on the platen, a flow into either chamber, the valve opening, the
+//! supply pressure, a recorded channel) may be given an expression ([`crate::expr`]) of that
+//! hook's quantities, the time `t` since the start of the run and up to [`SLOTS`] named
+//! parameters; a hook without one is left alone.
+//!
+//! ```toml
+//! [model.expression]
+//! force = "-c2 * v * abs(v)"                                # N on the platen
+//! c2 = { value = 4.0e4, unit = "N·s²/m²", range = [0, 1e9] }  # a named parameter
+//! ```
+//!
+//! The parameters' values sit in the slots `p1`..`p8` of this effect's table, in the order their
+//! names were first declared; the model layer (`params`) keeps the names, their units and their
+//! ranges, so that `expression.c2` is a parameter like any other (fits, studies, diagnoses).
+//! Where a hook's expression is not given, the effect is neutral there; where the effect is off
+//! in a lane, it is neutral in that lane. An expression runs on the CPU (an interpreted program,
+//! [`crate::expr::Program`]); the CUDA kernel does not have it, and a study with it on takes the
+//! CPU engine.
+
+use super::{hook, Effect, EffectInfo, LibraryEffect, ModelView, PlantView, Stage};
+use crate::expr::{ExprError, Program};
+use crate::param_table::{params, Range};
+use std::sync::Arc;
+
+/// The effect's entry in the library. Its free parameters are the named ones its expressions
+/// read (the model's, not the table's: a diagnosis asks the model).
+pub const INFO: EffectInfo = EffectInfo {
+    name: super::module_name(module_path!()),
+    family: "expression",
+    summary: "forces, flows, openings, supply pressure or channels written as expressions",
+    params: Params::FIELDS,
+    stages: &[Stage::free(&[])],
+};
+
+/// How many named parameters the expressions of one process may declare.
+pub const SLOTS: usize = 8;
+
+params! {
+    /// Effect `expression`: the values of its named parameters, by slot (a model file names them).
+    pub struct Params {
+        p1: "-", "", 0.0, Range::any(), Chosen, "Slot 1 of the expressions' named parameters [chosen: none until a model file names it].";
+        p2: "-", "", 0.0, Range::any(), Chosen, "Slot 2 (see p1) [chosen].";
+        p3: "-", "", 0.0, Range::any(), Chosen, "Slot 3 (see p1) [chosen].";
+        p4: "-", "", 0.0, Range::any(), Chosen, "Slot 4 (see p1) [chosen].";
+        p5: "-", "", 0.0, Range::any(), Chosen, "Slot 5 (see p1) [chosen].";
+        p6: "-", "", 0.0, Range::any(), Chosen, "Slot 6 (see p1) [chosen].";
+        p7: "-", "", 0.0, Range::any(), Chosen, "Slot 7 (see p1) [chosen].";
+        p8: "-", "", 0.0, Range::any(), Chosen, "Slot 8 (see p1) [chosen].";
+    }
+}
+
+impl Params {
+    fn slots(&self) -> [f64; SLOTS] {
+        [
+            self.p1, self.p2, self.p3, self.p4, self.p5, self.p6, self.p7, self.p8,
+        ]
+    }
+}
+
+/// Where an expression acts: its model-file key, the quantities it reads, what it gives.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Hook {
+    /// A force on the platen, N (positive extends), of its displacement `y` and velocity `v`.
+    Force,
+    /// A flow into chamber 1 (cap side) of each actuator, m³/s, of the chamber pressures `p1`,
+    /// `p2` and the supply pressure `ps` (Pa).
+    Flow1,
+    /// A flow into chamber 2 (rod side) of each actuator, m³/s, of `p1`, `p2`, `ps`.
+    Flow2,
+    /// The valve opening, m, from the spool command `x` (m).
+    Opening,
+    /// The supply pressure the valves see, Pa, from the nominal `ps`.
+    Supply,
+    /// The recorded acceleration (m/s²), displacement (m) and force (N), from the plant's `a`,
+    /// `d`, `f`.
+    Accel,
+    Disp,
+    SensedForce,
+}
+
+impl Hook {
+    pub const ALL: [Hook; 8] = [
+        Hook::Force,
+        Hook::Flow1,
+        Hook::Flow2,
+        Hook::Opening,
+        Hook::Supply,
+        Hook::Accel,
+        Hook::Disp,
+        Hook::SensedForce,
+    ];
+
+    /// Its key in `[model.expression]`.
+    pub fn key(self) -> &'static str {
+        match self {
+            Hook::Force => "force",
+            Hook::Flow1 => "flow_1",
+            Hook::Flow2 => "flow_2",
+            Hook::Opening => "opening",
+            Hook::Supply => "supply",
+            Hook::Accel => "accel_channel",
+            Hook::Disp => "disp_channel",
+            Hook::SensedForce => "force_channel",
+        }
+    }
+
+    /// The hook called `key`.
+    pub fn parse(key: &str) -> Option<Hook> {
+        Self::ALL.into_iter().find(|h| h.key() == key)
+    }
+
+    /// The quantities its expression reads, in the order the hook gives them (`t` last).
+    pub fn vars(self) -> &'static [&'static str] {
+        match self {
+            Hook::Force => &["y", "v", "t"],
+            Hook::Flow1 | Hook::Flow2 => &["p1", "p2", "ps", "t"],
+            Hook::Opening => &["x", "t"],
+            Hook::Supply => &["ps", "t"],
+            Hook::Accel | Hook::Disp | Hook::SensedForce => &["a", "d", "f", "t"],
+        }
+    }
+
+    /// The unit of what it gives.
+    pub fn unit(self) -> &'static str {
+        match self {
+            Hook::Force | Hook::SensedForce => "N",
+            Hook::Flow1 | Hook::Flow2 => "m³/s",
+            Hook::Opening | Hook::Disp => "m",
+            Hook::Supply => "Pa",
+            Hook::Accel => "m/s²",
+        }
+    }
+
+    /// Whether it changes the hydraulics ([`Effect::HYDRAULIC`]).
+    fn hydraulic(self) -> bool {
+        matches!(
+            self,
+            Hook::Flow1 | Hook::Flow2 | Hook::Opening | Hook::Supply
+        )
+    }
+}
+
+/// One hook's expression: its source as written and its program.
+#[derive(Debug, Clone)]
+pub struct HookExpr {
+    pub hook: Hook,
+    pub source: String,
+    pub program: Arc<Program>,
+}
+
+impl PartialEq for HookExpr {
+    fn eq(&self, other: &Self) -> bool {
+        (self.hook, &self.source) == (other.hook, &other.source)
+    }
+}
+
+/// The expressions of a parameter set: the hooks given one, and the parameters' names by slot.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Expressions {
+    pub hooks: Vec<HookExpr>,
+    /// The name of each slot's parameter ("" where none is named).
+    pub names: [String; SLOTS],
+}
+
+impl Expressions {
+    /// Gives `hook` the expression `source` (replacing one it had), compiled against the slots'
+    /// names.
+    pub fn set(&mut self, hook: Hook, source: &str) -> Result<(), ExprError> {
+        let names: Vec<&str> = self.names.iter().map(String::as_str).collect();
+        let program = Arc::new(Program::compile(source, hook.vars(), &names)?);
+        self.hooks.retain(|h| h.hook != hook);
+        self.hooks.push(HookExpr {
+            hook,
+            source: source.to_string(),
+            program,
+        });
+        Ok(())
+    }
+
+    /// The expression of `hook`, if it has one.
+    pub fn get(&self, hook: Hook) -> Option<&HookExpr> {
+        self.hooks.iter().find(|h| h.hook == hook)
+    }
+
+    /// The slots whose parameters some expression reads.
+    pub fn slots_read(&self) -> Vec<usize> {
+        let mut read: Vec<usize> = (self.hooks.iter())
+            .flat_map(|h| h.program.params_read())
+            .collect();
+        read.sort_unstable();
+        read.dedup();
+        read
+    }
+}
+
+pub struct Expression<const N: usize> {
+    on: [f64; N],
+    slots: [[f64; SLOTS]; N],
+    /// Each hook's program per lane (none where the lane has the effect off or no expression).
+    programs: [[Option<Arc<Program>>; N]; Hook::ALL.len()],
+    hydraulic: bool,
+}
+
+impl<const N: usize> LibraryEffect<N> for Expression<N> {
+    fn new(p: [&dyn ModelView; N]) -> Self {
+        let on = super::lane_mask::<N, Self>(&p);
+        let programs = Hook::ALL.map(|hook| {
+            std::array::from_fn(|l| {
+                let e = p[l].expressions().get(hook).filter(|_| on[l] > 0.0);
+                e.map(|e| Arc::clone(&e.program))
+            })
+        });
+        let hydraulic = Hook::ALL
+            .iter()
+            .zip(&programs)
+            .any(|(h, lanes)| h.hydraulic() && lanes.iter().any(Option::is_some));
+        Expression {
+            on,
+            slots: p.map(|m| Params::of(m).slots()),
+            programs,
+            hydraulic,
+        }
+    }
+}
+
+impl<const N: usize> Expression<N> {
+    /// `hook`'s expression in `lane` at the quantities `vars`, if the lane has one.
+    #[inline(always)]
+    fn run(&self, hook: Hook, lane: usize, vars: &[f64]) -> Option<f64> {
+        let p = self.programs[hook as usize][lane].as_ref()?;
+        Some(p.eval(vars, &self.slots[lane]))
+    }
+}
+
+impl<const N: usize> Effect<N> for Expression<N> {
+    /// The time since the start of the run, s (its derivative is 1 where the effect is on).
+    type State = [[f64; N]; 1];
+
+    fn initial_state(&self) -> Self::State {
+        [[0.0; N]]
+    }
+
+    #[inline(always)]
+    fn hydraulic(&self) -> bool {
+        self.hydraulic
+    }
+
+    #[inline(always)]
+    fn supply(&self, c: hook::Supply, s: &Self::State) -> f64 {
+        let t = s[0][c.lane];
+        self.run(Hook::Supply, c.lane, &[c.p_s, t]).unwrap_or(c.p_s)
+    }
+
+    #[inline(always)]
+    fn opening(&self, c: hook::Opening, s: &Self::State) -> f64 {
+        let t = s[0][c.lane];
+        self.run(Hook::Opening, c.lane, &[c.x, t]).unwrap_or(c.x)
+    }
+
+    /// Net (into chamber 1, out of chamber 2): a flow into chamber 2 lessens what leaves it.
+    #[inline(always)]
+    fn flows(&self, c: hook::Flows, s: &Self::State) -> (f64, f64) {
+        let vars = [c.p1, c.p2, c.p_s, s[0][c.lane]];
+        let q1 = self.run(Hook::Flow1, c.lane, &vars).unwrap_or(0.0);
+        let q2 = self.run(Hook::Flow2, c.lane, &vars).unwrap_or(0.0);
+        (c.q.0 + q1, c.q.1 - q2)
+    }
+
+    #[inline(always)]
+    fn extra_force(&self, c: hook::Motion, s: &Self::State) -> f64 {
+        let t = s[0][c.lane];
+        self.run(Hook::Force, c.lane, &[c.y, c.v, t]).unwrap_or(0.0)
+    }
+
+    #[inline(always)]
+    fn derivs(&self, _plant: &PlantView<'_, N>, _s: &Self::State, ds: &mut Self::State) {
+        ds[0] = self.on;
+    }
+
+    #[inline(always)]
+    fn sensed(&self, c: hook::Sensed, s: &Self::State) -> [f64; 3] {
+        let [a, d, f] = c.raw;
+        let vars = [a, d, f, s[0][c.lane]];
+        let channel = |hook, raw| self.run(hook, c.lane, &vars).unwrap_or(raw);
+        [
+            channel(Hook::Accel, a),
+            channel(Hook::Disp, d),
+            channel(Hook::SensedForce, f),
+        ]
+    }
+}
