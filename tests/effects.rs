@@ -883,6 +883,49 @@ mod expressions {
         assert_ne!(a, run_expr(&ModelParams::default()));
     }
 
+    /// A batch whose lanes share one expression (clones of one model, as a fit's), at different
+    /// parameter values and one lane off: each lane gives the bits of its own single run, and
+    /// of the library's effect it writes.
+    #[test]
+    fn lanes_that_share_an_expression_give_their_own_runs_bits() {
+        use vshake::kernel::builds;
+        use vshake::kernel::params::EffectId;
+        let sine = Sine {
+            freq_hz: 2.0,
+            amp_m: Sine::amp_from_g(0.3, 2.0),
+            taper_s: 0.5,
+            duration_s: 1.5,
+            window_cycles: Some(2),
+        };
+        let r = sine.reference(1024.0);
+        let model = with(&[(Hook::Force, "-k3_t * y * y * y")], &[("k3_t", 3.0e8)]);
+        let k3 = ModelParams::lookup("expression.k3_t").unwrap();
+        let lanes: Vec<ModelParams> = (0..8)
+            .map(|l| {
+                let mut m = model.clone();
+                k3.set(&mut m, 1.0e8 * (1 + l) as f64);
+                m.effects.expression = l != 5;
+                m
+            })
+            .collect();
+        let refs: Vec<&ModelParams> = lanes.iter().collect();
+        let solver = Solver::default();
+        let mut obs = NoObserver;
+        let batch = builds::run_single_effect(EffectId::Expression, &refs, &r, &solver, &mut obs)
+            .expect("a kernel for the expressions alone")
+            .unwrap();
+        for (l, m) in lanes.iter().enumerate() {
+            let one = builds::run_lane(m, &r, &solver, &mut NoObserver).unwrap();
+            let mut lib = ModelParams::default();
+            lib.effects.hold_down = m.effects.expression;
+            lib.effect_params.hold_down.k3 = k3.get(m);
+            let compiled = builds::run_lane(&lib, &r, &solver, &mut NoObserver).unwrap();
+            let text = |r: &simulate::LaneResult| format!("{:?}", r.metrics.columns());
+            assert_eq!(text(&batch[l]), text(&one), "lane {l}");
+            assert_eq!(text(&batch[l]), text(&compiled), "lane {l}");
+        }
+    }
+
     /// Leakage written as two chamber flows gives the library's leakage (to rounding).
     #[test]
     fn chamber_flows_give_the_library_s_leakage() {

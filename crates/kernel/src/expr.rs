@@ -56,8 +56,13 @@ enum Op {
     Mul,
     Div,
     Pow,
-    /// A function of [`FUNCTIONS`], by index.
-    Call(u8),
+    /// A function of [`FUNCTIONS`] of one argument, of two, and `clamp`, by index.
+    Call1(u8),
+    Call2(u8),
+    Clamp,
+    /// `x ^ n` for a whole constant n, 1 ≤ |n| ≤ 4: n − 1 products (and, for n < 0, one
+    /// division), as the same power written as a product gives.
+    PowInt(i8),
 }
 
 /// An expression compiled: a postfix program over a fixed-size stack.
@@ -99,7 +104,9 @@ impl Program {
         if let Some(t) = p.tokens.get(p.pos) {
             return Err(p.error_at(t.at, format!("unexpected {}", t.tok)));
         }
-        let program = Program { ops: p.ops };
+        let program = Program {
+            ops: whole_powers(p.ops),
+        };
         let depth = program.depth();
         if depth > MAX_DEPTH {
             return Err(ExprError {
@@ -136,49 +143,170 @@ impl Program {
     /// The value at quantities `vars` and parameters `params` (in [`Program::compile`]'s orders).
     #[inline]
     pub fn eval(&self, vars: &[f64], params: &[f64]) -> f64 {
-        let mut stack = [0.0f64; MAX_DEPTH];
-        let mut top = 0usize;
+        let mut st = Stack {
+            v: [0.0; MAX_DEPTH],
+            top: 0,
+        };
         for op in &self.ops {
             match *op {
-                Op::Const(c) => push(&mut stack, &mut top, c),
-                Op::Var(i) => push(&mut stack, &mut top, vars[i as usize]),
-                Op::Param(i) => push(&mut stack, &mut top, params[i as usize]),
-                Op::Neg => stack[top - 1] = -stack[top - 1],
-                Op::Call(f) => match FUNCTIONS[f as usize].1 {
-                    1 => stack[top - 1] = call1(f, stack[top - 1]),
-                    2 => {
-                        top -= 1;
-                        stack[top - 1] = call2(f, stack[top - 1], stack[top]);
-                    }
-                    // clamp(x, lo, hi), without f64::clamp's panic where lo > hi or one is NaN.
-                    _ => {
-                        top -= 2;
-                        stack[top - 1] = stack[top - 1].max(stack[top]).min(stack[top + 1]);
-                    }
-                },
-                arithmetic => {
-                    top -= 1;
-                    stack[top - 1] = apply2(arithmetic, stack[top - 1], stack[top]);
+                Op::Const(c) => st.push(c),
+                Op::Var(i) => st.push(vars[i as usize]),
+                Op::Param(i) => st.push(params[i as usize]),
+                Op::Neg => st.unary(|x| -x),
+                Op::PowInt(n) => st.unary(|x| pow_int(x, n)),
+                Op::Call1(f) => st.unary(|x| call1(f, x)),
+                Op::Add => st.binary(|a, b| a + b),
+                Op::Sub => st.binary(|a, b| a - b),
+                Op::Mul => st.binary(|a, b| a * b),
+                Op::Div => st.binary(|a, b| a / b),
+                Op::Pow => st.binary(f64::powf),
+                Op::Call2(f) => st.binary(|a, b| call2(f, a, b)),
+                // clamp(x, lo, hi), without f64::clamp's panic where lo > hi or one is NaN.
+                Op::Clamp => {
+                    let hi = st.pop();
+                    st.binary(|x, lo| x.max(lo).min(hi));
                 }
             }
         }
-        stack[0]
+        st.v[0]
     }
 }
 
+impl Program {
+    /// [`Program::eval`] in every lane at once, the same operations in each lane (so the same
+    /// bits): `vars[i]` and `params[j]` hold a quantity's and a parameter's value per lane. The
+    /// interpretation is paid once for the N lanes; the arithmetic runs over the lanes.
+    #[inline]
+    pub fn eval_lanes<const N: usize>(&self, vars: &[&[f64; N]], params: &[[f64; N]]) -> [f64; N] {
+        let mut st = [[0.0f64; N]; MAX_DEPTH];
+        let mut top = 0usize;
+        for op in &self.ops {
+            let (below, at) = st.split_at_mut(top);
+            match *op {
+                Op::Const(c) => at[0] = [c; N],
+                Op::Var(i) => at[0] = *vars[i as usize],
+                Op::Param(i) => at[0] = params[i as usize],
+                Op::Neg => lanes1(below, |x| -x),
+                Op::PowInt(n) => lanes1(below, |x| pow_int(x, n)),
+                Op::Call1(f) => lanes1(below, |x| call1(f, x)),
+                Op::Add => lanes2(below, |a, b| a + b),
+                Op::Sub => lanes2(below, |a, b| a - b),
+                Op::Mul => lanes2(below, |a, b| a * b),
+                Op::Div => lanes2(below, |a, b| a / b),
+                Op::Pow => lanes2(below, f64::powf),
+                Op::Call2(f) => lanes2(below, |a, b| call2(f, a, b)),
+                Op::Clamp => {
+                    let [.., x, lo, hi] = below else {
+                        unreachable!("clamp reads three values")
+                    };
+                    (0..N).for_each(|l| x[l] = x[l].max(lo[l]).min(hi[l]));
+                }
+            }
+            top = top + 1 - pops(*op);
+        }
+        st[0]
+    }
+}
+
+/// The top of a lane stack `below` (the values under the next free slot) mapped by `f`.
 #[inline(always)]
-fn push(stack: &mut [f64; MAX_DEPTH], top: &mut usize, v: f64) {
-    stack[*top] = v;
-    *top += 1;
+fn lanes1<const N: usize>(below: &mut [[f64; N]], f: impl Fn(f64) -> f64) {
+    let x = below.last_mut().expect("a unary op reads one value");
+    x.iter_mut().for_each(|x| *x = f(*x));
+}
+
+/// The two top values of a lane stack `below` combined by `f` into the lower one.
+#[inline(always)]
+fn lanes2<const N: usize>(below: &mut [[f64; N]], f: impl Fn(f64, f64) -> f64) {
+    let [.., a, b] = below else {
+        unreachable!("a binary op reads two values")
+    };
+    (0..N).for_each(|l| a[l] = f(a[l], b[l]));
+}
+
+/// A program's stack. Every program is postfix and reaches a depth of at most [`MAX_DEPTH`]
+/// (checked by [`Program::compile`], which alone makes programs), so `top` stays in
+/// 1..=MAX_DEPTH wherever a value is read and below MAX_DEPTH wherever one is pushed.
+struct Stack {
+    v: [f64; MAX_DEPTH],
+    top: usize,
+}
+
+impl Stack {
+    #[inline(always)]
+    fn push(&mut self, x: f64) {
+        debug_assert!(self.top < MAX_DEPTH);
+        // SAFETY: top < MAX_DEPTH where a value is pushed (the type's invariant).
+        unsafe { *self.v.get_unchecked_mut(self.top) = x };
+        self.top += 1;
+    }
+
+    #[inline(always)]
+    fn pop(&mut self) -> f64 {
+        debug_assert!(self.top >= 1);
+        self.top -= 1;
+        // SAFETY: top was in 1..=MAX_DEPTH (the type's invariant).
+        unsafe { *self.v.get_unchecked(self.top) }
+    }
+
+    #[inline(always)]
+    fn unary(&mut self, f: impl Fn(f64) -> f64) {
+        debug_assert!((1..=MAX_DEPTH).contains(&self.top));
+        // SAFETY: top in 1..=MAX_DEPTH where a value is read (the type's invariant).
+        let x = unsafe { self.v.get_unchecked_mut(self.top - 1) };
+        *x = f(*x);
+    }
+
+    #[inline(always)]
+    fn binary(&mut self, f: impl Fn(f64, f64) -> f64) {
+        let b = self.pop();
+        self.unary(|a| f(a, b));
+    }
+}
+
+/// `ops` with each negated constant folded, and each `c ^` of a whole constant c, 1 ≤ |c| ≤ 4,
+/// made a [`Op::PowInt`].
+fn whole_powers(ops: Vec<Op>) -> Vec<Op> {
+    let mut out: Vec<Op> = Vec::with_capacity(ops.len());
+    for op in ops {
+        match (op, out.last()) {
+            (Op::Neg, Some(&Op::Const(c))) => {
+                out.pop();
+                out.push(Op::Const(-c));
+            }
+            (Op::Pow, Some(&Op::Const(c)))
+                if c.fract() == 0.0 && (1.0..=4.0).contains(&c.abs()) =>
+            {
+                out.pop();
+                out.push(Op::PowInt(c as i8));
+            }
+            _ => out.push(op),
+        }
+    }
+    out
+}
+
+#[inline(always)]
+fn pow_int(x: f64, n: i8) -> f64 {
+    let m = n.unsigned_abs();
+    let mut p = x;
+    for _ in 1..m {
+        p *= x;
+    }
+    if n < 0 {
+        1.0 / p
+    } else {
+        p
+    }
 }
 
 /// How many values an instruction takes off the stack (it puts one back).
 fn pops(op: Op) -> usize {
     match op {
         Op::Const(_) | Op::Var(_) | Op::Param(_) => 0,
-        Op::Neg => 1,
-        Op::Call(f) => FUNCTIONS[f as usize].1,
-        Op::Add | Op::Sub | Op::Mul | Op::Div | Op::Pow => 2,
+        Op::Neg | Op::PowInt(_) | Op::Call1(_) => 1,
+        Op::Add | Op::Sub | Op::Mul | Op::Div | Op::Pow | Op::Call2(_) => 2,
+        Op::Clamp => 3,
     }
 }
 
@@ -208,17 +336,6 @@ fn call2(f: u8, a: f64, b: f64) -> f64 {
         13 => a.max(b),
         14 => a.powf(b),
         _ => a.atan2(b),
-    }
-}
-
-#[inline(always)]
-fn apply2(op: Op, a: f64, b: f64) -> f64 {
-    match op {
-        Op::Add => a + b,
-        Op::Sub => a - b,
-        Op::Mul => a * b,
-        Op::Div => a / b,
-        _ => a.powf(b),
     }
 }
 
@@ -456,7 +573,11 @@ impl Parser<'_> {
             self.expr()?;
         }
         self.expect(')').map_err(takes)?;
-        self.ops.push(Op::Call(f as u8));
+        self.ops.push(match arity {
+            1 => Op::Call1(f as u8),
+            2 => Op::Call2(f as u8),
+            _ => Op::Clamp,
+        });
         Ok(())
     }
 }
@@ -478,6 +599,14 @@ mod tests {
         assert_eq!(eval("1 + 2 * 3", &[]), 7.0);
         assert_eq!(eval("(1 + 2) * 3", &[]), 9.0);
         assert_eq!(eval("2 ^ 3 ^ 2", &[]), 512.0);
+        // Whole powers are products: x^3 is x·x·x, x^-2 is 1/(x·x), bit for bit.
+        let x = 1.1f64;
+        assert_eq!(eval("x^3", &[("x", x)]).to_bits(), (x * x * x).to_bits());
+        assert_eq!(
+            eval("x^-2", &[("x", x)]).to_bits(),
+            (1.0 / (x * x)).to_bits()
+        );
+        assert_eq!(eval("x^0.5", &[("x", x)]), x.powf(0.5));
         assert_eq!(eval("-x^2", &[("x", 3.0)]), -9.0);
         assert_eq!(eval("8 / 4 / 2", &[]), 1.0);
         assert_eq!(eval("10 - 4 - 3", &[]), 3.0);
@@ -513,6 +642,26 @@ mod tests {
         let p = Program::compile("k * y + c", &["y"], &["c", "k"]).unwrap();
         assert_eq!(p.eval(&[2.0], &[1.0, 10.0]), 21.0);
         assert_eq!(p.params_read(), vec![0, 1]);
+    }
+
+    /// Over the lanes, each lane's value is the one-lane evaluation's, bit for bit.
+    #[test]
+    fn the_lanes_give_each_lane_s_bits() {
+        let src =
+            "-tanh(y / k) * (c + (k - c) * exp(-(y / 0.3)^2)) + clamp(y, -c, c) + min(y, k)^1.5";
+        let p = Program::compile(src, &["y"], &["c", "k"]).unwrap();
+        let y: [f64; 4] = [0.1, -0.7, 2.5, 0.0];
+        let (c, k) = ([0.2, 0.4, 1.0, 3.0], [1.5, 0.9, 0.3, 2.0]);
+        let all = p.eval_lanes(&[&y], &[c, k]);
+        for l in 0..4 {
+            let one = p.eval(&[y[l]], &[c[l], k[l]]);
+            assert_eq!(
+                all[l].to_bits(),
+                one.to_bits(),
+                "lane {l}: {} {one}",
+                all[l]
+            );
+        }
     }
 
     #[test]

@@ -982,10 +982,7 @@ fn rhs_platen_forces<const N: usize, const SIMD: u8, Q: FlowLaw, D: Damping, E: 
     ds: &mut [[f64; N]; NP],
     des: &mut E::State,
 ) {
-    let f_ext: [f64; N] = std::array::from_fn(|lane| {
-        let (y, v) = (s[Y][lane], s[VEL][lane]);
-        effect.extra_force(hook::Motion { lane, y, v }, es)
-    });
+    let f_ext: [f64; N] = effect.extra_forces(&s[Y], &s[VEL], es);
     let mut h = bare::Hydraulics::default();
     bare::rhs::<N, SIMD, Q, D>(lp, x_c, s, ds, Some(&f_ext), Some(&mut h));
     let view = PlantView {

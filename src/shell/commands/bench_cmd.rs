@@ -85,6 +85,57 @@ fn throughput<const N: usize>(threads: usize, secs: f64, r: &Reference) -> anyho
     Ok((reps * threads * N) as f64 * r.len() as f64 / r.f_s / wall)
 }
 
+/// The library's seal friction written as an expression, as a model file would
+/// (`[model.expression] force = ...`), for the expression's cost against the compiled effect.
+const FRICTION_EXPR: &str = "-tanh(v / v_eps) * (f_c + (f_s - f_c) * exp(-(v / v_s)^2))";
+
+/// Seal friction at its defaults: compiled (the library's effect), and as [`FRICTION_EXPR`].
+fn friction_models() -> anyhow::Result<[ModelParams; 2]> {
+    use crate::kernel::effects::expression::Hook;
+    use crate::kernel::params::Range;
+    let mut compiled = ModelParams::default();
+    compiled.effects.seal_friction = true;
+    let q = compiled.effect_params.seal_friction.clone();
+    anyhow::ensure!(q.sigma == 0.0, "the expression has no viscous term");
+    let mut expr = ModelParams::default();
+    expr.effects.expression = true;
+    for (name, v) in [
+        ("f_c", q.f_c),
+        ("f_s", q.f_s),
+        ("v_s", q.v_s),
+        ("v_eps", q.v_eps),
+    ] {
+        (expr.name_expression_param(name, "-", Range::any(), v)).map_err(anyhow::Error::msg)?;
+    }
+    expr.expression.set(Hook::Force, FRICTION_EXPR)?;
+    Ok([compiled, expr])
+}
+
+/// Sim-s per wall-s of a batch of [`EFFECT_LANES`] lanes of `model` (one effect on) on one
+/// thread, through the kernel a study or a diagnosis runs for one effect.
+fn effect_throughput(model: &ModelParams, secs: f64, r: &Reference) -> anyhow::Result<f64> {
+    let id = model.effects.on().next().expect("one effect on");
+    let solver = Solver::default();
+    let run_once = || {
+        let models = [model];
+        let mut obs = NoObserver;
+        match builds::run_single_effect(id, &models, r, &solver, &mut obs) {
+            Some(x) => x,
+            None => builds::run_effect_lanes(&models, &[r; EFFECT_LANES], &solver, &mut obs),
+        }
+        .map(|x| x[0].metrics.rms_err_accel_ratio)
+    };
+    let t = Instant::now();
+    run_once()?;
+    let reps = ((secs / t.elapsed().as_secs_f64().max(1e-6)) as usize).max(2);
+    let t = Instant::now();
+    for _ in 0..reps {
+        anyhow::ensure!(run_once()?.is_finite(), "benchmark run failed");
+    }
+    let wall = t.elapsed().as_secs_f64();
+    Ok((reps * EFFECT_LANES) as f64 * r.len() as f64 / r.f_s / wall)
+}
+
 /// Figures of one benchmark run.
 #[derive(Debug, Clone, Copy)]
 pub struct Figures {
@@ -99,6 +150,10 @@ pub struct Figures {
     pub limit: f64,
     pub rates: Rates,
     pub rhs_per_sim_s: f64,
+    /// Seal friction on the sine, a batch of [`EFFECT_LANES`] on one thread: the library's
+    /// compiled effect, and the same law as an expression ([`FRICTION_EXPR`]).
+    pub friction: f64,
+    pub friction_expr: f64,
 }
 
 impl Figures {
@@ -120,7 +175,8 @@ impl Figures {
 /// stable on a busy machine.
 pub fn measure(secs: f64) -> anyhow::Result<Figures> {
     const ROUNDS: usize = 5;
-    let budget = secs / (7.0 * ROUNDS as f64);
+    let budget = secs / (9.0 * ROUNDS as f64);
+    let [friction, friction_expr] = friction_models()?;
     let r = reference();
     let quake = record_reference()?;
     let substeps = Solver::default().substeps as f64;
@@ -140,6 +196,8 @@ pub fn measure(secs: f64) -> anyhow::Result<Figures> {
             sqrts: 0.0,
         },
         rhs_per_sim_s: r.f_s * rhs_per_tick,
+        friction: 0.0,
+        friction_expr: 0.0,
     };
     let chain_iters = 50_000_000;
     for _ in 0..ROUNDS {
@@ -163,6 +221,8 @@ pub fn measure(secs: f64) -> anyhow::Result<Figures> {
         f.batch2 = f.batch2.max(throughput::<LANES>(2, budget, &r)?);
         f.record1 = f.record1.max(throughput::<LANES>(1, budget, &quake)?);
         f.record2 = f.record2.max(throughput::<LANES>(2, budget, &quake)?);
+        f.friction = f.friction.max(effect_throughput(&friction, budget, &r)?);
+        f.friction_expr = (f.friction_expr).max(effect_throughput(&friction_expr, budget, &r)?);
     }
     f.limit = f.rates.limit(rhs_per_tick, window_share, r.f_s);
     Ok(f)
@@ -263,6 +323,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     let mut out = std::io::stdout().lock();
     print_sine(&mut out, &f)?;
     print_record(&mut out, &f)?;
+    print_expression(&mut out, &f)?;
     if let Some(path) = &args.write_baseline {
         write_baseline(&mut out, path, &f)?;
     }
@@ -355,6 +416,27 @@ fn print_record(out: &mut dyn Write, f: &Figures) -> anyhow::Result<()> {
         f.batch_over_scalar(),
         f.batch_over_limit(),
         f.batch2 / f.batch1
+    )?;
+    Ok(())
+}
+
+/// An effect compiled against the same law written as an expression.
+fn print_expression(out: &mut dyn Write, f: &Figures) -> anyhow::Result<()> {
+    writeln!(
+        out,
+        "  effect: seal friction on the sine, {EFFECT_LANES} lanes, 1 thread (the kernel a study runs for one effect)"
+    )?;
+    writeln!(
+        out,
+        "  {:<34} {:>8.0} sim-s/wall-s",
+        "compiled (seal_friction)", f.friction
+    )?;
+    writeln!(
+        out,
+        "  {:<34} {:>8.0} sim-s/wall-s  ({:.2}x compiled; force = \"{FRICTION_EXPR}\")",
+        "as an expression",
+        f.friction_expr,
+        f.friction_expr / f.friction
     )?;
     Ok(())
 }

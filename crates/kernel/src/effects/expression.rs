@@ -197,6 +197,11 @@ impl Expressions {
 pub struct Expression<const N: usize> {
     on: [f64; N],
     slots: [[f64; SLOTS]; N],
+    /// The slots' values slot by slot, over the lanes (for [`Program::eval_lanes`]).
+    by_slot: [[f64; N]; SLOTS],
+    /// The force's program where every lane that switches the effect on has the same one (a
+    /// diagnosis, a fit): evaluated over the lanes at once.
+    shared_force: Option<Arc<Program>>,
     /// Each hook's program per lane (none where the lane has the effect off or no expression).
     programs: [[Option<Arc<Program>>; N]; Hook::ALL.len()],
     hydraulic: bool,
@@ -215,13 +220,26 @@ impl<const N: usize> LibraryEffect<N> for Expression<N> {
             .iter()
             .zip(&programs)
             .any(|(h, lanes)| h.hydraulic() && lanes.iter().any(Option::is_some));
+        let slots = p.map(|m| Params::of(m).slots());
+        let shared_force = shared(&programs[Hook::Force as usize], &on);
         Expression {
             on,
-            slots: p.map(|m| Params::of(m).slots()),
+            slots,
+            by_slot: std::array::from_fn(|k| std::array::from_fn(|l| slots[l][k])),
+            shared_force,
             programs,
             hydraulic,
         }
     }
+}
+
+/// The program every lane that is on has (the same one, by address), if they share one.
+fn shared<const N: usize>(lanes: &[Option<Arc<Program>>; N], on: &[f64; N]) -> Option<Arc<Program>> {
+    let mut on_lanes = (0..N).filter(|&l| on[l] > 0.0).map(|l| lanes[l].as_ref());
+    let first = on_lanes.next()??;
+    on_lanes
+        .all(|p| p.is_some_and(|p| Arc::ptr_eq(p, first)))
+        .then(|| Arc::clone(first))
 }
 
 impl<const N: usize> Expression<N> {
@@ -271,6 +289,23 @@ impl<const N: usize> Effect<N> for Expression<N> {
     fn extra_force(&self, c: hook::Motion, s: &Self::State) -> f64 {
         let t = s[0][c.lane];
         self.run(Hook::Force, c.lane, &[c.y, c.v, t]).unwrap_or(0.0)
+    }
+
+    /// Over the lanes at once where they share the program, lanes that are off giving 0.
+    #[inline(always)]
+    fn extra_forces(&self, y: &[f64; N], v: &[f64; N], s: &Self::State) -> [f64; N] {
+        let Some(p) = &self.shared_force else {
+            return std::array::from_fn(|lane| {
+                let c = hook::Motion {
+                    lane,
+                    y: y[lane],
+                    v: v[lane],
+                };
+                self.extra_force(c, s)
+            });
+        };
+        let f = p.eval_lanes(&[y, v, &s[0]], &self.by_slot);
+        std::array::from_fn(|l| if self.on[l] > 0.0 { f[l] } else { 0.0 })
     }
 
     #[inline(always)]

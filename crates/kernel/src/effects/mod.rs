@@ -583,6 +583,23 @@ pub trait Effect<const N: usize>: Sync {
         0.0
     }
 
+    /// [`Effect::extra_force`] of every lane at once, at displacements `y` and velocities `v`
+    /// (the bare plant's vector path calls it): lane by lane unless an effect can do better over
+    /// the lanes (an interpreted expression), with the same numbers.
+    #[inline(always)]
+    fn extra_forces(&self, y: &[f64; N], v: &[f64; N], s: &Self::State) -> [f64; N] {
+        std::array::from_fn(|lane| {
+            self.extra_force(
+                hook::Motion {
+                    lane,
+                    y: y[lane],
+                    v: v[lane],
+                },
+                s,
+            )
+        })
+    }
+
     /// Derivatives of the extra states.
     #[inline(always)]
     fn derivs(&self, _plant: &PlantView<'_, N>, _s: &Self::State, _ds: &mut Self::State) {}
@@ -701,6 +718,14 @@ impl<const N: usize, A: Effect<N>, B: Effect<N>> Effect<N> for Both<A, B> {
     #[inline(always)]
     fn extra_force(&self, c: hook::Motion, s: &Self::State) -> f64 {
         self.0.extra_force(c, &s.0) + self.1.extra_force(c, &s.1)
+    }
+    #[inline(always)]
+    fn extra_forces(&self, y: &[f64; N], v: &[f64; N], s: &Self::State) -> [f64; N] {
+        let (a, b) = (
+            self.0.extra_forces(y, v, &s.0),
+            self.1.extra_forces(y, v, &s.1),
+        );
+        std::array::from_fn(|l| a[l] + b[l])
     }
     #[inline(always)]
     fn sensed(&self, c: hook::Sensed, s: &Self::State) -> [f64; 3] {
@@ -853,6 +878,14 @@ impl<const N: usize, E: Effect<N>> Effect<N> for Gated<E> {
             self.effect.extra_force(c, s)
         } else {
             0.0
+        }
+    }
+    #[inline(always)]
+    fn extra_forces(&self, y: &[f64; N], v: &[f64; N], s: &Self::State) -> [f64; N] {
+        if self.on {
+            self.effect.extra_forces(y, v, s)
+        } else {
+            [0.0; N]
         }
     }
     #[inline(always)]
