@@ -824,6 +824,44 @@ fn a_bad_expression_is_refused_with_its_key() {
     ] {
         assert!(stderr.contains(needle), "{needle}: {stderr}");
     }
+    // A misspelt hook, a number no float holds; no table at all for `--effect expression`.
+    let cases = [
+        (
+            "forse = \"-k*y\"\nk = 1.0\n",
+            "unknown hook (did you mean `force`?)",
+        ),
+        ("force = \"-1e400*y\"\n", "1e400 is too large"),
+        (
+            "force = \"-1e4*v\"\n",
+            "read no named parameter, so there is nothing to fit",
+        ),
+    ];
+    for (table, needle) in cases {
+        std::fs::write(&model, format!("[model.expression]\n{table}")).unwrap();
+        let m = model.to_str().unwrap();
+        let args = [
+            "fit",
+            "studies/overlap/campaign.toml",
+            "--model",
+            m,
+            "--effect",
+            "expression",
+        ];
+        let (code, _, stderr) = study(&args);
+        assert_eq!(code, 2, "{table}: {stderr}");
+        assert!(stderr.contains(needle), "{needle}: {stderr}");
+    }
+    let (code, _, stderr) = study(&[
+        "fit",
+        "studies/overlap/campaign.toml",
+        "--effect",
+        "expression",
+    ]);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains("the model writes no expression"),
+        "{stderr}"
+    );
 }
 
 mod expressions {

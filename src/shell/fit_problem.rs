@@ -104,6 +104,19 @@ pub(crate) fn check_effect(e: &str, flag: &str) -> anyhow::Result<EffectId> {
     })
 }
 
+/// For the `expression` effect, that the model writes an expression, and where `to_fit`, one
+/// that reads a named parameter; every other effect passes.
+pub(crate) fn check_written(e: EffectId, model: &ModelParams, to_fit: bool) -> anyhow::Result<()> {
+    let x = &model.expression;
+    let why = match () {
+        _ if e != EffectId::Expression => return Ok(()),
+        _ if x.hooks.is_empty() => "the model writes no expression: give --model a file with a [model.expression] table (docs/formats.md, \"Expressions\")",
+        _ if to_fit && x.slots_read().is_empty() => "the model's expressions read no named parameter, so there is nothing to fit: name one (`c = 1.0`) and write it in an expression",
+        _ => return Ok(()),
+    };
+    Err(BadInput(format!("--effect expression: {why}")).into())
+}
+
 /// The free parameters: each effect's defaults, then the named ones.
 pub(crate) fn free_parameters(
     effects: &[String],
@@ -113,9 +126,13 @@ pub(crate) fn free_parameters(
     let mut free: Vec<Free> = Vec::new();
     for e in effects {
         let e = check_effect(e, "--effect")?;
+        check_written(e, model, true)?;
         free.extend(crate::orchestration::diagnosis::diagnose::free_of(e, model));
     }
-    let all: Vec<String> = ModelParams::registry().map(|p| p.path()).collect();
+    let named_expr = model.expression.names.iter().filter(|n| !n.is_empty());
+    let all: Vec<String> = (ModelParams::registry().map(|p| p.path()))
+        .chain(named_expr.map(|n| format!("expression.{n}")))
+        .collect();
     let all_refs: Vec<&str> = all.iter().map(String::as_str).collect();
     for n in named {
         let info = ModelParams::lookup(n.trim()).ok_or_else(|| {

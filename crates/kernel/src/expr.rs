@@ -424,10 +424,17 @@ fn number(chars: &[char], start: usize) -> Result<(f64, usize), ExprError> {
         }
     }
     let text: String = chars[start..i].iter().collect();
-    text.parse().map(|v| (v, i)).map_err(|_| ExprError {
-        at: start,
-        message: format!("{text:?} is not a number"),
-    })
+    match text.parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok((v, i)),
+        Ok(_) => Err(ExprError {
+            at: start,
+            message: format!("{text} is too large for a 64-bit float"),
+        }),
+        Err(_) => Err(ExprError {
+            at: start,
+            message: format!("{text:?} is not a number"),
+        }),
+    }
 }
 
 /// Recursive descent, emitting postfix: expr = term {(+|-) term}; term = unary {(*|/) unary};
@@ -539,7 +546,9 @@ impl Parser<'_> {
         } else if name == "pi" {
             Op::Const(std::f64::consts::PI)
         } else {
-            let known = [self.vars, self.params].concat().join(", ");
+            let names = [self.vars, self.params].concat();
+            let known: Vec<&str> = names.into_iter().filter(|n| !n.is_empty()).collect();
+            let known = known.join(", ");
             return Err(self.error_at(
                 at,
                 format!("unknown name `{name}` (this expression knows {known} and pi)"),
@@ -684,6 +693,11 @@ mod tests {
         assert!(err("y v").message.contains("unexpected name `v`"));
         assert!(err("y # 2").message.contains("unexpected character '#'"));
         assert!(err("1.2.3").message.contains("not a number"));
+        assert!(
+            err("1e400 * y").message.contains("too large"),
+            "{}",
+            err("1e400 * y")
+        );
         let deep = format!("{}y{}", "(y+".repeat(30), ")".repeat(30));
         assert!(err(&deep).message.contains("stack of"), "{}", err(&deep));
     }

@@ -43,6 +43,7 @@ pub(crate) fn run_to(args: &FitArgs, o: &mut dyn Write) -> anyhow::Result<()> {
     }
     let mut implausible = residual_warnings(problem, &r.before, Some(&r.after));
     implausible.extend(noise_warnings(problem, Some(&r.after)));
+    implausible.extend(undetermined(&free, &r));
     if args.strict && !implausible.is_empty() {
         return Err(BadInput(format!("{} (--strict)", implausible.join("\n"))).into());
     }
@@ -70,6 +71,15 @@ pub(crate) fn run_to(args: &FitArgs, o: &mut dyn Write) -> anyhow::Result<()> {
     writeln!(o, "\n  wrote {} (use it with --model)", args.out.display())?;
     print_checks(o, &loaded.checks, &implausible)?;
     Ok(())
+}
+
+/// A warning for each free parameter the campaign's features do not determine (an infinite
+/// or undefined standard error: the misfit does not change with it, or only with others).
+fn undetermined(free: &[Free], r: &fit::FitResult) -> Vec<String> {
+    (free.iter().zip(&r.se))
+        .filter(|(_, se)| !se.is_finite())
+        .map(|(f, _)| format!("{}: the campaign's features do not determine it (its standard error is infinite), so its value is not an estimate; fix it, or give tests that it changes (the features are what `study compare` lists per test)", f.info.path()))
+        .collect()
 }
 
 /// The estimates with their starts and standard errors, and their correlations.

@@ -34,10 +34,11 @@ const NOISY: [(&str, &str); 5] = [
 
 /// Switches on the named effects.
 pub(crate) fn apply_effects(model: &mut ModelParams, effects: &[String]) -> anyhow::Result<()> {
+    use crate::shell::fit_problem::{check_effect, check_written};
     for e in effects {
-        *model
-            .effects
-            .get_mut(crate::shell::fit_problem::check_effect(e, "--effect")?) = true;
+        let id = check_effect(e, "--effect")?;
+        check_written(id, model, false)?;
+        *model.effects.get_mut(id) = true;
     }
     Ok(())
 }

@@ -882,10 +882,12 @@ impl StateMap {
             _ => format!("c_{hook} * {written}"),
         };
         let of = if st == State::Velocity { "m/s" } else { "m" };
-        let unit = match degree {
-            0.0 => unit.to_string(),
-            1.0 => format!("{unit}/({of})"),
-            d => format!("{unit}/({of})^{d}"),
+        let unit = match (degree, of) {
+            (0.0, _) => unit.to_string(),
+            (1.0, _) => format!("{unit}/{of}"),
+            (2.0, "m") => format!("{unit}/m²"),
+            (3.0, "m") => format!("{unit}/m³"),
+            (d, _) => format!("{unit}/({of})^{d}"),
         };
         Some(format!(
             "[model.expression]\nenabled = false   # a candidate: `fit --effect expression` or a diagnosis switches it on\n{hook} = \"{form}\"\nc_{hook} = {{ value = {c:.4e}, unit = \"{unit}\" }}"

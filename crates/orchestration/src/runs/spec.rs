@@ -106,7 +106,18 @@ fn read_expression(t: &mut Fields<'_>, model: &mut ModelParams, issues: &mut Iss
     let keys: Vec<&String> = t.keys().filter(|k| k.as_str() != "enabled").collect();
     let (hooks, params): (Vec<&String>, Vec<&String>) =
         keys.into_iter().partition(|k| Hook::parse(k).is_some());
+    let hook_keys: Vec<&str> = Hook::ALL.iter().map(|h| h.key()).collect();
+    let mut misnamed = false;
     for name in params {
+        // A string is an expression: its key names a hook the effect does not have.
+        if let Some(toml::Value::String(_)) = t.value(name) {
+            let hint = crate::toml_fields::suggest(name, &hook_keys)
+                .map_or(String::new(), |s| format!(" (did you mean `{s}`?)"));
+            let keys = hook_keys.join(", ");
+            issues.push(t.path_of(name), format!("unknown hook{hint}; an expression is one of {keys} (a number or a table is a parameter)"));
+            misnamed = true;
+            continue;
+        }
         read_expression_param(t, name, model, issues);
     }
     for key in &hooks {
@@ -117,11 +128,15 @@ fn read_expression(t: &mut Fields<'_>, model: &mut ModelParams, issues: &mut Iss
             issues.push(t.path_of(key), format!("{e}, in {src:?}"));
         }
     }
-    if hooks.is_empty() {
-        let keys: Vec<&str> = Hook::ALL.iter().map(|h| h.key()).collect();
+    // A table that only changes parameters (a run file's, over a model file's) needs none.
+    if hooks.is_empty() && !misnamed && model.expression.hooks.is_empty() {
+        let path = t.path_of("");
         issues.push(
-            t.path_of("force"),
-            format!("no expression: give one or more of {}", keys.join(", ")),
+            path.trim_end_matches('.'),
+            format!(
+                "no expression: give one or more of {}",
+                hook_keys.join(", ")
+            ),
         );
     }
 }
