@@ -754,24 +754,9 @@ fn an_expression_in_a_model_file_is_fitted_and_diagnosed() {
         out.to_str().unwrap(),
     ]);
     assert_eq!(code, 0, "{stdout}{stderr}");
-    let row: Vec<&str> = (stdout.lines())
-        .find(|l| l.trim_start().starts_with("expression.delta"))
-        .expect("delta's row")
-        .split_whitespace()
-        .collect();
-    let (est, se): (f64, f64) = (row[2].parse().unwrap(), row[3].parse().unwrap());
+    let (est, se) = estimate(&stdout, "expression.delta");
     assert!((est - 3.0e-4).abs() <= 2.0 * se, "{est} ± {se}: {stdout}");
-    let campaign = stdout.lines().find(|l| l.contains("noise floor")).unwrap();
-    let after: f64 = campaign
-        .rsplit('(')
-        .next()
-        .unwrap()
-        .split('x')
-        .next()
-        .unwrap()
-        .parse()
-        .unwrap();
-    assert!(after <= 1.5, "{campaign}");
+    assert!(noise_ratio_after(&stdout) <= 1.5, "{stdout}");
     // The fitted model file reads back with its expression and the fitted value.
     let fitted = std::fs::read_to_string(&out).unwrap();
     assert!(
@@ -792,6 +777,25 @@ fn an_expression_in_a_model_file_is_fitted_and_diagnosed() {
         verdict.contains("most likely missing: expression (opening = \"sign(x) * max(abs(x) - delta, 0)\") with delta = 3.00e-4 m;"),
         "{verdict}"
     );
+}
+
+/// The estimate and standard error of `path` in `study fit`'s table.
+fn estimate(stdout: &str, path: &str) -> (f64, f64) {
+    let row: Vec<&str> = (stdout.lines())
+        .find(|l| l.trim_start().starts_with(path))
+        .unwrap_or_else(|| panic!("{path}'s row: {stdout}"))
+        .split_whitespace()
+        .collect();
+    (row[2].parse().unwrap(), row[3].parse().unwrap())
+}
+
+/// The campaign's residual after `study fit`, over its noise floor ("(0.98x after)").
+fn noise_ratio_after(stdout: &str) -> f64 {
+    let line = stdout.lines().find(|l| l.contains("noise floor")).unwrap();
+    let ratio = line.rsplit('(').next().and_then(|r| r.split('x').next());
+    ratio
+        .and_then(|r| r.parse().ok())
+        .expect("the ratio to the noise floor")
 }
 
 /// A model file's expression that does not compile, or a parameter that is not a name, is
@@ -1079,26 +1083,8 @@ fn the_state_map_s_expression_fits_what_is_hidden() {
         ];
         let (code, stdout, stderr) = study(&args);
         assert_eq!(code, 0, "{stdout}{stderr}");
-        let row: Vec<&str> = (stdout.lines())
-            .find(|l| l.trim_start().starts_with(&format!("expression.{name}")))
-            .expect("the coefficient's row")
-            .split_whitespace()
-            .collect();
-        let (est, se): (f64, f64) = (row[2].parse().unwrap(), row[3].parse().unwrap());
-        assert!(
-            (est - truth).abs() <= 2.0 * se.max(1e-3 * truth.abs()),
-            "{est} ± {se}: {stdout}"
-        );
-        let line = stdout.lines().find(|l| l.contains("noise floor")).unwrap();
-        let after: f64 = line
-            .rsplit('(')
-            .next()
-            .unwrap()
-            .split('x')
-            .next()
-            .unwrap()
-            .parse()
-            .unwrap();
-        assert!(after <= 1.5, "{line}");
+        let (est, se) = estimate(&stdout, &format!("expression.{name}"));
+        assert!((est - truth).abs() <= 2.0 * se, "{est} ± {se}: {stdout}");
+        assert!(noise_ratio_after(&stdout) <= 1.5, "{stdout}");
     }
 }
