@@ -234,7 +234,10 @@ impl<const N: usize> LibraryEffect<N> for Expression<N> {
 }
 
 /// The program every lane that is on has (the same one, by address), if they share one.
-fn shared<const N: usize>(lanes: &[Option<Arc<Program>>; N], on: &[f64; N]) -> Option<Arc<Program>> {
+fn shared<const N: usize>(
+    lanes: &[Option<Arc<Program>>; N],
+    on: &[f64; N],
+) -> Option<Arc<Program>> {
     let mut on_lanes = (0..N).filter(|&l| on[l] > 0.0).map(|l| lanes[l].as_ref());
     let first = on_lanes.next()??;
     on_lanes
