@@ -242,7 +242,8 @@ fn read_baseline(path: &std::path::Path) -> anyhow::Result<(f64, f64)> {
     Ok((get("batch_over_scalar")?, get("batch_over_limit")?))
 }
 
-/// Times a diagnosis of `campaign` with every candidate of the library.
+/// Times a diagnosis of `campaign` with every candidate of the library (and the state map's
+/// term, where it names one), as `study diagnose` runs it.
 fn bench_diagnose(campaign: &std::path::Path, max_seconds: Option<f64>) -> anyhow::Result<()> {
     let model = crate::kernel::params::ModelParams::default();
     let mut loaded = crate::shell::fit_problem::load_problem(campaign, &model, false)?;
@@ -252,10 +253,10 @@ fn bench_diagnose(campaign: &std::path::Path, max_seconds: Option<f64>) -> anyho
     loaded.problem.progress = Some(std::sync::Arc::new(move |_| {
         counter.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     }));
-    let problem = &loaded.problem;
+    let problem = &mut loaded.problem;
     let candidates: Vec<_> = crate::kernel::params::EffectId::ALL
         .into_iter()
-        .filter(|e| e.screened())
+        .filter(|&e| e.screened() || e == crate::kernel::params::EffectId::Expression)
         .collect();
     let simulated: f64 = problem
         .tests

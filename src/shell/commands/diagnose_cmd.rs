@@ -49,8 +49,9 @@ pub(crate) fn run_to(args: &DiagnoseArgs, o: &mut dyn Write) -> anyhow::Result<(
     )?;
     let model = load_model(args.model.as_deref())?;
     let candidates: Vec<EffectId> = if args.candidates.is_empty() {
-        // The model file's expressions, switched off there, are a candidate too.
-        let written = |e: EffectId| e == EffectId::Expression && !model.expression.hooks.is_empty();
+        // The expressions, switched off: the model file's, or else the state map's term (the
+        // diagnosis drops the candidate where there is neither).
+        let written = |e: EffectId| e == EffectId::Expression;
         EffectId::ALL
             .into_iter()
             .filter(|&e| (e.screened() || written(e)) && !model.effects.get(e))
@@ -63,10 +64,10 @@ pub(crate) fn run_to(args: &DiagnoseArgs, o: &mut dyn Write) -> anyhow::Result<(
     };
     let mut loaded = load_problem(&args.campaign, &model, args.strict)?;
     let progress = fit_problem::with_progress(&mut loaded.problem, "diagnose", args.log_progress);
-    let problem = loaded.problem;
+    let mut problem = loaded.problem;
     let t0 = std::time::Instant::now();
     let d = pool(args.threads)?
-        .install(|| diagnose::diagnose_campaign(&problem, &candidates, &loaded.aligned));
+        .install(|| diagnose::diagnose_campaign(&mut problem, &candidates, &loaded.aligned));
     progress.finish();
     let secs = t0.elapsed().as_secs_f64();
     if let Some(f) = &d.baseline.failure {
@@ -115,6 +116,14 @@ pub(crate) fn run_to(args: &DiagnoseArgs, o: &mut dyn Write) -> anyhow::Result<(
         writeln!(o, "\n  wrote {} and its tables (candidates, selection, tests, evidence, statemap, stateterms .parquet)", dir.join("report.html").display())?;
     }
     if let Some(out) = &args.out {
+        let mut model = model;
+        if let Some((t, group)) = &d.map_term {
+            t.install(&mut model).map_err(RunFailed)?;
+            if group.len() < problem.tests.len() && d.named_fit().is_some() {
+                let tests = d.signals.list(group.iter().copied());
+                writeln!(o, "\n  note: the state map's expression was fitted to {tests} only; the model written applies it to every test (a campaign's `model = {{ expression = {{ enabled = false }} }}` on the others keeps it off there)")?;
+            }
+        }
         write_named(o, out, &args.campaign, &model, &d)?;
     }
     print_checks(o, &loaded.checks, &implausible)?;

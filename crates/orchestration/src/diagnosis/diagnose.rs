@@ -46,7 +46,7 @@ use crate::diagnosis::compare::ComparedTest;
 use crate::diagnosis::fit::{self, FeatureInfo, Free, Problem};
 use crate::diagnosis::seeds::{self, Seed};
 use crate::diagnosis::signals::{self, Signals};
-use crate::diagnosis::statemap::StateMap;
+use crate::diagnosis::statemap::{MapTerm, StateMap};
 use crate::measured::aligned::AlignedTest;
 use rayon::prelude::*;
 use vshake_kernel::effects::building;
@@ -212,6 +212,9 @@ pub struct Diagnosis {
     /// The model's expressions as written (`opening = "x - c*sign(x)"`), which a verdict that
     /// names the `expression` effect gives as its form; empty where it writes none.
     pub written: String,
+    /// The state map's term, where the diagnosis gave it to the model as the `expression`
+    /// candidate, and the tests it gave it to ([`diagnose_campaign`]).
+    pub map_term: Option<(MapTerm, Vec<usize>)>,
 }
 
 /// What the diagnosis concludes.
@@ -415,14 +418,26 @@ impl Diagnosis {
     }
 
     /// [`Self::signal_note`] when the named effects leave more than [`NOISE_FACTOR`] times the
-    /// noise floor; empty otherwise.
+    /// noise floor, or name the state map's term fitted to a group of tests (the evidence it
+    /// rests on); empty otherwise.
     fn signal_note_if_short(&self) -> String {
         match self.named_fit() {
             Some((_, f)) if f.after.residual_rms() > NOISE_FACTOR * self.noise_rms => {
                 self.signal_note()
             }
+            Some(_) if self.names_a_group() => self.signal_note(),
             _ => String::new(),
         }
+    }
+
+    /// Whether the verdict names the state map's term given to some tests only.
+    fn names_a_group(&self) -> bool {
+        let named = match self.verdict() {
+            Verdict::Missing { effects, .. } | Verdict::Unexplained { effects, .. } => effects,
+            Verdict::NothingSignificant => Vec::new(),
+        };
+        let group = self.map_term.as_ref().map_or(0, |(_, g)| g.len());
+        named.iter().any(|p| p.effect == EffectId::Expression) && group < self.test_misfit.len()
     }
 
     /// "; the missing valve flow follows sign(x) in spool opening (R² = 0.96): …", from the
@@ -716,30 +731,144 @@ pub fn scan_starts(problem: &Problem, free: &[Free]) -> Vec<Free> {
 /// [`crate::diagnosis::seeds`]) and ranked, and the residual the named effects leave mapped.
 /// The maps stay None, the signals empty, where a test's model run fails (the diagnosis
 /// reports that itself).
+///
+/// The `expression` effect, where `candidates` has it, is the model's own expressions; where the
+/// model writes none, the state map's static term ([`StateMap::term`]) is given to the tests'
+/// models in `problem` as their expression (the effect left off) and fitted as that candidate
+/// ([`MapTerm`]); with neither, the candidate is dropped. Where the signals find tests that
+/// differ (some at the noise, others not), the term is the map of the tests not at the noise,
+/// given to those tests only: a candidate for that group of tests.
 pub fn diagnose_campaign(
-    problem: &Problem,
+    problem: &mut Problem,
     candidates: &[EffectId],
     aligned: &[AlignedTest],
 ) -> Diagnosis {
     let c = compared(aligned).ok();
     let map = c.as_ref().map(|c| crate::diagnosis::statemap::map(c));
     let seeds = map.as_ref().map_or_else(Vec::new, seeds::from_map);
-    let mut d = diagnose(problem, candidates, &seeds);
-    if let Some(c) = &c {
-        let sigma: Vec<[f64; 3]> = problem.tests.iter().map(|t| t.sigma).collect();
-        d.signals = signals::read(c, &sigma, &d.test_misfit);
-    }
+    let signals = c.as_ref().map(|c| read_signals(problem, c));
+    let writes = !problem.tests[0].model.expression.hooks.is_empty();
+    let asked = candidates.contains(&EffectId::Expression);
+    let term = match (&c, asked && !writes) {
+        (Some(c), true) => map_term(problem, c, map.as_ref(), signals.as_ref()),
+        _ => None,
+    };
+    let candidates: Vec<EffectId> = (candidates.iter().copied())
+        .filter(|&e| e != EffectId::Expression || writes || term.is_some())
+        .collect();
+    let mut d = diagnose(problem, &candidates, &seeds, term.is_some());
+    d.signals = signals.unwrap_or(d.signals);
     d.state_map = map;
-    d.map_after(aligned);
+    let mut aligned = aligned.to_vec();
+    if let Some((t, group)) = &term {
+        for &i in group {
+            // Installed in these tests' models before: it cannot fail here.
+            t.install(&mut aligned[i].model)
+                .expect("the map's term installs");
+        }
+        if group.len() < aligned.len() {
+            d.written += &format!(" in {} only", d.signals.list(group.iter().copied()));
+        }
+    }
+    d.map_after(&aligned);
+    d.map_term = term;
     d
+}
+
+/// The signals' evidence in the compared tests `c` of `problem`'s starting model.
+fn read_signals(problem: &Problem, c: &[ComparedTest]) -> Signals {
+    let baseline = problem.evaluate(1, &|_, m| m.clone()).remove(0);
+    let sigma: Vec<[f64; 3]> = problem.tests.iter().map(|t| t.sigma).collect();
+    signals::read(c, &sigma, &problem.test_misfit(&baseline))
+}
+
+/// The state map's term given to the models of `problem`'s tests, and those tests: the term of
+/// the campaign's `map`, given to every test; or, where the `signals` split the tests (some at
+/// the noise, others not), the term of the map of the tests not at the noise, given to those
+/// only, if its fit leaves a lower χ² (a split also comes of an effect that grows with the
+/// amplitude, which the tests at the noise carry too, below their noise). None where there is
+/// no term or a model refuses it.
+fn map_term(
+    problem: &mut Problem,
+    c: &[ComparedTest],
+    map: Option<&StateMap>,
+    signals: Option<&Signals>,
+) -> Option<(MapTerm, Vec<usize>)> {
+    let clean: Vec<usize> = signals
+        .and_then(|s| s.split.as_ref())
+        .map_or_else(Vec::new, |(_, clean)| clean.iter().map(|x| x.0).collect());
+    let every: Vec<usize> = (0..c.len()).collect();
+    let whole = map.and_then(StateMap::term).map(|t| (t, every));
+    if clean.is_empty() {
+        return whole.filter(|(t, g)| install(problem, t, g));
+    }
+    let group: Vec<usize> = (0..c.len()).filter(|i| !clean.contains(i)).collect();
+    let some: Vec<ComparedTest> = group.iter().map(|&i| c[i].clone()).collect();
+    let part = crate::diagnosis::statemap::map(&some)
+        .term()
+        .map(|t| (t, group));
+    let chi2 = |problem: &mut Problem, (t, g): &(MapTerm, Vec<usize>)| {
+        if !install(problem, t, g) {
+            return f64::INFINITY;
+        }
+        let free = expression_free(reference_model(problem, EffectId::Expression));
+        let before = problem.evaluate(1, &|_, m| m.clone()).remove(0);
+        let fit = fit::fit_unprofiled(problem, &free, MAX_ITER, before, f64::INFINITY);
+        fit.map_or(f64::INFINITY, |f| f.chi2_after())
+    };
+    let scored: Vec<((MapTerm, Vec<usize>), f64)> = [whole, part]
+        .into_iter()
+        .flatten()
+        .map(|x| {
+            let c = chi2(problem, &x);
+            (x, c)
+        })
+        .collect();
+    let best = scored.into_iter().min_by(|a, b| a.1.total_cmp(&b.1))?;
+    install(problem, &best.0 .0, &best.0 .1).then_some(best.0)
+}
+
+/// `problem`'s tests given the expression `term`, those of `group` alone (the others none);
+/// false where a model refuses it.
+fn install(problem: &mut Problem, term: &MapTerm, group: &[usize]) -> bool {
+    for (i, t) in problem.tests.iter_mut().enumerate() {
+        t.model.expression.hooks.clear();
+        if group.contains(&i) && term.install(&mut t.model).is_err() {
+            return false;
+        }
+    }
+    true
+}
+
+/// A significant library candidate within [`SIGNIFICANT_BIC`] of a leading state-map term is
+/// ranked first: the term is the regression's stand-in for whatever is missing, and names the
+/// physics only where it fits clearly better than every effect the library has.
+fn prefer_library(out: &mut [Candidate]) {
+    let Some(lead) = out.first().filter(|c| c.effect == EffectId::Expression) else {
+        return;
+    };
+    let close = |c: &Candidate| c.significant() && lead.delta_bic - c.delta_bic <= SIGNIFICANT_BIC;
+    if let Some(i) = out
+        .iter()
+        .position(|c| c.effect != EffectId::Expression && close(c))
+    {
+        out[..=i].rotate_right(1);
+    }
 }
 
 /// Fits every candidate (from its own start and from each of its seeds', keeping the better
 /// fit: [`crate::diagnosis::seeds`]) and ranks them.
-pub fn diagnose(problem: &Problem, candidates: &[EffectId], seeds: &[Seed]) -> Diagnosis {
+///
+/// `generic`: the `expression` candidate is the state map's term, which ranks behind a library
+/// effect that fits about as well ([`prefer_library`]).
+pub fn diagnose(
+    problem: &Problem,
+    candidates: &[EffectId],
+    seeds: &[Seed],
+    generic: bool,
+) -> Diagnosis {
     let baseline = problem.evaluate(1, &|_, m| m.clone()).remove(0);
     let n = problem.dof().round() as usize;
-    let model0 = &problem.tests[0].model;
     let score = Scoring {
         chi2_b: baseline.chi2(),
         n: n as f64,
@@ -751,7 +880,8 @@ pub fn diagnose(problem: &Problem, candidates: &[EffectId], seeds: &[Seed]) -> D
     let mut out: Vec<Candidate> = candidates
         .par_iter()
         .map(|&effect| {
-            let own = scanned(problem, &free_of(effect, model0), effect, 0);
+            let model = reference_model(problem, effect);
+            let own = scanned(problem, &free_of(effect, model), effect, 0);
             let seeded = seeds::starts(&own, effect, seeds);
             let starts =
                 std::iter::once((own, None)).chain(seeded.into_iter().map(|(f, o)| (f, Some(o))));
@@ -767,6 +897,9 @@ pub fn diagnose(problem: &Problem, candidates: &[EffectId], seeds: &[Seed]) -> D
     rank(&mut out);
     polish_leaders(problem, &mut out, &baseline, &score);
     profile_leaders(problem, &mut out, &score);
+    if generic {
+        prefer_library(&mut out);
+    }
     let more = forward_selection(problem, &out, &score);
     let (more, own) = prune(problem, &out, more, &score);
     Diagnosis {
@@ -786,8 +919,22 @@ pub fn diagnose(problem: &Problem, candidates: &[EffectId], seeds: &[Seed]) -> D
             names: problem.tests.iter().map(|t| t.name.clone()).collect(),
             ..Default::default()
         },
-        written: written(model0),
+        written: written(reference_model(problem, EffectId::Expression)),
+        map_term: None,
     }
+}
+
+/// The model whose parameters a candidate of `effect` starts from: the first test's, or for the
+/// expressions the first that writes them (the state map's term may be given to some tests
+/// only).
+fn reference_model(problem: &Problem, effect: EffectId) -> &ModelParams {
+    let mut models = problem.tests.iter().map(|t| &t.model);
+    let writes = |m: &&ModelParams| !m.expression.hooks.is_empty();
+    match effect {
+        EffectId::Expression => models.find(writes),
+        _ => None,
+    }
+    .unwrap_or(&problem.tests[0].model)
 }
 
 /// `model`'s expressions as written: `opening = "…", force = "…"`.
@@ -997,13 +1144,13 @@ fn best_addition(
     (chosen, free, at): (&[Part], &[Free], &fit::Eval),
     score: &Scoring,
 ) -> Option<(Part, Vec<Free>, fit::FitResult, f64)> {
-    let model0 = &problem.tests[0].model;
     let rest = additions(ranked, chosen);
     let tried: Vec<(Part, Vec<Free>, Result<fit::FitResult, fit::FitError>)> = rest
         .par_iter()
         .map(|&part| {
             let mut f = free.to_vec();
-            f.extend(free_of_stage(part.effect, part.stage, model0));
+            let model = reference_model(problem, part.effect);
+            f.extend(free_of_stage(part.effect, part.stage, model));
             let f = scanned(problem, &f, part.effect, part.stage);
             let r = fit::fit_from(problem, &f, MAX_ITER, at.clone());
             (part, f, r)

@@ -488,7 +488,7 @@ impl Signals {
     }
 
     /// "a, b and c" of the tests' names.
-    fn list(&self, tests: impl Iterator<Item = usize>) -> String {
+    pub fn list(&self, tests: impl Iterator<Item = usize>) -> String {
         let v: Vec<&str> = tests.map(|t| self.names[t].as_str()).collect();
         join_and(&v)
     }

@@ -65,6 +65,8 @@ use faer::prelude::*;
 use faer::Mat;
 use std::f64::consts::PI;
 use vshake_kernel::actuator::{self, ActuatorLane};
+use vshake_kernel::effects::expression::Hook;
+use vshake_kernel::params::ModelParams;
 use vshake_kernel::servovalve::Valves;
 
 /// Bins per state in the map.
@@ -850,6 +852,11 @@ impl StateMap {
     /// (`force`, in `v` or `y`). Its coefficient, named `c_<hook>`, starts at the regression's
     /// value in SI units, so that `study fit --effect expression` starts near it.
     pub fn expression(&self) -> Option<String> {
+        self.term().map(|t| t.toml())
+    }
+
+    /// [`StateMap::expression`]'s term: its hook, form and coefficient.
+    pub fn term(&self) -> Option<MapTerm> {
         let Some(Named::Static(reg, t)) = self.named() else {
             return None;
         };
@@ -861,10 +868,10 @@ impl StateMap {
         // the model lacks with the sign reversed (r_F − M·r_a = −F).
         let (hook, unit, sign, to_si, scale) = match (reg.residual, st) {
             (Residual::ValveOpening, State::SpoolOpening) => {
-                ("opening", "m", 1.0, self.stroke_m, self.stroke_m)
+                (Hook::Opening, "m", 1.0, self.stroke_m, self.stroke_m)
             }
             (Residual::PlatenForce, State::Velocity | State::Displacement) => (
-                "force",
+                Hook::Force,
                 "N",
                 -1.0,
                 self.res_scale[at(Residual::PlatenForce)],
@@ -873,13 +880,13 @@ impl StateMap {
             _ => return None,
         };
         let (written, degree) = t.term.expression(st.symbol(), NULL_WIDTH * scale);
-        let c = sign * t.slope * to_si / scale.powf(degree);
+        let param = format!("c_{}", hook.key());
         let form = match (hook, t.term) {
             // A step with the opening's sign: lands that overlap (c < 0, no flow while
             // |x| ≤ −c) or underlap (c > 0); the same as x + c·sign(x) outside the band.
-            ("opening", Term::Sign) => "sign(x) * max(abs(x) + c_opening, 0)".to_string(),
-            ("opening", _) => format!("x + c_opening * {written}"),
-            _ => format!("c_{hook} * {written}"),
+            (Hook::Opening, Term::Sign) => format!("sign(x) * max(abs(x) + {param}, 0)"),
+            (Hook::Opening, _) => format!("x + {param} * {written}"),
+            _ => format!("{param} * {written}"),
         };
         let of = if st == State::Velocity { "m/s" } else { "m" };
         let unit = match (degree, of) {
@@ -889,9 +896,13 @@ impl StateMap {
             (3.0, "m") => format!("{unit}/m³"),
             (d, _) => format!("{unit}/({of})^{d}"),
         };
-        Some(format!(
-            "[model.expression]\nenabled = false   # a candidate: `fit --effect expression` or a diagnosis switches it on\n{hook} = \"{form}\"\nc_{hook} = {{ value = {c:.4e}, unit = \"{unit}\" }}"
-        ))
+        Some(MapTerm {
+            hook,
+            form,
+            param,
+            unit,
+            value: sign * t.slope * to_si / scale.powf(degree),
+        })
     }
 
     /// One sentence: which state and term the residual follows, and what that suggests.
@@ -918,6 +929,39 @@ impl StateMap {
                 o.reading(self.band)
             ),
         })
+    }
+}
+
+/// The state map's static term as an expression effect ([`StateMap::term`]): `hook = form`,
+/// whose one parameter `param` (of `unit`) starts at `value`; at 0 it changes nothing.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MapTerm {
+    pub hook: Hook,
+    pub form: String,
+    pub param: String,
+    pub unit: String,
+    pub value: f64,
+}
+
+impl MapTerm {
+    /// The `[model.expression]` block that writes it, switched off.
+    pub fn toml(&self) -> String {
+        format!(
+            "[model.expression]\nenabled = false   # a candidate: `fit --effect expression` or a diagnosis switches it on\n{} = \"{}\"\n{} = {{ value = {:.4e}, unit = \"{}\" }}",
+            self.hook.key(),
+            self.form,
+            self.param,
+            self.value,
+            self.unit
+        )
+    }
+
+    /// `model` given the term as its expression, its parameter at the map's value (the effect
+    /// left as it was: a candidate's fit switches it on).
+    pub fn install(&self, model: &mut ModelParams) -> Result<(), String> {
+        let any = vshake_kernel::param_table::Range::any();
+        model.name_expression_param(&self.param, &self.unit, any, self.value)?;
+        (model.expression.set(self.hook, &self.form)).map_err(|e| e.to_string())
     }
 }
 
