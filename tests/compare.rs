@@ -27,6 +27,25 @@ fn tests_table(report: &Path, col: &str) -> Vec<f64> {
     t.column(col).unwrap().to_vec()
 }
 
+/// A synthesis whose model fails in one test writes nothing: every test is run before any file
+/// is written, so no half-written campaign is left that looks complete (at 3 MPa of supply the
+/// 3.2 g test empties a chamber).
+#[test]
+fn a_synthesis_that_fails_in_one_test_leaves_no_files() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("out");
+    let c = Path::new(env!("CARGO_MANIFEST_DIR")).join("studies/campaigns/diagnosis.toml");
+    let args = ["synth", c.to_str().unwrap(), "--out", out.to_str().unwrap()];
+    let (code, stdout, stderr) = study(&[&args[..], &["--set", "servovalve.p_s=3e6"]].concat());
+    assert_ne!(code, 0, "{stdout}");
+    assert!(
+        stderr.contains("test \"f3_a3p2\": the model failed"),
+        "{stderr}"
+    );
+    let left: Vec<_> = std::fs::read_dir(&out).map_or(Vec::new(), |r| r.collect());
+    assert!(left.is_empty(), "{left:?}");
+}
+
 /// Acceptance 1: files that are exactly the model's own output compare at floating-point level
 /// (CSV written with round-trip digits, and Parquet).
 #[test]

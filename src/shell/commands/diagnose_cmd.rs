@@ -116,26 +116,19 @@ pub(crate) fn run_to(args: &DiagnoseArgs, o: &mut dyn Write) -> anyhow::Result<(
         writeln!(o, "\n  wrote {} and its tables (candidates, selection, tests, evidence, statemap, stateterms .parquet)", dir.join("report.html").display())?;
     }
     if let Some(out) = &args.out {
-        let mut model = model;
-        if let Some((t, group)) = &d.map_term {
-            t.install(&mut model).map_err(RunFailed)?;
-            if group.len() < problem.tests.len() && d.named_fit().is_some() {
-                let tests = d.signals.list(group.iter().copied());
-                writeln!(o, "\n  note: the state map's expression was fitted to {tests} only; the model written applies it to every test (a campaign's `model = {{ expression = {{ enabled = false }} }}` on the others keeps it off there)")?;
-            }
-        }
-        write_named(o, out, &args.campaign, &model, &d)?;
+        write_named(o, out, &args.campaign, model, &d)?;
     }
     print_checks(o, &loaded.checks, &implausible)?;
     Ok(())
 }
 
-/// `--out`: the named effects' fitted model, or a line saying there is none.
+/// `--out`: the named effects' fitted model (with the state map's term where the diagnosis gave
+/// it to the model), or a line saying there is none.
 fn write_named(
     o: &mut dyn Write,
     out: &std::path::Path,
     campaign: &std::path::Path,
-    model: &crate::kernel::params::ModelParams,
+    mut model: crate::kernel::params::ModelParams,
     d: &Diagnosis,
 ) -> anyhow::Result<()> {
     let Some((free, fit)) = d.named_fit() else {
@@ -146,6 +139,14 @@ fn write_named(
         )?;
         return Ok(());
     };
+    if let Some((t, group)) = &d.map_term {
+        t.install(&mut model).map_err(RunFailed)?;
+        if d.names_a_group() {
+            let tests = d.signals.list(group.iter().copied());
+            writeln!(o, "\n  note: the state map's expression was fitted to {tests} only; the model written applies it to every test (a campaign's `model = {{ expression = {{ enabled = false }} }}` on the others keeps it off there)")?;
+        }
+    }
+    let model = &model;
     let command = format!("diagnose {}", campaign.display());
     crate::shell::fit_problem::write_fitted(out, &command, model, free, fit)?;
     writeln!(

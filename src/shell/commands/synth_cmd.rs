@@ -258,18 +258,33 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
         args.campaign.display(),
         args.out.display()
     )?;
-    for (i, test) in lc.campaign.tests.iter().enumerate() {
-        let (path, rows) = synth_test(args, &lc, (i, test), &noise, (rate, pre_rows))?;
-        writeln!(
-            stdout,
-            "  {:<24} {} ({} rows)",
-            test.name,
-            path.display(),
-            rows
-        )?;
-    }
+    // Every test is run before any file is written: a test whose model fails leaves nothing
+    // behind that looks like a campaign.
+    let runs: Vec<SynthRun> = (lc.campaign.tests.iter().enumerate())
+        .map(|(i, test)| synth_test(args, &lc, (i, test), &noise, (rate, pre_rows)))
+        .collect::<anyhow::Result<_>>()?;
+    let mut written: Vec<PathBuf> = Vec::new();
     let dst = args.out.join(lc.file.file_name().unwrap_or_default());
-    let records = write_campaign(&lc, &dst, args.as_records)?;
+    let wrote = (|| -> anyhow::Result<usize> {
+        for (test, run) in lc.campaign.tests.iter().zip(&runs) {
+            write_test(args, &lc, test, run, &mut written)?;
+            let (path, rows) = (args.out.join(&test.data), run.cols[0].1.len());
+            writeln!(
+                stdout,
+                "  {:<24} {} ({rows} rows)",
+                test.name,
+                path.display()
+            )?;
+        }
+        written.push(dst.clone());
+        write_campaign(&lc, &dst, args.as_records)
+    })();
+    let records = wrote.inspect_err(|_| {
+        // A write failed (a full disk): what this run wrote is removed.
+        for f in &written {
+            let _ = std::fs::remove_file(f);
+        }
+    })?;
     writeln!(stdout, "  campaign                 {}", dst.display())?;
     writeln!(
         stdout,
@@ -411,15 +426,20 @@ fn check_timing(rate: f64, pre_trigger: f64) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The `i`-th test's measurement file (and its record's, where that is another file) written
-/// into `--out`: its path and its rows.
+/// One test synthesised: its channels, noisy, and the metadata its file gets.
+struct SynthRun {
+    cols: Columns,
+    meta: Vec<(String, String)>,
+}
+
+/// Runs test `i` of the campaign with the hidden changes and adds its noise (nothing written).
 fn synth_test(
     args: &SynthArgs,
     lc: &LoadedCampaign,
     (i, test): (usize, &TestSpec),
     noise: &[Noise; 5],
     (rate, pre_rows): (f64, usize),
-) -> anyhow::Result<(PathBuf, usize)> {
+) -> anyhow::Result<SynthRun> {
     let mut test_model = test.model.clone();
     apply_effects(&mut test_model, &args.effect)?;
     apply_sets(&mut test_model, &args.set)?;
@@ -438,14 +458,9 @@ fn synth_test(
         solver: Default::default(),
         spectrum: crate::orchestration::runs::quake_spec::default_spectrum(),
     };
-    let cols = sample_test(&spec, &mut reference, rate, pre_rows)?
+    let mut cols = sample_test(&spec, &mut reference, rate, pre_rows)?
         .map_err(|e| RunFailed(format!("test {:?}: {e}", test.name)))?;
-    let mut cols: Vec<(&str, Vec<f64>)> = cols;
     add_noise(&mut cols, noise, args.seed, i);
-    let path = args.out.join(&test.data);
-    if let Some(dir) = path.parent() {
-        std::fs::create_dir_all(dir)?;
-    }
     let mut meta = meta::header(Kind::SyntheticMeasurement);
     if !args.blind {
         meta.push(meta::pair(Key::Spec, spec.resolved_toml()));
@@ -454,7 +469,24 @@ fn synth_test(
         meta::pair(Key::Noise, args.noise.clone().unwrap_or_default()),
         meta::pair(Key::Seed, args.seed),
     ]);
-    write_measured(&path, &cols, &meta)?;
+    Ok(SynthRun { cols, meta })
+}
+
+/// Writes a synthesised test's data file (and the record file it reads, copied along), each
+/// path pushed to `written` before it is written.
+fn write_test(
+    args: &SynthArgs,
+    lc: &LoadedCampaign,
+    test: &TestSpec,
+    run: &SynthRun,
+    written: &mut Vec<PathBuf>,
+) -> anyhow::Result<()> {
+    let path = args.out.join(&test.data);
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir)?;
+    }
+    written.push(path.clone());
+    write_measured(&path, &run.cols, &run.meta)?;
     // A record that lives in its own file is copied along, so the folder is a whole campaign.
     if let ExcitationSpec::Record { file, .. } = &test.excitation {
         if file != &test.data {
@@ -462,11 +494,12 @@ fn synth_test(
             if let Some(dir) = dst.parent() {
                 std::fs::create_dir_all(dir)?;
             }
+            written.push(dst.clone());
             std::fs::copy(lc.base.join(file), &dst)
                 .with_context(|| format!("copying the record {}", file.display()))?;
         }
     }
-    Ok((path, cols[0].1.len()))
+    Ok(())
 }
 
 /// Seeded Gaussian sensor noise added to the `i`-th test's noisy channels: one stream per test

@@ -431,7 +431,7 @@ impl Diagnosis {
     }
 
     /// Whether the verdict names the state map's term given to some tests only.
-    fn names_a_group(&self) -> bool {
+    pub fn names_a_group(&self) -> bool {
         let named = match self.verdict() {
             Verdict::Missing { effects, .. } | Verdict::Unexplained { effects, .. } => effects,
             Verdict::NothingSignificant => Vec::new(),
