@@ -777,6 +777,18 @@ fn an_expression_in_a_model_file_is_fitted_and_diagnosed() {
         verdict.contains("most likely missing: expression (opening = \"sign(x) * max(abs(x) - delta, 0)\") with delta = 3.00e-4 m;"),
         "{verdict}"
     );
+    // The slot the model's name sits on, freed by the slot's path, is fitted and shown by name.
+    let (code, stdout, stderr) = study(&[
+        "fit",
+        "studies/overlap/campaign.toml",
+        "--model",
+        "studies/overlap/expression.toml",
+        "--free",
+        "expression.p1",
+    ]);
+    assert_eq!(code, 0, "{stdout}{stderr}");
+    let (est, se) = estimate(&stdout, "expression.delta");
+    assert!((est - 3.0e-4).abs() <= 2.0 * se, "{est} ± {se}: {stdout}");
 }
 
 /// The estimate and standard error of `path` in `study fit`'s table.

@@ -142,6 +142,7 @@ pub(crate) fn free_parameters(
                 "--free {n:?}: unknown parameter{hint} (`study params` lists them)"
             ))
         })?;
+        let info = named_slot(info, model);
         if !free
             .iter()
             .any(|f| std::ptr::eq(f.info, info) || f.info.path() == info.path())
@@ -163,6 +164,22 @@ pub(crate) fn free_parameters(
         .into());
     }
     Ok(free)
+}
+
+/// A slot of the expressions' parameters (`expression.p1`) as the parameter the model names on
+/// it (`expression.c_opening`, with its unit and range); any other row as it is.
+fn named_slot(
+    info: &'static crate::kernel::params::ParamInfo,
+    model: &ModelParams,
+) -> &'static crate::kernel::params::ParamInfo {
+    let slot = info.index();
+    let name = model.expression.names.get(slot).filter(|n| !n.is_empty());
+    match (info.component.effect(), name) {
+        (Some(EffectId::Expression), Some(n)) if n != info.name => {
+            ModelParams::lookup(&format!("expression.{n}")).unwrap_or(info)
+        }
+        _ => info,
+    }
 }
 
 /// The data notes and warnings after a fit's or a diagnosis's results (a one-line pointer on

@@ -58,5 +58,12 @@ pub fn run(args: &ParamsArgs) -> anyhow::Result<()> {
     if component.is_none_or(|c| c == Component::Servovalve) {
         writeln!(out, "{:<30} {:<12} {:>14} {:<16} {:<7} Valve flow law: square-root orifice, or the linear counter-example.", "servovalve.law", "-", "orifice", "orifice|linear", "paper")?;
     }
+    if component
+        == Some(Component::Effect(
+            crate::kernel::params::EffectId::Expression,
+        ))
+    {
+        writeln!(out, "\nThe slots hold the parameters a model file's [model.expression] names (`c = {{ value, unit, range }}`), which --free, --set and a study's variables take by name (expression.c); docs/formats.md, \"Expressions\".")?;
+    }
     Ok(())
 }
