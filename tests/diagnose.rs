@@ -667,12 +667,15 @@ impl vshake::kernel::effects::Effect<1> for Ripple {
     }
 }
 
-/// Acceptance 3: the hidden effect is not in the library. The report must not name a missing
-/// effect with confidence: the best candidate explains little of the residual; the verdict states
-/// what the signals show instead (issue 51): a spectral line at the ripple's 17.3 Hz.
+/// Acceptance 3 (issue 8), and issue 51's evidence of a spectral line: a pump's ripple, a 50 kN
+/// force at 17.3 Hz on the platen, is not in the library, and no library effect explains it (each
+/// explains under 1 %). The signals show a line at 17.3 Hz in every channel; the diagnosis fits
+/// it as an expression, a force of that frequency on the platen with a sine and a cosine per
+/// test, which wins over the same line in the acceleration channel alone: its amplitude within
+/// 2 % of the ripple's in every test, the residual at most 2× the noise floor.
 #[test]
-#[ignore = "slow (about 100 s in all): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
-fn an_effect_outside_the_library_gets_no_confident_answer() {
+#[ignore = "slow (about 30 s): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
+fn an_effect_outside_the_library_is_fitted_from_its_spectral_line() {
     let d = tempfile::tempdir().unwrap();
     write_hidden(
         d.path(),
@@ -683,21 +686,9 @@ fn an_effect_outside_the_library_gets_no_confident_answer() {
     );
     let r = diagnose(d.path());
     println!("{}", r.stdout);
-    let (first, best) = r.first();
-    assert!(
-        !r.stdout.contains("most likely missing"),
-        "a confident wrong answer ({first}):\n{}",
-        r.stdout
-    );
-    assert!(best.explained < 0.5, "{first} explains {}", best.explained);
-    assert!(
-        r.stdout.contains("explains only")
-            || r.stdout.contains("explain only")
-            || r.stdout.contains("no effect of the library explains it"),
-        "{}",
-        r.stdout
-    );
-    // The signals show the ripple itself: a line at its frequency, in every channel.
+    for (name, c) in r.cands.iter().filter(|(n, _)| *n != "expression") {
+        assert!(c.explained < 0.01, "{name} explains {}", c.explained);
+    }
     let verdict = verdict_of(&r.stdout);
     let f = number_after(verdict, "a spectral line at ");
     assert!((f - 17.3).abs() < 0.05, "{f}: {verdict}");
@@ -706,10 +697,21 @@ fn an_effect_outside_the_library_gets_no_confident_answer() {
         "{verdict}"
     );
     assert!(
-        r.residual["baseline"] > 0.02,
-        "the ripple leaves a clear residual: {}",
-        r.residual["baseline"]
+        verdict.contains("most likely missing: expression (force = \"s_i*sin(2*pi*f_i*t) + c_i*cos(2*pi*f_i*t)\" in each test i"),
+        "{verdict}"
     );
+    let (first, best) = r.first();
+    assert_eq!(first, "expression", "{}", r.stdout);
+    assert_eq!(best.estimates.len(), 16, "{:?}", best.params);
+    for k in 0..8 {
+        let amp = best.estimates[2 * k].hypot(best.estimates[2 * k + 1]);
+        assert!(
+            (amp - 50e3).abs() < 0.02 * 50e3,
+            "test {k}: amplitude {amp}"
+        );
+    }
+    let left = r.residual["expression"] / r.noise_floor;
+    assert!(left <= 2.0, "the residual is {left}x the noise floor");
 }
 
 /// A flow gain that grows with the opening (an expansion: ports that widen), x_eff = x·(1 + a·|x|/x_ref),
@@ -1443,11 +1445,13 @@ fn number_after(text: &str, after: &str) -> f64 {
 
 /// Issue 51, evidence from the signals: a load cell whose zero is 10 kN off (written here,
 /// outside the library; 5× the force's noise σ per sample). No library effect makes such an
-/// offset; the verdict states it, with its size, and that it is in every test. (A displacement
-/// offset is not used: where a file starts at rest, loading removes it as a table homed off zero.)
+/// offset; the verdict states it, with its size, and that it is in every test, and fits it as an
+/// expression (`force_channel = "f + off_f"`): the offset within 2 SE, the residual at most 2×
+/// the noise floor. (A displacement offset is not used: where a file starts at rest, loading
+/// removes it as a table homed off zero.)
 #[test]
-#[ignore = "slow (about 100 s): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
-fn a_force_offset_is_stated_from_the_signals() {
+#[ignore = "slow (about 20 s): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
+fn a_force_offset_is_stated_from_the_signals_and_fitted() {
     let d = tempfile::tempdir().unwrap();
     write_altered(
         d.path(),
@@ -1465,24 +1469,38 @@ fn a_force_offset_is_stated_from_the_signals() {
     let v = number_after(verdict, "offset of the force (measured - model) of ");
     assert!((v - 1.0e4).abs() < 0.02 * 1.0e4, "{v}: {verdict}");
     assert!(verdict.contains("in every test (8 of 8)"), "{verdict}");
+    assert!(
+        verdict.contains("most likely missing: expression (force_channel = \"f + off_f\")"),
+        "{verdict}"
+    );
+    let (first, best) = r.first();
+    assert_eq!(first, "expression", "{}", r.stdout);
+    let (e, se) = (best.estimates[0], best.std_errors[0]);
+    assert!((e - 1.0e4).abs() <= 2.0 * se, "{e} ± {se}");
+    let left = r.residual["expression"] / r.noise_floor;
+    assert!(left <= 2.0, "the residual is {left}x the noise floor");
 }
 
 /// Issue 51, evidence from the signals: a 37.3 Hz hum of 0.1 m/s² (5× the acceleration's noise σ)
-/// on the accelerometer's signal in every test (written here). The verdict states a spectral line
-/// at its frequency, its amplitude, and that it stays put while the excitation's frequency moves.
+/// on the accelerometer's signal in every test, at a phase of its own in each (written here). The
+/// verdict states a spectral line at its frequency, its amplitude, and that it stays put while
+/// the excitation's frequency moves; it fits the line as an expression in the acceleration
+/// channel with a sine and a cosine per test: each test's amplitude within 3 % of the hum's, the
+/// residual at most 2× the noise floor.
 #[test]
-#[ignore = "slow (about 100 s): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
-fn a_spectral_line_is_stated_from_the_signals() {
+#[ignore = "slow (about 20 s): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
+fn a_spectral_line_is_stated_from_the_signals_and_fitted() {
     let d = tempfile::tempdir().unwrap();
     let w = 2.0 * std::f64::consts::PI * 37.3;
     write_altered(
         d.path(),
         &vshake::kernel::effects::Baseline,
         &|_| true,
-        &|_, col, t, v| {
+        &|i, col, t, v| {
             if col == "accel_mps2" {
+                let phase = 0.4 + 2.3 * i as f64;
                 for (x, t) in v.iter_mut().zip(t) {
-                    *x += 0.1 * (w * t + 0.4).sin();
+                    *x += 0.1 * (w * t + phase).sin();
                 }
             }
         },
@@ -1499,6 +1517,19 @@ fn a_spectral_line_is_stated_from_the_signals() {
             && verdict.contains("at one frequency whatever the excitation's"),
         "{verdict}"
     );
+    assert!(
+        verdict.contains("most likely missing: expression (accel_channel = \"a + s_i*sin(2*pi*f_i*t) + c_i*cos(2*pi*f_i*t)\" in each test i"),
+        "{verdict}"
+    );
+    let (first, best) = r.first();
+    assert_eq!(first, "expression", "{}", r.stdout);
+    assert_eq!(best.estimates.len(), 16, "{:?}", best.params);
+    for k in 0..8 {
+        let amp = best.estimates[2 * k].hypot(best.estimates[2 * k + 1]);
+        assert!((amp - 0.1).abs() < 0.003, "test {k}: amplitude {amp}");
+    }
+    let left = r.residual["expression"] / r.noise_floor;
+    assert!(left <= 2.0, "the residual is {left}x the noise floor");
 }
 
 /// Issue 51, evidence from the signals: a specimen (20 t, 5 Hz, 5 %; written here) on the table in

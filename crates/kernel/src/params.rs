@@ -272,8 +272,8 @@ impl ModelParams {
     /// Declares `name` a parameter of the `expression` effect, of `unit` and valid `range`: its
     /// row (`expression.<name>`, found by [`ModelParams::lookup`] from then on), on the slot the
     /// name took when it was first declared in this process (a new name takes the next free one
-    /// of [`expression::SLOTS`]). Declared again with another unit or range, the name keeps its
-    /// slot and the new row is the one looked up.
+    /// of [`expression::SLOTS`]). Declared again, with another unit or range or the same, the
+    /// name keeps its slot and the row of this declaration is the one looked up.
     pub fn declare_expression_param(
         name: &str,
         unit: &str,
@@ -281,9 +281,12 @@ impl ModelParams {
     ) -> Result<&'static ParamInfo, String> {
         check_param_name(name)?;
         let mut d = DECLARED.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(same) =
-            (d.iter().rev()).find(|p| p.name == name && p.unit == unit && p.range == range)
+        if let Some(at) =
+            (d.iter()).rposition(|p| p.name == name && p.unit == unit && p.range == range)
         {
+            // The row looked up from then on: the last declared.
+            let same = d.remove(at);
+            d.push(same);
             return Ok(same);
         }
         let names = |d: &[&ParamInfo]| {
@@ -461,7 +464,7 @@ fn check_param_name(name: &str) -> Result<(), String> {
         || expression::Params::FIELDS.iter().any(|f| f.name == name);
     if taken {
         return Err(format!(
-            "{name:?} is taken (a hook's quantity or key, a function, pi, enabled or a slot p1..p8)"
+            "{name:?} is taken (a hook's quantity or key, a function, pi, enabled or a slot p1..p32)"
         ));
     }
     Ok(())

@@ -10,3 +10,4 @@ pub mod seeds;
 pub mod signals;
 pub mod statemap;
 pub mod states;
+pub mod terms;

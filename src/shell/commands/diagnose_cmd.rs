@@ -139,11 +139,15 @@ fn write_named(
         )?;
         return Ok(());
     };
-    if let Some((t, group)) = &d.map_term {
-        t.install(&mut model).map_err(RunFailed)?;
+    if let Some(t) = &d.term {
+        t.install_one(&mut model, 0).map_err(RunFailed)?;
+        let tests = d.signals.list(t.tests().into_iter());
         if d.names_a_group() {
-            let tests = d.signals.list(group.iter().copied());
-            writeln!(o, "\n  note: the state map's expression was fitted to {tests} only; the model written applies it to every test (a campaign's `model = {{ expression = {{ enabled = false }} }}` on the others keeps it off there)")?;
+            writeln!(o, "\n  note: the expression was fitted to {tests} only; the model written applies it to every test (a campaign's `model = {{ expression = {{ enabled = false }} }}` on the others keeps it off there)")?;
+        }
+        if t.per_test() {
+            let first = d.signals.list(t.tests().into_iter().take(1));
+            writeln!(o, "\n  note: the expression has parameters per test ({}); the model written holds {first}'s form", t.written())?;
         }
     }
     let model = &model;
@@ -209,6 +213,33 @@ fn print_candidates(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
                 c.effect
             )?;
         }
+    }
+    print_terms_tried(o, d)
+}
+
+/// The expression terms the diagnosis fitted to choose its `expression` candidate, if several.
+fn print_terms_tried(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
+    if d.terms_tried.is_empty() {
+        return Ok(());
+    }
+    writeln!(
+        o,
+        "\n  expression terms tried (the candidate is the one of lowest BIC = chi2 + p ln n):"
+    )?;
+    for t in &d.terms_tried {
+        let chosen = d.term.as_ref() == Some(&t.term);
+        let tests = match t.term.forms.len() == d.test_misfit.len() {
+            true => String::new(),
+            false => format!(" in {} only", d.signals.list(t.term.tests().into_iter())),
+        };
+        writeln!(
+            o,
+            "  {} p {:>2}  chi2 {:.4e}  {}{tests}",
+            if chosen { "->" } else { "  " },
+            t.k,
+            t.chi2,
+            t.term.written()
+        )?;
     }
     Ok(())
 }

@@ -10,7 +10,7 @@
 //! c2 = { value = 4.0e4, unit = "N·s²/m²", range = [0, 1e9] }  # a named parameter
 //! ```
 //!
-//! The parameters' values sit in the slots `p1`..`p8` of this effect's table, in the order their
+//! The parameters' values sit in the slots `p1`..`p32` of this effect's table, in the order their
 //! names were first declared; the model layer (`params`) keeps the names, their units and their
 //! ranges, so that `expression.c2` is a parameter like any other (fits, studies, diagnoses).
 //! Where a hook's expression is not given, the effect is neutral there; where the effect is off
@@ -34,7 +34,7 @@ pub const INFO: EffectInfo = EffectInfo {
 };
 
 /// How many named parameters the expressions of one process may declare.
-pub const SLOTS: usize = 8;
+pub const SLOTS: usize = 32;
 
 params! {
     /// Effect `expression`: the values of its named parameters, by slot (a model file names them).
@@ -47,13 +47,40 @@ params! {
         p6: "-", "", 0.0, Range::any(), Chosen, "Slot 6 (see p1) [chosen].";
         p7: "-", "", 0.0, Range::any(), Chosen, "Slot 7 (see p1) [chosen].";
         p8: "-", "", 0.0, Range::any(), Chosen, "Slot 8 (see p1) [chosen].";
+        p9: "-", "", 0.0, Range::any(), Chosen, "Slot 9 (see p1) [chosen].";
+        p10: "-", "", 0.0, Range::any(), Chosen, "Slot 10 (see p1) [chosen].";
+        p11: "-", "", 0.0, Range::any(), Chosen, "Slot 11 (see p1) [chosen].";
+        p12: "-", "", 0.0, Range::any(), Chosen, "Slot 12 (see p1) [chosen].";
+        p13: "-", "", 0.0, Range::any(), Chosen, "Slot 13 (see p1) [chosen].";
+        p14: "-", "", 0.0, Range::any(), Chosen, "Slot 14 (see p1) [chosen].";
+        p15: "-", "", 0.0, Range::any(), Chosen, "Slot 15 (see p1) [chosen].";
+        p16: "-", "", 0.0, Range::any(), Chosen, "Slot 16 (see p1) [chosen].";
+        p17: "-", "", 0.0, Range::any(), Chosen, "Slot 17 (see p1) [chosen].";
+        p18: "-", "", 0.0, Range::any(), Chosen, "Slot 18 (see p1) [chosen].";
+        p19: "-", "", 0.0, Range::any(), Chosen, "Slot 19 (see p1) [chosen].";
+        p20: "-", "", 0.0, Range::any(), Chosen, "Slot 20 (see p1) [chosen].";
+        p21: "-", "", 0.0, Range::any(), Chosen, "Slot 21 (see p1) [chosen].";
+        p22: "-", "", 0.0, Range::any(), Chosen, "Slot 22 (see p1) [chosen].";
+        p23: "-", "", 0.0, Range::any(), Chosen, "Slot 23 (see p1) [chosen].";
+        p24: "-", "", 0.0, Range::any(), Chosen, "Slot 24 (see p1) [chosen].";
+        p25: "-", "", 0.0, Range::any(), Chosen, "Slot 25 (see p1) [chosen].";
+        p26: "-", "", 0.0, Range::any(), Chosen, "Slot 26 (see p1) [chosen].";
+        p27: "-", "", 0.0, Range::any(), Chosen, "Slot 27 (see p1) [chosen].";
+        p28: "-", "", 0.0, Range::any(), Chosen, "Slot 28 (see p1) [chosen].";
+        p29: "-", "", 0.0, Range::any(), Chosen, "Slot 29 (see p1) [chosen].";
+        p30: "-", "", 0.0, Range::any(), Chosen, "Slot 30 (see p1) [chosen].";
+        p31: "-", "", 0.0, Range::any(), Chosen, "Slot 31 (see p1) [chosen].";
+        p32: "-", "", 0.0, Range::any(), Chosen, "Slot 32 (see p1) [chosen].";
     }
 }
 
 impl Params {
     fn slots(&self) -> [f64; SLOTS] {
         [
-            self.p1, self.p2, self.p3, self.p4, self.p5, self.p6, self.p7, self.p8,
+            self.p1, self.p2, self.p3, self.p4, self.p5, self.p6, self.p7, self.p8, self.p9,
+            self.p10, self.p11, self.p12, self.p13, self.p14, self.p15, self.p16, self.p17,
+            self.p18, self.p19, self.p20, self.p21, self.p22, self.p23, self.p24, self.p25,
+            self.p26, self.p27, self.p28, self.p29, self.p30, self.p31, self.p32,
         ]
     }
 }

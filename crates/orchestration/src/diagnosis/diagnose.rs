@@ -46,7 +46,8 @@ use crate::diagnosis::compare::ComparedTest;
 use crate::diagnosis::fit::{self, FeatureInfo, Free, Problem};
 use crate::diagnosis::seeds::{self, Seed};
 use crate::diagnosis::signals::{self, Signals};
-use crate::diagnosis::statemap::{MapTerm, StateMap};
+use crate::diagnosis::statemap::StateMap;
+use crate::diagnosis::terms::{self, Evidence, Term};
 use crate::measured::aligned::AlignedTest;
 use rayon::prelude::*;
 use vshake_kernel::effects::building;
@@ -212,9 +213,11 @@ pub struct Diagnosis {
     /// The model's expressions as written (`opening = "x - c*sign(x)"`), which a verdict that
     /// names the `expression` effect gives as its form; empty where it writes none.
     pub written: String,
-    /// The state map's term, where the diagnosis gave it to the model as the `expression`
-    /// candidate, and the tests it gave it to ([`diagnose_campaign`]).
-    pub map_term: Option<(MapTerm, Vec<usize>)>,
+    /// The expression term the diagnosis gave the models as the `expression` candidate, where
+    /// it gave one ([`diagnose_campaign`], [`crate::diagnosis::terms`]).
+    pub term: Option<Term>,
+    /// The expression terms fitted to choose [`Self::term`], where there were several.
+    pub terms_tried: Vec<Tried>,
 }
 
 /// What the diagnosis concludes.
@@ -418,26 +421,36 @@ impl Diagnosis {
     }
 
     /// [`Self::signal_note`] when the named effects leave more than [`NOISE_FACTOR`] times the
-    /// noise floor, or name the state map's term fitted to a group of tests (the evidence it
-    /// rests on); empty otherwise.
+    /// noise floor, or name a term fitted to a group of tests or read off the signals (the
+    /// evidence it rests on); empty otherwise.
     fn signal_note_if_short(&self) -> String {
         match self.named_fit() {
             Some((_, f)) if f.after.residual_rms() > NOISE_FACTOR * self.noise_rms => {
                 self.signal_note()
             }
-            Some(_) if self.names_a_group() => self.signal_note(),
+            Some(_) if self.names_a_group() || self.names_evidence() => self.signal_note(),
             _ => String::new(),
         }
     }
 
-    /// Whether the verdict names the state map's term given to some tests only.
-    pub fn names_a_group(&self) -> bool {
+    /// The term the verdict names, if it names the diagnosis's expression term.
+    pub fn named_term(&self) -> Option<&Term> {
         let named = match self.verdict() {
             Verdict::Missing { effects, .. } | Verdict::Unexplained { effects, .. } => effects,
             Verdict::NothingSignificant => Vec::new(),
         };
-        let group = self.map_term.as_ref().map_or(0, |(_, g)| g.len());
-        named.iter().any(|p| p.effect == EffectId::Expression) && group < self.test_misfit.len()
+        let names = named.iter().any(|p| p.effect == EffectId::Expression);
+        self.term.as_ref().filter(|_| names)
+    }
+
+    /// Whether the verdict names a term given to some tests only.
+    pub fn names_a_group(&self) -> bool {
+        (self.named_term()).is_some_and(|t| t.forms.len() < self.test_misfit.len())
+    }
+
+    /// Whether the verdict names a term read off the signals (an offset, a line).
+    pub fn names_evidence(&self) -> bool {
+        (self.named_term()).is_some_and(|t| t.evidence != Evidence::Map)
     }
 
     /// "; the missing valve flow follows sign(x) in spool opening (R² = 0.96): …", from the
@@ -475,9 +488,18 @@ impl Diagnosis {
         let (Some((free, f)), Some(c)) = (self.named_fit(), self.candidates.first()) else {
             return String::new();
         };
-        let values: Vec<String> = free
-            .iter()
-            .zip(&f.estimate)
+        let term = self.named_term();
+        let phase = |name: &str| term.is_some_and(|t| t.is_phase_param(name));
+        let named: Vec<(&str, f64)> = (free.iter().zip(&f.estimate))
+            .map(|(p, &v)| (p.info.name, v))
+            .collect();
+        let amplitudes = term.and_then(|t| {
+            let (lo, hi, n) = t.amplitudes(&named)?;
+            let (lo, hi, unit) = (three_figures(lo), three_figures(hi), t.unit());
+            Some(format!("amplitude {lo} to {hi} {unit} in its {n} tests"))
+        });
+        let values: Vec<String> = (free.iter().zip(&f.estimate))
+            .filter(|(p, _)| !phase(p.info.name))
             .map(|(p, &v)| {
                 let unit = match p.info.unit {
                     "-" | "" => String::new(),
@@ -485,6 +507,7 @@ impl Diagnosis {
                 };
                 format!("{} = {}{unit}", p.info.name, three_figures(v))
             })
+            .chain(amplitudes)
             .collect();
         let origin = c
             .origin
@@ -582,6 +605,31 @@ fn expression_free(model: &ModelParams) -> Vec<Free> {
         .filter_map(|slot| ModelParams::lookup(&format!("expression.{}", e.names[slot])))
         .map(|info| Free::new(info, info.get(model)))
         .collect()
+}
+
+/// The expressions' free parameters in `problem`: those some test's expression reads (a term may
+/// be given to some tests only, or with one parameter per test), at the first such test's values.
+fn expression_free_in(problem: &Problem) -> Vec<Free> {
+    let mut slots: Vec<usize> = (problem.tests.iter())
+        .flat_map(|t| t.model.expression.slots_read())
+        .collect();
+    slots.sort_unstable();
+    slots.dedup();
+    let model = reference_model(problem, EffectId::Expression);
+    let e = &model.expression;
+    (slots.into_iter())
+        .filter_map(|slot| ModelParams::lookup(&format!("expression.{}", e.names[slot])))
+        .map(|info| Free::new(info, info.get(model)))
+        .collect()
+}
+
+/// The free parameters of stage `stage` of `effect` in `problem`: the expressions' over every
+/// test ([`expression_free_in`]), another effect's in its reference model.
+fn free_in(problem: &Problem, effect: EffectId, stage: usize) -> Vec<Free> {
+    match effect {
+        EffectId::Expression => expression_free_in(problem),
+        _ => free_of_stage(effect, stage, reference_model(problem, effect)),
+    }
 }
 
 /// `free` with the scanned start of stage `stage` of `effect` (see [`fit::scanned`]).
@@ -734,10 +782,10 @@ pub fn scan_starts(problem: &Problem, free: &[Free]) -> Vec<Free> {
 ///
 /// The `expression` effect, where `candidates` has it, is the model's own expressions; where the
 /// model writes none, the state map's static term ([`StateMap::term`]) is given to the tests'
-/// models in `problem` as their expression (the effect left off) and fitted as that candidate
-/// ([`MapTerm`]); with neither, the candidate is dropped. Where the signals find tests that
-/// differ (some at the noise, others not), the term is the map of the tests not at the noise,
-/// given to those tests only: a candidate for that group of tests.
+/// models in `problem` as their expression (the effect left off) and fitted as that candidate;
+/// so are, where the signals show them, a channel's offset, a spectral line, and the map of the
+/// tests not at the noise, given to those tests only ([`choose_term`]: the one that fits best);
+/// with none, the candidate is dropped.
 pub fn diagnose_campaign(
     problem: &mut Problem,
     candidates: &[EffectId],
@@ -749,9 +797,9 @@ pub fn diagnose_campaign(
     let signals = c.as_ref().map(|c| read_signals(problem, c));
     let writes = !problem.tests[0].model.expression.hooks.is_empty();
     let asked = candidates.contains(&EffectId::Expression);
-    let term = match (&c, asked && !writes) {
-        (Some(c), true) => map_term(problem, c, map.as_ref(), signals.as_ref()),
-        _ => None,
+    let (term, tried) = match (&c, asked && !writes) {
+        (Some(c), true) => choose_term(problem, c, map.as_ref(), signals.as_ref()),
+        _ => (None, Vec::new()),
     };
     let candidates: Vec<EffectId> = (candidates.iter().copied())
         .filter(|&e| e != EffectId::Expression || writes || term.is_some())
@@ -760,18 +808,19 @@ pub fn diagnose_campaign(
     d.signals = signals.unwrap_or(d.signals);
     d.state_map = map;
     let mut aligned = aligned.to_vec();
-    if let Some((t, group)) = &term {
-        for &i in group {
+    if let Some(t) = &term {
+        for (i, a) in aligned.iter_mut().enumerate() {
             // Installed in these tests' models before: it cannot fail here.
-            t.install(&mut aligned[i].model)
-                .expect("the map's term installs");
+            t.install(&mut a.model, i).expect("the term installs");
         }
-        if group.len() < aligned.len() {
-            d.written += &format!(" in {} only", d.signals.list(group.iter().copied()));
+        d.written = t.written();
+        if t.forms.len() < aligned.len() {
+            d.written += &format!(" in {} only", d.signals.list(t.tests().into_iter()));
         }
     }
     d.map_after(&aligned);
-    d.map_term = term;
+    d.term = term;
+    d.terms_tried = tried;
     d
 }
 
@@ -782,62 +831,74 @@ fn read_signals(problem: &Problem, c: &[ComparedTest]) -> Signals {
     signals::read(c, &sigma, &problem.test_misfit(&baseline))
 }
 
-/// The state map's term given to the models of `problem`'s tests, and those tests: the term of
-/// the campaign's `map`, given to every test; or, where the `signals` split the tests (some at
-/// the noise, others not), the term of the map of the tests not at the noise, given to those
-/// only, if its fit leaves a lower χ² (a split also comes of an effect that grows with the
-/// amplitude, which the tests at the noise carry too, below their noise). None where there is
-/// no term or a model refuses it.
-fn map_term(
+/// The expression term given to the models of `problem`'s tests as the `expression` candidate
+/// ([`crate::diagnosis::terms`]): of the state map's term of the campaign's `map` (in every
+/// test), the term of the map of the tests not at the noise where the `signals` split the tests
+/// (in those only: a split also comes of an effect that grows with the amplitude, which the tests
+/// at the noise carry too, below their noise), and the terms of the signals' offsets and lines,
+/// the one whose fit has the lowest BIC. None where there is none or no model takes one.
+fn choose_term(
     problem: &mut Problem,
     c: &[ComparedTest],
     map: Option<&StateMap>,
     signals: Option<&Signals>,
-) -> Option<(MapTerm, Vec<usize>)> {
-    let clean: Vec<usize> = signals
-        .and_then(|s| s.split.as_ref())
-        .map_or_else(Vec::new, |(_, clean)| clean.iter().map(|x| x.0).collect());
+) -> (Option<Term>, Vec<Tried>) {
     let every: Vec<usize> = (0..c.len()).collect();
-    let whole = map.and_then(StateMap::term).map(|t| (t, every));
-    if clean.is_empty() {
-        return whole.filter(|(t, g)| install(problem, t, g));
+    let mut options: Vec<Term> = (map.and_then(StateMap::term).iter())
+        .map(|t| Term::from_map(t, &every))
+        .collect();
+    if let Some((carry, _)) = signals.and_then(|s| s.split.as_ref()) {
+        let group: Vec<usize> = carry.iter().map(|x| x.0).collect();
+        let some: Vec<ComparedTest> = group.iter().map(|&i| c[i].clone()).collect();
+        let part = crate::diagnosis::statemap::map(&some).term();
+        options.extend(part.map(|t| Term::from_map(&t, &group)));
     }
-    let group: Vec<usize> = (0..c.len()).filter(|i| !clean.contains(i)).collect();
-    let some: Vec<ComparedTest> = group.iter().map(|&i| c[i].clone()).collect();
-    let part = crate::diagnosis::statemap::map(&some)
-        .term()
-        .map(|t| (t, group));
-    let chi2 = |problem: &mut Problem, (t, g): &(MapTerm, Vec<usize>)| {
-        if !install(problem, t, g) {
-            return f64::INFINITY;
-        }
-        let free = expression_free(reference_model(problem, EffectId::Expression));
-        let before = problem.evaluate(1, &|_, m| m.clone()).remove(0);
-        let fit = fit::fit_unprofiled(problem, &free, MAX_ITER, before, f64::INFINITY);
-        fit.map_or(f64::INFINITY, |f| f.chi2_after())
-    };
-    let scored: Vec<((MapTerm, Vec<usize>), f64)> = [whole, part]
-        .into_iter()
-        .flatten()
-        .map(|x| {
-            let c = chi2(problem, &x);
-            (x, c)
+    options.extend(signals.map_or_else(Vec::new, |s| terms::from_signals(s, c)));
+    if options.len() < 2 {
+        return (options.pop().filter(|t| install(problem, t)), Vec::new());
+    }
+    let ln_n = problem.dof().max(2.0).ln();
+    let tried: Vec<Tried> = (options.into_iter())
+        .map(|t| {
+            let (chi2, k) = term_fit(problem, &t);
+            let bic = chi2 + k as f64 * ln_n;
+            Tried {
+                term: t,
+                chi2,
+                k,
+                bic,
+            }
         })
         .collect();
-    let best = scored.into_iter().min_by(|a, b| a.1.total_cmp(&b.1))?;
-    install(problem, &best.0 .0, &best.0 .1).then_some(best.0)
+    let best = (tried.iter()).min_by(|a, b| a.bic.total_cmp(&b.bic));
+    let best = best.map(|t| t.term.clone()).filter(|t| install(problem, t));
+    (best, tried)
 }
 
-/// `problem`'s tests given the expression `term`, those of `group` alone (the others none);
-/// false where a model refuses it.
-fn install(problem: &mut Problem, term: &MapTerm, group: &[usize]) -> bool {
-    for (i, t) in problem.tests.iter_mut().enumerate() {
-        t.model.expression.hooks.clear();
-        if group.contains(&i) && term.install(&mut t.model).is_err() {
-            return false;
-        }
+/// One expression term [`choose_term`] fitted: its χ², parameters and BIC.
+pub struct Tried {
+    pub term: Term,
+    pub chi2: f64,
+    pub k: usize,
+    pub bic: f64,
+}
+
+/// The χ² of `problem` given the term `t`, its parameters fitted, and their number (χ² infinite
+/// where a model refuses the term or the fit fails).
+fn term_fit(problem: &mut Problem, t: &Term) -> (f64, usize) {
+    if !install(problem, t) {
+        return (f64::INFINITY, t.params.len());
     }
-    true
+    let free = expression_free_in(problem);
+    let before = problem.evaluate(1, &|_, m| m.clone()).remove(0);
+    let fit = fit::fit_unprofiled(problem, &free, MAX_ITER, before, f64::INFINITY);
+    (fit.map_or(f64::INFINITY, |f| f.chi2_after()), free.len())
+}
+
+/// `problem`'s tests given the expression `term` (those it is not given to, its parameters
+/// only); false where a model refuses it.
+fn install(problem: &mut Problem, term: &Term) -> bool {
+    (problem.tests.iter_mut().enumerate()).all(|(i, t)| term.install(&mut t.model, i).is_ok())
 }
 
 /// A significant library candidate within [`SIGNIFICANT_BIC`] of a leading state-map term is
@@ -880,8 +941,7 @@ pub fn diagnose(
     let mut out: Vec<Candidate> = candidates
         .par_iter()
         .map(|&effect| {
-            let model = reference_model(problem, effect);
-            let own = scanned(problem, &free_of(effect, model), effect, 0);
+            let own = scanned(problem, &free_in(problem, effect, 0), effect, 0);
             let seeded = seeds::starts(&own, effect, seeds);
             let starts =
                 std::iter::once((own, None)).chain(seeded.into_iter().map(|(f, o)| (f, Some(o))));
@@ -920,7 +980,8 @@ pub fn diagnose(
             ..Default::default()
         },
         written: written(reference_model(problem, EffectId::Expression)),
-        map_term: None,
+        term: None,
+        terms_tried: Vec::new(),
     }
 }
 
@@ -1149,8 +1210,7 @@ fn best_addition(
         .par_iter()
         .map(|&part| {
             let mut f = free.to_vec();
-            let model = reference_model(problem, part.effect);
-            f.extend(free_of_stage(part.effect, part.stage, model));
+            f.extend(free_in(problem, part.effect, part.stage));
             let f = scanned(problem, &f, part.effect, part.stage);
             let r = fit::fit_from(problem, &f, MAX_ITER, at.clone());
             (part, f, r)

@@ -24,8 +24,10 @@
 //! chi-square when the model is right. The noise of a channel is estimated from the measured data
 //! itself ([`noise_sigma`]):
 //! - a sine test: the residual of a least-squares fit of every harmonic of the test's frequency
-//!   up to 0.45 of the file's rate (at most 60), a quadratic trend and a linearly drifting
-//!   fundamental, over the window: σ² = RSS/(n − p). It holds at any sample rate (third
+//!   up to 0.45 of the file's rate (at most 60), a quadratic trend, a linearly drifting
+//!   fundamental and a sinusoid at each spectral line between the harmonics
+//!   ([`crate::diagnosis::signals`]; a hum is a signal, which left in σ would hide itself from
+//!   χ²), over the window: σ² = RSS/(n − p). It holds at any sample rate (third
 //!   differences, which keep (2πf/R)³ of a smooth signal, do not at 256 Hz);
 //! - a record test: the level of the spectrum's top band, 0.4 to 0.5 of the rate
 //!   ([`crate::fourier::noise_sigma`]): the motion is band-limited, the sensors' noise is not
@@ -143,20 +145,53 @@ pub fn noise_sigma(x: &[f64], tau: &[f64], rate_hz: f64, f: Option<f64>) -> f64 
     if k_max == 0 || n < p + 20 {
         return noise_sigma_differences(x);
     }
+    let floor = NUMERICAL_FLOOR * rms_slice(x);
+    let r = periodic_residual(x, tau, f, k_max, &[]);
+    // Spectral lines between the harmonics are a signal (a hum, a ripple), not noise: fitted
+    // with the harmonics, they do not raise σ and hide themselves from χ². (Not required to be
+    // as narrow as the window: the harmonics' own fit leaves a spur beside a line it leaks into.)
+    let lines: Vec<f64> =
+        (crate::diagnosis::signals::line_frequencies(&r, rate_hz, Some(f), floor))
+            .into_iter()
+            .map(|fl| crate::diagnosis::signals::refined_frequency(&r, tau, fl, rate_hz))
+            .collect();
+    let r = match lines.len() {
+        0 => r,
+        _ => periodic_residual(x, tau, f, k_max, &lines),
+    };
+    let p = p + 2 * lines.len();
+    let rss: f64 = r.iter().map(|v| v * v).sum();
+    (rss / n.saturating_sub(p).max(1) as f64)
+        .sqrt()
+        .max(floor)
+        .max(f64::MIN_POSITIVE)
+}
+
+/// The residual of the least-squares fit to `x` at `tau` of the harmonics 1…`k_max` of `f`, a
+/// quadratic trend, a linearly drifting fundamental and a sinusoid at each of `lines` (Hz).
+fn periodic_residual(x: &[f64], tau: &[f64], f: f64, k_max: usize, lines: &[f64]) -> Vec<f64> {
+    let n = x.len();
+    let p = 2 * k_max + 5;
     let (t0, t1) = (tau[0], tau[n - 1]);
     let (mid, half) = (0.5 * (t0 + t1), (0.5 * (t1 - t0)).max(f64::MIN_POSITIVE));
-    let a = Mat::<f64>::from_fn(n, p, |i, j| {
+    let turn = |c: f64| 2.0 * std::f64::consts::PI * (c - c.floor());
+    let a = Mat::<f64>::from_fn(n, p + 2 * lines.len(), |i, j| {
         let s = (tau[i] - mid) / half;
-        let th = |k: usize| {
-            let c = f * tau[i] * k as f64;
-            2.0 * std::f64::consts::PI * (c - c.floor())
-        };
+        let th = |k: usize| turn(f * tau[i] * k as f64);
         match j {
             0 => 1.0,
             1 => s,
             2 => s * s,
             3 => s * th(1).cos(),
             4 => s * th(1).sin(),
+            j if j >= p => {
+                let w = turn(lines[(j - p) / 2] * tau[i]);
+                if (j - p).is_multiple_of(2) {
+                    w.cos()
+                } else {
+                    w.sin()
+                }
+            }
             _ => {
                 let k = (j - 5) / 2 + 1;
                 if (j - 5) % 2 == 0 {
@@ -170,11 +205,7 @@ pub fn noise_sigma(x: &[f64], tau: &[f64], rate_hz: f64, f: Option<f64>) -> f64 
     let b = Mat::<f64>::from_fn(n, 1, |i, _| x[i]);
     let coef = a.qr().solve_lstsq(&b);
     let fitted = &a * &coef;
-    let rss: f64 = (0..n).map(|i| (x[i] - fitted[(i, 0)]).powi(2)).sum();
-    (rss / (n - p) as f64)
-        .sqrt()
-        .max(NUMERICAL_FLOOR * rms_slice(x))
-        .max(f64::MIN_POSITIVE)
+    (0..n).map(|i| x[i] - fitted[(i, 0)]).collect()
 }
 
 /// The unweighted linear features of channel `c` at the samples `s`: the harmonics below the
@@ -1268,6 +1299,33 @@ mod tests {
     use super::*;
     use crate::runs::single::run_sampled;
     use vshake_kernel::excitation::Record;
+
+    /// A sine test's noise σ is the noise's, not a hum's: a line between the harmonics (near one
+    /// of them, or in a short window) is fitted out with them.
+    #[test]
+    fn a_hum_is_not_noise() {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, Normal};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+        let noise = Normal::new(0.0, 0.02).unwrap();
+        let rate = 1024.0;
+        for (f0, n) in [
+            (1.0, 4096),
+            (2.0, 4096),
+            (3.0, 3072),
+            (6.0, 2048),
+            (8.0, 1024),
+        ] {
+            let tau: Vec<f64> = (0..n).map(|i| 1.0 + i as f64 / rate).collect();
+            let w = |f: f64, t: f64| (2.0 * std::f64::consts::PI * f * t).sin();
+            let x: Vec<f64> = (tau.iter())
+                .map(|&t| 3.0 * w(f0, t) + 0.1 * w(37.3, t + 0.01) + noise.sample(&mut rng))
+                .collect();
+            let s = noise_sigma(&x, &tau, rate, Some(f0));
+            // Without the line σ would be √(0.02² + 0.1²/2) = 0.073.
+            assert!((s - 0.02).abs() < 0.002, "f0 {f0}: σ {s}");
+        }
+    }
 
     /// A record test (time-domain features) with a hidden baseline-parameter change: the fit of that
     /// parameter from its default finds it, within its standard error's reach.

@@ -1,0 +1,291 @@
+//! Expression terms a diagnosis gives the tests' models as its `expression` candidate, where
+//! the model file writes none ([`crate::diagnosis::diagnose::diagnose_campaign`]):
+//!
+//! - the state map's static term ([`MapTerm`]), in every test or in the group of tests that
+//!   carry the residual;
+//! - a channel's steady **offset** ([`signals::Offset`]): `force_channel = "f + off_f"` in the
+//!   tests that show it, one value for them all (a sensor's zero, a preload: a constant of the
+//!   set-up) or one per test (a zero that moved between tests);
+//! - a **spectral line** ([`signals::Line`]): a sinusoid at the line's frequency in the channel
+//!   that shows it most, `accel_channel = "a + s_3*sin(2*pi*37.2731*t) + c_3*cos(2*pi*37.2731*t)"`,
+//!   or, where it is in several channels, a force of that frequency on the platen (a pump's
+//!   ripple, a hum in the drive). Its sine and cosine are per test (a hum's phase at a test's
+//!   start is the mains', not the excitation's); its frequency is the least-squares one of each
+//!   test's residual ([`signals::refined_frequency`]), written as a number.
+//!
+//! Each is fitted like any effect; the one with the lowest BIC (χ² + k ln n) is the candidate.
+
+use crate::diagnosis::compare::ComparedTest;
+use crate::diagnosis::signals::{self, Signals};
+use crate::diagnosis::statemap::MapTerm;
+use vshake_kernel::effects::expression::{Hook, SLOTS};
+use vshake_kernel::param_table::Range;
+use vshake_kernel::params::ModelParams;
+
+/// A named parameter of a term: its name, unit and start value.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TermParam {
+    pub name: String,
+    pub unit: String,
+    pub value: f64,
+}
+
+/// What a term stands for.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Evidence {
+    /// The state map's static term.
+    Map,
+    /// A steady offset of a channel (0 acceleration, 1 displacement, 2 force).
+    Offset { channel: usize },
+    /// A spectral line of about `freq_hz`, seen in `channel` (the term may act on the platen).
+    Line { channel: usize, freq_hz: f64 },
+}
+
+/// An expression term given to some tests' models: `hook = form` in each of them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Term {
+    pub hook: Hook,
+    /// The tests it is given to, each with its form.
+    pub forms: Vec<(usize, String)>,
+    /// Its parameters (declared in every test, in this order).
+    pub params: Vec<TermParam>,
+    /// Its form in words where the tests' forms differ ("… per test").
+    pub generic: String,
+    pub evidence: Evidence,
+}
+
+impl Term {
+    /// The state map's term, given to the tests `group`.
+    pub fn from_map(t: &MapTerm, group: &[usize]) -> Term {
+        Term {
+            hook: t.hook,
+            forms: group.iter().map(|&i| (i, t.form.clone())).collect(),
+            params: vec![TermParam {
+                name: t.param.clone(),
+                unit: t.unit.clone(),
+                value: t.value,
+            }],
+            generic: t.form.clone(),
+            evidence: Evidence::Map,
+        }
+    }
+
+    /// The tests it is given to.
+    pub fn tests(&self) -> Vec<usize> {
+        self.forms.iter().map(|f| f.0).collect()
+    }
+
+    /// `hook = "form"` where every test has the same form, else the generic form.
+    pub fn written(&self) -> String {
+        let same = self.forms.windows(2).all(|w| w[0].1 == w[1].1);
+        match self.forms.first() {
+            Some((_, f)) if same => format!("{} = {f:?}", self.hook.key()),
+            _ => self.generic.clone(),
+        }
+    }
+
+    /// `model` (of test `test`) given the term's parameters at their starts, and its form where
+    /// the term is given to that test (its other hooks cleared).
+    pub fn install(&self, model: &mut ModelParams, test: usize) -> Result<(), String> {
+        model.expression.hooks.clear();
+        for p in &self.params {
+            model.name_expression_param(&p.name, &p.unit, Range::any(), p.value)?;
+        }
+        match self.forms.iter().find(|f| f.0 == test) {
+            Some((_, form)) => (model.expression.set(self.hook, form)).map_err(|e| e.to_string()),
+            None => Ok(()),
+        }
+    }
+
+    /// A model given the term as test `test` has it (the first of its tests where `test` has
+    /// none): what `--out` writes.
+    pub fn install_one(&self, model: &mut ModelParams, test: usize) -> Result<(), String> {
+        let t = match self.forms.iter().any(|f| f.0 == test) {
+            true => test,
+            false => self.forms.first().map_or(test, |f| f.0),
+        };
+        self.install(model, t)
+    }
+
+    /// A line's fitted sinusoids: the least and the largest amplitude over its tests and their
+    /// number, from the fitted values of `params` (names and values, the line's `s_k`, `c_k`
+    /// among them); None for another term.
+    pub fn amplitudes(&self, params: &[(&str, f64)]) -> Option<(f64, f64, usize)> {
+        let Evidence::Line { .. } = self.evidence else {
+            return None;
+        };
+        let value = |n: String| params.iter().find(|p| p.0 == n).map(|p| p.1);
+        let amp = |t: usize| Some(value(format!("s_{t}"))?.hypot(value(format!("c_{t}"))?));
+        let amps: Vec<f64> = (self.tests().into_iter())
+            .filter_map(|t| amp(t + 1))
+            .collect();
+        let lo = amps.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = amps.iter().copied().fold(0.0, f64::max);
+        Some((lo, hi, amps.len()))
+    }
+
+    /// The unit of its parameters.
+    pub fn unit(&self) -> &str {
+        self.params.first().map_or("", |p| p.unit.as_str())
+    }
+
+    /// Whether `name` is one of a line's per-test sines and cosines.
+    pub fn is_phase_param(&self, name: &str) -> bool {
+        matches!(self.evidence, Evidence::Line { .. }) && self.params.iter().any(|p| p.name == name)
+    }
+
+    /// Whether the tests' forms differ (a line's per-test phase, an offset per test).
+    pub fn per_test(&self) -> bool {
+        !self.forms.windows(2).all(|w| w[0].1 == w[1].1)
+    }
+}
+
+/// The terms the signals' evidence suggests, for the compared tests `c`: one or two per channel
+/// with an offset, one or two per spectral line.
+pub fn from_signals(s: &Signals, c: &[ComparedTest]) -> Vec<Term> {
+    let mut out = Vec::new();
+    for ch in 0..3 {
+        let o: Vec<&signals::Offset> = s.offsets.iter().filter(|o| o.channel == ch).collect();
+        out.extend(offset_terms(ch, &o));
+    }
+    for l in &s.lines {
+        out.extend(line_terms(l, c));
+    }
+    out.retain(|t| t.params.len() <= SLOTS);
+    out
+}
+
+/// Most tests given an offset each. [chosen: 8, for the expressions' [`SLOTS`] (see
+/// [`LINE_TESTS`]).]
+pub const OFFSET_TESTS: usize = 8;
+
+/// A channel's hook and the quantity its expression reads.
+fn channel_hook(ch: usize) -> (Hook, &'static str, &'static str) {
+    match ch {
+        0 => (Hook::Accel, "a", "m/s²"),
+        1 => (Hook::Disp, "d", "m"),
+        _ => (Hook::SensedForce, "f", "N"),
+    }
+}
+
+/// The offset terms of channel `ch` from its offsets `o`: one value in the tests that show it,
+/// and one per test where there are several.
+fn offset_terms(ch: usize, o: &[&signals::Offset]) -> Vec<Term> {
+    if o.is_empty() {
+        return Vec::new();
+    }
+    let (hook, x, unit) = channel_hook(ch);
+    let name = format!("off_{x}");
+    let mean = o.iter().map(|o| o.value).sum::<f64>() / o.len() as f64;
+    let shared = Term {
+        hook,
+        forms: o
+            .iter()
+            .map(|o| (o.test, format!("{x} + {name}")))
+            .collect(),
+        params: vec![param(&name, unit, mean)],
+        generic: format!("{} = \"{x} + {name}\"", hook.key()),
+        evidence: Evidence::Offset { channel: ch },
+    };
+    if o.len() < 2 || o.len() > OFFSET_TESTS {
+        return vec![shared];
+    }
+    let each = Term {
+        forms: (o.iter())
+            .map(|o| (o.test, format!("{x} + {name}_{}", o.test + 1)))
+            .collect(),
+        params: (o.iter())
+            .map(|o| param(&format!("{name}_{}", o.test + 1), unit, o.value))
+            .collect(),
+        generic: format!("{} = \"{x} + {name}_i\" in each test i", hook.key()),
+        ..shared.clone()
+    };
+    vec![shared, each]
+}
+
+fn param(name: &str, unit: &str, value: f64) -> TermParam {
+    TermParam {
+        name: name.to_string(),
+        unit: unit.to_string(),
+        value,
+    }
+}
+
+/// Most tests a line term is given to (two slots each): those where the line is largest.
+/// [chosen: 10, so that a line term and the other terms of one diagnosis fit in the
+/// expressions' [`SLOTS`].]
+pub const LINE_TESTS: usize = 10;
+
+/// The terms of a spectral line: a sinusoid in the channel that shows it most (in the tests that
+/// show it there), and, where other channels show it too, a force of that frequency on the
+/// platen. Each test has its own sine and cosine (`s_k`, `c_k`, k the test's number) and its own
+/// least-squares frequency.
+fn line_terms(l: &signals::Line, c: &[ComparedTest]) -> Vec<Term> {
+    let Some(top) = (l.hits.iter()).max_by(|a, b| a.share.total_cmp(&b.share)) else {
+        return Vec::new();
+    };
+    let ch = top.channel;
+    // Every test (a line too weak to stand out in some, or beside a harmonic there, is still
+    // there), those that show it in that channel first, as many as the slots hold.
+    let share = |t: usize| {
+        let h = l.hits.iter().filter(|h| h.test == t && h.channel == ch);
+        h.map(|h| h.share).fold(0.0, f64::max)
+    };
+    let mut tests: Vec<usize> = (0..c.len()).collect();
+    tests.sort_by(|&a, &b| share(b).total_cmp(&share(a)));
+    tests.truncate(LINE_TESTS);
+    tests.sort_unstable();
+    // Per test: its index, frequency, the residual's sine and cosine there, and those of the
+    // acceleration's residual times the platen's mass (the force term's start: a force above
+    // the loop's bandwidth moves the platen as F/M).
+    let each: Vec<(usize, f64, [f64; 4])> = (tests.into_iter())
+        .filter_map(|t| {
+            let e = signals::residual(&c[t], ch)?;
+            let s = &c[t].test.samples;
+            let near = (l.hits.iter().find(|h| h.test == t)).map_or(l.freq_hz, |h| h.freq_hz);
+            let f = signals::refined_frequency(&e, &s.tau, near, s.rate_hz);
+            let (sn, cs) = signals::projection(&e, &s.tau, f);
+            let a = signals::residual(&c[t], 0)?;
+            let m = c[t].test.model.platen.m;
+            let (sa, ca) = signals::projection(&a, &s.tau, f);
+            Some((t, f, [sn, cs, m * sa, m * ca]))
+        })
+        .collect();
+    let (hook, x, unit) = channel_hook(ch);
+    let about = format!("in each test i, f_i about {:.4} Hz", l.freq_hz);
+    let evidence = Evidence::Line {
+        channel: ch,
+        freq_hz: l.freq_hz,
+    };
+    let term = |hook: Hook, lead: &str, unit: &str, start: usize| Term {
+        hook,
+        forms: (each.iter())
+            .map(|&(t, f, _)| (t, format!("{lead}{}", sinusoid(t + 1, f))))
+            .collect(),
+        params: (each.iter())
+            .flat_map(|&(t, _, v)| {
+                let k = t + 1;
+                let (sn, cs) = (v[start], v[start + 1]);
+                [
+                    param(&format!("s_{k}"), unit, sn),
+                    param(&format!("c_{k}"), unit, cs),
+                ]
+            })
+            .collect(),
+        generic: format!(
+            "{} = \"{lead}s_i*sin(2*pi*f_i*t) + c_i*cos(2*pi*f_i*t)\" {about}",
+            hook.key()
+        ),
+        evidence: evidence.clone(),
+    };
+    let mut out = vec![term(hook, &format!("{x} + "), unit, 0)];
+    if l.hits.iter().any(|h| h.channel != ch) {
+        out.push(term(Hook::Force, "", "N", 2));
+    }
+    out
+}
+
+/// `s_k*sin(2*pi*f*t) + c_k*cos(2*pi*f*t)`, f written to 8 significant figures.
+fn sinusoid(k: usize, f: f64) -> String {
+    format!("s_{k}*sin(2*pi*{f:.7e}*t) + c_{k}*cos(2*pi*{f:.7e}*t)")
+}
