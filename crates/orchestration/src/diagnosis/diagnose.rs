@@ -600,8 +600,13 @@ pub(crate) fn free_of_stage(effect: EffectId, stage: usize, model: &ModelParams)
 /// The expressions' free parameters: the named ones some expression of `model` reads, at their
 /// values there (a model file's value is the fit's start).
 fn expression_free(model: &ModelParams) -> Vec<Free> {
+    slots_free(model, model.expression.slots_read())
+}
+
+/// The named parameters of the expressions' `slots`, at their values in `model`.
+fn slots_free(model: &ModelParams, slots: Vec<usize>) -> Vec<Free> {
     let e = &model.expression;
-    (e.slots_read().into_iter())
+    (slots.into_iter())
         .filter_map(|slot| ModelParams::lookup(&format!("expression.{}", e.names[slot])))
         .map(|info| Free::new(info, info.get(model)))
         .collect()
@@ -615,12 +620,7 @@ fn expression_free_in(problem: &Problem) -> Vec<Free> {
         .collect();
     slots.sort_unstable();
     slots.dedup();
-    let model = reference_model(problem, EffectId::Expression);
-    let e = &model.expression;
-    (slots.into_iter())
-        .filter_map(|slot| ModelParams::lookup(&format!("expression.{}", e.names[slot])))
-        .map(|info| Free::new(info, info.get(model)))
-        .collect()
+    slots_free(reference_model(problem, EffectId::Expression), slots)
 }
 
 /// The free parameters of stage `stage` of `effect` in `problem`: the expressions' over every
@@ -847,8 +847,13 @@ fn choose_term(
     let mut options: Vec<Term> = (map.and_then(StateMap::term).iter())
         .map(|t| Term::from_map(t, &every))
         .collect();
-    if let Some((carry, _)) = signals.and_then(|s| s.split.as_ref()) {
-        let group: Vec<usize> = carry.iter().map(|x| x.0).collect();
+    if let Some((_, clean)) = signals.and_then(|s| s.split.as_ref()) {
+        let clean: Vec<usize> = clean.iter().map(|x| x.0).collect();
+        let group: Vec<usize> = every
+            .iter()
+            .copied()
+            .filter(|i| !clean.contains(i))
+            .collect();
         let some: Vec<ComparedTest> = group.iter().map(|&i| c[i].clone()).collect();
         let part = crate::diagnosis::statemap::map(&some).term();
         options.extend(part.map(|t| Term::from_map(&t, &group)));
