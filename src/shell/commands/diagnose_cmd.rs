@@ -1,7 +1,7 @@
 //! `study diagnose`: fit every candidate effect and say which one is most likely missing.
 
 use crate::kernel::params::EffectId;
-use crate::orchestration::diagnosis::diagnose::{self, Diagnosis};
+use crate::orchestration::diagnosis::diagnose::{self, Candidate, Diagnosis};
 use crate::orchestration::diagnosis::fit::Problem;
 use crate::shell::cli::DiagnoseArgs;
 use crate::shell::fit_problem::{
@@ -296,12 +296,30 @@ fn print_evidence(o: &mut dyn Write, problem: &Problem, d: &Diagnosis) -> std::i
     Ok(())
 }
 
+/// Why selection starts from a candidate ranked behind one that fits better alone, where it
+/// does: the two tied, and the effects added fit better with it (`diagnose::settle_leader`).
+fn print_swap(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
+    let [lead, next, ..] = &d.candidates[..] else {
+        return Ok(());
+    };
+    let library = |c: &Candidate| c.effect != EffectId::Expression;
+    if library(lead) && library(next) && next.chi2() < lead.chi2() {
+        writeln!(
+            o,
+            "  (from {}, not {}: alone they tie, and with the effects added {} fits better)",
+            lead.effect, next.effect, lead.effect
+        )?;
+    }
+    Ok(())
+}
+
 /// The forward selection's steps, each with its joint fit.
 fn print_selection(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
     if d.more.is_empty() {
         return Ok(());
     }
     writeln!(o, "\n  forward selection (each effect fitted on top of those before it, their parameters refitted with it):")?;
+    print_swap(o, d)?;
     writeln!(
         o,
         "  {:<22} {:>4} {:>11} {:>11} {:>9} {:>11}  parameters (joint fit)",

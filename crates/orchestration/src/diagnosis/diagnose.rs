@@ -33,7 +33,10 @@
 //! joint fit, remove [`ADDS_ENOUGH`] of what the others leave without it, with a significant ΔBIC,
 //! is dropped (a later effect may have taken over what it had removed). Each named effect's share
 //! is reported as it stands in the final joint fit: the share of the baseline's misfit beyond
-//! noise that the set loses without it. The verdict
+//! noise that the set loses without it. A leader that merely tied with the next candidates alone
+//! ([`TIE`]) gives way to one of them when, in its place in the final joint fit, that one fits
+//! better: selection then runs again from it, and the better set is named ([`settle_leader`]).
+//! The verdict
 //! names "A + B" and the share each adds when together they explain at least
 //! [`EXPLAINS_TOGETHER`] of the misfit beyond noise; a best candidate that
 //! explains less than [`EXPLAINS_ENOUGH`] (alone or with those added) is reported as such: the
@@ -82,6 +85,15 @@ pub const MAX_EFFECTS: usize = 3;
 /// χ² over thousands of features, and other flexible effects each take a sliver of it with a
 /// significant ΔBIC; an effect that removes a sliver is not a second missing effect.]
 pub const ADDS_ENOUGH: f64 = 0.25;
+/// Candidates ranked next behind the best that may take its place in the named set
+/// ([`settle_leader`]).
+pub const ALTERNATES: usize = 2;
+/// A candidate ties with the best when the χ² beyond noise it leaves alone is within this factor
+/// of the best's. [chosen: 1.25. Two forms of one mechanism (a valve's pure delay and its spool's
+/// second-order lag) fit a campaign alone to within a fraction of a percent of each other; which
+/// ranks first then turns on the channels' weights, yet only one of them, with the effects added
+/// to it, takes the residual to the noise.]
+pub const TIE: f64 = 1.25;
 /// A chosen set of effects is "right to the noise" when it leaves a residual rms within this
 /// factor of the noise floor. [chosen: 1.5, the criterion for a fit that is done.]
 pub const NOISE_FACTOR: f64 = 1.5;
@@ -966,7 +978,8 @@ pub fn diagnose(
         prefer_library(&mut out);
     }
     let more = forward_selection(problem, &out, &score);
-    let (more, own) = prune(problem, &out, more, &score);
+    let chosen = prune(problem, &out, more, &score);
+    let (more, own) = settle_leader(problem, &mut out, chosen, &score);
     Diagnosis {
         test_misfit: problem.test_misfit(&baseline),
         noise_rms: problem.noise_rms(),
@@ -1052,6 +1065,83 @@ fn forward_selection(problem: &Problem, ranked: &[Candidate], score: &Scoring) -
         });
     }
     steps
+}
+
+/// The named set `chosen` (the best candidate, then its steps, and each part's own share) with
+/// its leader replaced by a candidate that tied with it alone ([`ALTERNATES`], [`TIE`]) where the
+/// set then fits better by more than [`SIGNIFICANT_BIC`] in BIC: the tied candidate is put first
+/// in `out` and forward selection and [`prune`] run again from it; the better of the two sets
+/// (in BIC) is kept, and `out`'s order with it.
+fn settle_leader(
+    problem: &Problem,
+    out: &mut [Candidate],
+    chosen: (Vec<Step>, Vec<f64>),
+    score: &Scoring,
+) -> (Vec<Step>, Vec<f64>) {
+    let Some(last) = chosen.0.last() else {
+        return chosen;
+    };
+    let bic = |chi2: f64, p: usize| chi2 + p as f64 * score.ln_n;
+    let current = bic(last.fit.chi2_after(), last.free.len());
+    let Some((j, swapped)) = best_swap(problem, out, &chosen.0, score) else {
+        return chosen;
+    };
+    if swapped >= current - SIGNIFICANT_BIC {
+        return chosen;
+    }
+    out[..=j].rotate_right(1);
+    let more = forward_selection(problem, out, score);
+    let again = prune(problem, out, more, score);
+    let set_bic = |steps: &[Step]| match steps.last() {
+        Some(s) => bic(s.fit.chi2_after(), s.free.len()),
+        None => bic(out[0].chi2(), out[0].free.len()),
+    };
+    if set_bic(&again.0) < current {
+        return again;
+    }
+    out[..=j].rotate_left(1);
+    chosen
+}
+
+/// The tied candidate (its index in `out`) whose joint fit in the leader's place, with the
+/// parameters of `steps` from their final estimates, fits best, and that fit's BIC (χ² + p·ln n);
+/// None where no candidate ties. A tied candidate is one of the [`ALTERNATES`] library effects
+/// ranked next, significant, not already named, whose χ² beyond noise alone is within [`TIE`]
+/// times the leader's.
+fn best_swap(
+    problem: &Problem,
+    out: &[Candidate],
+    steps: &[Step],
+    score: &Scoring,
+) -> Option<(usize, f64)> {
+    let last = steps.last()?;
+    let parts: Vec<Part> = std::iter::once(out[0].part())
+        .chain(steps.iter().map(Step::part))
+        .collect();
+    let rest = kept(&parts, &param_ranges(out[0].free.len(), steps), 0);
+    let excess = |c: &Candidate| c.chi2() - score.n;
+    let tied = |c: &Candidate| {
+        c.significant()
+            && c.effect != EffectId::Expression
+            && excess(c) <= TIE * excess(&out[0])
+            && !parts.iter().any(|p| p.effect == c.effect)
+    };
+    let tries: Vec<(usize, f64)> = (1..out.len().min(1 + ALTERNATES))
+        .filter(|&j| tied(&out[j]))
+        .collect::<Vec<_>>()
+        .into_par_iter()
+        .filter_map(|j| {
+            let alone = out[j].fit.as_ref().ok()?;
+            let mut f = at_estimates(&out[j].free, &alone.estimate);
+            let others = rest
+                .iter()
+                .map(|&k| Free::new(last.free[k].info, last.fit.estimate[k]));
+            f.extend(others);
+            let r = fit::fit_from(problem, &f, MAX_ITER, last.fit.before.clone()).ok()?;
+            Some((j, r.chi2_after() + f.len() as f64 * score.ln_n))
+        })
+        .collect();
+    tries.into_iter().min_by(|a, b| a.1.total_cmp(&b.1))
 }
 
 /// The named set (the best candidate, then `steps`) checked in its final joint fit: each part is

@@ -7,7 +7,11 @@
 //!   the means of the window's two halves differ by less than [`OFFSET_STEADY`] of m (a drift or a
 //!   slow misfit is not an offset). The same offset in every test that has the channel is a
 //!   constant of the set-up (a sensor's zero, a preload); one in some tests only, a change between
-//!   tests.
+//!   tests. A displacement offset is also read against the tracked reference: the steady part of
+//!   feedback − reference, measured and in the model (the loop's own steady error), from a
+//!   least-squares fit of it by a constant and the reference's x_r, v_r, a_r ([`loop_errors`]).
+//!   A valve's null bias or a steady force shows as feedback the loop holds off the reference by
+//!   more than the model's loop does.
 //! - **Spectral lines.** Per test and channel, the periodogram of the residual under a Hann window
 //!   (zero-padded to a power of two, [`crate::fourier`]). A bin is a line where it is a local
 //!   maximum standing [`LINE_RATIO`] times above the median of its neighbours (±[`LINE_SPAN`]
@@ -20,9 +24,10 @@
 //!   k·f₀ of the excitation (nor below three resolutions: drift). Its amplitude is
 //!   2|X_k|/Σw (the Hann window's coherent gain), its frequency the peak refined by a parabola
 //!   through the log-power of the three bins around it. Lines at one frequency in several tests
-//!   (within the coarser resolution) are one line: *fixed* in frequency when the sine tests'
-//!   f₀ differ and the line does not move, *locked* to the excitation when f/f₀ is the same in
-//!   every sine test that has it.
+//!   (within the coarser resolution) are one line, and so are lines of sine tests at one ratio
+//!   f/f₀ to each test's f₀ ([`merge_locked`]): *fixed* in frequency when the sine tests' f₀
+//!   differ and the line does not move, *locked* to the excitation when f/f₀ is the same in every
+//!   sine test that has it.
 //! - **Tests that differ.** Per test, the weighted misfit the fit minimises (√(χ²/dof), about 1
 //!   at the noise). When some tests are above [`TEST_CARRIES`] and others at most
 //!   [`TEST_CLEAN`], the residual is in some tests only: the set-up changed between them, or an
@@ -32,6 +37,8 @@
 
 use crate::diagnosis::compare::ComparedTest;
 use crate::fourier;
+use faer::prelude::*;
+use faer::Mat;
 use std::f64::consts::PI;
 
 /// An offset is reported at this many standard errors of the noise from zero. [chosen: 5; the
@@ -89,6 +96,9 @@ pub struct Offset {
     pub z: f64,
     /// Its share of the residual's mean square.
     pub share: f64,
+    /// The displacement's: the steady part of the feedback less the tracked reference, measured
+    /// and the model's (the loop's steady error), m ([`loop_errors`]).
+    pub loop_error: Option<[f64; 2]>,
 }
 
 /// A spectral line of the residual in one test and channel.
@@ -165,6 +175,7 @@ pub fn read(compared: &[ComparedTest], sigma: &[[f64; 3]], misfit: &[f64]) -> Si
                 offsets.push(Offset {
                     test: i,
                     channel: c,
+                    loop_error: (c == 1).then(|| loop_errors(t)),
                     ..o
                 });
             }
@@ -194,6 +205,27 @@ pub fn read(compared: &[ComparedTest], sigma: &[[f64; 3]], misfit: &[f64]) -> Si
     }
 }
 
+/// The steady part of the displacement less the tracked reference over a compared test's
+/// samples, measured and the model's: the constant of its least-squares fit by a constant and
+/// the reference's x_r, v_r and a_r (the loop's lag and gain error of the motion taken out, which
+/// over a window of partial cycles would leave a mean of its own).
+fn loop_errors(t: &ComparedTest) -> [f64; 2] {
+    let s = &t.test.samples;
+    let n = s.len();
+    let a = Mat::<f64>::from_fn(n, 4, |i, j| match j {
+        0 => 1.0,
+        1 => s.ref_x[i],
+        2 => s.ref_v[i],
+        _ => s.ref_a[i],
+    });
+    let qr = a.qr();
+    let steady = |y: &[f64]| {
+        let b = Mat::<f64>::from_fn(n, 1, |i, _| y[i] - s.ref_x[i]);
+        qr.solve_lstsq(&b)[(0, 0)]
+    };
+    [steady(&t.test.measured.disp), steady(&t.disp_model)]
+}
+
 /// The offset of the residual `e` (test and channel left 0), if it is one; `sigma` the noise.
 fn offset(e: &[f64], sigma: f64) -> Option<Offset> {
     let n = e.len();
@@ -213,6 +245,7 @@ fn offset(e: &[f64], sigma: f64) -> Option<Offset> {
         value: m,
         z,
         share,
+        loop_error: None,
     })
 }
 
@@ -394,10 +427,41 @@ fn group_lines(mut hits: Vec<Hit>, f0: &[Option<f64>], res: &[f64]) -> Vec<Line>
             }),
         }
     }
+    let mut lines = merge_locked(lines, f0, res);
     for l in &mut lines {
         classify(l, f0);
     }
     lines
+}
+
+/// Lines seen in sine tests only, at one ratio to each test's f₀, merged into one: a line locked
+/// to the excitation moves with it, so grouping by frequency splits it over tests of different
+/// f₀. Two lines merge when their mean ratios f/f₀ agree within the coarser of their tests'
+/// resolutions over f₀, twice.
+fn merge_locked(lines: Vec<Line>, f0: &[Option<f64>], res: &[f64]) -> Vec<Line> {
+    // The line's ratio and its tolerance; None where a hit is not a sine test's or the hits'
+    // ratios differ (a line at one frequency over tests of different f₀).
+    let ratio = |l: &Line| -> Option<(f64, f64)> {
+        let (mut lo, mut hi, mut tol) = (f64::INFINITY, 0.0f64, 0.0f64);
+        for h in &l.hits {
+            let f = f0[h.test]?;
+            (lo, hi) = (lo.min(h.freq_hz / f), hi.max(h.freq_hz / f));
+            tol = tol.max(2.0 * res[h.test] / f);
+        }
+        (hi - lo <= tol).then_some((0.5 * (lo + hi), tol))
+    };
+    let mut out: Vec<Line> = Vec::new();
+    for l in lines {
+        let same = |o: &&mut Line| match (ratio(o), ratio(&l)) {
+            (Some((a, ta)), Some((b, tb))) => (a - b).abs() <= ta.max(tb),
+            _ => false,
+        };
+        match out.iter_mut().find(same) {
+            Some(o) => o.hits.extend(l.hits),
+            None => out.push(l),
+        }
+    }
+    out
 }
 
 /// Whether a line stays at one frequency or moves with the excitation, over its sine tests.
@@ -477,11 +541,16 @@ impl Signals {
                 let what = if same_sign && hi <= 1.25 * lo {
                     format!("{:+.3e} {unit}", values.iter().sum::<f64>() / values.len() as f64)
                 } else {
-                    format!("{:.2e} to {:.2e} {unit}", lo, hi)
+                    let (min, max) = (values.iter())
+                        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                            (a.min(v), b.max(v))
+                        });
+                    format!("{min:+.2e} to {max:+.2e} {unit}")
                 };
                 Some(format!(
-                    "a steady offset of the {name} (measured - model) of {what} {which}, up to {z:.0} noise errors and {:.0} % of that residual",
-                    100.0 * share
+                    "a steady offset of the {name} (measured - model) of {what} {which}, up to {z:.0} noise errors and {:.0} % of that residual{}",
+                    100.0 * share,
+                    loop_sentence(&o)
                 ))
             })
             .collect()
@@ -510,9 +579,15 @@ impl Signals {
             (None, true) => "at one frequency whatever the excitation's".to_string(),
             _ => "not a harmonic of the excitation".to_string(),
         };
+        let (lo, hi) = (l.hits.iter()).fold((f64::INFINITY, 0.0f64), |(a, b), h| {
+            (a.min(h.freq_hz), b.max(h.freq_hz))
+        });
+        let at = match hi - lo > 0.005 * hi {
+            true => format!("{lo:.2} to {hi:.2}"),
+            false => format!("{:.2}", l.freq_hz),
+        };
         format!(
-            "a spectral line at {:.2} Hz in the {} ({} of {} tests: {}; amplitude up to {}, {:.0} % of that residual; {kind})",
-            l.freq_hz,
+            "a spectral line at {at} Hz in the {} ({} of {} tests: {}; amplitude up to {}, {:.0} % of that residual; {kind})",
             join_and(&ch),
             tests.len(),
             self.names.len(),
@@ -541,6 +616,30 @@ impl Signals {
     pub fn list(&self, tests: impl Iterator<Item = usize>) -> String {
         let v: Vec<&str> = tests.map(|t| self.names[t].as_str()).collect();
         join_and(&v)
+    }
+}
+
+/// The displacement offsets' reading against the reference: where the feedback sits from the
+/// tracked reference, measured and in the model (its loop's steady error); empty for another
+/// channel.
+fn loop_sentence(o: &[&Offset]) -> String {
+    let errors: Vec<[f64; 2]> = o.iter().filter_map(|o| o.loop_error).collect();
+    let range = |i: usize| {
+        let (lo, hi) = (errors.iter()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), e| {
+            (a.min(e[i]), b.max(e[i]))
+        });
+        match hi - lo > 0.25 * hi.abs().max(lo.abs()) {
+            true => format!("{lo:+.2e} to {hi:+.2e} m"),
+            false => format!("{:+.3e} m", 0.5 * (lo + hi)),
+        }
+    };
+    match errors.is_empty() {
+        true => String::new(),
+        false => format!(
+            "; the feedback sits {} from the tracked reference, where the model's loop leaves {} (its steady error): a valve's null bias or a steady force the loop leaves as an error, or a recorded feedback whose zero is not the loop's",
+            range(0),
+            range(1)
+        ),
     }
 }
 
@@ -624,6 +723,71 @@ mod tests {
         assert!((o.value - 1e-3).abs() < 1e-6 && o.share > 0.99, "{o:?}");
         let drift: Vec<f64> = (0..2000).map(|j| 1e-6 * j as f64).collect();
         assert_eq!(offset(&drift, 1e-5), None);
+    }
+
+    /// A line at 3.1 f₀ in sine tests of 1, 2 and 3 Hz is one line, locked to the excitation;
+    /// a hum at 59.96 Hz in the same tests is another, at one frequency.
+    #[test]
+    fn a_line_that_moves_with_the_excitation_is_one_line() {
+        let f0 = [Some(1.0), Some(2.0), Some(3.0)];
+        let res = [0.01; 3];
+        let hit = |test: usize, freq_hz: f64, share: f64| Hit {
+            test,
+            channel: 0,
+            freq_hz,
+            amplitude: 1.0,
+            share,
+        };
+        let hits = vec![
+            hit(0, 3.1, 0.3),
+            hit(1, 6.2, 0.2),
+            hit(2, 9.3 + 0.004, 0.1),
+            hit(0, 59.96, 0.05),
+            hit(1, 59.96, 0.04),
+            hit(2, 59.965, 0.03),
+        ];
+        let lines = group_lines(hits, &f0, &res);
+        assert_eq!(lines.len(), 2, "{lines:?}");
+        let locked = lines.iter().find(|l| l.locked.is_some()).unwrap();
+        assert_eq!(locked.hits.len(), 3, "{locked:?}");
+        assert!((locked.locked.unwrap() - 3.1).abs() < 1e-3, "{locked:?}");
+        let hum = lines.iter().find(|l| l.fixed).unwrap();
+        assert_eq!(hum.hits.len(), 3, "{hum:?}");
+        let names = ["a", "b", "c"].map(String::from).to_vec();
+        let s = Signals {
+            lines: vec![locked.clone()],
+            names,
+            ..Default::default()
+        };
+        let sentence = s.line_sentence(locked);
+        assert!(
+            sentence.contains("at 3.10 to 9.30 Hz") && sentence.contains("at 3.100 f0"),
+            "{sentence}"
+        );
+    }
+
+    /// An offset of either sign over the tests is stated with its signs.
+    #[test]
+    fn offsets_of_both_signs_keep_their_signs() {
+        let off = |test: usize, value: f64| Offset {
+            test,
+            channel: 1,
+            value,
+            z: 10.0,
+            share: 0.5,
+            loop_error: Some([value + 1e-5, 1e-5]),
+        };
+        let s = Signals {
+            offsets: vec![off(0, -2e-4), off(1, 3e-4)],
+            names: ["a", "b"].map(String::from).to_vec(),
+            ..Default::default()
+        };
+        let said = s.offset_sentences().join("");
+        assert!(said.contains("-2.00e-4 to +3.00e-4 m"), "{said}");
+        assert!(
+            said.contains("the feedback sits -1.90e-4 to +3.10e-4 m from the tracked reference, where the model's loop leaves +1.000e-5 m"),
+            "{said}"
+        );
     }
 
     #[test]

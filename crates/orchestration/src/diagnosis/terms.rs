@@ -235,6 +235,12 @@ fn line_terms(l: &signals::Line, c: &[ComparedTest]) -> Vec<Term> {
     tests.sort_by(|&a, &b| share(b).total_cmp(&share(a)));
     tests.truncate(LINE_TESTS);
     tests.sort_unstable();
+    // A test without a hit: the line where it is in the tests that show it (at the same ratio to
+    // the test's f₀ for a line locked to the excitation).
+    let guess = |t: usize| match (l.locked, c[t].test.samples.fundamental_hz) {
+        (Some(r), Some(f0)) => r * f0,
+        _ => l.freq_hz,
+    };
     // Per test: its index, frequency, the residual's sine and cosine there, and those of the
     // acceleration's residual times the platen's mass (the force term's start: a force above
     // the loop's bandwidth moves the platen as F/M).
@@ -242,7 +248,7 @@ fn line_terms(l: &signals::Line, c: &[ComparedTest]) -> Vec<Term> {
         .filter_map(|t| {
             let e = signals::residual(&c[t], ch)?;
             let s = &c[t].test.samples;
-            let near = (l.hits.iter().find(|h| h.test == t)).map_or(l.freq_hz, |h| h.freq_hz);
+            let near = (l.hits.iter().find(|h| h.test == t)).map_or(guess(t), |h| h.freq_hz);
             let f = signals::refined_frequency(&e, &s.tau, near, s.rate_hz);
             let (sn, cs) = signals::projection(&e, &s.tau, f);
             let a = signals::residual(&c[t], 0)?;
@@ -252,7 +258,7 @@ fn line_terms(l: &signals::Line, c: &[ComparedTest]) -> Vec<Term> {
         })
         .collect();
     let (hook, x, unit) = channel_hook(ch);
-    let about = format!("in each test i, f_i about {:.4} Hz", l.freq_hz);
+    let about = line_about(l, &each, c.len());
     let evidence = Evidence::Line {
         channel: ch,
         freq_hz: l.freq_hz,
@@ -283,6 +289,25 @@ fn line_terms(l: &signals::Line, c: &[ComparedTest]) -> Vec<Term> {
         out.push(term(Hook::Force, "", "N", 2));
     }
     out
+}
+
+/// Where a line term's f_i are, from `each` (test, f_i, …), and in how many of the `n` tests.
+fn line_about(l: &signals::Line, each: &[(usize, f64, [f64; 4])], n: usize) -> String {
+    let (lo, hi) = (each.iter()).fold((f64::INFINITY, 0.0f64), |(a, b), e| {
+        (a.min(e.1), b.max(e.1))
+    });
+    let f = match (l.locked, hi - lo > 1e-4 * hi) {
+        (Some(r), _) => format!("f_i = {r:.4} times test i's frequency ({lo:.4} to {hi:.4} Hz)"),
+        (None, true) => format!("f_i from {lo:.4} to {hi:.4} Hz"),
+        (None, false) => format!("f_i about {lo:.4} Hz"),
+    };
+    match each.len() < n {
+        true => format!(
+            "in each test i of the {} (of {n}) where the line is largest, {f}",
+            each.len()
+        ),
+        false => format!("in each test i, {f}"),
+    }
 }
 
 /// `s_k*sin(2*pi*f*t) + c_k*cos(2*pi*f*t)`, f written to 8 significant figures.
