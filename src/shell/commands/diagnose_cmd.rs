@@ -296,14 +296,15 @@ fn print_evidence(o: &mut dyn Write, problem: &Problem, d: &Diagnosis) -> std::i
     Ok(())
 }
 
-/// Why selection starts from a candidate ranked behind one that fits better alone, where it
-/// does: the two tied, and the effects added fit better with it (`diagnose::settle_leader`).
+/// Why selection starts from a candidate ranked behind one that fits better alone (in ΔBIC, the
+/// ranking's measure), where it does: the two tied, and the effects added fit better with it
+/// (`diagnose::settle_leader`).
 fn print_swap(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
     let [lead, next, ..] = &d.candidates[..] else {
         return Ok(());
     };
     let library = |c: &Candidate| c.effect != EffectId::Expression;
-    if library(lead) && library(next) && next.chi2() < lead.chi2() {
+    if library(lead) && library(next) && next.delta_bic > lead.delta_bic {
         writeln!(
             o,
             "  (from {}, not {}: alone they tie, and with the effects added {} fits better)",
