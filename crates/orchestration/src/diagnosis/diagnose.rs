@@ -660,6 +660,12 @@ struct Scoring {
 }
 
 impl Scoring {
+    /// The Bayesian information criterion of a fit leaving `chi2` with `p` parameters, up to a
+    /// constant: χ² + p·ln n.
+    fn bic(&self, chi2: f64, p: usize) -> f64 {
+        chi2 + p as f64 * self.ln_n
+    }
+
     /// Share of the baseline's χ² beyond noise that a fit leaving `chi2` removes, in [0, 1].
     fn share(&self, chi2: f64) -> f64 {
         let excess = self.chi2_b - self.n;
@@ -1081,8 +1087,7 @@ fn settle_leader(
     let Some(last) = chosen.0.last() else {
         return chosen;
     };
-    let bic = |chi2: f64, p: usize| chi2 + p as f64 * score.ln_n;
-    let current = bic(last.fit.chi2_after(), last.free.len());
+    let current = score.bic(last.fit.chi2_after(), last.free.len());
     let Some((j, swapped)) = best_swap(problem, out, &chosen.0, score) else {
         return chosen;
     };
@@ -1093,8 +1098,8 @@ fn settle_leader(
     let more = forward_selection(problem, out, score);
     let again = prune(problem, out, more, score);
     let set_bic = |steps: &[Step]| match steps.last() {
-        Some(s) => bic(s.fit.chi2_after(), s.free.len()),
-        None => bic(out[0].chi2(), out[0].free.len()),
+        Some(s) => score.bic(s.fit.chi2_after(), s.free.len()),
+        None => score.bic(out[0].chi2(), out[0].free.len()),
     };
     if set_bic(&again.0) < current {
         return again;
@@ -1138,7 +1143,7 @@ fn best_swap(
                 .map(|&k| Free::new(last.free[k].info, last.fit.estimate[k]));
             f.extend(others);
             let r = fit::fit_from(problem, &f, MAX_ITER, last.fit.before.clone()).ok()?;
-            Some((j, r.chi2_after() + f.len() as f64 * score.ln_n))
+            Some((j, score.bic(r.chi2_after(), f.len())))
         })
         .collect();
     tries.into_iter().min_by(|a, b| a.1.total_cmp(&b.1))

@@ -541,10 +541,7 @@ impl Signals {
                 let what = if same_sign && hi <= 1.25 * lo {
                     format!("{:+.3e} {unit}", values.iter().sum::<f64>() / values.len() as f64)
                 } else {
-                    let (min, max) = (values.iter())
-                        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-                            (a.min(v), b.max(v))
-                        });
+                    let (min, max) = bounds(values.iter().copied());
                     format!("{min:+.2e} to {max:+.2e} {unit}")
                 };
                 Some(format!(
@@ -579,9 +576,7 @@ impl Signals {
             (None, true) => "at one frequency whatever the excitation's".to_string(),
             _ => "not a harmonic of the excitation".to_string(),
         };
-        let (lo, hi) = (l.hits.iter()).fold((f64::INFINITY, 0.0f64), |(a, b), h| {
-            (a.min(h.freq_hz), b.max(h.freq_hz))
-        });
+        let (lo, hi) = bounds(l.hits.iter().map(|h| h.freq_hz));
         let at = match hi - lo > 0.005 * hi {
             true => format!("{lo:.2} to {hi:.2}"),
             false => format!("{:.2}", l.freq_hz),
@@ -625,9 +620,7 @@ impl Signals {
 fn loop_sentence(o: &[&Offset]) -> String {
     let errors: Vec<[f64; 2]> = o.iter().filter_map(|o| o.loop_error).collect();
     let range = |i: usize| {
-        let (lo, hi) = (errors.iter()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), e| {
-            (a.min(e[i]), b.max(e[i]))
-        });
+        let (lo, hi) = bounds(errors.iter().map(|e| e[i]));
         match hi - lo > 0.25 * hi.abs().max(lo.abs()) {
             true => format!("{lo:+.2e} to {hi:+.2e} m"),
             false => format!("{:+.3e} m", 0.5 * (lo + hi)),
@@ -641,6 +634,13 @@ fn loop_sentence(o: &[&Offset]) -> String {
             range(1)
         ),
     }
+}
+
+/// The least and the greatest of `v` ((∞, −∞) when empty).
+pub(crate) fn bounds(v: impl IntoIterator<Item = f64>) -> (f64, f64) {
+    (v.into_iter()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
+        (a.min(x), b.max(x))
+    })
 }
 
 /// "a, b and c".

@@ -293,9 +293,7 @@ fn line_terms(l: &signals::Line, c: &[ComparedTest]) -> Vec<Term> {
 
 /// Where a line term's f_i are, from `each` (test, f_i, …), and in how many of the `n` tests.
 fn line_about(l: &signals::Line, each: &[(usize, f64, [f64; 4])], n: usize) -> String {
-    let (lo, hi) = (each.iter()).fold((f64::INFINITY, 0.0f64), |(a, b), e| {
-        (a.min(e.1), b.max(e.1))
-    });
+    let (lo, hi) = signals::bounds(each.iter().map(|e| e.1));
     let f = match (l.locked, hi - lo > 1e-4 * hi) {
         (Some(r), _) => format!("f_i = {r:.4} times test i's frequency ({lo:.4} to {hi:.4} Hz)"),
         (None, true) => format!("f_i from {lo:.4} to {hi:.4} Hz"),
