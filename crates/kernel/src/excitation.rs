@@ -14,11 +14,12 @@
 //!     causal like a controller's generator, so x_r lags the record (4/ω at low frequency);
 //!   - the tracked *reference* (what a data-acquisition system records): x_r is the record
 //!     itself, by the cubic through the four nearest samples between them; v_r, a_r, j_r are the
-//!     derivatives of the record through a zero-phase filter, the 4th-order Butterworth of corner
-//!     f_ref run backward then forward, |H|² = 1/(1 + (f/f_ref)⁸) [chosen: flat to 3e-6 at
-//!     f_ref/5, where the command's critically damped filter run both ways would take 15 % off
-//!     a_r; each pass is exact for an input linear between ticks, the input first corrected by
-//!     −Δ²/12, so the derivatives of a smooth record are right to O((ωT)⁴)]; no lag.
+//!     derivatives of the record through a zero-phase filter, the 4th-order Butterworth run
+//!     backward then forward, |H|² = 1/(1 + (f/f_d)⁸), at four times the ticks' rate; its corner
+//!     f_d is chosen per record from 1 to 3 × f_ref by the least estimated error of a_r
+//!     ([`Record::derivative_corner_hz`]) [each pass is exact for an input linear between its
+//!     steps, the input first corrected by −Δ²/12, so the derivatives of a smooth record are right
+//!     to O((ωT)⁴)]; no lag.
 
 use super::expm::expm;
 use super::spectrum::SpectrumSpec;
@@ -45,6 +46,9 @@ pub struct Reference {
     /// The response spectrum the metrics take, with the target's PSA (of `a` over the window),
     /// m/s² ([`Reference::with_spectrum`]); `None`: no spectral metrics.
     pub spectrum: Option<(SpectrumSpec, Vec<f64>)>,
+    /// The estimated rms error of a_r over a_r's rms: a tracked reference's derivatives,
+    /// [`Record::derivative_corner_hz`]; 0 where the states are exact.
+    pub accel_floor: f64,
 }
 
 /// What moves the spool.
@@ -81,6 +85,7 @@ impl Reference {
             fundamental_hz,
             drive: Drive::ClosedLoop,
             spectrum: None,
+            accel_floor: 0.0,
         }
     }
 
@@ -300,12 +305,122 @@ impl Record {
     /// them), v_r, a_r and j_r its zero-phase derivatives ([`zero_phase_derivatives`]).
     fn tracked(&self, f_s: f64, n: usize) -> Reference {
         let u = cubic_at_ticks(&self.time_s, &self.disp_m, f_s, n);
-        let d = zero_phase_derivatives(&u, 2.0 * PI * self.f_ref_hz, 1.0 / f_s);
+        let d = self.derivatives(f_s, n);
         let mut r = Reference::with_capacity(f_s, n, None);
-        for (k, s) in d.iter().enumerate() {
+        for (k, s) in d.states.iter().enumerate() {
             r.push([u[k], s[1], s[2], s[3]], u[k]);
         }
+        r.accel_floor = d.floor;
         r
+    }
+
+    /// The corner of a tracked reference's derivatives, Hz (docs/model.md §4): of
+    /// [`DERIVATIVE_CORNERS`] × f_ref (those up to f_s/4 and 1/2.5 of the record's rate), the
+    /// one whose a_r has the least estimated error, the record's content the corner takes off
+    /// (against the highest corner's a_r) plus the record's noise it lets through.
+    pub fn derivative_corner_hz(&self, f_s: f64) -> f64 {
+        let n = ((self.time_s[self.time_s.len() - 1] - self.time_s[0]) * f_s).floor() as usize + 1;
+        self.derivatives(f_s, n).corner_hz
+    }
+
+    /// [`Record::derivative_corner_hz`], the derivatives there at `n` ticks and their estimated
+    /// error. The filters run at [`OVERSAMPLING`] times the controller's rate, on the record's
+    /// cubic there: at the ticks' own rate each pass's linear interpolation has a kink at every
+    /// tick, whose images at the tick rate a corner above f_s/20 passes into a_r (4.6e-4 of a
+    /// multisine's a_r at 125 Hz).
+    fn derivatives(&self, f_s: f64, n: usize) -> Derivatives {
+        let rate = self.sample_rate();
+        let cap = (f_s / 4.0).min(rate / 2.5);
+        let corners: Vec<f64> = DERIVATIVE_CORNERS
+            .iter()
+            .map(|k| k * self.f_ref_hz)
+            .filter(|&c| c <= self.f_ref_hz || c <= cap)
+            .collect();
+        let fine = OVERSAMPLING as f64 * f_s;
+        let u = cubic_at_ticks(&self.time_s, &self.disp_m, fine, OVERSAMPLING * (n - 1) + 1);
+        let at = |c: f64| -> Vec<[f64; 4]> {
+            let d = zero_phase_derivatives(&u, 2.0 * PI * c, 1.0 / fine);
+            d.into_iter().step_by(OVERSAMPLING).collect()
+        };
+        let accels: Vec<Vec<f64>> = corners
+            .iter()
+            .map(|&c| at(c).iter().map(|s| s[2]).collect())
+            .collect();
+        let sigma = self.noise_sigma();
+        let noise =
+            |c: f64, minus: Option<f64>| noise_in_accel(sigma, rate.min(f_s) / 2.0, c, minus);
+        // The content corner i takes off against corner j (i < j), noise apart.
+        let taken = |i: usize, j: usize| {
+            (mean_square_apart(&accels[i], &accels[j]) - noise(corners[i], Some(corners[j])))
+                .max(0.0)
+        };
+        let top = corners.len() - 1;
+        let best = (0..=top)
+            .map(|i| {
+                (
+                    if i < top { taken(i, top) } else { 0.0 } + noise(corners[i], None),
+                    i,
+                )
+            })
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .map_or(top, |(_, i)| i);
+        // The best corner's own loss, from its difference with a neighbour: for content well
+        // below both corners the filter takes (f/c)⁸ off, so corner c' < c takes ((c/c')⁸ − 1)
+        // times c's loss more, and c'' > c ((1 − (c/c'')⁸) times c's loss less.
+        let loss = match (best, top) {
+            (_, 0) => 0.0,
+            (0, _) => taken(0, 1) / (1.0 - (corners[0] / corners[1]).powi(8)).powi(2),
+            (b, _) => taken(b - 1, b) / ((corners[b] / corners[b - 1]).powi(8) - 1.0).powi(2),
+        };
+        let rms = (accels[best].iter().map(|a| a * a).sum::<f64>() / n.max(1) as f64).sqrt();
+        Derivatives {
+            corner_hz: corners[best],
+            states: at(corners[best]),
+            floor: ((loss + noise(corners[best], None)).sqrt() / rms).min(1.0),
+        }
+    }
+
+    /// The record's sample rate, Hz: its samples over its span.
+    fn sample_rate(&self) -> f64 {
+        let span = self.time_s[self.time_s.len() - 1] - self.time_s[0];
+        (self.time_s.len() - 1) as f64 / span
+    }
+
+    /// σ of white noise in the record, m: the median power of its Hann-windowed spectrum in the
+    /// top band, 0.4 to 0.5 of its rate, where a reference the controller's generator made holds
+    /// next to nothing (as `fourier::noise_sigma` in the orchestration layer, at 64 bins by a
+    /// direct transform); third differences (σ = rms(Δ³x)/√20, an upper bound) for a record too
+    /// short for the band to hold 64 bins.
+    fn noise_sigma(&self) -> f64 {
+        let x = &self.disp_m;
+        let n = x.len();
+        if n < 1280 {
+            let d3 = x
+                .windows(4)
+                .map(|w| (w[3] - 3.0 * w[2] + 3.0 * w[1] - w[0]).powi(2));
+            return (d3.sum::<f64>() / n.saturating_sub(3).max(1) as f64 / 20.0).sqrt();
+        }
+        let hann: Vec<f64> = (0..n)
+            .map(|j| (PI * (j as f64 + 0.5) / n as f64).sin().powi(2))
+            .collect();
+        let sum_w2: f64 = hann.iter().map(|w| w * w).sum();
+        let turn: Vec<(f64, f64)> = (0..n)
+            .map(|j| (2.0 * PI * j as f64 / n as f64).sin_cos())
+            .collect();
+        let mut power: Vec<f64> = (0..64)
+            .map(|m| {
+                let k = (n as f64 * (0.4 + 0.1 * (m as f64 + 0.5) / 64.0)) as usize;
+                let (mut re, mut im) = (0.0, 0.0);
+                for j in 0..n {
+                    let (s, c) = turn[(j * k) % n];
+                    re += x[j] * hann[j] * c;
+                    im -= x[j] * hann[j] * s;
+                }
+                re * re + im * im
+            })
+            .collect();
+        power.sort_by(f64::total_cmp);
+        (power[32] / (2f64.ln() * sum_w2)).sqrt()
     }
 
     /// `signal = "command"`: the record, linear between samples, through the causal
@@ -430,6 +545,50 @@ pub(crate) fn foh_filter(c: [f64; 3], w: f64, dt: f64) -> ([[f64; 4]; 4], [f64; 
         g1[r] = e[r][5] * up;
     }
     (phi, g0, g1)
+}
+
+/// A tracked reference's derivatives ([`Record::derivative_corner_hz`]).
+struct Derivatives {
+    /// The corner they were filtered at, Hz.
+    corner_hz: f64,
+    /// (x, v, a, j) at every tick (x filtered too; the reference takes the record's).
+    states: Vec<[f64; 4]>,
+    /// The estimated rms error of a over its rms: the content the corner takes off, and the
+    /// record's noise it lets through.
+    floor: f64,
+}
+
+/// The mean square of `a − b`.
+fn mean_square_apart(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(p, q)| (p - q).powi(2)).sum::<f64>() / a.len().max(1) as f64
+}
+
+/// The corners tried for a tracked reference's derivatives, in units of f_ref [chosen: from
+/// f_ref, the contract's corner, to 3 f_ref, where the zero-phase filter takes (1/3)⁸ = 1.5e-4 off
+/// the content at f_ref and the generator that made the reference has left (1 + 3²)⁻² = 1 % of
+/// its command; higher corners raise j_r's error on a 1024 Hz record (6.8e-4 of a multisine's
+/// peak at 4 f_ref against 1.6e-4 at 3 f_ref). The model's own 35 s stochastic run read back:
+/// acceleration residual 1.1e-2 at f_ref, 1.2e-4 at 3 f_ref].
+pub const DERIVATIVE_CORNERS: [f64; 6] = [1.0, 1.25, 1.5, 2.0, 2.5, 3.0];
+
+/// How many times the controller's rate a tracked reference's derivatives are filtered at.
+const OVERSAMPLING: usize = 4;
+
+/// The variance of white noise of σ `sigma` (m), spread evenly over [0, `band`] Hz, in the
+/// acceleration the zero-phase filter of corner `c` derives from it, m²/s⁴; with `minus`, in the
+/// difference from the acceleration at that corner.
+fn noise_in_accel(sigma: f64, band: f64, c: f64, minus: Option<f64>) -> f64 {
+    let h = |f: f64, c: f64| 1.0 / (1.0 + (f / c).powi(8));
+    let steps = 2000;
+    let df = band / steps as f64;
+    let integral: f64 = (0..steps)
+        .map(|i| {
+            let f = (i as f64 + 0.5) * df;
+            let g = h(f, c) - minus.map_or(0.0, |m| h(f, m));
+            (2.0 * PI * f).powi(4) * g * g * df
+        })
+        .sum();
+    sigma * sigma / band * integral
 }
 
 /// Coefficients of the critically damped (s + 1)⁴ of the command's state-variable filter.
@@ -686,13 +845,14 @@ mod tests {
             }
             s
         };
-        // Largest error over the largest value, of x, v, a, j: measured 0, 8.8e-6, 3.1e-5,
-        // 2.2e-4 at 1024 Hz; 6.2e-7, 1.2e-5, 4.1e-5, 2.4e-4 at 500 Hz; 9.5e-6, 4.7e-5, 1.3e-4,
-        // 3.9e-4 at 256 Hz (j loses (15/50)⁸ = 6.6e-5 of its 15 Hz part to the filter).
+        // Largest error over the largest value, of x, v, a, j: measured 0, 1.5e-7, 3.4e-6,
+        // 1.6e-4 at 1024 Hz and 6.2e-7, 2.8e-6, 1.0e-5, 2.1e-4 at 500 Hz (corner 150 Hz);
+        // 9.5e-6, 4.0e-5, 1.3e-4, 4.8e-4 at 256 Hz (corner 100 Hz, the highest below 1/2.5 of
+        // the rate).
         for (rate, bound) in [
-            (1024.0, [1e-15, 2e-5, 6e-5, 4e-4]),
-            (500.0, [2e-6, 2e-5, 6e-5, 4e-4]),
-            (256.0, [2e-5, 1e-4, 3e-4, 8e-4]),
+            (1024.0, [1e-15, 1e-6, 1e-5, 4e-4]),
+            (500.0, [2e-6, 1e-5, 3e-5, 5e-4]),
+            (256.0, [2e-5, 1e-4, 3e-4, 1e-3]),
         ] {
             let n = (20.0 * rate) as usize;
             let time_s: Vec<f64> = (0..n).map(|i| i as f64 / rate).collect();
@@ -721,5 +881,51 @@ mod tests {
             }
             assert_eq!(r.command, r.x);
         }
+    }
+
+    /// The derivatives' corner: the highest tried for a clean record (3 f_ref), f_ref for one
+    /// whose noise (10 µm, a 16-bit reference over ±0.3 m) would swamp a higher corner's a_r, and
+    /// in between for 0.1 µm; at 256 Hz only corners up to 1/2.5 of the rate are tried.
+    #[test]
+    fn the_derivatives_corner_follows_the_records_noise() {
+        let rate = 1024.0;
+        let n = (20.0 * rate) as usize;
+        let mut state = 12345u64;
+        let mut gauss = move || {
+            let mut u = || {
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+            };
+            (-2.0 * u().ln()).sqrt() * (2.0 * PI * u()).cos()
+        };
+        let clean: Vec<f64> = (0..n)
+            .map(|i| {
+                let t = i as f64 / rate;
+                0.05 * (2.0 * PI * 1.1 * t).sin() + 1e-5 * (2.0 * PI * 41.0 * t).sin()
+            })
+            .collect();
+        let corner = |sd: f64, rate: f64, gauss: &mut dyn FnMut() -> f64| {
+            let step = (1024.0 / rate) as usize;
+            let disp_m: Vec<f64> = clean
+                .iter()
+                .step_by(step)
+                .map(|x| x + sd * gauss())
+                .collect();
+            let time_s = (0..disp_m.len()).map(|i| i as f64 / rate).collect();
+            let rec = Record {
+                time_s,
+                disp_m,
+                f_ref_hz: 50.0,
+                signal: Signal::Reference,
+            };
+            rec.derivative_corner_hz(1024.0)
+        };
+        assert_eq!(corner(0.0, rate, &mut gauss), 150.0);
+        assert_eq!(corner(1e-5, rate, &mut gauss), 50.0);
+        let between = corner(1e-7, rate, &mut gauss);
+        assert!(between > 50.0 && between < 150.0, "{between}");
+        assert_eq!(corner(0.0, 256.0, &mut gauss), 100.0);
     }
 }

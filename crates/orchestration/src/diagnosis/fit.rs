@@ -167,6 +167,18 @@ pub fn noise_sigma(x: &[f64], tau: &[f64], rate_hz: f64, f: Option<f64>) -> f64 
         .max(f64::MIN_POSITIVE)
 }
 
+/// σ of channel `c`'s noise in `x` ([`noise_sigma`]). A tracked reference's derivatives are only
+/// as exact as the record lets them be (docs/model.md §4): their estimated error over a_r's rms,
+/// `accel_floor`, is a floor of the acceleration's and the force's (the inertia's share) noise
+/// over their rms; the displacement's is below its own.
+fn channel_sigma(x: &[f64], s: &Samples, c: usize, accel_floor: f64) -> f64 {
+    let sigma = noise_sigma(x, &s.tau, s.rate_hz, s.fundamental_hz);
+    match c {
+        1 => sigma,
+        _ => sigma.max(accel_floor * rms_slice(x)),
+    }
+}
+
 /// The residual of the least-squares fit to `x` at `tau` of the harmonics 1…`k_max` of `f`, a
 /// quadratic trend, a linearly drifting fundamental and a sinusoid at each of `lines` (Hz).
 fn periodic_residual(x: &[f64], tau: &[f64], f: f64, k_max: usize, lines: &[f64]) -> Vec<f64> {
@@ -280,7 +292,7 @@ impl TestData {
             if w[c] <= 0.0 {
                 continue;
             }
-            let sigma = noise_sigma(x, &s.tau, s.rate_hz, s.fundamental_hz);
+            let sigma = channel_sigma(x, s, c, t.drive.accel_floor);
             t.sigma[c] = sigma;
             let fs = channel_features(t.proj.as_ref(), c, x);
             let sd = if sine {
