@@ -115,6 +115,23 @@ fn synthesise(dir: &Path, rate: &str) -> PathBuf {
     out.join("campaign.toml")
 }
 
+/// `study compare` of `campaign` with its report in `report`: each test's name and acceleration
+/// residual (over the acceleration's rms), and the printed table.
+fn compared(campaign: &Path, report: &Path) -> (Vec<String>, Vec<f64>, String) {
+    let (ok, stdout, err) = study(&[
+        "compare",
+        campaign.to_str().unwrap(),
+        "--report",
+        report.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stdout}{err}");
+    let p = report.join("tests.parquet");
+    let names = read_strings(&p, "test").unwrap();
+    let t = read_columns_allow_nan(&p, &["rms_residual_accel_ratio"]).unwrap();
+    let resid = t.column("rms_residual_accel_ratio").unwrap().to_vec();
+    (names, resid, stdout)
+}
+
 #[test]
 #[ignore = "slow (about 35 s): a CI step runs it, cargo test --release --test roundtrip -- --ignored"]
 fn the_models_own_output_compares_at_the_numerical_floor() {
@@ -126,24 +143,13 @@ fn the_models_own_output_compares_at_the_numerical_floor() {
             written.matches("\nsignal = \"reference\"\n").count() == 2,
             "{written}"
         );
-        let report = d.path().join(format!("report_{rate}"));
-        let (ok, stdout, err) = study(&[
-            "compare",
-            campaign.to_str().unwrap(),
-            "--report",
-            report.to_str().unwrap(),
-        ]);
-        assert!(ok, "{stdout}{err}");
-        let p = report.join("tests.parquet");
-        let names = read_strings(&p, "test").unwrap();
-        let t = read_columns_allow_nan(&p, &["rms_residual_accel_ratio"]).unwrap();
-        let resid = t.column("rms_residual_accel_ratio").unwrap();
+        let (names, resid, stdout) = compared(&campaign, &d.path().join(format!("report_{rate}")));
         assert_eq!(names.len(), 5);
         for (name, r) in names.iter().zip(resid) {
             // docs/model.md §4's floor, 1e-4 of the acceleration's rms. Measured (2026-11-27): 0
             // for every test at 1024 Hz; 1.3e-7 (sine) to 1.4e-5 (reference run) at 500 Hz.
             assert!(
-                *r <= 1e-4,
+                r <= 1e-4,
                 "{rate} Hz, {name}: acceleration residual {r:e}\n{stdout}"
             );
         }
@@ -189,18 +195,8 @@ fn a_broadband_run_read_back_as_a_record_compares_within_1e_3() {
              excitation = { kind = \"record\", file = \"stochastic.csv\", column = \"ref_disp_m\" }\n",
         )
         .unwrap();
-        let report = out.join("report");
-        let (ok, stdout, err) = study(&[
-            "compare",
-            campaign.to_str().unwrap(),
-            "--report",
-            report.to_str().unwrap(),
-        ]);
-        assert!(ok, "{stdout}{err}");
-        let t =
-            read_columns_allow_nan(&report.join("tests.parquet"), &["rms_residual_accel_ratio"])
-                .unwrap();
-        let r = t.column("rms_residual_accel_ratio").unwrap()[0];
+        let (_, resid, stdout) = compared(&campaign, &out.join("report"));
+        let r = resid[0];
         // Measured (2026-11-29): 1.2e-4 at 1024 Hz, 1.8e-4 at 500 Hz (1.1e-2 with the
         // derivatives' corner at f_ref).
         assert!(
