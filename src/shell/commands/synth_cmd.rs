@@ -187,10 +187,12 @@ const FINE_SUBSTEPS: usize = 64;
 type Columns = Vec<(&'static str, Vec<f64>)>;
 
 /// The measured-file columns of one test at `rate` (Hz) after `pre_rows` rows at rest: the model
-/// sampled at the file's times (at the ticks themselves when the rate is the controller's).
+/// sampled at the file's times (at the ticks themselves when the rate is the controller's). The
+/// reference column is `recorded` where given (a tracked record's own samples, at the file's
+/// times), else x_r at the file's times.
 fn sample_test(
     spec: &SimSpec,
-    reference: &mut Reference,
+    (reference, recorded): (&mut Reference, Option<&[f64]>),
     rate: f64,
     pre_rows: usize,
 ) -> anyhow::Result<Result<Columns, String>> {
@@ -217,9 +219,18 @@ fn sample_test(
         let v = rs.channel(c, 0);
         std::iter::repeat_n(v[0], pre_rows).chain(v).collect()
     };
-    // What a data-acquisition system records: the reference the controller tracked, x_r.
+    // What a data-acquisition system records: the reference the controller tracked, x_r; for a
+    // tracked record, the record itself (x_r re-interpolated from the ticks would differ from it
+    // by the cubic's error, which the derivatives' corner passes into a_r).
     let ref_disp: Vec<f64> = std::iter::repeat_n(reference.x[0], pre_rows)
-        .chain(tau.iter().map(|&t| reference.at_time(&reference.x, t)))
+        .chain(
+            tau.iter()
+                .enumerate()
+                .map(|(i, &t)| match recorded.and_then(|r| r.get(i)) {
+                    Some(&x) => x,
+                    None => reference.at_time(&reference.x, t),
+                }),
+        )
         .collect();
     Ok(Ok(vec![
         (
@@ -445,11 +456,13 @@ fn synth_test(
     apply_sets(&mut test_model, &args.set)?;
     let mut reference = load_reference(&test.excitation, &test_model, &lc.base, 0)?;
     let mut pre_rows = pre_rows;
+    let mut recorded = None;
     if let Some(f_ref_hz) = read_as_record(&test.excitation, args.as_records) {
         // The campaign reads this test's x_r as the tracked reference: the truth tracks that
         // reference too, its derivatives the zero-phase filter's (docs/model.md §4).
         let record = single::tracked_record(&reference, rate, pre_rows, f_ref_hz);
         reference = record.reference(test_model.controller.f_s);
+        recorded = Some(record.disp_m);
         pre_rows = 0;
     }
     let spec = SimSpec {
@@ -458,7 +471,7 @@ fn synth_test(
         solver: Default::default(),
         spectrum: crate::orchestration::runs::quake_spec::default_spectrum(),
     };
-    let mut cols = sample_test(&spec, &mut reference, rate, pre_rows)?
+    let mut cols = sample_test(&spec, (&mut reference, recorded.as_deref()), rate, pre_rows)?
         .map_err(|e| RunFailed(format!("test {:?}: {e}", test.name)))?;
     add_noise(&mut cols, noise, args.seed, i);
     let mut meta = meta::header(Kind::SyntheticMeasurement);
