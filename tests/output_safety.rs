@@ -424,6 +424,31 @@ fn a_file_vshake_did_not_write_is_never_replaced() {
 /// Acceptance 4 (merge): a flipped byte in a shard is refused by `study merge` with exit code 2,
 /// naming the shard and the rows; nothing is merged and the shards are kept. A merged table
 /// written into the shards' folder is skipped by the next merge.
+/// `diagnose --out fitted.toml` may write `fitted.campaign.toml` beside it (a term whose form
+/// differs between tests): a file of that name it did not write is refused before any work, exit
+/// 2, and left as it was.
+#[test]
+fn the_campaign_diagnose_writes_beside_its_model_never_replaces_another_file() {
+    let d = tempfile::tempdir().unwrap();
+    let theirs = d.path().join("fitted.campaign.toml");
+    std::fs::write(&theirs, "[campaign]\nname = \"mine\"\n").unwrap();
+    let campaign = Path::new(env!("CARGO_MANIFEST_DIR")).join("studies/tutorial/campaign.toml");
+    let out = d.path().join("fitted.toml");
+    let (code, o, err) = study(&["diagnose", s(&campaign), "--out", s(&out)]);
+    assert_eq!(code, 2, "{o}{err}");
+    assert!(
+        err.contains("fitted.campaign.toml: exists and is not a campaign")
+            && err.contains("nothing was replaced"),
+        "{err}"
+    );
+    assert!(o.is_empty(), "no work before the refusal: {o}");
+    assert_eq!(
+        std::fs::read_to_string(&theirs).unwrap(),
+        "[campaign]\nname = \"mine\"\n"
+    );
+    assert!(!out.exists());
+}
+
 #[test]
 fn a_flipped_byte_in_a_shard_is_refused_by_merge() {
     let d = tempfile::tempdir().unwrap();

@@ -38,6 +38,9 @@ fn harmonic_label(k: usize, rate_hz: f64) -> String {
 
 pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
     crate::shell::job::outputs::check_outputs([args.out.as_ref()])?;
+    if let Some(out) = &args.out {
+        check_term_campaign(&term_campaign_path(out))?;
+    }
     run_to(args, &mut std::io::stdout())
 }
 
@@ -143,11 +146,11 @@ fn write_named(
         t.install_one(&mut model, 0).map_err(RunFailed)?;
         let tests = d.signals.list(t.tests().into_iter());
         if d.names_a_group() {
-            writeln!(o, "\n  note: the expression was fitted to {tests} only; the model written applies it to every test (a campaign's `model = {{ expression = {{ enabled = false }} }}` on the others keeps it off there)")?;
+            writeln!(o, "\n  note: the expression was fitted to {tests} only; the model written applies it to every test, the campaign written beside it keeps it off in the others")?;
         }
         if t.per_test() {
             let first = d.signals.list(t.tests().into_iter().take(1));
-            writeln!(o, "\n  note: the expression has parameters per test ({}); the model written holds {first}'s form", t.written())?;
+            writeln!(o, "\n  note: the expression has parameters per test ({}); the model written holds {first}'s form, the campaign written beside it each test's own", t.written())?;
         }
     }
     let model = &model;
@@ -162,7 +165,100 @@ fn write_named(
             .collect::<Vec<_>>()
             .join(", ")
     )?;
+    match d.named_term() {
+        Some(t) if t.per_test() || d.names_a_group() => {
+            let path = term_campaign_path(out);
+            write_term_campaign(&path, campaign, t)?;
+            writeln!(o, "\n  wrote {} (the campaign with each test's own form of the expression, and the expression off in the tests it was not fitted to: `study compare {} --model {}`)", path.display(), path.display(), out.display())?;
+        }
+        _ => {}
+    }
     Ok(())
+}
+
+/// The campaign `--out` writes beside the model where the expression's form differs between
+/// tests or applies to some of them: `fitted.toml` → `fitted.campaign.toml`.
+fn term_campaign_path(out: &std::path::Path) -> std::path::PathBuf {
+    out.with_extension("campaign.toml")
+}
+
+/// The first line of a campaign [`write_term_campaign`] writes.
+const TERM_CAMPAIGN_HEAD: &str = "# Written by `study diagnose --out`";
+
+/// Refuses, before any work, to replace a file at `path` that [`write_term_campaign`] did not
+/// write (bad input, exit 2).
+fn check_term_campaign(path: &std::path::Path) -> anyhow::Result<()> {
+    crate::shell::job::outputs::check_output(path)?;
+    match std::fs::read_to_string(path) {
+        Ok(text) if !text.starts_with(TERM_CAMPAIGN_HEAD) => Err(BadInput(format!(
+            "{}: exists and is not a campaign `study diagnose --out` wrote (where the expression differs between tests it writes one there); nothing was replaced: choose another --out, or remove it",
+            path.display()
+        ))
+        .into()),
+        _ => Ok(()),
+    }
+}
+
+/// Writes to `path` a copy of `campaign` in which each test the term `t` is given to has its own
+/// form (`model = { expression = { <hook> = "<form>" } }`) and every other test has the
+/// expression off (`enabled = false`); the data and record paths made absolute, since the copy
+/// may lie elsewhere.
+fn write_term_campaign(
+    path: &std::path::Path,
+    campaign: &std::path::Path,
+    t: &crate::orchestration::diagnosis::terms::Term,
+) -> anyhow::Result<()> {
+    use anyhow::Context;
+    let text = std::fs::read_to_string(campaign)
+        .with_context(|| format!("reading {}", campaign.display()))?;
+    let mut table: toml::Table = text.parse().context("the campaign was read before")?;
+    let base = std::fs::canonicalize(campaign)?
+        .parent()
+        .map(|p| p.to_path_buf())
+        .unwrap_or_default();
+    let tests = (table.get_mut("test"))
+        .and_then(toml::Value::as_array_mut)
+        .context("the campaign's tests")?;
+    for (i, test) in tests.iter_mut().enumerate() {
+        let Some(test) = test.as_table_mut() else {
+            continue;
+        };
+        absolute(test, "data", &base);
+        if let Some(e) = test
+            .get_mut("excitation")
+            .and_then(toml::Value::as_table_mut)
+        {
+            absolute(e, "file", &base);
+        }
+        let model = test
+            .entry("model")
+            .or_insert_with(|| toml::Table::new().into());
+        let expression = (model.as_table_mut())
+            .context("a test's model")?
+            .entry("expression")
+            .or_insert_with(|| toml::Table::new().into())
+            .as_table_mut()
+            .context("a test's expression")?;
+        match t.forms.iter().find(|f| f.0 == i) {
+            Some((_, form)) => expression.insert(t.hook.key().into(), form.clone().into()),
+            None => expression.insert("enabled".into(), false.into()),
+        };
+    }
+    let out = format!(
+        "{TERM_CAMPAIGN_HEAD} from {}: each test's own form of the expression fitted (the\n\
+         # model file --out wrote holds its parameters); the tests it was not fitted to have it off.\n{table}",
+        campaign.display()
+    );
+    let file = parquet_write::AtomicFile::new(path);
+    std::fs::write(&file.tmp, out).with_context(|| format!("writing {}", file.tmp.display()))?;
+    Ok(file.commit()?)
+}
+
+/// `table[key]`, a path relative to `base`, made absolute.
+fn absolute(table: &mut toml::Table, key: &str, base: &std::path::Path) {
+    if let Some(toml::Value::String(p)) = table.get_mut(key) {
+        *p = base.join(&*p).display().to_string();
+    }
 }
 
 /// The baseline, then the candidates ranked.
