@@ -89,9 +89,9 @@ impl Projector {
         self.rows[0].iter().zip(x).map(|(a, b)| a * b).sum()
     }
 
-    /// ‖x − P x‖²: what of `x` the mean and the resolved harmonics do not hold (other
+    /// x − P x at each sample: what of `x` the mean and the resolved harmonics do not hold (other
     /// frequencies, higher harmonics, a trend, noise).
-    pub(crate) fn remainder_sq(&self, x: &[f64]) -> f64 {
+    pub(crate) fn remainder(&self, x: &[f64]) -> Vec<f64> {
         let c: Vec<f64> = self
             .rows
             .iter()
@@ -100,15 +100,14 @@ impl Projector {
         x.iter()
             .enumerate()
             .map(|(m, &v)| {
-                (v - self
+                v - self
                     .basis
                     .iter()
                     .zip(&c)
                     .map(|(b, c)| b[m] * c)
-                    .sum::<f64>())
-                .powi(2)
+                    .sum::<f64>()
             })
-            .sum()
+            .collect()
     }
 
     /// The basis at the samples, one row per function: the constant, then cos and sin of each
