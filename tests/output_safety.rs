@@ -426,7 +426,7 @@ fn a_file_vshake_did_not_write_is_never_replaced() {
 /// written into the shards' folder is skipped by the next merge.
 /// `diagnose --out fitted.toml` may write `fitted.campaign.toml` beside it (a term whose form
 /// differs between tests): a file of that name it did not write is refused before any work, exit
-/// 2, and left as it was.
+/// 2, and left as it was; one an earlier diagnosis wrote is removed where this one writes none.
 #[test]
 fn the_campaign_diagnose_writes_beside_its_model_never_replaces_another_file() {
     let d = tempfile::tempdir().unwrap();
@@ -447,6 +447,13 @@ fn the_campaign_diagnose_writes_beside_its_model_never_replaces_another_file() {
         "[campaign]\nname = \"mine\"\n"
     );
     assert!(!out.exists());
+    // One an earlier diagnosis wrote is removed where this verdict (seal friction, one form in
+    // every test) needs none: it would pair the earlier forms with this model.
+    std::fs::write(&theirs, "# Written by `study diagnose --out` from x.toml\n").unwrap();
+    let (code, o, err) = study(&["diagnose", s(&campaign), "--out", s(&out)]);
+    assert_eq!(code, 0, "{o}{err}");
+    assert!(o.contains("removed ") && !theirs.exists(), "{o}");
+    assert!(out.exists());
 }
 
 #[test]

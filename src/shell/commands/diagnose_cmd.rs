@@ -135,12 +135,16 @@ fn write_named(
     d: &Diagnosis,
 ) -> anyhow::Result<()> {
     let Some((free, fit)) = d.named_fit() else {
+        let earlier = match out.exists() {
+            true => " (the file there is an earlier run's, left as it was)",
+            false => "",
+        };
         writeln!(
             o,
-            "\n  {} not written: the verdict names no effect",
+            "\n  {} not written: the verdict names no effect{earlier}",
             out.display()
         )?;
-        return Ok(());
+        return remove_stale_campaign(o, out);
     };
     if let Some(t) = &d.term {
         t.install_one(&mut model, 0).map_err(RunFailed)?;
@@ -170,8 +174,24 @@ fn write_named(
             let path = term_campaign_path(out);
             write_term_campaign(&path, campaign, t)?;
             writeln!(o, "\n  wrote {} (the campaign with each test's own form of the expression, and the expression off in the tests it was not fitted to: `study compare {} --model {}`)", path.display(), path.display(), out.display())?;
+            Ok(())
         }
-        _ => {}
+        _ => remove_stale_campaign(o, out),
+    }
+}
+
+/// Removes the campaign an earlier diagnosis wrote beside `out` ([`term_campaign_path`]; the run
+/// checked before any work that a file there is one), where this one writes none: it would pair
+/// an earlier verdict's forms with this run's model.
+fn remove_stale_campaign(o: &mut dyn Write, out: &std::path::Path) -> anyhow::Result<()> {
+    let path = term_campaign_path(out);
+    if path.exists() {
+        std::fs::remove_file(&path)?;
+        writeln!(
+            o,
+            "\n  removed {} (an earlier diagnosis's campaign; this verdict needs none)",
+            path.display()
+        )?;
     }
     Ok(())
 }
