@@ -11,7 +11,8 @@
 //!   or, where it is in several channels, a force of that frequency on the platen (a pump's
 //!   ripple, a hum in the drive). Its sine and cosine are per test (a hum's phase at a test's
 //!   start is the mains', not the excitation's); its frequency is the least-squares one of each
-//!   test's residual ([`signals::refined_frequency`]), written as a number.
+//!   test's residual ([`signals::refined_frequency`]), written as a number. It is given to every
+//!   test and, where only some show the line, to those alone (a hum on one day's set-up).
 //!
 //! Each is fitted like any effect; the one with the lowest BIC (χ² + k ln n) is the candidate.
 
@@ -258,23 +259,64 @@ fn line_terms(l: &signals::Line, c: &[ComparedTest]) -> Vec<Term> {
         })
         .collect();
     let (hook, x, unit) = channel_hook(ch);
-    let about = line_about(l, &each, c.len());
     let evidence = Evidence::Line {
         channel: ch,
         freq_hz: l.freq_hz,
     };
-    let term = |hook: Hook, lead: &str, unit: &str, start: usize| Term {
+    // Every test, and, where only some show the line, those alone (a hum in some tests only:
+    // the others' sinusoids would fit their noise); the fits' BIC chooses.
+    let shown: Vec<(usize, f64, [f64; 4])> = (each.iter().copied())
+        .filter(|e| share(e.0) > 0.0)
+        .collect();
+    let mut groups = vec![(each.as_slice(), false)];
+    if !shown.is_empty() && shown.len() < each.len() {
+        groups.push((shown.as_slice(), true));
+    }
+    let mut out = Vec::new();
+    for (group, subset) in groups {
+        let about = line_about(l, group, c.len(), subset);
+        let lead = format!("{x} + ");
+        out.push(sinusoid_term(
+            group,
+            (hook, &lead, unit),
+            0,
+            &about,
+            &evidence,
+        ));
+        if l.hits.iter().any(|h| h.channel != ch) {
+            out.push(sinusoid_term(
+                group,
+                (Hook::Force, "", "N"),
+                2,
+                &about,
+                &evidence,
+            ));
+        }
+    }
+    out
+}
+
+/// A line's term in the tests of `group` (test, f_i, the residual's sine and cosine there, and the
+/// platen force's): `hook = "lead + s_k*sin(2*pi*f_k*t) + c_k*cos(2*pi*f_k*t)"` in test k, its
+/// sine and cosine starting from `start` (0: the channel's, 2: the force's) in `unit`.
+fn sinusoid_term(
+    group: &[(usize, f64, [f64; 4])],
+    (hook, lead, unit): (Hook, &str, &str),
+    start: usize,
+    about: &str,
+    evidence: &Evidence,
+) -> Term {
+    Term {
         hook,
-        forms: (each.iter())
+        forms: (group.iter())
             .map(|&(t, f, _)| (t, format!("{lead}{}", sinusoid(t + 1, f))))
             .collect(),
-        params: (each.iter())
+        params: (group.iter())
             .flat_map(|&(t, _, v)| {
                 let k = t + 1;
-                let (sn, cs) = (v[start], v[start + 1]);
                 [
-                    param(&format!("s_{k}"), unit, sn),
-                    param(&format!("c_{k}"), unit, cs),
+                    param(&format!("s_{k}"), unit, v[start]),
+                    param(&format!("c_{k}"), unit, v[start + 1]),
                 ]
             })
             .collect(),
@@ -283,28 +325,33 @@ fn line_terms(l: &signals::Line, c: &[ComparedTest]) -> Vec<Term> {
             hook.key()
         ),
         evidence: evidence.clone(),
-    };
-    let mut out = vec![term(hook, &format!("{x} + "), unit, 0)];
-    if l.hits.iter().any(|h| h.channel != ch) {
-        out.push(term(Hook::Force, "", "N", 2));
     }
-    out
 }
 
-/// Where a line term's f_i are, from `each` (test, f_i, …), and in how many of the `n` tests.
-fn line_about(l: &signals::Line, each: &[(usize, f64, [f64; 4])], n: usize) -> String {
+/// Where a line term's f_i are, from `each` (test, f_i, …), and in how many of the `n` tests
+/// (`subset`: those that show the line).
+fn line_about(
+    l: &signals::Line,
+    each: &[(usize, f64, [f64; 4])],
+    n: usize,
+    subset: bool,
+) -> String {
     let (lo, hi) = signals::bounds(each.iter().map(|e| e.1));
     let f = match (l.locked, hi - lo > 1e-4 * hi) {
         (Some(r), _) => format!("f_i = {r:.4} times test i's frequency ({lo:.4} to {hi:.4} Hz)"),
         (None, true) => format!("f_i from {lo:.4} to {hi:.4} Hz"),
         (None, false) => format!("f_i about {lo:.4} Hz"),
     };
-    match each.len() < n {
-        true => format!(
+    match (subset, each.len() < n) {
+        (true, _) => format!(
+            "in each test i of the {} (of {n}) that show the line, {f}",
+            each.len()
+        ),
+        (false, true) => format!(
             "in each test i of the {} (of {n}) where the line is largest, {f}",
             each.len()
         ),
-        false => format!("in each test i, {f}"),
+        (false, false) => format!("in each test i, {f}"),
     }
 }
 
