@@ -699,6 +699,18 @@ fn an_effect_outside_the_library_is_fitted_from_its_spectral_line() {
     assert_line_fitted(&r, "force = \"", 50e3, 0.02 * 50e3);
 }
 
+/// The diagnosis names the expression first, a line's sine and cosine in each of `tests` tests,
+/// each test's amplitude within `tol` of `amplitude`.
+fn assert_line_amplitudes(r: &Diagnosis, tests: usize, amplitude: f64, tol: f64) {
+    let (first, best) = r.first();
+    assert_eq!(first, "expression", "{}", r.stdout);
+    assert_eq!(best.estimates.len(), 2 * tests, "{:?}", best.params);
+    for k in 0..tests {
+        let amp = best.estimates[2 * k].hypot(best.estimates[2 * k + 1]);
+        assert!((amp - amplitude).abs() < tol, "test {k}: amplitude {amp}");
+    }
+}
+
 /// `r`'s verdict names a line term on `hook` (`"force = \""`, `"accel_channel = \"a + "`) with a
 /// sine and a cosine in each of the campaign's 8 tests; each test's amplitude is within `tol` of
 /// `amplitude`, and the residual at most 2× the noise floor.
@@ -709,13 +721,7 @@ fn assert_line_fitted(r: &Diagnosis, hook: &str, amplitude: f64, tol: f64) {
         verdict.contains(&format!("most likely missing: expression ({hook}{form}")),
         "{verdict}"
     );
-    let (first, best) = r.first();
-    assert_eq!(first, "expression", "{}", r.stdout);
-    assert_eq!(best.estimates.len(), 16, "{:?}", best.params);
-    for k in 0..8 {
-        let amp = best.estimates[2 * k].hypot(best.estimates[2 * k + 1]);
-        assert!((amp - amplitude).abs() < tol, "test {k}: amplitude {amp}");
-    }
+    assert_line_amplitudes(r, 8, amplitude, tol);
     let left = r.residual["expression"] / r.noise_floor;
     assert!(left <= 2.0, "the residual is {left}x the noise floor");
 }
@@ -1579,13 +1585,7 @@ fn a_line_in_some_tests_only_is_fitted_in_those_tests() {
             && verdict.contains("in f2_a0p3, f4_a0p8 and f8_a1p0 only"),
         "{verdict}"
     );
-    let (first, best) = r.first();
-    assert_eq!(first, "expression", "{}", r.stdout);
-    assert_eq!(best.estimates.len(), 6, "{:?}", best.params);
-    for k in 0..3 {
-        let amp = best.estimates[2 * k].hypot(best.estimates[2 * k + 1]);
-        assert!((amp - 0.1).abs() < 0.005, "test {k}: amplitude {amp}");
-    }
+    assert_line_amplitudes(&r, 3, 0.1, 0.005);
     for (test, rms) in residuals_with_fitted(d.path(), "fitted.campaign.toml") {
         assert!(rms < 1.5 * 0.02, "{test}: {rms} m/s²");
     }
