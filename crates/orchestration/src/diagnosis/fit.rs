@@ -284,15 +284,14 @@ impl TestData {
             dof: 0.0,
             dof_ch: [0.0; 3],
         };
-        let s = &t.samples;
-        let sine = s.fundamental_hz.is_some();
-        let n = s.len();
+        let sine = t.samples.fundamental_hz.is_some();
+        let n = t.samples.len();
         for c in 0..3 {
             let Some(x) = &t.measured[c] else { continue };
             if w[c] <= 0.0 {
                 continue;
             }
-            let sigma = channel_sigma(x, s, c, t.drive.accel_floor);
+            let sigma = channel_sigma(x, &t.samples, c, t.drive.accel_floor);
             t.sigma[c] = sigma;
             let fs = channel_features(t.proj.as_ref(), c, x);
             let sd = if sine {
@@ -317,29 +316,34 @@ impl TestData {
                 });
                 t.dof_ch[c] += 1.0;
             }
-            if let Some(p) = &t.proj {
-                // The remainder (I − P)(model − measured)/σ at each sample (measured value 0):
-                // its sum of squares is a χ² of n − p degrees of freedom for a model right to the
-                // noise. Each sample a feature, not their norm alone: a parameter that acts
-                // through the remainder (a line between the harmonics, a mode above the 9th)
-                // then has its full curvature in JᵀJ, where one norm per channel gave it rank
-                // one (a 0.1 m/s² line at 37.3 Hz in 1–8 Hz tests, its sine in the first test:
-                // 9.2e-2 ± 3.3e-2 m/s² from the norm, ± 8.0e-4 from the samples, σ√(2/n) for
-                // its noise; the tutorial's seal friction converges in 4 iterations, not 15).
-                for _ in 0..n {
-                    t.meas.push(0.0);
-                    t.scale.push(sigma / w[c]);
-                    t.info.push(FeatureInfo {
-                        test: 0,
-                        channel: c,
-                        harmonic: REMAINDER,
-                    });
-                }
-                t.dof_ch[c] += n.saturating_sub(p.n_functions()) as f64;
-            }
+            t.push_remainder(c, sigma / w[c]);
         }
         t.dof = t.dof_ch.iter().sum();
         t
+    }
+
+    /// A sine test's remainder features of channel `c`, each of scale `scale` (its σ over its
+    /// weight): (I − P)(model − measured)/σ at each sample (measured value 0), whose sum of
+    /// squares is a χ² of n − p degrees of freedom for a model right to the noise. Each sample a
+    /// feature, not their norm alone: a parameter that acts through the remainder (a line between
+    /// the harmonics, a mode above the 9th) then has its full curvature in JᵀJ, where one norm
+    /// per channel gave it rank one (a 0.1 m/s² line at 37.3 Hz in 1–8 Hz tests, its sine in the
+    /// first test: 9.2e-2 ± 3.3e-2 m/s² from the norm, ± 8.0e-4 from the samples, σ√(2/n) for
+    /// its noise; the tutorial's seal friction converges in 4 iterations, not 15). None for a
+    /// record test.
+    fn push_remainder(&mut self, c: usize, scale: f64) {
+        let Some(p) = &self.proj else { return };
+        let n = self.samples.len();
+        for _ in 0..n {
+            self.meas.push(0.0);
+            self.scale.push(scale);
+            self.info.push(FeatureInfo {
+                test: 0,
+                channel: c,
+                harmonic: REMAINDER,
+            });
+        }
+        self.dof_ch[c] += n.saturating_sub(p.n_functions()) as f64;
     }
 
     /// The χ² a model right to the noise leaves in this test's features (their degrees of freedom).
