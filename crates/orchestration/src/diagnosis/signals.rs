@@ -20,8 +20,10 @@
 //!   resolutions its power is below [`LINE_SKIRT`] of the peak's: a resonance, a specimen's mode
 //!   in a record's residual, is as wide as its damping and is not a line), the sinusoid it
 //!   implies carries at least [`LINE_SHARE`] of the
-//!   residual's mean square, and, for a sine test, it is not within two resolutions of a harmonic
-//!   k·f₀ of the excitation (nor below three resolutions: drift). Its amplitude is
+//!   residual's mean square, and, for a sine test, it is not a harmonic k·f₀ of the excitation
+//!   (nor below three resolutions: drift); a higher harmonic (k > [`HARMONIC_ALWAYS`]) standing
+//!   [`HARMONIC_STANDS`] times above its neighbours k ± 1, k ± 2 is a line that sits on a
+//!   harmonic, not the excitation's ([`is_excitation_harmonic`]). Its amplitude is
 //!   2|X_k|/Σw (the Hann window's coherent gain), its frequency the peak refined by a parabola
 //!   through the log-power of the three bins around it. Lines at one frequency in several tests
 //!   (within the coarser resolution) are one line, and so are lines of sine tests at one ratio
@@ -66,6 +68,15 @@ pub const LINE_SKIRT: f64 = 0.01;
 /// A line is reported when its sinusoid carries this share of the residual's mean square.
 /// [chosen: 0.5 %: a line smaller than that changes nothing a fit could see.]
 pub const LINE_SHARE: f64 = 0.005;
+/// Harmonics of a sine test's excitation up to this order are never lines of their own.
+/// [chosen: 3; the fundamental's misfit is the largest part of most residuals, and a nonlinearity
+/// of the plant puts its share of the motion in the 2nd and 3rd.]
+pub const HARMONIC_ALWAYS: f64 = 3.0;
+/// A higher harmonic is a line of its own when its power is this many times that of each of its
+/// neighbours h ± 1, h ± 2. [chosen: 10 (3.2× in amplitude): a nonlinearity's harmonics change
+/// smoothly with their order, the odd ones of a friction as 1/h, 1.1× in power from one to the
+/// next at h = 20.]
+pub const HARMONIC_STANDS: f64 = 10.0;
 /// A test carries the residual above this misfit (√(χ²/dof)). [chosen: 5, the issue's "many
 /// times its noise".]
 pub const TEST_CARRIES: f64 = 5.0;
@@ -282,7 +293,7 @@ fn lines_of(e: &[f64], rate: f64, f0: Option<f64>, narrow_only: bool) -> Vec<Hit
             continue;
         }
         let f = refined(&p, k) * df;
-        if f < 3.0 * resolution || is_harmonic(f, f0, resolution) {
+        if f < 3.0 * resolution || is_excitation_harmonic(&p, k, f, f0, resolution, df) {
             continue;
         }
         let wide = narrow_only && !narrow(&p, k, pad);
@@ -353,14 +364,43 @@ fn narrow(p: &[f64], k: usize, pad: f64) -> bool {
     k >= off && k + off < p.len() && p[k - off].max(p[k + off]) < LINE_SKIRT * p[k]
 }
 
-/// Whether the peak frequency `f` lies within half a resolution of a harmonic k·f₀ (k ≥ 1) of the
-/// sine `f0`. (A sine test's window holds whole cycles, so its harmonics fall on bins and a
-/// harmonic's refined peak is at its bin; a line between harmonics is not.)
-fn is_harmonic(f: f64, f0: Option<f64>, resolution: f64) -> bool {
-    f0.is_some_and(|f0| {
-        let k = (f / f0).round().max(1.0);
-        (f - k * f0).abs() <= 0.5 * resolution
-    })
+/// Whether the peak at bin k of `p` (frequency `f`, `df` Hz a bin) is a harmonic of the sine
+/// `f0`'s excitation rather than a line of its own: it lies within half a resolution of a
+/// harmonic h·f₀ (a sine test's window holds whole cycles, so its harmonics fall on bins and a
+/// harmonic's refined peak is at its bin; a line between harmonics is not), and either h is at
+/// most [`HARMONIC_ALWAYS`] or its power is below [`HARMONIC_STANDS`] times the largest of the
+/// harmonics h ± 1 and h ± 2. A nonlinearity's harmonics change smoothly with their order (a
+/// friction's fall as 1/h), so one that stands alone over its neighbours is a line that happens
+/// to sit on a harmonic: a 48 Hz hum in a 2 Hz test, mains in a 1 Hz one.
+fn is_excitation_harmonic(
+    p: &[f64],
+    k: usize,
+    f: f64,
+    f0: Option<f64>,
+    resolution: f64,
+    df: f64,
+) -> bool {
+    let Some(f0) = f0 else { return false };
+    let h = (f / f0).round().max(1.0);
+    if (f - h * f0).abs() > 0.5 * resolution {
+        return false;
+    }
+    if h <= HARMONIC_ALWAYS || f0 < 1.5 * resolution {
+        return true;
+    }
+    // The bins within a quarter resolution of a harmonic (its own bin where the FFT is not
+    // padded: the next is in the main lobe of whatever stands at the harmonic).
+    let w = (0.25 * resolution / df).floor() as usize;
+    let power_near = |j: f64| {
+        let b = (j * f0 / df).round() as usize;
+        let hi = (b + w).min(p.len() - 1);
+        (b.saturating_sub(w)..=hi).map(|i| p[i]).fold(0.0, f64::max)
+    };
+    let neighbours = [-2.0, -1.0, 1.0, 2.0]
+        .map(|d| power_near(h + d))
+        .into_iter()
+        .fold(0.0, f64::max);
+    p[k] < HARMONIC_STANDS * neighbours
 }
 
 /// The amplitude of the sinusoid at `f` cycles per sample in `e` under the window `w` (of sum
@@ -714,6 +754,31 @@ mod tests {
             .collect();
         assert!(lines_of(&e, rate, Some(3.0), true).is_empty());
         assert_eq!(lines_of(&e, rate, None, true).len(), 1);
+    }
+
+    /// A 48 Hz hum in a 2 Hz sine test sits on its 24th harmonic, over a friction's odd
+    /// harmonics falling as 1/k: the hum is a line, the friction's harmonics are not.
+    #[test]
+    fn a_line_on_a_high_harmonic_is_a_line_and_a_smooth_distortion_is_not() {
+        let (rate, f0) = (1024.0, 2.0);
+        let friction = |t: f64| -> f64 {
+            (1..40)
+                .step_by(2)
+                .map(|k| 0.3 / k as f64 * (2.0 * PI * k as f64 * f0 * t).sin())
+                .sum()
+        };
+        let e: Vec<f64> = (0..8192)
+            .map(|j| {
+                let t = j as f64 / rate;
+                friction(t) + 0.1 * (2.0 * PI * 48.0 * t + 0.4).sin() + noise(j, 0.02)
+            })
+            .collect();
+        let hits = lines_of(&e, rate, Some(f0), true);
+        assert_eq!(hits.len(), 1, "{hits:?}");
+        assert!((hits[0].freq_hz - 48.0).abs() < 0.05, "{hits:?}");
+        assert!((hits[0].amplitude - 0.1).abs() < 0.01, "{hits:?}");
+        let e: Vec<f64> = (0..8192).map(|j| friction(j as f64 / rate)).collect();
+        assert!(lines_of(&e, rate, Some(f0), true).is_empty());
     }
 
     #[test]
