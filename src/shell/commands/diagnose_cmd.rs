@@ -7,7 +7,7 @@ use crate::shell::cli::DiagnoseArgs;
 use crate::shell::fit_problem::{
     self, check_effect, load_problem, print_checks, residual_warnings,
 };
-use crate::shell::formats::campaign_io::load_model;
+use crate::shell::formats::campaign_io::{self, load_model};
 use crate::shell::formats::meta::{self, Key, Kind};
 use crate::shell::formats::parquet_write;
 use crate::shell::formats::parquet_write::Column;
@@ -229,20 +229,16 @@ fn write_term_campaign(
     t: &crate::orchestration::diagnosis::terms::Term,
 ) -> anyhow::Result<()> {
     use anyhow::Context;
-    let text = std::fs::read_to_string(campaign)
-        .with_context(|| format!("reading {}", campaign.display()))?;
-    let mut table: toml::Table = text.parse().context("the campaign was read before")?;
     let base = std::fs::canonicalize(campaign)?
         .parent()
         .map(|p| p.to_path_buf())
         .unwrap_or_default();
-    let tests = (table.get_mut("test"))
-        .and_then(toml::Value::as_array_mut)
-        .context("the campaign's tests")?;
-    for (i, test) in tests.iter_mut().enumerate() {
-        let Some(test) = test.as_table_mut() else {
-            continue;
-        };
+    let head = format!(
+        "{TERM_CAMPAIGN_HEAD} from {}: each test's own form of the expression fitted (the\n\
+         # model file --out wrote holds its parameters); the tests it was not fitted to have it off.\n",
+        campaign.display()
+    );
+    campaign_io::rewrite_tests(campaign, path, &head, &mut |i, test| {
         absolute(test, "data", &base);
         if let Some(e) = test
             .get_mut("excitation")
@@ -263,15 +259,8 @@ fn write_term_campaign(
             Some((_, form)) => expression.insert(t.hook.key().into(), form.clone().into()),
             None => expression.insert("enabled".into(), false.into()),
         };
-    }
-    let out = format!(
-        "{TERM_CAMPAIGN_HEAD} from {}: each test's own form of the expression fitted (the\n\
-         # model file --out wrote holds its parameters); the tests it was not fitted to have it off.\n{table}",
-        campaign.display()
-    );
-    let file = parquet_write::AtomicFile::new(path);
-    std::fs::write(&file.tmp, out).with_context(|| format!("writing {}", file.tmp.display()))?;
-    Ok(file.commit()?)
+        Ok(())
+    })
 }
 
 /// `table[key]`, a path relative to `base`, made absolute.

@@ -9,7 +9,7 @@ use crate::orchestration::measured::campaign::TestSpec;
 use crate::orchestration::runs::single;
 use crate::orchestration::runs::spec::{ExcitationSpec, SimSpec};
 use crate::shell::cli::SynthArgs;
-use crate::shell::formats::campaign_io::{load_campaign, load_model, LoadedCampaign};
+use crate::shell::formats::campaign_io::{self, load_campaign, load_model, LoadedCampaign};
 use crate::shell::formats::meta::{self, Key, Kind};
 use crate::shell::formats::parquet_write;
 use crate::shell::formats::parquet_write::Column;
@@ -392,31 +392,22 @@ fn write_campaign(lc: &LoadedCampaign, dst: &Path, as_records: bool) -> anyhow::
         }
         return Ok(0);
     }
-    let text = std::fs::read_to_string(&lc.file)
-        .with_context(|| format!("reading {}", lc.file.display()))?;
-    let mut table: toml::Table = text.parse().context("the campaign was read before")?;
-    let tests = table
-        .get_mut("test")
-        .and_then(toml::Value::as_array_mut)
-        .context("the campaign's tests")?;
-    for &(i, f_ref_hz) in &records {
-        let mut e = toml::Table::new();
-        e.insert("kind".into(), "record".into());
-        e.insert("signal".into(), "reference".into());
-        e.insert("f_ref_hz".into(), f_ref_hz.into());
-        if let Some(t) = tests[i].as_table_mut() {
-            t.insert("excitation".into(), e.into());
-        }
-    }
-    let out = format!(
+    let head = format!(
         "# Written by study synth from {}: the record tests' data files hold in `ref_disp_m` the\n\
          # reference the controller tracked (x_r), read as each test's record with\n\
-         # signal = \"reference\" (docs/model.md §4).\n{table}",
+         # signal = \"reference\" (docs/model.md §4).\n",
         lc.file.display()
     );
-    let file = parquet_write::AtomicFile::new(dst);
-    std::fs::write(&file.tmp, out).with_context(|| format!("writing {}", file.tmp.display()))?;
-    file.commit()?;
+    campaign_io::rewrite_tests(&lc.file, dst, &head, &mut |i, t| {
+        if let Some(&(_, f_ref_hz)) = records.iter().find(|r| r.0 == i) {
+            let mut e = toml::Table::new();
+            e.insert("kind".into(), "record".into());
+            e.insert("signal".into(), "reference".into());
+            e.insert("f_ref_hz".into(), f_ref_hz.into());
+            t.insert("excitation".into(), e.into());
+        }
+        Ok(())
+    })?;
     Ok(records.len())
 }
 

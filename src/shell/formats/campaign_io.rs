@@ -180,3 +180,30 @@ pub(crate) fn report_checks(
     }
     Ok(())
 }
+
+/// Writes to `dst` (atomically: nothing half-written is left under its name) the campaign file
+/// `src` with `edit` applied to each of its `[[test]]` tables (the test's index, its table), under
+/// the comment lines `head` (each starting with `#`, ending with a newline).
+pub(crate) fn rewrite_tests(
+    src: &Path,
+    dst: &Path,
+    head: &str,
+    edit: &mut dyn FnMut(usize, &mut toml::Table) -> anyhow::Result<()>,
+) -> anyhow::Result<()> {
+    use anyhow::Context;
+    let text =
+        std::fs::read_to_string(src).with_context(|| format!("reading {}", src.display()))?;
+    let mut table: toml::Table = text.parse().context("the campaign was read before")?;
+    let tests = (table.get_mut("test"))
+        .and_then(toml::Value::as_array_mut)
+        .context("the campaign's tests")?;
+    for (i, test) in tests.iter_mut().enumerate() {
+        if let Some(test) = test.as_table_mut() {
+            edit(i, test)?;
+        }
+    }
+    let file = crate::shell::formats::parquet_write::AtomicFile::new(dst);
+    std::fs::write(&file.tmp, format!("{head}{table}"))
+        .with_context(|| format!("writing {}", file.tmp.display()))?;
+    Ok(file.commit()?)
+}
