@@ -1591,6 +1591,73 @@ fn a_line_on_a_harmonic_of_every_test_is_stated_and_fitted() {
     }
 }
 
+/// Issue 51, evidence from the signals: a valve's null bias, which the library lacks (written
+/// into the synthesising model as `opening = "x - 4.5e-5"`: 0.24 % of the spool's stroke). The
+/// signals show a steady displacement offset with the feedback further from the tracked reference
+/// than the model's loop leaves it; the verdict names the bias as an expression in the opening,
+/// b_x within 2 SE of the truth, every test's channels at their noise (the displacement's offset
+/// alone, `disp_channel = "d + off_d"`, leaves the force's steady error: measured 2026-11-30,
+/// its force misfit about 2 where the bias leaves 1).
+#[test]
+#[ignore = "slow (about 20 s): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
+fn a_valve_null_bias_is_named_from_the_loop_error() {
+    let d = tempfile::tempdir().unwrap();
+    let model = d.path().join("bias.toml");
+    std::fs::write(&model, "[model.expression]\nopening = \"x - 4.5e-5\"\n").unwrap();
+    synth(d.path(), &["--model", model.to_str().unwrap()]);
+    let r = diagnose(d.path());
+    println!("{}", r.stdout);
+    let verdict = verdict_of(&r.stdout);
+    assert!(
+        verdict.contains("most likely missing: expression (opening = \"x + b_x\")")
+            && verdict.contains("a steady offset of the displacement"),
+        "{verdict}"
+    );
+    let (_, best) = r.first();
+    let (b, se) = (best.estimates[0], best.std_errors[0]);
+    assert!((b + 4.5e-5).abs() <= 2.0 * se, "{b} ± {se}");
+    let left = r.residual["expression"] / r.noise_floor;
+    assert!(left <= 1.5, "the residual is {left}x the noise floor");
+}
+
+/// The other reading of a displacement offset: the recorded displacement's zero is 1.2 mm off
+/// the loop's (a transducer not zeroed), the motion itself untouched. Reading the files removes
+/// it in every test, within 0.01 mm (measured over the lead against the tracked reference: the
+/// lead's own mean, which holds the taper's first motion, left up to 0.015 mm, read by the
+/// diagnosis as a steady error of some tests and named a valve's null bias); what is left is not
+/// named a null bias, and the residual is at most 1.5× the noise floor.
+#[test]
+#[ignore = "slow (about 20 s): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
+fn a_displacement_zero_is_removed_and_not_named_a_valve_bias() {
+    let d = tempfile::tempdir().unwrap();
+    write_altered(
+        d.path(),
+        &vshake::kernel::effects::Baseline,
+        &|_| true,
+        &|_, col, _, v| {
+            if col == "disp_m" {
+                v.iter_mut().for_each(|x| *x += 1.2e-3);
+            }
+        },
+    );
+    let r = diagnose(d.path());
+    println!("{}", r.stdout);
+    let removed: Vec<f64> = (r.stdout.lines())
+        .filter(|l| l.contains(": disp_m ") && l.contains("removed"))
+        .map(|l| {
+            let mm = l.split(" mm").next().unwrap().rsplit(' ').next().unwrap();
+            mm.parse::<f64>().unwrap()
+        })
+        .collect();
+    assert_eq!(removed.len(), 8, "{removed:?}");
+    assert!(removed.iter().all(|mm| (mm - 1.2).abs() < 0.01), "{removed:?}");
+    let verdict = verdict_of(&r.stdout);
+    assert!(!verdict.contains("opening"), "{verdict}");
+    let (first, _) = r.first();
+    let left = r.residual[first.as_str()] / r.noise_floor;
+    assert!(left <= 1.5, "the residual is {left}x the noise floor");
+}
+
 /// Issue 51 point 4, a line in some tests only: a 37.3 Hz sinusoid of 0.1 m/s² added to the
 /// acceleration of three tests of eight (a hum on one day's set-up). The line term is fitted in
 /// those three tests only (its BIC beats the sinusoids of every test, which in the five others

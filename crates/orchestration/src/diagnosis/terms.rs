@@ -5,7 +5,9 @@
 //!   carry the residual;
 //! - a channel's steady **offset** ([`signals::Offset`]): `force_channel = "f + off_f"` in the
 //!   tests that show it, one value for them all (a sensor's zero, a preload: a constant of the
-//!   set-up) or one per test (a zero that moved between tests);
+//!   set-up) or one per test (a zero that moved between tests); where the displacement's
+//!   feedback sits further from the tracked reference than the model's loop leaves it, also a
+//!   valve's null bias `opening = "x + b_x"` ([`bias_terms`]);
 //! - a **spectral line** ([`signals::Line`]): a sinusoid at the line's frequency in the channel
 //!   that shows it most, `accel_channel = "a + s_3*sin(2*pi*37.2731*t) + c_3*cos(2*pi*37.2731*t)"`,
 //!   or, where it is in several channels, a force of that frequency on the platen (a pump's
@@ -148,6 +150,9 @@ pub fn from_signals(s: &Signals, c: &[ComparedTest]) -> Vec<Term> {
     for ch in 0..3 {
         let o: Vec<&signals::Offset> = s.offsets.iter().filter(|o| o.channel == ch).collect();
         out.extend(offset_terms(ch, &o));
+        if ch == 1 {
+            out.extend(bias_terms(&o, c));
+        }
     }
     for l in &s.lines {
         out.extend(line_terms(l, c));
@@ -199,6 +204,51 @@ fn offset_terms(ch: usize, o: &[&signals::Offset]) -> Vec<Term> {
             .map(|o| param(&format!("{name}_{}", o.test + 1), unit, o.value))
             .collect(),
         generic: format!("{} = \"{x} + {name}_i\" in each test i", hook.key()),
+        ..shared.clone()
+    };
+    vec![shared, each]
+}
+
+/// The valve's null bias a displacement offset with a loop error suggests (`o`, the
+/// displacement's offsets): `opening = "x + b_x"` in the tests that show it, one value for them
+/// all, and one per test where there are several (a null that drifted between tests). Where the
+/// feedback sits Δ further from the tracked reference than the model's loop leaves it, the
+/// controller's displacement term holds the spool at k_sp·10·G_d·Δ/D_max (docs/model.md §2,
+/// step 3), which a bias b_x = −that cancels in the steady state: the start.
+fn bias_terms(o: &[&signals::Offset], c: &[ComparedTest]) -> Vec<Term> {
+    let with_loop: Vec<(usize, f64)> = (o.iter())
+        .filter_map(|o| Some((o.test, o.loop_error?)))
+        .map(|(t, [measured, model])| {
+            let ctl = &c[t].test.model.controller;
+            let spool_per_m = c[t].test.model.servovalve.k_sp * 10.0 * ctl.g_d / ctl.d_max;
+            (t, spool_per_m * (measured - model))
+        })
+        .collect();
+    if with_loop.is_empty() {
+        return Vec::new();
+    }
+    let mean = with_loop.iter().map(|b| b.1).sum::<f64>() / with_loop.len() as f64;
+    let evidence = Evidence::Offset { channel: 1 };
+    let shared = Term {
+        hook: Hook::Opening,
+        forms: (with_loop.iter())
+            .map(|&(t, _)| (t, "x + b_x".to_string()))
+            .collect(),
+        params: vec![param("b_x", "m", mean)],
+        generic: "opening = \"x + b_x\"".to_string(),
+        evidence,
+    };
+    if with_loop.len() < 2 || with_loop.len() > OFFSET_TESTS {
+        return vec![shared];
+    }
+    let each = Term {
+        forms: (with_loop.iter())
+            .map(|&(t, _)| (t, format!("x + b_x_{}", t + 1)))
+            .collect(),
+        params: (with_loop.iter())
+            .map(|&(t, b)| param(&format!("b_x_{}", t + 1), "m", b))
+            .collect(),
+        generic: "opening = \"x + b_x_i\" in each test i".to_string(),
         ..shared.clone()
     };
     vec![shared, each]

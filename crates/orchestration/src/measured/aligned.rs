@@ -396,7 +396,10 @@ fn remove_static_offsets(data: &mut NumTable, rate_hz: f64) -> Vec<String> {
         let Some(i) = data.names.iter().position(|n| n == name) else {
             continue;
         };
-        let Some((offset, lead)) = static_offset(&data.columns[i], rate_hz) else {
+        let reference = (name == "disp_m")
+            .then(|| data.column("ref_disp_m"))
+            .flatten();
+        let Some((offset, lead)) = static_offset(&data.columns[i], reference, rate_hz) else {
             continue;
         };
         data.columns[i].iter_mut().for_each(|x| *x -= offset);
@@ -416,7 +419,7 @@ fn remove_static_offsets(data: &mut NumTable, rate_hz: f64) -> Vec<String> {
 /// first motion too); else a lead of `disp_m` alone, or without one its mean difference from
 /// the reference ([`remove_feedback_offset`]). Returns the notes.
 fn remove_offsets(test: &TestSpec, data: &mut NumTable, time: &TimeBase) -> Vec<String> {
-    let ref_lead = (data.column("ref_disp_m")).and_then(|r| static_offset(r, time.rate_hz));
+    let ref_lead = (data.column("ref_disp_m")).and_then(|r| static_offset(r, None, time.rate_hz));
     if let (None, ExcitationSpec::Sine { sine, .. }) = (ref_lead, &test.excitation) {
         if let Some(note) = remove_sine_offset(test, sine, data, time) {
             return vec![note];
@@ -484,10 +487,18 @@ fn remove_sine_offset(
 }
 
 /// The static offset of column `x` and the rows of its quiet lead (see
-/// [`remove_static_offsets`]), or None where there is none to remove.
-fn static_offset(x: &[f64], rate_hz: f64) -> Option<(f64, usize)> {
+/// [`remove_static_offsets`]), or None where there is none to remove. With the tracked
+/// `reference` (the feedback's, its own offset removed), the offset is the lead's mean of
+/// x − reference: the lead ends where x leaves its level by more than its noise, so it holds the
+/// first motion up to that (a taper's start), which the reference has too and which leaves the
+/// difference; x's own mean over the lead would count that motion as offset (up to a few of the
+/// noise's σ, read later as a steady error of the test).
+fn static_offset(x: &[f64], reference: Option<&[f64]>, rate_hz: f64) -> Option<(f64, usize)> {
     let (lead, sigma) = quiet_lead(x, rate_hz)?;
-    let offset = x[..lead].iter().sum::<f64>() / lead as f64;
+    let offset = match reference {
+        Some(r) => (x[..lead].iter().zip(r)).map(|(a, b)| a - b).sum::<f64>() / lead as f64,
+        None => x[..lead].iter().sum::<f64>() / lead as f64,
+    };
     let motion = x.iter().map(|v| (v - offset).abs()).fold(0.0, f64::max);
     (offset.abs() > (10.0 * sigma).max(1e-3 * motion)).then_some((offset, lead))
 }
