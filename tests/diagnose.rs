@@ -1622,10 +1622,12 @@ fn a_valve_null_bias_is_named_from_the_loop_error() {
 
 /// The other reading of a displacement offset: the recorded displacement's zero is 1.2 mm off
 /// the loop's (a transducer not zeroed), the motion itself untouched. Reading the files removes
-/// it in every test, within 0.01 mm (measured over the lead against the tracked reference: the
-/// lead's own mean, which holds the taper's first motion, left up to 0.015 mm, read by the
-/// diagnosis as a steady error of some tests and named a valve's null bias); what is left is not
-/// named a null bias, and the residual is at most 1.5× the noise floor.
+/// it in every test, within 0.01 mm (measured over the lead's rows before the tracked reference
+/// moves: the whole lead's mean, which holds the taper's first motion, left up to 0.015 mm, read
+/// by the diagnosis as a steady error of some tests and named a valve's null bias); what is left
+/// is not named a null bias: the verdict is that nothing significant is missing, the starting
+/// model being at the noise (it said a candidate explaining 10 % of the little left was
+/// "probably not in the library").
 #[test]
 #[ignore = "slow (about 20 s): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
 fn a_displacement_zero_is_removed_and_not_named_a_valve_bias() {
@@ -1650,9 +1652,16 @@ fn a_displacement_zero_is_removed_and_not_named_a_valve_bias() {
         })
         .collect();
     assert_eq!(removed.len(), 8, "{removed:?}");
-    assert!(removed.iter().all(|mm| (mm - 1.2).abs() < 0.01), "{removed:?}");
+    assert!(
+        removed.iter().all(|mm| (mm - 1.2).abs() < 0.01),
+        "{removed:?}"
+    );
     let verdict = verdict_of(&r.stdout);
     assert!(!verdict.contains("opening"), "{verdict}");
+    assert!(
+        verdict.contains("no significant missing effect: the starting model is at the noise"),
+        "{verdict}"
+    );
     let (first, _) = r.first();
     let left = r.residual[first.as_str()] / r.noise_floor;
     assert!(left <= 1.5, "the residual is {left}x the noise floor");

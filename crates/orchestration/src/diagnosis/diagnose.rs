@@ -247,6 +247,23 @@ pub enum Verdict {
 
 impl Diagnosis {
     pub fn verdict(&self) -> Verdict {
+        match self.named_verdict() {
+            Verdict::Unexplained { .. } if self.starts_at_noise() => Verdict::NothingSignificant,
+            v => v,
+        }
+    }
+
+    /// Whether the starting model is already at the noise: its residual within [`NOISE_FACTOR`]
+    /// of the noise floor, and every test's misfit (√(χ²/dof)) within it too. A candidate that
+    /// explains a small share of what little is left is then no sign of a missing effect outside
+    /// the library.
+    pub fn starts_at_noise(&self) -> bool {
+        self.baseline.residual_rms() <= NOISE_FACTOR * self.noise_rms
+            && self.test_misfit.iter().all(|m| !(*m > NOISE_FACTOR))
+    }
+
+    /// The verdict from the candidates alone.
+    fn named_verdict(&self) -> Verdict {
         match self.candidates.first() {
             Some(c) if c.significant() => {
                 let effects: Vec<Part> = std::iter::once(c.part())
@@ -346,6 +363,13 @@ impl Diagnosis {
         let best = self.candidates.first();
         match self.verdict() {
             Verdict::NothingSignificant => match best {
+                Some(c) if self.starts_at_noise() && c.significant() => format!(
+                    "no significant missing effect: the starting model is at the noise (residual {:.2}x the noise floor, every test within {NOISE_FACTOR}x its noise; best: {}, explaining {:.0} % of the little beyond noise){}",
+                    self.baseline.residual_rms() / self.noise_rms,
+                    c.effect,
+                    100.0 * c.explained,
+                    self.signal_note()
+                ),
                 Some(c) if c.delta_bic > SIGNIFICANT_BIC => format!(
                     "no candidate explains the residual significantly (best: {}, dBIC = {:.1}, but it explains {:.1} % of the misfit beyond noise, under {:.0} %); {}{}{}",
                     c.effect,

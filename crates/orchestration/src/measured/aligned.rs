@@ -380,6 +380,11 @@ pub fn align(
     })
 }
 
+/// Rows before the tracked reference moves that a feedback's static offset is measured over
+/// at least, else over its whole quiet lead. [chosen: 16, a standard error of a quarter of the
+/// noise's σ.]
+pub const OFFSET_STILL_ROWS: usize = 16;
+
 /// Rows at rest that a static offset is measured over at least [chosen: a quiet lead shorter
 /// than this cannot tell an offset from the first samples of the motion].
 pub const OFFSET_MIN_LEAD_S: f64 = 0.05;
@@ -488,17 +493,25 @@ fn remove_sine_offset(
 
 /// The static offset of column `x` and the rows of its quiet lead (see
 /// [`remove_static_offsets`]), or None where there is none to remove. With the tracked
-/// `reference` (the feedback's, its own offset removed), the offset is the lead's mean of
-/// x − reference: the lead ends where x leaves its level by more than its noise, so it holds the
-/// first motion up to that (a taper's start), which the reference has too and which leaves the
-/// difference; x's own mean over the lead would count that motion as offset (up to a few of the
-/// noise's σ, read later as a steady error of the test).
+/// `reference` (the feedback's, its own offset removed), the offset is x's mean over the lead's
+/// rows before the reference leaves its level by x's noise σ (at least [`OFFSET_STILL_ROWS`] of
+/// them; else the whole lead): the lead ends only where x leaves its level by several σ, so it
+/// holds the excitation's first motion (a taper's start), which its mean would count as offset,
+/// up to a few σ; before the reference moves, the table cannot have.
 fn static_offset(x: &[f64], reference: Option<&[f64]>, rate_hz: f64) -> Option<(f64, usize)> {
     let (lead, sigma) = quiet_lead(x, rate_hz)?;
-    let offset = match reference {
-        Some(r) => (x[..lead].iter().zip(r)).map(|(a, b)| a - b).sum::<f64>() / lead as f64,
-        None => x[..lead].iter().sum::<f64>() / lead as f64,
+    let still = reference.map_or(lead, |r| {
+        let level = r.first().copied().unwrap_or(0.0);
+        (r[..lead.min(r.len())].iter())
+            .position(|v| (v - level).abs() > sigma)
+            .unwrap_or(lead)
+    });
+    let rows = if still >= OFFSET_STILL_ROWS {
+        still
+    } else {
+        lead
     };
+    let offset = x[..rows].iter().sum::<f64>() / rows as f64;
     let motion = x.iter().map(|v| (v - offset).abs()).fold(0.0, f64::max);
     (offset.abs() > (10.0 * sigma).max(1e-3 * motion)).then_some((offset, lead))
 }
