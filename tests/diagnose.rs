@@ -699,6 +699,17 @@ fn an_effect_outside_the_library_is_fitted_from_its_spectral_line() {
     assert_line_fitted(&r, "force = \"", 50e3, 0.02 * 50e3);
 }
 
+/// The diagnosis names the expression first, its first parameter within 2 SE of `truth`, and
+/// the residual at most `factor` times the noise floor.
+fn assert_expression_fitted(r: &Diagnosis, truth: f64, factor: f64) {
+    let (first, best) = r.first();
+    assert_eq!(first, "expression", "{}", r.stdout);
+    let (e, se) = (best.estimates[0], best.std_errors[0]);
+    assert!((e - truth).abs() <= 2.0 * se, "{e} ± {se} vs {truth}");
+    let left = r.residual["expression"] / r.noise_floor;
+    assert!(left <= factor, "the residual is {left}x the noise floor");
+}
+
 /// The diagnosis names the expression first, a line's sine and cosine in each of `tests` tests,
 /// each test's amplitude within `tol` of `amplitude`.
 fn assert_line_amplitudes(r: &Diagnosis, tests: usize, amplitude: f64, tol: f64) {
@@ -841,12 +852,7 @@ fn the_state_map_s_term_is_a_candidate_and_names_what_the_library_lacks() {
             verdict.contains(&format!("most likely missing: expression ({form})")),
             "{verdict}"
         );
-        let (first, best) = r.first();
-        assert_eq!(first, "expression", "{}", r.stdout);
-        let (e, se) = (best.estimates[0], best.std_errors[0]);
-        assert!((e - truth).abs() <= 2.0 * se, "{e} ± {se} vs {truth}");
-        let left = r.residual["expression"] / r.noise_floor;
-        assert!(left <= 1.5, "the residual is {left}x the noise floor");
+        assert_expression_fitted(&r, truth, 1.5);
         let fitted = std::fs::read_to_string(toml.with_file_name("fitted.toml")).unwrap();
         assert!(fitted.contains(form), "{fitted}");
     }
@@ -883,12 +889,7 @@ fn a_term_in_some_tests_only_is_fitted_to_that_group() {
         verdict.contains("the residual is in some tests only: "),
         "{verdict}"
     );
-    let (first, best) = r.first();
-    assert_eq!(first, "expression", "{}", r.stdout);
-    let (e, se) = (best.estimates[0], best.std_errors[0]);
-    assert!((e + 20_000.0).abs() <= 2.0 * se, "{e} ± {se}");
-    let left = r.residual["expression"] / r.noise_floor;
-    assert!(left <= 2.0, "the residual is {left}x the noise floor");
+    assert_expression_fitted(&r, -20_000.0, 2.0);
     // As `--out` writes it: the campaign beside the model has the drag in the tests the verdict
     // names and off in the others, so every test's acceleration is within 1.5× its noise (0.02
     // m/s²; the signals' TEST_CLEAN: the tests left out are those at most 1.5× theirs), where the
@@ -1496,12 +1497,7 @@ fn a_force_offset_is_stated_from_the_signals_and_fitted() {
         verdict.contains("most likely missing: expression (force_channel = \"f + off_f\")"),
         "{verdict}"
     );
-    let (first, best) = r.first();
-    assert_eq!(first, "expression", "{}", r.stdout);
-    let (e, se) = (best.estimates[0], best.std_errors[0]);
-    assert!((e - 1.0e4).abs() <= 2.0 * se, "{e} ± {se}");
-    let left = r.residual["expression"] / r.noise_floor;
-    assert!(left <= 2.0, "the residual is {left}x the noise floor");
+    assert_expression_fitted(&r, 1.0e4, 2.0);
 }
 
 /// Issue 51, evidence from the signals: a 37.3 Hz hum of 0.1 m/s² (5× the acceleration's noise σ)
@@ -1613,11 +1609,7 @@ fn a_valve_null_bias_is_named_from_the_loop_error() {
             && verdict.contains("a steady offset of the displacement"),
         "{verdict}"
     );
-    let (_, best) = r.first();
-    let (b, se) = (best.estimates[0], best.std_errors[0]);
-    assert!((b + 4.5e-5).abs() <= 2.0 * se, "{b} ± {se}");
-    let left = r.residual["expression"] / r.noise_floor;
-    assert!(left <= 1.5, "the residual is {left}x the noise floor");
+    assert_expression_fitted(&r, -4.5e-5, 1.5);
 }
 
 /// The other reading of a displacement offset: the recorded displacement's zero is 1.2 mm off
