@@ -169,15 +169,31 @@ fn write_named(
             .collect::<Vec<_>>()
             .join(", ")
     )?;
-    match d.named_term() {
-        Some(t) if t.per_test() || d.names_a_group() => {
-            let path = term_campaign_path(out);
-            write_term_campaign(&path, campaign, t)?;
-            writeln!(o, "\n  wrote {} (the campaign with each test's own form of the expression, and the expression off in the tests it was not fitted to: `study compare {} --model {}`)", path.display(), path.display(), out.display())?;
-            Ok(())
-        }
-        _ => remove_stale_campaign(o, out),
+    let term = (d.named_term()).filter(|t| t.per_test() || d.names_a_group());
+    let group = d.named_group().zip(d.candidates.first().map(|c| c.effect));
+    if let Some((g, e)) = &group {
+        let tests = d.signals.list(g.iter().copied());
+        writeln!(o, "\n  note: {e} was fitted to {tests} only; the model written applies it to every test, the campaign written beside it keeps it off in the others")?;
     }
+    if term.is_none() && group.is_none() {
+        return remove_stale_campaign(o, out);
+    }
+    let path = term_campaign_path(out);
+    let off = group.as_ref().map(|(g, e)| (*e, g.as_slice()));
+    write_term_campaign(&path, campaign, term, off)?;
+    let what = match (term, &group) {
+        (Some(_), _) => "each test's own form of the expression, and the expression off in the tests it was not fitted to".to_string(),
+        (None, Some((_, e))) => format!("{e} off in the tests it was not fitted to"),
+        (None, None) => unreachable!("returned above"),
+    };
+    writeln!(
+        o,
+        "\n  wrote {} (the campaign with {what}: `study compare {} --model {}`)",
+        path.display(),
+        path.display(),
+        out.display()
+    )?;
+    Ok(())
 }
 
 /// Removes the campaign an earlier diagnosis wrote beside `out` ([`term_campaign_path`]; the run
@@ -219,16 +235,16 @@ fn check_term_campaign(path: &std::path::Path) -> anyhow::Result<()> {
     }
 }
 
-/// Writes to `path` a copy of `campaign` in which each test the term `t` is given to has its own
-/// form (`model = { expression = { <hook> = "<form>" } }`) and every other test has the
-/// expression off (`enabled = false`); the data and record paths made absolute, since the copy
-/// may lie elsewhere.
+/// Writes to `path` a copy of `campaign` in which each test the term `t` (if any) is given to has
+/// its own form (`model = { expression = { <hook> = "<form>" } }`) and every other test has the
+/// expression off (`enabled = false`), and the effect of `off` (if any) is off in the tests
+/// outside its group; the data and record paths made absolute, since the copy may lie elsewhere.
 fn write_term_campaign(
     path: &std::path::Path,
     campaign: &std::path::Path,
-    t: &crate::orchestration::diagnosis::terms::Term,
+    t: Option<&crate::orchestration::diagnosis::terms::Term>,
+    off: Option<(EffectId, &[usize])>,
 ) -> anyhow::Result<()> {
-    use anyhow::Context;
     let base = std::fs::canonicalize(campaign)?
         .parent()
         .map(|p| p.to_path_buf())
@@ -246,21 +262,28 @@ fn write_term_campaign(
         {
             absolute(e, "file", &base);
         }
-        let model = test
-            .entry("model")
-            .or_insert_with(|| toml::Table::new().into());
-        let expression = (model.as_table_mut())
-            .context("a test's model")?
-            .entry("expression")
-            .or_insert_with(|| toml::Table::new().into())
-            .as_table_mut()
-            .context("a test's expression")?;
-        match t.forms.iter().find(|f| f.0 == i) {
-            Some((_, form)) => expression.insert(t.hook.key().into(), form.clone().into()),
-            None => expression.insert("enabled".into(), false.into()),
-        };
+        let model = sub_table(test, "model")?;
+        if let Some(t) = t {
+            let expression = sub_table(model, "expression")?;
+            match t.forms.iter().find(|f| f.0 == i) {
+                Some((_, form)) => expression.insert(t.hook.key().into(), form.clone().into()),
+                None => expression.insert("enabled".into(), false.into()),
+            };
+        }
+        if let Some((e, _)) = off.filter(|(_, g)| !g.contains(&i)) {
+            sub_table(model, e.name())?.insert("enabled".into(), false.into());
+        }
         Ok(())
     })
+}
+
+/// `table[name]`, a table, made where it is missing.
+fn sub_table<'a>(table: &'a mut toml::Table, name: &str) -> anyhow::Result<&'a mut toml::Table> {
+    use anyhow::Context;
+    (table.entry(name))
+        .or_insert_with(|| toml::Table::new().into())
+        .as_table_mut()
+        .with_context(|| format!("a test's {name}"))
 }
 
 /// `table[key]`, a path relative to `base`, made absolute.
@@ -285,13 +308,14 @@ fn print_candidates(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
         "\n  {:<4} {:<17} {:<24} {:>3} {:>4} {:>11} {:>11} {:>9} {:>11}  significant",
         "rank", "candidate", "family", "p", "iter", "chi2", "dBIC", "explains", "rms resid."
     )?;
+    let at_noise = d.verdict() == diagnose::Verdict::NothingSignificant && d.starts_at_noise();
     for (i, c) in d.candidates.iter().enumerate() {
         let rms = c.fit.as_ref().map_or(f64::NAN, |f| f.after.residual_rms());
         writeln!(
             o,
             "  {:<4} {:<17} {:<24} {:>3} {:>4} {:>11.4e} {:>11.4e} {:>8.1}% {:>11.3e}  {}",
             i + 1,
-            c.effect.name(),
+            c.label(),
             c.family,
             c.free.len(),
             c.fit.as_ref().map_or("-".to_string(), |f| format!(
@@ -305,9 +329,16 @@ fn print_candidates(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
             rms,
             match &c.fit {
                 Err(e) => format!("fit failed: {e}"),
+                Ok(_) if c.significant() && at_noise => "yes*".into(),
                 Ok(_) if c.significant() => "yes".into(),
                 Ok(_) => "no".into(),
             }
+        )?;
+    }
+    if at_noise && d.candidates.iter().any(|c| c.significant()) {
+        writeln!(
+            o,
+            "  * significant in BIC over the features, but the starting model is already at the noise: nothing is named"
         )?;
     }
     for c in &d.candidates {
@@ -329,7 +360,7 @@ fn print_terms_tried(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
     }
     writeln!(
         o,
-        "\n  expression terms tried (the candidate is the one of lowest BIC = chi2 + p ln n):"
+        "\n  expression terms tried (the candidate is the one of lowest BIC = chi2 + p ln n, or a term read off the signals that adds to the named effects):"
     )?;
     for t in &d.terms_tried {
         let chosen = d.term.as_ref() == Some(&t.term);
@@ -554,7 +585,7 @@ fn candidates_columns(d: &Diagnosis) -> Vec<(String, Column)> {
         ("rank".into(), Column::U32((1..=cs.len() as u32).collect())),
         (
             "effect".into(),
-            Column::Str(cs.iter().map(|c| c.effect.to_string()).collect()),
+            Column::Str(cs.iter().map(|c| c.label()).collect()),
         ),
         (
             "family".into(),
@@ -639,7 +670,7 @@ fn selection_columns(d: &Diagnosis) -> Vec<(String, Column)> {
     )> = Vec::new();
     if let Some(c) = cs.first().filter(|c| c.significant()) {
         if let Ok(f) = &c.fit {
-            steps.push((c.effect.to_string(), &c.free, f, c.delta_bic, c.explained));
+            steps.push((c.label(), &c.free, f, c.delta_bic, c.explained));
         }
     }
     for st in &d.more {
@@ -711,7 +742,7 @@ fn selection_columns(d: &Diagnosis) -> Vec<(String, Column)> {
 /// `tests.parquet`: the residual per test, baseline and each candidate (the "error falls" table).
 fn tests_columns(problem: &Problem, d: &Diagnosis) -> Vec<(String, Column)> {
     let cs = &d.candidates;
-    let mut rows: Vec<(String, &str, f64, f64)> = Vec::new();
+    let mut rows: Vec<(String, String, f64, f64)> = Vec::new();
     let phase_b = problem.fundamental_phase_error(&d.baseline);
     let phase_c: Vec<Vec<f64>> = cs
         .iter()
@@ -726,14 +757,14 @@ fn tests_columns(problem: &Problem, d: &Diagnosis) -> Vec<(String, Column)> {
     for (t, test) in problem.tests.iter().enumerate() {
         rows.push((
             test.name.clone(),
-            "baseline",
+            "baseline".to_string(),
             d.baseline.test_rms(t),
             phase_b[t],
         ));
         for (i, c) in cs.iter().enumerate() {
             rows.push((
                 test.name.clone(),
-                c.effect.name(),
+                c.label(),
                 c.fit.as_ref().map_or(f64::NAN, |f| f.after.test_rms(t)),
                 phase_c[i][t],
             ));
@@ -808,7 +839,7 @@ fn error_falls_svg(problem: &Problem, d: &Diagnosis) -> Result<String, Box<dyn s
     let mut series: Vec<(String, Vec<f64>)> = vec![("baseline".into(), per(&d.baseline))];
     for c in d.candidates.iter().take(4) {
         if let Ok(f) = &c.fit {
-            series.push((c.effect.to_string(), per(&f.after)));
+            series.push((c.label(), per(&f.after)));
         }
     }
     let y1 = series
@@ -902,7 +933,7 @@ td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}} th{{background:#
             h,
             "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{:.4e}</td><td>{:.4e}</td><td>{:.1} %</td><td>{}</td></tr>",
             i + 1,
-            c.effect,
+            c.label(),
             c.family,
             esc(&params),
             c.chi2(),

@@ -139,6 +139,30 @@ impl Candidate {
     pub fn chi2(&self) -> f64 {
         self.fit.as_ref().map_or(f64::INFINITY, |f| f.chi2_after())
     }
+
+    /// The tests it is fitted to where that is a group of them ([`group_variants`]): its effect
+    /// is off in the others.
+    pub fn group(&self) -> Option<Vec<usize>> {
+        let mask = self.free.first()?.tests;
+        let same = self.free.iter().all(|f| f.tests == mask);
+        (same && mask != fit::ALL_TESTS).then(|| {
+            (0..fit::GROUP_TESTS)
+                .filter(|&t| mask >> t & 1 == 1)
+                .collect()
+        })
+    }
+
+    /// Its name in tables: the effect's, and for a group the tests' numbers from 1
+    /// (`specimen[1,3,5,7]`).
+    pub fn label(&self) -> String {
+        match self.group() {
+            Some(g) => {
+                let n: Vec<String> = g.iter().map(|t| (t + 1).to_string()).collect();
+                format!("{}[{}]", self.effect, n.join(","))
+            }
+            None => self.effect.to_string(),
+        }
+    }
 }
 
 /// A share as a percentage, to two significant figures below 1 % (a share is never shown as
@@ -364,11 +388,10 @@ impl Diagnosis {
         match self.verdict() {
             Verdict::NothingSignificant => match best {
                 Some(c) if self.starts_at_noise() && c.significant() => format!(
-                    "no significant missing effect: the starting model is at the noise (residual {:.2}x the noise floor, every test within {NOISE_FACTOR}x its noise; best: {}, explaining {:.0} % of the little beyond noise){}",
+                    "no significant missing effect: the starting model is at the noise (residual {:.2}x the noise floor, every test within {NOISE_FACTOR}x its noise; best: {}, explaining {:.0} % of the little beyond noise)",
                     self.baseline.residual_rms() / self.noise_rms,
                     c.effect,
                     100.0 * c.explained,
-                    self.signal_note()
                 ),
                 Some(c) if c.delta_bic > SIGNIFICANT_BIC => format!(
                     "no candidate explains the residual significantly (best: {}, dBIC = {:.1}, but it explains {:.1} % of the misfit beyond noise, under {:.0} %); {}{}{}",
@@ -390,9 +413,10 @@ impl Diagnosis {
                 ),
             },
             Verdict::Missing { effects, explained } if effects.len() == 1 => format!(
-                "most likely missing: {} ({}){}; it explains {:.0} % of the misfit beyond noise (dBIC = {:.0}){}{}",
+                "most likely missing: {} ({}){}{}; it explains {:.0} % of the misfit beyond noise (dBIC = {:.0}){}{}",
                 effects[0],
                 self.family(effects[0].effect),
+                self.leader_group(),
                 self.fitted_values(),
                 100.0 * explained,
                 best.map_or(f64::NAN, |c| c.delta_bic),
@@ -401,8 +425,9 @@ impl Diagnosis {
             ) + &self.signal_note_if_short(),
             Verdict::Missing { effects, explained } => format!(
                 "most likely missing: {}; together they explain {:.0} % of the misfit beyond noise (what the joint fit loses without each: {}){}{}",
-                effects.iter().map(|e| match e.stage {
-                    0 => format!("{e} ({})", self.family(e.effect)),
+                effects.iter().enumerate().map(|(i, e)| match (i, e.stage) {
+                    (0, _) => format!("{e} ({}){}", self.family(e.effect), self.leader_group()),
+                    (_, 0) => format!("{e} ({})", self.family(e.effect)),
                     _ => e.to_string(),
                 }).collect::<Vec<_>>().join(" + "),
                 100.0 * explained,
@@ -457,15 +482,34 @@ impl Diagnosis {
     }
 
     /// [`Self::signal_note`] when the named effects leave more than [`NOISE_FACTOR`] times the
-    /// noise floor, or name a term fitted to a group of tests or read off the signals (the
-    /// evidence it rests on); empty otherwise.
+    /// noise floor, or name a term or an effect fitted to a group of tests, or a term read off the
+    /// signals (the evidence it rests on); empty otherwise.
     fn signal_note_if_short(&self) -> String {
         match self.named_fit() {
             Some((_, f)) if f.after.residual_rms() > NOISE_FACTOR * self.noise_rms => {
                 self.signal_note()
             }
             Some(_) if self.names_a_group() || self.names_evidence() => self.signal_note(),
+            Some(_) if self.named_group().is_some() => self.signal_note(),
             _ => String::new(),
+        }
+    }
+
+    /// " in f1_a0p5, f2_a1p5 and f4_a0p8 only" where the best candidate is fitted to a group of
+    /// tests ([`group_variants`]); empty otherwise.
+    fn leader_group(&self) -> String {
+        match self.named_group() {
+            Some(g) => format!(" in {} only", self.signals.list(g.into_iter())),
+            None => String::new(),
+        }
+    }
+
+    /// The tests the named best candidate is fitted to, where that is a group of them (its
+    /// effect off in the others).
+    pub fn named_group(&self) -> Option<Vec<usize>> {
+        match self.verdict() {
+            Verdict::NothingSignificant => None,
+            _ => self.candidates.first()?.group(),
         }
     }
 
@@ -576,10 +620,9 @@ impl Diagnosis {
     /// Maps the residual the named effects leave (None when a test's model run fails).
     fn map_after(&mut self, aligned: &[AlignedTest]) {
         if let Some((free, fit)) = self.named_fit() {
-            let fitted: Vec<AlignedTest> = aligned
-                .iter()
-                .map(|t| AlignedTest {
-                    model: fit::apply_estimates(&t.model, free, &fit.estimate),
+            let fitted: Vec<AlignedTest> = (aligned.iter().enumerate())
+                .map(|(i, t)| AlignedTest {
+                    model: fit::apply_estimates_in(i, &t.model, free, &fit.estimate),
                     ..t.clone()
                 })
                 .collect();
@@ -738,6 +781,48 @@ fn rank(out: &mut [Candidate]) {
     });
 }
 
+/// Leading library candidates [`group_variants`] fits again to a group of tests. [chosen: 2,
+/// as [`ALTERNATES`]: the effect that leads alone over every test is, where it acts in some
+/// tests only, among the first few.]
+pub const GROUP_LEADERS: usize = 2;
+
+/// The leading [`GROUP_LEADERS`] significant library candidates fitted again in the tests
+/// `group` alone (their effect off in the others: a specimen on the table for some tests of a
+/// campaign, a set-up changed between them), each from the better of its own start and its
+/// estimates over every test; each is a candidate of its own ([`Candidate::label`]), and `out`
+/// is ranked again. Nothing where `group` is every test, or the campaign has more tests than a
+/// group can hold ([`fit::GROUP_TESTS`]).
+fn group_variants(
+    problem: &Problem,
+    out: &mut Vec<Candidate>,
+    group: &[usize],
+    baseline: &fit::Eval,
+    s: &Scoring,
+) {
+    let n = problem.tests.len();
+    if group.is_empty() || group.len() >= n || n > fit::GROUP_TESTS {
+        return;
+    }
+    let library = |c: &&Candidate| c.significant() && c.effect != EffectId::Expression;
+    let leaders: Vec<&Candidate> = out.iter().filter(library).take(GROUP_LEADERS).collect();
+    let more: Vec<Candidate> = (leaders.par_iter())
+        .filter_map(|c| {
+            let f = c.fit.as_ref().ok()?;
+            let own = scanned(problem, &free_in(problem, c.effect, 0), c.effect, 0);
+            let starts = [own, at_estimates(&c.free, &f.estimate)];
+            (starts.into_par_iter())
+                .map(|free| {
+                    let free: Vec<Free> = free.iter().map(|p| p.in_tests(group)).collect();
+                    let r = fit::fit_from(problem, &free, MAX_ITER, baseline.clone());
+                    s.candidate(c.effect, free, r, None)
+                })
+                .min_by(|a, b| a.chi2().total_cmp(&b.chi2()))
+        })
+        .collect();
+    out.extend(more);
+    rank(out);
+}
+
 /// The leading [`POLISHED`] significant candidates whose fits stopped at [`MAX_ITER`] go on from
 /// their estimates (up to 4 × [`MAX_ITER`] more), and the candidates are ranked again: two
 /// effects of one family may both explain nearly all, and the one whose parameters are
@@ -807,7 +892,7 @@ pub fn scan_starts(problem: &Problem, free: &[Free]) -> Vec<Free> {
             for f in out.iter_mut() {
                 let start = stage.start.iter().find(|(n, _)| f.info.path() == path(n));
                 if let (Some(&(_, v)), true) = (start, f.start == 0.0) {
-                    *f = Free::new(f.info, v);
+                    *f = f.at(v);
                 }
             }
             out = scanned(problem, &out, effect, k);
@@ -846,7 +931,17 @@ pub fn diagnose_campaign(
     let candidates: Vec<EffectId> = (candidates.iter().copied())
         .filter(|&e| e != EffectId::Expression || writes || term.is_some())
         .collect();
-    let mut d = diagnose(problem, &candidates, &seeds, term.is_some());
+    let group: Option<Vec<usize>> = (signals.as_ref())
+        .and_then(|s| s.split.as_ref())
+        .map(|(carry, _)| carry.iter().map(|x| x.0).collect());
+    let mut d = diagnose(
+        problem,
+        &candidates,
+        &seeds,
+        term.is_some(),
+        group.as_deref(),
+    );
+    let term = beside_named(problem, &mut d, &tried, term);
     d.signals = signals.unwrap_or(d.signals);
     d.state_map = map;
     let mut aligned = aligned.to_vec();
@@ -868,7 +963,7 @@ pub fn diagnose_campaign(
 
 /// The signals' evidence in the compared tests `c` of `problem`'s starting model.
 fn read_signals(problem: &Problem, c: &[ComparedTest]) -> Signals {
-    let baseline = problem.evaluate(1, &|_, m| m.clone()).remove(0);
+    let baseline = problem.evaluate(1, &|_, _, m| m.clone()).remove(0);
     let sigma: Vec<[f64; 3]> = problem.tests.iter().map(|t| t.sigma).collect();
     signals::read(c, &sigma, &problem.test_misfit(&baseline))
 }
@@ -922,6 +1017,108 @@ fn choose_term(
     (best, tried)
 }
 
+/// Terms read off the signals that [`beside_named`] tries on top of the named effects. [chosen:
+/// 2, the two that fit best alone; each is one joint fit of the named set with it.]
+pub const BESIDE_TRIES: usize = 2;
+
+/// A term read off the signals (an offset, a spectral line) added to the library effects the
+/// diagnosis `d` names, where `term`, the `expression` candidate, is the state map's or is not
+/// among them: a hum in some tests beside a friction in all of them. The one expression slot held
+/// the term that fits best alone (the map's, standing in for the friction), and forward selection
+/// never met the line. The signals' terms of `tried`, best alone first ([`BESIDE_TRIES`]), are
+/// each fitted on top of the named set (its parameters from their estimates, freed with the
+/// term's); the first that adds as forward selection requires ([`ADDS_ENOUGH`], ΔBIC >
+/// [`SIGNIFICANT_BIC`]) is named with them, the set checked again ([`prune`]); it is given to
+/// `problem`'s models and becomes the `expression` candidate, fitted alone. Returns the term the
+/// models then have.
+fn beside_named(
+    problem: &mut Problem,
+    d: &mut Diagnosis,
+    tried: &[Tried],
+    term: Option<Term>,
+) -> Option<Term> {
+    let Some(lead) = d.candidates.first().filter(|c| c.significant()) else {
+        return term;
+    };
+    let named = std::iter::once(lead.effect).chain(d.more.iter().map(|s| s.effect));
+    if named.clone().any(|e| e == EffectId::Expression) || named.count() >= MAX_EFFECTS {
+        return term;
+    }
+    let score = Scoring {
+        chi2_b: d.baseline.chi2(),
+        n: d.n as f64,
+        ln_n: (d.n as f64).ln(),
+    };
+    let (free, at) = match d.more.last() {
+        Some(s) => (at_estimates(&s.free, &s.fit.estimate), s.fit.after.clone()),
+        None => match &lead.fit {
+            Ok(f) => (at_estimates(&lead.free, &f.estimate), f.after.clone()),
+            Err(_) => return term,
+        },
+    };
+    let mut options: Vec<&Tried> = (tried.iter())
+        .filter(|t| t.term.evidence != Evidence::Map && Some(&t.term) != term.as_ref())
+        .collect();
+    options.sort_by(|a, b| a.bic.total_cmp(&b.bic));
+    let added = (options.into_iter().take(BESIDE_TRIES))
+        .find_map(|t| added_beside(problem, &t.term, (&free, &at), &score).map(|s| (t, s)));
+    let Some((t, step)) = added else {
+        restore(problem, term.as_ref());
+        return term;
+    };
+    let mut steps = std::mem::take(&mut d.more);
+    steps.push(step);
+    (d.more, d.own) = prune(problem, &d.candidates, steps, &score);
+    let free = expression_free_in(problem);
+    let fit = fit::fit_from(problem, &free, MAX_ITER, d.baseline.clone());
+    let alone = score.candidate(EffectId::Expression, free, fit, None);
+    d.candidates.retain(|c| c.effect != EffectId::Expression);
+    d.candidates.push(alone);
+    rank(&mut d.candidates[1..]);
+    Some(t.term.clone())
+}
+
+/// The step that names `t` on top of the named set (its parameters `free` at their estimates,
+/// leaving the evaluation `at`), `t` given to `problem`'s models; None, `t` still given, where
+/// it does not add as forward selection requires.
+fn added_beside(
+    problem: &mut Problem,
+    t: &Term,
+    (free, at): (&[Free], &fit::Eval),
+    score: &Scoring,
+) -> Option<Step> {
+    if !install(problem, t) {
+        return None;
+    }
+    let mut f = free.to_vec();
+    f.extend(expression_free_in(problem));
+    let r = fit::fit_from(problem, &f, MAX_ITER, at.clone()).ok()?;
+    let drop = at.chi2() - r.chi2_after();
+    let dbic = drop - (f.len() - free.len()) as f64 * score.ln_n;
+    if !(dbic > SIGNIFICANT_BIC && drop >= ADDS_ENOUGH * (at.chi2() - score.n)) {
+        return None;
+    }
+    Some(Step {
+        effect: EffectId::Expression,
+        stage: 0,
+        family: EffectId::Expression.info().family,
+        free: f,
+        explained: score.share(r.chi2_after()),
+        fit: r,
+        delta_bic: dbic,
+    })
+}
+
+/// `problem`'s models given `term` again (their expressions cleared where there is none).
+fn restore(problem: &mut Problem, term: Option<&Term>) {
+    match term {
+        Some(t) => {
+            install(problem, t);
+        }
+        None => (problem.tests.iter_mut()).for_each(|t| t.model.expression.hooks.clear()),
+    }
+}
+
 /// One expression term [`choose_term`] fitted: its χ², parameters and BIC.
 pub struct Tried {
     pub term: Term,
@@ -937,7 +1134,7 @@ fn term_fit(problem: &mut Problem, t: &Term) -> (f64, usize) {
         return (f64::INFINITY, t.params.len());
     }
     let free = expression_free_in(problem);
-    let before = problem.evaluate(1, &|_, m| m.clone()).remove(0);
+    let before = problem.evaluate(1, &|_, _, m| m.clone()).remove(0);
     let fit = fit::fit_unprofiled(problem, &free, MAX_ITER, before, f64::INFINITY);
     (fit.map_or(f64::INFINITY, |f| f.chi2_after()), free.len())
 }
@@ -968,14 +1165,17 @@ fn prefer_library(out: &mut [Candidate]) {
 /// fit: [`crate::diagnosis::seeds`]) and ranks them.
 ///
 /// `generic`: the `expression` candidate is the state map's term, which ranks behind a library
-/// effect that fits about as well ([`prefer_library`]).
+/// effect that fits about as well ([`prefer_library`]). `group`: the tests that carry the
+/// residual where the others are at the noise ([`Signals::split`]): the leading library
+/// candidates are also fitted to them alone ([`group_variants`]).
 pub fn diagnose(
     problem: &Problem,
     candidates: &[EffectId],
     seeds: &[Seed],
     generic: bool,
+    group: Option<&[usize]>,
 ) -> Diagnosis {
-    let baseline = problem.evaluate(1, &|_, m| m.clone()).remove(0);
+    let baseline = problem.evaluate(1, &|_, _, m| m.clone()).remove(0);
     let n = problem.dof().round() as usize;
     let score = Scoring {
         chi2_b: baseline.chi2(),
@@ -1004,6 +1204,9 @@ pub fn diagnose(
     rank(&mut out);
     polish_leaders(problem, &mut out, &baseline, &score);
     profile_leaders(problem, &mut out, &score);
+    if let Some(g) = group {
+        group_variants(problem, &mut out, g, &baseline, &score);
+    }
     if generic {
         prefer_library(&mut out);
     }
@@ -1162,9 +1365,7 @@ fn best_swap(
         .filter_map(|j| {
             let alone = out[j].fit.as_ref().ok()?;
             let mut f = at_estimates(&out[j].free, &alone.estimate);
-            let others = rest
-                .iter()
-                .map(|&k| Free::new(last.free[k].info, last.fit.estimate[k]));
+            let others = rest.iter().map(|&k| last.free[k].at(last.fit.estimate[k]));
             f.extend(others);
             let r = fit::fit_from(problem, &f, MAX_ITER, last.fit.before.clone()).ok()?;
             Some((j, score.bic(r.chi2_after(), f.len())))
@@ -1279,7 +1480,7 @@ fn refit_without(
 ) -> Option<(Vec<Free>, fit::FitResult)> {
     let free: Vec<Free> = kept(parts, ranges, i)
         .iter()
-        .map(|&k| Free::new(last.free[k].info, last.fit.estimate[k]))
+        .map(|&k| last.free[k].at(last.fit.estimate[k]))
         .collect();
     if free.is_empty() {
         return None;
@@ -1290,10 +1491,7 @@ fn refit_without(
 
 /// The parameters `free` at the values `estimate`.
 fn at_estimates(free: &[Free], estimate: &[f64]) -> Vec<Free> {
-    free.iter()
-        .zip(estimate)
-        .map(|(f, &v)| Free::new(f.info, v))
-        .collect()
+    free.iter().zip(estimate).map(|(f, &v)| f.at(v)).collect()
 }
 
 /// What forward selection may add to the `chosen` parts: every other candidate that could be
@@ -1305,6 +1503,15 @@ fn additions(ranked: &[Candidate], chosen: &[Part]) -> Vec<Part> {
         .filter(|c| !has(c.effect) && c.fit.is_ok())
         .map(Candidate::part)
         .collect();
+    // An effect's group variant ([`group_variants`]) is the same addition.
+    let mut seen = Vec::new();
+    out.retain(|p| match seen.contains(p) {
+        true => false,
+        false => {
+            seen.push(*p);
+            true
+        }
+    });
     for p in chosen {
         let next = p.stage + 1;
         let last = !chosen
@@ -1334,7 +1541,12 @@ fn best_addition(
         .par_iter()
         .map(|&part| {
             let mut f = free.to_vec();
-            f.extend(free_in(problem, part.effect, part.stage));
+            // A further stage of a chosen effect acts in the tests its first does.
+            let tests = (free.iter())
+                .find(|p| p.info.component.effect() == Some(part.effect))
+                .map_or(fit::ALL_TESTS, |p| p.tests);
+            let added = free_in(problem, part.effect, part.stage).into_iter();
+            f.extend(added.map(|p| fit::Free { tests, ..p }));
             let f = scanned(problem, &f, part.effect, part.stage);
             let r = fit::fit_from(problem, &f, MAX_ITER, at.clone());
             (part, f, r)

@@ -609,7 +609,7 @@ impl Problem {
     pub fn evaluate(
         &self,
         n_sets: usize,
-        set: &(dyn Fn(usize, &ModelParams) -> ModelParams + Sync),
+        set: &(dyn Fn(usize, usize, &ModelParams) -> ModelParams + Sync),
     ) -> Vec<Eval> {
         let chunks: Vec<(usize, usize)> = (0..self.tests.len())
             .flat_map(|t| (0..n_sets.div_ceil(LANES)).map(move |c| (t, c)))
@@ -621,7 +621,7 @@ impl Problem {
                 let t = &self.tests[ti];
                 let lo = c * LANES;
                 let hi = (lo + LANES).min(n_sets);
-                let models: Vec<ModelParams> = (lo..hi).map(|k| set(k, &t.model)).collect();
+                let models: Vec<ModelParams> = (lo..hi).map(|k| set(k, ti, &t.model)).collect();
                 let refs: Vec<&ModelParams> = models.iter().collect();
                 if let Some(bad) = models.iter().find_map(|m| m.validate().err()) {
                     let msg = bad
@@ -685,7 +685,16 @@ pub struct Free {
     pub start: f64,
     /// Scaled by log (a positive parameter) or linearly.
     pub log: bool,
+    /// The tests it is set in, a bit each ([`ALL_TESTS`]: every one): an effect fitted to a
+    /// group of tests is on in those alone (a specimen on the table for some tests).
+    pub tests: u64,
 }
+
+/// [`Free::tests`] of a parameter set in every test.
+pub const ALL_TESTS: u64 = u64::MAX;
+
+/// Most tests a group may be made of ([`Free::tests`]: one bit each).
+pub const GROUP_TESTS: usize = 64;
 
 impl Free {
     pub fn new(info: &'static ParamInfo, start: f64) -> Self {
@@ -693,7 +702,24 @@ impl Free {
             info,
             start,
             log: start > 0.0 && info.range.lo >= 0.0,
+            tests: ALL_TESTS,
         }
+    }
+    /// The same parameter (in the same tests) started at `start`.
+    pub fn at(&self, start: f64) -> Self {
+        Free {
+            tests: self.tests,
+            ..Free::new(self.info, start)
+        }
+    }
+    /// The same parameter set in the tests `group` alone (indices below [`GROUP_TESTS`]).
+    pub fn in_tests(&self, group: &[usize]) -> Self {
+        let tests = group.iter().fold(0u64, |m, &t| m | 1u64 << t);
+        Free { tests, ..*self }
+    }
+    /// Whether it is set in test `test`.
+    pub fn applies(&self, test: usize) -> bool {
+        self.tests == ALL_TESTS || (test < GROUP_TESTS && self.tests >> test & 1 == 1)
     }
     /// The parameter's value at scaled coordinate u, inside its valid range.
     pub fn value(&self, u: f64) -> f64 {
@@ -739,26 +765,55 @@ impl Free {
     }
 }
 
-/// Sets the free parameters at `u` on `model` (switching on the effects they belong to).
-pub fn apply(model: &ModelParams, free: &[Free], u: &[f64]) -> ModelParams {
-    with_values(model, free, free.iter().zip(u).map(|(f, &x)| f.value(x)))
+/// Sets the free parameters at `u` on `model`, test `test`'s (switching on the effects they
+/// belong to; those set in other tests only left as they are).
+pub fn apply(test: usize, model: &ModelParams, free: &[Free], u: &[f64]) -> ModelParams {
+    with_values(
+        test,
+        model,
+        free,
+        free.iter().zip(u).map(|(f, &x)| f.value(x)),
+    )
 }
 
 /// `model` with the parameters `free` at the values `estimate` (in their units), their effects
-/// switched on: a fit's model, whatever start its scaled coordinates are relative to.
+/// switched on, every parameter set whatever its tests: a fit's model file, whatever start its
+/// scaled coordinates are relative to.
 pub fn apply_estimates(model: &ModelParams, free: &[Free], estimate: &[f64]) -> ModelParams {
-    with_values(model, free, estimate.iter().copied())
+    let every: Vec<Free> = (free.iter())
+        .map(|f| Free {
+            tests: ALL_TESTS,
+            ..*f
+        })
+        .collect();
+    with_values(0, model, &every, estimate.iter().copied())
 }
 
-/// `model` with the parameters `free` at `values` (in their units), their effects switched on;
-/// no allocation beyond the model's clone (a batch makes one per lane).
+/// [`apply_estimates`] on test `test`'s model: the parameters set in other tests only left as
+/// they are.
+pub fn apply_estimates_in(
+    test: usize,
+    model: &ModelParams,
+    free: &[Free],
+    estimate: &[f64],
+) -> ModelParams {
+    with_values(test, model, free, estimate.iter().copied())
+}
+
+/// `model` (test `test`'s) with the parameters `free` set in it at `values` (in their units),
+/// their effects switched on; no allocation beyond the model's clone (a batch makes one per
+/// lane).
 fn with_values(
+    test: usize,
     model: &ModelParams,
     free: &[Free],
     values: impl Iterator<Item = f64>,
 ) -> ModelParams {
     let mut m = model.clone();
     for (f, v) in free.iter().zip(values) {
+        if !f.applies(test) {
+            continue;
+        }
         if let Some(e) = f.info.component.effect() {
             *m.effects.get_mut(e) = true;
         }
@@ -785,15 +840,15 @@ pub fn scanned(problem: &Problem, free: &[Free], scan: Option<(&str, &[f64])>) -
     let points: Vec<f64> = std::iter::once(f.start)
         .chain(values.iter().copied().filter(|&v| f.info.range.contains(v)))
         .collect();
-    let ev = problem.evaluate(points.len(), &|k, m| {
+    let ev = problem.evaluate(points.len(), &|k, t, m| {
         let mut u = vec![0.0; free.len()];
         u[i] = f.u_of(points[k]);
-        apply(m, free, &u)
+        apply(t, m, free, &u)
     });
     let best = (0..points.len())
         .min_by(|&a, &b| ev[a].chi2().total_cmp(&ev[b].chi2()))
         .unwrap_or(0);
-    out[i] = Free::new(f.info, points[best]);
+    out[i] = f.at(points[best]);
     out
 }
 
@@ -873,7 +928,7 @@ fn with_jacobian(
             sets.push(v);
         }
     }
-    let ev = problem.evaluate(sets.len(), &|k, m| apply(m, free, &sets[k]));
+    let ev = problem.evaluate(sets.len(), &|k, t, m| apply(t, m, free, &sets[k]));
     ev.chunks(p + 1)
         .map(|c| {
             let base = c[0].clone();
@@ -940,7 +995,7 @@ pub fn fit(problem: &Problem, free: &[Free], max_iter: usize) -> Result<FitResul
         problem,
         free,
         max_iter,
-        problem.evaluate(1, &|_, m| m.clone()).remove(0),
+        problem.evaluate(1, &|_, _, m| m.clone()).remove(0),
     )
 }
 
@@ -1138,7 +1193,7 @@ fn profiled(
         if probes.is_empty() {
             break;
         }
-        let ev = problem.evaluate(probes.len(), &|k, m| apply(m, free, &probes[k].1));
+        let ev = problem.evaluate(probes.len(), &|k, t, m| apply(t, m, free, &probes[k].1));
         let chi0 = at.chi2();
         let best = (0..ev.len()).min_by(|&a, &b| ev[a].chi2().total_cmp(&ev[b].chi2()));
         // A lower side moves the estimate only where it is lower by a share of s² that matters:

@@ -80,7 +80,7 @@ fn with_seed(free: &[Free], effect: EffectId, seed: &Seed) -> Vec<Free> {
                 .iter()
                 .find(|(n, _)| f.info.path() == format!("{effect}.{n}"));
             match named {
-                Some(&(_, v)) => Free::new(f.info, clamp_into(f, v)),
+                Some(&(_, v)) => f.at(clamp_into(f, v)),
                 None => *f,
             }
         })

@@ -654,26 +654,28 @@ impl Signals {
     }
 }
 
-/// The displacement offsets' reading against the reference: where the feedback sits from the
-/// tracked reference, measured and in the model (its loop's steady error); empty for another
-/// channel.
+/// The displacement offsets' reading against the reference: how much further the loop holds the
+/// measured feedback off the tracked reference than the model's loop holds the model's (its
+/// steady error), then the two readings; empty for another channel. In mm: the model's own
+/// steady error is a few hundredths of a millimetre.
 fn loop_sentence(o: &[&Offset]) -> String {
     let errors: Vec<[f64; 2]> = o.iter().filter_map(|o| o.loop_error).collect();
-    let range = |i: usize| {
-        let (lo, hi) = bounds(errors.iter().map(|e| e[i]));
+    if errors.is_empty() {
+        return String::new();
+    }
+    let range = |v: Vec<f64>| {
+        let (lo, hi) = bounds(v.iter().copied());
         match hi - lo > 0.25 * hi.abs().max(lo.abs()) {
-            true => format!("{lo:+.2e} to {hi:+.2e} m"),
-            false => format!("{:+.3e} m", 0.5 * (lo + hi)),
+            true => format!("{:+.3} to {:+.3} mm", 1e3 * lo, 1e3 * hi),
+            false => format!("{:+.3} mm", 0.5e3 * (lo + hi)),
         }
     };
-    match errors.is_empty() {
-        true => String::new(),
-        false => format!(
-            "; the feedback sits {} from the tracked reference, where the model's loop leaves {} (its steady error): a valve's null bias or a steady force the loop leaves as an error, or a recorded feedback whose zero is not the loop's",
-            range(0),
-            range(1)
-        ),
-    }
+    let beyond = range(errors.iter().map(|e| e[0] - e[1]).collect());
+    let measured = range(errors.iter().map(|e| e[0]).collect());
+    let model = range(errors.iter().map(|e| e[1]).collect());
+    format!(
+        "; the loop holds the feedback {beyond} off the tracked reference beyond the model's own steady error (feedback - reference: measured {measured}, model {model}): a valve's null bias or a steady force the loop leaves as an error, or a recorded feedback whose zero is not the loop's"
+    )
 }
 
 /// The least and the greatest of `v` ((∞, −∞) when empty).
@@ -850,7 +852,7 @@ mod tests {
         let said = s.offset_sentences().join("");
         assert!(said.contains("-2.00e-4 to +3.00e-4 m"), "{said}");
         assert!(
-            said.contains("the feedback sits -1.90e-4 to +3.10e-4 m from the tracked reference, where the model's loop leaves +1.000e-5 m"),
+            said.contains("the loop holds the feedback -0.200 to +0.300 mm off the tracked reference beyond the model's own steady error (feedback - reference: measured -0.190 to +0.310 mm, model +0.010 mm)"),
             "{said}"
         );
     }
