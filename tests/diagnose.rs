@@ -590,18 +590,11 @@ fn a_specimen_written_apart_from_the_library_is_named_and_fitted() {
         "{}",
         r.stdout
     );
-    for (name, truth) in [("m1", 20_000.0), ("f1", 5.0), ("zeta1", 0.05)] {
-        let i = best
-            .params
-            .iter()
-            .position(|p| p == &format!("specimen.{name}"))
-            .unwrap();
-        let (e, se) = (best.estimates[i], best.std_errors[i]);
-        assert!(
-            (e - truth).abs() <= 2.0 * se,
-            "{name}: {e} ± {se} vs {truth}"
-        );
-    }
+    assert_within_2se(
+        best,
+        "specimen",
+        &[("m1", 20_000.0), ("f1", 5.0), ("zeta1", 0.05)],
+    );
     assert!(
         r.residual["specimen"] <= 1.5 * r.noise_floor,
         "residual {} vs noise floor {}",
@@ -740,6 +733,30 @@ fn assert_line_fitted(r: &Diagnosis, hook: &str, amplitude: f64, tol: f64) {
     assert!(left <= 2.0, "the residual is {left}x the noise floor");
 }
 
+/// The candidate `c`'s estimate of each parameter of `effect` in `truth` within 2 SE of it.
+fn assert_within_2se(c: &Cand, effect: &str, truth: &[(&str, f64)]) {
+    for (name, truth) in truth {
+        let i = (c.params.iter())
+            .position(|p| p == &format!("{effect}.{name}"))
+            .unwrap_or_else(|| panic!("{effect}.{name} not fitted: {:?}", c.params));
+        let (e, se) = (c.estimates[i], c.std_errors[i]);
+        assert!(
+            (e - truth).abs() <= 2.0 * se,
+            "{name}: {e} ± {se} vs {truth}"
+        );
+    }
+}
+
+/// The state of an effect written here that has none.
+macro_rules! stateless {
+    () => {
+        type State = [[f64; 1]; 0];
+        fn initial_state(&self) -> Self::State {
+            []
+        }
+    };
+}
+
 /// A flow gain that grows with the opening (an expansion: ports that widen), x_eff = x·(1 + a·|x|/x_ref),
 /// written here, not in the library: the library's `flow_saturation` (tanh) cannot expand.
 struct Expansion {
@@ -748,10 +765,7 @@ struct Expansion {
 }
 
 impl vshake::kernel::effects::Effect<1> for Expansion {
-    type State = [[f64; 1]; 0];
-    fn initial_state(&self) -> Self::State {
-        []
-    }
+    stateless!();
     fn opening(&self, c: vshake::kernel::effects::hook::Opening, _s: &Self::State) -> f64 {
         c.x * (1.0 + self.a * c.x.abs() * self.inv_ref)
     }
@@ -811,10 +825,7 @@ struct Drag {
 }
 
 impl vshake::kernel::effects::Effect<1> for Drag {
-    type State = [[f64; 1]; 0];
-    fn initial_state(&self) -> Self::State {
-        []
-    }
+    stateless!();
     fn extra_force(&self, c: vshake::kernel::effects::hook::Motion, _s: &Self::State) -> f64 {
         -self.k * c.v * c.v.abs()
     }
@@ -1716,10 +1727,7 @@ struct Stribeck {
 }
 
 impl vshake::kernel::effects::Effect<1> for Stribeck {
-    type State = [[f64; 1]; 0];
-    fn initial_state(&self) -> Self::State {
-        []
-    }
+    stateless!();
     fn extra_force(&self, c: vshake::kernel::effects::hook::Motion, _s: &Self::State) -> f64 {
         let r = c.v / self.v_s;
         -(c.v / 1e-3).tanh() * (self.f_c + (self.f_s - self.f_c) * (-r * r).exp())
@@ -1890,16 +1898,7 @@ fn assert_group_fitted(r: &Diagnosis, names: &[&str], truth: &[(&str, f64)]) {
         )),
         "{verdict}"
     );
-    for (name, truth) in truth {
-        let i = (best.params.iter())
-            .position(|p| p == &format!("specimen.{name}"))
-            .unwrap();
-        let (e, se) = (best.estimates[i], best.std_errors[i]);
-        assert!(
-            (e - truth).abs() <= 2.0 * se,
-            "{name}: {e} ± {se} vs {truth}"
-        );
-    }
+    assert_within_2se(best, "specimen", truth);
     for (test, m) in misfit_after(&r.stdout) {
         assert!(m.iter().all(|&x| x <= 1.5), "{test}: {m:?}");
     }

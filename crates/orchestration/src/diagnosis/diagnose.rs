@@ -36,7 +36,11 @@
 //! noise that the set loses without it. A leader that merely tied with the next candidates alone
 //! ([`TIE`]) gives way to one of them when, in its place in the final joint fit, that one fits
 //! better: selection then runs again from it, and the better set is named ([`settle_leader`]).
-//! The verdict
+//! Where the signals show the residual in some tests only, the leading library candidates are
+//! also fitted to those tests alone, their effect off in the others ([`group_variants`]); where
+//! the `expression` candidate is the state map's term and a library effect is named, the terms
+//! read off the signals (a line, an offset) are tried on top of the named set
+//! ([`beside_named`]). The verdict
 //! names "A + B" and the share each adds when together they explain at least
 //! [`EXPLAINS_TOGETHER`] of the misfit beyond noise; a best candidate that
 //! explains less than [`EXPLAINS_ENOUGH`] (alone or with those added) is reported as such: the
@@ -789,14 +793,15 @@ pub const GROUP_LEADERS: usize = 2;
 /// The leading [`GROUP_LEADERS`] significant library candidates fitted again in the tests
 /// `group` alone (their effect off in the others: a specimen on the table for some tests of a
 /// campaign, a set-up changed between them), each from the better of its own start and its
-/// estimates over every test; each is a candidate of its own ([`Candidate::label`]), and `out`
-/// is ranked again. Nothing where `group` is every test, or the campaign has more tests than a
-/// group can hold ([`fit::GROUP_TESTS`]).
+/// estimates over every test, screened as every candidate is (`reach`: [`fit::fit_unprofiled`]);
+/// each is a candidate of its own ([`Candidate::label`]), and `out` is ranked again (a leading
+/// one is then polished and profiled as any leader). Nothing where `group` is every test, or the
+/// campaign has more tests than a group can hold ([`fit::GROUP_TESTS`]).
 fn group_variants(
     problem: &Problem,
     out: &mut Vec<Candidate>,
     group: &[usize],
-    baseline: &fit::Eval,
+    (baseline, reach): (&fit::Eval, f64),
     s: &Scoring,
 ) {
     let n = problem.tests.len();
@@ -813,7 +818,7 @@ fn group_variants(
             (starts.into_par_iter())
                 .map(|free| {
                     let free: Vec<Free> = free.iter().map(|p| p.in_tests(group)).collect();
-                    let r = fit::fit_from(problem, &free, MAX_ITER, baseline.clone());
+                    let r = fit::fit_unprofiled(problem, &free, MAX_ITER, baseline.clone(), reach);
                     s.candidate(c.effect, free, r, None)
                 })
                 .min_by(|a, b| a.chi2().total_cmp(&b.chi2()))
@@ -1202,11 +1207,11 @@ pub fn diagnose(
         })
         .collect();
     rank(&mut out);
+    if let Some(g) = group {
+        group_variants(problem, &mut out, g, (&baseline, reach), &score);
+    }
     polish_leaders(problem, &mut out, &baseline, &score);
     profile_leaders(problem, &mut out, &score);
-    if let Some(g) = group {
-        group_variants(problem, &mut out, g, &baseline, &score);
-    }
     if generic {
         prefer_library(&mut out);
     }
