@@ -1851,9 +1851,7 @@ fn tests_that_differ_are_stated_from_the_signals() {
         .unwrap_or_else(|| panic!("{verdict}"));
     let (carry, clean) = verdict[at..].split_once("while").unwrap();
     // The campaign's tests in order; the specimen is on the even ones.
-    let names = [
-        "f1_a0p5", "f2_a0p3", "f2_a1p5", "f3_a3p2", "f4_a0p8", "f6_a0p3", "f6_a1p5", "f8_a1p0",
-    ];
+    let names = TUTORIAL_TESTS;
     for (i, n) in names.iter().enumerate() {
         let (on, off) = if i % 2 == 0 {
             (carry, clean)
@@ -1872,25 +1870,44 @@ fn tests_that_differ_are_stated_from_the_signals() {
         names.iter().step_by(2).any(|n| carry.contains(n)),
         "{verdict}"
     );
-    assert_group_fitted(
-        &r,
-        &names,
-        &[("m1", 30_000.0), ("f1", 7.2), ("zeta1", 0.08)],
-    );
+    let truth = [("m1", 30_000.0), ("f1", 7.2), ("zeta1", 0.08)];
+    assert_group_fitted(&r, &[0, 2, 4, 6], &truth);
+}
+
+/// The campaign's tests in order (studies/campaigns/diagnosis.toml).
+const TUTORIAL_TESTS: [&str; 8] = [
+    "f1_a0p5", "f2_a0p3", "f2_a1p5", "f3_a3p2", "f4_a0p8", "f6_a0p3", "f6_a1p5", "f8_a1p0",
+];
+
+/// A new user's case (2026-11-30): a specimen of 25 t at 5.5 Hz, 6 %, in three tests of eight
+/// (2, 3 and 6 Hz). The group's fit started from the effect's frequency scan over every test
+/// (the specimen on in all), which landed at 23.6 Hz, and ended at ζ = 1, 49× the noise; the
+/// scan is now made with the effect in the group alone.
+#[test]
+#[ignore = "slow (about 10 s): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
+fn a_specimen_in_three_tests_is_scanned_in_those_tests() {
+    let d = tempfile::tempdir().unwrap();
+    let on = [1, 3, 5];
+    let specimen = Specimen::new(25_000.0, 5.5, 0.06);
+    write_altered(d.path(), &specimen, &|i| on.contains(&i), &|_, _, _, _| {});
+    let r = diagnose(d.path());
+    println!("{}", r.stdout);
+    let truth = [("m1", 25_000.0), ("f1", 5.5), ("zeta1", 0.06)];
+    assert_group_fitted(&r, &on, &truth);
 }
 
 /// `r`'s verdict names the specimen fitted to the tests that carry it (the even ones of
 /// `names`) alone: its parameters within 2 SE of `truth`, every test's misfit after at most 1.5,
 /// and the campaign `--out` wrote with the specimen off in the odd tests.
-fn assert_group_fitted(r: &Diagnosis, names: &[&str], truth: &[(&str, f64)]) {
+fn assert_group_fitted(r: &Diagnosis, on: &[usize], truth: &[(&str, f64)]) {
     let verdict = verdict_of(&r.stdout);
     let (first, best) = r.first();
     assert!(first.starts_with("specimen["), "{}", r.stdout);
-    let even: Vec<&str> = names.iter().step_by(2).copied().collect();
+    let with: Vec<&str> = on.iter().map(|&i| TUTORIAL_TESTS[i]).collect();
     let group = format!(
         "{} and {}",
-        even[..even.len() - 1].join(", "),
-        even[even.len() - 1]
+        with[..with.len() - 1].join(", "),
+        with[with.len() - 1]
     );
     assert!(
         verdict.contains(&format!(
@@ -1910,7 +1927,7 @@ fn assert_group_fitted(r: &Diagnosis, names: &[&str], truth: &[(&str, f64)]) {
         let enabled = enabled.and_then(|s| s.get("enabled")?.as_bool());
         assert_eq!(
             enabled,
-            (i % 2 == 1).then_some(false),
+            (!on.contains(&i)).then_some(false),
             "test {i}: {written}"
         );
     }
