@@ -1360,19 +1360,12 @@ fn the_user_closes_the_loop(dir: &Path, campaign: &str) {
     ]);
     assert_eq!(code, 0, "{out}{err}");
     println!("{out}");
-    // The estimates at full precision: the fitted model's first line.
     let head = std::fs::read_to_string(&again).unwrap();
-    let head = head.lines().next().unwrap().split("): ").nth(1).unwrap();
     for (p, v) in SPECIMEN_2 {
-        let item = (head.split(", "))
-            .find(|l| l.starts_with(&format!("specimen.{p} = ")))
-            .unwrap_or_else(|| panic!("specimen.{p} not fitted: {head}\n{out}"));
-        let f: Vec<f64> = (item.split(" = ").nth(1).unwrap().split(" ± "))
-            .map(|x| x.parse().unwrap())
-            .collect();
+        let (e, se) = fitted_value(&head, &format!("specimen.{p}"));
         assert!(
-            (f[0] - v).abs() <= 2.0 * f[1],
-            "specimen.{p}: {item} (truth {v})\n{out}"
+            (e - v).abs() <= 2.0 * se,
+            "specimen.{p}: {e} ± {se} (truth {v})\n{out}"
         );
     }
     let after: f64 = (out.split("x after)").next().unwrap())
@@ -1894,6 +1887,48 @@ fn a_specimen_in_three_tests_is_scanned_in_those_tests() {
     println!("{}", r.stdout);
     let truth = [("m1", 25_000.0), ("f1", 5.5), ("zeta1", 0.06)];
     assert_group_fitted(&r, &on, &truth);
+    assert_fit_keeps_switches(&r.dir, &on, &truth);
+}
+
+/// The estimate and standard error of `path` at full precision in the first line of a model file
+/// `study fit` wrote (`text`).
+fn fitted_value(text: &str, path: &str) -> (f64, f64) {
+    let head = text.lines().next().unwrap().split("): ").nth(1).unwrap();
+    let item = (head.split(", "))
+        .find(|l| l.starts_with(&format!("{path} = ")))
+        .unwrap_or_else(|| panic!("{path} not fitted: {head}"));
+    let f: Vec<f64> = (item.split(" = ").nth(1).unwrap().split(" ± "))
+        .map(|x| x.parse().unwrap())
+        .collect();
+    (f[0], f[1])
+}
+
+/// `study fit` on the campaign a diagnosis wrote (the specimen `enabled = false` in the tests
+/// off `on`), with no model file (the specimen off by default): the specimen set in the tests
+/// `on` alone, its estimates within 2 SE of `truth`, the residual at the noise.
+fn assert_fit_keeps_switches(dir: &Path, on: &[usize], truth: &[(&str, f64)]) {
+    let c = dir.join("fitted.campaign.toml");
+    let o = dir.join("refit.toml");
+    let fit = ["fit", c.to_str().unwrap(), "--effect", "specimen"];
+    let (code, out, err) = study(&[&fit[..], &["--out", o.to_str().unwrap()]].concat());
+    assert_eq!(code, 0, "{out}{err}");
+    let with: Vec<&str> = on.iter().map(|&i| TUTORIAL_TESTS[i]).collect();
+    let said = format!("specimen fitted in {} only", with.join(", "));
+    assert!(out.contains(&said), "{said}?\n{out}");
+    let head = std::fs::read_to_string(&o).unwrap();
+    for (p, v) in truth {
+        let (e, se) = fitted_value(&head, &format!("specimen.{p}"));
+        assert!(
+            (e - v).abs() <= 2.0 * se,
+            "specimen.{p}: {e} ± {se} (truth {v})\n{out}"
+        );
+    }
+    let after: f64 = (out.split("x after)").next().unwrap().rsplit('('))
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(after <= 1.5, "{after}x the noise after the fit\n{out}");
 }
 
 /// `r`'s verdict names the specimen fitted to the tests that carry it (the even ones of

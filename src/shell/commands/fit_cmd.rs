@@ -28,6 +28,7 @@ pub(crate) fn run_to(args: &FitArgs, o: &mut dyn Write) -> anyhow::Result<()> {
     let mut loaded = load_problem(&args.campaign, &model, args.strict)?;
     let progress = with_progress(&mut loaded.problem, "fit", args.log_progress);
     let problem = &loaded.problem;
+    let free = fit::as_switched(problem, &free).map_err(BadInput)?;
     let t0 = std::time::Instant::now();
     let pool = crate::shell::job::study_job::pool(args.threads)?;
     // Each freed stage's start and scan (a mode's mass, a resonance's frequency, a lag), as a
@@ -65,11 +66,29 @@ pub(crate) fn run_to(args: &FitArgs, o: &mut dyn Write) -> anyhow::Result<()> {
     writeln!(o, "  backend     {}", engine.describe())?;
     writeln!(o)?;
     print_estimates(o, &free, &r)?;
+    print_switched(o, problem, &free)?;
     print_residuals(o, problem, &r)?;
     let command = format!("fit {}", args.campaign.display());
     write_fitted(&args.out, &command, &model, &free, &r)?;
     writeln!(o, "\n  wrote {} (use it with --model)", args.out.display())?;
     print_checks(o, &loaded.checks, &implausible)?;
+    Ok(())
+}
+
+/// A line for each effect fitted in some tests only (the campaign switches it off in others).
+fn print_switched(o: &mut dyn Write, problem: &Problem, free: &[Free]) -> std::io::Result<()> {
+    let mut said = Vec::new();
+    for f in free.iter().filter(|f| f.tests != fit::ALL_TESTS) {
+        let Some(e) = f.info.component.effect().filter(|e| !said.contains(e)) else {
+            continue;
+        };
+        said.push(e);
+        let names: Vec<&str> = (0..problem.tests.len())
+            .filter(|&t| f.applies(t))
+            .map(|t| problem.tests[t].name.as_str())
+            .collect();
+        writeln!(o, "  {} fitted in {} only (the campaign switches it off in its other tests, as it still does with the fitted model)", e.name(), names.join(", "))?;
+    }
     Ok(())
 }
 

@@ -58,7 +58,7 @@ use faer::prelude::*;
 use faer::Mat;
 use rayon::prelude::*;
 use vshake_kernel::excitation::Reference;
-use vshake_kernel::params::{ModelParams, ParamInfo};
+use vshake_kernel::params::{EffectId, ModelParams, ParamInfo};
 use vshake_kernel::resample::{ch, Resampler};
 use vshake_kernel::simulate::{LaneResult, LaneStatus, Solver};
 use vshake_kernel::EFFECT_LANES as LANES;
@@ -94,6 +94,9 @@ pub struct TestData {
     pub name: String,
     /// The test's model (campaign model with its overrides); free parameters are set on it.
     pub model: ModelParams,
+    /// The effects the campaign switches off in this test by name (`enabled = false`): a fit
+    /// that adds one leaves it off here ([`as_switched`]).
+    pub off: Vec<EffectId>,
     /// The model's drive at the controller's ticks.
     pub drive: Reference,
     /// The compared samples (the analysis window in the file).
@@ -253,6 +256,12 @@ impl TestData {
             [Some(m.accel.clone()), Some(m.disp.clone()), m.force.clone()],
             t.weights,
         )
+        .switched_off(t.off.clone())
+    }
+
+    /// The test with the effects its campaign switches off by name ([`TestData::off`]).
+    pub fn switched_off(self, off: Vec<EffectId>) -> Self {
+        TestData { off, ..self }
     }
 
     /// Prepares a test from its parts: the measured features, the noise estimate and the feature
@@ -272,6 +281,7 @@ impl TestData {
         let mut t = TestData {
             name,
             model,
+            off: Vec::new(),
             drive,
             samples,
             measured,
@@ -798,6 +808,36 @@ pub fn apply_estimates_in(
     estimate: &[f64],
 ) -> ModelParams {
     with_values(test, model, free, estimate.iter().copied())
+}
+
+/// `free` with each effect's parameters set in the tests the campaign has it in: those whose
+/// models have it on where some do (a specimen on the table for some tests), else every test (an
+/// effect a fit adds), less those whose model table switches it off by name (`enabled = false`).
+/// Fails naming the effect where that leaves no test, or more than [`GROUP_TESTS`] to tell apart.
+pub fn as_switched(problem: &Problem, free: &[Free]) -> Result<Vec<Free>, String> {
+    let mut out = free.to_vec();
+    let n = problem.tests.len();
+    for f in out.iter_mut() {
+        let Some(e) = f.info.component.effect() else {
+            continue;
+        };
+        let on = |t: usize| problem.tests[t].model.effects.get(e);
+        let some_on = (0..n).any(on);
+        let tests: Vec<usize> = (0..n)
+            .filter(|&t| (on(t) || !some_on) && !problem.tests[t].off.contains(&e))
+            .collect();
+        if tests.len() == n {
+            continue;
+        }
+        if tests.is_empty() {
+            return Err(format!("{}: the campaign switches it off (`enabled = false`) in every test: nothing to fit it to", e.name()));
+        }
+        if n > GROUP_TESTS {
+            return Err(format!("{}: the campaign has it in {} of its {n} tests; a fit tells at most {GROUP_TESTS} tests apart (split the campaign)", e.name(), tests.len()));
+        }
+        *f = f.in_tests(&tests);
+    }
+    Ok(out)
 }
 
 /// `model` (test `test`'s) with the parameters `free` set in it at `values` (in their units),

@@ -279,6 +279,8 @@ pub struct AlignedTest {
     pub excitation: ExcitationSpec,
     /// The campaign's model with the test's overrides.
     pub model: ModelParams,
+    /// The effects the test's model table switches off ([`TestSpec::off`]).
+    pub off: Vec<vshake_kernel::effects::EffectId>,
     pub weights: Weights,
     pub alignment: Alignment,
     /// The model's drive at the controller's ticks, lasting a tick beyond the last sample.
@@ -370,6 +372,7 @@ pub fn align(
         file: data.file.clone(),
         excitation: test.excitation.clone(),
         model: model_for(test, open_loop),
+        off: test.off.clone(),
         weights: test.weights,
         alignment,
         drive,

@@ -23,7 +23,7 @@ use crate::runs::spec::{self, ExcitationSpec};
 use crate::toml_fields::{Fields, InputError, Issues};
 use std::path::PathBuf;
 use vshake_kernel::channels;
-use vshake_kernel::params::ModelParams;
+use vshake_kernel::params::{EffectId, ModelParams};
 
 /// A column named in a campaign's `columns` table: its header (or 1-based position) and unit.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -76,6 +76,9 @@ pub struct TestSpec {
     pub excitation: ExcitationSpec,
     /// The campaign's model with this test's overrides.
     pub model: ModelParams,
+    /// The effects this test's model table switches off (`enabled = false`): a fit that adds
+    /// one to the campaign leaves it off here.
+    pub off: Vec<EffectId>,
     pub weights: Weights,
     /// Whether the excitation table set `window_cycles` (else the window follows the file's
     /// length) and `duration_s` (else the file's length is the duration).
@@ -245,8 +248,9 @@ fn read_test(
         );
     }
     let mut model = base_model.clone();
+    let mut off = Vec::new();
     if let Some(m) = t.table("model", issues) {
-        spec::read_model(m, &mut model, issues);
+        off = spec::read_model(m, &mut model, issues);
         spec::validate_model(&model, &t.path_of("model"), issues);
     }
     let weights = read_weights(&mut t, issues);
@@ -276,6 +280,7 @@ fn read_test(
         data,
         excitation,
         model,
+        off,
         weights,
         window_given,
         duration_given,
@@ -312,7 +317,9 @@ pub fn model_from_toml(text: &str, file: &str) -> Result<ModelParams, InputError
     let mut root = Fields::new("", &table);
     let mut model = ModelParams::default();
     match root.table("model", &mut issues) {
-        Some(m) => spec::read_model(m, &mut model, &mut issues),
+        Some(m) => {
+            spec::read_model(m, &mut model, &mut issues);
+        }
         None => issues.push("model", "missing ([model.<component>] tables)"),
     }
     root.finish(&["model"], &mut issues);

@@ -49,8 +49,14 @@ pub struct SimSpec {
     pub spectrum: SpectrumSpec,
 }
 
-/// Reads `[model.<component>]` overrides into `model` (defaults for everything not named).
-pub(crate) fn read_model(mut f: Fields<'_>, model: &mut ModelParams, issues: &mut Issues) {
+/// Reads `[model.<component>]` overrides into `model` (defaults for everything not named); the
+/// effects it switches off by name (`enabled = false`).
+pub(crate) fn read_model(
+    mut f: Fields<'_>,
+    model: &mut ModelParams,
+    issues: &mut Issues,
+) -> Vec<EffectId> {
+    let mut off = Vec::new();
     for comp in ModelParams::components() {
         let Some(mut t) = f.table(comp.name(), issues) else {
             continue;
@@ -62,12 +68,19 @@ pub(crate) fn read_model(mut f: Fields<'_>, model: &mut ModelParams, issues: &mu
         let mut expected = names.clone();
         if comp == Component::Effect(EffectId::Expression) {
             read_expression(&mut t, model, issues);
+            if !model.effects.expression {
+                off.push(EffectId::Expression);
+            }
             continue;
         }
         if let Some(e) = comp.effect() {
             // An optional effect is on when its table is given (`enabled = false` switches it off).
             expected.push("enabled");
-            *model.effects.get_mut(e) = t.bool("enabled", issues).unwrap_or(true);
+            let on = t.bool("enabled", issues).unwrap_or(true);
+            *model.effects.get_mut(e) = on;
+            if !on {
+                off.push(e);
+            }
         }
         if comp == Component::Servovalve {
             expected.push("law");
@@ -96,6 +109,7 @@ pub(crate) fn read_model(mut f: Fields<'_>, model: &mut ModelParams, issues: &mu
             .collect::<Vec<_>>(),
         issues,
     );
+    off
 }
 
 /// Reads `[model.expression]`: `enabled`, each hook's expression (`force = "-c * v"`, keys of
