@@ -1,7 +1,7 @@
 //! `study diagnose`: fit every candidate effect and say which one is most likely missing.
 
 use crate::kernel::params::EffectId;
-use crate::orchestration::diagnosis::diagnose::{self, Candidate, Diagnosis};
+use crate::orchestration::diagnosis::diagnose::{self, Candidate, Diagnosis, Verdict};
 use crate::orchestration::diagnosis::fit::Problem;
 use crate::shell::cli::DiagnoseArgs;
 use crate::shell::fit_problem::{
@@ -39,7 +39,7 @@ fn harmonic_label(k: usize, rate_hz: f64) -> String {
 pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
     crate::shell::job::outputs::check_outputs([args.out.as_ref()])?;
     if let Some(out) = &args.out {
-        check_term_campaign(&term_campaign_path(out))?;
+        check_fitted_campaign(&fitted_campaign_path(out))?;
     }
     run_to(args, &mut std::io::stdout())
 }
@@ -160,14 +160,16 @@ fn write_named(
     let model = &model;
     let command = format!("diagnose {}", campaign.display());
     crate::shell::fit_problem::write_fitted(out, &command, model, free, fit)?;
+    let what = match d.verdict() {
+        Verdict::Unexplained { explained, .. } => format!("the best candidates fitted, though they explain only {:.0} % of the residual: the missing effect is probably not among them", 100.0 * explained),
+        _ => "the named effects fitted".into(),
+    };
+    let params: Vec<_> = free.iter().map(|f| f.info.path()).collect();
     writeln!(
         o,
-        "\n  wrote {} (the named effects fitted: {}; use it with --model)",
+        "\n  wrote {} ({what}: {}; use it with --model)",
         out.display(),
-        free.iter()
-            .map(|f| f.info.path())
-            .collect::<Vec<_>>()
-            .join(", ")
+        params.join(", ")
     )?;
     let term = (d.named_term()).filter(|t| t.per_test() || d.names_a_group());
     let group = d.named_group().zip(d.candidates.first().map(|c| c.effect));
@@ -178,9 +180,9 @@ fn write_named(
     if term.is_none() && group.is_none() {
         return remove_stale_campaign(o, out);
     }
-    let path = term_campaign_path(out);
+    let path = fitted_campaign_path(out);
     let off = group.as_ref().map(|(g, e)| (*e, g.as_slice()));
-    write_term_campaign(&path, campaign, term, off)?;
+    write_fitted_campaign(&path, campaign, term, off)?;
     let what = match (term, &group) {
         (Some(_), _) => "each test's own form of the expression, and the expression off in the tests it was not fitted to".to_string(),
         (None, Some((_, e))) => format!("{e} off in the tests it was not fitted to"),
@@ -196,11 +198,11 @@ fn write_named(
     Ok(())
 }
 
-/// Removes the campaign an earlier diagnosis wrote beside `out` ([`term_campaign_path`]; the run
+/// Removes the campaign an earlier diagnosis wrote beside `out` ([`fitted_campaign_path`]; the run
 /// checked before any work that a file there is one), where this one writes none: it would pair
 /// an earlier verdict's forms with this run's model.
 fn remove_stale_campaign(o: &mut dyn Write, out: &std::path::Path) -> anyhow::Result<()> {
-    let path = term_campaign_path(out);
+    let path = fitted_campaign_path(out);
     if path.exists() {
         std::fs::remove_file(&path)?;
         writeln!(
@@ -214,19 +216,19 @@ fn remove_stale_campaign(o: &mut dyn Write, out: &std::path::Path) -> anyhow::Re
 
 /// The campaign `--out` writes beside the model where the expression's form differs between
 /// tests or applies to some of them: `fitted.toml` → `fitted.campaign.toml`.
-fn term_campaign_path(out: &std::path::Path) -> std::path::PathBuf {
+fn fitted_campaign_path(out: &std::path::Path) -> std::path::PathBuf {
     out.with_extension("campaign.toml")
 }
 
-/// The first line of a campaign [`write_term_campaign`] writes.
-const TERM_CAMPAIGN_HEAD: &str = "# Written by `study diagnose --out`";
+/// The first line of a campaign [`write_fitted_campaign`] writes.
+const FITTED_CAMPAIGN_HEAD: &str = "# Written by `study diagnose --out`";
 
-/// Refuses, before any work, to replace a file at `path` that [`write_term_campaign`] did not
+/// Refuses, before any work, to replace a file at `path` that [`write_fitted_campaign`] did not
 /// write (bad input, exit 2).
-fn check_term_campaign(path: &std::path::Path) -> anyhow::Result<()> {
+fn check_fitted_campaign(path: &std::path::Path) -> anyhow::Result<()> {
     crate::shell::job::outputs::check_output(path)?;
     match std::fs::read_to_string(path) {
-        Ok(text) if !text.starts_with(TERM_CAMPAIGN_HEAD) => Err(BadInput(format!(
+        Ok(text) if !text.starts_with(FITTED_CAMPAIGN_HEAD) => Err(BadInput(format!(
             "{}: exists and is not a campaign `study diagnose --out` wrote (where the expression differs between tests it writes one there); nothing was replaced: choose another --out, or remove it",
             path.display()
         ))
@@ -239,7 +241,7 @@ fn check_term_campaign(path: &std::path::Path) -> anyhow::Result<()> {
 /// its own form (`model = { expression = { <hook> = "<form>" } }`) and every other test has the
 /// expression off (`enabled = false`), and the effect of `off` (if any) is off in the tests
 /// outside its group; the data and record paths made absolute, since the copy may lie elsewhere.
-fn write_term_campaign(
+fn write_fitted_campaign(
     path: &std::path::Path,
     campaign: &std::path::Path,
     t: Option<&crate::orchestration::diagnosis::terms::Term>,
@@ -249,10 +251,20 @@ fn write_term_campaign(
         .parent()
         .map(|p| p.to_path_buf())
         .unwrap_or_default();
+    let mut what = Vec::new();
+    if t.is_some() {
+        what.push(
+            "each test's own form of the expression fitted, off in the tests it was not fitted to"
+                .to_string(),
+        );
+    }
+    if let Some((e, _)) = off {
+        what.push(format!("{e} off in the tests it was not fitted to"));
+    }
     let head = format!(
-        "{TERM_CAMPAIGN_HEAD} from {}: each test's own form of the expression fitted (the\n\
-         # model file --out wrote holds its parameters); the tests it was not fitted to have it off.\n",
-        campaign.display()
+        "{FITTED_CAMPAIGN_HEAD} from {}:\n# {} (the model file --out wrote holds the fitted parameters).\n",
+        campaign.display(),
+        what.join("; ")
     );
     campaign_io::rewrite_tests(campaign, path, &head, &mut |i, test| {
         absolute(test, "data", &base);
@@ -303,9 +315,14 @@ fn print_candidates(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
         d.baseline.residual_rms(),
         d.noise_rms
     )?;
+    // The candidate column as wide as its longest label (a group's: `specimen[1,3,5,7]`).
+    let w = (d.candidates.iter().map(|c| c.label().len()))
+        .max()
+        .unwrap_or(0)
+        .max(17);
     writeln!(
         o,
-        "\n  {:<4} {:<17} {:<24} {:>3} {:>4} {:>11} {:>11} {:>9} {:>11}  significant",
+        "\n  {:<4} {:<w$} {:<24} {:>3} {:>4} {:>11} {:>11} {:>9} {:>11}  significant",
         "rank", "candidate", "family", "p", "iter", "chi2", "dBIC", "explains", "rms resid."
     )?;
     let at_noise = d.verdict() == diagnose::Verdict::NothingSignificant && d.starts_at_noise();
@@ -313,7 +330,7 @@ fn print_candidates(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
         let rms = c.fit.as_ref().map_or(f64::NAN, |f| f.after.residual_rms());
         writeln!(
             o,
-            "  {:<4} {:<17} {:<24} {:>3} {:>4} {:>11.4e} {:>11.4e} {:>8.1}% {:>11.3e}  {}",
+            "  {:<4} {:<w$} {:<24} {:>3} {:>4} {:>11.4e} {:>11.4e} {:>8.1}% {:>11.3e}  {}",
             i + 1,
             c.label(),
             c.family,

@@ -19,6 +19,7 @@ pub const INFO: EffectInfo = EffectInfo {
         // Corner, damping and delay: the filter's whole shape (issue 51).
         free: &["f_c", "zeta", "delay"],
         scan: Some(("f_c", &[15.0, 30.0, 60.0, 120.0, 240.0])),
+        size: None,
         start: &[],
     }],
 };

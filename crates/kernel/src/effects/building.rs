@@ -44,6 +44,7 @@ pub const INFO: EffectInfo = EffectInfo {
             label: "storey 1",
             free: &["k1", "fy1"],
             scan: None,
+            size: None,
             start: &[],
         },
         Stage {
@@ -53,6 +54,7 @@ pub const INFO: EffectInfo = EffectInfo {
                 "fy6", "fy7", "fy8", "fy9", "fy10", "zeta",
             ],
             scan: None,
+            size: None,
             start: &[],
         },
     ],

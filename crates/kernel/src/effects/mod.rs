@@ -123,6 +123,10 @@ pub struct Stage {
     /// A parameter whose start a fit scans over these values, keeping the best, before it
     /// iterates: one that makes the misfit non-convex (a resonance's frequency).
     pub scan: Option<(&'static str, &'static [f64])>,
+    /// A parameter the stage's signature grows in proportion to (a mode's mass): at each scanned
+    /// value the scan also takes it at the size that fits best, to first order, and starts it
+    /// there (a specimen of 12 t scanned at the default 20 t lands in another valley).
+    pub size: Option<&'static str>,
     /// Values a diagnosis starts this stage's parameters from where the model has them at 0
     /// (a second mode's mass: at 0 the mode is absent and its frequency has no effect to scan).
     pub start: &'static [(&'static str, f64)],
@@ -135,6 +139,7 @@ impl Stage {
             label: "",
             free,
             scan: None,
+            size: None,
             start: &[],
         }
     }

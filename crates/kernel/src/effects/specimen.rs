@@ -38,12 +38,14 @@ pub const INFO: EffectInfo = EffectInfo {
             label: "mode 1",
             free: &["m1", "f1", "zeta1"],
             scan: Some(("f1", SCAN_HZ)),
+            size: Some("m1"),
             start: &[],
         },
         Stage {
             label: "mode 2",
             free: &["m2", "f2", "zeta2"],
             scan: Some(("f2", SCAN_HZ)),
+            size: Some("m2"),
             // [chosen] A further mode starts at a quarter of mode 1's default mass.
             start: &[("m2", 5.0e3)],
         },
@@ -51,6 +53,7 @@ pub const INFO: EffectInfo = EffectInfo {
             label: "mode 3",
             free: &["m3", "f3", "zeta3"],
             scan: Some(("f3", SCAN_HZ)),
+            size: Some("m3"),
             start: &[("m3", 5.0e3)],
         },
     ],

@@ -337,9 +337,10 @@ impl Diagnosis {
         }
     }
 
-    /// ", but it leaves a residual 3.9× the noise floor: …" when the named effects do not take the
-    /// residual to within [`NOISE_FACTOR`] of the noise; empty when they do.
-    fn short_of_noise(&self) -> String {
+    /// ", but leaves a residual 3.9× the noise floor: …" when the named effects do not take the
+    /// residual to within [`NOISE_FACTOR`] of the noise (`plural`: "leave", of several); empty
+    /// when they do.
+    fn short_of_noise(&self, plural: bool) -> String {
         let Some((_, f)) = self.named_fit() else {
             return String::new();
         };
@@ -352,7 +353,11 @@ impl Diagnosis {
             .as_ref()
             .and_then(|m| m.sentence())
             .map_or(String::new(), |s| format!("; in what is left, {s}"));
-        format!(", but leaves a residual {ratio:.1}x the noise floor: its form is probably not quite the plant's{left}")
+        let (leave, form) = match plural {
+            true => ("leave", "their forms are"),
+            false => ("leaves", "its form is"),
+        };
+        format!(", but {leave} a residual {ratio:.1}x the noise floor: {form} probably not quite the plant's{left}")
     }
 
     /// The channels whose starting residual exceeds [`NOISE_FACTOR`] times their noise floor.
@@ -424,7 +429,7 @@ impl Diagnosis {
                 self.fitted_values(),
                 100.0 * explained,
                 best.map_or(f64::NAN, |c| c.delta_bic),
-                self.short_of_noise(),
+                self.short_of_noise(false),
                 self.measurement_note(&effects)
             ) + &self.signal_note_if_short(),
             Verdict::Missing { effects, explained } => format!(
@@ -436,7 +441,7 @@ impl Diagnosis {
                 }).collect::<Vec<_>>().join(" + "),
                 100.0 * explained,
                 self.shares(),
-                self.short_of_noise(),
+                self.short_of_noise(true),
                 self.measurement_note(&effects)
             ) + &self.signal_note_if_short(),
             Verdict::Unexplained { effects, explained } if effects.len() == 1 => format!(
@@ -717,9 +722,11 @@ fn free_in(problem: &Problem, effect: EffectId, stage: usize) -> Vec<Free> {
 
 /// `free` with the scanned start of stage `stage` of `effect` (see [`fit::scanned`]).
 fn scanned(problem: &Problem, free: &[Free], effect: EffectId, stage: usize) -> Vec<Free> {
-    let scan = effect.info().stages[stage].scan;
-    let path = scan.map(|(name, _)| format!("{effect}.{name}"));
-    fit::scanned(problem, free, path.as_deref().zip(scan.map(|(_, v)| v)))
+    let s = &effect.info().stages[stage];
+    let path = s.scan.map(|(name, _)| format!("{effect}.{name}"));
+    let size = s.size.map(|name| format!("{effect}.{name}"));
+    let scan = path.as_deref().zip(s.scan.map(|(_, v)| v));
+    fit::scanned(problem, free, scan, size.as_deref())
 }
 
 /// How a candidate's fit is scored against the baseline: its χ², the χ² noise leaves (the

@@ -867,8 +867,15 @@ fn with_values(
 /// batch of evaluations. A resonance's frequency or a lag makes χ² non-convex in the parameter,
 /// and Levenberg–Marquardt from a start in another valley stays there. Values outside the
 /// parameter's range are skipped; without a scan, or when `free` lacks the parameter, `free` as
-/// it is.
-pub fn scanned(problem: &Problem, free: &[Free], scan: Option<(&str, &[f64])>) -> Vec<Free> {
+/// it is. Where `size` names a parameter of `free` the signature grows in proportion to (a mode's
+/// mass), each value is scored at the size that fits best to first order
+/// ([`first_order_size`]), and the size starts at the best value's.
+pub fn scanned(
+    problem: &Problem,
+    free: &[Free],
+    scan: Option<(&str, &[f64])>,
+    size: Option<&str>,
+) -> Vec<Free> {
     let mut out = free.to_vec();
     let Some((name, values)) = scan else {
         return out;
@@ -876,20 +883,60 @@ pub fn scanned(problem: &Problem, free: &[Free], scan: Option<(&str, &[f64])>) -
     let Some(i) = free.iter().position(|f| f.info.path() == name) else {
         return out;
     };
+    let sized = size.and_then(|n| free.iter().position(|f| f.info.path() == n));
     let f = free[i];
     let points: Vec<f64> = std::iter::once(f.start)
         .chain(values.iter().copied().filter(|&v| f.info.range.contains(v)))
         .collect();
-    let ev = problem.evaluate(points.len(), &|k, t, m| {
+    let n = points.len();
+    // One set more where a size is scaled: the model as it is (the effect's absence).
+    let ev = problem.evaluate(n + usize::from(sized.is_some()), &|k, t, m| {
         let mut u = vec![0.0; free.len()];
-        u[i] = f.u_of(points[k]);
+        match points.get(k) {
+            Some(&p) => u[i] = f.u_of(p),
+            None => return m.clone(),
+        }
         apply(t, m, free, &u)
     });
-    let best = (0..points.len())
-        .min_by(|&a, &b| ev[a].chi2().total_cmp(&ev[b].chi2()))
+    let score = |k: usize| match sized {
+        Some(_) => first_order_size(&ev[n], &ev[k]),
+        None => (ev[k].chi2(), 1.0),
+    };
+    let scores: Vec<(f64, f64)> = (0..n).map(score).collect();
+    let best = (0..n)
+        .min_by(|&a, &b| scores[a].0.total_cmp(&scores[b].0))
         .unwrap_or(0);
     out[i] = f.at(points[best]);
+    if let Some(j) = sized {
+        let s = free[j];
+        out[j] = s.at(s.value(s.u_of(s.start * scores[best].1)));
+    }
     out
+}
+
+/// Most a first-order size moves its parameter from its start, either way: a size fitted far
+/// beyond its start is a linearisation too far to trust. [chosen: 16]
+const SIZE_REACH: f64 = 16.0;
+
+/// The χ² of `with` with its difference from `without` scaled by the factor that minimises it
+/// (within 1/[`SIZE_REACH`] to [`SIZE_REACH`]), and that factor: the misfit of an effect of
+/// the best size, to first order, where its signature grows in proportion to one parameter.
+/// `with`'s own χ² and 1 where either run failed.
+fn first_order_size(without: &Eval, with: &Eval) -> (f64, f64) {
+    if without.failure.is_some() || with.failure.is_some() || without.r.len() != with.r.len() {
+        return (with.chi2(), 1.0);
+    }
+    let d: Vec<f64> = with.r.iter().zip(&without.r).map(|(a, b)| a - b).collect();
+    let dd: f64 = d.iter().map(|x| x * x).sum();
+    let rd: f64 = without.r.iter().zip(&d).map(|(r, x)| r * x).sum();
+    if !(dd > 0.0) {
+        return (with.chi2(), 1.0);
+    }
+    let a = (-rd / dd).clamp(1.0 / SIZE_REACH, SIZE_REACH);
+    let chi2 = (without.r.iter().zip(&d))
+        .map(|(r, x)| (r + a * x).powi(2))
+        .sum();
+    (chi2, a)
 }
 
 /// The outcome of a fit.
