@@ -947,6 +947,10 @@ pub fn diagnose_campaign(
     let candidates: Vec<EffectId> = (candidates.iter().copied())
         .filter(|&e| e != EffectId::Expression || writes || term.is_some())
         .collect();
+    let mut signals = signals;
+    if let Some(s) = signals.as_mut() {
+        split_after_term(s, &tried);
+    }
     let group: Option<Vec<usize>> = (signals.as_ref())
         .and_then(|s| s.split.as_ref())
         .map(|(carry, _)| carry.iter().map(|x| x.0).collect());
@@ -957,7 +961,8 @@ pub fn diagnose_campaign(
         term.is_some(),
         group.as_deref(),
     );
-    let term = beside_named(problem, &mut d, &tried, term);
+    let mut tried = tried;
+    let term = beside_named(problem, &mut d, (&mut tried, aligned), term);
     d.signals = signals.unwrap_or(d.signals);
     d.state_map = map;
     let mut aligned = aligned.to_vec();
@@ -1018,13 +1023,14 @@ fn choose_term(
     let ln_n = problem.dof().max(2.0).ln();
     let tried: Vec<Tried> = (options.into_iter())
         .map(|t| {
-            let (chi2, k) = term_fit(problem, &t);
+            let (chi2, k, misfit) = term_fit(problem, &t);
             let bic = chi2 + k as f64 * ln_n;
             Tried {
                 term: t,
                 chi2,
                 k,
                 bic,
+                misfit,
             }
         })
         .collect();
@@ -1050,7 +1056,7 @@ pub const BESIDE_TRIES: usize = 2;
 fn beside_named(
     problem: &mut Problem,
     d: &mut Diagnosis,
-    tried: &[Tried],
+    (tried, aligned): (&mut Vec<Tried>, &[AlignedTest]),
     term: Option<Term>,
 ) -> Option<Term> {
     let Some(lead) = d.candidates.first().filter(|c| c.significant()) else {
@@ -1072,12 +1078,9 @@ fn beside_named(
             Err(_) => return term,
         },
     };
-    let mut options: Vec<&Tried> = (tried.iter())
-        .filter(|t| t.term.evidence != Evidence::Map && Some(&t.term) != term.as_ref())
-        .collect();
-    options.sort_by(|a, b| a.bic.total_cmp(&b.bic));
-    let added = (options.into_iter().take(BESIDE_TRIES))
-        .find_map(|t| added_beside(problem, &t.term, (&free, &at), &score).map(|s| (t, s)));
+    let options = beside_options(problem, d, tried, aligned, term.as_ref());
+    let added = (options.into_iter())
+        .find_map(|t| added_beside(problem, &t, (&free, &at), &score).map(|s| (t, s)));
     let Some((t, step)) = added else {
         restore(problem, term.as_ref());
         return term;
@@ -1088,10 +1091,68 @@ fn beside_named(
     let free = expression_free_in(problem);
     let fit = fit::fit_from(problem, &free, MAX_ITER, d.baseline.clone());
     let alone = score.candidate(EffectId::Expression, free, fit, None);
+    if !tried.iter().any(|x| x.term == t) {
+        let (chi2, k) = (alone.chi2(), alone.free.len());
+        let bic = chi2 + k as f64 * score.ln_n;
+        let misfit = Vec::new();
+        tried.push(Tried {
+            term: t.clone(),
+            chi2,
+            k,
+            bic,
+            misfit,
+        });
+    }
     d.candidates.retain(|c| c.effect != EffectId::Expression);
     d.candidates.push(alone);
     rank(&mut d.candidates[1..]);
-    Some(t.term.clone())
+    Some(t)
+}
+
+/// The terms [`beside_named`] tries, in order: those read off the signals of the residual the
+/// named set leaves (an offset the specimen's residual hid in its tests is then seen in every
+/// test), then the signals' terms of `tried` that fit best alone; [`BESIDE_TRIES`] of each,
+/// none twice, none the `expression` candidate's `term`.
+fn beside_options(
+    problem: &Problem,
+    d: &Diagnosis,
+    tried: &[Tried],
+    aligned: &[AlignedTest],
+    term: Option<&Term>,
+) -> Vec<Term> {
+    let mut before: Vec<&Tried> = (tried.iter())
+        .filter(|t| t.term.evidence != Evidence::Map)
+        .collect();
+    before.sort_by(|a, b| a.bic.total_cmp(&b.bic));
+    let after = terms_after(problem, d, aligned).into_iter().take(BESIDE_TRIES);
+    let before = before.into_iter().take(BESIDE_TRIES).map(|t| t.term.clone());
+    let mut out: Vec<Term> = Vec::new();
+    for t in after.chain(before) {
+        if Some(&t) != term && !out.contains(&t) {
+            out.push(t);
+        }
+    }
+    out
+}
+
+/// The terms read off the signals of the residual the effects `d` names leave (none where it
+/// names none, or a test's run fails).
+fn terms_after(problem: &Problem, d: &Diagnosis, aligned: &[AlignedTest]) -> Vec<Term> {
+    let Some((free, fit)) = d.named_fit() else {
+        return Vec::new();
+    };
+    let fitted: Vec<AlignedTest> = (aligned.iter().enumerate())
+        .map(|(i, t)| AlignedTest {
+            model: fit::apply_estimates_in(i, &t.model, free, &fit.estimate),
+            ..t.clone()
+        })
+        .collect();
+    let Ok(c) = compared(&fitted) else {
+        return Vec::new();
+    };
+    let sigma: Vec<[f64; 3]> = problem.tests.iter().map(|t| t.sigma).collect();
+    let s = signals::read(&c, &sigma, &problem.test_misfit(&fit.after));
+    terms::from_signals(&s, &c)
 }
 
 /// The step that names `t` on top of the named set (its parameters `free` at their estimates,
@@ -1141,18 +1202,38 @@ pub struct Tried {
     pub chi2: f64,
     pub k: usize,
     pub bic: f64,
+    /// Each test's misfit (√(χ²/dof)) with the term fitted; empty where its fit failed.
+    pub misfit: Vec<f64>,
 }
 
-/// The χ² of `problem` given the term `t`, its parameters fitted, and their number (χ² infinite
-/// where a model refuses the term or the fit fails).
-fn term_fit(problem: &mut Problem, t: &Term) -> (f64, usize) {
+/// The χ² of `problem` given the term `t`, its parameters fitted, their number, and each test's
+/// misfit then (χ² infinite and no misfits where a model refuses the term or the fit fails).
+fn term_fit(problem: &mut Problem, t: &Term) -> (f64, usize, Vec<f64>) {
     if !install(problem, t) {
-        return (f64::INFINITY, t.params.len());
+        return (f64::INFINITY, t.params.len(), Vec::new());
     }
     let free = expression_free_in(problem);
     let before = problem.evaluate(1, &|_, _, m| m.clone()).remove(0);
-    let fit = fit::fit_unprofiled(problem, &free, MAX_ITER, before, f64::INFINITY);
-    (fit.map_or(f64::INFINITY, |f| f.chi2_after()), free.len())
+    match fit::fit_unprofiled(problem, &free, MAX_ITER, before, f64::INFINITY) {
+        Ok(f) => (f.chi2_after(), free.len(), problem.test_misfit(&f.after)),
+        Err(_) => (f64::INFINITY, free.len(), Vec::new()),
+    }
+}
+
+/// Where the signals split no tests, their split once the term read off them that fits best
+/// (an offset, a line: of `tried`, the lowest BIC) is fitted: an offset in every test keeps the
+/// tests a specimen is absent from above the noise, and hides that it is in some only.
+fn split_after_term(s: &mut Signals, tried: &[Tried]) {
+    if s.split.is_some() {
+        return;
+    }
+    let best = (tried.iter())
+        .filter(|t| t.term.evidence != Evidence::Map && t.bic.is_finite())
+        .min_by(|a, b| a.bic.total_cmp(&b.bic));
+    if let Some(t) = best {
+        s.split = signals::split(&t.misfit);
+        s.split_after = s.split.as_ref().map(|_| t.term.written());
+    }
 }
 
 /// `problem`'s tests given the expression `term` (those it is not given to, its parameters

@@ -147,6 +147,9 @@ pub struct Signals {
     /// Tests above [`TEST_CARRIES`] and tests at most [`TEST_CLEAN`] (√(χ²/dof)), when both are
     /// there.
     pub split: Option<(Misfits, Misfits)>,
+    /// The term read off the signals (its form) with which the tests split, where they split
+    /// only once it is fitted (an offset in every test).
+    pub split_after: Option<String>,
     /// The tests' names, for the sentences.
     pub names: Vec<String>,
 }
@@ -212,6 +215,7 @@ pub fn read(compared: &[ComparedTest], sigma: &[[f64; 3]], misfit: &[f64]) -> Si
         offsets,
         lines: group_lines(hits, &f0, &res),
         split: split(misfit),
+        split_after: None,
         names: compared.iter().map(|t| t.test.name.clone()).collect(),
     }
 }
@@ -532,7 +536,7 @@ fn classify(l: &mut Line, f0: &[Option<f64>]) {
 }
 
 /// The tests above [`TEST_CARRIES`] and those at most [`TEST_CLEAN`], when both are there.
-fn split(misfit: &[f64]) -> Option<(Misfits, Misfits)> {
+pub(crate) fn split(misfit: &[f64]) -> Option<(Misfits, Misfits)> {
     let pick = |keep: &dyn Fn(f64) -> bool| -> Vec<(usize, f64)> {
         misfit
             .iter()
@@ -640,8 +644,10 @@ impl Signals {
                 .collect::<Vec<_>>()
                 .join(", ")
         };
+        let once = (self.split_after.as_ref())
+            .map_or(String::new(), |t| format!(" once the term {t} is fitted"));
         Some(format!(
-            "the residual is in some tests only: {} (misfit over noise), while {} are at the noise: the set-up changed between them, or an effect acts in those tests only",
+            "the residual is in some tests only{once}: {} (misfit over noise), while {} are at the noise: the set-up changed between them, or an effect acts in those tests only",
             show(carry),
             show(clean)
         ))

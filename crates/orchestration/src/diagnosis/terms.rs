@@ -149,7 +149,7 @@ pub fn from_signals(s: &Signals, c: &[ComparedTest]) -> Vec<Term> {
     let mut out = Vec::new();
     for ch in 0..3 {
         let o: Vec<&signals::Offset> = s.offsets.iter().filter(|o| o.channel == ch).collect();
-        out.extend(offset_terms(ch, &o));
+        out.extend(offset_terms(ch, &o, c.len()));
         if ch == 1 {
             out.extend(bias_terms(&o, c));
         }
@@ -175,11 +175,26 @@ fn channel_hook(ch: usize) -> (Hook, &'static str, &'static str) {
 }
 
 /// The offset terms of channel `ch` from its offsets `o`: one value in the tests that show it,
-/// and one per test where there are several.
-fn offset_terms(ch: usize, o: &[&signals::Offset]) -> Vec<Term> {
+/// one per test where there are several, and one value in every test of the `n` where some do
+/// not show it.
+fn offset_terms(ch: usize, o: &[&signals::Offset], n: usize) -> Vec<Term> {
     if o.is_empty() {
         return Vec::new();
     }
+    let mut out = offset_terms_in(ch, o);
+    if o.len() < n {
+        // An offset seen in some tests may be in every one, hidden where another residual
+        // dominates (a specimen on the table for some tests): the shared term in all of them.
+        let mut every = out[0].clone();
+        let form = every.forms[0].1.clone();
+        every.forms = (0..n).map(|t| (t, form.clone())).collect();
+        out.push(every);
+    }
+    out
+}
+
+/// [`offset_terms`] in the tests that show the offset.
+fn offset_terms_in(ch: usize, o: &[&signals::Offset]) -> Vec<Term> {
     let (hook, x, unit) = channel_hook(ch);
     let name = format!("off_{x}");
     let mean = o.iter().map(|o| o.value).sum::<f64>() / o.len() as f64;
