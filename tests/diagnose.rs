@@ -1979,7 +1979,7 @@ fn a_specimen_in_some_tests_beside_an_offset_in_all_is_fitted_to_them() {
         "{verdict}"
     );
     // The named set's joint fit: the specimen's parameters beside the offset's.
-    let (params, e, se, _, _) = named_fit(&r.dir, &r, &first);
+    let (params, e, se, _, _) = named_fit(&r.dir, &r, first);
     for (p, v) in [("m1", 15_000.0), ("f1", 3.6), ("zeta1", 0.04)] {
         let i = (params.iter().position(|x| x == &format!("specimen.{p}")))
             .unwrap_or_else(|| panic!("specimen.{p} not in {params:?}"));

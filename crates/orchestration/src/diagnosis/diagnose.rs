@@ -1039,18 +1039,19 @@ fn choose_term(
     (best, tried)
 }
 
-/// Terms read off the signals that [`beside_named`] tries on top of the named effects. [chosen:
-/// 2, the two that fit best alone; each is one joint fit of the named set with it.]
+/// Terms read off the signals that [`beside_named`] tries on top of the named effects, of those
+/// read before any fit and of those read off the residual the named set leaves. [chosen: 2 of
+/// each; each is one joint fit of the named set with it.]
 pub const BESIDE_TRIES: usize = 2;
 
 /// A term read off the signals (an offset, a spectral line) added to the library effects the
 /// diagnosis `d` names, where `term`, the `expression` candidate, is the state map's or is not
 /// among them: a hum in some tests beside a friction in all of them. The one expression slot held
 /// the term that fits best alone (the map's, standing in for the friction), and forward selection
-/// never met the line. The signals' terms of `tried`, best alone first ([`BESIDE_TRIES`]), are
-/// each fitted on top of the named set (its parameters from their estimates, freed with the
-/// term's); the first that adds as forward selection requires ([`ADDS_ENOUGH`], ΔBIC >
-/// [`SIGNIFICANT_BIC`]) is named with them, the set checked again ([`prune`]); it is given to
+/// never met the line. The signals' terms ([`beside_options`]) are each fitted on top of the
+/// named set (its parameters from their estimates, freed with the term's); of those that add as
+/// forward selection requires ([`ADDS_ENOUGH`], ΔBIC > [`SIGNIFICANT_BIC`]), the one of the
+/// largest ΔBIC is named with them, the set checked again ([`prune`]); it is given to
 /// `problem`'s models and becomes the `expression` candidate, fitted alone. Returns the term the
 /// models then have.
 fn beside_named(
@@ -1079,12 +1080,16 @@ fn beside_named(
         },
     };
     let options = beside_options(problem, d, tried, aligned, term.as_ref());
+    // Of the terms that add, the one of the largest ΔBIC (a line's term in the tests that show
+    // it, not one with a parameter pair in every test that adds as much).
     let added = (options.into_iter())
-        .find_map(|t| added_beside(problem, &t, (&free, &at), &score).map(|s| (t, s)));
+        .filter_map(|t| added_beside(problem, &t, (&free, &at), &score).map(|s| (t, s)))
+        .max_by(|a, b| a.1.delta_bic.total_cmp(&b.1.delta_bic));
     let Some((t, step)) = added else {
         restore(problem, term.as_ref());
         return term;
     };
+    install(problem, &t);
     let mut steps = std::mem::take(&mut d.more);
     steps.push(step);
     (d.more, d.own) = prune(problem, &d.candidates, steps, &score);
@@ -1109,10 +1114,10 @@ fn beside_named(
     Some(t)
 }
 
-/// The terms [`beside_named`] tries, in order: those read off the signals of the residual the
-/// named set leaves (an offset the specimen's residual hid in its tests is then seen in every
-/// test), then the signals' terms of `tried` that fit best alone; [`BESIDE_TRIES`] of each,
-/// none twice, none the `expression` candidate's `term`.
+/// The terms [`beside_named`] tries: those read off the signals of the residual the named set
+/// leaves (an offset the specimen's residual hid in its tests is then seen in every test), and
+/// the signals' terms of `tried` that fit best alone; [`BESIDE_TRIES`] of each, none twice, none
+/// the `expression` candidate's `term`.
 fn beside_options(
     problem: &Problem,
     d: &Diagnosis,
@@ -1124,8 +1129,13 @@ fn beside_options(
         .filter(|t| t.term.evidence != Evidence::Map)
         .collect();
     before.sort_by(|a, b| a.bic.total_cmp(&b.bic));
-    let after = terms_after(problem, d, aligned).into_iter().take(BESIDE_TRIES);
-    let before = before.into_iter().take(BESIDE_TRIES).map(|t| t.term.clone());
+    let after = terms_after(problem, d, aligned)
+        .into_iter()
+        .take(BESIDE_TRIES);
+    let before = before
+        .into_iter()
+        .take(BESIDE_TRIES)
+        .map(|t| t.term.clone());
     let mut out: Vec<Term> = Vec::new();
     for t in after.chain(before) {
         if Some(&t) != term && !out.contains(&t) {
