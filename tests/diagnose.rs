@@ -1371,8 +1371,14 @@ fn the_user_closes_the_loop(dir: &Path, campaign: &str) {
     ]);
     assert_eq!(code, 0, "{out}{err}");
     println!("{out}");
-    let head = std::fs::read_to_string(&again).unwrap();
-    for (p, v) in SPECIMEN_2 {
+    assert_fit_recovers(&again, &SPECIMEN_2, &out);
+}
+
+/// The specimen's parameters `study fit` wrote to `model` within 2 SE of `truth`, and its report
+/// `out` saying the residual is then within 1.5× the noise floor.
+fn assert_fit_recovers(model: &Path, truth: &[(&str, f64)], out: &str) {
+    let head = std::fs::read_to_string(model).unwrap();
+    for (p, v) in truth {
         let (e, se) = fitted_value(&head, &format!("specimen.{p}"));
         assert!(
             (e - v).abs() <= 2.0 * se,
@@ -1925,14 +1931,7 @@ fn fitted_value(text: &str, path: &str) -> (f64, f64) {
 fn a_light_stiff_specimen_in_three_tests_is_sized_by_the_scan() {
     let d = tempfile::tempdir().unwrap();
     let on = [0, 3, 5];
-    let specimen = Specimen::new(12_000.0, 8.5, 0.05);
-    write_seeded(
-        d.path(),
-        &specimen,
-        &|i| on.contains(&i),
-        &|_, _, _, _| {},
-        12,
-    );
+    specimen_in(d.path(), &on, (12_000.0, 8.5, 0.05), &|_, _, _, _| {}, 12);
     let r = diagnose(d.path());
     println!("{}", r.stdout);
     let truth = [("m1", 12_000.0), ("f1", 8.5), ("zeta1", 0.05)];
@@ -1949,31 +1948,16 @@ fn a_light_stiff_specimen_in_three_tests_is_sized_by_the_scan() {
 fn a_specimen_in_some_tests_beside_an_offset_in_all_is_fitted_to_them() {
     let d = tempfile::tempdir().unwrap();
     let on = [1, 3, 6];
-    let specimen = Specimen::new(15_000.0, 3.6, 0.04);
-    write_altered(
-        d.path(),
-        &specimen,
-        &|i| on.contains(&i),
-        &|_, col, _, v| {
-            if col == "force_n" {
-                v.iter_mut().for_each(|x| *x += 6.0e3);
-            }
-        },
-    );
+    let offset: Alter<'_> = &|_, col, _, v| {
+        if col == "force_n" {
+            v.iter_mut().for_each(|x| *x += 6.0e3);
+        }
+    };
+    specimen_in(d.path(), &on, (15_000.0, 3.6, 0.04), offset, 11);
     let r = diagnose(d.path());
     println!("{}", r.stdout);
-    let verdict = verdict_of(&r.stdout);
+    let verdict = specimen_group_named(&r, &on);
     let (first, _) = r.first();
-    assert!(first.starts_with("specimen["), "{}", r.stdout);
-    let with: Vec<&str> = on.iter().map(|&i| TUTORIAL_TESTS[i]).collect();
-    let group = format!(
-        "specimen (specimen) in {}, {} and {} only",
-        with[0], with[1], with[2]
-    );
-    assert!(
-        verdict.contains(&format!("most likely missing: {group}")),
-        "{verdict}"
-    );
     assert!(
         verdict.contains("+ expression (force_channel = "),
         "{verdict}"
@@ -1995,6 +1979,14 @@ fn a_specimen_in_some_tests_beside_an_offset_in_all_is_fitted_to_them() {
     }
 }
 
+/// Writes in `dir` the tutorial's campaign with a specimen of (mass kg, frequency Hz, damping
+/// ratio) `m_f_zeta` in the tests `on` (the baseline model in the others), its columns then
+/// changed by `alter`, the noise of `seed`'s stream.
+fn specimen_in(dir: &Path, on: &[usize], m_f_zeta: (f64, f64, f64), alter: Alter<'_>, seed: u64) {
+    let specimen = Specimen::new(m_f_zeta.0, m_f_zeta.1, m_f_zeta.2);
+    write_seeded(dir, &specimen, &|i| on.contains(&i), alter, seed);
+}
+
 /// `study fit` on the campaign a diagnosis wrote (the specimen `enabled = false` in the tests
 /// off `on`), with no model file (the specimen off by default): the specimen set in the tests
 /// `on` alone, its estimates within 2 SE of `truth`, the residual at the noise.
@@ -2007,42 +1999,28 @@ fn assert_fit_keeps_switches(dir: &Path, on: &[usize], truth: &[(&str, f64)]) {
     let with: Vec<&str> = on.iter().map(|&i| TUTORIAL_TESTS[i]).collect();
     let said = format!("specimen fitted in {} only", with.join(", "));
     assert!(out.contains(&said), "{said}?\n{out}");
-    let head = std::fs::read_to_string(&o).unwrap();
-    for (p, v) in truth {
-        let (e, se) = fitted_value(&head, &format!("specimen.{p}"));
-        assert!(
-            (e - v).abs() <= 2.0 * se,
-            "specimen.{p}: {e} ± {se} (truth {v})\n{out}"
-        );
-    }
-    let after: f64 = (out.split("x after)").next().unwrap().rsplit('('))
-        .next()
-        .unwrap()
-        .parse()
-        .unwrap();
-    assert!(after <= 1.5, "{after}x the noise after the fit\n{out}");
+    assert_fit_recovers(&o, truth, &out);
+}
+
+/// `r`'s verdict, which names first the specimen fitted to the tests `on` alone (its group
+/// variant leads the candidates).
+fn specimen_group_named<'a>(r: &'a Diagnosis, on: &[usize]) -> &'a str {
+    let verdict = verdict_of(&r.stdout);
+    assert!(r.first().0.starts_with("specimen["), "{}", r.stdout);
+    let with: Vec<&str> = on.iter().map(|&i| TUTORIAL_TESTS[i]).collect();
+    let (last, rest) = with.split_last().unwrap();
+    let group = format!("{} and {last}", rest.join(", "));
+    let named = format!("most likely missing: specimen (specimen) in {group} only");
+    assert!(verdict.contains(&named), "{verdict}");
+    verdict
 }
 
 /// `r`'s verdict names the specimen fitted to the tests that carry it (the even ones of
 /// `names`) alone: its parameters within 2 SE of `truth`, every test's misfit after at most 1.5,
 /// and the campaign `--out` wrote with the specimen off in the odd tests.
 fn assert_group_fitted(r: &Diagnosis, on: &[usize], truth: &[(&str, f64)]) {
-    let verdict = verdict_of(&r.stdout);
-    let (first, best) = r.first();
-    assert!(first.starts_with("specimen["), "{}", r.stdout);
-    let with: Vec<&str> = on.iter().map(|&i| TUTORIAL_TESTS[i]).collect();
-    let group = format!(
-        "{} and {}",
-        with[..with.len() - 1].join(", "),
-        with[with.len() - 1]
-    );
-    assert!(
-        verdict.contains(&format!(
-            "most likely missing: specimen (specimen) in {group} only"
-        )),
-        "{verdict}"
-    );
-    assert_within_2se(best, "specimen", truth);
+    specimen_group_named(r, on);
+    assert_within_2se(r.first().1, "specimen", truth);
     for (test, m) in misfit_after(&r.stdout) {
         assert!(m.iter().all(|&x| x <= 1.5), "{test}: {m:?}");
     }

@@ -39,8 +39,10 @@
 //! Where the signals show the residual in some tests only, the leading library candidates are
 //! also fitted to those tests alone, their effect off in the others ([`group_variants`]); where
 //! the `expression` candidate is the state map's term and a library effect is named, the terms
-//! read off the signals (a line, an offset) are tried on top of the named set
-//! ([`beside_named`]). The verdict
+//! read off the signals (a line, an offset), before any fit and in the residual the named set
+//! leaves, are tried on top of the named set ([`beside_named`]). Where no test is at the noise,
+//! the tests are split again once the signals' best term is fitted ([`split_after_term`]). The
+//! verdict
 //! names "A + B" and the share each adds when together they explain at least
 //! [`EXPLAINS_TOGETHER`] of the misfit beyond noise; a best candidate that
 //! explains less than [`EXPLAINS_ENOUGH`] (alone or with those added) is reported as such: the
