@@ -1476,7 +1476,8 @@ fn best_swap(
             let mut f = at_estimates(&out[j].free, &alone.estimate);
             let others = rest.iter().map(|&k| last.free[k].at(last.fit.estimate[k]));
             f.extend(others);
-            let r = fit::fit_from(problem, &f, MAX_ITER, last.fit.before.clone()).ok()?;
+            let before = last.fit.before.clone();
+            let r = fit::fit_unprofiled(problem, &f, MAX_ITER, before, f64::INFINITY).ok()?;
             Some((j, score.bic(r.chi2_after(), f.len())))
         })
         .collect();
@@ -1535,6 +1536,8 @@ fn prune(
             // The last part dropped: the fit before it stands.
             _ if i == last_part => steps.truncate(i - 1),
             Some((f, r)) if alone => {
+                // The refit kept is checked along each parameter (its errors are shown).
+                let r = r.profile(problem, &f);
                 steps.remove(i - 1);
                 let k = steps.len();
                 let before = match k {
@@ -1594,8 +1597,14 @@ fn refit_without(
     if free.is_empty() {
         return None;
     }
-    let r = fit::fit_from(problem, &free, MAX_ITER, last.fit.before.clone()).ok()?;
-    Some((free, r))
+    let r = fit::fit_unprofiled(
+        problem,
+        &free,
+        MAX_ITER,
+        last.fit.before.clone(),
+        f64::INFINITY,
+    );
+    Some((free, r.ok()?))
 }
 
 /// The parameters `free` at the values `estimate`.
@@ -1646,6 +1655,11 @@ fn best_addition(
     score: &Scoring,
 ) -> Option<(Part, Vec<Free>, fit::FitResult, f64)> {
     let rest = additions(ranked, chosen);
+    let chi2_at = at.chi2();
+    let excess_at = chi2_at - score.n;
+    // An addition that cannot remove [`ADDS_ENOUGH`] of what is left stops early, and only the
+    // one chosen is checked along each parameter.
+    let reach = chi2_at - ADDS_ENOUGH * excess_at;
     let tried: Vec<(Part, Vec<Free>, Result<fit::FitResult, fit::FitError>)> = rest
         .par_iter()
         .map(|&part| {
@@ -1657,23 +1671,23 @@ fn best_addition(
             let added = free_in(problem, part.effect, part.stage).into_iter();
             f.extend(added.map(|p| fit::Free { tests, ..p }));
             let f = scanned(problem, &f, part.effect, part.stage);
-            let r = fit::fit_from(problem, &f, MAX_ITER, at.clone());
+            let r = fit::fit_unprofiled(problem, &f, MAX_ITER, at.clone(), reach);
             (part, f, r)
         })
         .collect();
-    let chi2_at = at.chi2();
-    let excess_at = chi2_at - score.n;
-    tried
-        .into_iter()
+    let p_new = |f: &[Free]| (f.len() - free.len()) as f64;
+    let (part, f, r, _) = (tried.into_iter())
         .filter_map(|(part, f, r)| {
             let r = r.ok()?;
-            let p_new = (f.len() - free.len()) as f64;
             let drop = chi2_at - r.chi2_after();
-            let dbic = drop - p_new * score.ln_n;
+            let dbic = drop - p_new(&f) * score.ln_n;
             (dbic > SIGNIFICANT_BIC && drop >= ADDS_ENOUGH * excess_at)
                 .then_some((part, f, r, dbic))
         })
-        .max_by(|a, b| a.3.total_cmp(&b.3))
+        .max_by(|a, b| a.3.total_cmp(&b.3))?;
+    let r = r.profile(problem, &f);
+    let dbic = chi2_at - r.chi2_after() - p_new(&f) * score.ln_n;
+    Some((part, f, r, dbic))
 }
 
 /// A joint fit `r` (of the parameters `f`, with ΔBIC `dbic`) that did not converge, refitted
