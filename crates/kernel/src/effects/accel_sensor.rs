@@ -20,6 +20,7 @@ pub const INFO: EffectInfo = EffectInfo {
         free: &["f_c", "zeta", "delay"],
         scan: Some(("f_c", &[15.0, 30.0, 60.0, 120.0, 240.0])),
         size: None,
+        shape: None,
         start: &[],
     }],
 };

@@ -45,6 +45,7 @@ pub const INFO: EffectInfo = EffectInfo {
             free: &["k1", "fy1"],
             scan: None,
             size: None,
+            shape: None,
             start: &[],
         },
         Stage {
@@ -55,6 +56,7 @@ pub const INFO: EffectInfo = EffectInfo {
             ],
             scan: None,
             size: None,
+            shape: None,
             start: &[],
         },
     ],

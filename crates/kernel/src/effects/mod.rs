@@ -127,6 +127,10 @@ pub struct Stage {
     /// value the scan also takes it at the size that fits best, to first order, and starts it
     /// there (a specimen of 12 t scanned at the default 20 t lands in another valley).
     pub size: Option<&'static str>,
+    /// A parameter of the signature's shape (a mode's damping) the scan also tries at these
+    /// values besides its start, where the stage has a size: above a resonance, mass and
+    /// frequency trade off and the damping decides the valley.
+    pub shape: Option<(&'static str, &'static [f64])>,
     /// Values a diagnosis starts this stage's parameters from where the model has them at 0
     /// (a second mode's mass: at 0 the mode is absent and its frequency has no effect to scan).
     pub start: &'static [(&'static str, f64)],
@@ -140,6 +144,7 @@ impl Stage {
             free,
             scan: None,
             size: None,
+            shape: None,
             start: &[],
         }
     }

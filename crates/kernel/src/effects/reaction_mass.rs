@@ -26,6 +26,7 @@ pub const INFO: EffectInfo = EffectInfo {
         // [chosen] Starts a fit scans for `f_r` (a resonance).
         scan: Some(("f_r", &[3.0, 6.0, 12.0, 25.0, 50.0, 100.0])),
         size: None,
+        shape: None,
         start: &[],
     }],
 };

@@ -39,6 +39,7 @@ pub const INFO: EffectInfo = EffectInfo {
             free: &["m1", "f1", "zeta1"],
             scan: Some(("f1", SCAN_HZ)),
             size: Some("m1"),
+            shape: Some(("zeta1", &[0.1, 0.3])),
             start: &[],
         },
         Stage {
@@ -46,6 +47,7 @@ pub const INFO: EffectInfo = EffectInfo {
             free: &["m2", "f2", "zeta2"],
             scan: Some(("f2", SCAN_HZ)),
             size: Some("m2"),
+            shape: Some(("zeta2", &[0.1, 0.3])),
             // [chosen] A further mode starts at a quarter of mode 1's default mass.
             start: &[("m2", 5.0e3)],
         },
@@ -54,6 +56,7 @@ pub const INFO: EffectInfo = EffectInfo {
             free: &["m3", "f3", "zeta3"],
             scan: Some(("f3", SCAN_HZ)),
             size: Some("m3"),
+            shape: Some(("zeta3", &[0.1, 0.3])),
             start: &[("m3", 5.0e3)],
         },
     ],

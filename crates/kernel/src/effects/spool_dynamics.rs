@@ -20,6 +20,7 @@ pub const INFO: EffectInfo = EffectInfo {
         // [chosen] Starts a fit scans for `freq_hz` (a spool slow enough to matter can drive the loop into a limit cycle, whose misfit has other valleys).
         scan: Some(("freq_hz", &[15.0, 25.0, 40.0, 60.0, 90.0, 140.0, 220.0])),
         size: None,
+        shape: None,
         start: &[],
     }],
 };

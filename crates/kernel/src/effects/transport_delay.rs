@@ -26,6 +26,7 @@ pub const INFO: EffectInfo = EffectInfo {
         // [chosen] Starts a fit scans for `tau` (a lag a whole period off a harmonic fits it as well).
         scan: Some(("tau", &[0.5e-3, 1.0e-3, 2.0e-3, 4.0e-3, 8.0e-3, 15.0e-3])),
         size: None,
+        shape: None,
         start: &[],
     }],
 };

@@ -875,6 +875,7 @@ pub fn scanned(
     free: &[Free],
     scan: Option<(&str, &[f64])>,
     size: Option<&str>,
+    shape: Option<(&str, &[f64])>,
 ) -> Vec<Free> {
     let mut out = free.to_vec();
     let Some((name, values)) = scan else {
@@ -884,16 +885,31 @@ pub fn scanned(
         return out;
     };
     let sized = size.and_then(|n| free.iter().position(|f| f.info.path() == n));
+    let shaped = shape
+        .filter(|_| sized.is_some())
+        .and_then(|(n, v)| Some((free.iter().position(|f| f.info.path() == n)?, v)));
     let f = free[i];
-    let points: Vec<f64> = std::iter::once(f.start)
-        .chain(values.iter().copied().filter(|&v| f.info.range.contains(v)))
+    let shapes: Vec<Option<f64>> = std::iter::once(None)
+        .chain(shaped.iter().flat_map(|(_, v)| v.iter().map(|&x| Some(x))))
+        .collect();
+    let points: Vec<(f64, Option<f64>)> = (shapes.iter())
+        .flat_map(|&s| {
+            std::iter::once(f.start)
+                .chain(values.iter().copied().filter(|&v| f.info.range.contains(v)))
+                .map(move |v| (v, s))
+        })
         .collect();
     let n = points.len();
     // One set more where a size is scaled: the model as it is (the effect's absence).
     let ev = problem.evaluate(n + usize::from(sized.is_some()), &|k, t, m| {
         let mut u = vec![0.0; free.len()];
         match points.get(k) {
-            Some(&p) => u[i] = f.u_of(p),
+            Some(&(p, s)) => {
+                u[i] = f.u_of(p);
+                if let (Some(x), Some((j, _))) = (s, shaped) {
+                    u[j] = free[j].u_of(x);
+                }
+            }
             None => return m.clone(),
         }
         apply(t, m, free, &u)
@@ -906,10 +922,29 @@ pub fn scanned(
     let best = (0..n)
         .min_by(|&a, &b| scores[a].0.total_cmp(&scores[b].0))
         .unwrap_or(0);
-    out[i] = f.at(points[best]);
-    if let Some(j) = sized {
-        let s = free[j];
-        out[j] = s.at(s.value(s.u_of(s.start * scores[best].1)));
+    let Some(j) = sized else {
+        out[i] = f.at(points[best].0);
+        return out;
+    };
+    // The first-order sizes, checked by a run each: a large effect is not linear in its size.
+    let s = free[j];
+    let size = |k: usize| s.value(s.u_of(s.start * scores[k].1));
+    let again = problem.evaluate(n, &|k, t, m| {
+        let mut u = vec![0.0; free.len()];
+        u[i] = f.u_of(points[k].0);
+        u[j] = s.u_of(size(k));
+        if let (Some(x), Some((h, _))) = (points[k].1, shaped) {
+            u[h] = free[h].u_of(x);
+        }
+        apply(t, m, free, &u)
+    });
+    let best = (0..n)
+        .min_by(|&a, &b| again[a].chi2().total_cmp(&again[b].chi2()))
+        .unwrap_or(0);
+    out[i] = f.at(points[best].0);
+    out[j] = s.at(size(best));
+    if let (Some(x), Some((h, _))) = (points[best].1, shaped) {
+        out[h] = free[h].at(x);
     }
     out
 }
