@@ -457,14 +457,23 @@ fn print_swap(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
         return Ok(());
     };
     let library = |c: &Candidate| c.effect != EffectId::Expression;
-    if library(lead) && library(next) && next.delta_bic > lead.delta_bic {
-        writeln!(
-            o,
-            "  (from {}, not {}: alone they tie, and with the effects added {} fits better)",
-            lead.effect, next.effect, lead.effect
-        )?;
+    if !(library(lead) && library(next) && next.delta_bic > lead.delta_bic) {
+        return Ok(());
     }
-    Ok(())
+    if lead.effect == next.effect {
+        // `diagnose::narrow_group`: the group narrowed in the joint fit.
+        return writeln!(
+            o,
+            "  (from {}, not {}: beside the other effects named, the joint fit is as good without it in the tests dropped, and the set fits better)",
+            lead.label(),
+            next.label()
+        );
+    }
+    writeln!(
+        o,
+        "  (from {}, not {}: alone they tie, and with the effects added {} fits better)",
+        lead.effect, next.effect, lead.effect
+    )
 }
 
 /// The forward selection's steps, each with its joint fit.
