@@ -464,7 +464,7 @@ fn print_swap(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
         // `diagnose::narrow_group`: the group narrowed in the joint fit.
         return writeln!(
             o,
-            "  (from {}, not {}: beside the other effects named, the joint fit is as good without it in the tests dropped, and the set fits better)",
+            "  (from {}, not {}: the named set fits as well without it in the tests dropped, and the set found from there fits better)",
             lead.label(),
             next.label()
         );

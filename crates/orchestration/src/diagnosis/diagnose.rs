@@ -1450,27 +1450,28 @@ fn settle_leader(
 }
 
 /// The named set `chosen` again from its leader fitted to fewer tests, where it leads as a group
-/// variant ([`group_variants`]) beside other named effects: a test of its group that does not
-/// carry the residual ([`signals::TEST_CARRIES`] at the `baseline`) is dropped from it where the
-/// final joint fit, refitted without it in the group, fits as well ([`narrowed`]): friction in
-/// every test held the low-amplitude tests above the noise, and a weak supply in three tests was
-/// fitted to five, a flow-gain curve beside it making up the difference. The narrowed leader is
-/// fitted alone (from its estimates) and put first in `out`, and forward selection and [`prune`]
-/// run again from it; the better of the two sets (in BIC) is kept, and `out` with it.
+/// variant ([`group_variants`]): a test is dropped from its group where the set's final joint fit
+/// (or the leader's alone), refitted without it in the group, fits as well ([`narrowed`]).
+/// Friction in every test held the low-amplitude tests above the noise, so a weak supply in three
+/// tests was fitted to five, a flow-gain curve beside it making up the difference, and a specimen
+/// in three tests to five, 20x the noise. The narrowed leader is fitted alone (from its
+/// estimates) and put first in `out`, and forward selection and [`prune`] run again from it; the
+/// better of the two sets (in BIC) is kept, and `out` with it.
 fn narrow_group(
     problem: &Problem,
     out: &mut Vec<Candidate>,
     chosen: (Vec<Step>, Vec<f64>),
     (baseline, score): (&fit::Eval, &Scoring),
 ) -> (Vec<Step>, Vec<f64>) {
-    let (Some(group), Some(last), Ok(f)) = (out[0].group(), chosen.0.last(), &out[0].fit) else {
+    let (Some(group), Ok(f)) = (out[0].group(), &out[0].fit) else {
         return chosen;
     };
-    let misfit = problem.test_misfit(baseline);
-    let carry: Vec<usize> = (group.iter().copied())
-        .filter(|&t| misfit[t] > signals::TEST_CARRIES)
-        .collect();
-    let fewer = narrowed(problem, (last, out[0].free.len()), &group, &carry);
+    // The named set's final joint fit: the last step's, or the leader's alone.
+    let (set, fitted) = match chosen.0.last() {
+        Some(s) => (&s.free, &s.fit),
+        None => (&out[0].free, f),
+    };
+    let fewer = narrowed(problem, (set, fitted, out[0].free.len()), &group);
     if fewer.len() == group.len() {
         return chosen;
     }
@@ -1499,30 +1500,28 @@ fn narrow_group(
 /// deviation of one feature]
 pub const NARROW_TOLERANCE: f64 = 1.0;
 
-/// The leader's `group` after backward elimination in the joint fit `last` (the leader's
-/// parameters its first `n_lead`): each round refits the set with each test but those of `keep`
+/// The leader's `group` after backward elimination in the named set's joint fit `fitted` of the
+/// parameters `set` (the leader's its first `n_lead`): each round refits the set with each test
 /// dropped from the leader's group in turn (from the estimates), and drops the one whose refit
 /// has the lowest χ² where that is at most [`NARROW_TOLERANCE`] above the set's; until none is
 /// or one test is left.
 fn narrowed(
     problem: &Problem,
-    (last, n_lead): (&Step, usize),
+    (set, fitted, n_lead): (&[Free], &fit::FitResult, usize),
     group: &[usize],
-    keep: &[usize],
 ) -> Vec<usize> {
     let mut g = group.to_vec();
-    let mut free = at_estimates(&last.free, &last.fit.estimate);
-    let mut chi2 = last.fit.chi2_after();
+    let mut free = at_estimates(set, &fitted.estimate);
+    let mut chi2 = fitted.chi2_after();
     // The group keeps one test at least.
     while g.len() > 1 {
-        let between: Vec<usize> = g.iter().copied().filter(|t| !keep.contains(t)).collect();
-        let tries: Vec<(usize, Vec<Free>, f64)> = (between.par_iter())
+        let tries: Vec<(usize, Vec<Free>, f64)> = (g.par_iter())
             .filter_map(|&t| {
                 let rest: Vec<usize> = g.iter().copied().filter(|&x| x != t).collect();
                 let f: Vec<Free> = (free.iter().enumerate())
                     .map(|(k, p)| if k < n_lead { p.in_tests(&rest) } else { *p })
                     .collect();
-                let before = last.fit.before.clone();
+                let before = fitted.before.clone();
                 let r = fit::fit_unprofiled(problem, &f, MAX_ITER, before, f64::INFINITY).ok()?;
                 Some((t, at_estimates(&f, &r.estimate), r.chi2_after()))
             })
