@@ -1440,13 +1440,24 @@ fn settle_leader(
         return chosen;
     }
     out[..=j].rotate_right(1);
-    let more = forward_selection(problem, out, score);
-    let again = prune(problem, out, more, score);
-    if set_bic(&out[0], &again.0, score) < current {
+    if let Some(again) = reselected(problem, out, current, score) {
         return again;
     }
     out[..=j].rotate_left(1);
     chosen
+}
+
+/// The named set found again from `out`'s leader, by forward selection and [`prune`], where its
+/// BIC is below `current` (the set it would replace); None where it is not.
+fn reselected(
+    problem: &Problem,
+    out: &[Candidate],
+    current: f64,
+    score: &Scoring,
+) -> Option<(Vec<Step>, Vec<f64>)> {
+    let more = forward_selection(problem, out, score);
+    let again = prune(problem, out, more, score);
+    (set_bic(&out[0], &again.0, score) < current).then_some(again)
 }
 
 /// The named set `chosen` again from its leader fitted to fewer tests, where it leads as a group
@@ -1486,9 +1497,7 @@ fn narrow_group(
     }
     let current = set_bic(&out[0], &chosen.0, score);
     out.insert(0, narrowed);
-    let more = forward_selection(problem, out, score);
-    let again = prune(problem, out, more, score);
-    if set_bic(&out[0], &again.0, score) < current {
+    if let Some(again) = reselected(problem, out, current, score) {
         return again;
     }
     out.remove(0);
@@ -1522,7 +1531,9 @@ fn narrowed(
                     .map(|(k, p)| if k < n_lead { p.in_tests(&rest) } else { *p })
                     .collect();
                 let before = fitted.before.clone();
-                let r = fit::fit_unprofiled(problem, &f, MAX_ITER, before, f64::INFINITY).ok()?;
+                // A drop that cannot come within the tolerance stops early.
+                let reach = chi2 + NARROW_TOLERANCE;
+                let r = fit::fit_unprofiled(problem, &f, MAX_ITER, before, reach).ok()?;
                 Some((t, at_estimates(&f, &r.estimate), r.chi2_after()))
             })
             .collect();
