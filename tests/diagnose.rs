@@ -1020,10 +1020,20 @@ fn accepted_in(
     hidden: &[Hidden],
     parts: &[&str],
 ) -> Diagnosis {
-    let d = dir;
     let c = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("studies/campaigns")
         .join(campaign);
+    accepted_from(dir, &c, extra, hidden, parts)
+}
+
+/// [`accepted_in`] of the campaign file `c`, wherever it is.
+fn accepted_from(
+    d: &Path,
+    c: &Path,
+    extra: &[&str],
+    hidden: &[Hidden],
+    parts: &[&str],
+) -> Diagnosis {
     let mut args: Vec<String> = extra.iter().map(|s| s.to_string()).collect();
     let names: Vec<&str> = hidden.iter().map(|h| h.0).collect();
     args.extend(["--effect".to_string(), names.join(",")]);
@@ -1033,8 +1043,8 @@ fn accepted_in(
         }
     }
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    synth_from(&c, NOISE_ACCEPTANCE, d, &args);
-    let r = diagnose_file(&d.join(campaign));
+    synth_from(c, NOISE_ACCEPTANCE, d, &args);
+    let r = diagnose_file(&d.join(c.file_name().unwrap()));
     println!("{}", r.stdout);
     let verdict = r
         .stdout
@@ -1130,6 +1140,22 @@ fn records_hiding_a_spool_damped_away_from_the_default() {
         let t = [("spool_dynamics", "valve dynamics", &truth[..])];
         accepted("broadband.toml", &["--as-records"], &t, &[]);
     }
+}
+
+/// Issue 51: a spool of 35 Hz damped at 1.3, on the tutorial's sine tests exported at 2048 Hz
+/// with a second of pre-trigger. Below its corner it lags as a spool of 19 Hz damped at 0.7,
+/// which drives the loop unstable: the fit from the scan's start at the default damping followed
+/// the lag's ridge to the damping's bound (ζ = 5, 134 Hz, 11 SE off, 1.9x the noise). The scan
+/// also tries the damping at 0.3 and 1.5.
+#[test]
+#[ignore = "issue 51 acceptance, a CI step: cargo test --release --test diagnose -- --ignored"]
+fn a_heavily_damped_spool_on_sine_tests_at_2048_hz() {
+    let d = tempfile::tempdir().unwrap();
+    let c = Path::new(env!("CARGO_MANIFEST_DIR")).join("studies/tutorial/campaign.toml");
+    let truth = [("freq_hz", 35.0), ("zeta", 1.3)];
+    let t = [("spool_dynamics", "valve dynamics", &truth[..])];
+    let extra = ["--rate", "2048", "--pre-trigger", "1.0"];
+    accepted_from(d.path(), &c, &extra, &t, &[]);
 }
 
 /// Issue 51: an acceleration channel's anti-alias filter away from the defaults (corner 35 Hz,

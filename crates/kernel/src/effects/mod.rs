@@ -127,9 +127,10 @@ pub struct Stage {
     /// value the scan also takes it at the size that fits best, to first order, and starts it
     /// there (a specimen of 12 t scanned at the default 20 t lands in another valley).
     pub size: Option<&'static str>,
-    /// A parameter of the signature's shape (a mode's damping) the scan also tries at these
-    /// values besides its start, where the stage has a size: above a resonance, mass and
-    /// frequency trade off and the damping decides the valley.
+    /// A parameter of the signature's shape (a mode's damping, a spool's) the scan also tries at
+    /// these values besides its start: above a resonance, mass and frequency trade off and the
+    /// damping decides the valley; below a lag's corner, frequency and damping trade off along
+    /// a ridge that a start at the wrong damping follows to a bound.
     pub shape: Option<(&'static str, &'static [f64])>,
     /// Values a diagnosis starts this stage's parameters from where the model has them at 0
     /// (a second mode's mass: at 0 the mode is absent and its frequency has no effect to scan).

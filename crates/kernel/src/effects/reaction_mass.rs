@@ -22,7 +22,8 @@ pub const INFO: EffectInfo = EffectInfo {
     params: Params::FIELDS,
     stages: &[Stage {
         label: "",
-        free: &["m_r", "f_r"],
+        // The damping shapes the resonance with the mass and the frequency (issue 51).
+        free: &["m_r", "f_r", "zeta_r"],
         // [chosen] Starts a fit scans for `f_r` (a resonance).
         scan: Some(("f_r", &[3.0, 6.0, 12.0, 25.0, 50.0, 100.0])),
         size: None,

@@ -20,7 +20,10 @@ pub const INFO: EffectInfo = EffectInfo {
         // [chosen] Starts a fit scans for `freq_hz` (a spool slow enough to matter can drive the loop into a limit cycle, whose misfit has other valleys).
         scan: Some(("freq_hz", &[15.0, 25.0, 40.0, 60.0, 90.0, 140.0, 220.0])),
         size: None,
-        shape: None,
+        // [chosen] Dampings the scan also tries (real valves: 0.3–1.5). A spool of 35 Hz, ζ 1.3
+        // lags as one of 19 Hz, ζ 0.7, which drives the loop unstable: from 60 Hz, ζ 0.7 the
+        // fit followed the lag's ridge to ζ = 5, 134 Hz (issue 51).
+        shape: Some(("zeta", &[0.3, 1.5])),
         start: &[],
     }],
 };

@@ -801,28 +801,33 @@ fn rank(out: &mut [Candidate]) {
 /// tests only, among the first few.]
 pub const GROUP_LEADERS: usize = 2;
 
-/// The leading [`GROUP_LEADERS`] significant library candidates fitted again in the tests
-/// `group` alone (their effect off in the others: a specimen on the table for some tests of a
-/// campaign, a set-up changed between them), each from the better of its own start and its
-/// estimates over every test, screened as every candidate is (`reach`: [`fit::fit_unprofiled`]);
-/// each is a candidate of its own ([`Candidate::label`]), and `out` is ranked again (a leading
-/// one is then polished and profiled as any leader). Nothing where `group` is every test, or the
-/// campaign has more tests than a group can hold ([`fit::GROUP_TESTS`]).
+/// The leading [`GROUP_LEADERS`] significant library candidates fitted again in each of the
+/// `groups` of tests alone (their effect off in the others: a specimen on the table for some
+/// tests of a campaign, a set-up changed between them), each from the better of its own start
+/// and its estimates over every test, screened as every candidate is (`reach`:
+/// [`fit::fit_unprofiled`]); each is a candidate of its own ([`Candidate::label`]), and `out` is
+/// ranked again (a leading one is then polished and profiled as any leader). No group of every
+/// test, or of none, and none where the campaign has more tests than a group can hold
+/// ([`fit::GROUP_TESTS`]).
 fn group_variants(
     problem: &Problem,
     out: &mut Vec<Candidate>,
-    group: &[usize],
+    groups: &[Vec<usize>],
     (baseline, reach): (&fit::Eval, f64),
     s: &Scoring,
 ) {
     let n = problem.tests.len();
-    if group.is_empty() || group.len() >= n || n > fit::GROUP_TESTS {
-        return;
-    }
+    let groups: Vec<&[usize]> = (groups.iter())
+        .filter(|g| !g.is_empty() && g.len() < n && n <= fit::GROUP_TESTS)
+        .map(Vec::as_slice)
+        .collect();
     let library = |c: &&Candidate| c.significant() && c.effect != EffectId::Expression;
     let leaders: Vec<&Candidate> = out.iter().filter(library).take(GROUP_LEADERS).collect();
-    let more: Vec<Candidate> = (leaders.par_iter())
-        .filter_map(|c| {
+    let pairs: Vec<(&Candidate, &[usize])> = (leaders.iter())
+        .flat_map(|&c| groups.iter().map(move |&g| (c, g)))
+        .collect();
+    let more: Vec<Candidate> = (pairs.par_iter())
+        .filter_map(|&(c, group)| {
             let f = c.fit.as_ref().ok()?;
             let in_group =
                 |free: Vec<Free>| -> Vec<Free> { free.iter().map(|p| p.in_tests(group)).collect() };
@@ -955,22 +960,10 @@ pub fn diagnose_campaign(
     if let Some(s) = signals.as_mut() {
         split_after_term(s, &tried);
     }
-    // The tests not at the noise: those that carry the residual, and those between (a specimen
-    // at 1.2 Hz moves the 4 and 6 Hz tests' residual to 2-4x their noise, no further).
-    let group: Option<Vec<usize>> =
-        (signals.as_ref())
-            .and_then(|s| s.split.as_ref())
-            .map(|(_, clean)| {
-                let n = problem.tests.len();
-                (0..n).filter(|t| clean.iter().all(|c| c.0 != *t)).collect()
-            });
-    let mut d = diagnose(
-        problem,
-        &candidates,
-        &seeds,
-        term.is_some(),
-        group.as_deref(),
-    );
+    let groups = (signals.as_ref())
+        .and_then(|s| s.split.as_ref())
+        .map_or_else(Vec::new, |split| split_groups(problem.tests.len(), split));
+    let mut d = diagnose(problem, &candidates, &seeds, term.is_some(), &groups);
     let mut tried = tried;
     let term = beside_named(problem, &mut d, (&mut tried, aligned), term);
     d.signals = signals.unwrap_or(d.signals);
@@ -990,6 +983,24 @@ pub fn diagnose_campaign(
     d.term = term;
     d.terms_tried = tried;
     d
+}
+
+/// The groups of tests a split of the signals (the tests that carry the residual, those at the
+/// noise) gives the leading candidates ([`group_variants`]): the tests not at the noise, and the
+/// tests that carry the residual where some are between. A specimen at 1.2 Hz moves the 4 and 6
+/// Hz tests' residual to 2-4x their noise, no further, and is in them; a friction in every test
+/// holds low-amplitude tests at 3.5x, and a specimen of 35 t in three others fitted to them too
+/// made them 60x worse.
+fn split_groups(
+    n: usize,
+    (carry, clean): &(signals::Misfits, signals::Misfits),
+) -> Vec<Vec<usize>> {
+    let wide: Vec<usize> = (0..n).filter(|t| clean.iter().all(|c| c.0 != *t)).collect();
+    let strict: Vec<usize> = carry.iter().map(|c| c.0).collect();
+    match strict.len() < wide.len() {
+        true => vec![wide, strict],
+        false => vec![wide],
+    }
 }
 
 /// The signals' evidence in the compared tests `c` of `problem`'s starting model.
@@ -1282,15 +1293,15 @@ fn prefer_library(out: &mut [Candidate]) {
 /// fit: [`crate::diagnosis::seeds`]) and ranks them.
 ///
 /// `generic`: the `expression` candidate is the state map's term, which ranks behind a library
-/// effect that fits about as well ([`prefer_library`]). `group`: the tests not at the noise
-/// where some are ([`Signals::split`]): the leading library candidates are also fitted to them
-/// alone ([`group_variants`]).
+/// effect that fits about as well ([`prefer_library`]). `groups`: groups of tests where the
+/// signals split them ([`Signals::split`], [`split_groups`]): the leading library candidates are
+/// also fitted to each alone ([`group_variants`]).
 pub fn diagnose(
     problem: &Problem,
     candidates: &[EffectId],
     seeds: &[Seed],
     generic: bool,
-    group: Option<&[usize]>,
+    groups: &[Vec<usize>],
 ) -> Diagnosis {
     let baseline = problem.evaluate(1, &|_, _, m| m.clone()).remove(0);
     let n = problem.dof().round() as usize;
@@ -1319,15 +1330,13 @@ pub fn diagnose(
         })
         .collect();
     rank(&mut out);
-    if let Some(g) = group {
-        group_variants(problem, &mut out, g, (&baseline, reach), &score);
-    }
+    group_variants(problem, &mut out, groups, (&baseline, reach), &score);
     polish_leaders(problem, &mut out, &baseline, &score);
     profile_leaders(problem, &mut out, &score);
     if generic {
         prefer_library(&mut out);
     }
-    let more = forward_selection(problem, &out, &score);
+    let more = forward_selection(problem, &out, (&[], &score));
     let chosen = prune(problem, &out, more, &score);
     let chosen = settle_leader(problem, &mut out, chosen, &score);
     let (more, own) = narrow_group(problem, &mut out, chosen, (&baseline, &score));
@@ -1376,8 +1385,13 @@ fn written(model: &ModelParams) -> String {
     each.join(", ")
 }
 
-/// Forward selection on top of the best candidate (see the module docs): the effects it adds.
-fn forward_selection(problem: &Problem, ranked: &[Candidate], score: &Scoring) -> Vec<Step> {
+/// Forward selection on top of the best candidate (see the module docs): the effects it adds;
+/// `before`, the parts named from another leader, are tried first ([`best_addition`]).
+fn forward_selection(
+    problem: &Problem,
+    ranked: &[Candidate],
+    (before, score): (&[Part], &Scoring),
+) -> Vec<Step> {
     let n = score.n;
     let Some(best) = ranked.first().filter(|c| c.significant()) else {
         return Vec::new();
@@ -1397,7 +1411,9 @@ fn forward_selection(problem: &Problem, ranked: &[Candidate], score: &Scoring) -
         if at.chi2() - n <= (score.ln_n + SIGNIFICANT_BIC).max(3.0 * (2.0 * n).sqrt()) {
             break;
         }
-        let Some((part, f, r, dbic)) = best_addition(problem, ranked, (&chosen, &free, &at), score)
+        let first = before.get(steps.len()).copied();
+        let at_now = (&chosen[..], &free[..], &at);
+        let Some((part, f, r, dbic)) = best_addition(problem, ranked, at_now, (first, score))
         else {
             break;
         };
@@ -1440,7 +1456,7 @@ fn settle_leader(
         return chosen;
     }
     out[..=j].rotate_right(1);
-    if let Some(again) = reselected(problem, out, current, score) {
+    if let Some(again) = reselected(problem, out, (current, &chosen.0), score) {
         return again;
     }
     out[..=j].rotate_left(1);
@@ -1448,14 +1464,16 @@ fn settle_leader(
 }
 
 /// The named set found again from `out`'s leader, by forward selection and [`prune`], where its
-/// BIC is below `current` (the set it would replace); None where it is not.
+/// BIC is below `current`'s (the set it would replace, its leader's `steps`); None where it is
+/// not. The parts `current` added are tried first, in their order ([`best_addition`]).
 fn reselected(
     problem: &Problem,
     out: &[Candidate],
-    current: f64,
+    (current, named): (f64, &[Step]),
     score: &Scoring,
 ) -> Option<(Vec<Step>, Vec<f64>)> {
-    let more = forward_selection(problem, out, score);
+    let before: Vec<Part> = named.iter().map(Step::part).collect();
+    let more = forward_selection(problem, out, (&before, score));
     let again = prune(problem, out, more, score);
     (set_bic(&out[0], &again.0, score) < current).then_some(again)
 }
@@ -1497,7 +1515,7 @@ fn narrow_group(
     }
     let current = set_bic(&out[0], &chosen.0, score);
     out.insert(0, narrowed);
-    if let Some(again) = reselected(problem, out, current, score) {
+    if let Some(again) = reselected(problem, out, (current, &chosen.0), score) {
         return again;
     }
     out.remove(0);
@@ -1760,12 +1778,14 @@ fn additions(ranked: &[Candidate], chosen: &[Part]) -> Vec<Part> {
 
 /// The candidate that adds most to the chosen parts (their parameters `free`, leaving the
 /// evaluation `at`): what it adds, the joint parameters, their fit and its ΔBIC; None where no
-/// addition is significant and removes [`ADDS_ENOUGH`] of the misfit left.
+/// addition is significant and removes [`ADDS_ENOUGH`] of the misfit left. Where `first`, a part
+/// named before from another leader ([`reselected`]), is among the additions and adds so, it is
+/// taken without fitting the others: the set it was named in tied with this one.
 fn best_addition(
     problem: &Problem,
     ranked: &[Candidate],
     (chosen, free, at): (&[Part], &[Free], &fit::Eval),
-    score: &Scoring,
+    (first, score): (Option<Part>, &Scoring),
 ) -> Option<(Part, Vec<Free>, fit::FitResult, f64)> {
     let rest = additions(ranked, chosen);
     let chi2_at = at.chi2();
@@ -1773,34 +1793,46 @@ fn best_addition(
     // An addition that cannot remove [`ADDS_ENOUGH`] of what is left stops early, and only the
     // one chosen is checked along each parameter.
     let reach = chi2_at - ADDS_ENOUGH * excess_at;
-    let tried: Vec<(Part, Vec<Free>, Result<fit::FitResult, fit::FitError>)> = rest
-        .par_iter()
-        .map(|&part| {
-            let mut f = free.to_vec();
-            // A further stage of a chosen effect acts in the tests its first does.
-            let tests = (free.iter())
-                .find(|p| p.info.component.effect() == Some(part.effect))
-                .map_or(fit::ALL_TESTS, |p| p.tests);
-            let added = free_in(problem, part.effect, part.stage).into_iter();
-            f.extend(added.map(|p| fit::Free { tests, ..p }));
-            let f = scanned(problem, &f, part.effect, part.stage);
-            let r = fit::fit_unprofiled(problem, &f, MAX_ITER, at.clone(), reach);
-            (part, f, r)
-        })
-        .collect();
     let p_new = |f: &[Free]| (f.len() - free.len()) as f64;
-    let (part, f, r, _) = (tried.into_iter())
-        .filter_map(|(part, f, r)| {
-            let r = r.ok()?;
-            let drop = chi2_at - r.chi2_after();
-            let dbic = drop - p_new(&f) * score.ln_n;
-            (dbic > SIGNIFICANT_BIC && drop >= ADDS_ENOUGH * excess_at)
-                .then_some((part, f, r, dbic))
-        })
-        .max_by(|a, b| a.3.total_cmp(&b.3))?;
+    let adds = |(part, f, r): (Part, Vec<Free>, Result<fit::FitResult, fit::FitError>)| {
+        let r = r.ok()?;
+        let drop = chi2_at - r.chi2_after();
+        let dbic = drop - p_new(&f) * score.ln_n;
+        (dbic > SIGNIFICANT_BIC && drop >= ADDS_ENOUGH * excess_at).then_some((part, f, r, dbic))
+    };
+    let fitted = |part: Part| {
+        let f = with_addition(problem, free, part);
+        let r = fit::fit_unprofiled(problem, &f, MAX_ITER, at.clone(), reach);
+        (part, f, r)
+    };
+    let named = first
+        .filter(|p| rest.contains(p))
+        .and_then(|p| adds(fitted(p)));
+    let (part, f, r, _) = match named {
+        Some(a) => a,
+        None => (rest
+            .par_iter()
+            .map(|&part| fitted(part))
+            .collect::<Vec<_>>())
+        .into_iter()
+        .filter_map(adds)
+        .max_by(|a, b| a.3.total_cmp(&b.3))?,
+    };
     let r = r.profile(problem, &f);
     let dbic = chi2_at - r.chi2_after() - p_new(&f) * score.ln_n;
     Some((part, f, r, dbic))
+}
+
+/// The parameters `free` with those of `part` added, from its scanned start; a further stage of
+/// a chosen effect acts in the tests its first does.
+fn with_addition(problem: &Problem, free: &[Free], part: Part) -> Vec<Free> {
+    let mut f = free.to_vec();
+    let tests = (free.iter())
+        .find(|p| p.info.component.effect() == Some(part.effect))
+        .map_or(fit::ALL_TESTS, |p| p.tests);
+    let added = free_in(problem, part.effect, part.stage).into_iter();
+    f.extend(added.map(|p| fit::Free { tests, ..p }));
+    scanned(problem, &f, part.effect, part.stage)
 }
 
 /// A joint fit `r` (of the parameters `f`, with ΔBIC `dbic`) that did not converge, refitted

@@ -869,7 +869,8 @@ fn with_values(
 /// parameter's range are skipped; without a scan, or when `free` lacks the parameter, `free` as
 /// it is. Where `size` names a parameter of `free` the signature grows in proportion to (a mode's
 /// mass), each value is scored at the size that fits best to first order
-/// ([`first_order_size`]), and the size starts at the best value's.
+/// ([`first_order_size`]), and the size starts at the best value's. Where `shape` names a
+/// parameter of `free`, every value is also tried with it at each of its values.
 pub fn scanned(
     problem: &Problem,
     free: &[Free],
@@ -885,9 +886,7 @@ pub fn scanned(
         return out;
     };
     let sized = size.and_then(|n| free.iter().position(|f| f.info.path() == n));
-    let shaped = shape
-        .filter(|_| sized.is_some())
-        .and_then(|(n, v)| Some((free.iter().position(|f| f.info.path() == n)?, v)));
+    let shaped = shape.and_then(|(n, v)| Some((free.iter().position(|f| f.info.path() == n)?, v)));
     let f = free[i];
     let shapes: Vec<Option<f64>> = std::iter::once(None)
         .chain(shaped.iter().flat_map(|(_, v)| v.iter().map(|&x| Some(x))))
@@ -924,6 +923,9 @@ pub fn scanned(
         .unwrap_or(0);
     let Some(j) = sized else {
         out[i] = f.at(points[best].0);
+        if let (Some(x), Some((h, _))) = (points[best].1, shaped) {
+            out[h] = free[h].at(x);
+        }
         return out;
     };
     // The first-order sizes, checked by a run each: a large effect is not linear in its size.
