@@ -216,6 +216,24 @@ pub(crate) fn with_progress(problem: &mut Problem, label: &str, log_lines: bool)
     progress
 }
 
+/// The first line of a model [`write_fitted`] writes.
+const FITTED_HEAD: &str = "# Fitted by `study ";
+
+/// Refuses, before any work, to replace a file at `out` that [`write_fitted`] did not write (a
+/// model file of the user's, a campaign): bad input, exit 2, nothing replaced. An earlier fit's
+/// or diagnosis's model is replaced.
+pub(crate) fn check_fitted_model(out: &Path) -> anyhow::Result<()> {
+    crate::shell::job::outputs::check_output(out)?;
+    match std::fs::read_to_string(out) {
+        Ok(text) if !text.starts_with(FITTED_HEAD) => Err(crate::shell::BadInput(format!(
+            "{}: exists and is not a model `study fit` or `study diagnose --out` wrote; nothing was replaced: choose another --out, or remove it",
+            out.display()
+        ))
+        .into()),
+        _ => Ok(()),
+    }
+}
+
 /// Writes the fitted model (the starting model with the fitted parameters, their effects on),
 /// headed by the command (`fit CAMPAIGN`) and the estimates, to `out`.
 pub(crate) fn write_fitted(
@@ -232,7 +250,7 @@ pub(crate) fn write_fitted(
         toml::Value::Table(crate::orchestration::runs::spec::model_table(&fitted)),
     );
     let header = format!(
-        "# Fitted by `study {command}` (vshake {}): {}\n",
+        "{FITTED_HEAD}{command}` (vshake {}): {}\n",
         env!("CARGO_PKG_VERSION"),
         free.iter()
             .zip(&r.estimate)

@@ -1,7 +1,9 @@
 //! `study diagnose`: fit every candidate effect and say which one is most likely missing.
 
 use crate::kernel::params::EffectId;
-use crate::orchestration::diagnosis::diagnose::{self, Candidate, Diagnosis, Verdict};
+use crate::orchestration::diagnosis::diagnose::{
+    self, Candidate, Diagnosis, Verdict, EXPLAINS_TOGETHER,
+};
 use crate::orchestration::diagnosis::fit::Problem;
 use crate::shell::cli::DiagnoseArgs;
 use crate::shell::fit_problem::{
@@ -37,8 +39,8 @@ fn harmonic_label(k: usize, rate_hz: f64) -> String {
 }
 
 pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
-    crate::shell::job::outputs::check_outputs([args.out.as_ref()])?;
     if let Some(out) = &args.out {
+        crate::shell::fit_problem::check_fitted_model(out)?;
         check_fitted_campaign(&fitted_campaign_path(out))?;
     }
     run_to(args, &mut std::io::stdout())
@@ -146,7 +148,9 @@ fn write_named(
         )?;
         return remove_stale_campaign(o, out);
     };
-    if let Some(t) = &d.term {
+    // The expression's notes where the verdict names it (a term tried and not named is not in
+    // the model written).
+    if let Some(t) = d.named_term() {
         t.install_one(&mut model, 0).map_err(RunFailed)?;
         let tests = d.signals.list(t.tests().into_iter());
         if d.names_a_group() {
@@ -277,10 +281,14 @@ fn write_fitted_campaign(
         let model = sub_table(test, "model")?;
         if let Some(t) = t {
             let expression = sub_table(model, "expression")?;
-            match t.forms.iter().find(|f| f.0 == i) {
-                Some((_, form)) => expression.insert(t.hook.key().into(), form.clone().into()),
-                None => expression.insert("enabled".into(), false.into()),
-            };
+            for (hook, form) in
+                (t.parts()).filter_map(|p| Some((p.hook, &p.forms.iter().find(|f| f.0 == i)?.1)))
+            {
+                expression.insert(hook.key().into(), form.clone().into());
+            }
+            if !t.tests().contains(&i) {
+                expression.insert("enabled".into(), false.into());
+            }
         }
         if let Some((e, _)) = off.filter(|(_, g)| !g.contains(&i)) {
             sub_table(model, e.name())?.insert("enabled".into(), false.into());
@@ -381,7 +389,7 @@ fn print_terms_tried(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
     )?;
     for t in &d.terms_tried {
         let chosen = d.term.as_ref() == Some(&t.term);
-        let tests = match t.term.forms.len() == d.test_misfit.len() {
+        let tests = match t.term.tests().len() == d.test_misfit.len() {
             true => String::new(),
             false => format!(" in {} only", d.signals.list(t.term.tests().into_iter())),
         };
@@ -512,7 +520,25 @@ fn print_selection(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
             params.join(", ")
         )?;
     }
-    Ok(())
+    print_first_only(o, d)
+}
+
+/// Why the verdict names the first effect only where the steps above do not close the gap to
+/// the noise.
+fn print_first_only(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
+    let (Verdict::Missing { effects, .. }, Some(last)) = (d.verdict(), d.more.last()) else {
+        return Ok(());
+    };
+    if effects.len() > d.more.len() {
+        return Ok(());
+    }
+    writeln!(
+        o,
+        "  (the verdict names {} only: the effects added explain {:.1} % together, short of {:.0} %, so what they add is not taken for the plant's)",
+        effects[0],
+        100.0 * last.explained,
+        100.0 * EXPLAINS_TOGETHER
+    )
 }
 
 /// The weighted misfit the fit minimises, per test and channel: the baseline's, and the named

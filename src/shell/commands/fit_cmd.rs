@@ -13,7 +13,7 @@ use crate::shell::fit_problem::{
 };
 
 pub fn run(args: &FitArgs) -> anyhow::Result<()> {
-    crate::shell::job::outputs::check_output(&args.out)?;
+    crate::shell::fit_problem::check_fitted_model(&args.out)?;
     run_to(args, &mut std::io::stdout())
 }
 

@@ -131,6 +131,12 @@ pub enum ColumnProblem {
         column: String,
         headers: Vec<String>,
     },
+    /// Several columns of the file have this one name (positions from 1).
+    SameName {
+        column: String,
+        header: String,
+        positions: Vec<usize>,
+    },
     /// One column of the file read as two channels.
     Twice {
         header: String,
@@ -160,6 +166,14 @@ impl std::fmt::Display for ColumnProblem {
                 channel(column).map_or(column.as_str(), |c| c.1),
                 headers.first().map_or("", |h| h.as_str())
             ),
+            ColumnProblem::SameName { column, header, positions } => write!(
+                f,
+                "columns {} are {} named `{header}`: give the position of the one to read as `{column}` in the campaign's `columns` table, e.g. columns = {{ {} = {} }} (positions count every column of the file, in order, from 1; docs/formats.md)",
+                join_positions(positions),
+                if positions.len() == 2 { "both" } else { "all" },
+                channel(column).map_or(column.as_str(), |c| c.1),
+                positions.first().unwrap_or(&1)
+            ),
             ColumnProblem::Twice { header, columns } => write!(
                 f,
                 "column `{header}` would be read as both `{}` and `{}`: give each channel its own column in the campaign's `columns` table (positions count every column of the file, in order; docs/formats.md)",
@@ -169,6 +183,36 @@ impl std::fmt::Display for ColumnProblem {
                 write!(f, "the campaign's `columns` table maps `{column}` to {what}, which the file does not have")
             }
         }
+    }
+}
+
+/// "3 and 9", "2, 5 and 7".
+fn join_positions(p: &[usize]) -> String {
+    let s: Vec<String> = p.iter().map(usize::to_string).collect();
+    match s.split_last() {
+        Some((last, rest)) if !rest.is_empty() => format!("{} and {last}", rest.join(", ")),
+        _ => s.join(""),
+    }
+}
+
+/// The one position in `headers` of the name `name` (trimmed), None where there is none, or the
+/// problem naming every position where several columns have it.
+fn named_once(
+    column: &str,
+    headers: &[String],
+    name: &str,
+) -> Result<Option<usize>, ColumnProblem> {
+    let at: Vec<usize> = (0..headers.len())
+        .filter(|&i| headers[i].trim() == name.trim())
+        .collect();
+    match at.as_slice() {
+        [] => Ok(None),
+        [i] => Ok(Some(*i)),
+        _ => Err(ColumnProblem::SameName {
+            column: column.to_string(),
+            header: name.trim().to_string(),
+            positions: at.iter().map(|i| i + 1).collect(),
+        }),
     }
 }
 
@@ -200,7 +244,7 @@ fn locate(
     let at = |i: usize, unit_text: Option<String>| read_at(column, headers, units, i, unit_text);
     if let Some(m) = map {
         let i = match (&m.name, m.index) {
-            (Some(n), _) => headers.iter().position(|h| h.trim() == n.trim()),
+            (Some(n), _) => named_once(column, headers, n)?,
             (None, Some(k)) => (k >= 1 && k <= headers.len()).then(|| k - 1),
             (None, None) => None,
         };
@@ -213,8 +257,8 @@ fn locate(
         })?;
         return at(i, m.unit.clone()).map(Some);
     }
-    let exact = headers.iter().position(|h| h == column);
     if channel(column).is_none() {
+        let exact = headers.iter().position(|h| h == column);
         // Not a channel (a record's own column, a results table's metric): by its exact name, as
         // it is.
         return Ok(exact.map(|index| Resolved {
@@ -224,7 +268,8 @@ fn locate(
             note: None,
         }));
     }
-    if let Some(i) = exact {
+    // Two columns of vshake's own name: neither is taken silently.
+    if let Some(i) = named_once(column, headers, column)? {
         return at(i, None).map(Some);
     }
     let lower: Vec<usize> = (0..headers.len())
@@ -570,6 +615,22 @@ mod tests {
         assert!(
             matches!(&e.unwrap_err()[0], ColumnProblem::Ambiguous { headers, .. } if headers.len() == 2)
         );
+        // Two columns of one name, the channel's own: an error naming both positions.
+        let e = resolve(
+            &s(&["time_s", "disp_m", "accel_mps2", "disp_m"]),
+            None,
+            &["time_s", "disp_m"],
+            &[],
+            &[],
+        );
+        let p = &e.unwrap_err()[0];
+        assert!(
+            matches!(p, ColumnProblem::SameName { positions, .. } if positions == &[2, 4]),
+            "{p:?}"
+        );
+        assert!(p
+            .to_string()
+            .starts_with("columns 2 and 4 are both named `disp_m`"));
         let e = resolve(&s(&["Time (s)"]), None, &["time_s", "disp_m"], &[], &[]);
         assert_eq!(
             e.unwrap_err(),

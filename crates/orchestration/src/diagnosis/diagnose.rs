@@ -431,7 +431,7 @@ impl Diagnosis {
                 self.fitted_values(),
                 100.0 * explained,
                 best.map_or(f64::NAN, |c| c.delta_bic),
-                self.short_of_noise(false),
+                self.short_of_noise(false) + &self.bound_note(),
                 self.measurement_note(&effects)
             ) + &self.signal_note_if_short(),
             Verdict::Missing { effects, explained } => format!(
@@ -443,7 +443,7 @@ impl Diagnosis {
                 }).collect::<Vec<_>>().join(" + "),
                 100.0 * explained,
                 self.shares(),
-                self.short_of_noise(true),
+                self.short_of_noise(true) + &self.bound_note(),
                 self.measurement_note(&effects)
             ) + &self.signal_note_if_short(),
             Verdict::Unexplained { effects, explained } if effects.len() == 1 => format!(
@@ -526,17 +526,21 @@ impl Diagnosis {
 
     /// The term the verdict names, if it names the diagnosis's expression term.
     pub fn named_term(&self) -> Option<&Term> {
+        self.term.as_ref().filter(|_| self.names_expression())
+    }
+
+    /// Whether the verdict names the `expression` candidate.
+    fn names_expression(&self) -> bool {
         let named = match self.verdict() {
             Verdict::Missing { effects, .. } | Verdict::Unexplained { effects, .. } => effects,
             Verdict::NothingSignificant => Vec::new(),
         };
-        let names = named.iter().any(|p| p.effect == EffectId::Expression);
-        self.term.as_ref().filter(|_| names)
+        named.iter().any(|p| p.effect == EffectId::Expression)
     }
 
     /// Whether the verdict names a term given to some tests only.
     pub fn names_a_group(&self) -> bool {
-        (self.named_term()).is_some_and(|t| t.forms.len() < self.test_misfit.len())
+        (self.named_term()).is_some_and(|t| t.tests().len() < self.test_misfit.len())
     }
 
     /// Whether the verdict names a term read off the signals (an offset, a line).
@@ -547,6 +551,42 @@ impl Diagnosis {
     /// "; the missing valve flow follows sign(x) in spool opening (R² = 0.96): …", from the
     /// state map; empty without one, when no state explains the residual, or when the starting
     /// model is already within [`NOISE_FACTOR`] of the noise floor.
+    /// "; spool_dynamics.zeta = 5.00 is at the top of its range [0.05, 5]: …" for the named
+    /// parameters whose estimates are at a bound of their range ([`AT_BOUND`]); empty where none
+    /// is. A fit stopped at a bound has not found the plant's value: a spool of 35 Hz damped at
+    /// 1.3 fitted from a start at 0.7 followed the lag's ridge to ζ = 5, 134 Hz.
+    fn bound_note(&self) -> String {
+        let Some((free, f)) = self.named_fit() else {
+            return String::new();
+        };
+        let at: Vec<String> = (free.iter().zip(&f.estimate))
+            .filter_map(|(p, &v)| {
+                let r = p.info.range;
+                let near =
+                    |b: f64| b.is_finite() && b != 0.0 && (v - b).abs() <= AT_BOUND * b.abs();
+                let side = match (near(r.lo), near(r.hi)) {
+                    (_, true) => "top",
+                    (true, _) => "bottom",
+                    _ => return None,
+                };
+                Some(format!(
+                    "{} = {} is at the {side} of its range [{}, {}]",
+                    p.info.path(),
+                    three_figures(v),
+                    r.lo,
+                    r.hi
+                ))
+            })
+            .collect();
+        match at.is_empty() {
+            true => String::new(),
+            false => format!(
+                "; {}: the fit stopped at a bound, not at the plant's value (the effect's form, or the fit's start, is not the plant's: `study fit --model` from another start tells which)",
+                signals::join_and(&at.iter().map(String::as_str).collect::<Vec<_>>())
+            ),
+        }
+    }
+
     fn where_it_fails(&self) -> String {
         if !(self.baseline.residual_rms() > NOISE_FACTOR * self.noise_rms) {
             return String::new();
@@ -966,6 +1006,7 @@ pub fn diagnose_campaign(
     let mut d = diagnose(problem, &candidates, &seeds, term.is_some(), &groups);
     let mut tried = tried;
     let term = beside_named(problem, &mut d, (&mut tried, aligned), term);
+    let term = combined_beside(problem, &mut d, (&mut tried, aligned), term);
     d.signals = signals.unwrap_or(d.signals);
     d.state_map = map;
     let mut aligned = aligned.to_vec();
@@ -974,10 +1015,17 @@ pub fn diagnose_campaign(
             // Installed in these tests' models before: it cannot fail here.
             t.install(&mut a.model, i).expect("the term installs");
         }
-        d.written = t.written();
-        if t.forms.len() < aligned.len() {
-            d.written += &format!(" in {} only", d.signals.list(t.tests().into_iter()));
-        }
+        let each: Vec<String> = (t.parts())
+            .map(|p| match p.forms.len() < aligned.len() {
+                true => format!(
+                    "{} in {} only",
+                    p.written_alone(),
+                    d.signals.list(p.forms.iter().map(|f| f.0))
+                ),
+                false => p.written_alone(),
+            })
+            .collect();
+        d.written = each.join("; ");
     }
     d.map_after(&aligned);
     d.term = term;
@@ -1100,7 +1148,7 @@ fn beside_named(
             Err(_) => return term,
         },
     };
-    let options = beside_options(problem, d, tried, aligned, term.as_ref());
+    let options = beside_options(problem, (d, tried, aligned), term.as_ref(), &Some);
     // Of the terms that add, the one of the largest ΔBIC (a line's term in the tests that show
     // it, not one with a parameter pair in every test that adds as much).
     let added = (options.into_iter())
@@ -1135,28 +1183,99 @@ fn beside_named(
     Some(t)
 }
 
+/// The named expression term given with a second term read off the signals ([`Term::with`]: on
+/// another hook, with parameters of its own) where that adds as forward selection requires
+/// ([`ADDS_ENOUGH`], ΔBIC > [`SIGNIFICANT_BIC`]) to the named set's final joint fit (the term's
+/// parameters from their estimates, freed with the second's): a line in every test beside an
+/// offset in some, where the one expression slot held the line and the offset stayed unfitted.
+/// The terms tried are [`beside_options`]'s; of those that add, the one of the largest ΔBIC is
+/// taken. The expression must be the set's leader alone or its last step (whose fit the verdict
+/// reads). Returns the term `problem`'s models then have.
+fn combined_beside(
+    problem: &mut Problem,
+    d: &mut Diagnosis,
+    (tried, aligned): (&mut Vec<Tried>, &[AlignedTest]),
+    term: Option<Term>,
+) -> Option<Term> {
+    let named = term.clone().filter(|_| d.names_expression());
+    let (Some(t), Some((free, fit))) = (named, d.named_fit()) else {
+        return term;
+    };
+    let leads = d.more.is_empty() && d.candidates[0].effect == EffectId::Expression;
+    let last = d
+        .more
+        .last()
+        .is_some_and(|s| s.effect == EffectId::Expression);
+    let score = Scoring {
+        chi2_b: d.baseline.chi2(),
+        n: d.n as f64,
+        ln_n: (d.n as f64).ln(),
+    };
+    let room = (score.ln_n + SIGNIFICANT_BIC).max(3.0 * (2.0 * score.n).sqrt());
+    if !(leads || last) || fit.chi2_after() - score.n <= room {
+        return term;
+    }
+    let (free, at) = (at_estimates(free, &fit.estimate), fit.after.clone());
+    // The residual the named set leaves is read with the term in the tests' models.
+    let mut given = aligned.to_vec();
+    for (i, a) in given.iter_mut().enumerate() {
+        if t.install(&mut a.model, i).is_err() {
+            return term;
+        }
+    }
+    let with = |o: Term| t.with(&o);
+    let options = beside_options(problem, (d, tried, &given), Some(&t), &with);
+    let added = (options.into_iter())
+        .filter_map(|c| added_beside(problem, &c, (&free, &at), &score).map(|s| (c, s)))
+        .max_by(|a, b| a.1.delta_bic.total_cmp(&b.1.delta_bic));
+    let Some((c, step)) = added else {
+        install(problem, &t);
+        return term;
+    };
+    install(problem, &c);
+    let (chi2, k) = (step.fit.chi2_after(), step.free.len());
+    tried.push(Tried {
+        term: c.clone(),
+        chi2,
+        k,
+        bic: score.bic(chi2, k),
+        misfit: Vec::new(),
+    });
+    match d.more.last_mut() {
+        Some(s) => {
+            s.delta_bic += step.delta_bic;
+            (s.free, s.fit, s.explained) = (step.free, step.fit, step.explained);
+            let steps = std::mem::take(&mut d.more);
+            (d.more, d.own) = prune(problem, &d.candidates, steps, &score);
+        }
+        None => {
+            d.candidates[0] = score.candidate(EffectId::Expression, step.free, Ok(step.fit), None);
+        }
+    }
+    Some(c)
+}
+
 /// The terms [`beside_named`] tries: those read off the signals of the residual the named set
 /// leaves (an offset the specimen's residual hid in its tests is then seen in every test), and
-/// the signals' terms of `tried` that fit best alone; [`BESIDE_TRIES`] of each, none twice, none
-/// the `expression` candidate's `term`.
+/// the signals' terms of `tried` that fit best alone; [`BESIDE_TRIES`] of each of those `as_option`
+/// makes an option of (the term as it is; given with the named term, [`combined_beside`]), none
+/// twice, none the `expression` candidate's `term`.
 fn beside_options(
     problem: &Problem,
-    d: &Diagnosis,
-    tried: &[Tried],
-    aligned: &[AlignedTest],
+    (d, tried, aligned): (&Diagnosis, &[Tried], &[AlignedTest]),
     term: Option<&Term>,
+    as_option: &dyn Fn(Term) -> Option<Term>,
 ) -> Vec<Term> {
     let mut before: Vec<&Tried> = (tried.iter())
         .filter(|t| t.term.evidence != Evidence::Map)
         .collect();
     before.sort_by(|a, b| a.bic.total_cmp(&b.bic));
-    let after = terms_after(problem, d, aligned)
-        .into_iter()
+    let after = (terms_after(problem, d, aligned).into_iter())
+        .filter_map(as_option)
         .take(BESIDE_TRIES);
-    let before = before
-        .into_iter()
-        .take(BESIDE_TRIES)
-        .map(|t| t.term.clone());
+    let before = (before.into_iter())
+        .filter_map(|t| as_option(t.term.clone()))
+        .take(BESIDE_TRIES);
     let mut out: Vec<Term> = Vec::new();
     for t in after.chain(before) {
         if Some(&t) != term && !out.contains(&t) {
@@ -1199,7 +1318,9 @@ fn added_beside(
         return None;
     }
     let mut f = free.to_vec();
-    f.extend(expression_free_in(problem));
+    // A term given with a named one: the named one's parameters are in `free` already.
+    let new = |p: &Free| !free.iter().any(|q| q.info.path() == p.info.path());
+    f.extend(expression_free_in(problem).into_iter().filter(new));
     let r = fit::fit_from(problem, &f, MAX_ITER, at.clone()).ok()?;
     let drop = at.chi2() - r.chi2_after();
     let dbic = drop - (f.len() - free.len()) as f64 * score.ln_n;
@@ -1521,6 +1642,10 @@ fn narrow_group(
     out.remove(0);
     chosen
 }
+
+/// How close (relative) an estimate is to a bound of its range to be reported as at it
+/// ([`Diagnosis::bound_note`]). [chosen: 1e-3]
+pub const AT_BOUND: f64 = 1e-3;
 
 /// Most a test's removal from a group may raise the joint fit's χ² and still be made: a test in
 /// which the effect changes nothing beyond the noise says nothing of it. [chosen: 1, a standard

@@ -692,7 +692,7 @@ pub(crate) fn bounds(v: impl IntoIterator<Item = f64>) -> (f64, f64) {
 }
 
 /// "a, b and c".
-fn join_and(v: &[&str]) -> String {
+pub(crate) fn join_and(v: &[&str]) -> String {
     match v {
         [] => String::new(),
         [a] => a.to_string(),

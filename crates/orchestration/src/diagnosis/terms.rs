@@ -55,6 +55,9 @@ pub struct Term {
     /// Its form in words where the tests' forms differ ("… per test").
     pub generic: String,
     pub evidence: Evidence,
+    /// Terms given with it, each on a hook of its own and with parameters of their own names
+    /// ([`Term::with`]): a line in every test beside an offset in some.
+    pub also: Vec<Term>,
 }
 
 impl Term {
@@ -70,16 +73,59 @@ impl Term {
             }],
             generic: t.form.clone(),
             evidence: Evidence::Map,
+            also: Vec::new(),
         }
     }
 
-    /// The tests it is given to.
-    pub fn tests(&self) -> Vec<usize> {
-        self.forms.iter().map(|f| f.0).collect()
+    /// It and the terms given with it.
+    pub fn parts(&self) -> impl Iterator<Item = &Term> {
+        std::iter::once(self).chain(self.also.iter())
     }
 
-    /// `hook = "form"` where every test has the same form, else the generic form.
+    /// It with `other` given too, where `other`'s hooks and parameter names are none of its own
+    /// and the expressions' slots hold them all; None where they are not.
+    pub fn with(&self, other: &Term) -> Option<Term> {
+        let hooks = |t: &Term| t.parts().map(|p| p.hook).collect::<Vec<_>>();
+        let names = |t: &Term| -> Vec<String> {
+            (t.parts())
+                .flat_map(|p| p.params.iter().map(|q| q.name.clone()))
+                .collect()
+        };
+        let (mine, theirs) = (names(self), names(other));
+        let clash = hooks(other).iter().any(|h| hooks(self).contains(h))
+            || theirs.iter().any(|n| mine.contains(n));
+        let slots = mine.len() + theirs.len();
+        if clash || slots > SLOTS {
+            return None;
+        }
+        let mut out = self.clone();
+        out.also.extend(other.parts().map(|p| Term {
+            also: Vec::new(),
+            ..p.clone()
+        }));
+        Some(out)
+    }
+
+    /// The tests some part of it is given to, in order.
+    pub fn tests(&self) -> Vec<usize> {
+        let mut t: Vec<usize> = self
+            .parts()
+            .flat_map(|p| p.forms.iter().map(|f| f.0))
+            .collect();
+        t.sort_unstable();
+        t.dedup();
+        t
+    }
+
+    /// `hook = "form"` where every test has the same form, else the generic form; with the
+    /// terms given with it, "; "-separated.
     pub fn written(&self) -> String {
+        let each: Vec<String> = self.parts().map(Term::written_alone).collect();
+        each.join("; ")
+    }
+
+    /// [`Term::written`] of this part alone.
+    pub fn written_alone(&self) -> String {
         let same = self.forms.windows(2).all(|w| w[0].1 == w[1].1);
         match self.forms.first() {
             Some((_, f)) if same => format!("{} = {f:?}", self.hook.key()),
@@ -88,24 +134,28 @@ impl Term {
     }
 
     /// `model` (of test `test`) given the term's parameters at their starts, and its form where
-    /// the term is given to that test (its other hooks cleared).
+    /// the term is given to that test (its other hooks cleared); the same of the terms given
+    /// with it.
     pub fn install(&self, model: &mut ModelParams, test: usize) -> Result<(), String> {
         model.expression.hooks.clear();
-        for p in &self.params {
+        for p in self.parts().flat_map(|t| t.params.iter()) {
             model.name_expression_param(&p.name, &p.unit, Range::any(), p.value)?;
         }
-        match self.forms.iter().find(|f| f.0 == test) {
-            Some((_, form)) => (model.expression.set(self.hook, form)).map_err(|e| e.to_string()),
-            None => Ok(()),
+        for t in self.parts() {
+            if let Some((_, form)) = t.forms.iter().find(|f| f.0 == test) {
+                (model.expression.set(t.hook, form)).map_err(|e| e.to_string())?;
+            }
         }
+        Ok(())
     }
 
     /// A model given the term as test `test` has it (the first of its tests where `test` has
     /// none): what `--out` writes.
     pub fn install_one(&self, model: &mut ModelParams, test: usize) -> Result<(), String> {
-        let t = match self.forms.iter().any(|f| f.0 == test) {
+        let tests = self.tests();
+        let t = match tests.contains(&test) {
             true => test,
-            false => self.forms.first().map_or(test, |f| f.0),
+            false => tests.first().copied().unwrap_or(test),
         };
         self.install(model, t)
     }
@@ -114,12 +164,11 @@ impl Term {
     /// number, from the fitted values of `params` (names and values, the line's `s_k`, `c_k`
     /// among them); None for another term.
     pub fn amplitudes(&self, params: &[(&str, f64)]) -> Option<(f64, f64, usize)> {
-        let Evidence::Line { .. } = self.evidence else {
-            return None;
-        };
+        let line = |t: &&Term| matches!(t.evidence, Evidence::Line { .. });
+        let line = self.parts().find(line)?;
         let value = |n: String| params.iter().find(|p| p.0 == n).map(|p| p.1);
         let amp = |t: usize| Some(value(format!("s_{t}"))?.hypot(value(format!("c_{t}"))?));
-        let amps: Vec<f64> = (self.tests().into_iter())
+        let amps: Vec<f64> = (line.forms.iter().map(|f| f.0))
             .filter_map(|t| amp(t + 1))
             .collect();
         let lo = amps.iter().copied().fold(f64::INFINITY, f64::min);
@@ -127,19 +176,27 @@ impl Term {
         Some((lo, hi, amps.len()))
     }
 
-    /// The unit of its parameters.
+    /// The unit of its parameters (of its line's, where a part is a line).
     pub fn unit(&self) -> &str {
-        self.params.first().map_or("", |p| p.unit.as_str())
+        let line = self
+            .parts()
+            .find(|t| matches!(t.evidence, Evidence::Line { .. }));
+        (line.unwrap_or(self).params.first()).map_or("", |p| p.unit.as_str())
     }
 
     /// Whether `name` is one of a line's per-test sines and cosines.
     pub fn is_phase_param(&self, name: &str) -> bool {
-        matches!(self.evidence, Evidence::Line { .. }) && self.params.iter().any(|p| p.name == name)
+        self.parts().any(|t| {
+            matches!(t.evidence, Evidence::Line { .. }) && t.params.iter().any(|p| p.name == name)
+        })
     }
 
-    /// Whether the tests' forms differ (a line's per-test phase, an offset per test).
+    /// Whether the tests' forms differ (a line's per-test phase, an offset per test), or a part
+    /// is given to other tests than another.
     pub fn per_test(&self) -> bool {
-        !self.forms.windows(2).all(|w| w[0].1 == w[1].1)
+        let n = self.tests().len();
+        self.parts()
+            .any(|t| !t.forms.windows(2).all(|w| w[0].1 == w[1].1) || t.forms.len() < n)
     }
 }
 
@@ -207,6 +264,7 @@ fn offset_terms_in(ch: usize, o: &[&signals::Offset]) -> Vec<Term> {
         params: vec![param(&name, unit, mean)],
         generic: format!("{} = \"{x} + {name}\"", hook.key()),
         evidence: Evidence::Offset { channel: ch },
+        also: Vec::new(),
     };
     if o.len() < 2 || o.len() > OFFSET_TESTS {
         return vec![shared];
@@ -252,6 +310,7 @@ fn bias_terms(o: &[&signals::Offset], c: &[ComparedTest]) -> Vec<Term> {
         params: vec![param("b_x", "m", mean)],
         generic: "opening = \"x + b_x\"".to_string(),
         evidence,
+        also: Vec::new(),
     };
     if with_loop.len() < 2 || with_loop.len() > OFFSET_TESTS {
         return vec![shared];
@@ -390,6 +449,7 @@ fn sinusoid_term(
             hook.key()
         ),
         evidence: evidence.clone(),
+        also: Vec::new(),
     }
 }
 
