@@ -1734,7 +1734,7 @@ fn a_line_in_every_test_and_an_offset_in_some_are_fitted_together() {
                 *x += 0.1 * (w * t + 0.4 + 2.3 * i as f64).sin();
             }
         }
-        if col == "force_n" && i % 3 == 0 {
+        if col == "force_n" && i.is_multiple_of(3) {
             v.iter_mut().for_each(|x| *x += 1.0e4);
         }
     };

@@ -456,6 +456,36 @@ fn the_campaign_diagnose_writes_beside_its_model_never_replaces_another_file() {
     assert!(out.exists());
 }
 
+/// `fit --out` and `diagnose --out` replace a model an earlier fit or diagnosis wrote, never a
+/// file of the user's: that is refused before any work, exit 2, and left as it was.
+#[test]
+fn a_model_file_of_ones_own_is_never_replaced_by_fit_or_diagnose() {
+    let d = tempfile::tempdir().unwrap();
+    let campaign = Path::new(env!("CARGO_MANIFEST_DIR")).join("studies/tutorial/campaign.toml");
+    let mine = d.path().join("mine.toml");
+    let text = "[model.platen]\nm = 150000.0\n";
+    std::fs::write(&mine, text).unwrap();
+    let fit = ["fit", s(&campaign), "--effect", "seal_friction", "--out"];
+    for args in [&fit[..], &["diagnose", s(&campaign), "--out"][..]] {
+        let (code, o, err) = study(&[args, &[s(&mine)]].concat());
+        assert_eq!(code, 2, "{o}{err}");
+        assert!(
+            err.contains(
+                "mine.toml: exists and is not a model `study fit` or `study diagnose --out` wrote"
+            ) && err.contains("nothing was replaced"),
+            "{err}"
+        );
+        assert!(o.is_empty(), "no work before the refusal: {o}");
+        assert_eq!(std::fs::read_to_string(&mine).unwrap(), text);
+    }
+    // A model study wrote is replaced.
+    let ours = d.path().join("fitted.toml");
+    for _ in 0..2 {
+        let (code, o, err) = study(&[&fit[..], &[s(&ours)]].concat());
+        assert_eq!(code, 0, "{o}{err}");
+    }
+}
+
 #[test]
 fn a_flipped_byte_in_a_shard_is_refused_by_merge() {
     let d = tempfile::tempdir().unwrap();

@@ -1384,6 +1384,7 @@ fn split_after_term(s: &mut Signals, tried: &[Tried]) {
         .min_by(|a, b| a.bic.total_cmp(&b.bic));
     if let Some(t) = best {
         s.split = signals::split(&t.misfit);
+        s.between = signals::between(&t.misfit);
         s.split_after = s.split.as_ref().map(|_| t.term.written());
     }
 }

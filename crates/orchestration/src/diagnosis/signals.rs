@@ -147,6 +147,8 @@ pub struct Signals {
     /// Tests above [`TEST_CARRIES`] and tests at most [`TEST_CLEAN`] (√(χ²/dof)), when both are
     /// there.
     pub split: Option<(Misfits, Misfits)>,
+    /// The tests between the split's (above [`TEST_CLEAN`], at most [`TEST_CARRIES`]).
+    pub between: Misfits,
     /// The term read off the signals (its form) with which the tests split, where they split
     /// only once it is fitted (an offset in every test).
     pub split_after: Option<String>,
@@ -215,6 +217,7 @@ pub fn read(compared: &[ComparedTest], sigma: &[[f64; 3]], misfit: &[f64]) -> Si
         offsets,
         lines: group_lines(hits, &f0, &res),
         split: split(misfit),
+        between: between(misfit),
         split_after: None,
         names: compared.iter().map(|t| t.test.name.clone()).collect(),
     }
@@ -536,6 +539,15 @@ fn classify(l: &mut Line, f0: &[Option<f64>]) {
 }
 
 /// The tests above [`TEST_CARRIES`] and those at most [`TEST_CLEAN`], when both are there.
+/// The tests whose misfit `misfit` (√(χ²/dof)) is above [`TEST_CLEAN`] and at most
+/// [`TEST_CARRIES`]: above their noise, short of carrying the residual.
+pub(crate) fn between(misfit: &[f64]) -> Misfits {
+    (misfit.iter().enumerate())
+        .filter(|(_, &m)| m > TEST_CLEAN && m <= TEST_CARRIES)
+        .map(|(i, &m)| (i, m))
+        .collect()
+}
+
 pub(crate) fn split(misfit: &[f64]) -> Option<(Misfits, Misfits)> {
     let pick = |keep: &dyn Fn(f64) -> bool| -> Vec<(usize, f64)> {
         misfit
@@ -646,10 +658,15 @@ impl Signals {
         };
         let once = (self.split_after.as_ref())
             .map_or(String::new(), |t| format!(" once the term {t} is fitted"));
+        let between = match self.between.is_empty() {
+            true => String::new(),
+            false => format!(" and, less, {}", show(&self.between)),
+        };
         Some(format!(
-            "the residual is in some tests only{once}: {} (misfit over noise), while {} are at the noise: the set-up changed between them, or an effect acts in those tests only",
+            "the residual is in some tests only{once}: {} (misfit over noise){between}, while {} {} at the noise: the set-up changed between them, or an effect acts in those tests only",
             show(carry),
-            show(clean)
+            show(clean),
+            if clean.len() == 1 { "is" } else { "are" }
         ))
     }
 
