@@ -782,6 +782,15 @@ struct Scoring {
 }
 
 impl Scoring {
+    /// Against the evaluation `baseline`, of `n` degrees of freedom.
+    fn of(baseline: &fit::Eval, n: usize) -> Scoring {
+        Scoring {
+            chi2_b: baseline.chi2(),
+            n: n as f64,
+            ln_n: (n as f64).ln(),
+        }
+    }
+
     /// The Bayesian information criterion of a fit leaving `chi2` with `p` parameters, up to a
     /// constant: χ² + p·ln n.
     fn bic(&self, chi2: f64, p: usize) -> f64 {
@@ -1136,11 +1145,7 @@ fn beside_named(
     if named.clone().any(|e| e == EffectId::Expression) || named.count() >= MAX_EFFECTS {
         return term;
     }
-    let score = Scoring {
-        chi2_b: d.baseline.chi2(),
-        n: d.n as f64,
-        ln_n: (d.n as f64).ln(),
-    };
+    let score = Scoring::of(&d.baseline, d.n);
     let (free, at) = match d.more.last() {
         Some(s) => (at_estimates(&s.free, &s.fit.estimate), s.fit.after.clone()),
         None => match &lead.fit {
@@ -1206,11 +1211,7 @@ fn combined_beside(
         .more
         .last()
         .is_some_and(|s| s.effect == EffectId::Expression);
-    let score = Scoring {
-        chi2_b: d.baseline.chi2(),
-        n: d.n as f64,
-        ln_n: (d.n as f64).ln(),
-    };
+    let score = Scoring::of(&d.baseline, d.n);
     let room = (score.ln_n + SIGNIFICANT_BIC).max(3.0 * (2.0 * score.n).sqrt());
     if !(leads || last) || fit.chi2_after() - score.n <= room {
         return term;
@@ -1427,11 +1428,7 @@ pub fn diagnose(
 ) -> Diagnosis {
     let baseline = problem.evaluate(1, &|_, _, m| m.clone()).remove(0);
     let n = problem.dof().round() as usize;
-    let score = Scoring {
-        chi2_b: baseline.chi2(),
-        n: n as f64,
-        ln_n: (n as f64).ln(),
-    };
+    let score = Scoring::of(&baseline, n);
     // A candidate that cannot explain [`EXPLAINS_SOME`] cannot be significant: its fit may stop
     // early ([`fit::fit_unprofiled`]).
     let reach = score.chi2_b - EXPLAINS_SOME * (score.chi2_b - score.n).max(0.0);
