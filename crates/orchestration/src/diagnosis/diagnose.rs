@@ -548,9 +548,6 @@ impl Diagnosis {
         (self.named_term()).is_some_and(|t| t.evidence != Evidence::Map)
     }
 
-    /// "; the missing valve flow follows sign(x) in spool opening (R² = 0.96): …", from the
-    /// state map; empty without one, when no state explains the residual, or when the starting
-    /// model is already within [`NOISE_FACTOR`] of the noise floor.
     /// "; spool_dynamics.zeta = 5.00 is at the top of its range [0.05, 5]: …" for the named
     /// parameters whose estimates are at a bound of their range ([`AT_BOUND`]); empty where none
     /// is. A fit stopped at a bound has not found the plant's value: a spool of 35 Hz damped at
@@ -587,6 +584,9 @@ impl Diagnosis {
         }
     }
 
+    /// "; the missing valve flow follows sign(x) in spool opening (R² = 0.96): …", from the
+    /// state map; empty without one, when no state explains the residual, or when the starting
+    /// model is already within [`NOISE_FACTOR`] of the noise floor.
     fn where_it_fails(&self) -> String {
         if !(self.baseline.residual_rms() > NOISE_FACTOR * self.noise_rms) {
             return String::new();
