@@ -2075,12 +2075,57 @@ fn a_specimen_in_three_tests_beside_friction_in_all_is_narrowed_to_them() {
     assert_friction_beside(d.path(), &r, named, &truth);
 }
 
+/// Issue 51, a new user's case: a specimen of 35 t (5.5 Hz, 6 %) in the 2 Hz 1.5 g, 4 Hz 0.8 g
+/// and 8 Hz 1 g tests beside a weak friction (3.5 kN, 5.5 kN breakaway) in every test, which
+/// holds the two 0.3 g tests at about 3.5x their noise. Fitted to every test not at the noise,
+/// the specimen made those two 60x worse and the verdict left 12.5x the noise; the group
+/// variants are also fitted to the tests that carry the residual alone.
+#[test]
+#[ignore = "slow (about 20 s): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
+fn a_heavy_specimen_in_three_tests_beside_a_weak_friction_is_fitted_to_them() {
+    let d = tempfile::tempdir().unwrap();
+    let specimen = "model = { specimen = { m1 = 35000.0, f1 = 5.5, zeta1 = 0.06 } }";
+    let friction = [3500.0, 5500.0];
+    let r = friction_beside_at(d.path(), (&[2, 4, 7], specimen), SEED_HEAVY, friction);
+    let named = "most likely missing: specimen (specimen) in f2_a1p5, f4_a0p8 and f8_a1p0 only + \
+                 seal_friction (friction); together";
+    let truth = [
+        ("specimen.m1", 35_000.0),
+        ("specimen.f1", 5.5),
+        ("specimen.zeta1", 0.06),
+    ];
+    assert_friction_beside_at(d.path(), (&r, named), &truth, friction);
+}
+
+/// The noise seed of [`a_heavy_specimen_in_three_tests_beside_a_weak_friction_is_fitted_to_them`].
+/// Seeds 2 to 5 pass; seed 1 puts f_c at 2.3 SE (3442 ± 25 N) and a helper's seed 33 f1 at 2.2
+/// SE, with every test at the noise: five parameters checked at 2 SE fail by chance in about one
+/// draw of five (measured 2026-11-30).
+const SEED_HEAVY: &str = "2";
+
 /// The tutorial's campaign synthesised in `dir`/data with seal friction (7 kN, 11 kN breakaway)
 /// in every test and the model table `model` in the tests `on`, 1 % noise on each channel from
 /// the stream of `seed`, and diagnosed once the per-test models are taken out (the lab's
 /// campaign says nothing of them).
 fn friction_beside(dir: &Path, on: &[usize], model: &str, seed: &str) -> Diagnosis {
+    friction_beside_at(dir, (on, model), seed, FRICTION)
+}
+
+/// The seal friction [`friction_beside`] hides: f_c and f_s, N.
+const FRICTION: [f64; 2] = [7000.0, 11000.0];
+
+/// [`friction_beside`] with the friction `[f_c, f_s]` (N).
+fn friction_beside_at(
+    dir: &Path,
+    (on, model): (&[usize], &str),
+    seed: &str,
+    [f_c, f_s]: [f64; 2],
+) -> Diagnosis {
     let campaign = with_model_in(dir, on, model);
+    let (f_c, f_s) = (
+        format!("seal_friction.f_c={f_c}"),
+        format!("seal_friction.f_s={f_s}"),
+    );
     let data = dir.join("data");
     let (code, out, err) = study(&[
         "synth",
@@ -2095,9 +2140,9 @@ fn friction_beside(dir: &Path, on: &[usize], model: &str, seed: &str) -> Diagnos
         "--effect",
         "seal_friction",
         "--set",
-        "seal_friction.f_c=7000",
+        &f_c,
         "--set",
-        "seal_friction.f_s=11000",
+        &f_s,
     ]);
     assert_eq!(code, 0, "{out}{err}");
     let written = data.join("campaign.toml");
@@ -2115,13 +2160,20 @@ fn friction_beside(dir: &Path, on: &[usize], model: &str, seed: &str) -> Diagnos
 /// [`friction_beside`]'s diagnosis `r`: the verdict says `named`; the friction's parameters and
 /// `truth`'s within 2 SE in the fitted model's header; every test's channels at their noise.
 fn assert_friction_beside(dir: &Path, r: &Diagnosis, named: &str, truth: &[(&str, f64)]) {
+    assert_friction_beside_at(dir, (r, named), truth, FRICTION);
+}
+
+/// [`assert_friction_beside`] with the friction `[f_c, f_s]` (N) of [`friction_beside_at`].
+fn assert_friction_beside_at(
+    dir: &Path,
+    (r, named): (&Diagnosis, &str),
+    truth: &[(&str, f64)],
+    [f_c, f_s]: [f64; 2],
+) {
     let verdict = verdict_of(&r.stdout);
     assert!(verdict.contains(named), "{verdict}");
     let fitted = std::fs::read_to_string(dir.join("data/fitted.toml")).unwrap();
-    let friction = [
-        ("seal_friction.f_c", 7000.0),
-        ("seal_friction.f_s", 11000.0),
-    ];
+    let friction = [("seal_friction.f_c", f_c), ("seal_friction.f_s", f_s)];
     for &(p, v) in truth.iter().chain(&friction) {
         let (e, se) = fitted_value(&fitted, p);
         assert!((e - v).abs() <= 2.0 * se, "{p}: {e} ± {se} (truth {v})");
