@@ -223,11 +223,18 @@ const FITTED_HEAD: &str = "# Fitted by `study ";
 /// model file of the user's, a campaign): bad input, exit 2, nothing replaced. An earlier fit's
 /// or diagnosis's model is replaced.
 pub(crate) fn check_fitted_model(out: &Path) -> anyhow::Result<()> {
-    crate::shell::job::outputs::check_output(out)?;
-    match std::fs::read_to_string(out) {
-        Ok(text) if !text.starts_with(FITTED_HEAD) => Err(crate::shell::BadInput(format!(
-            "{}: exists and is not a model `study fit` or `study diagnose --out` wrote; nothing was replaced: choose another --out, or remove it",
-            out.display()
+    let what = "a model `study fit` or `study diagnose --out` wrote";
+    replaced_only_if_ours(out, FITTED_HEAD, what)
+}
+
+/// Refuses, before any work, to replace a file at `path` whose first line does not start with
+/// `head` (a file study wrote; `what` names it in the error): bad input, exit 2.
+pub(crate) fn replaced_only_if_ours(path: &Path, head: &str, what: &str) -> anyhow::Result<()> {
+    crate::shell::job::outputs::check_output(path)?;
+    match std::fs::read_to_string(path) {
+        Ok(text) if !text.starts_with(head) => Err(crate::shell::BadInput(format!(
+            "{}: exists and is not {what}; nothing was replaced: choose another --out, or remove it",
+            path.display()
         ))
         .into()),
         _ => Ok(()),

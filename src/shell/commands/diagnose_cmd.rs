@@ -230,15 +230,8 @@ const FITTED_CAMPAIGN_HEAD: &str = "# Written by `study diagnose --out`";
 /// Refuses, before any work, to replace a file at `path` that [`write_fitted_campaign`] did not
 /// write (bad input, exit 2).
 fn check_fitted_campaign(path: &std::path::Path) -> anyhow::Result<()> {
-    crate::shell::job::outputs::check_output(path)?;
-    match std::fs::read_to_string(path) {
-        Ok(text) if !text.starts_with(FITTED_CAMPAIGN_HEAD) => Err(BadInput(format!(
-            "{}: exists and is not a campaign `study diagnose --out` wrote (where the expression differs between tests it writes one there); nothing was replaced: choose another --out, or remove it",
-            path.display()
-        ))
-        .into()),
-        _ => Ok(()),
-    }
+    let what = "a campaign `study diagnose --out` wrote (where the expression differs between tests it writes one there)";
+    crate::shell::fit_problem::replaced_only_if_ours(path, FITTED_CAMPAIGN_HEAD, what)
 }
 
 /// Writes to `path` a copy of `campaign` in which each test the term `t` (if any) is given to has
