@@ -1008,6 +1008,11 @@ fn standard_errors_match_the_spread_over_noise_seeds() {
 /// Issue 26's acceptance campaigns: noise of 1 % of each test's acceleration rms and 10 µm.
 const NOISE_ACCEPTANCE: &str = "accel=1%,disp=1e-5";
 
+/// Noise of 1 % in every channel, as the new users' trials made their campaigns: with the force
+/// measured to the numerical floor ([`NOISE_ACCEPTANCE`]) some fits stop in a further valley
+/// that this noise hides (the seal friction beside a supply below).
+const NOISE_EVERY_CHANNEL: &str = "accel=1%,disp=1%,force=1%";
+
 /// A hidden effect: its name, family and (parameter, truth) pairs; `stage` > 0 for a further
 /// stage the verdict names as "effect's label".
 type Hidden<'a> = (&'a str, &'a str, &'a [(&'a str, f64)]);
@@ -1044,6 +1049,16 @@ fn accepted_from(
     hidden: &[Hidden],
     parts: &[&str],
 ) -> Diagnosis {
+    accepted_at(NOISE_ACCEPTANCE, d, c, (extra, hidden, parts))
+}
+
+/// [`accepted_from`] at the synth noise `noise`.
+fn accepted_at(
+    noise: &str,
+    d: &Path,
+    c: &Path,
+    (extra, hidden, parts): (&[&str], &[Hidden], &[&str]),
+) -> Diagnosis {
     let mut args: Vec<String> = extra.iter().map(|s| s.to_string()).collect();
     let names: Vec<&str> = hidden.iter().map(|h| h.0).collect();
     args.extend(["--effect".to_string(), names.join(",")]);
@@ -1053,7 +1068,7 @@ fn accepted_from(
         }
     }
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    synth_from(c, NOISE_ACCEPTANCE, d, &args);
+    synth_from(c, noise, d, &args);
     let r = diagnose_file(&d.join(c.file_name().unwrap()));
     println!("{}", r.stdout);
     let verdict = r
@@ -1166,6 +1181,31 @@ fn a_heavily_damped_spool_on_sine_tests_at_2048_hz() {
     let t = [("spool_dynamics", "valve dynamics", &truth[..])];
     let extra = ["--rate", "2048", "--pre-trigger", "1.0"];
     accepted_from(d.path(), &c, &extra, &t, &[]);
+}
+
+/// Issue 51, a new user's case: seal friction of Stribeck velocity 0.04 m/s (the library says
+/// 0.01) and a viscous term of 15 kN·s/m (it says none), beside a supply whose pump is short and
+/// its band 3 MPa, on the tutorial's sine tests. With the shape held at the defaults the fit put
+/// f_c at 7.7 kN for 4, the supply 13 SE off and a flow-gain curve beside them; the friction's
+/// second stage frees v_s and σ.
+#[test]
+#[ignore = "issue 51 acceptance, a CI step: cargo test --release --test diagnose -- --ignored"]
+fn a_viscous_stribeck_friction_beside_a_supply_is_fitted_with_its_shape() {
+    let d = tempfile::tempdir().unwrap();
+    let c = Path::new(env!("CARGO_MANIFEST_DIR")).join("studies/tutorial/campaign.toml");
+    let friction = [
+        ("f_c", 4000.0),
+        ("f_s", 7000.0),
+        ("v_s", 0.04),
+        ("sigma", 15000.0),
+    ];
+    let supply = [("q_pump", 0.3), ("dp_band", 3.0e6)];
+    let t = [
+        ("seal_friction", "friction", &friction[..]),
+        ("supply", "supply pressure", &supply[..]),
+    ];
+    let parts = ["seal_friction's Stribeck and viscous terms"];
+    accepted_at(NOISE_EVERY_CHANNEL, d.path(), &c, (&[], &t, &parts));
 }
 
 /// Issue 51: an acceleration channel's anti-alias filter away from the defaults (corner 35 Hz,
@@ -1774,6 +1814,54 @@ fn a_line_in_every_test_and_an_offset_in_some_are_fitted_together() {
     }
     let off = value("expression.off_f".to_string());
     assert!((off - 1.0e4).abs() < 500.0, "offset {off} N");
+    let left = r.residual["expression"] / r.noise_floor;
+    assert!(left <= 2.0, "the residual is {left}x the noise floor");
+}
+
+/// Issue 51 point 4, a new user's case: a load cell that reads 5 % high in every test, its zero
+/// 8 kN off in three tests of eight, and an accelerometer reading 3 % low in one test (a
+/// calibration error, a zero that moved, a sensor swapped between tests). No gain term was
+/// tried: the verdict offered "a flexible specimen, or a mode of the table" at 3.4x the noise.
+/// The signals read each channel's gain against the model's own channel, and the terms are
+/// fitted together: every factor and the offset within a fraction of a percent, at most 2x the
+/// noise floor.
+#[test]
+#[ignore = "slow (about 30 s): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
+fn a_sensor_s_gain_in_every_test_and_another_s_in_one_are_fitted() {
+    let d = tempfile::tempdir().unwrap();
+    let alter = |i: usize, col: &str, _: &[f64], v: &mut [f64]| {
+        let (gain, offset) = match col {
+            "force_n" => (1.05, if i % 3 == 1 { 8.0e3 } else { 0.0 }),
+            "accel_mps2" if i == 3 => (0.97, 0.0),
+            _ => (1.0, 0.0),
+        };
+        v.iter_mut().for_each(|x| *x = gain * *x + offset);
+    };
+    let baseline = vshake::kernel::effects::Baseline;
+    write_altered(d.path(), &baseline, &|_| true, &alter);
+    let r = diagnose(d.path());
+    println!("{}", r.stdout);
+    let verdict = verdict_of(&r.stdout);
+    for part in [
+        "force_channel = \"k_f * f + off_f\" in 3 tests, \"k_f * f\" in the others",
+        "accel_channel = \"k_a * a\" in ",
+        "the force reads 1.05",
+        "the acceleration reads 0.97",
+    ] {
+        assert!(verdict.contains(part), "{part}: {verdict}");
+    }
+    let best = &r.cands["expression"];
+    let value = |name: &str| {
+        let i = best.params.iter().position(|p| p == name);
+        best.estimates[i.unwrap_or_else(|| panic!("{name}: {:?}", best.params))]
+    };
+    let close = |name: &str, truth: f64, tol: f64| {
+        let v = value(name);
+        assert!((v / truth - 1.0).abs() < tol, "{name}: {v} for {truth}");
+    };
+    close("expression.k_f", 1.05, 2e-3);
+    close("expression.k_a", 0.97, 3e-3);
+    close("expression.off_f", 8.0e3, 0.05);
     let left = r.residual["expression"] / r.noise_floor;
     assert!(left <= 2.0, "the residual is {left}x the noise floor");
 }

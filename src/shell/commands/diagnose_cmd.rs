@@ -382,17 +382,13 @@ fn print_terms_tried(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
     )?;
     for t in &d.terms_tried {
         let chosen = d.term.as_ref() == Some(&t.term);
-        let tests = match t.term.tests().len() == d.test_misfit.len() {
-            true => String::new(),
-            false => format!(" in {} only", d.signals.list(t.term.tests().into_iter())),
-        };
         writeln!(
             o,
-            "  {} p {:>2}  chi2 {:.4e}  {}{tests}",
+            "  {} p {:>2}  chi2 {:.4e}  {}",
             if chosen { "->" } else { "  " },
             t.k,
             t.chi2,
-            t.term.written()
+            t.term.described(d.test_misfit.len(), &d.signals)
         )?;
     }
     Ok(())

@@ -1024,17 +1024,7 @@ pub fn diagnose_campaign(
             // Installed in these tests' models before: it cannot fail here.
             t.install(&mut a.model, i).expect("the term installs");
         }
-        let each: Vec<String> = (t.parts())
-            .map(|p| match p.forms.len() < aligned.len() {
-                true => format!(
-                    "{} in {} only",
-                    p.written_alone(),
-                    d.signals.list(p.forms.iter().map(|f| f.0))
-                ),
-                false => p.written_alone(),
-            })
-            .collect();
-        d.written = each.join("; ");
+        d.written = t.described(aligned.len(), &d.signals);
     }
     d.map_after(&aligned);
     d.term = term;
@@ -1955,7 +1945,29 @@ fn with_addition(problem: &Problem, free: &[Free], part: Part) -> Vec<Free> {
         .map_or(fit::ALL_TESTS, |p| p.tests);
     let added = free_in(problem, part.effect, part.stage).into_iter();
     f.extend(added.map(|p| fit::Free { tests, ..p }));
+    if part.stage > 0 {
+        revive(&mut f, part.effect);
+    }
     scanned(problem, &f, part.effect, part.stage)
+}
+
+/// Share of its default below which a positive parameter has collapsed toward 0 [chosen: a
+/// thousandth; a fit scaled by log cannot return from there within its iterations].
+const COLLAPSED: f64 = 1e-3;
+
+/// `free` with `effect`'s parameters that collapsed toward 0 ([`COLLAPSED`]) started at their
+/// defaults again: held at the wrong shape, an effect's fit may drive one to 0 (seal friction
+/// of Stribeck velocity 0.04 m/s and σ 15 kN·s/m, fitted with the defaults' shape, put f_s at
+/// 1e-4 N), and on the log scale the fit that frees the shape could not bring it back (f_s
+/// stayed at 5e-4 N, f_c 3.5 % high, 2.9x the noise). The fit may take it to 0 again.
+fn revive(free: &mut [Free], effect: EffectId) {
+    for p in free.iter_mut() {
+        let default = p.info.default;
+        let ours = p.info.component.effect() == Some(effect);
+        if ours && p.log && default > 0.0 && p.start < COLLAPSED * default {
+            *p = p.at(default);
+        }
+    }
 }
 
 /// A joint fit `r` (of the parameters `f`, with ΔBIC `dbic`) that did not converge, refitted

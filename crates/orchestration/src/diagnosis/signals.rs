@@ -30,6 +30,14 @@
 //!   f/f₀ to each test's f₀ ([`merge_locked`]): *fixed* in frequency when the sine tests' f₀
 //!   differ and the line does not move, *locked* to the excitation when f/f₀ is the same in every
 //!   sine test that has it.
+//! - **A channel's gain.** Per test and channel, the least-squares gain g of the residual on the
+//!   model's own channel, both less their means (an offset beside it does not hide it): the
+//!   channel reads (1 + g) times the model's. It is reported where g·y explains at least
+//!   [`GAIN_SHARE`] of the residual's mean square about its mean, stands [`OFFSET_Z`] standard
+//!   errors of the noise from zero, and no other channel of the test shows a gain of its sign
+//!   over [`GAIN_ALONE`] of it: a sensor's calibration scales its one channel, while a plant
+//!   that moves more moves every channel. An offset of a channel with a gain is read in the
+//!   residual the gain leaves.
 //! - **Tests that differ.** Per test, the weighted misfit the fit minimises (√(χ²/dof), about 1
 //!   at the noise). When some tests are above [`TEST_CARRIES`] and others at most
 //!   [`TEST_CLEAN`], the residual is in some tests only: the set-up changed between them, or an
@@ -83,6 +91,15 @@ pub const TEST_CARRIES: f64 = 5.0;
 /// A test is at the noise at or below this misfit. [chosen: 1.5, the diagnosis's NOISE_FACTOR.]
 pub const TEST_CLEAN: f64 = 1.5;
 
+/// A channel's gain is reported where it explains this share of the residual's mean square about
+/// its mean. [chosen: 0.8. A load cell reading 6 % high beside 1 % noise leaves 97 %; a plant
+/// effect leaves a residual that is not one channel scaled (a lag, harmonics, a resonance).]
+pub const GAIN_SHARE: f64 = 0.8;
+/// … and the test's other channels show no gain of its sign over this share of it. [chosen: a
+/// quarter: a motion the plant changes by a factor changes every channel alike, while two
+/// sensors' calibrations need not agree.]
+pub const GAIN_ALONE: f64 = 0.25;
+
 /// Offsets and lines smaller than this share of the measured channel's rms are not reported:
 /// [docs/model.md §4: the model's numerical floor, 1e-4 of the signal's rms. The model's own
 /// output compared with itself leaves residuals at that level, with narrow peaks of resampling
@@ -110,6 +127,19 @@ pub struct Offset {
     /// The displacement's: the steady part of the feedback less the tracked reference, measured
     /// and the model's (the loop's steady error), m ([`loop_errors`]).
     pub loop_error: Option<[f64; 2]>,
+}
+
+/// A channel that reads a constant factor times the model's in one test.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Gain {
+    pub test: usize,
+    pub channel: usize,
+    /// g: the channel reads (1 + g) times the model's.
+    pub gain: f64,
+    /// g in standard errors of the noise.
+    pub z: f64,
+    /// Its share of the residual's mean square about its mean.
+    pub share: f64,
 }
 
 /// A spectral line of the residual in one test and channel.
@@ -143,6 +173,7 @@ pub type Misfits = Vec<(usize, f64)>;
 #[derive(Debug, Clone, Default)]
 pub struct Signals {
     pub offsets: Vec<Offset>,
+    pub gains: Vec<Gain>,
     pub lines: Vec<Line>,
     /// Tests above [`TEST_CARRIES`] and tests at most [`TEST_CLEAN`] (√(χ²/dof)), when both are
     /// there.
@@ -167,6 +198,67 @@ pub(crate) fn residual(t: &ComparedTest, c: usize) -> Option<Vec<f64>> {
     Some(x.iter().zip(y).map(|(a, b)| a - b).collect())
 }
 
+/// The model's channel `c` of a compared test (None where the file lacks it).
+fn model_channel(t: &ComparedTest, c: usize) -> Option<&[f64]> {
+    match c {
+        0 => Some(&t.accel_model),
+        1 => Some(&t.disp_model),
+        _ => t
+            .test
+            .measured
+            .force
+            .as_ref()
+            .map(|_| t.force_model.as_slice()),
+    }
+}
+
+/// The least-squares factor g of channel `c`'s residual on the model's channel, both less their
+/// means, with Σ(y − ȳ)² and Σ(e − ē)²; None without the channel or its variation.
+fn factor(t: &ComparedTest, c: usize) -> Option<(f64, f64, f64)> {
+    let (e, y) = (residual(t, c)?, model_channel(t, c)?);
+    let n = e.len().min(y.len());
+    if n < 8 {
+        return None;
+    }
+    let mean = |v: &[f64]| v[..n].iter().sum::<f64>() / n as f64;
+    let (me, my) = (mean(&e), mean(y));
+    let (mut ey, mut yy, mut ee) = (0.0, 0.0, 0.0);
+    for (a, b) in e[..n].iter().zip(&y[..n]) {
+        let (a, b) = (a - me, b - my);
+        (ey, yy, ee) = (ey + a * b, yy + b * b, ee + a * a);
+    }
+    (yy > 0.0 && ee > 0.0).then(|| (ey / yy, yy, ee))
+}
+
+/// The gain of channel `c` of test `t` ([`Gain`], test and channel set), where its residual is
+/// one; `sigma` the channel's noise.
+fn gain(t: &ComparedTest, c: usize, sigma: f64) -> Option<Gain> {
+    let (g, yy, ee) = factor(t, c).filter(|_| sigma > 0.0)?;
+    let (share, z) = (g * g * yy / ee, g * yy.sqrt() / sigma);
+    let big = g.abs() >= SIGNAL_FLOOR && z.abs() >= OFFSET_Z;
+    (big && share >= GAIN_SHARE).then_some(Gain {
+        test: 0,
+        channel: c,
+        gain: g,
+        z,
+        share,
+    })
+}
+
+/// The gains of test `t`'s channels that no other channel shares ([`GAIN_ALONE`]: another's
+/// factor of the same sign and over that share of it), test index `i`.
+fn gains_of(t: &ComparedTest, i: usize, sigma: &[f64; 3]) -> Vec<Gain> {
+    let other = |c: usize| factor(t, c).map_or(0.0, |f| f.0);
+    (0..3)
+        .filter_map(|c| gain(t, c, sigma[c]))
+        .filter(|g| {
+            let mut others = (0..3).filter(|&o| o != g.channel).map(other);
+            others.all(|o| o * g.gain <= 0.0 || o.abs() <= GAIN_ALONE * g.gain.abs())
+        })
+        .map(|g| Gain { test: i, ..g })
+        .collect()
+}
+
 /// The rms of the measured channel `c` of a compared test (0 without it).
 fn measured_rms(t: &ComparedTest, c: usize) -> f64 {
     let m = &t.test.measured;
@@ -183,9 +275,17 @@ fn measured_rms(t: &ComparedTest, c: usize) -> f64 {
 pub fn read(compared: &[ComparedTest], sigma: &[[f64; 3]], misfit: &[f64]) -> Signals {
     let mut offsets = Vec::new();
     let mut hits = Vec::new();
+    let mut gains = Vec::new();
     for (i, t) in compared.iter().enumerate() {
+        let own = gains_of(t, i, &sigma[i]);
         for c in 0..3 {
-            let Some(e) = residual(t, c) else { continue };
+            let Some(mut e) = residual(t, c) else {
+                continue;
+            };
+            // An offset beside a gain is read in what the gain leaves.
+            if let (Some(g), Some(y)) = (own.iter().find(|g| g.channel == c), model_channel(t, c)) {
+                e.iter_mut().zip(y).for_each(|(e, y)| *e -= g.gain * y);
+            }
             let floor = SIGNAL_FLOOR * measured_rms(t, c);
             if let Some(o) = offset(&e, sigma[i][c]).filter(|o| o.value.abs() >= floor) {
                 offsets.push(Offset {
@@ -204,6 +304,7 @@ pub fn read(compared: &[ComparedTest], sigma: &[[f64; 3]], misfit: &[f64]) -> Si
                 ..h
             }));
         }
+        gains.extend(own);
     }
     let f0: Vec<Option<f64>> = compared
         .iter()
@@ -215,6 +316,7 @@ pub fn read(compared: &[ComparedTest], sigma: &[[f64; 3]], misfit: &[f64]) -> Si
         .collect();
     Signals {
         offsets,
+        gains,
         lines: group_lines(hits, &f0, &res),
         split: split(misfit),
         between: between(misfit),
@@ -566,6 +668,7 @@ impl Signals {
     /// The evidence in plain words, one sentence per finding, each with its numbers.
     pub fn sentences(&self) -> Vec<String> {
         let mut out = self.offset_sentences();
+        out.extend(self.gain_sentences());
         out.extend(self.lines.iter().map(|l| self.line_sentence(l)));
         out.extend(self.split_sentence());
         out
@@ -573,7 +676,36 @@ impl Signals {
 
     /// Whether the signals show anything.
     pub fn is_empty(&self) -> bool {
-        self.offsets.is_empty() && self.lines.is_empty() && self.split.is_none()
+        self.offsets.is_empty()
+            && self.gains.is_empty()
+            && self.lines.is_empty()
+            && self.split.is_none()
+    }
+
+    fn gain_sentences(&self) -> Vec<String> {
+        (0..3)
+            .filter_map(|c| {
+                let g: Vec<&Gain> = self.gains.iter().filter(|g| g.channel == c).collect();
+                g.first()?;
+                let (lo, hi) = bounds(g.iter().map(|g| 1.0 + g.gain));
+                let what = match hi - lo > 0.1 * (hi - 1.0).abs().max((lo - 1.0).abs()) {
+                    true => format!("{lo:.4} to {hi:.4}"),
+                    false => format!("{:.4}", 1.0 + g.iter().map(|g| g.gain).sum::<f64>() / g.len() as f64),
+                };
+                let which = if g.len() == self.names.len() {
+                    format!("in every test ({} of {})", g.len(), self.names.len())
+                } else {
+                    format!("in {} only", self.list(g.iter().map(|g| g.test)))
+                };
+                let share = g.iter().map(|g| g.share).fold(0.0, f64::max);
+                let z = g.iter().map(|g| g.z.abs()).fold(0.0, f64::max);
+                Some(format!(
+                    "the {} reads {what} times the model's {which}, while the other channels show no such factor (up to {z:.0} noise errors and {:.0} % of that residual about its mean): a sensor's calibration, or a load only that channel sees",
+                    CHANNELS[c].0,
+                    100.0 * share
+                ))
+            })
+            .collect()
     }
 
     fn offset_sentences(&self) -> Vec<String> {

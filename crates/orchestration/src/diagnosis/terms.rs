@@ -40,6 +40,8 @@ pub enum Evidence {
     Map,
     /// A steady offset of a channel (0 acceleration, 1 displacement, 2 force).
     Offset { channel: usize },
+    /// A channel that reads a factor times the model's (0 acceleration, 1 displacement, 2 force).
+    Gain { channel: usize },
     /// A spectral line of about `freq_hz`, seen in `channel` (the term may act on the platen).
     Line { channel: usize, freq_hz: f64 },
 }
@@ -121,6 +123,22 @@ impl Term {
     /// terms given with it, "; "-separated.
     pub fn written(&self) -> String {
         let each: Vec<String> = self.parts().map(Term::written_alone).collect();
+        each.join("; ")
+    }
+
+    /// [`Term::written`] with the tests each part is given to where that is not every one of the
+    /// `n` ("… in f2_a1p5 only"), the tests named as `s` names them.
+    pub fn described(&self, n: usize, s: &Signals) -> String {
+        let each: Vec<String> = (self.parts())
+            .map(|p| match p.forms.len() < n {
+                true => format!(
+                    "{} in {} only",
+                    p.written_alone(),
+                    s.list(p.forms.iter().map(|f| f.0))
+                ),
+                false => p.written_alone(),
+            })
+            .collect();
         each.join("; ")
     }
 
@@ -210,6 +228,8 @@ pub fn from_signals(s: &Signals, c: &[ComparedTest]) -> Vec<Term> {
         if ch == 1 {
             out.extend(bias_terms(&o, c));
         }
+        let g: Vec<&signals::Gain> = s.gains.iter().filter(|g| g.channel == ch).collect();
+        out.extend(gain_terms(ch, &g, &o, c.len()));
     }
     for l in &s.lines {
         out.extend(line_terms(l, c));
@@ -269,17 +289,73 @@ fn offset_terms_in(ch: usize, o: &[&signals::Offset]) -> Vec<Term> {
     if o.len() < 2 || o.len() > OFFSET_TESTS {
         return vec![shared];
     }
-    let each = Term {
-        forms: (o.iter())
-            .map(|o| (o.test, format!("{x} + {name}_{}", o.test + 1)))
+    let values: Vec<(usize, f64)> = o.iter().map(|o| (o.test, o.value)).collect();
+    let each = each_test(&shared, (&name, unit), &values, &|p| format!("{x} + {p}"));
+    vec![shared, each]
+}
+
+/// The gain terms of channel `ch` from its gains `g` (and its offsets `o`), in `n` tests: one
+/// factor in the tests that show it, one per test where there are several, one in every test
+/// where some do not show it (a sensor's calibration holds for the campaign; another residual
+/// may hide it), and that one with the channel's offset where it has one (a load cell's factor
+/// and a zero that moved).
+fn gain_terms(ch: usize, g: &[&signals::Gain], o: &[&signals::Offset], n: usize) -> Vec<Term> {
+    if g.is_empty() {
+        return Vec::new();
+    }
+    let (hook, x, _) = channel_hook(ch);
+    let name = format!("k_{x}");
+    let factor = 1.0 + g.iter().map(|g| g.gain).sum::<f64>() / g.len() as f64;
+    let shared = Term {
+        hook,
+        forms: g
+            .iter()
+            .map(|g| (g.test, format!("{name} * {x}")))
             .collect(),
-        params: (o.iter())
-            .map(|o| param(&format!("{name}_{}", o.test + 1), unit, o.value))
-            .collect(),
-        generic: format!("{} = \"{x} + {name}_i\" in each test i", hook.key()),
+        params: vec![param(&name, "-", factor)],
+        generic: format!("{} = \"{name} * {x}\"", hook.key()),
+        evidence: Evidence::Gain { channel: ch },
+        also: Vec::new(),
+    };
+    let mut out = vec![shared.clone()];
+    if (2..=OFFSET_TESTS).contains(&g.len()) {
+        let values: Vec<(usize, f64)> = g.iter().map(|g| (g.test, 1.0 + g.gain)).collect();
+        out.push(each_test(&shared, (&name, "-"), &values, &|p| {
+            format!("{p} * {x}")
+        }));
+    }
+    let every = Term {
+        forms: (0..n).map(|t| (t, format!("{name} * {x}"))).collect(),
         ..shared.clone()
     };
-    vec![shared, each]
+    if g.len() < n {
+        out.push(every.clone());
+    }
+    if let Some(first) = o.first() {
+        let (_, _, unit) = channel_hook(ch);
+        let off = format!("off_{x}");
+        let mean = o.iter().map(|o| o.value).sum::<f64>() / o.len() as f64;
+        let with_offset = |t: usize| o.iter().any(|o| o.test == t);
+        out.push(Term {
+            forms: (0..n)
+                .map(|t| match with_offset(t) {
+                    true => (t, format!("{name} * {x} + {off}")),
+                    false => (t, format!("{name} * {x}")),
+                })
+                .collect(),
+            params: vec![param(&name, "-", factor), param(&off, unit, mean)],
+            generic: format!(
+                "{} = \"{name} * {x} + {off}\" in {}, \"{name} * {x}\" in the others",
+                hook.key(),
+                match o.len() {
+                    1 => format!("test {}", first.test + 1),
+                    k => format!("{k} tests"),
+                }
+            ),
+            ..every
+        });
+    }
+    out
 }
 
 /// The valve's null bias a displacement offset with a loop error suggests (`o`, the
@@ -315,17 +391,31 @@ fn bias_terms(o: &[&signals::Offset], c: &[ComparedTest]) -> Vec<Term> {
     if with_loop.len() < 2 || with_loop.len() > OFFSET_TESTS {
         return vec![shared];
     }
-    let each = Term {
-        forms: (with_loop.iter())
-            .map(|&(t, _)| (t, format!("x + b_x_{}", t + 1)))
-            .collect(),
-        params: (with_loop.iter())
-            .map(|&(t, b)| param(&format!("b_x_{}", t + 1), "m", b))
-            .collect(),
-        generic: "opening = \"x + b_x_i\" in each test i".to_string(),
-        ..shared.clone()
-    };
+    let each = each_test(&shared, ("b_x", "m"), &with_loop, &|p| format!("x + {p}"));
     vec![shared, each]
+}
+
+/// `shared` with a parameter of its own in each test: `name_k` (unit `unit`) started at the test's
+/// value in `values` (test index, start), in the form `form` makes of it ("x + b_x_3").
+fn each_test(
+    shared: &Term,
+    (name, unit): (&str, &str),
+    values: &[(usize, f64)],
+    form: &dyn Fn(&str) -> String,
+) -> Term {
+    let own = |t: usize| format!("{name}_{}", t + 1);
+    Term {
+        forms: values.iter().map(|&(t, _)| (t, form(&own(t)))).collect(),
+        params: (values.iter())
+            .map(|&(t, v)| param(&own(t), unit, v))
+            .collect(),
+        generic: format!(
+            "{} = \"{}\" in each test i",
+            shared.hook.key(),
+            form(&format!("{name}_i"))
+        ),
+        ..shared.clone()
+    }
 }
 
 fn param(name: &str, unit: &str, value: f64) -> TermParam {

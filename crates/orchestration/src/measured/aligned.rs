@@ -1032,7 +1032,16 @@ impl Alignment {
             ));
         }
         if self.end_row < rows {
-            notes.push(format!("the excitation ends at t = {:.4} s: the {:.3} s recorded after it are not compared", self.end_s(), self.after_s()));
+            // A row or two (a record a sample longer than its excitation) in rows, not "0.000 s".
+            let after = match rows - self.end_row {
+                1 => "row recorded after it is".to_string(),
+                k if self.after_s() < 0.01 => format!("{k} rows recorded after it are"),
+                _ => format!("{:.3} s recorded after it are", self.after_s()),
+            };
+            notes.push(format!(
+                "the excitation ends at t = {:.4} s: the {after} not compared",
+                self.end_s()
+            ));
         }
         notes
     }

@@ -160,15 +160,37 @@ impl fmt::Display for TimeProblem {
     }
 }
 
-/// Decimal quantum of the shortest round-trip representation of `x` (0 for 0) and its
-/// significant digits.
+/// Ulps of its value by which a printed time may have moved on its way in: a column in another
+/// unit (ms) is scaled to seconds as it is read, and the product is rounded, as was the printed
+/// value [chosen: a scaled decimal is within 2 ulps of the scaled decimal's nearest double].
+const CONVERSION_ULPS: f64 = 4.0;
+
+/// Decimal quantum of the shortest representation of `x` (0 for 0) within [`CONVERSION_ULPS`] of
+/// it, and its significant digits: the digits it was printed with, in whatever unit.
 pub(crate) fn printed_quantum(x: f64) -> (f64, u32) {
     if x == 0.0 || !x.is_finite() {
         return (0.0, 1);
     }
-    let s = format!("{:e}", x.abs());
+    let a = x.abs();
+    let shortest = quantum_of(&format!("{a:e}"));
+    if shortest.1 < 15 {
+        return shortest;
+    }
+    let near = |s: &String| {
+        s.parse::<f64>()
+            .is_ok_and(|y| (y - a).abs() <= CONVERSION_ULPS * f64::EPSILON * a)
+    };
+    (1..shortest.1 as usize)
+        .map(|p| format!("{a:.*e}", p - 1))
+        .find(near)
+        .map_or(shortest, |s| quantum_of(&s))
+}
+
+/// The quantum and significant digits of `s`, a number printed by `{:e}`.
+fn quantum_of(s: &str) -> (f64, u32) {
     let (mant, exp) = s.split_once('e').expect("{:e} has an exponent");
     let exp: i32 = exp.parse().expect("exponent");
+    let mant = mant.trim_end_matches('0').trim_end_matches('.');
     let decimals = mant.split_once('.').map_or(0, |(_, d)| d.len()) as i32;
     (10f64.powi(exp - decimals), decimals as u32 + 1)
 }
@@ -487,6 +509,43 @@ mod tests {
         assert_eq!(printed_quantum(12.3457), (1e-4, 6));
         assert_eq!(printed_quantum(0.0009765625).1, 7);
         assert!((printed_quantum(1.5e-3).0 - 1e-4).abs() < 1e-20);
+        // A column in ms scaled to seconds: the digits printed, not those of the product.
+        for ms in ["24674.6", "1234.57", "0.48828125", "59999.9"] {
+            let printed = printed_quantum(ms.parse::<f64>().unwrap());
+            let scaled = printed_quantum(ms.parse::<f64>().unwrap() * 1e-3);
+            assert_eq!(scaled.1, printed.1, "{ms} ms");
+            assert!((scaled.0 / printed.0 - 1e-3).abs() < 1e-15, "{ms} ms");
+        }
+        // Times computed exactly keep their full digits.
+        assert!(printed_quantum(1.0 / 3.0).1 >= 15);
+    }
+
+    #[test]
+    fn time_printed_in_ms_and_scaled_to_seconds_is_read_by_its_printed_digits() {
+        // A trial's 2048 Hz exports: ms at `%.6g` (refused past 10 s as off a 2040.8 Hz grid)
+        // and ms to one decimal (refused at row 14 as off a 2000 Hz grid).
+        let exact = grid(2048.0, 20 * 2048, 0.0);
+        let ms: Vec<f64> = exact.iter().map(|t| t * 1e3).collect();
+        for (what, text) in [
+            ("%.6g", printed(&ms, 6)),
+            (
+                "%.1f",
+                ms.iter()
+                    .map(|t| format!("{t:.1}").parse().unwrap())
+                    .collect(),
+            ),
+        ] {
+            let s: Vec<f64> = text.iter().map(|t| t * 1e-3).collect();
+            let tb = rebuild(&s).unwrap_or_else(|e| panic!("ms at {what}: {e}"));
+            assert_eq!(tb.rate_hz, 2048.0, "ms at {what}");
+            let note = tb.note().unwrap();
+            let said = if what == "%.6g" {
+                "6 significant digits"
+            } else {
+                "4 decimal place(s)"
+            };
+            assert!(note.contains(said), "ms at {what}: {note}");
+        }
     }
 
     #[test]
