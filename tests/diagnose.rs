@@ -2338,6 +2338,84 @@ fn a_specimen_in_some_tests_beside_an_offset_in_all_is_fitted_to_them() {
     }
 }
 
+/// Two specimens of [`Specimen`] on the platen side by side: a structure's first two modes, each
+/// of its own modal mass (written here, apart from the library's specimen).
+struct TwoModes(Specimen, Specimen);
+
+impl vshake::kernel::effects::Effect<1> for TwoModes {
+    type State = [[f64; 1]; 4];
+    fn initial_state(&self) -> Self::State {
+        [[0.0]; 4]
+    }
+    fn extra_force(&self, c: vshake::kernel::effects::hook::Motion, s: &Self::State) -> f64 {
+        let (a, b) = (&self.0, &self.1);
+        a.k * (s[0][0] - c.y)
+            + a.c * (s[1][0] - c.v)
+            + b.k * (s[2][0] - c.y)
+            + b.c * (s[3][0] - c.v)
+    }
+    fn derivs(
+        &self,
+        plant: &vshake::kernel::effects::PlantView<'_, 1>,
+        s: &Self::State,
+        ds: &mut Self::State,
+    ) {
+        use vshake::kernel::state::idx::{VEL as V, Y};
+        let (y, v) = (plant.state[Y][0], plant.state[V][0]);
+        for (i, m) in [&self.0, &self.1].into_iter().enumerate() {
+            let (x, u) = (s[2 * i][0], s[2 * i + 1][0]);
+            ds[2 * i][0] = u;
+            ds[2 * i + 1][0] = -(m.k * (x - y) + m.c * (u - v)) / m.m;
+        }
+    }
+}
+
+/// Issue 51 (trial 3's case, 2026-11-30, made again): a two-mode specimen (25 t at 3.6 Hz, 4 %;
+/// 20 t at 6.2 Hz, 5 %: modes close and of like mass, away from the library's 2.5 and 7.5 Hz)
+/// in four tests of 8. The second mode, scanned on top of the first fitted alone, was sized
+/// against the model without either mode, and the first mode's mass, fitted where it stood in
+/// for both, was held: the addition was not significant and the verdict named one mode, 33x the
+/// noise. The scan now sizes the second mode against the first at its estimates, the first
+/// mode's mass giving way to it.
+#[test]
+#[ignore = "slow (about 35 s): a CI step runs it, cargo test --release --test diagnose -- --ignored"]
+fn a_two_mode_specimen_in_some_tests_is_fitted_to_them() {
+    let d = tempfile::tempdir().unwrap();
+    let on = [0, 2, 5, 7];
+    let modes = TwoModes(
+        Specimen::new(25_000.0, 3.6, 0.04),
+        Specimen::new(20_000.0, 6.2, 0.05),
+    );
+    write_seeded(d.path(), &modes, &|i| on.contains(&i), &|_, _, _, _| {}, 11);
+    let r = diagnose(d.path());
+    println!("{}", r.stdout);
+    let verdict = specimen_group_named(&r, &on);
+    assert!(verdict.contains("specimen's mode 2"), "{verdict}");
+    let truth = [
+        ("m1", 25_000.0),
+        ("f1", 3.6),
+        ("zeta1", 0.04),
+        ("m2", 20_000.0),
+        ("f2", 6.2),
+        ("zeta2", 0.05),
+    ];
+    let (first, _) = r.first();
+    let (params, e, se, _, _) = named_fit(&r.dir, &r, first);
+    for (p, v) in truth {
+        let i = (params.iter().position(|x| x == &format!("specimen.{p}")))
+            .unwrap_or_else(|| panic!("specimen.{p} not in {params:?}"));
+        assert!(
+            (e[i] - v).abs() <= 2.0 * se[i],
+            "{p}: {} ± {} vs {v}",
+            e[i],
+            se[i]
+        );
+    }
+    for (test, m) in misfit_after(&r.stdout) {
+        assert!(m.iter().all(|&x| x <= 1.5), "{test}: {m:?}");
+    }
+}
+
 /// Writes in `dir` the tutorial's campaign with a specimen of (mass kg, frequency Hz, damping
 /// ratio) `m_f_zeta` in the tests `on` (the baseline model in the others), its columns then
 /// changed by `alter`, the noise of `seed`'s stream.

@@ -431,9 +431,16 @@ fn print_evidence(o: &mut dyn Write, problem: &Problem, d: &Diagnosis) -> std::i
             problem.fundamental_phase_error(&d.baseline),
             problem.fundamental_phase_error(&f.after),
         );
-        let ph: Vec<String> = (0..problem.tests.len())
+        // Record tests have no fundamental: where some are left out, each value is named.
+        let sines: Vec<usize> = (0..problem.tests.len())
             .filter(|&t| pb[t].is_finite())
-            .map(|t| format!("{:+.2}->{:+.2}", pb[t], pa[t]))
+            .collect();
+        let named = sines.len() < problem.tests.len();
+        let ph: Vec<String> = (sines.iter())
+            .map(|&t| match named {
+                true => format!("{} {:+.2}->{:+.2}", problem.tests[t].name, pb[t], pa[t]),
+                false => format!("{:+.2}->{:+.2}", pb[t], pa[t]),
+            })
             .collect();
         if !ph.is_empty() {
             writeln!(

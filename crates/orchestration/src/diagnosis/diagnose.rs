@@ -493,15 +493,20 @@ impl Diagnosis {
     }
 
     /// [`Self::signal_note`] when the named effects leave more than [`NOISE_FACTOR`] times the
-    /// noise floor, or name a term or an effect fitted to a group of tests, or a term read off the
-    /// signals (the evidence it rests on); empty otherwise.
+    /// noise floor, or name a term read off the signals; where they name a term or an effect
+    /// fitted to a group of tests, the tests that differ alone (the evidence it rests on: a
+    /// specimen in a 1 Hz test also reads as a force gain, which the fit has explained); empty
+    /// otherwise.
     fn signal_note_if_short(&self) -> String {
         match self.named_fit() {
             Some((_, f)) if f.after.residual_rms() > NOISE_FACTOR * self.noise_rms => {
                 self.signal_note()
             }
-            Some(_) if self.names_a_group() || self.names_evidence() => self.signal_note(),
-            Some(_) if self.named_group().is_some() => self.signal_note(),
+            Some(_) if self.names_evidence() => self.signal_note(),
+            Some(_) if self.names_a_group() || self.named_group().is_some() => {
+                (self.signals.split_sentence())
+                    .map_or(String::new(), |s| format!("; the signals show {s}"))
+            }
             _ => String::new(),
         }
     }
@@ -762,15 +767,23 @@ fn free_in(problem: &Problem, effect: EffectId, stage: usize) -> Vec<Free> {
     }
 }
 
-/// `free` with the scanned start of stage `stage` of `effect` (see [`fit::scanned`]).
+/// `free` with the scanned start of stage `stage` of `effect` (see [`fit::scanned`]): sized where
+/// the stage has a size, the sizes of the earlier stages giving way (a first mode's mass,
+/// fitted alone, stood in for the second's too).
 fn scanned(problem: &Problem, free: &[Free], effect: EffectId, stage: usize) -> Vec<Free> {
-    let s = &effect.info().stages[stage];
+    let stages = effect.info().stages;
+    let s = &stages[stage];
     let path = s.scan.map(|(name, _)| format!("{effect}.{name}"));
-    let size = s.size.map(|name| format!("{effect}.{name}"));
     let scan = path.as_deref().zip(s.scan.map(|(_, v)| v));
     let shape = s.shape.map(|(name, v)| (format!("{effect}.{name}"), v));
     let shape = shape.as_ref().map(|(n, v)| (n.as_str(), *v));
-    fit::scanned(problem, free, scan, size.as_deref(), shape)
+    let sizing = fit::Sizing {
+        size: s.size.map(|name| format!("{effect}.{name}")),
+        give: (stages[..stage].iter())
+            .filter_map(|e| Some(format!("{effect}.{}", e.size?)))
+            .collect(),
+    };
+    fit::scanned(problem, free, scan, &sizing, shape)
 }
 
 /// How a candidate's fit is scored against the baseline: its χ², the χ² noise leaves (the

@@ -862,31 +862,27 @@ fn with_values(
     m
 }
 
-/// `free` with the start of the parameter `scan` names (its path, `effect.name`) moved to the one of its values (or its
-/// own start) at which the model, the other parameters at their starts, has the lowest χ²: one
-/// batch of evaluations. A resonance's frequency or a lag makes χ² non-convex in the parameter,
-/// and Levenberg–Marquardt from a start in another valley stays there. Values outside the
-/// parameter's range are skipped; without a scan, or when `free` lacks the parameter, `free` as
-/// it is. Where `size` names a parameter of `free` the signature grows in proportion to (a mode's
-/// mass), each value is scored at the size that fits best to first order
-/// ([`first_order_size`]), and the size starts at the best value's. Where `shape` names a
-/// parameter of `free`, every value is also tried with it at each of its values.
+/// `free` with the start of the parameter `scan` names (its path, `effect.name`) moved to the
+/// one of its values (or its own start) at which the model, the other parameters at their
+/// starts, has the lowest χ²: one batch of evaluations. A resonance's frequency or a lag makes χ²
+/// non-convex in the parameter, and Levenberg–Marquardt from a start in another valley stays
+/// there. Values outside the parameter's range are skipped; without a scan, or when `free` lacks
+/// the parameter, `free` as it is. Where `shape` names a parameter of `free`, every value is also
+/// tried with it at each of its values. Where `sizing` names a size of `free` ([`Sizing`]), each
+/// value is scored at the sizes that fit best to first order ([`first_order_sizes`]), and the
+/// sizes start at the best value's.
 pub fn scanned(
     problem: &Problem,
     free: &[Free],
     scan: Option<(&str, &[f64])>,
-    size: Option<&str>,
+    sizing: &Sizing,
     shape: Option<(&str, &[f64])>,
 ) -> Vec<Free> {
-    let mut out = free.to_vec();
-    let Some((name, values)) = scan else {
-        return out;
+    let at = |n: &str| free.iter().position(|f| f.info.path() == n);
+    let Some((i, values)) = scan.and_then(|(n, v)| Some((at(n)?, v))) else {
+        return free.to_vec();
     };
-    let Some(i) = free.iter().position(|f| f.info.path() == name) else {
-        return out;
-    };
-    let sized = size.and_then(|n| free.iter().position(|f| f.info.path() == n));
-    let shaped = shape.and_then(|(n, v)| Some((free.iter().position(|f| f.info.path() == n)?, v)));
+    let shaped = shape.and_then(|(n, v)| Some((at(n)?, v)));
     let f = free[i];
     let shapes: Vec<Option<f64>> = std::iter::once(None)
         .chain(shaped.iter().flat_map(|(_, v)| v.iter().map(|&x| Some(x))))
@@ -898,82 +894,145 @@ pub fn scanned(
                 .map(move |v| (v, s))
         })
         .collect();
-    let n = points.len();
-    // One set more where a size is scaled: the model as it is (the effect's absence).
-    let ev = problem.evaluate(n + usize::from(sized.is_some()), &|k, t, m| {
-        let mut u = vec![0.0; free.len()];
-        match points.get(k) {
-            Some(&(p, s)) => {
-                u[i] = f.u_of(p);
-                if let (Some(x), Some((j, _))) = (s, shaped) {
-                    u[j] = free[j].u_of(x);
-                }
-            }
-            None => return m.clone(),
-        }
-        apply(t, m, free, &u)
-    });
-    let score = |k: usize| match sized {
-        Some(_) => first_order_size(&ev[n], &ev[k]),
-        None => (ev[k].chi2(), 1.0),
-    };
-    let scores: Vec<(f64, f64)> = (0..n).map(score).collect();
-    let best = (0..n)
-        .min_by(|&a, &b| scores[a].0.total_cmp(&scores[b].0))
-        .unwrap_or(0);
-    let Some(j) = sized else {
-        out[i] = f.at(points[best].0);
-        if let (Some(x), Some((h, _))) = (points[best].1, shaped) {
-            out[h] = free[h].at(x);
-        }
-        return out;
-    };
-    // The first-order sizes, checked by a run each: a large effect is not linear in its size.
-    let s = free[j];
-    let size = |k: usize| s.value(s.u_of(s.start * scores[k].1));
-    let again = problem.evaluate(n, &|k, t, m| {
+    // The scaled coordinates of point k: the scanned parameter and the shape at its values.
+    let u_at = |k: usize| {
         let mut u = vec![0.0; free.len()];
         u[i] = f.u_of(points[k].0);
-        u[j] = s.u_of(size(k));
         if let (Some(x), Some((h, _))) = (points[k].1, shaped) {
             u[h] = free[h].u_of(x);
         }
-        apply(t, m, free, &u)
-    });
-    let best = (0..n)
-        .min_by(|&a, &b| again[a].chi2().total_cmp(&again[b].chi2()))
-        .unwrap_or(0);
+        u
+    };
+    let (best, sizes) = match sizing.size.as_deref().and_then(at) {
+        Some(j) => sized_best(problem, free, (j, sizing), points.len(), &u_at),
+        None => {
+            let ev = problem.evaluate(points.len(), &|k, t, m| apply(t, m, free, &u_at(k)));
+            (lowest(&ev), Vec::new())
+        }
+    };
+    let mut out = free.to_vec();
     out[i] = f.at(points[best].0);
-    out[j] = s.at(size(best));
     if let (Some(x), Some((h, _))) = (points[best].1, shaped) {
         out[h] = free[h].at(x);
     }
+    for (q, v) in sizes {
+        out[q] = free[q].at(v);
+    }
     out
+}
+
+/// What a scan sizes: the parameter a stage's signature grows in proportion to (a mode's mass;
+/// 0, the stage absent), and those of the effect's earlier stages that may give way to it (the
+/// first mode's mass, fitted where it stood in for both modes).
+#[derive(Debug, Clone, Default)]
+pub struct Sizing {
+    pub size: Option<String>,
+    pub give: Vec<String>,
+}
+
+/// The index of the lowest χ² of `ev` (0 where it is empty).
+fn lowest(ev: &[Eval]) -> usize {
+    (0..ev.len())
+        .min_by(|&a, &b| ev[a].chi2().total_cmp(&ev[b].chi2()))
+        .unwrap_or(0)
+}
+
+/// Relative step of an earlier stage's size for its signature, to first order [chosen: a
+/// quarter: far above the integrator's round-off, small beside the sizes the scan moves].
+const GIVE_STEP: f64 = 0.25;
+
+/// The best of `n` points (`u_at`, their scaled coordinates) of a sized scan, and the values
+/// of its sizes (index in `free`, value): each point's sizes (the size at `j`, those of
+/// `sizing.give` beside it) fitted to first order against the model with the stage absent (the
+/// size 0, the other parameters at their starts), then each point run at its sizes, a large
+/// effect not being linear in its size.
+fn sized_best(
+    problem: &Problem,
+    free: &[Free],
+    (j, sizing): (usize, &Sizing),
+    n: usize,
+    u_at: &(dyn Fn(usize) -> Vec<f64> + Sync),
+) -> (usize, Vec<(usize, f64)>) {
+    let give: Vec<usize> = (sizing.give.iter())
+        .filter_map(|g| free.iter().position(|f| &f.info.path() == g))
+        .collect();
+    // The stage absent, then the same with each earlier size a step larger.
+    let absent = |g: Option<usize>| -> Vec<f64> {
+        (free.iter().enumerate())
+            .map(|(q, f)| match q {
+                q if q == j => 0.0,
+                q if Some(q) == g => f.start * (1.0 + GIVE_STEP),
+                _ => f.start,
+            })
+            .collect()
+    };
+    let ev = problem.evaluate(n + 1 + give.len(), &|k, t, m| match k.checked_sub(n) {
+        None => apply(t, m, free, &u_at(k)),
+        Some(0) => with_values(t, m, free, absent(None).into_iter()),
+        Some(c) => with_values(t, m, free, absent(Some(give[c - 1])).into_iter()),
+    });
+    let (points, without) = ev.split_at(n);
+    let cols: Vec<&Eval> = without[1..].iter().collect();
+    let at_sizes = |k: usize| {
+        let (a, b) = first_order_sizes(&without[0], &points[k], &cols);
+        let mut u = u_at(k);
+        u[j] = free[j].u_of(free[j].start * a);
+        for (&g, b) in give.iter().zip(b) {
+            u[g] = free[g].u_of(free[g].start * (1.0 + b * GIVE_STEP));
+        }
+        u
+    };
+    let sized: Vec<Vec<f64>> = (0..n).map(at_sizes).collect();
+    let again = problem.evaluate(n, &|k, t, m| apply(t, m, free, &sized[k]));
+    let best = lowest(&again);
+    let sizes = (std::iter::once(j).chain(give))
+        .map(|q| (q, free[q].value(sized[best][q])))
+        .collect();
+    (best, sizes)
 }
 
 /// Most a first-order size moves its parameter from its start, either way: a size fitted far
 /// beyond its start is a linearisation too far to trust. [chosen: 16]
 const SIZE_REACH: f64 = 16.0;
 
-/// The χ² of `with` with its difference from `without` scaled by the factor that minimises it
-/// (within 1/[`SIZE_REACH`] to [`SIZE_REACH`]), and that factor: the misfit of an effect of
-/// the best size, to first order, where its signature grows in proportion to one parameter.
-/// `with`'s own χ² and 1 where either run failed.
-fn first_order_size(without: &Eval, with: &Eval) -> (f64, f64) {
-    if without.failure.is_some() || with.failure.is_some() || without.r.len() != with.r.len() {
-        return (with.chi2(), 1.0);
+/// The factors of the first-order fit of `with`'s difference from `without` (a stage at its
+/// start size against its absence) and of the differences `give` make (an earlier stage's size
+/// a [`GIVE_STEP`] larger), scaled by the factors that minimise the χ²: the size's factor
+/// (within 1/[`SIZE_REACH`] to [`SIZE_REACH`]) and the earlier sizes' in steps (their sizes kept
+/// within the same reach). 1 and none where a run failed or the signature is nil.
+fn first_order_sizes(without: &Eval, with: &Eval, give: &[&Eval]) -> (f64, Vec<f64>) {
+    let failed = |e: &Eval| e.failure.is_some() || e.r.len() != without.r.len();
+    if failed(without) || failed(with) || give.iter().any(|e| failed(e)) {
+        return (1.0, vec![0.0; give.len()]);
     }
-    let d: Vec<f64> = with.r.iter().zip(&without.r).map(|(a, b)| a - b).collect();
-    let dd: f64 = d.iter().map(|x| x * x).sum();
-    let rd: f64 = without.r.iter().zip(&d).map(|(r, x)| r * x).sum();
-    if !(dd > 0.0) {
-        return (with.chi2(), 1.0);
+    let diff = |e: &Eval| -> Vec<f64> { e.r.iter().zip(&without.r).map(|(a, b)| a - b).collect() };
+    let cols: Vec<Vec<f64>> = std::iter::once(with)
+        .chain(give.iter().copied())
+        .map(diff)
+        .collect();
+    if !(cols[0].iter().map(|x| x * x).sum::<f64>() > 0.0) {
+        return (1.0, vec![0.0; give.len()]);
     }
-    let a = (-rd / dd).clamp(1.0 / SIZE_REACH, SIZE_REACH);
-    let chi2 = (without.r.iter().zip(&d))
-        .map(|(r, x)| (r + a * x).powi(2))
-        .sum();
-    (chi2, a)
+    let neg: Vec<f64> = without.r.iter().map(|r| -r).collect();
+    let (a, g) = normal(&cols, &neg);
+    let x = solve(&a, &g);
+    let size = x[0].clamp(1.0 / SIZE_REACH, SIZE_REACH);
+    // With the size held inside its reach, the earlier sizes refitted to what it leaves.
+    let left: Vec<f64> = (neg.iter().zip(&cols[0]))
+        .map(|(r, d)| r - size * d)
+        .collect();
+    let steps = match give.len() {
+        0 => Vec::new(),
+        _ => {
+            let (a, g) = normal(&cols[1..], &left);
+            solve(&a, &g)
+        }
+    };
+    let reach = |b: f64| {
+        let lo = (1.0 / SIZE_REACH - 1.0) / GIVE_STEP;
+        b.clamp(lo, (SIZE_REACH - 1.0) / GIVE_STEP)
+    };
+    (size, steps.into_iter().map(reach).collect())
 }
 
 /// The outcome of a fit.
@@ -1504,6 +1563,45 @@ mod tests {
     use super::*;
     use crate::runs::single::run_sampled;
     use vshake_kernel::excitation::Record;
+
+    /// The first-order sizes are the least-squares factors of the stage's and the earlier
+    /// stages' signatures, and the size is held inside its reach with the earlier ones refitted.
+    #[test]
+    fn first_order_sizes_give_way_jointly() {
+        let eval = |r: Vec<f64>| Eval {
+            r,
+            rms: Vec::new(),
+            failure: None,
+        };
+        let d = [1.0, 0.5, -0.3, 0.2, 0.0];
+        let c = [0.1, -0.4, 0.6, 0.0, 0.3];
+        // The residual the stage (2x its start) and an earlier size (1.5 steps) would remove.
+        let r0: Vec<f64> = (0..5).map(|i| -(2.0 * d[i] + 1.5 * c[i])).collect();
+        let shifted = |x: &[f64; 5]| eval((0..5).map(|i| r0[i] + x[i]).collect());
+        let (without, with, give) = (eval(r0.clone()), shifted(&d), shifted(&c));
+        let (a, b) = first_order_sizes(&without, &with, &[&give]);
+        assert!(
+            (a - 2.0).abs() < 1e-12 && (b[0] - 1.5).abs() < 1e-12,
+            "{a} {b:?}"
+        );
+        // Alone, the size takes what it can of both.
+        let (alone, none) = first_order_sizes(&without, &with, &[]);
+        let dd: f64 = d.iter().map(|x| x * x).sum();
+        let rd: f64 = r0.iter().zip(&d).map(|(r, x)| r * x).sum();
+        assert!(
+            (alone + rd / dd).abs() < 1e-12 && none.is_empty(),
+            "{alone}"
+        );
+        // Past its reach, the size is held at it and the earlier size takes the rest.
+        let far: Vec<f64> = (0..5).map(|i| -(20.0 * d[i] + 1.5 * c[i])).collect();
+        let at = |x: &[f64; 5]| eval((0..5).map(|i| far[i] + x[i]).collect());
+        let (a, b) = first_order_sizes(&eval(far.clone()), &at(&d), &[&at(&c)]);
+        let left: Vec<f64> = (0..5).map(|i| -far[i] - SIZE_REACH * d[i]).collect();
+        let cc: f64 = c.iter().map(|x| x * x).sum();
+        let lc: f64 = left.iter().zip(&c).map(|(l, x)| l * x).sum();
+        assert_eq!(a, SIZE_REACH);
+        assert!((b[0] - lc / cc).abs() < 1e-12, "{b:?}");
+    }
 
     /// A sine test's noise σ is the noise's, not a hum's: a line between the harmonics (near one
     /// of them, or in a short window) is fitted out with them.

@@ -780,7 +780,8 @@ impl Signals {
         )
     }
 
-    fn split_sentence(&self) -> Option<String> {
+    /// "the residual is in some tests only: …" where it is ([`Signals::split`]).
+    pub fn split_sentence(&self) -> Option<String> {
         let (carry, clean) = self.split.as_ref()?;
         let show = |v: &[(usize, f64)]| -> String {
             v.iter()

@@ -331,31 +331,37 @@ fn gain_terms(ch: usize, g: &[&signals::Gain], o: &[&signals::Offset], n: usize)
     if g.len() < n {
         out.push(every.clone());
     }
-    if let Some(first) = o.first() {
-        let (_, _, unit) = channel_hook(ch);
-        let off = format!("off_{x}");
-        let mean = o.iter().map(|o| o.value).sum::<f64>() / o.len() as f64;
-        let with_offset = |t: usize| o.iter().any(|o| o.test == t);
-        out.push(Term {
-            forms: (0..n)
-                .map(|t| match with_offset(t) {
-                    true => (t, format!("{name} * {x} + {off}")),
-                    false => (t, format!("{name} * {x}")),
-                })
-                .collect(),
-            params: vec![param(&name, "-", factor), param(&off, unit, mean)],
-            generic: format!(
-                "{} = \"{name} * {x} + {off}\" in {}, \"{name} * {x}\" in the others",
-                hook.key(),
-                match o.len() {
-                    1 => format!("test {}", first.test + 1),
-                    k => format!("{k} tests"),
-                }
-            ),
-            ..every
-        });
+    if !o.is_empty() {
+        out.push(gain_with_offset(ch, o, every));
     }
     out
+}
+
+/// `every` (a channel's factor in every test) with the channel's offset `off_x` added in the
+/// tests whose offsets `o` show one, started at their mean.
+fn gain_with_offset(ch: usize, o: &[&signals::Offset], every: Term) -> Term {
+    let (hook, x, unit) = channel_hook(ch);
+    let (name, off) = (format!("k_{x}"), format!("off_{x}"));
+    let mean = o.iter().map(|o| o.value).sum::<f64>() / o.len() as f64;
+    let with_offset = |t: usize| o.iter().any(|o| o.test == t);
+    let in_tests = match o.len() {
+        1 => format!("test {}", o[0].test + 1),
+        k => format!("{k} tests"),
+    };
+    Term {
+        forms: (every.forms.iter())
+            .map(|&(t, _)| match with_offset(t) {
+                true => (t, format!("{name} * {x} + {off}")),
+                false => (t, format!("{name} * {x}")),
+            })
+            .collect(),
+        params: vec![every.params[0].clone(), param(&off, unit, mean)],
+        generic: format!(
+            "{} = \"{name} * {x} + {off}\" in {in_tests}, \"{name} * {x}\" in the others",
+            hook.key(),
+        ),
+        ..every
+    }
 }
 
 /// The valve's null bias a displacement offset with a loop error suggests (`o`, the
