@@ -2316,14 +2316,21 @@ fn a_specimen_in_some_tests_beside_an_offset_in_all_is_fitted_to_them() {
     let r = diagnose(d.path());
     println!("{}", r.stdout);
     let verdict = specimen_group_named(&r, &on);
-    let (first, _) = r.first();
     assert!(
         verdict.contains("+ expression (force_channel = "),
         "{verdict}"
     );
     // The named set's joint fit: the specimen's parameters beside the offset's.
-    let (params, e, se, _, _) = named_fit(&r.dir, &r, first);
-    for (p, v) in [("m1", 15_000.0), ("f1", 3.6), ("zeta1", 0.04)] {
+    let truth = [("m1", 15_000.0), ("f1", 3.6), ("zeta1", 0.04)];
+    assert_specimen_in_named_fit(&r, &truth);
+}
+
+/// The specimen's parameters in the joint fit of `r`'s named set within 2 SE of `truth`, and
+/// every test's misfit after at most 1.5.
+fn assert_specimen_in_named_fit(r: &Diagnosis, truth: &[(&str, f64)]) {
+    let (first, _) = r.first();
+    let (params, e, se, _, _) = named_fit(&r.dir, r, first);
+    for &(p, v) in truth {
         let i = (params.iter().position(|x| x == &format!("specimen.{p}")))
             .unwrap_or_else(|| panic!("specimen.{p} not in {params:?}"));
         assert!(
@@ -2399,21 +2406,7 @@ fn a_two_mode_specimen_in_some_tests_is_fitted_to_them() {
         ("f2", 6.2),
         ("zeta2", 0.05),
     ];
-    let (first, _) = r.first();
-    let (params, e, se, _, _) = named_fit(&r.dir, &r, first);
-    for (p, v) in truth {
-        let i = (params.iter().position(|x| x == &format!("specimen.{p}")))
-            .unwrap_or_else(|| panic!("specimen.{p} not in {params:?}"));
-        assert!(
-            (e[i] - v).abs() <= 2.0 * se[i],
-            "{p}: {} ± {} vs {v}",
-            e[i],
-            se[i]
-        );
-    }
-    for (test, m) in misfit_after(&r.stdout) {
-        assert!(m.iter().all(|&x| x <= 1.5), "{test}: {m:?}");
-    }
+    assert_specimen_in_named_fit(&r, &truth);
 }
 
 /// Writes in `dir` the tutorial's campaign with a specimen of (mass kg, frequency Hz, damping
