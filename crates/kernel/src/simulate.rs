@@ -882,73 +882,51 @@ pub(crate) fn rhs_general<
     let mut q_out2 = [[0.0; N]; N_ACT];
     let mut xs = [[0.0; N]; N_ACT];
     let mut q_supply = [0.0; N];
-    let mut p_s = [0.0; N];
     let mut f_act = [0.0; N];
-    let mut stroke = [0.0; N];
+    // One hook of every lane before the next ([`Effect::supplies`]): each lane's numbers are
+    // those of the hooks called lane by lane, in the same order.
+    let p_s = effect.supplies(&lp.p_s, es);
+    // The chambers follow the actuator stroke (the platen's motion unless an effect says so).
+    let [stroke, v_s] = effect.strokes(&s[Y], &s[VEL], es);
+    let mut b = [[0.0; N]; 2];
     for l in 0..N {
-        let valve = lp.valve.lane(l);
-        let act = lp.act.lane(l);
-        let (y, v, z) = (s[Y][l], s[VEL][l], s[Z][l]);
-        let ps = effect.supply(
-            hook::Supply {
-                lane: l,
-                p_s: lp.p_s[l],
-            },
-            es,
-        );
-        p_s[l] = ps;
-        // The chambers follow the actuator stroke (the platen's motion unless an effect says so).
-        let motion = hook::Motion { lane: l, y, v };
-        let (y_s, v_s) = effect.stroke(motion, es);
-        stroke[l] = y_s;
-        let b = actuator::stiffness_factors(&act, y_s);
-        let mut f = 0.0;
-        let mut qs = 0.0;
-        for i in 0..A {
-            let (p1, p2) = (s[P1[i]][l], s[P2[i]][l]);
-            let x = effect.opening(opening(l, i, x_c[l]), es);
-            xs[i][l] = x;
-            let (q1, q2) = Q::flows(&valve, x, p1, p2, ps);
+        (b[0][l], b[1][l]) = actuator::stiffness_factors(&lp.act.lane(l), stroke[l]);
+    }
+    for i in 0..A {
+        let p = [&s[P1[i]], &s[P2[i]]];
+        let x = effect.openings(i, x_c, es);
+        let mut q = [[0.0; N]; 2];
+        for l in 0..N {
+            let (q1, q2) = Q::flows(&lp.valve.lane(l), x[l], p[0][l], p[1][l], p_s[l]);
             // Supply → chamber 1 when x > 0, supply → chamber 2 (q2 < 0) otherwise.
-            qs += if x > 0.0 { q1 } else { -q2 };
-            let flows = hook::Flows {
-                lane: l,
-                act: i,
-                q: (q1, q2),
-                p1,
-                p2,
-                p_s: ps,
-            };
-            let (q1, q2) = effect.flows(flows, es);
-            q_in1[i][l] = q1;
-            q_out2[i][l] = q2;
-            let chambers = hook::Chambers {
-                lane: l,
-                act: i,
-                b,
-                p1,
-                p2,
-            };
-            let (b1, b2) = effect.chamber_stiffness(chambers, es);
-            let (d1, d2) = actuator::pressure_rates(&act, b1, b2, q1, q2, v_s);
+            q_supply[l] += if x[l] > 0.0 { q1 } else { -q2 };
+            (q[0][l], q[1][l]) = (q1, q2);
+        }
+        let [q1, q2] = effect.all_flows(i, q, (p, &p_s), es);
+        let [b1, b2] = effect.stiffnesses(i, b, p, es);
+        for l in 0..N {
+            let act = lp.act.lane(l);
+            let (d1, d2) = actuator::pressure_rates(&act, b1[l], b2[l], q1[l], q2[l], v_s[l]);
             ds[P1[i]][l] = d1;
             ds[P2[i]][l] = d2;
-            f += actuator::force(&act, p1, p2);
+            f_act[l] += actuator::force(&act, p[0][l], p[1][l]);
         }
-        if A == 1 {
-            f = f + f;
-            qs = qs + qs;
+        (xs[i], q_in1[i], q_out2[i]) = (x, q1, q2);
+    }
+    if A == 1 {
+        for l in 0..N {
+            f_act[l] = f_act[l] + f_act[l];
+            q_supply[l] = q_supply[l] + q_supply[l];
             for j in [P1, P2] {
                 ds[j[1]][l] = ds[j[0]][l];
             }
-            xs[1][l] = xs[0][l];
-            q_in1[1][l] = q_in1[0][l];
-            q_out2[1][l] = q_out2[0][l];
         }
-        q_supply[l] = qs;
-        f_act[l] = f;
-        let fe = effect.extra_force(motion, es);
-        ds[VEL][l] = platen::accel::<D>(&lp.platen.lane(l), f, fe, y, v, z);
+        (xs[1], q_in1[1], q_out2[1]) = (xs[0], q_in1[0], q_out2[0]);
+    }
+    let fe = effect.extra_forces(&s[Y], &s[VEL], es);
+    for l in 0..N {
+        let (y, v, z) = (s[Y][l], s[VEL][l], s[Z][l]);
+        ds[VEL][l] = platen::accel::<D>(&lp.platen.lane(l), f_act[l], fe[l], y, v, z);
         ds[Y][l] = v;
         ds[Z][l] = friction::dz_dt(&lp.friction.lane(l), v, z);
     }
@@ -1028,7 +1006,7 @@ impl<const N: usize, E: Effect<N>> Probe<N, E> {
             k: [[[0.0; N]; NP]; 4],
             es,
             etmp: es,
-            ek: [es; 4],
+            ek: [bytemuck::Zeroable::zeroed(); 4],
         }
     }
 
@@ -1391,12 +1369,14 @@ pub(crate) fn integrate<
         [[0.0; N]; NP],
         [[0.0; N]; NP],
     );
-    let (mut ek1, mut ek2, mut ek3, mut ek4, mut etmp) = (es, es, es, es, es);
+    // The derivatives start at 0 ([`Effect::derivs`]: an effect whose states stand still need
+    // not write them).
+    let ez: E::State = bytemuck::Zeroable::zeroed();
+    let (mut ek1, mut ek2, mut ek3, mut ek4, mut etmp) = (ez, ez, ez, ez, es);
     // The effects' states that move in this batch; the rest keep their values at t = 0.
     let live = effect.live_states();
     let mut u = [0.0; N];
     let mut x_c = [0.0; N];
-    let mut spool = [0.0; N];
     let mut a = [0.0; N];
     let mut x = [0.0; N];
     let h = 1.0 / (lp.f_s * solver.substeps as f64);
@@ -1436,9 +1416,7 @@ pub(crate) fn integrate<
         commands(lp, &reference.drive, k, &fed, &mut mem, &mut u, &mut x_c);
         rhs::<N, A, SIMD, Q, D, E, P>(lp, effect, &x_c, &s, &es, &mut k1, &mut ek1);
         a.copy_from_slice(&k1[VEL]);
-        for l in 0..N {
-            spool[l] = effect.spool_position(opening(l, 0, x_c[l]), &es);
-        }
+        let spool = effect.spool_positions(0, &x_c, &es);
         // Observers and the metrics see the channels as recorded (a measurement chain changes
         // them); the controller, the plant's.
         let (mut a_rec, mut x_rec, mut f_rec) = (a, x, f);

@@ -567,6 +567,21 @@ pub trait Effect<const N: usize>: Sync {
         }
     }
 
+    /// [`Effect::spool_position`] of actuator `act` in every lane at once, from the commands `x`.
+    #[inline(always)]
+    fn spool_positions(&self, act: usize, x: &[f64; N], s: &Self::State) -> [f64; N] {
+        std::array::from_fn(|lane| {
+            self.spool_position(
+                hook::Opening {
+                    lane,
+                    act,
+                    x: x[lane],
+                },
+                s,
+            )
+        })
+    }
+
     /// Actuator stroke and stroke rate (m, m/s) from the platen's motion `c.y`, `c.v` (the
     /// chamber volumes, the piston flows and the LVDT follow the stroke).
     #[inline(always)]
@@ -611,7 +626,106 @@ pub trait Effect<const N: usize>: Sync {
         })
     }
 
-    /// Derivatives of the extra states.
+    /// [`Effect::supply`] of every lane at once, from `p_s`. The general right-hand side calls
+    /// this and the array hooks below, one hook of every lane before the next: a composition
+    /// ([`Both`], [`Gated`]) then decides once per batch, not once per lane, whether an effect
+    /// acts, and each effect's loop over the lanes is its own (vectorised where its law allows).
+    /// Lane by lane as the scalar hook, the same numbers.
+    #[inline(always)]
+    fn supplies(&self, p_s: &[f64; N], s: &Self::State) -> [f64; N] {
+        std::array::from_fn(|lane| {
+            self.supply(
+                hook::Supply {
+                    lane,
+                    p_s: p_s[lane],
+                },
+                s,
+            )
+        })
+    }
+
+    /// [`Effect::opening`] of actuator `act` in every lane at once, from the commands `x`.
+    #[inline(always)]
+    fn openings(&self, act: usize, x: &[f64; N], s: &Self::State) -> [f64; N] {
+        std::array::from_fn(|lane| {
+            self.opening(
+                hook::Opening {
+                    lane,
+                    act,
+                    x: x[lane],
+                },
+                s,
+            )
+        })
+    }
+
+    /// [`Effect::stroke`] of every lane at once, from the platen's `y` and `v`: [stroke, rate].
+    #[inline(always)]
+    fn strokes(&self, y: &[f64; N], v: &[f64; N], s: &Self::State) -> [[f64; N]; 2] {
+        let mut out = [[0.0; N]; 2];
+        for lane in 0..N {
+            let m = hook::Motion {
+                lane,
+                y: y[lane],
+                v: v[lane],
+            };
+            (out[0][lane], out[1][lane]) = self.stroke(m, s);
+        }
+        out
+    }
+
+    /// [`Effect::chamber_stiffness`] of actuator `act` in every lane at once, from `b`
+    /// ([cap side, rod side]) at the chamber pressures `p`.
+    #[inline(always)]
+    fn stiffnesses(
+        &self,
+        act: usize,
+        b: [[f64; N]; 2],
+        p: [&[f64; N]; 2],
+        s: &Self::State,
+    ) -> [[f64; N]; 2] {
+        let mut out = [[0.0; N]; 2];
+        for lane in 0..N {
+            let c = hook::Chambers {
+                lane,
+                act,
+                b: (b[0][lane], b[1][lane]),
+                p1: p[0][lane],
+                p2: p[1][lane],
+            };
+            (out[0][lane], out[1][lane]) = self.chamber_stiffness(c, s);
+        }
+        out
+    }
+
+    /// [`Effect::flows`] of actuator `act` in every lane at once, from the valve flows `q`
+    /// ([into chamber 1, out of chamber 2]) at the chamber pressures `p` and the supply `p_s`.
+    #[inline(always)]
+    fn all_flows(
+        &self,
+        act: usize,
+        q: [[f64; N]; 2],
+        (p, p_s): ([&[f64; N]; 2], &[f64; N]),
+        s: &Self::State,
+    ) -> [[f64; N]; 2] {
+        let mut out = [[0.0; N]; 2];
+        for lane in 0..N {
+            let c = hook::Flows {
+                lane,
+                act,
+                q: (q[0][lane], q[1][lane]),
+                p1: p[0][lane],
+                p2: p[1][lane],
+                p_s: p_s[lane],
+            };
+            (out[0][lane], out[1][lane]) = self.flows(c, s);
+        }
+        out
+    }
+
+    /// Derivatives of the extra states, written to `ds`. The kernel's `ds` hold zeros before
+    /// the first call and what the effect wrote after: an effect whose states stand still in a
+    /// batch (one no lane switches on) may leave them.
     #[inline(always)]
     fn derivs(&self, _plant: &PlantView<'_, N>, _s: &Self::State, _ds: &mut Self::State) {}
 
@@ -684,13 +798,14 @@ impl<const N: usize, A: Effect<N>, B: Effect<N>> Effect<N> for Both<A, B> {
     fn hydraulic(&self) -> bool {
         self.0.hydraulic() || self.1.hydraulic()
     }
-    /// A's states, then B's that move; A's that move where B has none.
+    /// A's states, then B's that move; A's that move where none of B's does (B's type may hold
+    /// states that stand still in this batch: the library's set ends with a building of 40 and
+    /// an expression's state, which no effect before them should drag along).
     #[inline(always)]
     fn live_states(&self) -> usize {
-        if state_len::<N, B::State>() == 0 {
-            self.0.live_states()
-        } else {
-            state_len::<N, A::State>() + self.1.live_states()
+        match self.1.live_states() {
+            0 => self.0.live_states(),
+            b => state_len::<N, A::State>() + b,
         }
     }
     fn symmetric(&self) -> bool {
@@ -739,6 +854,46 @@ impl<const N: usize, A: Effect<N>, B: Effect<N>> Effect<N> for Both<A, B> {
         std::array::from_fn(|l| a[l] + b[l])
     }
     #[inline(always)]
+    fn supplies(&self, p_s: &[f64; N], s: &Self::State) -> [f64; N] {
+        self.1.supplies(&self.0.supplies(p_s, &s.0), &s.1)
+    }
+    #[inline(always)]
+    fn spool_positions(&self, act: usize, x: &[f64; N], s: &Self::State) -> [f64; N] {
+        self.1
+            .spool_positions(act, &self.0.spool_positions(act, x, &s.0), &s.1)
+    }
+    #[inline(always)]
+    fn openings(&self, act: usize, x: &[f64; N], s: &Self::State) -> [f64; N] {
+        self.1.openings(act, &self.0.openings(act, x, &s.0), &s.1)
+    }
+    #[inline(always)]
+    fn strokes(&self, y: &[f64; N], v: &[f64; N], s: &Self::State) -> [[f64; N]; 2] {
+        let [y, v] = self.0.strokes(y, v, &s.0);
+        self.1.strokes(&y, &v, &s.1)
+    }
+    #[inline(always)]
+    fn stiffnesses(
+        &self,
+        act: usize,
+        b: [[f64; N]; 2],
+        p: [&[f64; N]; 2],
+        s: &Self::State,
+    ) -> [[f64; N]; 2] {
+        let b = self.0.stiffnesses(act, b, p, &s.0);
+        self.1.stiffnesses(act, b, p, &s.1)
+    }
+    #[inline(always)]
+    fn all_flows(
+        &self,
+        act: usize,
+        q: [[f64; N]; 2],
+        at: ([&[f64; N]; 2], &[f64; N]),
+        s: &Self::State,
+    ) -> [[f64; N]; 2] {
+        let q = self.0.all_flows(act, q, at, &s.0);
+        self.1.all_flows(act, q, at, &s.1)
+    }
+    #[inline(always)]
     fn sensed(&self, c: hook::Sensed, s: &Self::State) -> [f64; 3] {
         let raw = self.0.sensed(c, &s.0);
         self.1.sensed(hook::Sensed { raw, ..c }, &s.1)
@@ -756,14 +911,7 @@ impl<const N: usize, A: Effect<N>, B: Effect<N>> Effect<N> for Both<A, B> {
     fn derivs(&self, plant: &PlantView<'_, N>, s: &Self::State, ds: &mut Self::State) {
         self.0.derivs(plant, &s.0, &mut ds.0);
         // B sees the command as A leaves it (actuator 0's: a command effect acts on all alike).
-        let x_c: [f64; N] = std::array::from_fn(|lane| {
-            let c = hook::Opening {
-                lane,
-                act: 0,
-                x: plant.x_c[lane],
-            };
-            self.0.spool_position(c, &s.0)
-        });
+        let x_c = self.0.spool_positions(0, plant.x_c, &s.0);
         self.1.derivs(
             &PlantView {
                 x_c: &x_c,
@@ -900,6 +1048,66 @@ impl<const N: usize, E: Effect<N>> Effect<N> for Gated<E> {
         }
     }
     #[inline(always)]
+    fn supplies(&self, p_s: &[f64; N], s: &Self::State) -> [f64; N] {
+        if self.on {
+            self.effect.supplies(p_s, s)
+        } else {
+            *p_s
+        }
+    }
+    #[inline(always)]
+    fn spool_positions(&self, act: usize, x: &[f64; N], s: &Self::State) -> [f64; N] {
+        if self.on {
+            self.effect.spool_positions(act, x, s)
+        } else {
+            *x
+        }
+    }
+    #[inline(always)]
+    fn openings(&self, act: usize, x: &[f64; N], s: &Self::State) -> [f64; N] {
+        if self.on {
+            self.effect.openings(act, x, s)
+        } else {
+            *x
+        }
+    }
+    #[inline(always)]
+    fn strokes(&self, y: &[f64; N], v: &[f64; N], s: &Self::State) -> [[f64; N]; 2] {
+        if self.on {
+            self.effect.strokes(y, v, s)
+        } else {
+            [*y, *v]
+        }
+    }
+    #[inline(always)]
+    fn stiffnesses(
+        &self,
+        act: usize,
+        b: [[f64; N]; 2],
+        p: [&[f64; N]; 2],
+        s: &Self::State,
+    ) -> [[f64; N]; 2] {
+        if self.on {
+            self.effect.stiffnesses(act, b, p, s)
+        } else {
+            b
+        }
+    }
+    #[inline(always)]
+    fn all_flows(
+        &self,
+        act: usize,
+        q: [[f64; N]; 2],
+        at: ([&[f64; N]; 2], &[f64; N]),
+        s: &Self::State,
+    ) -> [[f64; N]; 2] {
+        if self.on {
+            self.effect.all_flows(act, q, at, s)
+        } else {
+            q
+        }
+    }
+    #[inline(always)]
     fn sensed(&self, c: hook::Sensed, s: &Self::State) -> [f64; 3] {
         if self.on {
             self.effect.sensed(c, s)
@@ -920,12 +1128,9 @@ impl<const N: usize, E: Effect<N>> Effect<N> for Gated<E> {
     }
     #[inline(always)]
     fn derivs(&self, plant: &PlantView<'_, N>, s: &Self::State, ds: &mut Self::State) {
+        // Off: its derivatives stay the zeros they start at ([`Effect::derivs`]).
         if self.on {
             self.effect.derivs(plant, s, ds);
-        } else {
-            for d in ds.as_mut() {
-                *d = [0.0; N];
-            }
         }
     }
 }
