@@ -1307,4 +1307,183 @@ mod tests {
             n - 1
         );
     }
+
+    /// Eight lanes, two for each of four sets of effects (every hook changed by some effect; an
+    /// effect on in some lanes of the batch and off in others).
+    fn mixed_lanes() -> (Vec<Defaults>, [f64; 8]) {
+        use EffectId::*;
+        let on = [
+            &[TransportDelay, SpoolDynamics, Leakage][..],
+            &[FlowSaturation, FlowGain, Supply],
+            &[Asymmetry, Compressibility, ReactionMass, SealFriction],
+            &[BulkCurve, SpoolDynamics, Specimen],
+        ];
+        let lanes = (0..8)
+            .map(|l| {
+                let mut p = Defaults::default();
+                for &id in on.get(l / 2).copied().unwrap_or_default() {
+                    *p.effects.get_mut(id) = true;
+                }
+                p
+            })
+            .collect();
+        (lanes, std::array::from_fn(|l| 1.0 + 0.1 * l as f64))
+    }
+
+    /// The array hooks of a composition ([`Effect::supplies`] and the others) give, lane by lane,
+    /// the bits of its scalar hooks: the kernel's right-hand side calls the array hooks, a single
+    /// lane's callers the scalar ones, and both must compose the effects alike.
+    #[test]
+    fn a_compositions_array_hooks_are_its_scalar_hooks_lane_by_lane() {
+        let (lanes, w) = mixed_lanes();
+        let refs: Vec<&Defaults> = lanes.iter().collect();
+        let set = effect_set::<8>(&refs);
+        let mut es = set.initial_state();
+        for (j, row) in es.as_mut().iter_mut().enumerate() {
+            for l in 0..8 {
+                row[l] += 1e-4 * w[l] * (j as f64 + 1.0);
+            }
+        }
+        let x = w.map(|v| 2e-3 * (v - 1.4));
+        let (p1, p2, ps) = (w.map(|v| 9e6 * v), w.map(|v| 4e6 * v), w.map(|v| 2e7 * v));
+        let (y, v) = (w.map(|v| 0.05 * (v - 1.3)), w.map(|v| 0.4 * (1.5 - v)));
+        let b = [w.map(|v| 3e12 * v), w.map(|v| 5e12 * v)];
+        let q = [w.map(|v| 1e-3 * (v - 1.2)), w.map(|v| 2e-3 * (1.35 - v))];
+        let bits = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(a, b)| a.to_bits() == b.to_bits());
+        let mut changed = 0;
+        let mut check = |what: &str, array: Vec<f64>, scalar: Vec<f64>, input: Vec<f64>| {
+            assert!(bits(&array, &scalar), "{what}: {array:?} != {scalar:?}");
+            changed += usize::from(!bits(&array, &input));
+        };
+        for act in 0..crate::N_ACT {
+            let at = |lane| hook::Opening {
+                lane,
+                act,
+                x: x[lane],
+            };
+            let ops = set.openings(act, &x, &es).to_vec();
+            check(
+                "openings",
+                ops,
+                (0..8).map(|l| set.opening(at(l), &es)).collect(),
+                x.to_vec(),
+            );
+            let sp = set.spool_positions(act, &x, &es).to_vec();
+            let one = (0..8).map(|l| set.spool_position(at(l), &es)).collect();
+            check("spool positions", sp, one, x.to_vec());
+            let [f1, f2] = set.all_flows(act, q, ([&p1, &p2], &ps), &es);
+            let one: Vec<(f64, f64)> = (0..8)
+                .map(|lane| {
+                    let c = hook::Flows {
+                        lane,
+                        act,
+                        q: (q[0][lane], q[1][lane]),
+                        p1: p1[lane],
+                        p2: p2[lane],
+                        p_s: ps[lane],
+                    };
+                    set.flows(c, &es)
+                })
+                .collect();
+            check(
+                "flows in",
+                f1.to_vec(),
+                one.iter().map(|f| f.0).collect(),
+                q[0].to_vec(),
+            );
+            check(
+                "flows out",
+                f2.to_vec(),
+                one.iter().map(|f| f.1).collect(),
+                q[1].to_vec(),
+            );
+            let [b1, b2] = set.stiffnesses(act, b, [&p1, &p2], &es);
+            let one: Vec<(f64, f64)> = (0..8)
+                .map(|lane| {
+                    let c = hook::Chambers {
+                        lane,
+                        act,
+                        b: (b[0][lane], b[1][lane]),
+                        p1: p1[lane],
+                        p2: p2[lane],
+                    };
+                    set.chamber_stiffness(c, &es)
+                })
+                .collect();
+            check(
+                "stiffness 1",
+                b1.to_vec(),
+                one.iter().map(|b| b.0).collect(),
+                b[0].to_vec(),
+            );
+            check(
+                "stiffness 2",
+                b2.to_vec(),
+                one.iter().map(|b| b.1).collect(),
+                b[1].to_vec(),
+            );
+        }
+        let one = (0..8).map(|lane| {
+            set.supply(
+                hook::Supply {
+                    lane,
+                    p_s: ps[lane],
+                },
+                &es,
+            )
+        });
+        check(
+            "supplies",
+            set.supplies(&ps, &es).to_vec(),
+            one.collect(),
+            ps.to_vec(),
+        );
+        let motion = |lane| hook::Motion {
+            lane,
+            y: y[lane],
+            v: v[lane],
+        };
+        let [ys, vs] = set.strokes(&y, &v, &es);
+        let one: Vec<(f64, f64)> = (0..8).map(|l| set.stroke(motion(l), &es)).collect();
+        check(
+            "strokes",
+            ys.to_vec(),
+            one.iter().map(|s| s.0).collect(),
+            y.to_vec(),
+        );
+        check(
+            "stroke rates",
+            vs.to_vec(),
+            one.iter().map(|s| s.1).collect(),
+            v.to_vec(),
+        );
+        let one = (0..8).map(|l| set.extra_force(motion(l), &es)).collect();
+        check(
+            "forces",
+            set.extra_forces(&y, &v, &es).to_vec(),
+            one,
+            vec![0.0; 8],
+        );
+        // Every hook changes its input in some lane: the comparisons are not of inputs.
+        assert_eq!(changed, 16, "the hooks that changed their input");
+    }
+
+    /// The set integrates the states up to the last one that moves in the batch: those of the
+    /// effects some lane switches on, and of the effects before them; none for the bare plant.
+    #[test]
+    fn the_set_integrates_the_states_of_what_is_on_and_no_further() {
+        let mut p = Defaults::default();
+        assert_eq!(effect_set::<4>(&[&p]).live_states(), 0);
+        *p.effects.get_mut(EffectId::SpoolDynamics) = true;
+        let spool = transport_delay::STAGES + 2 * crate::N_ACT;
+        assert_eq!(effect_set::<4>(&[&p]).live_states(), spool);
+        *p.effects.get_mut(EffectId::SealFriction) = true;
+        assert_eq!(
+            effect_set::<4>(&[&p]).live_states(),
+            spool,
+            "friction has no states"
+        );
+        *p.effects.get_mut(EffectId::Supply) = true;
+        assert_eq!(effect_set::<4>(&[&p]).live_states(), spool + 1);
+    }
 }
