@@ -1308,15 +1308,24 @@ mod tests {
         );
     }
 
-    /// Eight lanes, two for each of four sets of effects (every hook changed by some effect; an
-    /// effect on in some lanes of the batch and off in others).
+    /// Eight lanes, two for each of four sets of effects: every hook changed by some effect, the
+    /// opening, the flows and the chamber stiffness by two in one lane (each passes the first's
+    /// result on), an effect on in some lanes of the batch and off in others. The supply and
+    /// the stroke have one library effect each.
     fn mixed_lanes() -> (Vec<Defaults>, [f64; 8]) {
         use EffectId::*;
         let on = [
             &[TransportDelay, SpoolDynamics, Leakage][..],
             &[FlowSaturation, FlowGain, Supply],
-            &[Asymmetry, Compressibility, ReactionMass, SealFriction],
-            &[BulkCurve, SpoolDynamics, Specimen],
+            &[
+                Asymmetry,
+                Compressibility,
+                BulkCurve,
+                ReactionMass,
+                SealFriction,
+                Leakage,
+            ],
+            &[BulkCurve, SpoolDynamics, Specimen, TransportDelay],
         ];
         let lanes = (0..8)
             .map(|l| {
