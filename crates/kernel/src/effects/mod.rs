@@ -1309,14 +1309,14 @@ mod tests {
     }
 
     /// Eight lanes, two for each of four sets of effects: every hook changed by some effect, the
-    /// opening, the flows and the chamber stiffness by two in one lane (each passes the first's
-    /// result on), an effect on in some lanes of the batch and off in others. The supply and
-    /// the stroke have one library effect each.
+    /// opening, the flows, the chamber stiffness and the supply by two in one lane (each passes
+    /// the first's result on; the supply's second is an expression), an effect on in some lanes
+    /// of the batch and off in others. The stroke has one library effect.
     fn mixed_lanes() -> (Vec<Defaults>, [f64; 8]) {
         use EffectId::*;
         let on = [
             &[TransportDelay, SpoolDynamics, Leakage][..],
-            &[FlowSaturation, FlowGain, Supply],
+            &[FlowSaturation, FlowGain, Supply, Expression],
             &[
                 Asymmetry,
                 Compressibility,
@@ -1333,6 +1333,9 @@ mod tests {
                 for &id in on.get(l / 2).copied().unwrap_or_default() {
                     *p.effects.get_mut(id) = true;
                 }
+                // After the library's supply, a drop of 5 %.
+                let drop = expression::Hook::Supply;
+                p.expressions.set(drop, "0.95 * ps").expect("compiles");
                 p
             })
             .collect();
