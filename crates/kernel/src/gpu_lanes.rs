@@ -426,6 +426,16 @@ fn lane_status(code: f64, tick: f64, value: f64, chamber: f64, r: &Reference) ->
 mod tests {
     use super::*;
 
+    /// The union of two masks holds a field set in either or both, word by word.
+    #[test]
+    fn a_union_holds_the_fields_of_either_mask() {
+        let (a, b) = (
+            mask([0, 3, 64, 130].into_iter()),
+            mask([3, 65, 130].into_iter()),
+        );
+        assert_eq!(fields(union(a, b)), [0, 3, 64, 65, 130]);
+    }
+
     /// Each effect the CUDA kernel has holds the bit lane.cu gives it (`VS_E_*`, bit i for the
     /// i-th), listed once and in registry order (the order both kernels compose the hooks in),
     /// the two actuators' bit above them; and the record's length is what lane.cu says. An effect

@@ -421,6 +421,28 @@ impl Multisine {
 mod tests {
     use super::*;
 
+    /// The taper rises over its first `taper` s, holds 1 between, and falls over the last
+    /// `taper` s as the mirror image of its rise (odd derivatives negated); none where it is 0.
+    #[test]
+    fn the_taper_falls_at_the_end_as_it_rose_at_the_start() {
+        let (tp, d) = (1.5, 10.0);
+        for t in [0.0, 0.3, 0.75, 1.2, 1.5] {
+            let (rise, fall) = (taper(t, tp, d).0, taper(d - t, tp, d).0);
+            for k in 0..4 {
+                let sign = if k % 2 == 1 { -1.0 } else { 1.0 };
+                assert!(
+                    (fall[k] - sign * rise[k]).abs() <= 1e-12,
+                    "t {t}, order {k}"
+                );
+            }
+        }
+        assert!((taper(0.75, tp, d).0[0] - 0.5).abs() <= 1e-15);
+        for t in [1.6, 5.0, 8.4] {
+            assert_eq!(taper(t, tp, d).0, [1.0, 0.0, 0.0, 0.0], "t {t}");
+        }
+        assert_eq!(taper(9.5, 0.0, d).0, [1.0, 0.0, 0.0, 0.0]);
+    }
+
     fn fd_check(f: impl Fn(f64) -> [f64; 4], ts: &[f64]) {
         for &t in ts {
             let h = 1e-6;

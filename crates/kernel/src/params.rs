@@ -502,6 +502,25 @@ impl ModelView for ModelParams {
 mod tests {
     use super::*;
 
+    /// A result table's column is the parameter's name and unit suffix, qualified by its
+    /// component where two of one table would share it.
+    #[test]
+    fn column_names_carry_the_unit_and_the_component_where_needed() {
+        let p = |path| ModelParams::lookup(path).unwrap();
+        assert_eq!(p("servovalve.kv").column_name(), "kv_m_per_s_sqrt_pa");
+        let (a, d) = (p("accel_sensor.delay"), p("disp_sensor.delay"));
+        assert_eq!(a.column_name(), "delay_s");
+        let names = column_names(&[a, d, p("servovalve.kv")]);
+        assert_eq!(
+            names,
+            [
+                "accel_sensor_delay_s",
+                "disp_sensor_delay_s",
+                "kv_m_per_s_sqrt_pa"
+            ]
+        );
+    }
+
     #[test]
     fn kv_default_matches_its_formula() {
         let kv = (10_000.0e-3 / 60.0) / (0.254 * 19.05e-3 * (6.895e6f64 / 2.0).sqrt());

@@ -1498,4 +1498,52 @@ mod tests {
         *p.effects.get_mut(EffectId::Supply) = true;
         assert_eq!(effect_set::<4>(&[&p]).live_states(), spool + 1);
     }
+
+    /// In a composition, an effect's states follow the command as the effects before it leave
+    /// it: spool dynamics after a transport delay lags the delayed command.
+    #[test]
+    fn a_later_effects_states_follow_the_command_an_earlier_one_leaves() {
+        let mut p = Defaults::default();
+        *p.effects.get_mut(EffectId::TransportDelay) = true;
+        *p.effects.get_mut(EffectId::SpoolDynamics) = true;
+        let lanes = [&p as &dyn ModelView];
+        let set = effect_set::<1>(&[&p]);
+        let mut es = set.initial_state();
+        for (j, row) in es.as_mut().iter_mut().enumerate() {
+            row[0] = 1e-4 * (j as f64 + 1.0);
+        }
+        let zeros = (
+            [[0.0; 1]; crate::N_ACT],
+            [0.0; 1],
+            [[0.0; 1]; crate::state::NP],
+        );
+        let view = |x_c| PlantView {
+            x_c,
+            opening: &zeros.0,
+            q_supply: &zeros.1,
+            state: &zeros.2,
+            q_in1: &zeros.0,
+            q_out2: &zeros.0,
+            p_s: &zeros.1,
+            f_act: &zeros.1,
+            accel: &zeros.1,
+            stroke: &zeros.1,
+        };
+        let x_c = [2e-3];
+        let mut ds = es;
+        set.derivs(&view(&x_c), &es, &mut ds);
+        let stages = transport_delay::STAGES;
+        let delay = transport_delay::TransportDelay::<1>::new(lanes);
+        let mut delay_s = [[0.0; 1]; transport_delay::STAGES];
+        delay_s.copy_from_slice(&es.as_ref()[..stages]);
+        let delayed = delay.spool_positions(0, &x_c, &delay_s);
+        let spool = spool_dynamics::SpoolDynamics::<1>::new(lanes);
+        let mut spool_s = [[0.0; 1]; 2 * crate::N_ACT];
+        spool_s.copy_from_slice(&es.as_ref()[stages..stages + 2 * crate::N_ACT]);
+        let (mut after, mut undelayed) = (spool_s, spool_s);
+        spool.derivs(&view(&delayed), &spool_s, &mut after);
+        spool.derivs(&view(&x_c), &spool_s, &mut undelayed);
+        assert_eq!(&ds.as_ref()[stages..stages + 2 * crate::N_ACT], &after[..]);
+        assert_ne!(after, undelayed, "the delay changes what the spool follows");
+    }
 }
