@@ -1566,6 +1566,21 @@ mod tests {
     use crate::effects::{Baseline, LibraryEffect, ModelView};
     use crate::excitation::Sine;
 
+    /// The lanes [`healthy`] passes are those [`check_lane`] finds no failure in: a lane at
+    /// rest, a chamber above 2·P_S, one below −1 MPa, a state not finite.
+    #[test]
+    fn healthy_lanes_are_those_without_a_failure() {
+        let m = ModelParams::default();
+        let lp = LaneParams::<4>::new(&[&m]).unwrap();
+        let mut s = initial_state(&lp);
+        s[P1[0]][1] = 2.5 * m.servovalve.p_s;
+        s[P2[1]][2] = -2.0e6;
+        s[Z][3] = f64::NAN;
+        assert_eq!(healthy(&lp, &s), [true, false, false, false]);
+        let checked: Vec<bool> = (0..4).map(|l| check_lane(&lp, &s, l).is_none()).collect();
+        assert_eq!(checked, [true, false, false, false]);
+    }
+
     /// A build for one law pair, on every instruction set this CPU has: the lanes' results.
     fn each_isa<const N: usize, Q: FlowLaw, D: Damping, E: Effect<N>>(
         lp: &LaneParams<N>,
