@@ -1546,4 +1546,23 @@ mod tests {
         assert_eq!(&ds.as_ref()[stages..stages + 2 * crate::N_ACT], &after[..]);
         assert_ne!(after, undelayed, "the delay changes what the spool follows");
     }
+
+    /// The flow gain's coefficients as the CUDA kernel reads them (`FlowGain::lane`, lane.cu's
+    /// order): its five knots, neutral (1) in a lane that switches it off, then 1/x_ref.
+    #[test]
+    fn the_flow_gains_lane_record_is_its_knots_then_the_inverse_stroke() {
+        let mut on = Defaults::default();
+        *on.effects.get_mut(EffectId::FlowGain) = true;
+        let knots = [0.6, 0.8, 1.1, 1.3, 1.25];
+        for (k, g) in knots.iter().enumerate() {
+            let info = crate::params::ModelParams::lookup(&format!("flow_gain.g{k}")).unwrap();
+            (on.effect_params.table_mut(EffectId::FlowGain)).set_field(info.index(), *g);
+        }
+        let off = Defaults::default();
+        let lanes = [&on as &dyn ModelView, &off];
+        let g = flow_gain::FlowGain::<2>::new(lanes);
+        let inv = 1.0 / 19.05e-3;
+        assert_eq!(g.lane(0), [0.6, 0.8, 1.1, 1.3, 1.25, inv]);
+        assert_eq!(g.lane(1), [1.0, 1.0, 1.0, 1.0, 1.0, inv]);
+    }
 }
