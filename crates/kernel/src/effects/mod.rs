@@ -662,16 +662,10 @@ pub trait Effect<const N: usize>: Sync {
     /// [`Effect::stroke`] of every lane at once, from the platen's `y` and `v`: [stroke, rate].
     #[inline(always)]
     fn strokes(&self, y: &[f64; N], v: &[f64; N], s: &Self::State) -> [[f64; N]; 2] {
-        let mut out = [[0.0; N]; 2];
-        for lane in 0..N {
-            let m = hook::Motion {
-                lane,
-                y: y[lane],
-                v: v[lane],
-            };
-            (out[0][lane], out[1][lane]) = self.stroke(m, s);
-        }
-        out
+        lane_pairs(|lane| {
+            let (y, v) = (y[lane], v[lane]);
+            self.stroke(hook::Motion { lane, y, v }, s)
+        })
     }
 
     /// [`Effect::chamber_stiffness`] of actuator `act` in every lane at once, from `b`
@@ -684,18 +678,20 @@ pub trait Effect<const N: usize>: Sync {
         p: [&[f64; N]; 2],
         s: &Self::State,
     ) -> [[f64; N]; 2] {
-        let mut out = [[0.0; N]; 2];
-        for lane in 0..N {
-            let c = hook::Chambers {
-                lane,
-                act,
-                b: (b[0][lane], b[1][lane]),
-                p1: p[0][lane],
-                p2: p[1][lane],
-            };
-            (out[0][lane], out[1][lane]) = self.chamber_stiffness(c, s);
-        }
-        out
+        lane_pairs(|lane| {
+            let b = (b[0][lane], b[1][lane]);
+            let (p1, p2) = (p[0][lane], p[1][lane]);
+            self.chamber_stiffness(
+                hook::Chambers {
+                    lane,
+                    act,
+                    b,
+                    p1,
+                    p2,
+                },
+                s,
+            )
+        })
     }
 
     /// [`Effect::flows`] of actuator `act` in every lane at once, from the valve flows `q`
@@ -708,19 +704,21 @@ pub trait Effect<const N: usize>: Sync {
         (p, p_s): ([&[f64; N]; 2], &[f64; N]),
         s: &Self::State,
     ) -> [[f64; N]; 2] {
-        let mut out = [[0.0; N]; 2];
-        for lane in 0..N {
-            let c = hook::Flows {
-                lane,
-                act,
-                q: (q[0][lane], q[1][lane]),
-                p1: p[0][lane],
-                p2: p[1][lane],
-                p_s: p_s[lane],
-            };
-            (out[0][lane], out[1][lane]) = self.flows(c, s);
-        }
-        out
+        lane_pairs(|lane| {
+            let q = (q[0][lane], q[1][lane]);
+            let (p1, p2, p_s) = (p[0][lane], p[1][lane], p_s[lane]);
+            self.flows(
+                hook::Flows {
+                    lane,
+                    act,
+                    q,
+                    p1,
+                    p2,
+                    p_s,
+                },
+                s,
+            )
+        })
     }
 
     /// Derivatives of the extra states, written to `ds`. The kernel's `ds` hold zeros before
@@ -747,6 +745,16 @@ pub trait Effect<const N: usize>: Sync {
     /// [`crate::metrics::Metrics::SPECIMEN`]. Lanes the effect leaves alone stay NaN there.
     #[inline(always)]
     fn watch(&self, _s: &Self::State, _acc: &mut SpecimenAcc<N>) {}
+}
+
+/// `f` of every lane, its pairs as two arrays of lanes (the array hooks' default, lane by lane).
+#[inline(always)]
+fn lane_pairs<const N: usize>(f: impl Fn(usize) -> (f64, f64)) -> [[f64; N]; 2] {
+    let mut out = [[0.0; N]; 2];
+    for lane in 0..N {
+        (out[0][lane], out[1][lane]) = f(lane);
+    }
+    out
 }
 
 /// The number of arrays of lanes in a state type `S` of N lanes.
@@ -1342,6 +1350,138 @@ mod tests {
         (lanes, std::array::from_fn(|l| 1.0 + 0.1 * l as f64))
     }
 
+    /// What the hooks are given in the test below, lane by lane from the weights `w`.
+    struct HookInputs {
+        x: [f64; 8],
+        p: [[f64; 8]; 2],
+        ps: [f64; 8],
+        y: [f64; 8],
+        v: [f64; 8],
+        b: [[f64; 8]; 2],
+        q: [[f64; 8]; 2],
+    }
+
+    fn hook_inputs(w: [f64; 8]) -> HookInputs {
+        HookInputs {
+            x: w.map(|v| 2e-3 * (v - 1.4)),
+            p: [w.map(|v| 9e6 * v), w.map(|v| 4e6 * v)],
+            ps: w.map(|v| 2e7 * v),
+            y: w.map(|v| 0.05 * (v - 1.3)),
+            v: w.map(|v| 0.4 * (1.5 - v)),
+            b: [w.map(|v| 3e12 * v), w.map(|v| 5e12 * v)],
+            q: [w.map(|v| 1e-3 * (v - 1.2)), w.map(|v| 2e-3 * (1.35 - v))],
+        }
+    }
+
+    /// A hook's name, its array hook's result, its scalar hook's lane by lane, and its input.
+    type HookRow = (&'static str, [f64; 8], [f64; 8], [f64; 8]);
+    type SetState = <EffectSet<8> as Effect<8>>::State;
+
+    fn per_lane(f: impl Fn(usize) -> f64) -> [f64; 8] {
+        std::array::from_fn(f)
+    }
+
+    /// The hooks of actuator `act`: the opening, the spool, the flows, the chamber stiffness.
+    fn actuator_rows(
+        set: &EffectSet<8>,
+        es: &SetState,
+        act: usize,
+        i: &HookInputs,
+    ) -> Vec<HookRow> {
+        let at = |lane| hook::Opening {
+            lane,
+            act,
+            x: i.x[lane],
+        };
+        let (p1, p2) = (i.p[0], i.p[1]);
+        let flows = |lane: usize| {
+            let q = (i.q[0][lane], i.q[1][lane]);
+            let p_s = i.ps[lane];
+            let c = hook::Flows {
+                lane,
+                act,
+                q,
+                p1: p1[lane],
+                p2: p2[lane],
+                p_s,
+            };
+            set.flows(c, es)
+        };
+        let chambers = |lane: usize| {
+            let b = (i.b[0][lane], i.b[1][lane]);
+            let c = hook::Chambers {
+                lane,
+                act,
+                b,
+                p1: p1[lane],
+                p2: p2[lane],
+            };
+            set.chamber_stiffness(c, es)
+        };
+        let [f1, f2] = set.all_flows(act, i.q, ([&p1, &p2], &i.ps), es);
+        let [b1, b2] = set.stiffnesses(act, i.b, [&p1, &p2], es);
+        let spool = set.spool_positions(act, &i.x, es);
+        vec![
+            (
+                "openings",
+                set.openings(act, &i.x, es),
+                per_lane(|l| set.opening(at(l), es)),
+                i.x,
+            ),
+            (
+                "spool",
+                spool,
+                per_lane(|l| set.spool_position(at(l), es)),
+                i.x,
+            ),
+            ("flows in", f1, per_lane(|l| flows(l).0), i.q[0]),
+            ("flows out", f2, per_lane(|l| flows(l).1), i.q[1]),
+            ("stiffness 1", b1, per_lane(|l| chambers(l).0), i.b[0]),
+            ("stiffness 2", b2, per_lane(|l| chambers(l).1), i.b[1]),
+        ]
+    }
+
+    /// The supply's, the stroke's and the platen force's hooks.
+    fn platen_rows(set: &EffectSet<8>, es: &SetState, i: &HookInputs) -> Vec<HookRow> {
+        let motion = |lane| hook::Motion {
+            lane,
+            y: i.y[lane],
+            v: i.v[lane],
+        };
+        let supply = |lane| {
+            set.supply(
+                hook::Supply {
+                    lane,
+                    p_s: i.ps[lane],
+                },
+                es,
+            )
+        };
+        let [ys, vs] = set.strokes(&i.y, &i.v, es);
+        let forces = set.extra_forces(&i.y, &i.v, es);
+        vec![
+            ("supplies", set.supplies(&i.ps, es), per_lane(supply), i.ps),
+            (
+                "strokes",
+                ys,
+                per_lane(|l| set.stroke(motion(l), es).0),
+                i.y,
+            ),
+            (
+                "stroke rates",
+                vs,
+                per_lane(|l| set.stroke(motion(l), es).1),
+                i.v,
+            ),
+            (
+                "forces",
+                forces,
+                per_lane(|l| set.extra_force(motion(l), es)),
+                [0.0; 8],
+            ),
+        ]
+    }
+
     /// The array hooks of a composition ([`Effect::supplies`] and the others) give, lane by lane,
     /// the bits of its scalar hooks: the kernel's right-hand side calls the array hooks, a single
     /// lane's callers the scalar ones, and both must compose the effects alike.
@@ -1356,128 +1496,21 @@ mod tests {
                 row[l] += 1e-4 * w[l] * (j as f64 + 1.0);
             }
         }
-        let x = w.map(|v| 2e-3 * (v - 1.4));
-        let (p1, p2, ps) = (w.map(|v| 9e6 * v), w.map(|v| 4e6 * v), w.map(|v| 2e7 * v));
-        let (y, v) = (w.map(|v| 0.05 * (v - 1.3)), w.map(|v| 0.4 * (1.5 - v)));
-        let b = [w.map(|v| 3e12 * v), w.map(|v| 5e12 * v)];
-        let q = [w.map(|v| 1e-3 * (v - 1.2)), w.map(|v| 2e-3 * (1.35 - v))];
-        let bits = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(a, b)| a.to_bits() == b.to_bits());
-        let mut changed = 0;
-        let mut check = |what: &str, array: Vec<f64>, scalar: Vec<f64>, input: Vec<f64>| {
-            assert!(bits(&array, &scalar), "{what}: {array:?} != {scalar:?}");
-            changed += usize::from(!bits(&array, &input));
-        };
+        let i = hook_inputs(w);
+        let mut rows = platen_rows(&set, &es, &i);
         for act in 0..crate::N_ACT {
-            let at = |lane| hook::Opening {
-                lane,
-                act,
-                x: x[lane],
-            };
-            let ops = set.openings(act, &x, &es).to_vec();
-            check(
-                "openings",
-                ops,
-                (0..8).map(|l| set.opening(at(l), &es)).collect(),
-                x.to_vec(),
-            );
-            let sp = set.spool_positions(act, &x, &es).to_vec();
-            let one = (0..8).map(|l| set.spool_position(at(l), &es)).collect();
-            check("spool positions", sp, one, x.to_vec());
-            let [f1, f2] = set.all_flows(act, q, ([&p1, &p2], &ps), &es);
-            let one: Vec<(f64, f64)> = (0..8)
-                .map(|lane| {
-                    let c = hook::Flows {
-                        lane,
-                        act,
-                        q: (q[0][lane], q[1][lane]),
-                        p1: p1[lane],
-                        p2: p2[lane],
-                        p_s: ps[lane],
-                    };
-                    set.flows(c, &es)
-                })
-                .collect();
-            check(
-                "flows in",
-                f1.to_vec(),
-                one.iter().map(|f| f.0).collect(),
-                q[0].to_vec(),
-            );
-            check(
-                "flows out",
-                f2.to_vec(),
-                one.iter().map(|f| f.1).collect(),
-                q[1].to_vec(),
-            );
-            let [b1, b2] = set.stiffnesses(act, b, [&p1, &p2], &es);
-            let one: Vec<(f64, f64)> = (0..8)
-                .map(|lane| {
-                    let c = hook::Chambers {
-                        lane,
-                        act,
-                        b: (b[0][lane], b[1][lane]),
-                        p1: p1[lane],
-                        p2: p2[lane],
-                    };
-                    set.chamber_stiffness(c, &es)
-                })
-                .collect();
-            check(
-                "stiffness 1",
-                b1.to_vec(),
-                one.iter().map(|b| b.0).collect(),
-                b[0].to_vec(),
-            );
-            check(
-                "stiffness 2",
-                b2.to_vec(),
-                one.iter().map(|b| b.1).collect(),
-                b[1].to_vec(),
-            );
+            rows.extend(actuator_rows(&set, &es, act, &i));
         }
-        let one = (0..8).map(|lane| {
-            set.supply(
-                hook::Supply {
-                    lane,
-                    p_s: ps[lane],
-                },
-                &es,
-            )
-        });
-        check(
-            "supplies",
-            set.supplies(&ps, &es).to_vec(),
-            one.collect(),
-            ps.to_vec(),
-        );
-        let motion = |lane| hook::Motion {
-            lane,
-            y: y[lane],
-            v: v[lane],
-        };
-        let [ys, vs] = set.strokes(&y, &v, &es);
-        let one: Vec<(f64, f64)> = (0..8).map(|l| set.stroke(motion(l), &es)).collect();
-        check(
-            "strokes",
-            ys.to_vec(),
-            one.iter().map(|s| s.0).collect(),
-            y.to_vec(),
-        );
-        check(
-            "stroke rates",
-            vs.to_vec(),
-            one.iter().map(|s| s.1).collect(),
-            v.to_vec(),
-        );
-        let one = (0..8).map(|l| set.extra_force(motion(l), &es)).collect();
-        check(
-            "forces",
-            set.extra_forces(&y, &v, &es).to_vec(),
-            one,
-            vec![0.0; 8],
-        );
+        let bits = |a: &[f64; 8]| a.map(f64::to_bits);
+        for (what, array, scalar, _) in &rows {
+            assert_eq!(bits(array), bits(scalar), "{what}: {array:?} != {scalar:?}");
+        }
         // Every hook changes its input in some lane: the comparisons are not of inputs.
-        assert_eq!(changed, 16, "the hooks that changed their input");
+        let changed: Vec<&str> = (rows.iter())
+            .filter(|r| bits(&r.1) != bits(&r.3))
+            .map(|r| r.0)
+            .collect();
+        assert_eq!(changed.len(), 16, "{changed:?}");
     }
 
     /// The set integrates the states up to the last one that moves in the batch: those of the
