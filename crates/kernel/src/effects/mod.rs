@@ -1587,9 +1587,9 @@ mod tests {
         let mut on = Defaults::default();
         *on.effects.get_mut(EffectId::FlowGain) = true;
         let knots = [0.6, 0.8, 1.1, 1.3, 1.25];
+        // Rows 0 to 4 of its table are the knots g0 to g4.
         for (k, g) in knots.iter().enumerate() {
-            let info = crate::params::ModelParams::lookup(&format!("flow_gain.g{k}")).unwrap();
-            (on.effect_params.table_mut(EffectId::FlowGain)).set_field(info.index(), *g);
+            (on.effect_params.table_mut(EffectId::FlowGain)).set_field(k, *g);
         }
         let off = Defaults::default();
         let lanes = [&on as &dyn ModelView, &off];
