@@ -130,6 +130,7 @@ fn random_effects(rng: &mut StdRng, p: &mut ModelParams) {
     (e.compressibility.beta_ratio, e.compressibility.air_fraction) = (u(0.5, 1.0), u(0.0, 0.03));
     (e.bulk_curve.b0, e.bulk_curve.b1, e.bulk_curve.b2) = (u(0.3, 1.0), u(0.6, 1.2), u(0.9, 1.1));
     e.hold_down.k3 = u(-5e8, 5e8);
+    e.valve_compensator.g_min = u(0.1, 1.0);
     e.transport_delay.tau = u(0.5e-3, 3e-3);
     (e.spool_dynamics.freq_hz, e.spool_dynamics.zeta) = (u(60.0, 200.0), u(0.5, 1.0));
     (e.asymmetry.extend_gain, e.asymmetry.act2_gain) = (u(0.9, 1.1), u(0.9, 1.1));

@@ -132,10 +132,22 @@ pub struct RefState {
 /// One controller tick: returns the clamped valve command u (V). The spool command is k_sp·u.
 #[inline(always)]
 pub fn tick(c: &ControllerLane, m: &mut ControllerMemory, r: &RefState, x: f64, f: f64) -> f64 {
+    let u = sum(c, m, r, x, f);
+    shape(c, m, u)
+}
+
+/// The TVC's sum at a tick (V): the force high-pass updated, then the gains. A compensator
+/// (docs/model.md §8) changes it before [`shape`].
+#[inline(always)]
+pub fn sum(c: &ControllerLane, m: &mut ControllerMemory, r: &RefState, x: f64, f: f64) -> f64 {
     m.f_hp = c.hp_b * (f - m.f_prev) + c.hp_a * m.f_hp;
     m.f_prev = f;
-    let mut u =
-        c.c_fb * (r.x - x) + c.c_d * r.x + c.c_v * r.v + c.c_a * r.a + c.c_j * r.j + c.c_f * m.f_hp;
+    c.c_fb * (r.x - x) + c.c_d * r.x + c.c_v * r.v + c.c_a * r.a + c.c_j * r.j + c.c_f * m.f_hp
+}
+
+/// The command `u` through the five notches in series, then clamped to ±u_lim (V).
+#[inline(always)]
+pub fn shape(c: &ControllerLane, m: &mut ControllerMemory, mut u: f64) -> f64 {
     for ((q, s), &identity) in c.notches.iter().zip(m.notch.iter_mut()).zip(&c.identity) {
         if identity {
             // Its states stay +0 while u is finite, so y = 1·u + 0 = u + 0 (the same bits).

@@ -19,12 +19,12 @@ use super::spectrum::oscillators;
 pub const SOURCE: &str = include_str!("cuda/lane.cu");
 
 /// Float64 fields per lane in the parameter record (lane.cu: `VS_LANE_FIELDS`).
-pub const LANE_FIELDS: usize = 178;
+pub const LANE_FIELDS: usize = 186;
 
 /// The library effects the CUDA kernel has, with their bit in its `effects` argument and build
 /// (lane.cu: `VS_E_*`, in this order). A library effect not listed here (one a user adds) runs
 /// on the CPU: [`unsupported`] names it, and a study with it on takes the CPU engine.
-pub const EFFECT_BITS: [(EffectId, i64); 17] = [
+pub const EFFECT_BITS: [(EffectId, i64); 18] = [
     (EffectId::TransportDelay, 1),
     (EffectId::SpoolDynamics, 1 << 1),
     (EffectId::FlowSaturation, 1 << 2),
@@ -42,11 +42,12 @@ pub const EFFECT_BITS: [(EffectId, i64); 17] = [
     (EffectId::DispSensor, 1 << 14),
     (EffectId::ForceSensor, 1 << 15),
     (EffectId::Building, 1 << 16),
+    (EffectId::ValveCompensator, 1 << 17),
 ];
 
 /// The bit saying that the two actuators differ in some lane (lane.cu: `VS_E_TWO`): the kernel
 /// then integrates both, else one stands for both.
-pub const TWO_ACTUATORS: i64 = 1 << 17;
+pub const TWO_ACTUATORS: i64 = 1 << 18;
 
 /// The `effects` bits of a launch: every covered effect some lane switches on, and
 /// [`TWO_ACTUATORS`] where some lane's actuators differ.
@@ -237,6 +238,7 @@ fn lane_record(lp: &LaneParams<1>, m: &ModelParams) -> [f64; LANE_FIELDS] {
     r.extend(disp_sensor::DispSensor::<1>::new([m]).lane(0));
     r.extend(force_sensor::ForceSensor::<1>::new([m]).lane(0));
     r.extend(building::Building::<1>::new([m]).lane(0));
+    r.extend(valve_compensator::ValveCompensator::<1>::new([m]).lane(0));
     r.try_into().expect("LANE_FIELDS fields")
 }
 
@@ -462,7 +464,8 @@ mod tests {
         }
         assert_eq!(TWO_ACTUATORS, 1 << EFFECT_BITS.len());
         assert_eq!(bits[EFFECT_BITS.len()], TWO_ACTUATORS);
-        assert!(source.contains("VS_LANE_FIELDS=VS_BLD+7+4*10"));
+        assert!(source.contains("VS_VCOMP=VS_BLD+7+4*10"));
+        assert!(source.contains("VS_LANE_FIELDS=VS_VCOMP+8"));
         let m = ModelParams::default();
         assert_eq!(pack_params(&[&m]).unwrap().len(), LANE_FIELDS);
     }

@@ -1229,18 +1229,31 @@ fn initial_state<const N: usize>(lp: &LaneParams<N>) -> [[f64; N]; NP] {
     s
 }
 
-/// What the controller reads at a tick, per lane: the reference, the stroke and the force.
+/// What the controller reads at a tick, per lane: the reference, the stroke, the force and (for
+/// a compensator) the chamber pressures, in the plant's state.
 struct Feedback<'a, const N: usize> {
     r: &'a [RefState; N],
     x: &'a [f64; N],
     f: &'a [f64; N],
+    s: &'a [[f64; N]; NP],
+}
+
+impl<const N: usize> Feedback<'_, N> {
+    /// Lane `l`'s chamber pressures (cap, rod) of each actuator, Pa.
+    #[inline(always)]
+    fn pressures(&self, l: usize) -> [(f64, f64); N_ACT] {
+        std::array::from_fn(|i| (self.s[P1[i]][l], self.s[P2[i]][l]))
+    }
 }
 
 /// The valve command `u` and the held spool command `x_c` of every lane at tick `k`: from the
-/// controller in closed loop, else from the open-loop drive (one branch per tick, not per lane).
+/// controller in closed loop (the TVC's sum, the effects' compensators, the notches), else from
+/// the open-loop drive (one branch per tick, not per lane).
 #[inline(always)]
-fn commands<const N: usize>(
+#[allow(clippy::too_many_arguments)]
+fn commands<const N: usize, E: Effect<N>>(
     lp: &LaneParams<N>,
+    (effect, es): (&E, &mut E::State),
     drive: &Drive,
     k: usize,
     fed: &Feedback<'_, N>,
@@ -1251,7 +1264,11 @@ fn commands<const N: usize>(
     match drive {
         Drive::ClosedLoop => {
             for l in 0..N {
-                u[l] = controller::tick(&lp.ctrl[l], &mut mem[l], &fed.r[l], fed.x[l], fed.f[l]);
+                let (c, m) = (&lp.ctrl[l], &mut mem[l]);
+                let sum = controller::sum(c, m, &fed.r[l], fed.x[l], fed.f[l]);
+                let p = fed.pressures(l);
+                let u_c = effect.command(hook::Command { lane: l, u: sum, p }, es);
+                u[l] = controller::shape(c, m, u_c);
                 x_c[l] = lp.ctrl[l].k_sp * u[l];
             }
         }
@@ -1412,8 +1429,19 @@ pub(crate) fn integrate<
             r: &rl,
             x: &x,
             f: &f,
+            s: &s,
         };
-        commands(lp, &reference.drive, k, &fed, &mut mem, &mut u, &mut x_c);
+        let fx = (effect, &mut es);
+        commands(
+            lp,
+            fx,
+            &reference.drive,
+            k,
+            &fed,
+            &mut mem,
+            &mut u,
+            &mut x_c,
+        );
         rhs::<N, A, SIMD, Q, D, E, P>(lp, effect, &x_c, &s, &es, &mut k1, &mut ek1);
         a.copy_from_slice(&k1[VEL]);
         let spool = effect.spool_positions(0, &x_c, &es);
@@ -1650,6 +1678,9 @@ mod tests {
         }
         fn sensed(&self, c: hook::Sensed, s: &Self::State) -> [f64; 3] {
             self.0.sensed(c, s)
+        }
+        fn command(&self, c: hook::Command, s: &mut Self::State) -> f64 {
+            self.0.command(c, s)
         }
         fn watch(&self, s: &Self::State, acc: &mut crate::metrics::SpecimenAcc<N>) {
             self.0.watch(s, acc)

@@ -67,7 +67,8 @@ enum {
   VS_SENSOR = VS_SPEC + 9,       // accel, disp, force sensors: on, ω², 2ζω, τ, Padé, 12/τ², 6/τ
   VS_BLD = VS_SENSOR + 21,       // building: law (0 off), α, Bouc–Wen A, β, γ, n, then per
                                  // storey 1/m (0 absent), k, c, F_y, then 1/height
-  VS_LANE_FIELDS = VS_BLD + 7 + 4 * 10
+  VS_VCOMP = VS_BLD + 7 + 4 * 10, // valve_compensator: on, P_S, P_R, 1/Δp₀ of the 4 ports, g_min
+  VS_LANE_FIELDS = VS_VCOMP + 8
 };
 
 // Which effects a build applies (gpu_lanes.rs: EFFECT_BITS), bit i = registry line i, and
@@ -76,7 +77,7 @@ enum {
   VS_E_DELAY = 1, VS_E_SPOOL = 2, VS_E_FSAT = 4, VS_E_FGAIN = 8, VS_E_ASYM = 16, VS_E_LEAK = 32,
   VS_E_SUPPLY = 64, VS_E_SEAL = 128, VS_E_COMP = 256, VS_E_BULK = 512, VS_E_RMASS = 1024,
   VS_E_HOLD = 2048, VS_E_SPEC = 4096, VS_E_ACCEL = 8192, VS_E_DISP = 16384, VS_E_FORCE = 32768,
-  VS_E_BLD = 65536, VS_E_TWO = 131072
+  VS_E_BLD = 65536, VS_E_VCOMP = 131072, VS_E_TWO = 262144
 };
 
 // Output record (gpu_lanes.rs: OUT_*). Status: 0 ok, 1 non-finite, 2 stroke, 3 pressure.
@@ -540,16 +541,22 @@ VS_FN void vs_combine(VsState &s, double h6, const VsState &k1, const VsState &k
     if (vs_live(i)) s.e[i] = vs_rk4(s.e[i], h6, k1.e[i], k2.e[i], k3.e[i], k4.e[i]);
 }
 
-// controller.rs `tick`: the force high-pass, the gains, five notches, the clamp.
+// controller.rs `sum`: the force high-pass, then the gains.
 struct VsCtrl { double f_prev, f_hp, notch[5][2]; };
 
-VS_FN double vs_tick(const double *P, long long n, long long l, VsCtrl &m, double xr, double vr,
-                     double ar, double jr, double x, double f) {
+VS_FN double vs_sum(const double *P, long long n, long long l, VsCtrl &m, double xr, double vr,
+                    double ar, double jr, double x, double f) {
 #define F(i) vs_p(P, n, l, (i))
   m.f_hp = F(VS_HP_B) * (f - m.f_prev) + F(VS_HP_A) * m.f_hp;
   m.f_prev = f;
-  double u = F(VS_C_FB) * (xr - x) + F(VS_C_D) * xr + F(VS_C_V) * vr + F(VS_C_A) * ar +
-             F(VS_C_J) * jr + F(VS_C_F) * m.f_hp;
+  return F(VS_C_FB) * (xr - x) + F(VS_C_D) * xr + F(VS_C_V) * vr + F(VS_C_A) * ar +
+         F(VS_C_J) * jr + F(VS_C_F) * m.f_hp;
+#undef F
+}
+
+// controller.rs `shape`: five notches, the clamp.
+VS_FN double vs_shape(const double *P, long long n, long long l, VsCtrl &m, double u) {
+#define F(i) vs_p(P, n, l, (i))
   for (int i = 0; i < 5; ++i) {
     const long long q = VS_NOTCH + 5 * i;
     double y = F(q) * u + m.notch[i][0];
@@ -559,6 +566,23 @@ VS_FN double vs_tick(const double *P, long long n, long long l, VsCtrl &m, doubl
   }
   double lim = F(VS_U_LIM);
   return u < -lim ? -lim : (u > lim ? lim : u);
+#undef F
+}
+
+// effects/valve_compensator.rs `command`: u divided by the orifice law's factor g (the mean
+// √(Δp/Δp₀) of the ports u opens, over the actuators), g at least g_min.
+VS_FN double vs_vcomp(const double *P, long long n, long long l, const VsState &s, double u) {
+#define F(i) vs_p(P, n, l, (i))
+  double ps = F(VS_VCOMP + 1), pr = F(VS_VCOMP + 2), g = 0.0;
+  for (int i = 0; i < VS_NA; ++i) {
+    double d1 = u >= 0.0 ? (ps - s.p1[i]) * F(VS_VCOMP + 3) : (s.p1[i] - pr) * F(VS_VCOMP + 5);
+    double d2 = u >= 0.0 ? (s.p2[i] - pr) * F(VS_VCOMP + 4) : (ps - s.p2[i]) * F(VS_VCOMP + 6);
+    g += sqrt(d1 > 0.0 ? d1 : 0.0) + sqrt(d2 > 0.0 ? d2 : 0.0);
+  }
+  g = g / (double)(2 * VS_NA);
+  double g_min = F(VS_VCOMP + 7);
+  g = g > g_min ? g : g_min;
+  return u + F(VS_VCOMP) * (u / g - u);
 #undef F
 }
 
@@ -672,11 +696,13 @@ VS_FN void vs_store(const VsRun &r, double *out, long long n, long long l, const
 // The spool command held over tick k (simulate.rs `integrate`, the drive match), from the
 // stroke x and the actuator force f the controller reads.
 VS_FN double vs_command(const double *P, long long n, long long l, const VsRun &r, long long k,
-                        VsCtrl &m, double x, double f, double &u) {
+                        VsCtrl &m, const VsState &s, double x, double f, double &u) {
   double k_sp = vs_p(P, n, l, VS_K_SP);
   if (r.drive == 0) {
     long long at = l * r.ref_stride + k;
-    u = vs_tick(P, n, l, m, r.x[at], r.v[at], r.a[at], r.j[at], x, f);
+    u = vs_sum(P, n, l, m, r.x[at], r.v[at], r.a[at], r.j[at], x, f);
+    if (VS_ON(VS_E_VCOMP)) u = vs_vcomp(P, n, l, s, u);
+    u = vs_shape(P, n, l, m, u);
     return k_sp * u;
   }
   if (r.drive == 1) {
@@ -740,7 +766,7 @@ VS_FN void vs_lane(const VsRun &r, const double *P, double *out, long long n, lo
   for (long long k = 0; k < r.ticks; ++k) {
     double x, v_s, f = vs_force(P, n, l, s), u = 0.0;
     vs_stroke(s, x, v_s);
-    double x_c = vs_command(P, n, l, r, k, m, x, f, u);
+    double x_c = vs_command(P, n, l, r, k, m, s, x, f, u);
     vs_rhs(P, n, l, linear, x_c, s, k1);
     c.max_u = fmax(c.max_u, fabs(u));
     if (VS_ON(VS_E_BLD)) vs_watch(P, n, l, s, c.spec);

@@ -71,3 +71,15 @@ pub struct Sensed {
     /// (the plant's first).
     pub raw: [f64; 3],
 }
+
+/// For [`super::Effect::command`]: the controller's valve command at a tick, after the TVC's sum
+/// and before its notches (docs/model.md §8: where a compensator enters).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Command {
+    pub lane: usize,
+    /// The command as the effects before this one leave it (the TVC's sum first), V.
+    pub u: f64,
+    /// Cap- and rod-side chamber pressures of each actuator as the controller measures them at
+    /// the tick, Pa.
+    pub p: [(f64, f64); crate::N_ACT],
+}

@@ -90,6 +90,10 @@ use super::baseline_params::{
 use super::metrics::SpecimenAcc;
 use super::param_table::{FieldInfo, Fields};
 
+/// The family of the compensators: effects in the controller (docs/model.md §8), which change
+/// the valve command at the ticks ([`Effect::command`]), not the plant.
+pub const COMPENSATION: &str = "controller compensation";
+
 /// What the rest of the tool knows about a library effect: its name (the model-file table and
 /// the parameter paths `name.param`), its family, its parameters and the ones a diagnosis frees.
 /// Each effect's file defines its `INFO`.
@@ -354,6 +358,7 @@ library! {
     force_sensor::ForceSensor,
     building::Building,
     expression::Expression,
+    valve_compensator::ValveCompensator,
 }
 
 /// The measurement chain shared by the sensor effects.
@@ -378,7 +383,13 @@ impl EffectId {
     /// same family, finds its modes; `study fit --effect building` then fits its storeys), and
     /// the expressions, which are a candidate where a model file writes some.
     pub fn screened(self) -> bool {
-        !matches!(self, EffectId::Building | EffectId::Expression)
+        !matches!(self, EffectId::Building | EffectId::Expression) && !self.compensates()
+    }
+
+    /// Whether the effect is a compensator in the controller ([`COMPENSATION`]), which a lab adds
+    /// to improve a test, not physics a diagnosis looks for.
+    pub fn compensates(self) -> bool {
+        self.info().family == COMPENSATION
     }
 }
 
@@ -735,6 +746,16 @@ pub trait Effect<const N: usize>: Sync {
         c.raw
     }
 
+    /// The valve command at a controller tick (volts), from `c.u`, the TVC's sum as the effects
+    /// before this one leave it: a compensator's hook (docs/model.md §8). It runs once per tick,
+    /// after the sum and before the notches and the clamp, in closed loop only (an open-loop
+    /// drive is the command itself). A compensator that adapts keeps what it learns in its own
+    /// states, which it may change here (their derivatives are 0 between ticks).
+    #[inline(always)]
+    fn command(&self, c: hook::Command, _s: &mut Self::State) -> f64 {
+        c.u
+    }
+
     /// What the effect's own states say of lane `lane`, each channel given to `out` by name and
     /// value in SI units (a building's storey drifts, floor accelerations and base shear): what a
     /// specimen experiences, for the time histories. Observers call it; the step does not.
@@ -905,6 +926,11 @@ impl<const N: usize, A: Effect<N>, B: Effect<N>> Effect<N> for Both<A, B> {
     fn sensed(&self, c: hook::Sensed, s: &Self::State) -> [f64; 3] {
         let raw = self.0.sensed(c, &s.0);
         self.1.sensed(hook::Sensed { raw, ..c }, &s.1)
+    }
+    #[inline(always)]
+    fn command(&self, c: hook::Command, s: &mut Self::State) -> f64 {
+        let u = self.0.command(c, &mut s.0);
+        self.1.command(hook::Command { u, ..c }, &mut s.1)
     }
     fn responses(&self, lane: usize, s: &Self::State, out: &mut dyn FnMut(&'static str, f64)) {
         self.0.responses(lane, &s.0, out);
@@ -1121,6 +1147,14 @@ impl<const N: usize, E: Effect<N>> Effect<N> for Gated<E> {
             self.effect.sensed(c, s)
         } else {
             c.raw
+        }
+    }
+    #[inline(always)]
+    fn command(&self, c: hook::Command, s: &mut Self::State) -> f64 {
+        if self.on {
+            self.effect.command(c, s)
+        } else {
+            c.u
         }
     }
     fn responses(&self, lane: usize, s: &Self::State, out: &mut dyn FnMut(&'static str, f64)) {
