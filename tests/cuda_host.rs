@@ -131,6 +131,35 @@ fn random_effects(rng: &mut StdRng, p: &mut ModelParams) {
     (e.bulk_curve.b0, e.bulk_curve.b1, e.bulk_curve.b2) = (u(0.3, 1.0), u(0.6, 1.2), u(0.9, 1.1));
     e.hold_down.k3 = u(-5e8, 5e8);
     e.valve_compensator.g_min = u(0.1, 1.0);
+    // The adaptive compensators: fast enough to act within the tests' 2.5 s, capped or not
+    // (authority up to half the motion for APC, a tenth for each harmonic of AHC: more drives
+    // most lanes out of their pressure band), frozen half-way or adapting to the end.
+    for (top, (g, band, tau, authority, freeze)) in [0.5, 0.1].into_iter().zip([
+        {
+            let a = &mut e.amplitude_phase;
+            (
+                &mut a.gain,
+                &mut a.band_hz,
+                &mut a.delay_s,
+                &mut a.authority,
+                &mut a.freeze_s,
+            )
+        },
+        {
+            let a = &mut e.harmonic_cancellation;
+            (
+                &mut a.gain,
+                &mut a.band_hz,
+                &mut a.delay_s,
+                &mut a.authority,
+                &mut a.freeze_s,
+            )
+        },
+    ]) {
+        (*g, *band, *tau) = (u(0.5, 5.0), u(1.0, 10.0), u(0.0, 0.02));
+        *authority = u(0.1 * top, top);
+        *freeze = if u(0.0, 1.0) < 0.5 { 0.0 } else { u(0.5, 2.0) };
+    }
     e.transport_delay.tau = u(0.5e-3, 3e-3);
     (e.spool_dynamics.freq_hz, e.spool_dynamics.zeta) = (u(60.0, 200.0), u(0.5, 1.0));
     (e.asymmetry.extend_gain, e.asymmetry.act2_gain) = (u(0.9, 1.1), u(0.9, 1.1));

@@ -185,10 +185,10 @@ const BLOCK: u32 = 128;
 /// What a build of the kernel is specialised for: the effects' bits
 /// ([`gpu_lanes::effect_bits`]) and the parameter fields that vary between lanes
 /// ([`Uniform::vary`]).
-type BuildKey = (i64, [u64; 3]);
+type BuildKey = (i64, [u64; gpu_lanes::MASK_WORDS]);
 
 /// The CUDA kernel on GPU 0: one build per set of effects and of varying fields (lane.cu's
-/// `VS_EFFECTS`, `VS_VARY0..2`), loaded when a launch first needs it.
+/// `VS_EFFECTS`, `VS_VARY0..3`), loaded when a launch first needs it.
 pub struct Cuda {
     pub name: String,
     ctx: Arc<CudaContext>,
@@ -240,7 +240,7 @@ impl Cuda {
             host_out: Mutex::new(Vec::new()),
             last: Mutex::new(Timings::default()),
         };
-        cuda.build((0, [0; 3]))?;
+        cuda.build((0, [0; gpu_lanes::MASK_WORDS]))?;
         Ok(cuda)
     }
 
@@ -492,9 +492,9 @@ pub(crate) fn pack(models: &[&ModelParams]) -> Result<Packed, SetupError> {
         .par_chunks(PACK_PIECE)
         .map(|lanes| Piece::new(lanes, &head, every))
         .collect::<Result<_, SetupError>>()?;
-    let vary = pieces
-        .iter()
-        .fold([0; 3], |a, p| gpu_lanes::union(a, p.vary));
+    let vary = pieces.iter().fold([0; gpu_lanes::MASK_WORDS], |a, p| {
+        gpu_lanes::union(a, p.vary)
+    });
     let uniform = Uniform {
         vary,
         values: head.to_vec(),
@@ -506,7 +506,7 @@ pub(crate) fn pack(models: &[&ModelParams]) -> Result<Packed, SetupError> {
 
 /// The records of some lanes' fields that differ from the first lane's (all of them, `every`).
 struct Piece {
-    vary: [u64; 3],
+    vary: [u64; gpu_lanes::MASK_WORDS],
     /// Those fields, in order, and their values: a row of the piece's lanes each.
     fields: Vec<usize>,
     rows: Vec<f64>,
@@ -523,8 +523,8 @@ impl Piece {
             .map(|m| gpu_lanes::record(m))
             .collect::<Result<Vec<_>, _>>()?;
         let vary = match every {
-            true => [!0; 3],
-            false => records.iter().fold([0; 3], |a, r| {
+            true => [!0; gpu_lanes::MASK_WORDS],
+            false => records.iter().fold([0; gpu_lanes::MASK_WORDS], |a, r| {
                 gpu_lanes::union(a, Uniform::differing(head, r))
             }),
         };
@@ -698,7 +698,10 @@ mod tests {
         let all = gpu_lanes::EFFECT_BITS
             .iter()
             .fold(gpu_lanes::TWO_ACTUATORS, |b, (_, bit)| b | bit);
-        for key in [(0, [0; 3]), (all, [!0; 3])] {
+        for key in [
+            (0, [0; gpu_lanes::MASK_WORDS]),
+            (all, [!0; gpu_lanes::MASK_WORDS]),
+        ] {
             let t = std::time::Instant::now();
             let ptx = compile_ptx(build_options(key)).unwrap_or_else(|e| panic!("{e}"));
             eprintln!(
@@ -712,7 +715,7 @@ mod tests {
                 "no vs_lanes entry in the PTX"
             );
             assert!(ptx.contains(".f64"), "the kernel is float64");
-            if key.1 == [0; 3] {
+            if key.1 == [0; gpu_lanes::MASK_WORDS] {
                 assert!(ptx.contains("vs_u["), "no constant for the shared fields");
             }
         }
@@ -746,7 +749,10 @@ mod tests {
             "c_fb, c_a, 1/m and the Coulomb force mu m g"
         );
         let same = pack(&refs[..1]).unwrap();
-        assert_eq!((same.uniform.vary, same.varying), ([0; 3], vec![0.0]));
+        assert_eq!(
+            (same.uniform.vary, same.varying),
+            ([0; gpu_lanes::MASK_WORDS], vec![0.0])
+        );
     }
 
     #[test]

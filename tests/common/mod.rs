@@ -196,3 +196,72 @@ pub fn assert_close(a: f64, b: f64, tol: f64, what: &str) {
         "{what}: {a} against {b} (|difference| {d:e}, tolerance {tol:e})"
     );
 }
+
+/// The metrics of each model (batches of 8, the library's effect set for each batch) on
+/// `reference` with the default solver; NaN metrics where a run failed (a chamber pressure left
+/// its range, the stroke limit).
+#[allow(dead_code)] // used by the compensator tests
+pub fn metrics_of(
+    models: &[vshake::kernel::params::ModelParams],
+    reference: &vshake::kernel::excitation::Reference,
+) -> Vec<vshake::kernel::metrics::Metrics> {
+    use vshake::kernel::effects::effect_set;
+    use vshake::kernel::metrics::Metrics;
+    use vshake::kernel::params::ModelParams;
+    use vshake::kernel::simulate::{self, LaneParams, LaneStatus, NoObserver, Solver};
+    models
+        .chunks(8)
+        .flat_map(|chunk| {
+            let refs: Vec<&ModelParams> = chunk.iter().collect();
+            let lanes = simulate::run(
+                &LaneParams::<8>::new(&refs).unwrap(),
+                &effect_set::<8>(&refs),
+                reference,
+                &Solver::default(),
+                &mut NoObserver,
+            )
+            .unwrap();
+            lanes.into_iter().take(chunk.len()).map(|r| match r.status {
+                LaneStatus::Ok => r.metrics,
+                _ => Metrics::NAN,
+            })
+        })
+        .collect()
+}
+
+/// The 90th percentile of `v`, a NaN (a failed run) counted as the worst.
+#[allow(dead_code)] // used by the compensator tests
+pub fn p90(v: &[f64]) -> f64 {
+    let mut v: Vec<f64> = v
+        .iter()
+        .map(|&x| if x.is_nan() { f64::INFINITY } else { x })
+        .collect();
+    v.sort_by(f64::total_cmp);
+    v[(0.9 * (v.len() - 1) as f64).round() as usize]
+}
+
+/// `n` tables drawn within ±20 % of the published model's β, M, the four port widths (w3 and the
+/// ratios r1, r2, r4) and P_S (issue 52's uncertainty).
+#[allow(dead_code)] // used by the compensator tests
+pub fn uncertain_tables(seed: u64, n: usize) -> Vec<vshake::kernel::params::ModelParams> {
+    use chacha20::ChaCha8Rng;
+    use rand::{RngExt, SeedableRng};
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut u = || rng.random_range(0.8..1.2);
+    (0..n)
+        .map(|_| {
+            let mut m = vshake::kernel::params::ModelParams::default();
+            m.actuator.beta *= u();
+            m.platen.m *= u();
+            let sv = &mut m.servovalve;
+            (sv.w3, sv.r1, sv.r2, sv.r4, sv.p_s) = (
+                sv.w3 * u(),
+                sv.r1 * u(),
+                sv.r2 * u(),
+                sv.r4 * u(),
+                sv.p_s * u(),
+            );
+            m
+        })
+        .collect()
+}

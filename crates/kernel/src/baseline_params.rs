@@ -167,4 +167,18 @@ impl ControllerParams {
             (self.notch5_f0, self.notch5_bw, self.notch5_depth),
         ]
     }
+
+    /// The TVC's gains folded with the 10 V scale and the normalisations (docs/model.md §2):
+    /// [10·G_d/D_max (V/m), 10·L_d/D_max (V/m), 10·L_v/V_max (V/(m/s)), 10·L_a/A_max
+    /// (V/(m/s²)), 10·L_j/J_max (V/(m/s³)), 10·G_f/F_max (V/N)].
+    pub fn gains(&self) -> [f64; 6] {
+        [
+            10.0 * self.g_d / self.d_max,
+            10.0 * self.l_d / self.d_max,
+            10.0 * self.l_v / self.v_max,
+            10.0 * self.l_a / self.a_max,
+            10.0 * self.l_j / self.j_max,
+            10.0 * self.g_f / self.f_max,
+        ]
+    }
 }

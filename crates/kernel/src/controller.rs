@@ -84,13 +84,14 @@ impl ControllerLane {
                 notch_coefficients(f0, bw, depth, p.f_s)
             }
         });
+        let [c_fb, c_d, c_v, c_a, c_j, c_f] = p.gains();
         ControllerLane {
-            c_fb: 10.0 * p.g_d / p.d_max,
-            c_d: 10.0 * p.l_d / p.d_max,
-            c_v: 10.0 * p.l_v / p.v_max,
-            c_a: 10.0 * p.l_a / p.a_max,
-            c_j: 10.0 * p.l_j / p.j_max,
-            c_f: 10.0 * p.g_f / p.f_max,
+            c_fb,
+            c_d,
+            c_v,
+            c_a,
+            c_j,
+            c_f,
             hp_b: two_fs / (two_fs + w_hp),
             hp_a: (two_fs - w_hp) / (two_fs + w_hp),
             notches,

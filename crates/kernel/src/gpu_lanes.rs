@@ -19,12 +19,12 @@ use super::spectrum::oscillators;
 pub const SOURCE: &str = include_str!("cuda/lane.cu");
 
 /// Float64 fields per lane in the parameter record (lane.cu: `VS_LANE_FIELDS`).
-pub const LANE_FIELDS: usize = 186;
+pub const LANE_FIELDS: usize = 198;
 
 /// The library effects the CUDA kernel has, with their bit in its `effects` argument and build
 /// (lane.cu: `VS_E_*`, in this order). A library effect not listed here (one a user adds) runs
 /// on the CPU: [`unsupported`] names it, and a study with it on takes the CPU engine.
-pub const EFFECT_BITS: [(EffectId, i64); 18] = [
+pub const EFFECT_BITS: [(EffectId, i64); 20] = [
     (EffectId::TransportDelay, 1),
     (EffectId::SpoolDynamics, 1 << 1),
     (EffectId::FlowSaturation, 1 << 2),
@@ -43,11 +43,13 @@ pub const EFFECT_BITS: [(EffectId, i64); 18] = [
     (EffectId::ForceSensor, 1 << 15),
     (EffectId::Building, 1 << 16),
     (EffectId::ValveCompensator, 1 << 17),
+    (EffectId::AmplitudePhase, 1 << 18),
+    (EffectId::HarmonicCancellation, 1 << 19),
 ];
 
 /// The bit saying that the two actuators differ in some lane (lane.cu: `VS_E_TWO`): the kernel
 /// then integrates both, else one stands for both.
-pub const TWO_ACTUATORS: i64 = 1 << 18;
+pub const TWO_ACTUATORS: i64 = 1 << 20;
 
 /// The `effects` bits of a launch: every covered effect some lane switches on, and
 /// [`TWO_ACTUATORS`] where some lane's actuators differ.
@@ -131,13 +133,16 @@ pub fn record(m: &ModelParams) -> Result<[f64; LANE_FIELDS], SetupError> {
 /// fields alone (lane.cu: `vs_p`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Uniform {
-    /// Bit f (of word f / 64) set where field f differs between lanes (lane.cu: `VS_VARY0..2`).
-    pub vary: [u64; 3],
+    /// Bit f (of word f / 64) set where field f differs between lanes (lane.cu: `VS_VARY0..3`).
+    pub vary: [u64; MASK_WORDS],
     /// Every field's value in the first lane (`vs_u`; the varying ones are not read).
     pub values: Vec<f64>,
 }
 
-const _: () = assert!(LANE_FIELDS <= 3 * 64, "the mask holds 192 fields");
+const _: () = assert!(LANE_FIELDS <= MASK_WORDS * 64, "the mask holds 256 fields");
+
+/// Words of the mask of varying fields (lane.cu: `VS_VARY0..3`).
+pub const MASK_WORDS: usize = 4;
 
 impl Uniform {
     /// Which fields of `params` (n lanes, field-major, as [`pack_params`] writes them) vary,
@@ -152,7 +157,7 @@ impl Uniform {
     }
 
     /// The bits of the fields where `record` differs from `first`.
-    pub fn differing(first: &[f64; LANE_FIELDS], record: &[f64; LANE_FIELDS]) -> [u64; 3] {
+    pub fn differing(first: &[f64; LANE_FIELDS], record: &[f64; LANE_FIELDS]) -> [u64; MASK_WORDS] {
         mask((0..LANE_FIELDS).filter(|&f| first[f].to_bits() != record[f].to_bits()))
     }
 
@@ -177,8 +182,8 @@ impl Uniform {
 }
 
 /// The mask of `fields`: bit f of word f / 64 ([`Uniform::vary`]).
-fn mask(fields: impl Iterator<Item = usize>) -> [u64; 3] {
-    let mut vary = [0u64; 3];
+fn mask(fields: impl Iterator<Item = usize>) -> [u64; MASK_WORDS] {
+    let mut vary = [0u64; MASK_WORDS];
     for f in fields {
         vary[f / 64] |= 1 << (f % 64);
     }
@@ -186,17 +191,17 @@ fn mask(fields: impl Iterator<Item = usize>) -> [u64; 3] {
 }
 
 /// Whether field `f` is set in the mask `vary`.
-fn bit(vary: [u64; 3], f: usize) -> bool {
+fn bit(vary: [u64; MASK_WORDS], f: usize) -> bool {
     vary[f / 64] >> (f % 64) & 1 == 1
 }
 
 /// The fields set in `vary`, in order (at most [`LANE_FIELDS`]).
-pub fn fields(vary: [u64; 3]) -> Vec<usize> {
+pub fn fields(vary: [u64; MASK_WORDS]) -> Vec<usize> {
     (0..LANE_FIELDS).filter(|&f| bit(vary, f)).collect()
 }
 
 /// The fields set in either mask.
-pub fn union(a: [u64; 3], b: [u64; 3]) -> [u64; 3] {
+pub fn union(a: [u64; MASK_WORDS], b: [u64; MASK_WORDS]) -> [u64; MASK_WORDS] {
     std::array::from_fn(|w| a[w] | b[w])
 }
 
@@ -239,6 +244,8 @@ fn lane_record(lp: &LaneParams<1>, m: &ModelParams) -> [f64; LANE_FIELDS] {
     r.extend(force_sensor::ForceSensor::<1>::new([m]).lane(0));
     r.extend(building::Building::<1>::new([m]).lane(0));
     r.extend(valve_compensator::ValveCompensator::<1>::new([m]).lane(0));
+    r.extend(amplitude_phase::AmplitudePhase::<1>::new([m]).lane(0));
+    r.extend(harmonic_cancellation::HarmonicCancellation::<1>::new([m]).lane(0));
     r.try_into().expect("LANE_FIELDS fields")
 }
 
@@ -465,7 +472,9 @@ mod tests {
         assert_eq!(TWO_ACTUATORS, 1 << EFFECT_BITS.len());
         assert_eq!(bits[EFFECT_BITS.len()], TWO_ACTUATORS);
         assert!(source.contains("VS_VCOMP=VS_BLD+7+4*10"));
-        assert!(source.contains("VS_LANE_FIELDS=VS_VCOMP+8"));
+        assert!(source.contains("VS_APC=VS_VCOMP+8"));
+        assert!(source.contains("VS_AHC=VS_APC+6"));
+        assert!(source.contains("VS_LANE_FIELDS=VS_AHC+6"));
         let m = ModelParams::default();
         assert_eq!(pack_params(&[&m]).unwrap().len(), LANE_FIELDS);
     }
@@ -487,6 +496,9 @@ mod tests {
         assert_eq!(u.compact(&p, 3), [&p[69..72], &p[78..81]].concat());
         let (ra, rb) = (record(&a).unwrap(), record(&b).unwrap());
         assert_eq!(Uniform::differing(&ra, &rb), u.vary);
-        assert_eq!(Uniform::of(&pack_params(&[&a]).unwrap(), 1).vary, [0; 3]);
+        assert_eq!(
+            Uniform::of(&pack_params(&[&a]).unwrap(), 1).vary,
+            [0; MASK_WORDS]
+        );
     }
 }

@@ -1232,6 +1232,8 @@ fn initial_state<const N: usize>(lp: &LaneParams<N>) -> [[f64; N]; NP] {
 /// What the controller reads at a tick, per lane: the reference, the stroke, the force and (for
 /// a compensator) the chamber pressures, in the plant's state.
 struct Feedback<'a, const N: usize> {
+    /// The tick's time, s.
+    t: f64,
     r: &'a [RefState; N],
     x: &'a [f64; N],
     f: &'a [f64; N],
@@ -1266,8 +1268,16 @@ fn commands<const N: usize, E: Effect<N>>(
             for l in 0..N {
                 let (c, m) = (&lp.ctrl[l], &mut mem[l]);
                 let sum = controller::sum(c, m, &fed.r[l], fed.x[l], fed.f[l]);
-                let p = fed.pressures(l);
-                let u_c = effect.command(hook::Command { lane: l, u: sum, p }, es);
+                let r = &fed.r[l];
+                let command = hook::Command {
+                    lane: l,
+                    u: sum,
+                    p: fed.pressures(l),
+                    t: fed.t,
+                    r: [r.x, r.v, r.a, r.j],
+                    x: fed.x[l],
+                };
+                let u_c = effect.command(command, es);
                 u[l] = controller::shape(c, m, u_c);
                 x_c[l] = lp.ctrl[l].k_sp * u[l];
             }
@@ -1426,6 +1436,7 @@ pub(crate) fn integrate<
             x[l] = effect.stroke(motion(l, &s), &es).0;
         }
         let fed = Feedback {
+            t,
             r: &rl,
             x: &x,
             f: &f,

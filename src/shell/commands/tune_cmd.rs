@@ -358,11 +358,15 @@ fn result(o: &mut impl Write, tuner: &Tuner, t: &Tuned, wall: f64) -> anyhow::Re
         "\n  stopped     {} after {:.1} s ({} runs)",
         t.stopped, wall, runs
     )?;
-    writeln!(o, "\n  {:<22} {:>12} {:>12}", "gain", "start", "tuned")?;
+    // The names' column: 22 wide, wider for a compensator's longer names.
+    let w = (tuner.spec.gains.iter())
+        .map(|g| g.info.path().len())
+        .fold(22, usize::max);
+    writeln!(o, "\n  {:<w$} {:>12} {:>12}", "gain", "start", "tuned")?;
     for (i, g) in tuner.spec.gains.iter().enumerate() {
         writeln!(
             o,
-            "  {:<22} {:>12.6} {:>12.6}",
+            "  {:<w$} {:>12.6} {:>12.6}",
             g.info.path(),
             t.start.gains[i],
             t.best.gains[i]
@@ -382,7 +386,7 @@ fn result(o: &mut impl Write, tuner: &Tuner, t: &Tuned, wall: f64) -> anyhow::Re
         } else {
             String::new()
         };
-        writeln!(o, "  {:<22} {:>12} {:>12}{change}", name, v(a), v(b))
+        writeln!(o, "  {:<w$} {:>12} {:>12}{change}", name, v(a), v(b))
     };
     row(o, "objective", t.start.objective, t.best.objective)?;
     if tuner.draws.len() > 1 {
@@ -453,12 +457,16 @@ fn write_model(
 ) -> anyhow::Result<()> {
     let model = with_gains(tuner, &t.best.gains);
     let table = if gains_only {
-        let mut c = toml::Table::new();
-        for (g, v) in tuner.spec.gains.iter().zip(&t.best.gains) {
-            c.insert(g.info.name.into(), (*v).into());
-        }
+        // [model.controller] and each tuned compensator's table (which switches it on).
         let mut m = toml::Table::new();
-        m.insert("controller".into(), c.into());
+        for (g, v) in tuner.spec.gains.iter().zip(&t.best.gains) {
+            let c = m
+                .entry(g.info.component.name())
+                .or_insert_with(|| toml::Table::new().into());
+            if let toml::Value::Table(c) = c {
+                c.insert(g.info.name.into(), (*v).into());
+            }
+        }
         m
     } else {
         crate::orchestration::runs::spec::model_table(&model)

@@ -37,6 +37,8 @@ using std::fmax;
 using std::fmin;
 using std::pow;
 using std::sqrt;
+using std::cos;
+using std::sin;
 #endif
 
 // Lane parameter record (gpu_lanes.rs: LANE_FIELDS).
@@ -68,7 +70,9 @@ enum {
   VS_BLD = VS_SENSOR + 21,       // building: law (0 off), α, Bouc–Wen A, β, γ, n, then per
                                  // storey 1/m (0 absent), k, c, F_y, then 1/height
   VS_VCOMP = VS_BLD + 7 + 4 * 10, // valve_compensator: on, P_S, P_R, 1/Δp₀ of the 4 ports, g_min
-  VS_LANE_FIELDS = VS_VCOMP + 8
+  VS_APC = VS_VCOMP + 8,         // amplitude_phase: on, μ, λ, τ, authority, freeze time
+  VS_AHC = VS_APC + 6,           // harmonic_cancellation: the same six
+  VS_LANE_FIELDS = VS_AHC + 6
 };
 
 // Which effects a build applies (gpu_lanes.rs: EFFECT_BITS), bit i = registry line i, and
@@ -77,7 +81,8 @@ enum {
   VS_E_DELAY = 1, VS_E_SPOOL = 2, VS_E_FSAT = 4, VS_E_FGAIN = 8, VS_E_ASYM = 16, VS_E_LEAK = 32,
   VS_E_SUPPLY = 64, VS_E_SEAL = 128, VS_E_COMP = 256, VS_E_BULK = 512, VS_E_RMASS = 1024,
   VS_E_HOLD = 2048, VS_E_SPEC = 4096, VS_E_ACCEL = 8192, VS_E_DISP = 16384, VS_E_FORCE = 32768,
-  VS_E_BLD = 65536, VS_E_VCOMP = 131072, VS_E_TWO = 262144
+  VS_E_BLD = 65536, VS_E_VCOMP = 131072, VS_E_APC = 262144, VS_E_AHC = 524288,
+  VS_E_TWO = 1048576
 };
 
 // Output record (gpu_lanes.rs: OUT_*). Status: 0 ok, 1 non-finite, 2 stroke, 3 pressure.
@@ -153,7 +158,7 @@ struct VsState { double p1[2], p2[2], y, v, z, e[VS_NES]; };
 // Parameters that every lane of a launch shares (gpu_lanes.rs `Uniform`) are read from `vs_u`
 // (on the GPU a constant-bank operand); P holds the records of the varying fields alone,
 // field-major, in field order (lane l's value of the s-th varying field at P[s * n + l]). Which
-// fields vary is fixed when the kernel is compiled (NVRTC: -DVS_VARY0..2, bit f of the 177-bit
+// fields vary is fixed when the kernel is compiled (NVRTC: -DVS_VARY0..3, bit f of the 256-bit
 // mask for field f), so that each read is resolved then; the host build reads the mask per run
 // (`vs_vary`, set by the harness).
 VS_FN constexpr int vs_popc(vs_u64 x) {
@@ -163,26 +168,27 @@ VS_FN constexpr int vs_popc(vs_u64 x) {
   return (int)((x * 0x0101010101010101ULL) >> 56);
 }
 
-// Whether field i varies under the mask (m0, m1, m2), and its row in P.
-VS_FN constexpr bool vs_varies_in(vs_u64 m0, vs_u64 m1, vs_u64 m2, int i) {
-  return (((i < 64 ? m0 : (i < 128 ? m1 : m2)) >> (i & 63)) & 1ULL) != 0;
+// Whether field i varies under the mask (m0, m1, m2, m3), and its row in P.
+VS_FN constexpr bool vs_varies_in(vs_u64 m0, vs_u64 m1, vs_u64 m2, vs_u64 m3, int i) {
+  return (((i < 64 ? m0 : (i < 128 ? m1 : (i < 192 ? m2 : m3))) >> (i & 63)) & 1ULL) != 0;
 }
-VS_FN constexpr int vs_row_in(vs_u64 m0, vs_u64 m1, vs_u64 m2, int i) {
+VS_FN constexpr int vs_row_in(vs_u64 m0, vs_u64 m1, vs_u64 m2, vs_u64 m3, int i) {
   return i < 64    ? vs_popc(m0 & ((1ULL << i) - 1))
          : i < 128 ? vs_popc(m0) + vs_popc(m1 & ((1ULL << (i - 64)) - 1))
-                   : vs_popc(m0) + vs_popc(m1) + vs_popc(m2 & ((1ULL << (i - 128)) - 1));
+         : i < 192 ? vs_popc(m0) + vs_popc(m1) + vs_popc(m2 & ((1ULL << (i - 128)) - 1))
+                   : vs_popc(m0) + vs_popc(m1) + vs_popc(m2) + vs_popc(m3 & ((1ULL << (i - 192)) - 1));
 }
 
 #ifdef __CUDACC_RTC__
-#if !defined(VS_VARY0) || !defined(VS_VARY1) || !defined(VS_VARY2)
-#error "the kernel is compiled with -DVS_VARY0=<mask> -DVS_VARY1=<mask> -DVS_VARY2=<mask>"
+#if !defined(VS_VARY0) || !defined(VS_VARY1) || !defined(VS_VARY2) || !defined(VS_VARY3)
+#error "the kernel is compiled with -DVS_VARY0=<mask> ... -DVS_VARY3=<mask>"
 #endif
 __constant__ double vs_u[VS_LANE_FIELDS];
-#define VS_MASK VS_VARY0, VS_VARY1, VS_VARY2
+#define VS_MASK VS_VARY0, VS_VARY1, VS_VARY2, VS_VARY3
 #else
 static double vs_u[VS_LANE_FIELDS];
-static vs_u64 vs_vary[3] = {~0ULL, ~0ULL, ~0ULL};
-#define VS_MASK vs_vary[0], vs_vary[1], vs_vary[2]
+static vs_u64 vs_vary[4] = {~0ULL, ~0ULL, ~0ULL, ~0ULL};
+#define VS_MASK vs_vary[0], vs_vary[1], vs_vary[2], vs_vary[3]
 #endif
 
 // Field i of lane l's parameters (n lanes).
@@ -542,7 +548,9 @@ VS_FN void vs_combine(VsState &s, double h6, const VsState &k1, const VsState &k
 }
 
 // controller.rs `sum`: the force high-pass, then the gains.
-struct VsCtrl { double f_prev, f_hp, notch[5][2]; };
+// The controller's memory; `apc` and `ahc` the adaptive compensators' states (D, E per harmonic:
+// effects/amplitude_phase.rs, effects/harmonic_cancellation.rs), which change at the ticks only.
+struct VsCtrl { double f_prev, f_hp, notch[5][2], apc[4], ahc[16]; };
 
 VS_FN double vs_sum(const double *P, long long n, long long l, VsCtrl &m, double xr, double vr,
                     double ar, double jr, double x, double f) {
@@ -584,6 +592,72 @@ VS_FN double vs_vcomp(const double *P, long long n, long long l, const VsState &
   g = g > g_min ? g : g_min;
   return u + F(VS_VCOMP) * (u / g - u);
 #undef F
+}
+
+// effects/adaptive.rs `Phase::of`: the reference's phase from its states; false where they are
+// not a sine's. ph = {ω, A, cos θ, sin θ}.
+VS_FN bool vs_phase(const double r[4], double ph[4]) {
+  double x = r[0], v = r[1], a = r[2], j = r[3];
+  double w2 = (a * a - v * j) / (v * v - x * a);
+  if (!(w2 > 0.0 && vs_finite(w2))) return false;
+  double omega = sqrt(w2), wx = omega * x;
+  double nn = sqrt(v * v + wx * wx);
+  if (!(nn > 0.0)) return false;
+  ph[0] = omega;
+  ph[1] = nn / omega;
+  ph[2] = v / nn;
+  ph[3] = wx / nn;
+  return true;
+}
+
+// effects/adaptive.rs `cancel`: one tick of harmonic k's canceller (settings at field `at`,
+// states st = D_re, D_im, E_re, E_im); returns the command's correction.
+VS_FN double vs_cancel(const double *P, long long n, long long l, int at, int k, const double ph[4],
+                       double e, double t, double *st) {
+#define F(i) vs_p(P, n, l, (i))
+  double c = ph[2], s = ph[3];
+  for (int i = 1; i < k; ++i) {
+    double c2 = c * ph[2] - s * ph[3], s2 = s * ph[2] + c * ph[3];
+    c = c2;
+    s = s2;
+  }
+  double big = (double)k * ph[0], lambda = F(at + 2), freeze = F(at + 5);
+  st[2] += lambda * (2.0 * e * c - st[2]);
+  st[3] += lambda * (-2.0 * e * s - st[3]);
+  if (!(freeze > 0.0 && t >= freeze)) {
+    double phi = big * F(at + 3), mu = F(at + 1);
+    double pc = cos(phi), ps = sin(phi);
+    st[0] += mu * (pc * st[2] - ps * st[3]);
+    st[1] += mu * (ps * st[2] + pc * st[3]);
+    double cap = F(at + 4) * ph[1];
+    double size = sqrt(st[0] * st[0] + st[1] * st[1]);
+    if (size > cap) {
+      st[0] *= cap / size;
+      st[1] *= cap / size;
+    }
+  }
+  double w2 = big * big;
+  double f_re = (F(VS_C_FB) + F(VS_C_D)) - F(VS_C_A) * w2;
+  double f_im = big * (F(VS_C_V) - F(VS_C_J) * w2);
+  double z_re = f_re * st[0] - f_im * st[1], z_im = f_re * st[1] + f_im * st[0];
+  return z_re * c - z_im * s;
+#undef F
+}
+
+// effects/amplitude_phase.rs and harmonic_cancellation.rs `command`: the corrections at the
+// fundamental, then at the 3rd, 5th, 7th and 9th harmonics.
+VS_FN double vs_adaptive(const double *P, long long n, long long l, VsCtrl &m, const double r[4],
+                         double x, double t, double u) {
+  double ph[4];
+  if (!vs_phase(r, ph)) return u;
+  double e = r[0] - x;
+  if (VS_ON(VS_E_APC)) u = u + vs_p(P, n, l, VS_APC) * vs_cancel(P, n, l, VS_APC, 1, ph, e, t, m.apc);
+  if (VS_ON(VS_E_AHC)) {
+    double sum = 0.0;
+    for (int h = 0; h < 4; ++h) sum += vs_cancel(P, n, l, VS_AHC, 3 + 2 * h, ph, e, t, m.ahc + 4 * h);
+    u = u + vs_p(P, n, l, VS_AHC) * sum;
+  }
+  return u;
 }
 
 // simulate.rs `check_lane`: 0 alive, else the status code, with the value and the chamber
@@ -702,6 +776,10 @@ VS_FN double vs_command(const double *P, long long n, long long l, const VsRun &
     long long at = l * r.ref_stride + k;
     u = vs_sum(P, n, l, m, r.x[at], r.v[at], r.a[at], r.j[at], x, f);
     if (VS_ON(VS_E_VCOMP)) u = vs_vcomp(P, n, l, s, u);
+    if (VS_ON(VS_E_APC) || VS_ON(VS_E_AHC)) {
+      const double ref[4] = {r.x[at], r.v[at], r.a[at], r.j[at]};
+      u = vs_adaptive(P, n, l, m, ref, x, (double)k / r.f_s, u);
+    }
     u = vs_shape(P, n, l, m, u);
     return k_sp * u;
   }

@@ -82,4 +82,11 @@ pub struct Command {
     /// Cap- and rod-side chamber pressures of each actuator as the controller measures them at
     /// the tick, Pa.
     pub p: [(f64, f64); crate::N_ACT],
+    /// The tick's time, s.
+    pub t: f64,
+    /// The reference states the TVC tracks at the tick: displacement (m), velocity (m/s),
+    /// acceleration (m/s²), jerk (m/s³).
+    pub r: [f64; 4],
+    /// The displacement feedback the TVC reads at the tick (the LVDT's stroke), m.
+    pub x: f64,
 }

@@ -359,10 +359,15 @@ library! {
     building::Building,
     expression::Expression,
     valve_compensator::ValveCompensator,
+    amplitude_phase::AmplitudePhase,
+    harmonic_cancellation::HarmonicCancellation,
 }
 
 /// The measurement chain shared by the sensor effects.
 mod sensor_chain;
+
+/// The canceller shared by the adaptive compensators.
+mod adaptive;
 
 pub mod hook;
 
@@ -1328,9 +1333,11 @@ mod tests {
                 + 2 * specimen::MODES
                 + 3 * 4
                 + 4 * building::MAX_STOREYS
-                + 1,
+                + 1
+                + 4
+                + 4 * harmonic_cancellation::HARMONICS.len(),
             "delay, spool, supply, reaction mass, specimen, three sensor chains, building, \
-             the expressions' time"
+             the expressions' time, the adaptive compensators' D and E"
         );
         // The supply pressure starts at P_S, every other state at 0.
         let ps = p.servovalve.p_s;

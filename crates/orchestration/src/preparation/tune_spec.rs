@@ -181,7 +181,7 @@ impl TuneSpec {
             spec::read_model(m, &mut model, &mut issues);
         }
         spec::validate_model(&model, "model", &mut issues);
-        let gains = read_gains(&mut root, &model, &mut issues);
+        let gains = read_gains(&mut root, &mut model, &mut issues);
         let mut weights = Vec::new();
         let excitations = problem::read_excitations_with(
             &mut root,
@@ -305,8 +305,9 @@ fn positive_int(t: &mut Fields<'_>, key: &str, max: i64, issues: &mut Issues) ->
     }
 }
 
-/// `[[gains]]`: at least one controller parameter, each once, with low < start ≤ high.
-fn read_gains(root: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues) -> Vec<Gain> {
+/// `[[gains]]`: at least one controller or compensator parameter (which switches the compensator
+/// on in `model`), each once, with low < start ≤ high.
+fn read_gains(root: &mut Fields<'_>, model: &mut ModelParams, issues: &mut Issues) -> Vec<Gain> {
     let Some(list) = root.tables("gains", issues) else {
         issues.push(
             "gains",
@@ -332,9 +333,14 @@ fn read_gains(root: &mut Fields<'_>, model: &ModelParams, issues: &mut Issues) -
         let (Some(info), Some(low), Some(high)) = (info, low, high) else {
             continue;
         };
-        if info.component != Component::Controller {
-            issues.push(&path, format!("{} is not a controller parameter (the gains are controller.*; an uncertain plant parameter goes under [[uncertain]])", info.path()));
+        let compensator = info.component.effect().filter(|e| e.compensates());
+        if info.component != Component::Controller && compensator.is_none() {
+            issues.push(&path, format!("{} is not a controller parameter (the gains are controller.* or a compensator's, e.g. harmonic_cancellation.gain; an uncertain plant parameter goes under [[uncertain]])", info.path()));
             continue;
+        }
+        if let Some(e) = compensator {
+            // A compensator's setting tuned: the compensator is on in every run of the tuning.
+            *model.effects.get_mut(e) = true;
         }
         if gains.iter().any(|g| std::ptr::eq(g.info, info)) {
             issues.push(&path, format!("{} is listed twice", info.path()));
@@ -573,6 +579,23 @@ weight = 2.0
             p[0].starts_with("gains[1].name: platen.m is not a controller parameter"),
             "{p:?}"
         );
+    }
+
+    #[test]
+    fn a_compensators_setting_is_a_gain_and_switches_it_on() {
+        use vshake_kernel::effects::EffectId;
+        let text = TUNE.replace(
+            "name = \"controller.l_a\"\nlow = 0.1\nhigh = 1.0",
+            "name = \"harmonic_cancellation.gain\"\nlow = 0.5\nhigh = 8.0",
+        );
+        let s = TuneSpec::from_toml_on(&text, "t.toml", ModelParams::default())
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert!(s.model.effects.get(EffectId::HarmonicCancellation));
+        assert!(!s.model.effects.get(EffectId::AmplitudePhase));
+        assert_eq!(s.gains[1].info.path(), "harmonic_cancellation.gain");
+        // A plant effect's parameter is not a gain.
+        let p = problems(&TUNE.replace("controller.l_a", "leakage.c_int"));
+        assert!(p[0].contains("is not a controller parameter"), "{p:?}");
     }
 
     #[test]
