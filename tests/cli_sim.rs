@@ -250,6 +250,45 @@ fn a_run_file_takes_a_spectrum_table() {
     assert!(stderr.contains("spectrum.damping"), "{stderr}");
 }
 
+/// With a compensator on, `study sim` prints which, and each metric beside the TVC alone's: at
+/// SP09 with harmonic cancellation the odd harmonics fall more than 5x against the second column,
+/// which is the plain run's own value.
+#[test]
+fn a_compensated_run_prints_the_tvc_alones_metrics_beside_its_own() {
+    let root = env!("CARGO_MANIFEST_DIR");
+    let run = format!("{root}/studies/sim_sp09.toml");
+    let model = format!("{root}/studies/compensation/harmonic_cancellation.toml");
+    let (code, with, stderr) = study(&["sim", &run, "--model", &model]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        with.contains("  compensated harmonic_cancellation (the last column: the TVC alone)"),
+        "{with}"
+    );
+    let (code, plain, stderr) = study(&["sim", &run]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(!plain.contains("compensated"), "{plain}");
+    let columns = |name: &str| -> Vec<f64> {
+        let line = with
+            .lines()
+            .find(|l| l.trim_start().starts_with(name))
+            .unwrap();
+        line.split_whitespace()
+            .skip(1)
+            .map(|v| v.parse().unwrap())
+            .collect()
+    };
+    for name in [
+        "amp_ratio",
+        "h3_ratio",
+        "thd_odd_ratio",
+        "rms_err_accel_ratio",
+    ] {
+        assert_eq!(columns(name)[1], metric(&plain, name), "{name}");
+    }
+    let thd = columns("thd_odd_ratio");
+    assert!(thd[0] * 5.0 < thd[1], "{thd:?}");
+}
+
 fn metric(stdout: &str, name: &str) -> f64 {
     let line = stdout
         .lines()

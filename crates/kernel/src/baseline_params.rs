@@ -182,3 +182,13 @@ impl ControllerParams {
         ]
     }
 }
+
+impl ActuatorParams {
+    /// No-load pressures (P1, P2) of the port-width design criterion (docs/model.md §3) with the
+    /// supply `p_s` and return `p_r` (Pa): P1 = (P_S + P_R)/(1 + A1/A2), P2 = P1·A1/A2.
+    pub fn no_load_pressures(&self, p_s: f64, p_r: f64) -> (f64, f64) {
+        let r = self.a1 / self.a2;
+        let p1 = (p_s + p_r) / (1.0 + r);
+        (p1, p1 * r)
+    }
+}

@@ -428,9 +428,8 @@ impl ModelParams {
     /// No-load pressures (P1, P2) of the port-width design criterion (docs/model.md §3):
     /// P1 = (P_S + P_R)/(1 + A1/A2), P2 = P1·A1/A2.
     pub fn no_load_pressures(&self) -> (f64, f64) {
-        let r = self.actuator.a1 / self.actuator.a2;
-        let p1 = (self.servovalve.p_s + self.servovalve.p_r) / (1.0 + r);
-        (p1, p1 * r)
+        let sv = &self.servovalve;
+        self.actuator.no_load_pressures(sv.p_s, sv.p_r)
     }
 }
 

@@ -1252,17 +1252,16 @@ impl<const N: usize> Feedback<'_, N> {
 /// controller in closed loop (the TVC's sum, the effects' compensators, the notches), else from
 /// the open-loop drive (one branch per tick, not per lane).
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
 fn commands<const N: usize, E: Effect<N>>(
     lp: &LaneParams<N>,
-    (effect, es): (&E, &mut E::State),
+    effect: &E,
+    es: &mut E::State,
     drive: &Drive,
     k: usize,
     fed: &Feedback<'_, N>,
     mem: &mut [ControllerMemory; N],
-    u: &mut [f64; N],
-    x_c: &mut [f64; N],
-) {
+) -> ([f64; N], [f64; N]) {
+    let (mut u, mut x_c) = ([0.0; N], [0.0; N]);
     match drive {
         Drive::ClosedLoop => {
             for l in 0..N {
@@ -1299,6 +1298,7 @@ fn commands<const N: usize, E: Effect<N>>(
             }
         }
     }
+    (u, x_c)
 }
 
 #[inline(always)]
@@ -1402,8 +1402,6 @@ pub(crate) fn integrate<
     let (mut ek1, mut ek2, mut ek3, mut ek4, mut etmp) = (ez, ez, ez, ez, es);
     // The effects' states that move in this batch; the rest keep their values at t = 0.
     let live = effect.live_states();
-    let mut u = [0.0; N];
-    let mut x_c = [0.0; N];
     let mut a = [0.0; N];
     let mut x = [0.0; N];
     let h = 1.0 / (lp.f_s * solver.substeps as f64);
@@ -1442,17 +1440,7 @@ pub(crate) fn integrate<
             f: &f,
             s: &s,
         };
-        let fx = (effect, &mut es);
-        commands(
-            lp,
-            fx,
-            &reference.drive,
-            k,
-            &fed,
-            &mut mem,
-            &mut u,
-            &mut x_c,
-        );
+        let (u, x_c) = commands(lp, effect, &mut es, &reference.drive, k, &fed, &mut mem);
         rhs::<N, A, SIMD, Q, D, E, P>(lp, effect, &x_c, &s, &es, &mut k1, &mut ek1);
         a.copy_from_slice(&k1[VEL]);
         let spool = effect.spool_positions(0, &x_c, &es);

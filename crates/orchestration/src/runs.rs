@@ -1,6 +1,7 @@
 //! What one run is and running it: run specifications and their excitations, the earthquake-type
 //! references, the table's limits, one configuration through the kernel, what a building on the platen experiences.
 
+pub mod adaptation;
 pub mod building_response;
 pub mod excitation_spec;
 pub mod limits;

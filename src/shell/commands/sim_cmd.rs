@@ -1,9 +1,11 @@
 //! `study sim`: resolve a run file, build its reference, run, print, write.
 
+use crate::kernel::effects::EffectId;
 use crate::kernel::excitation::Reference;
 use crate::kernel::params::G;
-use crate::kernel::simulate::LaneStatus;
+use crate::kernel::simulate::{LaneResult, LaneStatus};
 use crate::kernel::spectrum::SpectrumSpec;
+use crate::orchestration::runs::adaptation::cycles;
 use crate::orchestration::runs::building_response::building_response;
 use crate::orchestration::runs::single;
 use crate::orchestration::runs::spec::SimSpec;
@@ -52,10 +54,19 @@ pub fn run(args: &SimArgs) -> anyhow::Result<()> {
     }
     let status = status_text(&out.result.status);
     writeln!(stdout, "  status      {status}")?;
+    let alone = without_compensators(&spec, &reference)?;
+    if let Some((names, _)) = &alone {
+        writeln!(
+            stdout,
+            "  compensated {} (the last column: the TVC alone)",
+            names.join(", ")
+        )?;
+    }
     writeln!(stdout)?;
-    writeln!(stdout, "  {:<22} {:>12}", "metric", "value")?;
-    for (name, v) in out.result.metrics.columns_for(spec.model.effects.building) {
-        writeln!(stdout, "  {name:<22} {:>12}", fmt_value(v))?;
+    let alone_result = alone.as_ref().map(|a| &a.1.result);
+    metrics_table(&mut stdout, &spec, &out.result, alone_result)?;
+    if let Some((_, a)) = &alone {
+        adaptation_table(&mut stdout, &reference, &out.history, &a.history)?;
     }
     let ran = matches!(out.result.status, LaneStatus::Ok);
     let compared = target.as_ref().unwrap_or(&reference);
@@ -85,6 +96,98 @@ pub fn run(args: &SimArgs) -> anyhow::Result<()> {
             Err(RunFailed(format!("{}: run {status}", args.file.display())).into())
         }
     }
+}
+
+/// Where the run has a compensator on (docs/model.md §7, `controller compensation`): their names
+/// and the same run with every one of them off, the TVC alone.
+fn without_compensators(
+    spec: &SimSpec,
+    reference: &Reference,
+) -> anyhow::Result<Option<(Vec<&'static str>, single::SimOutcome)>> {
+    let on: Vec<EffectId> = (EffectId::ALL.into_iter())
+        .filter(|&e| e.compensates() && spec.model.effects.get(e))
+        .collect();
+    if on.is_empty() {
+        return Ok(None);
+    }
+    let mut alone = spec.clone();
+    for &e in &on {
+        *alone.model.effects.get_mut(e) = false;
+    }
+    let names = on.iter().map(|e| e.name()).collect();
+    Ok(Some((names, single::run_sim(&alone, reference)?)))
+}
+
+/// A sine run's cycles, about one a second, compensated and the TVC alone (issue 52: the
+/// adaptation's history): the fundamental's amplitude ratio and THD_odd of each.
+fn adaptation_table(
+    o: &mut dyn Write,
+    reference: &Reference,
+    with: &single::History,
+    alone: &single::History,
+) -> std::io::Result<()> {
+    let (c, a) = (cycles(with, reference), cycles(alone, reference));
+    let Some(f0) = reference.fundamental_hz.filter(|_| !c.is_empty()) else {
+        return Ok(());
+    };
+    writeln!(
+        o,
+        "\n  adaptation: each cycle's acceleration, compensated and the TVC alone"
+    )?;
+    writeln!(
+        o,
+        "  {:>8} {:>10} {:>10}   {:>10} {:>10}",
+        "cycle to", "amp_ratio", "thd_odd", "amp_ratio", "thd_odd"
+    )?;
+    let every = (f0.round() as usize).max(1);
+    let fmt = |x: Option<f64>| x.map_or("-".to_string(), fmt_value);
+    for (i, w) in c.iter().enumerate() {
+        if (i + 1) % every != 0 && i + 1 != c.len() {
+            continue;
+        }
+        let b = a.get(i);
+        writeln!(
+            o,
+            "  {:>7.2}s {:>10} {:>10}   {:>10} {:>10}",
+            w.end_s,
+            fmt_value(w.amp_ratio),
+            fmt_value(w.thd_odd),
+            fmt(b.map(|b| b.amp_ratio)),
+            fmt(b.map(|b| b.thd_odd))
+        )?;
+    }
+    Ok(())
+}
+
+/// The metrics, with the TVC alone's beside them where `alone` is given (a failed run's: `-`).
+fn metrics_table(
+    o: &mut dyn Write,
+    spec: &SimSpec,
+    run: &LaneResult,
+    alone: Option<&LaneResult>,
+) -> std::io::Result<()> {
+    let building = spec.model.effects.building;
+    let other: Vec<f64> = match alone {
+        Some(a) if a.status == LaneStatus::Ok => {
+            let cols = a.metrics.columns_for(building);
+            cols.into_iter().map(|(_, v)| v).collect()
+        }
+        _ => Vec::new(),
+    };
+    match alone {
+        Some(_) => writeln!(o, "  {:<22} {:>12} {:>12}", "metric", "value", "TVC alone")?,
+        None => writeln!(o, "  {:<22} {:>12}", "metric", "value")?,
+    }
+    for (i, (name, v)) in run.metrics.columns_for(building).into_iter().enumerate() {
+        match alone {
+            Some(_) => {
+                let w = other.get(i).map_or("-".to_string(), |&x| fmt_value(x));
+                writeln!(o, "  {name:<22} {:>12} {w:>12}", fmt_value(v))?
+            }
+            None => writeln!(o, "  {name:<22} {:>12}", fmt_value(v))?,
+        }
+    }
+    Ok(())
 }
 
 /// A run's status in words: `ok`, or where and why it failed.

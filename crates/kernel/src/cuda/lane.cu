@@ -651,11 +651,13 @@ VS_FN double vs_adaptive(const double *P, long long n, long long l, VsCtrl &m, c
   double ph[4];
   if (!vs_phase(r, ph)) return u;
   double e = r[0] - x;
-  if (VS_ON(VS_E_APC)) u = u + vs_p(P, n, l, VS_APC) * vs_cancel(P, n, l, VS_APC, 1, ph, e, t, m.apc);
-  if (VS_ON(VS_E_AHC)) {
+  // An off lane passes the command untouched (amplitude_phase.rs, harmonic_cancellation.rs).
+  if (VS_ON(VS_E_APC) && vs_p(P, n, l, VS_APC) != 0.0)
+    u = u + vs_cancel(P, n, l, VS_APC, 1, ph, e, t, m.apc);
+  if (VS_ON(VS_E_AHC) && vs_p(P, n, l, VS_AHC) != 0.0) {
     double sum = 0.0;
     for (int h = 0; h < 4; ++h) sum += vs_cancel(P, n, l, VS_AHC, 3 + 2 * h, ph, e, t, m.ahc + 4 * h);
-    u = u + vs_p(P, n, l, VS_AHC) * sum;
+    u = u + sum;
   }
   return u;
 }

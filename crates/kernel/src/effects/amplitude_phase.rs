@@ -81,11 +81,16 @@ impl<const N: usize> Effect<N> for AmplitudePhase<N> {
     #[inline(always)]
     fn command(&self, c: hook::Command, s: &mut Self::State) -> f64 {
         let (l, set) = (c.lane, &self.set[c.lane]);
+        // An off lane (or a reference that is not a sine) passes the command untouched: the
+        // canceller's trigonometry is the tick's dearest arithmetic, not to be paid for nothing.
+        if set.on == 0.0 {
+            return c.u;
+        }
         let Some(ph) = Phase::of(c.r) else {
             return c.u;
         };
         let [d_re, d_im, e_re, e_im] = s;
         let st = [&mut d_re[l], &mut d_im[l], &mut e_re[l], &mut e_im[l]];
-        c.u + set.on * cancel(set, 1, &ph, c.r[0] - c.x, c.t, st)
+        c.u + cancel(set, 1, &ph, c.r[0] - c.x, c.t, st)
     }
 }

@@ -40,8 +40,8 @@ params! {
     pub struct Params {
         gain: "1/s", "per_s", 2.0, Range::open_closed(0.0, 100.0), Chosen,
             "Adaptation rate g of each harmonic: its error falls as e^(−g·t) where the plant model is right [chosen: settled within a few seconds].";
-        band_hz: "Hz", "hz", 2.0, Range::open_closed(0.0, 1000.0), Chosen,
-            "Corner B of each band filter's low-pass after demodulation [chosen: above the rate g/2π, below twice the fundamental].";
+        band_hz: "Hz", "hz", 0.5, Range::open_closed(0.0, 1000.0), Chosen,
+            "Corner B of each band filter's low-pass after demodulation [chosen: below the spacing of a sine's harmonics, even ones included, down to a 1 Hz fundamental (at 2 Hz the neighbours passed at 1 Hz and the cancellers oscillated), above the rate g/2π; tests/compensation.rs, 1-10 Hz].";
         delay_s: "s", "s", 2.8e-3, Range::closed(0.0, 1.0), Chosen,
             "The plant model's delay τ: the closed loop's phase at k·ω taken as −k·ω·τ [chosen: measured, the published model's loop from reference to feedback lags as a delay of 2.6–2.9 ms at 12–40 Hz (−11° to −39°), and leads by under 15° below 5 Hz, within the 90° the LMS allows; tests/compensation.rs prints it].";
         authority: "1", "ratio", 0.05, Range::open_closed(0.0, 10.0), Chosen,
@@ -87,6 +87,10 @@ impl<const N: usize> Effect<N> for HarmonicCancellation<N> {
     #[inline(always)]
     fn command(&self, c: hook::Command, s: &mut Self::State) -> f64 {
         let (l, set) = (c.lane, &self.set[c.lane]);
+        // An off lane (or a reference that is not a sine) passes the command untouched.
+        if set.on == 0.0 {
+            return c.u;
+        }
         let Some(ph) = Phase::of(c.r) else {
             return c.u;
         };
@@ -99,6 +103,6 @@ impl<const N: usize> Effect<N> for HarmonicCancellation<N> {
             let st = [&mut d_re[l], &mut d_im[l], &mut e_re[l], &mut e_im[l]];
             sum += cancel(set, k, &ph, e, c.t, st);
         }
-        c.u + set.on * sum
+        c.u + sum
     }
 }

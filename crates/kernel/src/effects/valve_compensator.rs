@@ -56,10 +56,8 @@ impl<const N: usize> LibraryEffect<N> for ValveCompensator<N> {
             p_s: p.map(|m| m.servovalve().p_s),
             p_r: p.map(|m| m.servovalve().p_r),
             inv_dp0: p.map(|m| {
-                let (sv, act) = (m.servovalve(), m.actuator());
-                let r = act.a1 / act.a2;
-                let p1 = (sv.p_s + sv.p_r) / (1.0 + r);
-                let p2 = p1 * r;
+                let sv = m.servovalve();
+                let (p1, p2) = m.actuator().no_load_pressures(sv.p_s, sv.p_r);
                 [sv.p_s - p1, p2 - sv.p_r, p1 - sv.p_r, sv.p_s - p2].map(|d| 1.0 / d)
             }),
             g_min: p.map(|m| Params::of(m).g_min),
@@ -113,8 +111,13 @@ impl<const N: usize> Effect<N> for ValveCompensator<N> {
     #[inline(always)]
     fn command(&self, c: hook::Command, _s: &mut Self::State) -> f64 {
         let l = c.lane;
+        // An off lane passes the command untouched, without the four ports' roots (lane.cu
+        // multiplies by the switch instead: u + 0·(…) is u for a finite command).
+        if self.on[l] == 0.0 {
+            return c.u;
+        }
         let g = self.factor(l, c.u, &c.p).max(self.g_min[l]);
-        c.u + self.on[l] * (c.u / g - c.u)
+        c.u + (c.u / g - c.u)
     }
 }
 
