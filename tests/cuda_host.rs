@@ -160,6 +160,14 @@ fn random_effects(rng: &mut StdRng, p: &mut ModelParams) {
         *authority = u(0.1 * top, top);
         *freeze = if u(0.0, 1.0) < 0.5 { 0.0 } else { u(0.5, 2.0) };
     }
+    // Adaptive inverse control: its fit's memory, pole, anticipation and weighting anywhere in a
+    // useful range, holding its taps or copying them as it learns, taps near the identity.
+    let a = &mut e.adaptive_inverse;
+    (a.memory_s, a.corner_hz) = (u(0.5, 30.0), u(0.5, 8.0));
+    (a.anticipation_s, a.weight_hz) = (u(0.5, 8.0) / 1024.0, u(0.0, 10.0));
+    a.copy_s = if u(0.0, 1.0) < 0.5 { 0.0 } else { u(1.0, 4.0) };
+    a.freeze_s = if u(0.0, 1.0) < 0.5 { 0.0 } else { u(0.5, 2.0) };
+    (a.w_0, a.w_1, a.w_2, a.w_5) = (u(0.8, 1.2), u(-0.05, 0.05), u(-0.05, 0.05), u(-0.05, 0.05));
     e.transport_delay.tau = u(0.5e-3, 3e-3);
     (e.spool_dynamics.freq_hz, e.spool_dynamics.zeta) = (u(60.0, 200.0), u(0.5, 1.0));
     (e.asymmetry.extend_gain, e.asymmetry.act2_gain) = (u(0.9, 1.1), u(0.9, 1.1));

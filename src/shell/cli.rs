@@ -388,6 +388,15 @@ pub struct SimArgs {
     /// are the target's against the achieved.
     #[arg(long)]
     pub target: Option<PathBuf>,
+    /// Run the test this many times, each pass given the inverse the last one learned
+    /// (`adaptive_inverse`, offline passes before the real test): a table of each pass's
+    /// errors; the other outputs are the last pass's.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=100))]
+    pub passes: u32,
+    /// Write the model the last pass learned (its `[model.adaptive_inverse]` taps) to this TOML
+    /// file, to run the test with.
+    #[arg(long)]
+    pub learned: Option<PathBuf>,
 }
 
 const ITERATE_HELP: &str = "Iterate the drive of an earthquake test on the virtual table (offline iteration, as a \

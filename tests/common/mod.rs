@@ -265,3 +265,13 @@ pub fn uncertain_tables(seed: u64, n: usize) -> Vec<vshake::kernel::params::Mode
         })
         .collect()
 }
+
+/// The `col`-th value (1: the value, 2: the TVC alone's) of metric `name` in `study sim`'s table.
+#[allow(dead_code)] // used by compensation, not by every test crate
+pub fn metric_column(stdout: &str, name: &str, col: usize) -> f64 {
+    let row = stdout
+        .lines()
+        .find(|l| l.split_whitespace().next() == Some(name))
+        .unwrap_or_else(|| panic!("{name} in:\n{stdout}"));
+    row.split_whitespace().nth(col).unwrap().parse().unwrap()
+}

@@ -19,12 +19,12 @@ use super::spectrum::oscillators;
 pub const SOURCE: &str = include_str!("cuda/lane.cu");
 
 /// Float64 fields per lane in the parameter record (lane.cu: `VS_LANE_FIELDS`).
-pub const LANE_FIELDS: usize = 198;
+pub const LANE_FIELDS: usize = 223;
 
 /// The library effects the CUDA kernel has, with their bit in its `effects` argument and build
 /// (lane.cu: `VS_E_*`, in this order). A library effect not listed here (one a user adds) runs
 /// on the CPU: [`unsupported`] names it, and a study with it on takes the CPU engine.
-pub const EFFECT_BITS: [(EffectId, i64); 20] = [
+pub const EFFECT_BITS: [(EffectId, i64); 21] = [
     (EffectId::TransportDelay, 1),
     (EffectId::SpoolDynamics, 1 << 1),
     (EffectId::FlowSaturation, 1 << 2),
@@ -45,11 +45,12 @@ pub const EFFECT_BITS: [(EffectId, i64); 20] = [
     (EffectId::ValveCompensator, 1 << 17),
     (EffectId::AmplitudePhase, 1 << 18),
     (EffectId::HarmonicCancellation, 1 << 19),
+    (EffectId::AdaptiveInverse, 1 << 20),
 ];
 
 /// The bit saying that the two actuators differ in some lane (lane.cu: `VS_E_TWO`): the kernel
 /// then integrates both, else one stands for both.
-pub const TWO_ACTUATORS: i64 = 1 << 20;
+pub const TWO_ACTUATORS: i64 = 1 << 21;
 
 /// The `effects` bits of a launch: every covered effect some lane switches on, and
 /// [`TWO_ACTUATORS`] where some lane's actuators differ.
@@ -246,6 +247,7 @@ fn lane_record(lp: &LaneParams<1>, m: &ModelParams) -> [f64; LANE_FIELDS] {
     r.extend(valve_compensator::ValveCompensator::<1>::new([m]).lane(0));
     r.extend(amplitude_phase::AmplitudePhase::<1>::new([m]).lane(0));
     r.extend(harmonic_cancellation::HarmonicCancellation::<1>::new([m]).lane(0));
+    r.extend(adaptive_inverse::AdaptiveInverse::<1>::new([m]).lane(0));
     r.try_into().expect("LANE_FIELDS fields")
 }
 
@@ -474,7 +476,8 @@ mod tests {
         assert!(source.contains("VS_VCOMP=VS_BLD+7+4*10"));
         assert!(source.contains("VS_APC=VS_VCOMP+8"));
         assert!(source.contains("VS_AHC=VS_APC+6"));
-        assert!(source.contains("VS_LANE_FIELDS=VS_AHC+6"));
+        assert!(source.contains("VS_AIC=VS_AHC+6"));
+        assert!(source.contains("VS_LANE_FIELDS=VS_AIC+25"));
         let m = ModelParams::default();
         assert_eq!(pack_params(&[&m]).unwrap().len(), LANE_FIELDS);
     }

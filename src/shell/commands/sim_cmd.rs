@@ -6,7 +6,9 @@ use crate::kernel::params::G;
 use crate::kernel::simulate::{LaneResult, LaneStatus};
 use crate::kernel::spectrum::SpectrumSpec;
 use crate::orchestration::runs::adaptation::cycles;
+use crate::orchestration::runs::authority::{authority_used, Authority};
 use crate::orchestration::runs::building_response::building_response;
+use crate::orchestration::runs::passes;
 use crate::orchestration::runs::single;
 use crate::orchestration::runs::spec::SimSpec;
 use crate::shell::cli::SimArgs;
@@ -30,27 +32,11 @@ pub fn run(args: &SimArgs) -> anyhow::Result<()> {
         }
         None => None,
     };
-    let out = single::run_sim(&spec, &reference)?;
+    check_passes(args, &spec)?;
     let mut stdout = std::io::stdout().lock();
-    let h = 1.0 / (spec.model.controller.f_s * spec.solver.substeps as f64);
+    let out = run_passes(&mut stdout, args, &spec, &reference)?;
     if !args.quiet {
-        writeln!(stdout, "study sim {}", args.file.display())?;
-        if let Some(m) = &args.model {
-            writeln!(
-                stdout,
-                "  model       {} (the run file's [model.*] on top)",
-                m.display()
-            )?;
-        }
-        writeln!(stdout, "  excitation  {}", spec.excitation.describe())?;
-        writeln!(
-            stdout,
-            "  solver      RK4, {} substeps per tick (h = {:.2} µs), controller {} Hz, valve law {:?}",
-            spec.solver.substeps,
-            h * 1e6,
-            spec.model.controller.f_s,
-            spec.model.valve_law
-        )?;
+        header(&mut stdout, args, &spec)?;
     }
     let status = status_text(&out.result.status);
     writeln!(stdout, "  status      {status}")?;
@@ -67,6 +53,8 @@ pub fn run(args: &SimArgs) -> anyhow::Result<()> {
     metrics_table(&mut stdout, &spec, &out.result, alone_result)?;
     if let Some((_, a)) = &alone {
         adaptation_table(&mut stdout, &reference, &out.history, &a.history)?;
+        let rows = authority_used(&spec.model, &out.history, Some(&a.history));
+        authority_table(&mut stdout, &rows)?;
     }
     let ran = matches!(out.result.status, LaneStatus::Ok);
     let compared = target.as_ref().unwrap_or(&reference);
@@ -96,6 +84,121 @@ pub fn run(args: &SimArgs) -> anyhow::Result<()> {
             Err(RunFailed(format!("{}: run {status}", args.file.display())).into())
         }
     }
+}
+
+/// The run, or with `--passes`/`--learned` its passes (their table printed, the learned model
+/// written): the last pass's outcome.
+fn run_passes(
+    stdout: &mut dyn Write,
+    args: &SimArgs,
+    spec: &SimSpec,
+    reference: &Reference,
+) -> anyhow::Result<single::SimOutcome> {
+    if args.passes <= 1 && args.learned.is_none() {
+        return Ok(single::run_sim(spec, reference)?);
+    }
+    let p = passes::passes(spec, reference, args.passes as usize)?;
+    passes_table(stdout, spec, &p)?;
+    if let Some(path) = &args.learned {
+        write_learned(path, &args.file, &p.learned)?;
+        writeln!(
+            stdout,
+            "  wrote {} (the inverse the last pass learned; use it with --model)\n",
+            path.display()
+        )?;
+    }
+    Ok(p.runs.into_iter().last().expect("one pass at least"))
+}
+
+/// The run's heading: its file, model, excitation and solver.
+fn header(stdout: &mut dyn Write, args: &SimArgs, spec: &SimSpec) -> std::io::Result<()> {
+    let h = 1.0 / (spec.model.controller.f_s * spec.solver.substeps as f64);
+    writeln!(stdout, "study sim {}", args.file.display())?;
+    if let Some(m) = &args.model {
+        writeln!(
+            stdout,
+            "  model       {} (the run file's [model.*] on top)",
+            m.display()
+        )?;
+    }
+    writeln!(stdout, "  excitation  {}", spec.excitation.describe())?;
+    writeln!(
+        stdout,
+        "  solver      RK4, {} substeps per tick (h = {:.2} µs), controller {} Hz, valve law {:?}",
+        spec.solver.substeps,
+        h * 1e6,
+        spec.model.controller.f_s,
+        spec.model.valve_law
+    )
+}
+
+/// `--passes` and `--learned` need a compensator that learns across passes; `--learned` does not
+/// replace a file it did not write.
+fn check_passes(args: &SimArgs, spec: &SimSpec) -> anyhow::Result<()> {
+    if let Some(path) = &args.learned {
+        let what = "a model `study sim --learned` wrote";
+        crate::shell::fit_problem::replaced_only_if_ours(path, LEARNED_HEAD, what)?;
+    }
+    let asked = args.passes > 1 || args.learned.is_some();
+    if asked && !spec.model.effects.get(EffectId::AdaptiveInverse) {
+        return Err(crate::shell::BadInput(format!(
+            "{}: --passes and --learned carry adaptive_inverse's learned inverse from pass to pass, and the run has it off (add [model.adaptive_inverse], e.g. --model studies/compensation/adaptive_inverse.toml)",
+            args.file.display()
+        ))
+        .into());
+    }
+    Ok(())
+}
+
+/// The first line of a model `--learned` writes.
+const LEARNED_HEAD: &str = "# The inverse learned by `study sim";
+
+/// The passes' errors, one row each (a failed pass: its status).
+fn passes_table(o: &mut dyn Write, spec: &SimSpec, p: &passes::Passes) -> std::io::Result<()> {
+    writeln!(
+        o,
+        "  passes: each from the inverse the last one learned (adaptive_inverse)"
+    )?;
+    let cols = [
+        "rms_err_accel_ratio",
+        "rms_err_disp_ratio",
+        "amp_ratio",
+        "thd_odd_ratio",
+    ];
+    write!(o, "  {:>4}", "pass")?;
+    for c in cols {
+        write!(o, " {c:>20}")?;
+    }
+    writeln!(o)?;
+    let building = spec.model.effects.building;
+    for (i, run) in p.runs.iter().enumerate() {
+        write!(o, "  {:>4}", i + 1)?;
+        if run.result.status != LaneStatus::Ok {
+            writeln!(o, " {}", status_text(&run.result.status))?;
+            continue;
+        }
+        let m = run.result.metrics.columns_for(building);
+        for c in cols {
+            let v = m.iter().find(|(n, _)| *n == c).map(|(_, v)| *v);
+            write!(o, " {:>20}", v.map_or("-".to_string(), fmt_value))?;
+        }
+        writeln!(o)?;
+    }
+    writeln!(o)
+}
+
+/// The model the passes learned: the run's model with the last pass's taps, every table.
+fn write_learned(path: &Path, file: &Path, learned: &SimSpec) -> anyhow::Result<()> {
+    let mut root = toml::Table::new();
+    let table = crate::orchestration::runs::spec::model_table(&learned.model);
+    root.insert("model".into(), toml::Value::Table(table));
+    let head = format!(
+        "{LEARNED_HEAD} {} --passes` (vshake {}): the run's model, [model.adaptive_inverse]'s taps w_i those the last pass learned.\n",
+        file.display(),
+        env!("CARGO_PKG_VERSION")
+    );
+    let text = head + &toml::to_string(&root)?;
+    crate::shell::job::outputs::write_whole(path, text.as_bytes())
 }
 
 /// Where the run has a compensator on (docs/model.md §7, `controller compensation`): their names
@@ -155,6 +258,30 @@ fn adaptation_table(
             fmt(b.map(|b| b.amp_ratio)),
             fmt(b.map(|b| b.thd_odd))
         )?;
+    }
+    Ok(())
+}
+
+/// The authority the compensated run used: the most of each limited quantity, its limit and the
+/// share of it (the TVC alone's valve command beside).
+fn authority_table(o: &mut dyn Write, rows: &[Authority]) -> std::io::Result<()> {
+    writeln!(o, "\n  authority used (the most over the run; its limit)")?;
+    writeln!(
+        o,
+        "  {:<36} {:>10} {:>10} {:>8} {:>10}",
+        "", "used", "limit", "share", "TVC alone"
+    )?;
+    for r in rows {
+        let alone = r.alone.map_or(String::new(), fmt_value);
+        let row = format!(
+            "  {:<36} {:>10} {:>10} {:>7.1}% {:>10}",
+            format!("{} ({})", r.what, r.unit),
+            fmt_value(r.used),
+            fmt_value(r.limit),
+            100.0 * r.used / r.limit,
+            alone
+        );
+        writeln!(o, "{}", row.trim_end())?;
     }
     Ok(())
 }

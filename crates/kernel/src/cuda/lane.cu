@@ -72,7 +72,9 @@ enum {
   VS_VCOMP = VS_BLD + 7 + 4 * 10, // valve_compensator: on, P_S, P_R, 1/Δp₀ of the 4 ports, g_min
   VS_APC = VS_VCOMP + 8,         // amplitude_phase: on, μ, λ, τ, authority, freeze time
   VS_AHC = VS_APC + 6,           // harmonic_cancellation: the same six
-  VS_LANE_FIELDS = VS_AHC + 6
+  VS_AIC = VS_AHC + 6,           // adaptive_inverse: on, λ, pole a, √(1−a²), D, D/f_s, α, freeze
+                                 // time, the copy's step β, then the 16 taps at the start
+  VS_LANE_FIELDS = VS_AIC + 25
 };
 
 // Which effects a build applies (gpu_lanes.rs: EFFECT_BITS), bit i = registry line i, and
@@ -82,7 +84,7 @@ enum {
   VS_E_SUPPLY = 64, VS_E_SEAL = 128, VS_E_COMP = 256, VS_E_BULK = 512, VS_E_RMASS = 1024,
   VS_E_HOLD = 2048, VS_E_SPEC = 4096, VS_E_ACCEL = 8192, VS_E_DISP = 16384, VS_E_FORCE = 32768,
   VS_E_BLD = 65536, VS_E_VCOMP = 131072, VS_E_APC = 262144, VS_E_AHC = 524288,
-  VS_E_TWO = 1048576
+  VS_E_AIC = 1048576, VS_E_TWO = 2097152
 };
 
 // Output record (gpu_lanes.rs: OUT_*). Status: 0 ok, 1 non-finite, 2 stroke, 3 pressure.
@@ -549,8 +551,13 @@ VS_FN void vs_combine(VsState &s, double h6, const VsState &k1, const VsState &k
 
 // controller.rs `sum`: the force high-pass, then the gains.
 // The controller's memory; `apc` and `ahc` the adaptive compensators' states (D, E per harmonic:
-// effects/amplitude_phase.rs, effects/harmonic_cancellation.rs), which change at the ticks only.
-struct VsCtrl { double f_prev, f_hp, notch[5][2], apc[4], ahc[16]; };
+// effects/amplitude_phase.rs, effects/harmonic_cancellation.rs), `aic` the inverse's
+// (effects/adaptive_inverse.rs: STATES), which change at the ticks only.
+#define VS_TAPS 16
+#define VS_AHEAD 16
+struct VsCtrl {
+  double f_prev, f_hp, notch[5][2], apc[4], ahc[16], aic[VS_TAPS * VS_TAPS + 5 * VS_TAPS + VS_AHEAD + 8];
+};
 
 VS_FN double vs_sum(const double *P, long long n, long long l, VsCtrl &m, double xr, double vr,
                     double ar, double jr, double x, double f) {
@@ -660,6 +667,94 @@ VS_FN double vs_adaptive(const double *P, long long n, long long l, VsCtrl &m, c
     u = u + sum;
   }
   return u;
+}
+
+// effects/adaptive_inverse.rs `ahead`: component `i` of the reference's states read d ahead.
+VS_FN double vs_ahead(const double r[4], double d, int i) {
+  if (i == 0) return r[0] + d * (r[1] + 0.5 * d * (r[2] + d * r[3] / 3.0));
+  if (i == 1) return r[1] + d * (r[2] + 0.5 * d * r[3]);
+  if (i == 2) return r[2] + d * r[3];
+  return r[3];
+}
+
+// effects/adaptive_inverse.rs `network`: one tick of a Laguerre network (st = input at n−1, then
+// L1..L15 at n−1), its taps at n written to `taps`.
+VS_FN void vs_network(double a, double s, double u, double *st, double *taps) {
+  taps[0] = u;
+  double old = st[0], nw = u;
+  st[0] = u;
+  for (int i = 1; i < VS_TAPS; ++i) {
+    double before = st[i];
+    st[i] = i == 1 ? a * before + s * old : a * before + old - a * nw;
+    old = before;
+    nw = st[i];
+    taps[i] = st[i];
+  }
+}
+
+// effects/adaptive_inverse.rs `weigh`: the two weighting high-passes (st = each stage's input and
+// output at n−1).
+VS_FN double vs_weigh(double alpha, double x, double *st) {
+  if (alpha == 1.0) return x;
+  for (int i = 0; i < 2; ++i) {
+    st[2 * i + 1] = alpha * (st[2 * i + 1] + x - st[2 * i]);
+    st[2 * i] = x;
+    x = st[2 * i + 1];
+  }
+  return x;
+}
+
+// effects/adaptive_inverse.rs `rls`: one step of recursive least squares (P row-major).
+VS_FN void vs_rls(double lambda, const double *psi, double y, double *w, double *p) {
+  double pp[VS_TAPS], quad = 0.0, fit = 0.0;
+  for (int i = 0; i < VS_TAPS; ++i) {
+    double acc = 0.0;
+    for (int j = 0; j < VS_TAPS; ++j) acc += p[i * VS_TAPS + j] * psi[j];
+    pp[i] = acc;
+  }
+  for (int i = 0; i < VS_TAPS; ++i) quad += psi[i] * pp[i];
+  for (int i = 0; i < VS_TAPS; ++i) fit += w[i] * psi[i];
+  double den = lambda + quad, err = y - fit;
+  for (int i = 0; i < VS_TAPS; ++i) {
+    double k = pp[i] / den;
+    w[i] += k * err;
+    for (int j = 0; j < VS_TAPS; ++j) p[i * VS_TAPS + j] = (p[i * VS_TAPS + j] - k * pp[j]) / lambda;
+  }
+}
+
+// effects/adaptive_inverse.rs `tick`: the fit's step, then the command given the reference through
+// the inverse. States: w, P, the networks on x, on x̂_r and on F·r̂, the sent reference, the
+// weightings', the taps in use (effects/adaptive_inverse.rs: W, P, NET_X, NET_R, NET_G, SENT,
+// WEIGH_X, WEIGH_Y, WOUT).
+VS_FN double vs_aic(const double *P, long long n, long long l, VsCtrl &m, const double r[4],
+                    double x, double t, double u) {
+#define F(i) vs_p(P, n, l, (i))
+  if (F(VS_AIC) == 0.0) return u;
+  double *w = m.aic, *p = w + VS_TAPS, *net_x = p + VS_TAPS * VS_TAPS, *net_r = net_x + VS_TAPS;
+  double *net_g = net_r + VS_TAPS, *sent = net_g + VS_TAPS, *weigh_x = sent + VS_AHEAD;
+  double *weigh_y = weigh_x + 4, *wout = weigh_y + 4;
+  double a = F(VS_AIC + 2), sq = F(VS_AIC + 3), d = F(VS_AIC + 5), alpha = F(VS_AIC + 6);
+  double psi[VS_TAPS], rho[VS_TAPS], phi[VS_TAPS];
+  vs_network(a, sq, vs_weigh(alpha, x, weigh_x), net_x, psi);
+  double y = vs_weigh(alpha, sent[(int)F(VS_AIC + 4) - 1], weigh_y);
+  double freeze = F(VS_AIC + 7);
+  if (!(freeze > 0.0 && t >= freeze)) vs_rls(F(VS_AIC + 1), psi, y, w, p);
+  double beta = F(VS_AIC + 8);
+  for (int i = 0; i < VS_TAPS; ++i) wout[i] += beta * (w[i] - wout[i]);
+  double f0 = F(VS_C_FB) + F(VS_C_D), f1 = F(VS_C_V), f2 = F(VS_C_A), f3 = F(VS_C_J);
+  double rh[4];
+  for (int i = 0; i < 4; ++i) rh[i] = vs_ahead(r, d, i);
+  vs_network(a, sq, rh[0], net_r, rho);
+  vs_network(a, sq, f0 * rh[0] + f1 * rh[1] + f2 * rh[2] + f3 * rh[3], net_g, phi);
+  double out = 0.0, c = 0.0;
+  for (int i = 0; i < VS_TAPS; ++i) {
+    out += wout[i] * rho[i];
+    c += wout[i] * phi[i];
+  }
+  for (int i = VS_AHEAD - 1; i > 0; --i) sent[i] = sent[i - 1];
+  sent[0] = out;
+  return u + (c - (f0 * r[0] + f1 * r[1] + f2 * r[2] + f3 * r[3]));
+#undef F
 }
 
 // simulate.rs `check_lane`: 0 alive, else the status code, with the value and the chamber
@@ -782,6 +877,10 @@ VS_FN double vs_command(const double *P, long long n, long long l, const VsRun &
       const double ref[4] = {r.x[at], r.v[at], r.a[at], r.j[at]};
       u = vs_adaptive(P, n, l, m, ref, x, (double)k / r.f_s, u);
     }
+    if (VS_ON(VS_E_AIC)) {
+      const double ref[4] = {r.x[at], r.v[at], r.a[at], r.j[at]};
+      u = vs_aic(P, n, l, m, ref, x, (double)k / r.f_s, u);
+    }
     u = vs_shape(P, n, l, m, u);
     return k_sp * u;
   }
@@ -838,6 +937,15 @@ VS_FN void vs_lane(const VsRun &r, const double *P, double *out, long long n, lo
   VsState s, k1;
   vs_initial(P, n, l, s);
   VsCtrl m = {};
+  // effects/adaptive_inverse.rs `initial`: the taps learned and in use from the lane's record,
+  // P = P0·I.
+  if (VS_ON(VS_E_AIC)) {
+    double *wout = m.aic + VS_TAPS * VS_TAPS + 4 * VS_TAPS + VS_AHEAD + 8;
+    for (int i = 0; i < VS_TAPS; ++i) {
+      m.aic[i] = wout[i] = vs_p(P, n, l, VS_AIC + 9 + i);
+      m.aic[VS_TAPS + i * (VS_TAPS + 1)] = 1e6;
+    }
+  }
   VsAcc c = {};
   for (int i = 0; i < 4; ++i) c.spec[i] = vs_from_bits(0x7ff8000000000000ULL);  // NaN: no building
   m.f_prev = vs_force(P, n, l, s);

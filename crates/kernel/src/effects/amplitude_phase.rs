@@ -28,6 +28,10 @@ pub const INFO: EffectInfo = EffectInfo {
     stages: &[Stage::free(&["gain"])],
 };
 
+/// The time-history channel of the correction's size |D| (m): the authority it uses, against its
+/// cap authority·A.
+pub const CORRECTION: &str = "apc_d_m";
+
 params! {
     /// Effect `amplitude_phase`: the fundamental's correction adapted by LMS on its sine and
     /// cosine coefficients (docs/model.md §8).
@@ -75,6 +79,13 @@ impl<const N: usize> Effect<N> for AmplitudePhase<N> {
 
     fn initial_state(&self) -> Self::State {
         [[0.0; N]; 4]
+    }
+
+    /// The correction's size |D| at the fundamental ([`CORRECTION`]), where the lane has it on.
+    fn responses(&self, lane: usize, s: &Self::State, out: &mut dyn FnMut(&'static str, f64)) {
+        if self.set[lane].on != 0.0 {
+            out(CORRECTION, s[0][lane].hypot(s[1][lane]));
+        }
     }
 
     /// The TVC's command plus the correction at the fundamental, adapted at this tick.

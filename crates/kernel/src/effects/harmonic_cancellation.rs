@@ -34,6 +34,10 @@ pub const INFO: EffectInfo = EffectInfo {
 /// The harmonics cancelled.
 pub const HARMONICS: [usize; 4] = [3, 5, 7, 9];
 
+/// The time-history channels of each harmonic's cancelling displacement |D_k| (m): the authority
+/// it uses, against its cap authority·A.
+pub const CORRECTIONS: [&str; 4] = ["ahc_d3_m", "ahc_d5_m", "ahc_d7_m", "ahc_d9_m"];
+
 params! {
     /// Effect `harmonic_cancellation`: a canceller per odd harmonic (3rd to 9th) adapted by LMS
     /// through a model of the plant's phase (docs/model.md §8).
@@ -81,6 +85,15 @@ impl<const N: usize> Effect<N> for HarmonicCancellation<N> {
 
     fn initial_state(&self) -> Self::State {
         [[0.0; N]; 16]
+    }
+
+    /// Each harmonic's correction |D_k| ([`CORRECTIONS`]), where the lane has it on.
+    fn responses(&self, lane: usize, s: &Self::State, out: &mut dyn FnMut(&'static str, f64)) {
+        if self.set[lane].on != 0.0 {
+            for (h, name) in CORRECTIONS.iter().enumerate() {
+                out(name, s[4 * h][lane].hypot(s[4 * h + 1][lane]));
+            }
+        }
     }
 
     /// The TVC's command plus the four harmonics' corrections, adapted at this tick.

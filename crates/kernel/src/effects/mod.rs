@@ -361,6 +361,7 @@ library! {
     valve_compensator::ValveCompensator,
     amplitude_phase::AmplitudePhase,
     harmonic_cancellation::HarmonicCancellation,
+    adaptive_inverse::AdaptiveInverse,
 }
 
 /// The measurement chain shared by the sensor effects.
@@ -1335,12 +1336,27 @@ mod tests {
                 + 4 * building::MAX_STOREYS
                 + 1
                 + 4
-                + 4 * harmonic_cancellation::HARMONICS.len(),
+                + 4 * harmonic_cancellation::HARMONICS.len()
+                + adaptive_inverse::STATES,
             "delay, spool, supply, reaction mass, specimen, three sensor chains, building, \
-             the expressions' time, the adaptive compensators' D and E"
+             the expressions' time, the adaptive compensators' D and E, the inverse's weights \
+             and networks"
         );
-        // The supply pressure starts at P_S, every other state at 0.
+        // The supply pressure starts at P_S, the inverse at its starting taps (w_0 = 1, in the
+        // fit and in use) and its least squares' P at P0·I, every other state at 0.
         let ps = p.servovalve.p_s;
+        let mut w = [0.0; adaptive_inverse::TAPS];
+        w[0] = 1.0;
+        let inverse = adaptive_inverse::initial(&w);
+        assert_eq!(inverse.iter().filter(|&&v| v == 1.0).count(), 2);
+        assert_eq!(
+            inverse
+                .iter()
+                .filter(|&&v| v == adaptive_inverse::P0)
+                .count(),
+            adaptive_inverse::TAPS
+        );
+        let started = inverse.iter().filter(|&&v| v != 0.0).count();
         assert_eq!(
             s.as_ref()
                 .iter()
@@ -1353,7 +1369,7 @@ mod tests {
                 .iter()
                 .filter(|lanes| lanes.iter().all(|&v| v == 0.0))
                 .count(),
-            n - 1
+            n - 1 - started
         );
     }
 
