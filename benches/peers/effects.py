@@ -8,7 +8,8 @@ An effect is an object with
 * `opening(x, es)`: the valve opening from the spool command (identity unless it changes it);
 * `flows(q1, q2, p1, p2)`: the net flows into chamber 1 and out of chamber 2 of one actuator;
 * `force(y, v, es)`: its force on the platen, N;
-* `derivs(x_c, a, y, v, es)`: the derivatives of its states (a: the platen's acceleration).
+* `derivs(x_c, a, y, v, es)`: the derivatives of its states (a: the platen's acceleration);
+* `command(u, r, x, t, s)`: a compensator's valve command from the TVC's sum at a tick.
 
 `simulate(name, params, ref, substeps)` runs the baseline with one effect switched on and returns
 the metrics of model.py.
@@ -65,6 +66,13 @@ class Effect:
 
     def watch(self, es):
         """Once per controller tick, at the tick's states (a specimen's peaks)."""
+
+    def command(self, u, r, x, t, s):
+        """The valve command (V) from the TVC's sum `u` at a tick, before the notches and the
+        clamp (docs/model.md §2): a compensator's hook. `r`: the reference's x, v, a, j; `x`: the
+        displacement feedback; `t`: the tick's time; `s`: the plant's states (P1, P2 of each
+        actuator at s[3:7])."""
+        return u
 
     def specimen_metrics(self):
         """A building's metrics over the run, or none."""
@@ -405,6 +413,180 @@ class Building(Effect):
                     hysteretic_energy_j=self.energy)
 
 
+class ValveCompensator(Effect):
+    """docs/model.md §7, `valve_compensator`: u / max(g, g_min), g the mean over the actuators of
+    ½(√(Δp_a/Δp_a0) + √(Δp_b/Δp_b0)) for the two ports u's sign opens (u ≥ 0: P_S − P1 and
+    P2 − P_R; u < 0: P1 − P_R and P_S − P2), over their no-load drops; a negative drop counts 0."""
+
+    names = ["g_min"]
+
+    def command(self, u, r, x, t, s):
+        p_s, p_r, p1_0, p2_0 = m.P["p_s"], m.P["p_r"], m.P1_0, m.P2_0
+        g = 0.0
+        for act in (0, 1):
+            p1, p2 = s[3 + 2 * act], s[4 + 2 * act]
+            a = np.where(u >= 0.0, (p_s - p1) / (p_s - p1_0), (p1 - p_r) / (p1_0 - p_r))
+            b = np.where(u >= 0.0, (p2 - p_r) / (p2_0 - p_r), (p_s - p2) / (p_s - p2_0))
+            g = g + 0.5 * (np.sqrt(np.maximum(a, 0.0)) + np.sqrt(np.maximum(b, 0.0)))
+        return u / np.maximum(g / 2.0, self.p["g_min"])
+
+
+def reference_phase(r):
+    """docs/model.md §7 (`amplitude_phase`): the frequency ω, amplitude A and phase θ of a sine
+    read from its states, ω² = (a² − v·j)/(v² − x·a), (cos θ, sin θ) ∝ (v, ω·x); None where they
+    are not a sine's."""
+    x, v, a, j = r
+    with np.errstate(divide="ignore", invalid="ignore"):
+        w2 = (a * a - v * j) / (v * v - x * a)
+    if not (np.isfinite(w2) and w2 > 0.0):
+        return None
+    w = math.sqrt(w2)
+    n = math.hypot(v, w * x)
+    if not n > 0.0:
+        return None
+    return w, n / w, math.atan2(w * x, v)
+
+
+class Canceller(Effect):
+    """docs/model.md §7 (`amplitude_phase`, `harmonic_cancellation`): per harmonic k, with the
+    displacement error e = x_r − x, Ω = kω, E ← E + λ(2e·e^{−jkθ} − E), then (unless frozen,
+    t ≥ freeze_s > 0) D ← D + μ·e^{jΩτ}·E capped at |D| ≤ authority·A, and the command gains
+    Re{F(jΩ)·D·e^{jkθ}}, F(s) = c_fb + c_d + c_v s + c_a s² + c_j s³ (μ = gain/f_s,
+    λ = 1 − exp(−2π·band/f_s))."""
+
+    names = ["gain", "band_hz", "delay_s", "authority", "freeze_s"]
+    harmonics = ()
+
+    def initial(self, n_s):
+        self.d = np.zeros((len(self.harmonics), n_s), complex)
+        self.e = np.zeros((len(self.harmonics), n_s), complex)
+        return ()
+
+    def command(self, u, r, x, t, s):
+        ph = reference_phase(r)
+        if ph is None:
+            return u
+        w, amp, theta = ph
+        p, f_s, c = self.p, m.P["f_s"], m.coefficients({})
+        mu, lam = p["gain"] / f_s, 1.0 - np.exp(-2.0 * math.pi * p["band_hz"] / f_s)
+        adapting = ~((p["freeze_s"] > 0.0) & (t >= p["freeze_s"]))
+        e = r[0] - x
+        total = 0.0
+        for i, k in enumerate(self.harmonics):
+            big = k * w
+            turn = np.exp(1j * k * theta)
+            self.e[i] = self.e[i] + lam * (2.0 * e * np.conj(turn) - self.e[i])
+            d = self.d[i] + mu * np.exp(1j * big * p["delay_s"]) * self.e[i]
+            cap = p["authority"] * amp
+            d = np.where(np.abs(d) > cap, d * cap / np.abs(d), d)
+            self.d[i] = np.where(adapting, d, self.d[i])
+            f = (c["c_fb"] + c["c_d"] - c["c_a"] * big**2) + 1j * big * (c["c_v"] - c["c_j"] * big**2)
+            total = total + np.real(f * self.d[i] * turn)
+        return u + total
+
+
+class AmplitudePhase(Canceller):
+    harmonics = (1,)
+
+
+class HarmonicCancellation(Canceller):
+    harmonics = (3, 5, 7, 9)
+
+
+
+def dot(a, b):
+    """Σ_i a[:, i]·b[:, i], summed in the order of i (the least squares' sums are ill-conditioned
+    in its first ticks: a fixed order keeps the peer's rounding the same on every machine)."""
+    total = a[:, 0] * b[:, 0]
+    for i in range(1, a.shape[1]):
+        total = total + a[:, i] * b[:, i]
+    return total
+
+
+class AdaptiveInverse(Effect):
+    """docs/model.md §7, `adaptive_inverse`: a 16-tap Laguerre network (pole a = exp(−2π·corner/f_s),
+    s = √(1 − a²); L_1[n] = a·L_1[n−1] + s·in[n−1], L_i[n] = a·L_i[n−1] + L_{i−1}[n−1] − a·L_{i−1}[n],
+    tap 0 the input) fitted by recursive least squares (λ = 1 − 1/(memory_s·f_s), P = 10⁶·I at the
+    start) from the weighted displacement feedback to the weighted displacement sent D ticks
+    earlier (D = round(anticipation·f_s) in 1..16), both through two high-pass stages
+    y[n] = α·(y[n−1] + in[n] − in[n−1]) with α = 1/(1 + 2π·weight_hz/f_s) (none where weight_hz
+    = 0), unless frozen; the inverse in use v ← v + (w − v)/(copy_s·f_s) (held at copy_s = 0),
+    starting at the taps w_i; the reference's states read D/f_s ahead by their Taylor series
+    (the jerk held) pass through two more networks, the displacement's (the sent displacement
+    Σ vᵢ·Lᵢ) and F's (F·r = (c_fb + c_d)·x + c_v·v + c_a·a + c_j·j), and the command gains
+    Σ vᵢ·Lᵢ(F·r̂) − F·r."""
+
+    TAPS = 16
+    names = ["memory_s", "corner_hz", "anticipation_s", "weight_hz", "copy_s", "freeze_s"] + [
+        f"w_{i}" for i in range(16)]
+
+    def initial(self, n_s):
+        p, f_s, t = self.p, m.P["f_s"], self.TAPS
+        self.lam = 1.0 - 1.0 / (p["memory_s"] * f_s)
+        self.a = np.exp(-2.0 * math.pi * p["corner_hz"] / f_s)
+        self.s = np.sqrt(1.0 - self.a**2)
+        self.d = np.clip(np.round(p["anticipation_s"] * f_s), 1, 16).astype(int)
+        self.alpha = 1.0 / (1.0 + 2.0 * math.pi * p["weight_hz"] / f_s)
+        self.beta = np.where(p["copy_s"] > 0.0, 1.0 / (np.maximum(p["copy_s"], 1e-300) * f_s), 0.0)
+        start = np.stack([p[f"w_{i}"] * np.ones(n_s) for i in range(t)], axis=1)
+        self.w, self.v = start.copy(), start.copy()
+        self.pm = np.tile(1e6 * np.eye(t), (n_s, 1, 1))
+        self.nets = {k: np.zeros((n_s, t)) for k in ("x", "r", "g")}
+        self.sent = np.zeros((n_s, 16))
+        self.hp = {k: np.zeros((n_s, 4)) for k in ("x", "y")}
+        return ()
+
+    def network(self, key, u):
+        """The network's taps at this tick for input `u` (tap 0: u itself)."""
+        st = self.nets[key]
+        taps = np.empty_like(st)
+        taps[:, 0] = u
+        new = np.empty_like(st)
+        new[:, 0] = u
+        new[:, 1] = self.a * st[:, 1] + self.s * st[:, 0]
+        for i in range(2, self.TAPS):
+            new[:, i] = self.a * st[:, i] + st[:, i - 1] - self.a * new[:, i - 1]
+        taps[:, 1:] = new[:, 1:]
+        self.nets[key] = new
+        return taps
+
+    def weigh(self, key, x):
+        st = self.hp[key]
+        out = x
+        for k in (0, 2):
+            st[:, k + 1] = self.alpha * (st[:, k + 1] + out - st[:, k])
+            st[:, k] = out
+            out = st[:, k + 1].copy()
+        return np.where(self.alpha == 1.0, x, out)
+
+    def command(self, u, r, x, t, s):
+        p = self.p
+        psi = self.network("x", self.weigh("x", x * np.ones(len(self.d))))
+        y = self.weigh("y", self.sent[np.arange(len(self.d)), self.d - 1])
+        adapting = ~((p["freeze_s"] > 0.0) & (t >= p["freeze_s"]))
+        pp = np.stack([dot(self.pm[:, i, :], psi) for i in range(self.TAPS)], axis=1)
+        den = self.lam + dot(psi, pp)
+        k = pp / den[:, None]
+        err = y - dot(self.w, psi)
+        w = self.w + k * err[:, None]
+        pm = (self.pm - k[:, :, None] * pp[:, None, :]) / self.lam[:, None, None]
+        self.w = np.where(adapting[:, None], w, self.w)
+        self.pm = np.where(adapting[:, None, None], pm, self.pm)
+        self.v = self.v + self.beta[:, None] * (self.w - self.v)
+        dt = self.d / m.P["f_s"]
+        xr, vr, ar, jr = r
+        r_hat = (xr + dt * (vr + 0.5 * dt * (ar + dt * jr / 3.0)), vr + dt * (ar + 0.5 * dt * jr),
+                 ar + dt * jr, jr)
+        c = m.coefficients({})
+        f = (c["c_fb"] + c["c_d"], c["c_v"], c["c_a"], c["c_j"])
+        path = lambda q: f[0] * q[0] + f[1] * q[1] + f[2] * q[2] + f[3] * q[3]  # noqa: E731
+        rho = self.network("r", r_hat[0])
+        phi = self.network("g", path(r_hat))
+        self.sent = np.roll(self.sent, 1, axis=1)
+        self.sent[:, 0] = dot(self.v, rho)
+        return u + (dot(self.v, phi) - path(r))
+
+
 EFFECTS = {
     "specimen": Specimen,
     "hold_down": HoldDown,
@@ -423,6 +605,10 @@ EFFECTS = {
     "disp_sensor": DispSensor,
     "force_sensor": ForceSensor,
     "building": Building,
+    "valve_compensator": ValveCompensator,
+    "amplitude_phase": AmplitudePhase,
+    "harmonic_cancellation": HarmonicCancellation,
+    "adaptive_inverse": AdaptiveInverse,
 }
 
 
@@ -519,7 +705,9 @@ def simulate(name, params, ref, substeps):
         f_hp = m.HP_B * (f - f_prev) + m.HP_A * f_hp
         f_prev = f
         x = fx.stroke(s[0], s[1], es)[0]
-        u = m.command(np, c, (rx[k], rv[k], ra[k], rj[k]), x, f_hp)
+        r = (rx[k], rv[k], ra[k], rj[k])
+        u = c["c_fb"] * (r[0] - x) + c["c_d"] * r[0] + c["c_v"] * r[1] + c["c_a"] * r[2] + c["c_j"] * r[3] + c["c_f"] * f_hp
+        u = np.clip(fx.command(u, r, x, k / m.P["f_s"], s), -m.P["u_lim"], m.P["u_lim"])
         x_c = m.P["k_sp"] * u
         plant = {}
         a = rhs(fx, x_c, s, es, plant)[0][1]

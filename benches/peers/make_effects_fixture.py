@@ -84,6 +84,30 @@ def draws(name, rng):
         short = rng.uniform(size=SETS) < 0.3
         return dict(f_c=u(20.0, 300.0), zeta=u(0.3, 1.5),
                     delay=np.where(short, u(0.0, 0.5e-3), u(0.5e-3, 5e-3)))
+    if name == "valve_compensator":
+        return dict(g_min=u(0.05, 1.0))
+    if name in ("amplitude_phase", "harmonic_cancellation"):
+        # Half adapt to the end (freeze_s = 0), half are frozen within the run.
+        frozen = rng.uniform(size=SETS) < 0.5
+        # AHC's band below the harmonics' spacing (6 Hz at 3 Hz): wider, its cancellers take in
+        # their neighbours and the loop goes unstable, which would compare failures only.
+        apc = name == "amplitude_phase"
+        return dict(gain=u(0.5, 10.0), band_hz=u(0.5, 10.0) if apc else u(0.2, 1.0),
+                    delay_s=u(0.0, 6e-3), authority=u(0.002, 2.0 if apc else 0.2),
+                    freeze_s=np.where(frozen, u(1.2, 2.9), 0.0))
+    if name == "adaptive_inverse":
+        # Half weighted, half not (weight_hz = 0); half following the fit within the run (a copy
+        # of 10-40 s: with one of 1-8 s the fit's first ticks, the table barely moving and P at
+        # 1e6, amplify rounding 5e5-fold, and two correct implementations part by 1e-9; a third
+        # frozen; taps at the start near the identity.
+        sets = dict(memory_s=u(0.5, 60.0), corner_hz=u(0.3, 30.0), anticipation_s=u(0.0, 0.0156),
+                    weight_hz=np.where(rng.uniform(size=SETS) < 0.5, u(0.5, 20.0), 0.0),
+                    copy_s=np.where(rng.uniform(size=SETS) < 0.5, u(10.0, 40.0), 0.0),
+                    freeze_s=np.where(rng.uniform(size=SETS) < 0.33, u(1.0, 2.9), 0.0))
+        sets["w_0"] = u(0.8, 1.2)
+        for i in range(1, 16):
+            sets[f"w_{i}"] = u(-0.05, 0.05)
+        return sets
     raise KeyError(name)
 
 
@@ -111,6 +135,11 @@ DEFAULTS = {
                      bw_gamma=0.5, bw_n=2.0,
                      **{f"m{i}": 30e3 for i in range(1, 11)}, **{f"k{i}": 24e6 for i in range(1, 11)},
                      **{f"fy{i}": 250e3 for i in range(1, 11)}),
+    "valve_compensator": dict(g_min=0.2),
+    "amplitude_phase": dict(gain=2.0, band_hz=5.0, delay_s=2.8e-3, authority=1.0, freeze_s=0.0),
+    "harmonic_cancellation": dict(gain=2.0, band_hz=0.5, delay_s=2.8e-3, authority=0.05, freeze_s=0.0),
+    "adaptive_inverse": dict(memory_s=30.0, corner_hz=2.0, anticipation_s=2.8e-3, weight_hz=5.0, copy_s=0.0,
+                             freeze_s=0.0, w_0=1.0, **{f"w_{i}": 0.0 for i in range(1, 16)}),
 }
 # Columns beyond model.METRICS: the recorded force's projections over the window, and the building's
 # metrics (empty in the other effects' rows).

@@ -223,8 +223,10 @@ fn lane_record(lp: &LaneParams<1>, m: &ModelParams) -> [f64; LANE_FIELDS] {
     r.extend([a.beta, a.a1, a.a2, a.l, a.vd1, a.vd2]);
     r.extend([pl.inv_m, pl.k, pl.c, pl.alpha, pl.mu]);
     r.extend([fr.inv_y, fr.kappa, fr.kappa_neg]);
-    r.extend([c.c_fb, c.c_d, c.c_v, c.c_a, c.c_j, c.c_f, c.hp_b, c.hp_a]);
-    r.extend(c.notches.iter().flatten());
+    let (ff, force) = (&c.feedforward, &c.force);
+    r.extend([c.feedback.c_fb, ff.c_d, ff.c_v, ff.c_a, ff.c_j]);
+    r.extend([force.c_f, force.hp_b, force.hp_a]);
+    r.extend(c.notches.q.iter().flatten());
     r.extend([c.u_lim, c.k_sp, lp.p0[0].0, lp.p0[0].1]);
     use effects::*;
     r.extend(transport_delay::TransportDelay::<1>::new([m]).lane(0));

@@ -172,6 +172,22 @@ pub fn cancel(set: &Settings, k: usize, ph: &Phase, e: f64, t: f64, st: [&mut f6
     z_re * c - z_im * s
 }
 
+/// A controller at `f_s` Hz whose reference path is F(s) = 1 (c_fb = 1 V/m, no feedforward), so
+/// that a command's volts are metres: the known plants of the compensators' unit tests.
+#[cfg(test)]
+pub(crate) fn unit_reference_path(f_s: f64) -> ControllerParams {
+    ControllerParams {
+        f_s,
+        g_d: 0.1,
+        d_max: 1.0,
+        l_d: 0.0,
+        l_v: 0.0,
+        l_a: 0.0,
+        l_j: 0.0,
+        ..Default::default()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -222,16 +238,7 @@ mod tests {
     const F0: f64 = 2.0;
 
     fn settings(g: f64, tau: f64, authority: f64, freeze_s: f64) -> Settings {
-        let c = ControllerParams {
-            f_s: FS,
-            g_d: 0.1,
-            d_max: 1.0,
-            l_d: 0.0,
-            l_v: 0.0,
-            l_a: 0.0,
-            l_j: 0.0,
-            ..Default::default()
-        };
+        let c = unit_reference_path(FS);
         Settings::new(true, [g, 10.0, tau, authority, freeze_s], &c)
     }
 

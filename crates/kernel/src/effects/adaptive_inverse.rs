@@ -454,17 +454,8 @@ mod tests {
             copy_s: 0.25,
             ..Default::default()
         };
-        // F(s) = 1 (c_fb = 1 V/m, no feedforward): the command's volts are metres.
-        let c = ControllerParams {
-            f_s: FS,
-            g_d: 0.1,
-            d_max: 1.0,
-            l_d: 0.0,
-            l_v: 0.0,
-            l_a: 0.0,
-            l_j: 0.0,
-            ..Default::default()
-        };
+        // F(s) = 1: the command's volts are metres.
+        let c = super::super::adaptive::unit_reference_path(FS);
         Settings::new(true, &q, &c)
     }
 
