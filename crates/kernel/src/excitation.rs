@@ -224,18 +224,7 @@ impl Sine {
         let w = 2.0 * PI * self.freq_hz;
         let (s, c) = (w * t).sin_cos();
         let sd = [s, w * c, -w * w * s, -w * w * w * c];
-        let ed = if t < self.taper_s {
-            let p = PI / self.taper_s;
-            let (ps, pc) = (p * t).sin_cos();
-            [
-                0.5 * (1.0 - pc),
-                0.5 * p * ps,
-                0.5 * p * p * pc,
-                -0.5 * p * p * p * ps,
-            ]
-        } else {
-            [1.0, 0.0, 0.0, 0.0]
-        };
+        let ed = taper(t, self.taper_s);
         let x = self.amp_m;
         [
             x * ed[0] * sd[0],
@@ -696,6 +685,22 @@ fn solve3(a: [[f64; 3]; 3], b: [f64; 3]) -> [f64; 3] {
         }
         det(m) / d
     })
+}
+
+/// The taper (1 − cos(πt/T))/2 rising over `taper_s` = T and its first three derivatives at `t`
+/// (1 and zeros from T on): the envelope a sine starts under.
+pub fn taper(t: f64, taper_s: f64) -> [f64; 4] {
+    if t >= taper_s {
+        return [1.0, 0.0, 0.0, 0.0];
+    }
+    let p = PI / taper_s;
+    let (ps, pc) = (p * t).sin_cos();
+    [
+        0.5 * (1.0 - pc),
+        0.5 * p * ps,
+        0.5 * p * p * pc,
+        -0.5 * p * p * p * ps,
+    ]
 }
 
 #[cfg(test)]

@@ -424,18 +424,7 @@ mod tests {
             q[2] -= amp * w * w * th.sin();
             q[3] -= amp * w * w * w * th.cos();
         }
-        let h = std::f64::consts::FRAC_PI_2;
-        let s = if t < 2.0 {
-            let (c, sn) = ((h * t).cos(), (h * t).sin());
-            [
-                0.5 * (1.0 - c),
-                0.5 * h * sn,
-                0.5 * h * h * c,
-                -0.5 * h * h * h * sn,
-            ]
-        } else {
-            [1.0, 0.0, 0.0, 0.0]
-        };
+        let s = crate::excitation::taper(t, 2.0);
         [
             s[0] * q[0],
             s[0] * q[1] + s[1] * q[0],
