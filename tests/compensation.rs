@@ -250,8 +250,8 @@ fn the_compensators_delay_is_the_published_models_lag() {
 /// given the inverse the last one learned. The first pass (the identity, the reference read 3
 /// ticks early) is about the TVC alone; the second, with the inverse learned in the first, at
 /// most half the TVC alone's rms acceleration error (measured: 0.238 → 0.230, 0.044, 0.043), and
-/// the third no worse. `--learned` writes the model whose taps give the last pass's error at
-/// once.
+/// the third no worse. `--learned` writes the model of the best pass, whose taps give its error
+/// at once.
 #[test]
 fn adaptive_inverse_control_halves_a_records_acceleration_error_after_one_pass() {
     let root = env!("CARGO_MANIFEST_DIR");
@@ -280,12 +280,12 @@ fn adaptive_inverse_control_halves_a_records_acceleration_error_after_one_pass()
     );
     assert!(passes[1] <= 0.5 * alone, "{passes:?} vs {alone}");
     assert!(passes[2] <= passes[1] * 1.05, "{passes:?}");
-    // The learned model, run once, gives what the third pass learned from: the second pass's
-    // inverse learned once more, at the third's error or below.
+    // The learned model is the best pass's inverse: run once, it gives that pass's error.
     let (code, again, err) = common::study(&["sim", &run, "--model", learned.to_str().unwrap()]);
     assert_eq!(code, 0, "{err}");
     let once = common::metric_column(&again, "rms_err_accel_ratio", 1);
-    assert!(once <= passes[2] * 1.05, "{once} vs {passes:?}");
+    let best = passes.iter().copied().fold(f64::INFINITY, f64::min);
+    assert_eq!(once, best, "{once} vs {passes:?}");
     // It is not overwritten by a file it did not write.
     std::fs::write(&learned, "[model.controller]\n").unwrap();
     let (code, _, err) =
@@ -482,4 +482,32 @@ fn sim_reports_the_authority_used() {
         .collect();
     assert_eq!(shares.len(), 5, "{out}");
     assert!(shares.iter().all(|&s| s > 0.0 && s <= 100.0), "{shares:?}");
+}
+
+/// Bad settings of the passes and of a compensator, refused before any run with the file and key:
+/// `--learned` into a folder that does not exist; a ratio out of its range, its unit "1" not
+/// printed as a number.
+#[test]
+fn bad_pass_and_compensator_settings_are_refused_before_the_run() {
+    let root = env!("CARGO_MANIFEST_DIR");
+    let run = format!("{root}/studies/iterate_firm.toml");
+    let model = format!("{root}/studies/compensation/adaptive_inverse.toml");
+    let d = tempfile::tempdir().unwrap();
+    let nowhere = d.path().join("no_such_folder/learned.toml");
+    let args = ["sim", &run, "--model", &model, "--passes", "2", "--learned"];
+    let (code, out, err) = common::study(&[&args[..], &[nowhere.to_str().unwrap()]].concat());
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("its folder does not exist") && out.is_empty(),
+        "{out}{err}"
+    );
+    let bad = d.path().join("bad.toml");
+    std::fs::write(&bad, "[model.harmonic_cancellation]\nauthority = 0.0\n").unwrap();
+    let sp09 = format!("{root}/studies/sim_sp09.toml");
+    let (code, _, err) = common::study(&["sim", &sp09, "--model", bad.to_str().unwrap()]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("harmonic_cancellation.authority: 0 is outside the valid range (0, 10]"),
+        "{err}"
+    );
 }

@@ -393,8 +393,8 @@ pub struct SimArgs {
     /// errors; the other outputs are the last pass's.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=100))]
     pub passes: u32,
-    /// Write the model the last pass learned (its `[model.adaptive_inverse]` taps) to this TOML
-    /// file, to run the test with.
+    /// Write the model of the best pass (the lowest rms acceleration error: the
+    /// `[model.adaptive_inverse]` taps that pass used) to this TOML file, to run the test with.
     #[arg(long)]
     pub learned: Option<PathBuf>,
 }

@@ -233,7 +233,7 @@ pub(crate) fn replaced_only_if_ours(path: &Path, head: &str, what: &str) -> anyh
     crate::shell::job::outputs::check_output(path)?;
     match std::fs::read_to_string(path) {
         Ok(text) if !text.starts_with(head) => Err(crate::shell::BadInput(format!(
-            "{}: exists and is not {what}; nothing was replaced: choose another --out, or remove it",
+            "{}: exists and is not {what}; nothing was replaced: choose another file, or remove it",
             path.display()
         ))
         .into()),

@@ -346,7 +346,11 @@ impl ModelParams {
             if !p.range.contains(v) {
                 issues.push(ParamIssue {
                     path: p.path(),
-                    message: format!("{v} {} is outside the valid range {}", p.unit, p.range),
+                    message: format!(
+                        "{} is outside the valid range {}",
+                        with_unit(v, p.unit),
+                        p.range
+                    ),
                 });
             }
         }
@@ -411,9 +415,8 @@ impl ModelParams {
             .map(|p| ParamIssue {
                 path: p.path(),
                 message: format!(
-                    "{} {} is outside the valid range {}",
-                    p.get(self),
-                    p.unit,
+                    "{} is outside the valid range {}",
+                    with_unit(p.get(self), p.unit),
                     p.range
                 ),
             })
@@ -494,6 +497,14 @@ impl ModelView for ModelParams {
     }
     fn expressions(&self) -> &Expressions {
         &self.expression
+    }
+}
+
+/// A value with its unit for a message: `0.5 m`; a ratio's unit "1" and a bare "-" left out.
+pub fn with_unit(v: f64, unit: &str) -> String {
+    match unit {
+        "1" | "-" | "" => format!("{v}"),
+        _ => format!("{v} {unit}"),
     }
 }
 

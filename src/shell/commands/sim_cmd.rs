@@ -100,11 +100,20 @@ fn run_passes(
     let p = passes::passes(spec, reference, args.passes as usize)?;
     passes_table(stdout, spec, &p)?;
     if let Some(path) = &args.learned {
-        write_learned(path, &args.file, &p.learned)?;
+        let Some(best) = p.best() else {
+            return Err(RunFailed(format!(
+                "{}: no pass ran to the end; {} was not written",
+                args.file.display(),
+                path.display()
+            ))
+            .into());
+        };
+        write_learned(path, &args.file, &p.used[best], best + 1)?;
         writeln!(
             stdout,
-            "  wrote {} (the inverse the last pass learned; use it with --model)\n",
-            path.display()
+            "  wrote {} (the inverse pass {} used, the lowest error; use it with --model)\n",
+            path.display(),
+            best + 1
         )?;
     }
     Ok(p.runs.into_iter().last().expect("one pass at least"))
@@ -138,6 +147,14 @@ fn check_passes(args: &SimArgs, spec: &SimSpec) -> anyhow::Result<()> {
     if let Some(path) = &args.learned {
         let what = "a model `study sim --learned` wrote";
         crate::shell::fit_problem::replaced_only_if_ours(path, LEARNED_HEAD, what)?;
+        let folder = path.parent().filter(|f| !f.as_os_str().is_empty());
+        if folder.is_some_and(|f| !f.is_dir()) {
+            return Err(crate::shell::BadInput(format!(
+                "{}: its folder does not exist; nothing was run (create it, or choose another file)",
+                path.display()
+            ))
+            .into());
+        }
     }
     let asked = args.passes > 1 || args.learned.is_some();
     if asked && !spec.model.effects.get(EffectId::AdaptiveInverse) {
@@ -187,13 +204,13 @@ fn passes_table(o: &mut dyn Write, spec: &SimSpec, p: &passes::Passes) -> std::i
     writeln!(o)
 }
 
-/// The model the passes learned: the run's model with the last pass's taps, every table.
-fn write_learned(path: &Path, file: &Path, learned: &SimSpec) -> anyhow::Result<()> {
+/// The model of the best pass: the run's model with the taps pass `pass` used, every table.
+fn write_learned(path: &Path, file: &Path, used: &SimSpec, pass: usize) -> anyhow::Result<()> {
     let mut root = toml::Table::new();
-    let table = crate::orchestration::runs::spec::model_table(&learned.model);
+    let table = crate::orchestration::runs::spec::model_table(&used.model);
     root.insert("model".into(), toml::Value::Table(table));
     let head = format!(
-        "{LEARNED_HEAD} {} --passes` (vshake {}): the run's model, [model.adaptive_inverse]'s taps w_i those the last pass learned.\n",
+        "{LEARNED_HEAD} {} --passes` (vshake {}): the run's model, [model.adaptive_inverse]'s taps w_i those pass {pass} used (the lowest rms acceleration error of the passes).\n",
         file.display(),
         env!("CARGO_PKG_VERSION")
     );

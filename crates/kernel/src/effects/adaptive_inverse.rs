@@ -424,7 +424,19 @@ mod tests {
             q[2] -= amp * w * w * th.sin();
             q[3] -= amp * w * w * w * th.cos();
         }
-        let s = crate::excitation::taper(t, 2.0);
+        // An envelope sin²(πt/4), rising over 2 s, and its derivatives.
+        let h = std::f64::consts::FRAC_PI_4;
+        let s = if t < 2.0 {
+            let (sn, c) = (2.0 * h * t).sin_cos();
+            [
+                0.5 * (1.0 - c),
+                h * sn,
+                2.0 * h * h * c,
+                -4.0 * h * h * h * sn,
+            ]
+        } else {
+            [1.0, 0.0, 0.0, 0.0]
+        };
         [
             s[0] * q[0],
             s[0] * q[1] + s[1] * q[0],

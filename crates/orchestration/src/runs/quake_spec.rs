@@ -146,7 +146,11 @@ pub(crate) fn read_stochastic(
             } else {
                 issues.push(
                     f.path_of(p.name),
-                    format!("{v} {} is outside the valid range {}", p.unit, p.range),
+                    format!(
+                        "{} is outside the valid range {}",
+                        vshake_kernel::params::with_unit(v, p.unit),
+                        p.range
+                    ),
                 );
             }
         }
