@@ -1086,6 +1086,8 @@ fn accepted_at(
     for p in parts {
         assert!(verdict.contains(p), "{p}: {verdict}");
     }
+    // Nor one test's channel left above 1.5x its noise (the verdict says which).
+    assert!(!verdict.contains(", but leave"), "{verdict}");
     let (names, est, se, after, noise) = named_fit(d, &r, hidden[0].0);
     assert!(
         after <= 1.5 * noise,
@@ -1217,6 +1219,30 @@ fn records_hiding_an_acceleration_filter_of_another_shape() {
     let truth = [("f_c", 35.0), ("zeta", 1.1), ("delay", 2.5e-3)];
     let t = [("accel_sensor", "measurement chain", &truth[..])];
     accepted("broadband.toml", &["--as-records"], &t, &[]);
+}
+
+/// Issue 51: a shape away from the library's default. External leakage alone (c_int 0): to first
+/// order an internal leakage of c_ext/2, which the first stage fits, leaving 2.4x the noise and a
+/// steady offset; forward selection adds the second stage, and c_ext is recovered.
+#[test]
+#[ignore = "issue 51 acceptance, a CI step: cargo test --release --test diagnose -- --ignored"]
+fn records_hiding_external_leakage_alone() {
+    let t = [("leakage", "leakage", &[("c_ext", 6.0e-11)][..])];
+    let extra = ["--as-records", "--set", "leakage.c_int=0"];
+    accepted("broadband.toml", &extra, &t, &["external leakage"]);
+}
+
+/// Issue 51: actuator 2's valves 20 % weaker than actuator 1's, the ports alike (extend_gain 1).
+/// With act2_gain held at 1 this was named a flow-gain curve of 0.9 and a supply beside it
+/// ("+ supply 0.06 %"), leaving the force 55x its noise (69x named alone).
+#[test]
+#[ignore = "issue 51 acceptance, a CI step: cargo test --release --test diagnose -- --ignored"]
+fn records_hiding_actuators_whose_valves_differ() {
+    let t = [("asymmetry", "asymmetry", &[("act2_gain", 0.8)][..])];
+    let extra = ["--as-records", "--set", "asymmetry.extend_gain=1"];
+    let r = accepted("broadband.toml", &extra, &t, &[]);
+    let verdict = r.stdout.lines().find(|l| l.contains("verdict:")).unwrap();
+    assert!(!verdict.contains(" + "), "named alone: {verdict}");
 }
 
 #[test]

@@ -109,8 +109,7 @@ pub(crate) fn run_to(args: &DiagnoseArgs, o: &mut dyn Write) -> anyhow::Result<(
     }
     if let (Some(map), Some(true)) = (
         &d.state_map_after,
-        d.named_fit()
-            .map(|(_, f)| f.after.residual_rms() > diagnose::NOISE_FACTOR * d.noise_rms),
+        d.named_fit().map(|(_, f)| d.above_noise(&f.after)),
     ) {
         writeln!(o, "\n  the residual the named effects leave:")?;
         crate::shell::report::statemap_report::print(o, map)?;

@@ -12,7 +12,10 @@ pub const INFO: EffectInfo = EffectInfo {
     family: "asymmetry",
     summary: "the valve flows of extension and retraction, or of the two actuators, differ",
     params: Params::FIELDS,
-    stages: &[Stage::free(&["extend_gain"])],
+    // Both gains: a table whose actuators' valves differ (act2_gain 0.8) was named a flow-gain
+    // curve of 0.9 with act2_gain held at 1, leaving the total force 69x its noise (issue 51);
+    // freed, it is fitted to 1e-6. The split pressures it makes are its own signature.
+    stages: &[Stage::free(&["extend_gain", "act2_gain"])],
 };
 
 params! {

@@ -91,6 +91,14 @@ pub const MAX_EFFECTS: usize = 3;
 /// χ² over thousands of features, and other flexible effects each take a sliver of it with a
 /// significant ΔBIC; an effect that removes a sliver is not a second missing effect.]
 pub const ADDS_ENOUGH: f64 = 0.25;
+/// Share of the baseline's misfit beyond noise (χ²) an added effect must remove on its own in
+/// the final joint fit to be named, unless the set leaves every test within [`NOISE_FACTOR`] of
+/// its noise (a second effect 5x the noise beside one 100x it removes 0.25 % of the baseline; a
+/// friction's Stribeck and viscous terms beside a supply, the last 0.6 %). [chosen: 2 %, the "clear share". A
+/// table whose actuators' valves differed was named "flow_gain 28 %, + supply 0.06 %": the
+/// supply took a third of what the flow gain left, a χ² 300 times the noise's, and was evidence
+/// of nothing.]
+pub const NAMES_ALONE: f64 = 0.02;
 /// Candidates ranked next behind the best that may take its place in the named set
 /// ([`settle_leader`]).
 pub const ALTERNATES: usize = 2;
@@ -252,6 +260,9 @@ pub struct Diagnosis {
     pub signals: Signals,
     /// Per test, the starting model's residual in units of its noise (√(χ²/dof)).
     pub test_misfit: Vec<f64>,
+    /// Per test and channel, the features' degrees of freedom ([`Problem::dof_table`]): what a
+    /// fit's residual is measured against, channel by channel ([`Self::worst_channel`]).
+    pub dof_table: Vec<[f64; 3]>,
     /// The model's expressions as written (`opening = "x - c*sign(x)"`), which a verdict that
     /// names the `expression` effect gives as its form; empty where it writes none.
     pub written: String,
@@ -347,9 +358,21 @@ impl Diagnosis {
             return String::new();
         };
         let ratio = f.after.residual_rms() / self.noise_rms;
-        if !(ratio > NOISE_FACTOR) {
-            return String::new();
-        }
+        let worst = self.worst_channel(&f.after);
+        let channel = match worst {
+            Some((t, c, m)) if m > NOISE_FACTOR => format!(
+                "{} the {} of test {} at {m:.1}x its noise",
+                if ratio > NOISE_FACTOR { " and" } else { "" },
+                ["acceleration", "displacement", "force"][c],
+                self.signals.names.get(t).map_or("?", |n| n.as_str())
+            ),
+            _ if ratio > NOISE_FACTOR => String::new(),
+            _ => return String::new(),
+        };
+        let floor = match ratio > NOISE_FACTOR {
+            true => format!(" a residual {ratio:.1}x the noise floor"),
+            false => String::new(),
+        };
         let left = self
             .state_map_after
             .as_ref()
@@ -359,7 +382,38 @@ impl Diagnosis {
             true => ("leave", "their forms are"),
             false => ("leaves", "its form is"),
         };
-        format!(", but {leave} a residual {ratio:.1}x the noise floor: {form} probably not quite the plant's{left}")
+        format!(", but {leave}{floor}{channel}: {form} probably not quite the plant's{left}")
+    }
+
+    /// Whether `e` leaves more than [`NOISE_FACTOR`] times the noise: over every test and
+    /// channel, or in one test's channel.
+    pub fn above_noise(&self, e: &fit::Eval) -> bool {
+        e.residual_rms() > NOISE_FACTOR * self.noise_rms
+            || self.worst_channel(e).is_some_and(|w| w.2 > NOISE_FACTOR)
+    }
+
+    /// The test and channel whose residual in `e` is furthest from its noise, with √(χ²/dof)
+    /// there: a channel measured far more finely than the others (a load cell's force) can be
+    /// many times its noise while the residual rms over every channel, each relative to its
+    /// signal, is at the floor.
+    pub fn worst_channel(&self, e: &fit::Eval) -> Option<(usize, usize, f64)> {
+        if e.failure.is_some() {
+            return None;
+        }
+        let mut sum = vec![[0.0; 3]; self.dof_table.len()];
+        for (f, r) in self.features.iter().zip(&e.r) {
+            sum[f.test][f.channel] += r * r;
+        }
+        let misfits = sum
+            .iter()
+            .zip(&self.dof_table)
+            .enumerate()
+            .flat_map(|(t, (s, d))| {
+                (0..3)
+                    .filter(move |&c| d[c] > 0.0)
+                    .map(move |c| (t, c, (s[c] / d[c]).sqrt()))
+            });
+        misfits.max_by(|a, b| a.2.total_cmp(&b.2))
     }
 
     /// The channels whose starting residual exceeds [`NOISE_FACTOR`] times their noise floor.
@@ -499,9 +553,7 @@ impl Diagnosis {
     /// otherwise.
     fn signal_note_if_short(&self) -> String {
         match self.named_fit() {
-            Some((_, f)) if f.after.residual_rms() > NOISE_FACTOR * self.noise_rms => {
-                self.signal_note()
-            }
+            Some((_, f)) if self.above_noise(&f.after) => self.signal_note(),
             Some(_) if self.names_evidence() => self.signal_note(),
             Some(_) if self.names_a_group() || self.named_group().is_some() => {
                 (self.signals.split_sentence())
@@ -1464,6 +1516,7 @@ pub fn diagnose(
     let (more, own) = narrow_group(problem, &mut out, chosen, (&baseline, &score));
     Diagnosis {
         test_misfit: problem.test_misfit(&baseline),
+        dof_table: problem.dof_table(),
         noise_rms: problem.noise_rms(),
         channel_noise: std::array::from_fn(|c| problem.channel_noise_rms(c)),
         baseline,
@@ -1743,8 +1796,9 @@ fn best_swap(
 
 /// The named set (the best candidate, then `steps`) checked in its final joint fit: each part is
 /// refitted out of it, and the weakest added part that does not remove [`ADDS_ENOUGH`] of the
-/// misfit beyond noise the others leave without it, with ΔBIC > [`SIGNIFICANT_BIC`], is dropped,
-/// the set refitted without it, until every one does. Returns the steps kept and each named
+/// misfit beyond noise the others leave without it, with ΔBIC > [`SIGNIFICANT_BIC`], and either
+/// [`NAMES_ALONE`] of the baseline's or a set at the noise, is dropped, the set refitted
+/// without it, until every one does. Returns the steps kept and each named
 /// part's share of the baseline's misfit beyond noise on its own in the final joint fit (empty
 /// when only the best candidate is named).
 fn prune(
@@ -1780,8 +1834,14 @@ fn prune(
                 (base, left, c - chi2 - p * score.ln_n)
             })
             .collect();
+        // A set that leaves every test within NOISE_FACTOR of its noise needs no part to take a
+        // clear share of the baseline: the last few of it may be a shape's.
+        let at_noise = worst_test(problem, &last.fit) <= NOISE_FACTOR;
         let weakest = (1..parts.len())
-            .filter(|&i| !(own[i].1 >= ADDS_ENOUGH && own[i].2 > SIGNIFICANT_BIC))
+            .filter(|&i| {
+                let clear = own[i].0 >= NAMES_ALONE || at_noise;
+                !(own[i].1 >= ADDS_ENOUGH && own[i].2 > SIGNIFICANT_BIC && clear)
+            })
             .min_by(|&a, &b| own[a].1.total_cmp(&own[b].1));
         let Some(i) = weakest else {
             return (steps, own.iter().map(|o| o.0).collect());
@@ -1812,6 +1872,13 @@ fn prune(
         }
     }
     (steps, Vec::new())
+}
+
+/// The largest misfit of a test (√(χ²/dof) over its channels) that the fit `r` leaves.
+fn worst_test(problem: &Problem, r: &fit::FitResult) -> f64 {
+    (problem.test_misfit(&r.after).into_iter())
+        .map(|m| if m.is_nan() { f64::INFINITY } else { m })
+        .fold(0.0, f64::max)
 }
 
 /// The indices of each named part's parameters in the final joint fit's: the best candidate's

@@ -591,6 +591,12 @@ impl Problem {
             .collect()
     }
 
+    /// Per test, the degrees of freedom of each channel's features (acceleration, displacement,
+    /// force): the χ² a model right to the noise leaves in them.
+    pub fn dof_table(&self) -> Vec<[f64; 3]> {
+        self.tests.iter().map(|t| t.dof_ch).collect()
+    }
+
     /// Per test, √(χ²/dof) over its channels: the residual in units of its noise (about 1 at
     /// the noise; NaN where the evaluation failed).
     pub fn test_misfit(&self, e: &Eval) -> Vec<f64> {
