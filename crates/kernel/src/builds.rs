@@ -231,3 +231,43 @@ impl EffectFn<EFFECT_LANES> for Single<'_, '_> {
         )
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::excitation::Sine;
+    use crate::params::ValveLaw;
+
+    /// The wide build of one effect on the platen is made for the usual configuration alone
+    /// (orifice valves, α = ½) on a CPU with AVX2: elsewhere it declines, and the caller runs the
+    /// general build (a linear valve run through it would be given the orifice law).
+    #[test]
+    fn the_wide_single_effect_build_declines_the_laws_it_was_not_made_for() {
+        let r = Sine {
+            freq_hz: 3.0,
+            amp_m: Sine::amp_from_g(0.5, 3.0),
+            taper_s: 0.1,
+            duration_s: 0.3,
+            window_cycles: None,
+        }
+        .reference(1024.0);
+        let refs: [&Reference; LANES] = [&r; LANES];
+        let avx2 = cfg!(target_arch = "x86_64") && Isa::detected() >= Isa::Avx2;
+        for (law, alpha, usual) in [
+            (ValveLaw::Orifice, 0.5, true),
+            (ValveLaw::Linear, 0.5, false),
+            (ValveLaw::Orifice, 0.6, false),
+        ] {
+            let mut p = ModelParams {
+                valve_law: law,
+                ..ModelParams::default()
+            };
+            p.platen.alpha = alpha;
+            *p.effects.get_mut(EffectId::Specimen) = true;
+            let models = vec![&p; LANES];
+            let out =
+                run_wide_single_effect(EffectId::Specimen, &models, &refs, &Solver::default());
+            assert_eq!(out.is_some(), usual && avx2, "{law:?}, α {alpha}");
+        }
+    }
+}

@@ -99,14 +99,7 @@ pub fn to_displacement(accel: &[f64], dt: f64, p: &Processing) -> Processed {
     let pad = (p.pad_s() / dt).ceil() as usize;
     let mut a = vec![0.0; n + 2 * pad];
     for (i, v) in accel.iter().enumerate() {
-        let w = if i < nt {
-            0.5 * (1.0 - (PI * i as f64 / nt as f64).cos())
-        } else if i + nt >= n {
-            0.5 * (1.0 - (PI * (n - 1 - i) as f64 / nt as f64).cos())
-        } else {
-            1.0
-        };
-        a[pad + i] = (v - mean) * w;
+        a[pad + i] = (v - mean) * edge_weight(i, n, nt);
     }
     let bq = Biquad::highpass(p.highpass_hz, dt);
     bq.filter(&mut a);
@@ -129,6 +122,18 @@ pub fn to_displacement(accel: &[f64], dt: f64, p: &Processing) -> Processed {
         disp_m: disp,
         accel_mps2: a,
         pad,
+    }
+}
+
+/// The half-cosine taper's weight of sample `i` of `n`, over `nt` samples at each end: 0 at
+/// the first and last sample, 1 between the tapers, the end the mirror of the start.
+fn edge_weight(i: usize, n: usize, nt: usize) -> f64 {
+    if i < nt {
+        0.5 * (1.0 - (PI * i as f64 / nt as f64).cos())
+    } else if i + nt >= n {
+        0.5 * (1.0 - (PI * (n - 1 - i) as f64 / nt as f64).cos())
+    } else {
+        1.0
     }
 }
 
@@ -485,6 +490,30 @@ mod tests {
             );
         }
         assert_eq!(p.drift_m, d[d.len() - 1].abs());
+    }
+
+    /// A record's taper falls at its end as it rose at its start: each weight is its mirror's,
+    /// 0 at both ends, 1 between the tapers, and the taper's half-cosine at its own points.
+    #[test]
+    fn a_records_taper_at_its_end_is_the_mirror_of_its_start() {
+        let (n, nt) = (40, 7);
+        for i in 0..n {
+            assert_eq!(
+                edge_weight(i, n, nt),
+                edge_weight(n - 1 - i, n, nt),
+                "sample {i}"
+            );
+        }
+        assert_eq!(
+            (edge_weight(0, n, nt), edge_weight(n - 1, n, nt)),
+            (0.0, 0.0)
+        );
+        assert!((nt..n - nt).all(|i| edge_weight(i, n, nt) == 1.0));
+        let half = 0.5 * (1.0 - (PI * 3.0 / 7.0).cos());
+        assert_eq!(
+            (edge_weight(3, n, nt), edge_weight(n - 4, n, nt)),
+            (half, half)
+        );
     }
 
     /// [`filtered_noise`] against the Kanai–Tajimi and Clough–Penzien equations integrated

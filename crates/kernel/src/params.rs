@@ -512,6 +512,17 @@ pub fn with_unit(v: f64, unit: &str) -> String {
 mod tests {
     use super::*;
 
+    /// A value in a message carries its unit, but a ratio's "1" or "-" is not printed as if it
+    /// were a number after the value.
+    #[test]
+    fn a_value_in_a_message_carries_its_unit_but_not_a_ratios() {
+        assert_eq!(with_unit(0.5, "m"), "0.5 m");
+        assert_eq!(with_unit(2e-11, "m³/(s·Pa)"), "0.00000000002 m³/(s·Pa)");
+        for unit in ["1", "-", ""] {
+            assert_eq!(with_unit(1.05, unit), "1.05", "{unit:?}");
+        }
+    }
+
     /// A result table's column is the parameter's name and unit suffix, qualified by its
     /// component where two of one table would share it.
     #[test]

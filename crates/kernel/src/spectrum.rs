@@ -279,6 +279,25 @@ mod tests {
     }
 
     #[test]
+    fn peaks_set_from_another_engine_give_the_psa_of_their_lane() {
+        let s = SpectrumSpec::log_spaced(0.1, 2.0, 5, 0.05);
+        let mut acc = SpectrumAcc::<4>::new(&s, 1.0 / 1024.0);
+        let peaks = [0.01, 0.02, 0.03, 0.04, 0.05];
+        acc.set_peaks(2, &peaks);
+        for (k, (psa, p)) in acc.psa(2).iter().zip(peaks).enumerate() {
+            let w = 2.0 * std::f64::consts::PI / s.periods[k];
+            assert!(
+                (psa - w * w * p).abs() <= 1e-12 * psa.abs(),
+                "period {k}: {psa}"
+            );
+        }
+        assert!(
+            acc.psa(1).iter().all(|&a| a == 0.0),
+            "another lane is untouched"
+        );
+    }
+
+    #[test]
     fn log_spacing_and_band_error() {
         let s = SpectrumSpec::log_spaced(0.05, 4.0, 20, 0.05);
         assert_eq!(s.periods.len(), 20);

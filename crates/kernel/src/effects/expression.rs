@@ -355,3 +355,22 @@ impl<const N: usize> Effect<N> for Expression<N> {
         ]
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The slots a diagnosis frees are those some expression reads, each once, in order; a name
+    /// that no expression reads is not among them.
+    #[test]
+    fn the_slots_read_are_those_some_expression_names() {
+        let mut e = Expressions::default();
+        assert!(e.slots_read().is_empty());
+        e.names[0] = "k".into();
+        e.names[2] = "c".into();
+        e.names[3] = "unused".into();
+        e.set(Hook::Force, "-c*v - k*y - c*sign(v)").unwrap();
+        e.set(Hook::Flow1, "1e-12*c*(p1 - p2)").unwrap();
+        assert_eq!(e.slots_read(), vec![0, 2]);
+    }
+}

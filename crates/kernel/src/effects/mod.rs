@@ -1655,4 +1655,21 @@ mod tests {
         assert_eq!(g.lane(0), [0.6, 0.8, 1.1, 1.3, 1.25, inv]);
         assert_eq!(g.lane(1), [1.0, 1.0, 1.0, 1.0, 1.0, inv]);
     }
+
+    /// The supply's record for the CUDA kernel: its switch, the nominal supply pressure, the
+    /// pump's flow, the inverse accumulator capacity and the inverse pump band, in that order.
+    #[test]
+    fn the_supplys_lane_record_is_its_switch_pressure_pump_and_inverses() {
+        let mut on = Defaults::default();
+        *on.effects.get_mut(EffectId::Supply) = true;
+        // Rows 0 to 2 of its table: q_pump, c_acc, dp_band.
+        for (k, v) in [0.3, 4.0e-8, 2.0e6].into_iter().enumerate() {
+            (on.effect_params.table_mut(EffectId::Supply)).set_field(k, v);
+        }
+        let off = Defaults::default();
+        let s = supply::Supply::<2>::new([&on as &dyn ModelView, &off]);
+        let p_s = on.servovalve().p_s;
+        assert_eq!(s.lane(0), [1.0, p_s, 0.3, 1.0 / 4.0e-8, 1.0 / 2.0e6]);
+        assert_eq!(s.lane(1)[0], 0.0, "the switch of a lane without it");
+    }
 }
