@@ -1222,8 +1222,9 @@ fn records_hiding_an_acceleration_filter_of_another_shape() {
 }
 
 /// Issue 51: a shape away from the library's default. External leakage alone (c_int 0): to first
-/// order an internal leakage of c_ext/2, which the first stage fits, leaving 2.4x the noise and a
-/// steady offset; forward selection adds the second stage, and c_ext is recovered.
+/// order an internal leakage (c_int 1.7e-11 for c_ext 6e-11), which the first stage fits, leaving
+/// 2.4x the noise and a steady offset; forward selection adds the second stage, and c_ext is
+/// recovered.
 #[test]
 #[ignore = "issue 51 acceptance, a CI step: cargo test --release --test diagnose -- --ignored"]
 fn records_hiding_external_leakage_alone() {

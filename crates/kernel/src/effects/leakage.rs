@@ -14,10 +14,11 @@ pub const INFO: EffectInfo = EffectInfo {
     summary: "internal leakage across the piston and external leakage to drain",
     params: Params::FIELDS,
     // External leakage is a second stage: to first order it acts on the load pressure as an
-    // internal leakage of c_ext/2 (Merritt, Hydraulic Control Systems, 1967, §5.4: the total
-    // leakage coefficient C_ip + C_ep/2), which the first stage fits; what is left, the drained
-    // mean pressure and the steady offset it leaves, forward selection adds where it pays (a
-    // leakage of c_ext 6e-11 alone was fitted as c_int 1.7e-11, leaving 2.4x the noise; issue 51).
+    // internal leakage would (for a symmetric actuator, one of c_ext/2: Merritt, Hydraulic
+    // Control Systems, 1967, §5.4, the total leakage coefficient C_ip + C_ep/2; these actuators
+    // are single-ended), which the first stage fits; what is left, the drained mean pressure and
+    // the steady offset it leaves, forward selection adds where it pays (a leakage of c_ext 6e-11
+    // alone was fitted as c_int 1.7e-11, leaving 2.4x the noise; issue 51).
     stages: &[
         Stage::free(&["c_int"]),
         Stage {

@@ -92,9 +92,11 @@ pub const MAX_EFFECTS: usize = 3;
 /// significant ΔBIC; an effect that removes a sliver is not a second missing effect.]
 pub const ADDS_ENOUGH: f64 = 0.25;
 /// Share of the baseline's misfit beyond noise (χ²) an added effect must remove on its own in
-/// the final joint fit to be named, unless the set leaves every test within [`NOISE_FACTOR`] of
-/// its noise (a second effect 5x the noise beside one 100x it removes 0.25 % of the baseline; a
-/// friction's Stribeck and viscous terms beside a supply, the last 0.6 %). [chosen: 2 %, the "clear share". A
+/// the final joint fit to be named, unless the set is at the noise with it: every test within
+/// [`NOISE_FACTOR`] of its noise, or the χ² over them all within NOISE_FACTOR² of the noise's
+/// where it is not without the part (a second effect 5x the noise beside one 100x it removes
+/// 0.25 % of the baseline; a friction's Stribeck and viscous terms beside a supply, the last
+/// 0.6 %). [chosen: 2 %, the "clear share". A
 /// table whose actuators' valves differed was named "flow_gain 28 %, + supply 0.06 %": the
 /// supply took a third of what the flow gain left, a χ² 300 times the noise's, and was evidence
 /// of nothing.]
@@ -1817,9 +1819,9 @@ fn prune(
             .into_par_iter()
             .map(|i| refit_without(problem, last, &parts, &ranges, i))
             .collect();
-        // (share of the baseline's misfit, share of what the others leave, ΔBIC); a part whose
-        // removal leaves no parameter leaves the baseline.
-        let own: Vec<(f64, f64, f64)> = without
+        // (share of the baseline's misfit, share of what the others leave, ΔBIC, the χ² without
+        // it); a part whose removal leaves no parameter leaves the baseline.
+        let own: Vec<(f64, f64, f64, f64)> = without
             .iter()
             .enumerate()
             .map(|(i, w)| {
@@ -1831,15 +1833,19 @@ fn prune(
                 let p = ranges[i].len() as f64;
                 let left = (c - chi2) / (c - score.n);
                 let base = score.share(chi2) - score.share(c);
-                (base, left, c - chi2 - p * score.ln_n)
+                (base, left, c - chi2 - p * score.ln_n, c)
             })
             .collect();
-        // A set that leaves every test within NOISE_FACTOR of its noise needs no part to take a
-        // clear share of the baseline: the last few of it may be a shape's.
+        // At the noise, no part need take a clear share of the baseline: the last few of it may
+        // be a shape's. The set is at the noise where it leaves every test within NOISE_FACTOR
+        // of its noise, or the χ² over them all within NOISE_FACTOR² of the noise's where it is
+        // not without the part.
+        let noise = NOISE_FACTOR * NOISE_FACTOR * score.n;
         let at_noise = worst_test(problem, &last.fit) <= NOISE_FACTOR;
         let weakest = (1..parts.len())
             .filter(|&i| {
-                let clear = own[i].0 >= NAMES_ALONE || at_noise;
+                let to_noise = chi2 <= noise && own[i].3 > noise;
+                let clear = own[i].0 >= NAMES_ALONE || at_noise || to_noise;
                 !(own[i].1 >= ADDS_ENOUGH && own[i].2 > SIGNIFICANT_BIC && clear)
             })
             .min_by(|&a, &b| own[a].1.total_cmp(&own[b].1));
