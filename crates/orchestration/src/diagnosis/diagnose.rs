@@ -96,10 +96,9 @@ pub const ADDS_ENOUGH: f64 = 0.25;
 /// [`NOISE_FACTOR`] of its noise, or the χ² over them all within NOISE_FACTOR² of the noise's
 /// where it is not without the part (a second effect 5x the noise beside one 100x it removes
 /// 0.25 % of the baseline; a friction's Stribeck and viscous terms beside a supply, the last
-/// 0.6 %). [chosen: 2 %, the "clear share". A
-/// table whose actuators' valves differed was named "flow_gain 28 %, + supply 0.06 %": the
-/// supply took a third of what the flow gain left, a χ² 300 times the noise's, and was evidence
-/// of nothing.]
+/// 0.6 %). [chosen: 2 %, the "clear share". A table whose actuators' valves differed
+/// was named "flow_gain 28 %, + supply 0.06 %": the supply took a third of what the flow gain
+/// left, a χ² 300 times the noise's, and was evidence of nothing.]
 pub const NAMES_ALONE: f64 = 0.02;
 /// Candidates ranked next behind the best that may take its place in the named set
 /// ([`settle_leader`]).
