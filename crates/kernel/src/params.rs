@@ -502,9 +502,14 @@ impl ModelView for ModelParams {
 
 /// A value with its unit for a message: `0.5 m`; a ratio's unit "1" and a bare "-" left out.
 pub fn with_unit(v: f64, unit: &str) -> String {
+    format!("{v}{}", unit_after(unit))
+}
+
+/// What follows a value for its unit: " m"; nothing for a ratio's "1", a bare "-" or none.
+pub fn unit_after(unit: &str) -> String {
     match unit {
-        "1" | "-" | "" => format!("{v}"),
-        _ => format!("{v} {unit}"),
+        "1" | "-" | "" => String::new(),
+        _ => format!(" {unit}"),
     }
 }
 

@@ -403,7 +403,7 @@ fn print_evidence(o: &mut dyn Write, problem: &Problem, d: &Diagnosis) -> std::i
             .iter()
             .zip(&f.estimate)
             .zip(&f.se)
-            .map(|((p, e), s)| format!("{} = {e:.3e} ± {s:.1e} {}", p.info.name, p.info.unit))
+            .map(|((p, e), s)| estimate_text(p.info.name, *e, *s, p.info.unit))
             .collect();
         writeln!(o, "  {} ({})", c.effect, params.join(", "))?;
         for (t, k, b, a) in diagnose::evidence(d, c, 3) {
@@ -497,7 +497,7 @@ fn print_selection(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
             .iter()
             .zip(&s.fit.estimate)
             .zip(&s.fit.se)
-            .map(|((p, e), se)| format!("{} = {e:.3e} ± {se:.1e} {}", p.info.path(), p.info.unit))
+            .map(|((p, e), se)| estimate_text(&p.info.path(), *e, *se, p.info.unit))
             .collect();
         writeln!(
             o,
@@ -568,6 +568,50 @@ fn print_misfit(o: &mut dyn Write, problem: &Problem, d: &Diagnosis) -> std::io:
             cell(0),
             cell(1),
             cell(2)
+        )?;
+    }
+    match after {
+        Some(a) => print_below_noise(o, problem, &a),
+        None => Ok(()),
+    }
+}
+
+/// A channel's χ²/dof after the fit under this is far below its noise: the noise it was weighed
+/// with is larger than the channel's (a channel recorded without noise, a `noise` given too
+/// large). [chosen: at the noise χ²/dof is 1 within a few per cent over thousands of degrees
+/// of freedom; 0.1 is a residual under a third of the noise assumed.]
+const BELOW_NOISE: f64 = 0.1;
+
+/// Says which channels the named effects fit far below their noise (χ²/dof under
+/// [`BELOW_NOISE`]), from the table `after` of [`Problem::chi2_table`].
+fn print_below_noise(
+    o: &mut dyn Write,
+    problem: &Problem,
+    after: &[[f64; 3]],
+) -> std::io::Result<()> {
+    for (c, channel) in ["acceleration", "displacement", "force"].iter().enumerate() {
+        let low: Vec<(&str, f64)> = (problem.tests.iter().zip(after))
+            .filter(|(_, a)| a[c] < BELOW_NOISE)
+            .map(|(t, a)| (t.name.as_str(), a[c]))
+            .collect();
+        if low.is_empty() {
+            continue;
+        }
+        let lo = low.iter().map(|l| l.1).fold(f64::INFINITY, f64::min);
+        let hi = low.iter().map(|l| l.1).fold(0.0, f64::max);
+        let range = match lo == hi {
+            true => format!("{lo:.1e}"),
+            false => format!("{lo:.1e} to {hi:.1e}"),
+        };
+        let names: Vec<&str> = low.iter().map(|l| l.0).collect();
+        writeln!(
+            o,
+            "  (the {channel} of {} is fitted to a chi2/dof of {range}, far below 1: the noise it is weighed with is larger than its own (recorded without noise, or a `noise` given too large), so it counts for less in the fit than it could, and the standard errors are larger than they need be)",
+            match names.len() {
+                n if n == problem.tests.len() && n > 1 => "every test".to_string(),
+                1 => format!("test {}", names[0]),
+                _ => format!("tests {}", names.join(", ")),
+            }
         )?;
     }
     Ok(())
@@ -971,7 +1015,7 @@ td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}} th{{background:#
                 .iter()
                 .zip(&f.estimate)
                 .zip(&f.se)
-                .map(|((p, e), s)| format!("{} = {e:.3e} ± {s:.1e} {}", p.info.name, p.info.unit))
+                .map(|((p, e), s)| estimate_text(p.info.name, *e, *s, p.info.unit))
                 .collect::<Vec<_>>()
                 .join("; "),
             Err(e) => format!("fit failed: {e}"),
@@ -1008,4 +1052,11 @@ td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}} th{{background:#
     }
     h.push_str("<p>The numbers are in the Parquet tables beside this page (candidates, selection, tests, evidence, statemap, stateterms).</p>\n</body></html>\n");
     Ok(h)
+}
+
+/// "c_int = 1.700e-11 ± 2.0e-15 m³/(s·Pa)": an estimate with its standard error and its unit
+/// (none for a dimensionless one).
+fn estimate_text(name: &str, e: f64, se: f64, unit: &str) -> String {
+    let unit = crate::kernel::params::unit_after(unit);
+    format!("{name} = {e:.3e} ± {se:.1e}{unit}")
 }

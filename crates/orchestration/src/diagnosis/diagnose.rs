@@ -59,6 +59,7 @@ use crate::diagnosis::statemap::StateMap;
 use crate::diagnosis::terms::{self, Evidence, Term};
 use crate::measured::aligned::AlignedTest;
 use rayon::prelude::*;
+use std::ops::Range;
 use vshake_kernel::effects::building;
 use vshake_kernel::params::{EffectId, ModelParams};
 
@@ -228,6 +229,9 @@ pub struct Step {
     /// this one included.
     pub explained: f64,
 }
+
+/// A part the verdict names, with the indices of its parameters in the named fit's.
+type NamedPart = (Part, Range<usize>);
 
 /// The outcome of a diagnosis.
 pub struct Diagnosis {
@@ -401,19 +405,12 @@ impl Diagnosis {
         if e.failure.is_some() {
             return None;
         }
-        let mut sum = vec![[0.0; 3]; self.dof_table.len()];
-        for (f, r) in self.features.iter().zip(&e.r) {
-            sum[f.test][f.channel] += r * r;
-        }
-        let misfits = sum
-            .iter()
-            .zip(&self.dof_table)
-            .enumerate()
-            .flat_map(|(t, (s, d))| {
-                (0..3)
-                    .filter(move |&c| d[c] > 0.0)
-                    .map(move |c| (t, c, (s[c] / d[c]).sqrt()))
-            });
+        let table = fit::chi2_per_channel(&self.features, e, &self.dof_table);
+        let misfits = table.into_iter().enumerate().flat_map(|(t, m)| {
+            (0..3)
+                .filter(move |&c| !m[c].is_nan())
+                .map(move |c| (t, c, m[c].sqrt()))
+        });
         misfits.max_by(|a, b| a.2.total_cmp(&b.2))
     }
 
@@ -489,18 +486,23 @@ impl Diagnosis {
                 self.short_of_noise(false) + &self.bound_note(),
                 self.measurement_note(&effects)
             ) + &self.signal_note_if_short(),
-            Verdict::Missing { effects, explained } => format!(
-                "most likely missing: {}; together they explain {:.0} % of the misfit beyond noise (what the joint fit loses without each: {}){}{}",
-                effects.iter().enumerate().map(|(i, e)| match (i, e.stage) {
-                    (0, _) => format!("{e} ({}){}", self.family(e.effect), self.leader_group()),
-                    (_, 0) => format!("{e} ({})", self.family(e.effect)),
-                    _ => e.to_string(),
-                }).collect::<Vec<_>>().join(" + "),
-                100.0 * explained,
-                self.shares(),
-                self.short_of_noise(true) + &self.bound_note(),
-                self.measurement_note(&effects)
-            ) + &self.signal_note_if_short(),
+            Verdict::Missing { effects, explained } => {
+                let (list, shown) = self.named_list();
+                let shares = match shown {
+                    1 => "it explains".to_string(),
+                    _ => "together they explain".to_string(),
+                };
+                let each = match shown {
+                    1 => String::new(),
+                    _ => format!(" (what the joint fit loses without each: {})", self.shares()),
+                };
+                format!(
+                    "most likely missing: {list}; {shares} {:.0} % of the misfit beyond noise{each}{}{}",
+                    100.0 * explained,
+                    self.short_of_noise(shown > 1) + &self.bound_note(),
+                    self.measurement_note(&effects)
+                ) + &self.signal_note_if_short()
+            }
             Verdict::Unexplained { effects, explained } if effects.len() == 1 => format!(
                 "the best candidate, {}, explains only {:.0} % of the misfit beyond noise: the missing effect is probably not in the library{}{}",
                 effects[0],
@@ -677,27 +679,7 @@ impl Diagnosis {
         let (Some((free, f)), Some(c)) = (self.named_fit(), self.candidates.first()) else {
             return String::new();
         };
-        let term = self.named_term();
-        let phase = |name: &str| term.is_some_and(|t| t.is_phase_param(name));
-        let named: Vec<(&str, f64)> = (free.iter().zip(&f.estimate))
-            .map(|(p, &v)| (p.info.name, v))
-            .collect();
-        let amplitudes = term.and_then(|t| {
-            let (lo, hi, n) = t.amplitudes(&named)?;
-            let (lo, hi, unit) = (three_figures(lo), three_figures(hi), t.unit());
-            Some(format!("amplitude {lo} to {hi} {unit} in its {n} tests"))
-        });
-        let values: Vec<String> = (free.iter().zip(&f.estimate))
-            .filter(|(p, _)| !phase(p.info.name))
-            .map(|(p, &v)| {
-                let unit = match p.info.unit {
-                    "-" | "" => String::new(),
-                    u => format!(" {u}"),
-                };
-                format!("{} = {}{unit}", p.info.name, three_figures(v))
-            })
-            .chain(amplitudes)
-            .collect();
+        let values = self.values_in(free, &f.estimate, 0..free.len());
         let origin = c
             .origin
             .as_ref()
@@ -705,23 +687,114 @@ impl Diagnosis {
         format!(" with {}{origin}", values.join(", "))
     }
 
+    /// "freq_hz = 29.9 Hz", … for the parameters `range` of `free` at `estimate`: a term's
+    /// phases left out and its line's amplitudes summed up.
+    fn values_in(&self, free: &[Free], estimate: &[f64], range: Range<usize>) -> Vec<String> {
+        let term = self.named_term();
+        let phase = |name: &str| term.is_some_and(|t| t.is_phase_param(name));
+        let named: Vec<(&str, f64)> = (free[range.clone()].iter().zip(&estimate[range.clone()]))
+            .map(|(p, &v)| (p.info.name, v))
+            .collect();
+        let amplitudes = term.and_then(|t| {
+            let (lo, hi, n) = t.amplitudes(&named).filter(|a| a.2 > 0)?;
+            let (lo, hi, unit) = (three_figures(lo), three_figures(hi), t.unit());
+            Some(format!("amplitude {lo} to {hi} {unit} in its {n} tests"))
+        });
+        (named.iter().zip(&free[range]))
+            .filter(|((name, _), _)| !phase(name))
+            .map(|((name, v), p)| {
+                let unit = vshake_kernel::params::unit_after(p.info.unit);
+                format!("{name} = {}{unit}", three_figures(*v))
+            })
+            .chain(amplitudes)
+            .collect()
+    }
+
+    /// The named parts with the ranges of their parameters in the named fit (its parameters
+    /// `free` and estimates), where the verdict names several.
+    fn named_parts(&self) -> Option<(Vec<NamedPart>, &[Free], &fit::FitResult)> {
+        let (Verdict::Missing { effects, .. } | Verdict::Unexplained { effects, .. }) =
+            self.verdict()
+        else {
+            return None;
+        };
+        let (free, f) = self.named_fit()?;
+        let first = self.candidates.first()?;
+        let ranges = param_ranges(first.free.len(), &self.more[..effects.len() - 1]);
+        Some((effects.into_iter().zip(ranges).collect(), free, f))
+    }
+
+    /// Whether the named part `i` of `parts` is a stage of an effect that a later stage of it
+    /// has made void: every parameter it frees, in a range from 0, fitted to 0 within [`VOID`]
+    /// standard errors. The effect is then named by its later stages (leakage fitted as
+    /// external leakage alone, its internal leakage at 0).
+    fn void_stage(parts: &[NamedPart], free: &[Free], f: &fit::FitResult, i: usize) -> bool {
+        let (p, range) = &parts[i];
+        let later = parts
+            .iter()
+            .any(|(q, _)| q.effect == p.effect && q.stage > p.stage);
+        let nothing =
+            |k: usize| free[k].info.range.lo == 0.0 && f.estimate[k].abs() <= VOID * f.se[k];
+        later && !range.is_empty() && range.clone().all(nothing)
+    }
+
+    /// "leakage (leakage) with c_int = … + leakage's external leakage with c_ext = …": each named
+    /// part with its fitted values; a void stage ([`Self::void_stage`]) is not named, its
+    /// parameters are said to be fitted to 0 beside its effect's next stage.
+    fn named_list(&self) -> (String, usize) {
+        let Some((parts, free, f)) = self.named_parts() else {
+            return (String::new(), 0);
+        };
+        let void: Vec<bool> = (0..parts.len())
+            .map(|i| Self::void_stage(&parts, free, f, i))
+            .collect();
+        let mut out = Vec::new();
+        for (i, (p, range)) in parts.iter().enumerate() {
+            if void[i] {
+                continue;
+            }
+            let family = match (out.is_empty(), p.stage) {
+                (true, _) | (_, 0) => format!(" ({})", self.family(p.effect)),
+                _ => String::new(),
+            };
+            let group = if i == 0 {
+                self.leader_group()
+            } else {
+                String::new()
+            };
+            let mut values = self.values_in(free, &f.estimate, range.clone());
+            let zeroed = (0..i).filter(|&j| void[j] && parts[j].0.effect == p.effect);
+            for k in zeroed.flat_map(|j| parts[j].1.clone()) {
+                let (e, se) = (three_figures(f.estimate[k]), three_figures(f.se[k]));
+                values.push(format!("{} fitted to 0 ({e} ± {se})", free[k].info.name));
+            }
+            out.push(format!("{p}{family}{group} with {}", values.join(", ")));
+        }
+        let n = out.len();
+        (out.join(" + "), n)
+    }
+
     /// What each chosen effect removes on its own in the final joint fit: "A 60 %, + B 35 %"
-    /// (shares of the baseline's misfit beyond noise).
+    /// (shares of the baseline's misfit beyond noise). A stage with later stages named takes
+    /// them with it ("specimen (all stages) 100 %"); a void stage is left out.
     fn shares(&self) -> String {
-        let Some(first) = self.candidates.first() else {
+        let Some((parts, free, f)) = self.named_parts() else {
             return String::new();
         };
-        let parts = std::iter::once(first.part()).chain(self.more.iter().map(Step::part));
         let own = self.own.iter().copied().chain(std::iter::repeat(f64::NAN));
-        parts
-            .zip(own)
-            .enumerate()
-            .map(|(i, (p, s))| {
-                let plus = if i == 0 { "" } else { "+ " };
-                format!("{plus}{p} {}", percent(s))
-            })
-            .collect::<Vec<_>>()
-            .join(", ")
+        let mut out = Vec::new();
+        for (i, ((p, _), s)) in parts.iter().zip(own).enumerate() {
+            if Self::void_stage(&parts, free, f, i) {
+                continue;
+            }
+            let plus = if out.is_empty() { "" } else { "+ " };
+            let later = parts
+                .iter()
+                .any(|(q, _)| q.effect == p.effect && q.stage > p.stage);
+            let all = if later { " (all stages)" } else { "" };
+            out.push(format!("{plus}{p}{all} {}", percent(s)));
+        }
+        out.join(", ")
     }
 }
 
@@ -1701,6 +1774,10 @@ fn narrow_group(
 /// How close (relative) an estimate is to a bound of its range to be reported as at it
 /// ([`Diagnosis::bound_note`]). [chosen: 1e-3]
 pub const AT_BOUND: f64 = 1e-3;
+/// A stage's parameter, in a range from 0, fitted to 0 within this many standard errors is
+/// fitted to nothing ([`Diagnosis::void_stage`]). [chosen: 2, the acceptance's "within 2 SE";
+/// an internal leakage beside external leakage alone was fitted to 1.2e-16 ± 9.6e-15.]
+pub const VOID: f64 = 2.0;
 
 /// Most a test's removal from a group may raise the joint fit's χ² and still be made: a test in
 /// which the effect changes nothing beyond the noise says nothing of it. [chosen: 1, a standard

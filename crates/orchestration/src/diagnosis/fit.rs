@@ -573,22 +573,7 @@ impl Problem {
     /// force): χ² over its degrees of freedom, about 1 for a model right to the noise (NaN where
     /// the test has no features of the channel, or the evaluation failed).
     pub fn chi2_table(&self, e: &Eval) -> Vec<[f64; 3]> {
-        let mut sum = vec![[0.0; 3]; self.tests.len()];
-        let features = self.features();
-        if e.failure.is_none() {
-            for (f, r) in features.iter().zip(&e.r) {
-                sum[f.test][f.channel] += r * r;
-            }
-        }
-        let failed = e.failure.is_some();
-        (self.tests.iter().zip(sum))
-            .map(|(t, s)| {
-                std::array::from_fn(|c| match t.dof_ch[c] {
-                    d if d > 0.0 && !failed => s[c] / d,
-                    _ => f64::NAN,
-                })
-            })
-            .collect()
+        chi2_per_channel(&self.features(), e, &self.dof_table())
     }
 
     /// Per test, the degrees of freedom of each channel's features (acceleration, displacement,
@@ -1071,6 +1056,25 @@ impl FitResult {
     pub fn chi2_after(&self) -> f64 {
         self.after.chi2()
     }
+}
+
+/// The weighted misfit of `e` per test and channel: χ² over `dof`, the channels' degrees of
+/// freedom per test (NaN where a test has no features of the channel, or the evaluation failed);
+/// `features` say where each of `e`'s weighted residuals belongs.
+pub fn chi2_per_channel(features: &[FeatureInfo], e: &Eval, dof: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    let mut sum = vec![[0.0; 3]; dof.len()];
+    for (f, r) in features.iter().zip(&e.r) {
+        sum[f.test][f.channel] += r * r;
+    }
+    let failed = e.failure.is_some();
+    (dof.iter().zip(sum))
+        .map(|(d, s)| {
+            std::array::from_fn(|c| match d[c] {
+                d if d > 0.0 && !failed => s[c] / d,
+                _ => f64::NAN,
+            })
+        })
+        .collect()
 }
 
 /// Solves the small square system `a x = b` (least squares by QR, which also copes with a

@@ -179,26 +179,38 @@ pub struct MemoryFit {
 pub const OUT_OF_BAND: f64 = 2.0;
 
 impl MemoryFit {
-    /// Its parameters in words: "f_n 5.02 Hz, ζ 5.1 %, 20.3 t moving" (f_n ≥ 100 Hz at the top of
-    /// the range searched).
+    /// Its parameters in words: "f_n 5.02 Hz, ζ 5.1 %, 20.3 t moving" ("f_n ≥ 100 Hz, 15.9 t
+    /// moving" at the top of the range searched, "ζ ≥ 200 %: no resonance" at the top of the
+    /// damping's; a negative mass said as a slope).
     pub fn describe(&self) -> String {
         let g = match (self.kind, self.gain) {
             (_, g) if !g.is_finite() => String::new(),
-            (Kind::Carried, m) if m.abs() >= 1000.0 => format!(", {:.1} t moving", m / 1000.0),
-            (Kind::Carried, m) => format!(", {m:.0} kg moving"),
+            // A negative mass is no body's: the slope is said as what it is.
+            (Kind::Carried, m) if m < 0.0 => {
+                format!(", slope {}: a negative mass, no body moving", mass(m))
+            }
+            (Kind::Carried, m) => format!(", {} moving", mass(m)),
             // (L − 1) ≈ −2iζΩ/ω_n well below ω_n: a delay of gain·2ζ/ω_n.
             (Kind::Lag, g) => format!(
                 ", gain {g:.2}: {:.2} ms behind the command at low frequency",
                 1e3 * g * 2.0 * self.zeta / (2.0 * PI * self.f_n)
             ),
         };
-        // At the grid's top the data say only "fast": a rigid mass, a short delay.
-        let f = if self.f_n >= F_HI {
-            format!("f_n ≥ {F_HI:.0} Hz")
-        } else {
-            format!("f_n {:.2} Hz", self.f_n)
+        // At the grid's top the data say only "fast": a rigid mass, a short delay; its damping
+        // is not seen.
+        if self.f_n >= F_HI {
+            return format!("f_n ≥ {F_HI:.0} Hz{g}");
+        }
+        // At the polish's bounds of ζ the data say only "no resonance" (a lag of another form)
+        // or "undamped".
+        let z = match self.zeta {
+            z if z >= ZETA_MAX * (1.0 - 1e-9) => {
+                format!("ζ ≥ {:.0} %: no resonance", 100.0 * ZETA_MAX)
+            }
+            z if z <= ZETA_MIN * (1.0 + 1e-9) => format!("ζ ≤ {:.1} %", 100.0 * ZETA_MIN),
+            z => format!("ζ {:.1} %", 100.0 * z),
         };
-        format!("{f}, ζ {:.1} %{g}", 100.0 * self.zeta)
+        format!("f_n {:.2} Hz, {z}{g}", self.f_n)
     }
 
     /// What it suggests physically, given the tests' band of fundamentals (Hz).
@@ -213,6 +225,14 @@ impl MemoryFit {
                 _ => "a resonance within the tests' band: a flexible specimen, or a mode of the table or its foundation",
             },
         }
+    }
+}
+
+/// "20.3 t", "350 kg".
+fn mass(m: f64) -> String {
+    match m.abs() >= 1000.0 {
+        true => format!("{:.1} t", m / 1000.0),
+        false => format!("{m:.0} kg"),
     }
 }
 
