@@ -569,3 +569,64 @@ impl<const N: usize> Effect<N> for Building<N> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A building's channels are the documented ones at the state it is in (docs/model.md,
+    /// the building): a storey's restoring force R = αk·d + (1 − α)·r (bilinear, r within ±F_y),
+    /// its shear V = R + c·ḋ with c = (2ζ/ω₁)·k, a floor's acceleration (V_above − V)/m, the
+    /// base shear V₁ and each storey's work as its state holds it. The expected values are
+    /// computed here from those laws, ω₁ from the 2-storey eigenproblem in closed form.
+    #[test]
+    fn a_buildings_channels_follow_the_storey_laws() {
+        let (m1, m2, k1, k2, alpha, zeta) = (20.0e3, 10.0e3, 30.0e6, 20.0e6, 0.1, 0.05);
+        let mut m = super::super::tests::Defaults::default();
+        m.effects.building = true;
+        let p = &mut m.effect_params.building;
+        (p.storeys, p.law, p.alpha, p.zeta) = (2.0, BILINEAR, alpha, zeta);
+        (p.m1, p.m2, p.k1, p.k2, p.fy1, p.fy2) = (m1, m2, k1, k2, 200.0e3, 150.0e3);
+        let b = Building::<1>::new([&m as &dyn ModelView]);
+        // m1·m2·λ² − (m1·k2 + m2·(k1 + k2))·λ + k1·k2 = 0, λ = ω².
+        let (qa, qb, qc) = (m1 * m2, m1 * k2 + m2 * (k1 + k2), k1 * k2);
+        let w1 = ((qb - (qb * qb - 4.0 * qa * qc).sqrt()) / (2.0 * qa)).sqrt();
+        let (c1, c2) = (2.0 * zeta / w1 * k1, 2.0 * zeta / w1 * k2);
+        let mut s = b.initial_state();
+        let (u1, u2, v1, v2, r1, r2) = (0.01, 0.025, 0.1, 0.3, 150.0e3, 100.0e3);
+        (s[u(0)][0], s[u(1)][0], s[v(0)][0], s[v(1)][0]) = (u1, u2, v1, v2);
+        (s[r(0)][0], s[r(1)][0], s[w(0)][0], s[w(1)][0]) = (r1, r2, 123.0, 45.0);
+        let (d1, d2) = (u1, u2 - u1);
+        let f1 = alpha * k1 * d1 + (1.0 - alpha) * r1;
+        let f2 = alpha * k2 * d2 + (1.0 - alpha) * r2;
+        let (s1, s2) = (f1 + c1 * v1, f2 + c2 * (v2 - v1));
+        let want = [
+            ("base_shear_n", s1),
+            ("drift_1_m", d1),
+            ("storey_force_1_n", f1),
+            ("floor_accel_1_mps2", (s2 - s1) / m1),
+            ("energy_1_j", 123.0),
+            ("drift_2_m", d2),
+            ("storey_force_2_n", f2),
+            ("floor_accel_2_mps2", -s2 / m2),
+            ("energy_2_j", 45.0),
+        ];
+        let mut got = Vec::new();
+        b.responses(0, &s, &mut |name, value| got.push((name, value)));
+        assert_eq!(got.len(), want.len(), "{got:?}");
+        for ((name, value), (w_name, w_value)) in got.iter().zip(want) {
+            assert_eq!(*name, w_name);
+            let tol = 1e-12 * w_value.abs().max(1.0);
+            assert!(
+                (value - w_value).abs() <= tol,
+                "{name}: {value} not {w_value}"
+            );
+        }
+        // Off: no channels.
+        m.effects.building = false;
+        let off = Building::<1>::new([&m as &dyn ModelView]);
+        let mut none = 0;
+        off.responses(0, &off.initial_state(), &mut |_, _| none += 1);
+        assert_eq!(none, 0);
+    }
+}
