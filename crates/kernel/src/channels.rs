@@ -172,4 +172,21 @@ mod tests {
         );
         assert!(unit_list().contains("psi"));
     }
+
+    /// Each quantity's SI unit, the one a message says a column holds, is read back as that
+    /// quantity at a factor of exactly 1; and every channel's column name ends in it (`_m`,
+    /// `_mps2`, `_n`, …, the suffix spelled as a unit too).
+    #[test]
+    fn each_quantitys_si_unit_is_read_at_a_factor_of_one() {
+        use Quantity::*;
+        for q in [Time, Length, Acceleration, Force, Pressure, Voltage] {
+            let u = unit(q.si()).unwrap_or_else(|| panic!("{q:?}: {:?} is no unit", q.si()));
+            assert_eq!((u.quantity, u.to_si), (q, 1.0), "{q:?}");
+        }
+        for (column, _, q) in CHANNELS {
+            let suffix = column.rsplit('_').next().unwrap();
+            let u = unit(suffix).unwrap_or_else(|| panic!("{column}: {suffix} is no unit"));
+            assert_eq!((u.quantity, u.to_si), (*q, 1.0), "{column}");
+        }
+    }
 }

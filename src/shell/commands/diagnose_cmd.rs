@@ -4,7 +4,7 @@ use crate::kernel::params::EffectId;
 use crate::orchestration::diagnosis::diagnose::{
     self, Candidate, Diagnosis, Verdict, EXPLAINS_TOGETHER,
 };
-use crate::orchestration::diagnosis::fit::Problem;
+use crate::orchestration::diagnosis::fit::{FitResult, Free, Problem};
 use crate::shell::cli::DiagnoseArgs;
 use crate::shell::fit_problem::{
     self, check_effect, load_problem, print_checks, residual_warnings,
@@ -162,7 +162,12 @@ fn write_named(
     }
     let model = &model;
     let command = format!("diagnose {}", campaign.display());
-    crate::shell::fit_problem::write_fitted(out, &command, model, free, fit)?;
+    // A stage the verdict says was fitted to 0 is written at 0.
+    let mut fit = fit.clone();
+    for k in d.void_params() {
+        fit.estimate[k] = 0.0;
+    }
+    crate::shell::fit_problem::write_fitted(out, &command, model, free, &fit)?;
     let what = match d.verdict() {
         Verdict::Unexplained { explained, .. } => format!("the best candidates fitted, though they explain only {:.0} % of the residual: the missing effect is probably not among them", 100.0 * explained),
         _ => "the named effects fitted".into(),
@@ -479,43 +484,60 @@ fn print_swap(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
     )
 }
 
-/// The forward selection's steps, each with its joint fit.
+/// The forward selection's steps, each with its joint fit, after the candidate they start
+/// from (its own fit; its dBIC and share against the baseline, each step's dBIC against the
+/// step before it).
 fn print_selection(o: &mut dyn Write, d: &Diagnosis) -> std::io::Result<()> {
-    if d.more.is_empty() {
+    let Some(first) = d.candidates.first().filter(|_| !d.more.is_empty()) else {
         return Ok(());
-    }
+    };
     writeln!(o, "\n  forward selection (each effect fitted on top of those before it, their parameters refitted with it):")?;
     print_swap(o, d)?;
+    let names: Vec<String> = std::iter::once(first.label())
+        .chain(d.more.iter().map(|s| format!("+ {}", s.part())))
+        .collect();
+    let w = names
+        .iter()
+        .map(|n| n.chars().count())
+        .max()
+        .unwrap_or(0)
+        .max(22);
     writeln!(
         o,
-        "  {:<22} {:>4} {:>11} {:>11} {:>9} {:>11}  parameters (joint fit)",
+        "  {:<w$} {:>4} {:>11} {:>11} {:>9} {:>11}  parameters (joint fit)",
         "effect", "iter", "chi2", "dBIC", "explains", "rms resid."
     )?;
-    for s in &d.more {
-        let params: Vec<String> = s
-            .free
-            .iter()
-            .zip(&s.fit.estimate)
-            .zip(&s.fit.se)
-            .map(|((p, e), se)| estimate_text(&p.info.path(), *e, *se, p.info.unit))
-            .collect();
-        writeln!(
-            o,
-            "  + {:<20} {:>4} {:>11.4e} {:>11.4e} {:>8.1}% {:>11.3e}  {}",
-            s.part().to_string(),
-            format!(
-                "{}{}",
-                s.fit.iterations,
-                if s.fit.converged { "" } else { "!" }
-            ),
-            s.fit.chi2_after(),
-            s.delta_bic,
-            100.0 * s.explained,
-            s.fit.after.residual_rms(),
-            params.join(", ")
-        )?;
+    if let Ok(f) = &first.fit {
+        let row = (f, first.delta_bic, first.explained);
+        selection_row(o, (&names[0], w), &first.free, row)?;
+    }
+    for (s, name) in d.more.iter().zip(&names[1..]) {
+        selection_row(o, (name, w), &s.free, (&s.fit, s.delta_bic, s.explained))?;
     }
     print_first_only(o, d)
+}
+
+/// One row of the forward selection's table: `name` padded to `w`, the fit of `free`, its dBIC
+/// and the share it explains.
+fn selection_row(
+    o: &mut dyn Write,
+    (name, w): (&str, usize),
+    free: &[Free],
+    (fit, delta_bic, explained): (&FitResult, f64, f64),
+) -> std::io::Result<()> {
+    let params: Vec<String> = (free.iter().zip(&fit.estimate).zip(&fit.se))
+        .map(|((p, e), se)| estimate_text(&p.info.path(), *e, *se, p.info.unit))
+        .collect();
+    let iter = format!("{}{}", fit.iterations, if fit.converged { "" } else { "!" });
+    writeln!(
+        o,
+        "  {name:<w$} {iter:>4} {:>11.4e} {:>11.4e} {:>8.1}% {:>11.3e}  {}",
+        fit.chi2_after(),
+        delta_bic,
+        100.0 * explained,
+        fit.after.residual_rms(),
+        params.join(", ")
+    )
 }
 
 /// Why the verdict names the first effect only where the steps above do not close the gap to
@@ -754,7 +776,7 @@ fn selection_columns(d: &Diagnosis) -> Vec<(String, Column)> {
     let cs = &d.candidates;
     let mut steps: Vec<(
         String,
-        &[crate::orchestration::diagnosis::fit::Free],
+        &[Free],
         &crate::orchestration::diagnosis::fit::FitResult,
         f64,
         f64,

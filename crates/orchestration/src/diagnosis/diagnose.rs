@@ -493,7 +493,7 @@ impl Diagnosis {
                     _ => "together they explain".to_string(),
                 };
                 let each = match shown {
-                    1 => String::new(),
+                    1 => format!(" (dBIC = {:.0})", self.named_delta_bic()),
                     _ => format!(" (what the joint fit loses without each: {})", self.shares()),
                 };
                 format!(
@@ -710,6 +710,15 @@ impl Diagnosis {
             .collect()
     }
 
+    /// ΔBIC of the named fit against the baseline: χ²_baseline − χ² − p·ln n, p its parameters.
+    fn named_delta_bic(&self) -> f64 {
+        let Some((free, f)) = self.named_fit() else {
+            return f64::NAN;
+        };
+        let score = Scoring::of(&self.baseline, self.n);
+        score.chi2_b - score.bic(f.chi2_after(), free.len())
+    }
+
     /// The named parts with the ranges of their parameters in the named fit (its parameters
     /// `free` and estimates), where the verdict names several.
     fn named_parts(&self) -> Option<(Vec<NamedPart>, &[Free], &fit::FitResult)> {
@@ -725,17 +734,27 @@ impl Diagnosis {
     }
 
     /// Whether the named part `i` of `parts` is a stage of an effect that a later stage of it
-    /// has made void: every parameter it frees, in a range from 0, fitted to 0 within [`VOID`]
-    /// standard errors. The effect is then named by its later stages (leakage fitted as
-    /// external leakage alone, its internal leakage at 0).
+    /// has made void: every parameter it frees fitted to nothing ([`fitted_to_nothing`]). The
+    /// effect is then named by its later stages (leakage fitted as external leakage alone, its
+    /// internal leakage at 0).
     fn void_stage(parts: &[NamedPart], free: &[Free], f: &fit::FitResult, i: usize) -> bool {
         let (p, range) = &parts[i];
         let later = parts
             .iter()
             .any(|(q, _)| q.effect == p.effect && q.stage > p.stage);
-        let nothing =
-            |k: usize| free[k].info.range.lo == 0.0 && f.estimate[k].abs() <= VOID * f.se[k];
-        later && !range.is_empty() && range.clone().all(nothing)
+        later && !range.is_empty() && range.clone().all(|k| fitted_to_nothing(&free[k], f, k))
+    }
+
+    /// The indices, in the named fit's parameters, of a void stage's ([`Self::void_stage`]):
+    /// the model a diagnosis writes holds them at 0, as its verdict says.
+    pub fn void_params(&self) -> Vec<usize> {
+        let Some((parts, free, f)) = self.named_parts() else {
+            return Vec::new();
+        };
+        (0..parts.len())
+            .filter(|&i| Self::void_stage(&parts, free, f, i))
+            .flat_map(|i| parts[i].1.clone())
+            .collect()
     }
 
     /// "leakage (leakage) with c_int = … + leakage's external leakage with c_ext = …": each named
@@ -765,8 +784,12 @@ impl Diagnosis {
             let mut values = self.values_in(free, &f.estimate, range.clone());
             let zeroed = (0..i).filter(|&j| void[j] && parts[j].0.effect == p.effect);
             for k in zeroed.flat_map(|j| parts[j].1.clone()) {
-                let (e, se) = (three_figures(f.estimate[k]), three_figures(f.se[k]));
-                values.push(format!("{} fitted to 0 ({e} ± {se})", free[k].info.name));
+                let e = three_figures(f.estimate[k]);
+                let why = match f.se[k].is_finite() {
+                    true => format!("{e} ± {}", three_figures(f.se[k])),
+                    false => format!("{e}, from {} fitted alone", three_figures(free[k].start)),
+                };
+                values.push(format!("{} fitted to 0 ({why})", free[k].info.name));
             }
             out.push(format!("{p}{family}{group} with {}", values.join(", ")));
         }
@@ -1775,9 +1798,28 @@ fn narrow_group(
 /// ([`Diagnosis::bound_note`]). [chosen: 1e-3]
 pub const AT_BOUND: f64 = 1e-3;
 /// A stage's parameter, in a range from 0, fitted to 0 within this many standard errors is
-/// fitted to nothing ([`Diagnosis::void_stage`]). [chosen: 2, the acceptance's "within 2 SE";
-/// an internal leakage beside external leakage alone was fitted to 1.2e-16 ± 9.6e-15.]
+/// fitted to nothing ([`fitted_to_nothing`]). [chosen: 2, the acceptance's "within 2 SE"; an
+/// internal leakage beside external leakage alone was fitted to 1.2e-16 ± 9.6e-15.]
 pub const VOID: f64 = 2.0;
+
+/// Where a parameter's standard error is not finite (a log-scaled one near 0, whose derivative
+/// in its scaled coordinate vanishes there), it is fitted to nothing below this share of its
+/// start, the value its stage was fitted to before. [chosen: an internal leakage beside
+/// external leakage alone came to 8.6e-17 from 1.9e-11 (4.5e-6); a stage the data carry stays
+/// at a share of order 1.]
+pub const VOID_SHARE: f64 = 1e-3;
+
+/// Whether the parameter `p`, the `k`th of the fit `f`, was fitted to nothing: in a range from
+/// 0, and within [`VOID`] standard errors of 0, or (its standard error not finite) below
+/// [`VOID_SHARE`] of its start.
+fn fitted_to_nothing(p: &Free, f: &fit::FitResult, k: usize) -> bool {
+    let (e, se) = (f.estimate[k].abs(), f.se[k]);
+    let nothing = match se.is_finite() {
+        true => e <= VOID * se,
+        false => p.start > 0.0 && e <= VOID_SHARE * p.start,
+    };
+    p.info.range.lo == 0.0 && nothing
+}
 
 /// Most a test's removal from a group may raise the joint fit's χ² and still be made: a test in
 /// which the effect changes nothing beyond the noise says nothing of it. [chosen: 1, a standard

@@ -191,10 +191,14 @@ impl MemoryFit {
             }
             (Kind::Carried, m) => format!(", {} moving", mass(m)),
             // (L − 1) ≈ −2iζΩ/ω_n well below ω_n: a delay of gain·2ζ/ω_n.
-            (Kind::Lag, g) => format!(
-                ", gain {g:.2}: {:.2} ms behind the command at low frequency",
-                1e3 * g * 2.0 * self.zeta / (2.0 * PI * self.f_n)
-            ),
+            (Kind::Lag, g) => {
+                let ms = 1e3 * g * 2.0 * self.zeta / (2.0 * PI * self.f_n);
+                let side = if ms < 0.0 { "ahead of" } else { "behind" };
+                format!(
+                    ", gain {g:.2}: {:.2} ms {side} the command at low frequency",
+                    ms.abs()
+                )
+            }
         };
         // At the grid's top the data say only "fast": a rigid mass, a short delay; its damping
         // is not seen.
@@ -216,7 +220,10 @@ impl MemoryFit {
     /// What it suggests physically, given the tests' band of fundamentals (Hz).
     pub fn reading(&self, band: Option<(f64, f64)>) -> &'static str {
         match self.kind {
-            Kind::Lag if self.gain < 0.0 => "an opening that leads its command: a valve faster than the model's, or a lead in the valve's driver",
+            // In closed loop the opening the data ask for is the loop's answer too: a slower
+            // valve whose lag the controller over-corrects reads as a lead (a 60 Hz spool at
+            // ζ 0.55 beside seal friction read as a lead at f_n ≥ 100 Hz, R² 0.96).
+            Kind::Lag if self.gain < 0.0 => "an opening ahead of the model's: a lead in the valve's driver, a valve faster than the model's, or a slower one whose lag the loop over-corrects (the candidates' fits tell which)",
             Kind::Lag => "an opening that lags its command: spool dynamics (of another order or bandwidth than the model's), a slow valve driver or pilot stage",
             Kind::Carried if self.gain < 0.0 => "a dynamic load that no carried body makes (its mass comes out negative): a load with memory of another form",
             Kind::Carried => match band {
