@@ -719,8 +719,8 @@ impl Diagnosis {
         score.chi2_b - score.bic(f.chi2_after(), free.len())
     }
 
-    /// The named parts with the ranges of their parameters in the named fit (its parameters
-    /// `free` and estimates), where the verdict names several.
+    /// The named parts with the ranges of their parameters in the named fit, its parameters
+    /// `free` and the fit; None where the verdict names none.
     fn named_parts(&self) -> Option<(Vec<NamedPart>, &[Free], &fit::FitResult)> {
         let (Verdict::Missing { effects, .. } | Verdict::Unexplained { effects, .. }) =
             self.verdict()
@@ -738,11 +738,9 @@ impl Diagnosis {
     /// effect is then named by its later stages (leakage fitted as external leakage alone, its
     /// internal leakage at 0).
     fn void_stage(parts: &[NamedPart], free: &[Free], f: &fit::FitResult, i: usize) -> bool {
-        let (p, range) = &parts[i];
-        let later = parts
-            .iter()
-            .any(|(q, _)| q.effect == p.effect && q.stage > p.stage);
-        later && !range.is_empty() && range.clone().all(|k| fitted_to_nothing(&free[k], f, k))
+        let range = &parts[i].1;
+        let nothing = |k: usize| fitted_to_nothing(&free[k], f, k);
+        has_later_stage(parts, i) && !range.is_empty() && range.clone().all(nothing)
     }
 
     /// The indices, in the named fit's parameters, of a void stage's ([`Self::void_stage`]):
@@ -811,10 +809,10 @@ impl Diagnosis {
                 continue;
             }
             let plus = if out.is_empty() { "" } else { "+ " };
-            let later = parts
-                .iter()
-                .any(|(q, _)| q.effect == p.effect && q.stage > p.stage);
-            let all = if later { " (all stages)" } else { "" };
+            let all = match has_later_stage(&parts, i) {
+                true => " (all stages)",
+                false => "",
+            };
             out.push(format!("{plus}{p}{all} {}", percent(s)));
         }
         out.join(", ")
@@ -1808,6 +1806,14 @@ pub const VOID: f64 = 2.0;
 /// external leakage alone came to 8.6e-17 from 1.9e-11 (4.5e-6); a stage the data carry stays
 /// at a share of order 1.]
 pub const VOID_SHARE: f64 = 1e-3;
+
+/// Whether a later stage of the effect of the named part `i` is named too.
+fn has_later_stage(parts: &[NamedPart], i: usize) -> bool {
+    let p = parts[i].0;
+    parts
+        .iter()
+        .any(|(q, _)| q.effect == p.effect && q.stage > p.stage)
+}
 
 /// Whether the parameter `p`, the `k`th of the fit `f`, was fitted to nothing: in a range from
 /// 0, and within [`VOID`] standard errors of 0, or (its standard error not finite) below
