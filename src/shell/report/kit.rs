@@ -343,7 +343,7 @@ pub(crate) fn state_map_section(map: &StateMap) -> anyhow::Result<String> {
             r.label(),
             m.kind.name(),
             m.r2,
-            esc(&m.describe())
+            esc(&crate::orchestration::diagnosis::statemap::memory_text(m))
         )?;
     }
     h.push_str("</table>\n");

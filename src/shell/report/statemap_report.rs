@@ -42,7 +42,7 @@ pub fn print(o: &mut dyn Write, map: &StateMap) -> std::io::Result<()> {
                 "    {:<28} R^2 {:>5.2}  {}",
                 m.kind.name(),
                 m.r2,
-                m.describe()
+                crate::orchestration::diagnosis::statemap::memory_text(m)
             )?;
         }
     }

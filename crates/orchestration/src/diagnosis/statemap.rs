@@ -76,6 +76,16 @@ pub const N_BINS: usize = 10;
 /// [chosen: a term must carry a tenth of the residual's rms to stay.]
 pub const THRESHOLD: f64 = 0.1;
 
+/// A term with memory's parameters in words ([`MemoryFit::describe`]), or "-" where it carries
+/// under [`THRESHOLD`] of the residual's rms (R² below its square): its fit then reads noise,
+/// and its gain and lag mean nothing (a gain of −4e7 at R² 0.00 on real records).
+pub fn memory_text(m: &MemoryFit) -> String {
+    match m.r2 >= THRESHOLD * THRESHOLD {
+        true => m.describe(),
+        false => "-".to_string(),
+    }
+}
+
 /// A state is named only when its terms explain at least this share of the residual.
 /// [chosen: half; below it the residual is noise, or a dynamic effect no static term of one
 /// state holds.]
