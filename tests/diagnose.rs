@@ -2178,7 +2178,7 @@ fn a_weak_supply_in_three_tests_beside_friction_in_all_is_narrowed_to_them() {
     let weak = "model = { supply = { q_pump = 0.06, c_acc = 1.2e-8 } }";
     let r = friction_beside(d.path(), &[0, 2, 4], weak, "6");
     let named = "most likely missing: supply (supply pressure) in f1_a0p5, f2_a1p5 and f4_a0p8 \
-                 only + seal_friction (friction); together";
+                 only with ";
     let truth = [("supply.q_pump", 0.06), ("supply.c_acc", 1.2e-8)];
     assert_friction_beside(d.path(), &r, named, &truth);
 }
@@ -2195,8 +2195,8 @@ fn a_specimen_in_three_tests_beside_friction_in_all_is_narrowed_to_them() {
     let d = tempfile::tempdir().unwrap();
     let specimen = "model = { specimen = { m1 = 25000.0, f1 = 5.5, zeta1 = 0.06 } }";
     let r = friction_beside(d.path(), &[1, 3, 6], specimen, "3");
-    let named = "most likely missing: specimen (specimen) in f2_a0p3, f3_a3p2 and f6_a1p5 only + \
-                 seal_friction (friction); together";
+    let named = "most likely missing: specimen (specimen) in f2_a0p3, f3_a3p2 and f6_a1p5 only \
+                 with ";
     let truth = [
         ("specimen.m1", 25_000.0),
         ("specimen.f1", 5.5),
@@ -2217,8 +2217,8 @@ fn a_heavy_specimen_in_three_tests_beside_a_weak_friction_is_fitted_to_them() {
     let specimen = "model = { specimen = { m1 = 35000.0, f1 = 5.5, zeta1 = 0.06 } }";
     let friction = [3500.0, 5500.0];
     let r = friction_beside_at(d.path(), (&[2, 4, 7], specimen), SEED_HEAVY, friction);
-    let named = "most likely missing: specimen (specimen) in f2_a1p5, f4_a0p8 and f8_a1p0 only + \
-                 seal_friction (friction); together";
+    let named = "most likely missing: specimen (specimen) in f2_a1p5, f4_a0p8 and f8_a1p0 only \
+                 with ";
     let truth = [
         ("specimen.m1", 35_000.0),
         ("specimen.f1", 5.5),
@@ -2302,6 +2302,12 @@ fn assert_friction_beside_at(
 ) {
     let verdict = verdict_of(&r.stdout);
     assert!(verdict.contains(named), "{verdict}");
+    // The friction named second, with its values, and the two together.
+    let second = " + seal_friction (friction) with f_c = ";
+    assert!(
+        verdict.contains(second) && verdict.contains("; together"),
+        "{verdict}"
+    );
     let fitted = std::fs::read_to_string(dir.join("data/fitted.toml")).unwrap();
     let friction = [("seal_friction.f_c", f_c), ("seal_friction.f_s", f_s)];
     for &(p, v) in truth.iter().chain(&friction) {
