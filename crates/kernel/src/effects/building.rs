@@ -574,6 +574,29 @@ impl<const N: usize> Effect<N> for Building<N> {
 mod tests {
     use super::*;
 
+    /// A storey's parameters are told by their number, whatever the prefix; the others by
+    /// nothing; and one above the building's storeys is said to change nothing.
+    #[test]
+    fn a_storeys_parameters_are_told_by_their_number() {
+        for (name, storey) in [("m1", Some(1)), ("k5", Some(5)), ("fy10", Some(10))] {
+            assert_eq!(storey_of(name), storey, "{name}");
+        }
+        for name in ["zeta", "alpha", "storeys", "height", "law"] {
+            assert_eq!(storey_of(name), None, "{name}");
+        }
+        let p = Params {
+            storeys: 3.0,
+            ..Params::default()
+        };
+        assert_eq!(unused("k3", &p), None);
+        assert_eq!(unused("zeta", &p), None);
+        let why = unused("fy7", &p).expect("storey 7 of 3");
+        assert!(
+            why.contains("storey 7's") && why.contains("3 storeys"),
+            "{why}"
+        );
+    }
+
     /// A building's channels are the documented ones at the state it is in (docs/model.md,
     /// the building): a storey's restoring force R = αk·d + (1 − α)·r (bilinear, r within ±F_y),
     /// its shear V = R + c·ḋ with c = (2ζ/ω₁)·k, a floor's acceleration (V_above − V)/m, the
