@@ -6,7 +6,8 @@ An effect is an object with
 * `names`: its parameters, in the order `params` holds them (arrays, one value per sample);
 * `n`: its extra states per sample;
 * `opening(x, es)`: the valve opening from the spool command (identity unless it changes it);
-* `flows(q1, q2, p1, p2)`: the net flows into chamber 1 and out of chamber 2 of one actuator;
+* `flows(q1, q2, p1, p2, x, act, p_s, es)`: the net flows into chamber 1 and out of chamber 2 of
+  one actuator (p_s: the supply pressure the valves see);
 * `force(y, v, es)`: its force on the platen, N;
 * `derivs(x_c, a, y, v, es)`: the derivatives of its states (a: the platen's acceleration);
 * `command(u, r, x, t, s)`: a compensator's valve command from the TVC's sum at a tick.
@@ -43,8 +44,9 @@ class Effect:
     def opening(self, x, es):
         return x
 
-    def flows(self, q1, q2, p1, p2, x, act):
-        """The net flows into chamber 1 and out of chamber 2 of actuator `act` (0, 1)."""
+    def flows(self, q1, q2, p1, p2, x, act, p_s, es):
+        """The net flows into chamber 1 and out of chamber 2 of actuator `act` (0, 1); `p_s`: the
+        supply pressure the valves see."""
         return q1, q2
 
     def stiffness(self, v1, v2, p1, p2):
@@ -187,7 +189,7 @@ class Asymmetry(Effect):
 
     names = ["extend_gain", "act2_gain"]
 
-    def flows(self, q1, q2, p1, p2, x, act):
+    def flows(self, q1, q2, p1, p2, x, act, p_s, es):
         gain = np.where(x > 0.0, self.p["extend_gain"], 1.0)
         if act == 1:
             gain = gain * self.p["act2_gain"]
@@ -200,7 +202,7 @@ class Leakage(Effect):
 
     names = ["c_int", "c_ext"]
 
-    def flows(self, q1, q2, p1, p2, x, act):
+    def flows(self, q1, q2, p1, p2, x, act, p_s, es):
         qi = self.p["c_int"] * (p1 - p2)
         return q1 - qi - self.p["c_ext"] * p1, q2 - qi + self.p["c_ext"] * p2
 
@@ -587,6 +589,72 @@ class AdaptiveInverse(Effect):
         return u + (dot(self.v, phi) - path(r))
 
 
+# The expression language of docs/formats.md ("Expressions") in NumPy: each function as the
+# table defines it, over arrays of samples.
+FUNCTIONS = dict(
+    sin=np.sin, cos=np.cos, tan=np.tan, exp=np.exp, ln=np.log, log10=np.log10, sqrt=np.sqrt,
+    abs=np.abs, sign=np.sign, tanh=np.tanh, atan=np.arctan,
+    step=lambda x: np.where(x >= 0.0, 1.0, 0.0),
+    min=np.minimum, max=np.maximum, pow=np.power, atan2=np.arctan2,
+    clamp=lambda x, lo, hi: np.minimum(np.maximum(x, lo), hi),
+    pi=math.pi,
+)
+
+
+def translate(source):
+    """An expression of the documented language as Python source: the same grammar but `^`
+    (power, right to left, above unary minus: Python's `**`)."""
+    assert "**" not in source, source
+    return source.replace("^", "**")
+
+
+class Expression(Effect):
+    """Effect `expression` (docs/formats.md, "Expressions"): each hook given an expression of its
+    quantities, `t` (the time since the start of the run, its one state) and named parameters;
+    a hook without one is left alone. `hooks`: the model file's keys and their sources."""
+
+    n = 1
+
+    def __init__(self, params, hooks):
+        super().__init__(params)
+        self.names = list(params)
+        self.code = {k: compile(translate(src), k, "eval") for k, src in hooks.items()}
+
+    def _run(self, hook, **quantities):
+        code = self.code.get(hook)
+        if code is None:
+            return None
+        return eval(code, {"__builtins__": {}}, {**FUNCTIONS, **self.p, **quantities})
+
+    def _or(self, value, default):
+        return default if value is None else value
+
+    def supply(self, es):
+        return self._or(self._run("supply", ps=m.P["p_s"], t=es[0]), m.P["p_s"])
+
+    def opening(self, x, es):
+        return self._or(self._run("opening", x=x, t=es[0]), x)
+
+    def flows(self, q1, q2, p1, p2, x, act, p_s, es):
+        q = dict(p1=p1, p2=p2, ps=p_s, t=es[0])
+        into_1 = self._or(self._run("flow_1", **q), 0.0)
+        into_2 = self._or(self._run("flow_2", **q), 0.0)
+        # Net flows into chamber 1 and out of chamber 2: a flow into 2 lessens what leaves it.
+        return q1 + into_1, q2 - into_2
+
+    def force(self, y, v, es):
+        return self._or(self._run("force", y=y, v=v, t=es[0]), 0.0)
+
+    def derivs(self, plant, es):
+        return (np.ones_like(es[0]),)
+
+    def recorded(self, a, x, f, es, plant):
+        q = dict(a=a, d=x, f=f, t=es[0])
+        return (self._or(self._run("accel_channel", **q), a),
+                self._or(self._run("disp_channel", **q), x),
+                self._or(self._run("force_channel", **q), f))
+
+
 EFFECTS = {
     "specimen": Specimen,
     "hold_down": HoldDown,
@@ -633,7 +701,7 @@ def rhs(fx, x_c, s, es, plant=None):
         q1 = k1 * x * dp1 * (dp1 * dp1 + m.P_TR2) ** -0.25
         q2 = k2 * x * dp2 * (dp2 * dp2 + m.P_TR2) ** -0.25
         q_supply = q_supply + np.where(pos, q1, -q2)
-        q1, q2 = fx.flows(q1, q2, p1, p2, x, act)
+        q1, q2 = fx.flows(q1, q2, p1, p2, x, act, p_s, es)
         b1, b2 = fx.stiffness(vol1, vol2, p1, p2)
         dps += [b1 * (q1 - m.P["a1"] * vs), b2 * (m.P["a2"] * vs - q2)]
         f_act = f_act + (p1 * m.P["a1"] - p2 * m.P["a2"])
@@ -684,12 +752,13 @@ def failed(fx, s, es):
     return bad | ~np.isfinite(y)
 
 
-def simulate(name, params, ref, substeps):
+def simulate(name, params, ref, substeps, hooks=None):
     """Metrics per sample (model.py's) of the baseline with effect `name` on, its parameters
-    `params` (dict of equal-length arrays, every one of the effect's names), default gains."""
-    fx = EFFECTS[name](params)
+    `params` (dict of equal-length arrays, every one of the effect's names), default gains;
+    `hooks`: the expressions of effect `expression` (its named parameters in `params`)."""
+    fx = Expression(params, hooks) if name == "expression" else EFFECTS[name](params)
     c = m.coefficients({})
-    n_s = len(next(iter(params.values())))
+    n_s = len(next(iter(params.values()))) if params else 1
     zeros = np.zeros(n_s)
     p1, p2 = np.full(n_s, m.P1_0), np.full(n_s, m.P2_0)
     s = (zeros, zeros, zeros, p1, p2, p1, p2)

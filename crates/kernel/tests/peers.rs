@@ -7,7 +7,9 @@
 //! degrees), and a run the peer stops the kernel fails too. A change of any plant constant by
 //! 0.01 % moves some metric by far more than that (`a_small_change_of_beta_is_caught`).
 
+use vshake_kernel::effects::expression::Hook;
 use vshake_kernel::effects::{effect_set, Baseline, EffectId};
+use vshake_kernel::param_table::Range;
 use vshake_kernel::params::ModelParams;
 use vshake_kernel::simulate::{
     self, LaneParams, LaneResult, LaneStatus, NoObserver, Observer, Solver, TickView,
@@ -209,7 +211,12 @@ struct EffectCase {
 fn effect_cases() -> Vec<EffectCase> {
     let path =
         std::env::var("VSHAKE_PEER_EFFECTS").unwrap_or_else(|_| fixture("numpy_peer_effects.csv"));
-    let (header, rows) = read_csv(&path);
+    effect_cases_in(&path)
+}
+
+/// The cases of a fixture of effects (an effect, an amplitude, its parameters, the metrics).
+fn effect_cases_in(path: &str) -> Vec<EffectCase> {
+    let (header, rows) = read_csv(path);
     rows.iter()
         .map(|rec| {
             let params = rec[2]
@@ -263,12 +270,15 @@ impl Observer<1> for ForceProjections {
 /// recorded actuator force's projections ([`ForceProjections`]: what the force sensor changes).
 fn run_effect(c: &EffectCase) -> (LaneResult, [f64; 2]) {
     let mut model = ModelParams::default();
-    let id = EffectId::parse(&c.effect).unwrap();
-    *model.effects.get_mut(id) = true;
-    for (path, v) in &c.params {
-        ModelParams::lookup(path)
-            .unwrap_or_else(|| panic!("{path}: not a parameter"))
-            .set(&mut model, *v);
+    if let Some(scenario) = c.effect.strip_prefix("expression:") {
+        write_expressions(&mut model, scenario, &c.params);
+    } else {
+        *model.effects.get_mut(EffectId::parse(&c.effect).unwrap()) = true;
+        for (path, v) in &c.params {
+            ModelParams::lookup(path)
+                .unwrap_or_else(|| panic!("{path}: not a parameter"))
+                .set(&mut model, *v);
+        }
     }
     let lp = LaneParams::<1>::new(&[&model]).unwrap();
     let set = effect_set::<1>(&[&model]);
@@ -282,6 +292,47 @@ fn run_effect(c: &EffectCase) -> (LaneResult, [f64; 2]) {
     let s = obs.sums;
     assert!(s[1] > 0.0 && s[3] > 0.0, "no tick in the window");
     (r, [s[0] / s[1], s[2] / s[3]])
+}
+
+/// The expression fixture's scenarios (the peer's tests/fixtures/numpy_peer_expressions.tsv, or
+/// the `.tsv` beside the file `VSHAKE_PEER_EXPRESSIONS` names): (scenario, hook, source).
+fn expression_sources() -> Vec<(String, String, String)> {
+    let path = expressions_fixture().replace(".csv", ".tsv");
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
+    let rows: Vec<_> = (text.lines())
+        .map(|l| match l.split('\t').collect::<Vec<_>>()[..] {
+            [s, h, src] => (s.to_string(), h.to_string(), src.to_string()),
+            _ => panic!("{path}: {l:?} is not scenario, hook and source"),
+        })
+        .collect();
+    assert!(!rows.is_empty(), "{path}: no expression");
+    rows
+}
+
+/// The expression fixture: the committed one, or the file `VSHAKE_PEER_EXPRESSIONS` names (CI's
+/// step makes it again with the peer).
+fn expressions_fixture() -> String {
+    std::env::var("VSHAKE_PEER_EXPRESSIONS")
+        .unwrap_or_else(|_| fixture("numpy_peer_expressions.csv"))
+}
+
+/// Effect `expression` switched on in `model` with the scenario's expressions, each named
+/// parameter (`expression.NAME`) named at its value, as a model file's `[model.expression]` does.
+fn write_expressions(model: &mut ModelParams, scenario: &str, params: &[(String, f64)]) {
+    *model
+        .effects
+        .get_mut(EffectId::parse("expression").unwrap()) = true;
+    for (path, v) in params {
+        let name = path.strip_prefix("expression.").unwrap();
+        model
+            .name_expression_param(name, "-", Range::any(), *v)
+            .unwrap_or_else(|e| panic!("{path}: {e}"));
+    }
+    let sources = expression_sources();
+    for (_, hook, source) in sources.iter().filter(|r| r.0 == scenario) {
+        let hook = Hook::parse(hook).unwrap_or_else(|| panic!("{hook}: not a hook"));
+        (model.expression.set(hook, source)).unwrap_or_else(|e| panic!("{source}: {e:?}"));
+    }
 }
 
 /// The columns of the recorded force ([`ForceProjections`]), not kernel metrics.
@@ -382,11 +433,75 @@ fn each_effect_agrees_with_the_numpy_peer_to_1e_9() {
     let new: Vec<&str> = EffectId::ALL
         .iter()
         .map(|e| e.name())
-        .filter(|e| !peered.contains(e))
+        // `expression` has its own fixture (`each_expression_agrees_with_the_numpy_peer_to_1e_9`).
+        .filter(|e| !peered.contains(e) && *e != "expression")
         .collect();
     if !new.is_empty() {
         println!("effects without a peer (added after it was written): {new:?}");
     }
+}
+
+/// Effect `expression` (physics a model file writes, no rebuild) against the NumPy peer
+/// (benches/peers/make_expression_fixture.py: the documented language under Python's grammar and
+/// NumPy's functions): 50 random parameter sets of each scenario, whose expressions give every
+/// hook and use every function, and the effect on with no expression (the baseline's metrics):
+/// every metric and the recorded force within 1e-9 of the peer's.
+#[test]
+fn each_expression_agrees_with_the_numpy_peer_to_1e_9() {
+    let cases = effect_cases_in(&expressions_fixture());
+    let mut per_scenario: Vec<(&str, usize, f64)> = Vec::new();
+    for (i, c) in cases.iter().enumerate() {
+        let neutral = c.params.is_empty();
+        if i % every() != 0 && !neutral {
+            continue;
+        }
+        let (d, name) = effect_deviation(c, &run_effect(c));
+        assert!(
+            d <= TOLERANCE,
+            "row {} ({}, {:?}): {name} deviates by {d:e} from the NumPy peer",
+            i + 2,
+            c.effect,
+            c.params
+        );
+        match per_scenario.iter_mut().find(|(e, ..)| *e == c.effect) {
+            Some((_, n, worst)) => (*n, *worst) = (*n + 1, worst.max(d)),
+            None => per_scenario.push((&c.effect, 1, d)),
+        }
+    }
+    for (scenario, n, worst) in &per_scenario {
+        println!("{scenario}: {n} sets, largest deviation {worst:e}");
+        let want = if *scenario == "expression:none" {
+            1
+        } else {
+            50 / every()
+        };
+        assert!(*n >= want, "{scenario}: {n} sets");
+    }
+    assert!(per_scenario.iter().any(|s| s.0 == "expression:none"));
+    let sources = expression_sources();
+    for hook in Hook::ALL {
+        assert!(
+            sources.iter().any(|r| r.1 == hook.key()),
+            "{}: no scenario gives it an expression",
+            hook.key()
+        );
+    }
+    for (f, _) in vshake_kernel::expr::FUNCTIONS {
+        assert!(
+            sources.iter().any(|r| calls(&r.2, f)),
+            "{f}: no expression calls it"
+        );
+    }
+}
+
+/// Whether expression `source` calls function `f` (`f(` not inside a longer name: `atan(` is no
+/// call of `tan`).
+fn calls(source: &str, f: &str) -> bool {
+    let call = format!("{f}(");
+    source.match_indices(&call).any(|(i, _)| {
+        let before = source[..i].chars().next_back();
+        !before.is_some_and(|c| c.is_alphanumeric() || c == '_')
+    })
 }
 
 /// Whether parameter `path` changes anything in the set `params`: not a mode that is absent (zero
@@ -440,29 +555,53 @@ fn acts_in_some_runs(path: &str) -> bool {
 #[test]
 fn a_small_change_of_an_effect_is_caught() {
     let cases = effect_cases();
+    let changed = small_changes_are_caught(&cases, &[("hold_down", 0), ("leakage", 0)]);
+    assert!(changed >= 40, "{changed} parameters changed");
+}
+
+/// The expressions' pin can fail: a 1 % change of any named parameter, or the platen force's
+/// quadratic damper (c2) and the flow across the piston (cl) negated, moves some metric far
+/// beyond the tolerance.
+#[test]
+fn a_small_change_of_an_expression_is_caught() {
+    let cases = effect_cases_in(&expressions_fixture());
+    let flips = [("expression:force", 0), ("expression:flows", 0)];
+    let changed = small_changes_are_caught(&cases, &flips);
+    assert!(changed >= 30, "{changed} parameters changed");
+}
+
+/// A case with its `k`-th parameter times `factor`, against the case's own metrics.
+fn moved(c: &EffectCase, k: usize, factor: f64) -> (f64, String) {
+    let mut off = EffectCase {
+        effect: c.effect.clone(),
+        amp_g: c.amp_g,
+        params: c.params.clone(),
+        case: Case {
+            amp_g: c.amp_g,
+            gains: Vec::new(),
+            metrics: c.case.metrics.clone(),
+        },
+    };
+    off.params[k].1 *= factor;
+    effect_deviation(c, &run_effect(&off))
+}
+
+/// Every parameter of every effect of `cases` times 1.01 in the first set where it acts, and
+/// the `flips` (an effect, a parameter's index) negated in the effect's first set, each moves some
+/// metric by over 100 times the tolerance; how many parameters were changed.
+fn small_changes_are_caught(cases: &[EffectCase], flips: &[(&str, usize)]) -> usize {
     let mut effects: Vec<&str> = cases.iter().map(|c| c.effect.as_str()).collect();
     effects.dedup();
     let mut changed = 0;
-    let moved = |c: &EffectCase, k: usize, factor: f64| {
-        let mut off = EffectCase {
-            effect: c.effect.clone(),
-            amp_g: c.amp_g,
-            params: c.params.clone(),
-            case: Case {
-                amp_g: c.amp_g,
-                gains: Vec::new(),
-                metrics: c.case.metrics.clone(),
-            },
-        };
-        off.params[k].1 *= factor;
-        effect_deviation(c, &run_effect(&off))
-    };
     for effect in &effects {
         let sets: Vec<&EffectCase> = cases
             .iter()
             .filter(|c| c.effect == *effect && !c.params.is_empty())
             .collect();
-        for (k, (path, _)) in sets[0].params.iter().enumerate() {
+        let Some(first) = sets.first() else {
+            continue;
+        };
+        for (k, (path, _)) in first.params.iter().enumerate() {
             // The first set, where the parameter acts there (not zero, not inapplicable:
             // `applies`). A compensator's setting that acts in some runs only (a cap where it is
             // reached, a freeze, the inverse's fit where it is copied into the loop): the first
@@ -491,7 +630,7 @@ fn a_small_change_of_an_effect_is_caught() {
             changed += 1;
         }
     }
-    for (effect, k) in [("hold_down", 0), ("leakage", 0)] {
+    for &(effect, k) in flips {
         let c = cases.iter().find(|c| c.effect == effect).unwrap();
         let (d, name) = moved(c, k, -1.0);
         assert!(
@@ -500,5 +639,5 @@ fn a_small_change_of_an_effect_is_caught() {
             c.params[k].0
         );
     }
-    assert!(changed >= 40, "{changed} parameters changed");
+    changed
 }
