@@ -49,6 +49,13 @@ pub struct Reference {
     /// The estimated rms error of a_r over a_r's rms: a tracked reference's derivatives,
     /// [`Record::derivative_corner_hz`]; 0 where the states are exact.
     pub accel_floor: f64,
+    /// A tracked record's own noise, once more: (x, v, a, j) at each tick of an independent
+    /// realisation of the white noise the record holds ([`Record::noise_realisation`]). The
+    /// reference plus this is one the record could equally have given; how far it moves the
+    /// model's channels is the floor that the record's resolution (a DAQ's bits, its printed
+    /// digits) sets on any comparison. Empty where the states are exact (a sine, a generated
+    /// motion) or made by the causal generator (`signal = "command"`).
+    pub record_noise: Vec<[f64; 4]>,
 }
 
 /// What moves the spool.
@@ -86,6 +93,7 @@ impl Reference {
             drive: Drive::ClosedLoop,
             spectrum: None,
             accel_floor: 0.0,
+            record_noise: Vec::new(),
         }
     }
 
@@ -300,7 +308,33 @@ impl Record {
             r.push([u[k], s[1], s[2], s[3]], u[k]);
         }
         r.accel_floor = d.floor;
+        r.record_noise = self.noise_realisation(f_s, n, d.corner_hz);
         r
+    }
+
+    /// [`Reference::record_noise`]: white noise of the record's estimated σ
+    /// ([`Record::noise_sigma`], block by block of [`NOISE_BLOCK`] samples) at each of its samples (a fixed pseudo-random sequence,
+    /// [`gaussian`]), made into states as [`Record::tracked`] makes the record's: the cubic at the
+    /// ticks for x, the zero-phase derivatives at `corner_hz` for v, a and j. Empty where σ is 0.
+    fn noise_realisation(&self, f_s: f64, n: usize, corner_hz: f64) -> Vec<[f64; 4]> {
+        let x = &self.disp_m;
+        // σ block by block: a record's resolution may follow its level (printed significant
+        // digits step down a decade with it).
+        let block = x.len().div_ceil((x.len() / NOISE_BLOCK).max(1));
+        let sigma: Vec<f64> = x.chunks(block).map(white_sigma).collect();
+        if !sigma.iter().any(|s| *s > 0.0) || !sigma.iter().all(|s| s.is_finite()) {
+            return Vec::new();
+        }
+        let e: Vec<f64> = (0..x.len())
+            .map(|i| sigma[i / block] * gaussian(i as u64))
+            .collect();
+        let fine = OVERSAMPLING as f64 * f_s;
+        let u = cubic_at_ticks(&self.time_s, &e, fine, OVERSAMPLING * (n - 1) + 1);
+        let x = cubic_at_ticks(&self.time_s, &e, f_s, n);
+        let d = zero_phase_derivatives(&u, 2.0 * PI * corner_hz, 1.0 / fine);
+        (d.into_iter().step_by(OVERSAMPLING).zip(x))
+            .map(|(s, x)| [x, s[1], s[2], s[3]])
+            .collect()
     }
 
     /// The corner of a tracked reference's derivatives, Hz (docs/model.md §4): of
@@ -381,35 +415,7 @@ impl Record {
     /// direct transform); third differences (σ = rms(Δ³x)/√20, an upper bound) for a record too
     /// short for the band to hold 64 bins.
     fn noise_sigma(&self) -> f64 {
-        let x = &self.disp_m;
-        let n = x.len();
-        if n < 1280 {
-            let d3 = x
-                .windows(4)
-                .map(|w| (w[3] - 3.0 * w[2] + 3.0 * w[1] - w[0]).powi(2));
-            return (d3.sum::<f64>() / n.saturating_sub(3).max(1) as f64 / 20.0).sqrt();
-        }
-        let hann: Vec<f64> = (0..n)
-            .map(|j| (PI * (j as f64 + 0.5) / n as f64).sin().powi(2))
-            .collect();
-        let sum_w2: f64 = hann.iter().map(|w| w * w).sum();
-        let turn: Vec<(f64, f64)> = (0..n)
-            .map(|j| (2.0 * PI * j as f64 / n as f64).sin_cos())
-            .collect();
-        let mut power: Vec<f64> = (0..64)
-            .map(|m| {
-                let k = (n as f64 * (0.4 + 0.1 * (m as f64 + 0.5) / 64.0)) as usize;
-                let (mut re, mut im) = (0.0, 0.0);
-                for j in 0..n {
-                    let (s, c) = turn[(j * k) % n];
-                    re += x[j] * hann[j] * c;
-                    im -= x[j] * hann[j] * s;
-                }
-                re * re + im * im
-            })
-            .collect();
-        power.sort_by(f64::total_cmp);
-        (power[32] / (2f64.ln() * sum_w2)).sqrt()
+        white_sigma(&self.disp_m)
     }
 
     /// `signal = "command"`: the record, linear between samples, through the causal
@@ -471,6 +477,58 @@ const BUTTERWORTH4: [f64; 3] = [
     3.414_213_562_373_095,
     2.613_125_929_752_753,
 ];
+
+/// σ of white noise in `x` ([`Record::noise_sigma`]).
+fn white_sigma(x: &[f64]) -> f64 {
+    let n = x.len();
+    if n < 1280 {
+        let d3 = x
+            .windows(4)
+            .map(|w| (w[3] - 3.0 * w[2] + 3.0 * w[1] - w[0]).powi(2));
+        return (d3.sum::<f64>() / n.saturating_sub(3).max(1) as f64 / 20.0).sqrt();
+    }
+    let hann: Vec<f64> = (0..n)
+        .map(|j| (PI * (j as f64 + 0.5) / n as f64).sin().powi(2))
+        .collect();
+    let sum_w2: f64 = hann.iter().map(|w| w * w).sum();
+    let turn: Vec<(f64, f64)> = (0..n)
+        .map(|j| (2.0 * PI * j as f64 / n as f64).sin_cos())
+        .collect();
+    let mut power: Vec<f64> = (0..64)
+        .map(|m| {
+            let k = (n as f64 * (0.4 + 0.1 * (m as f64 + 0.5) / 64.0)) as usize;
+            let (mut re, mut im) = (0.0, 0.0);
+            for j in 0..n {
+                let (s, c) = turn[(j * k) % n];
+                re += x[j] * hann[j] * c;
+                im -= x[j] * hann[j] * s;
+            }
+            re * re + im * im
+        })
+        .collect();
+    power.sort_by(f64::total_cmp);
+    (power[32] / (2f64.ln() * sum_w2)).sqrt()
+}
+
+/// The fewest samples of a record whose noise σ [`Reference::record_noise`] estimates apart (the
+/// record split into equal blocks of at least this many, or taken whole) [chosen: 2048,
+/// 2 s at 1024 Hz: long enough for the top band's 64 bins of [`white_sigma`], short enough to
+/// follow a resolution that changes with the record's level].
+const NOISE_BLOCK: usize = 2048;
+
+/// The `i`-th of a fixed sequence of standard normal numbers: SplitMix64's outputs 2i and 2i + 1
+/// made uniform on (0, 1), then Gaussian by Box–Muller.
+fn gaussian(i: u64) -> f64 {
+    let mix = |z: u64| {
+        let z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        let z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    };
+    let unit = |z: u64| ((z >> 11) as f64 + 0.5) / (1u64 << 53) as f64;
+    let (u1, u2) = (unit(mix(2 * i)), unit(mix(2 * i + 1)));
+    (-2.0 * u1.ln()).sqrt() * (2.0 * PI * u2).cos()
+}
 
 /// The record's values at `n` ticks from its first time, by the cubic through the four nearest
 /// samples (the end samples held beyond the ends).
@@ -706,6 +764,57 @@ pub fn taper(t: f64, taper_s: f64) -> [f64; 4] {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A tracked record's noise, once more (`record_noise`): for a record holding white noise of
+    /// σ = 2e-6 m in its second half only (a resolution that follows the record's level), the
+    /// realisation's x has that σ there, within the estimate's 10 %, and none in the quiet first
+    /// half; a record without noise gives none (under 1e-3 of that σ); and the realisation is
+    /// not the record's own noise (their correlation is near 0).
+    #[test]
+    fn a_records_noise_is_drawn_once_more_where_it_is() {
+        let rate = 1024.0;
+        let n = 8 * 2048;
+        let time_s: Vec<f64> = (0..n).map(|i| i as f64 / rate).collect();
+        let smooth: Vec<f64> = (time_s.iter())
+            .map(|t| 0.02 * (2.0 * PI * 1.3 * t).sin())
+            .collect();
+        let noise: Vec<f64> = (0..n)
+            .map(|i| {
+                if i < n / 2 {
+                    0.0
+                } else {
+                    2e-6 * gaussian(1_000_003 + i as u64)
+                }
+            })
+            .collect();
+        let noisy: Vec<f64> = smooth.iter().zip(&noise).map(|(a, b)| a + b).collect();
+        let record = |disp_m: Vec<f64>| Record {
+            time_s: time_s.clone(),
+            disp_m,
+            f_ref_hz: 50.0,
+            signal: Signal::Reference,
+        };
+        let r = record(noisy).reference(rate);
+        let rms =
+            |v: &[[f64; 4]]| (v.iter().map(|s| s[0] * s[0]).sum::<f64>() / v.len() as f64).sqrt();
+        let (first, second) = r.record_noise.split_at(r.record_noise.len() / 2);
+        assert!((rms(second) / 2e-6 - 1.0).abs() < 0.1, "{:e}", rms(second));
+        assert!(rms(&first[..first.len() - 64]) < 2e-8, "{:e}", rms(first));
+        let dot: f64 = (second.iter().zip(&noise[n / 2..]))
+            .map(|(a, b)| a[0] * b)
+            .sum();
+        let corr = dot / (rms(second) * 2e-6 * second.len() as f64);
+        assert!(
+            corr.abs() < 0.05,
+            "correlated with the record's own noise: {corr}"
+        );
+        let clean = record(smooth).reference(rate);
+        assert!(
+            rms(&clean.record_noise) < 2e-9,
+            "{:e}",
+            rms(&clean.record_noise)
+        );
+    }
 
     /// The extension after a record's end lies on the parabola through its last values: exactly
     /// where they are a parabola, with three values (the fewest that fit one) or more.

@@ -56,3 +56,37 @@ fn rotate(a: &mut [Vec<f64>], v: &mut [Vec<f64>], p: usize, q: usize) {
         row[q] = s * vp + c * vq;
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The eigenpairs of a 4×4 symmetric matrix: A v = λ v for each column v, and the columns
+    /// orthonormal; the eigenvalues sum to the trace.
+    #[test]
+    fn eigenpairs_satisfy_a_v_equals_lambda_v() {
+        let a = vec![
+            vec![4.0, 1.0, -2.0, 0.5],
+            vec![1.0, 3.0, 0.0, 1.5],
+            vec![-2.0, 0.0, 5.0, -1.0],
+            vec![0.5, 1.5, -1.0, 2.0],
+        ];
+        let (lambda, v) = symmetric_eigen(a.clone());
+        let n = a.len();
+        for k in 0..n {
+            for i in 0..n {
+                let av: f64 = (0..n).map(|j| a[i][j] * v[j][k]).sum();
+                assert!(
+                    (av - lambda[k] * v[i][k]).abs() < 1e-12,
+                    "pair {k}, row {i}"
+                );
+            }
+            for m in 0..n {
+                let dot: f64 = (0..n).map(|i| v[i][k] * v[i][m]).sum();
+                let want = if k == m { 1.0 } else { 0.0 };
+                assert!((dot - want).abs() < 1e-12, "columns {k}, {m}: {dot}");
+            }
+        }
+        assert!((lambda.iter().sum::<f64>() - 14.0).abs() < 1e-12);
+    }
+}

@@ -182,6 +182,41 @@ fn channel_sigma(x: &[f64], s: &Samples, c: usize, accel_floor: f64) -> f64 {
     }
 }
 
+/// The floor a tracked record's own noise sets on each channel (acceleration, displacement,
+/// force; their units): the rms, at the samples `tau`, of the channels of `model` run on the drive
+/// plus [`Reference::record_noise`] less those run on the drive. The model's reference is the
+/// record, its noise and its printed digits included, while the table tracked the reference
+/// before they were added: a displacement written to 6 significant digits (1e-7 m steps) moved
+/// the force 1e-3 to 6e-3 of its rms through the controller, 1000 times its own rounding. The
+/// record's noise was drawn once in the data; here once more, of the same σ, so that the
+/// difference has the spread of the error. Zero where the reference has no noise, or a run
+/// fails.
+pub fn reference_floor(model: &ModelParams, drive: &Reference, tau: &[f64]) -> [f64; 3] {
+    if drive.record_noise.is_empty() || tau.is_empty() {
+        return [0.0; 3];
+    }
+    let mut noisy = drive.clone();
+    for (k, s) in drive.record_noise.iter().enumerate().take(drive.len()) {
+        noisy.x[k] += s[0];
+        noisy.v[k] += s[1];
+        noisy.a[k] += s[2];
+        noisy.j[k] += s[3];
+    }
+    let refs: [&Reference; LANES] = std::array::from_fn(|l| if l == 0 { drive } else { &noisy });
+    let mut rs = Resampler::<LANES>::new(tau);
+    let solver = Solver::default();
+    let ran = vshake_kernel::builds::run_effect_lanes(&[model, model], &refs, &solver, &mut rs);
+    match ran {
+        Ok(r) if r[..2].iter().all(|r| r.status == LaneStatus::Ok) => {
+            [ch::ACCEL, ch::DISP, ch::FORCE].map(|c| {
+                let lanes = rs.lanes(c);
+                rms_of(lanes[0].iter().zip(&lanes[1]).map(|(a, b)| b - a))
+            })
+        }
+        _ => [0.0; 3],
+    }
+}
+
 /// The residual of the least-squares fit to `x` at `tau` of the harmonics 1…`k_max` of `f`, a
 /// quadratic trend, a linearly drifting fundamental and a sinusoid at each of `lines` (Hz).
 fn periodic_residual(x: &[f64], tau: &[f64], f: f64, k_max: usize, lines: &[f64]) -> Vec<f64> {
@@ -248,13 +283,14 @@ impl TestData {
     /// Prepares a measured test aligned to the model.
     pub fn new(t: &AlignedTest) -> Self {
         let m = &t.measured;
+        let floor = reference_floor(&t.model, &t.drive, &t.samples.tau);
         Self::from_parts(
             t.name.clone(),
             t.model.clone(),
             t.drive.clone(),
             t.samples.clone(),
             [Some(m.accel.clone()), Some(m.disp.clone()), m.force.clone()],
-            t.weights,
+            (t.weights, floor),
         )
         .switched_off(t.off.clone())
     }
@@ -264,7 +300,8 @@ impl TestData {
         TestData { off, ..self }
     }
 
-    /// Prepares a test from its parts: the measured features, the noise estimate and the feature
+    /// Prepares a test from its parts: the measured features, the noise estimate (each channel's,
+    /// with the floor its record's resolution sets, `floor`: [`reference_floor`]) and the feature
     /// scales.
     pub(crate) fn from_parts(
         name: String,
@@ -272,7 +309,7 @@ impl TestData {
         drive: Reference,
         samples: Samples,
         measured: [Option<Vec<f64>>; 3],
-        weights: Weights,
+        (weights, floor): (Weights, [f64; 3]),
     ) -> Self {
         let w = [weights.accel, weights.disp, weights.force];
         let proj = samples
@@ -301,7 +338,7 @@ impl TestData {
             if w[c] <= 0.0 {
                 continue;
             }
-            let sigma = channel_sigma(x, &t.samples, c, t.drive.accel_floor);
+            let sigma = channel_sigma(x, &t.samples, c, t.drive.accel_floor).hypot(floor[c]);
             t.sigma[c] = sigma;
             let fs = channel_features(t.proj.as_ref(), c, x);
             let sd = if sine {
@@ -1691,7 +1728,7 @@ mod tests {
             reference,
             samples,
             [ch(ch::ACCEL), ch(ch::DISP), ch(ch::FORCE)],
-            Weights::default(),
+            (Weights::default(), [0.0; 3]),
         );
         assert!(
             test.samples.fundamental_hz.is_none() && test.len() == 3 * 1500,

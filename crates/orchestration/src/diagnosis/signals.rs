@@ -10,8 +10,9 @@
 //!   tests. A displacement offset is also read against the tracked reference: the steady part of
 //!   feedback − reference, measured and in the model (the loop's own steady error), from a
 //!   least-squares fit of it by a constant and the reference's x_r, v_r, a_r ([`loop_errors`]).
-//!   A valve's null bias or a steady force shows as feedback the loop holds off the reference by
-//!   more than the model's loop does.
+//!   A valve's null bias, a steady loss of oil (external leakage: the valve must stay open to
+//!   make it up) or a steady force shows as feedback the loop holds off the reference by more
+//!   than the model's loop does.
 //! - **Spectral lines.** Per test and channel, the periodogram of the residual under a Hann window
 //!   (zero-padded to a power of two, [`crate::fourier`]). A bin is a line where it is a local
 //!   maximum standing [`LINE_RATIO`] times above the median of its neighbours (±[`LINE_SPAN`]
@@ -830,7 +831,7 @@ fn loop_sentence(o: &[&Offset]) -> String {
     let measured = range(errors.iter().map(|e| e[0]).collect());
     let model = range(errors.iter().map(|e| e[1]).collect());
     format!(
-        "; the loop holds the feedback {beyond} off the tracked reference beyond the model's own steady error (feedback - reference: measured {measured}, model {model}): a valve's null bias or a steady force the loop leaves as an error, or a recorded feedback whose zero is not the loop's"
+        "; the loop holds the feedback {beyond} off the tracked reference beyond the model's own steady error (feedback - reference: measured {measured}, model {model}): a valve's null bias, a steady loss of oil from the chambers (external leakage) or a steady force the loop leaves as an error, or a recorded feedback whose zero is not the loop's"
     )
 }
 
