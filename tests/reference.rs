@@ -214,7 +214,7 @@ fn zero_command_stays_at_rest() {
         drive: Default::default(),
         spectrum: None,
         accel_floor: 0.0,
-        record_noise: Vec::new(),
+        record_error: Vec::new(),
     };
     let (p1, p2) = p.no_load_pressures();
     assert!((p1 - 8.2136e6).abs() < 100.0 && (p2 - 12.8364e6).abs() < 100.0);
